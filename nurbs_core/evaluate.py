@@ -1,0 +1,271 @@
+"""Functional evaluation of NURBS curves and surfaces at arbitrary parameters.
+
+Batch convention: control points carry leading batch dimensions ``*B``; knot vectors are either
+shared (1-D) or batched (``*B, K``); parameters are shared (``M``) or batched (``*B, M``).
+Gradients flow to control points, weights and knots through the custom Functions in
+:mod:`nurbs_core.autograd`. Knot gradients are computed only when a knot vector requires grad.
+
+Fixed knots and fixed parameters (the paper's B-spline layer): :class:`CurveEvaluator`,
+:class:`SurfaceEvaluator` and :class:`SurfaceGridEvaluator` precompute the spans and basis once;
+each call then costs only the sparse products.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from nurbs_core import autograd as _fn
+from nurbs_core.basis import (
+    basis_derivatives,
+    basis_functions,
+    basis_with_knot_derivatives,
+    dense_basis_matrix,
+    find_span,
+)
+
+#: Standard deviation of the Gaussian that smooths the derivative of the degree-0 indicator,
+#: as a fraction of the knot domain's length (NURBS-Diff paper, "Backward Evaluation").
+DEFAULT_KNOT_BANDWIDTH = 1e-3
+
+
+def homogeneous(control_points: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    """(..., d) points and (...) weights -> (..., d + 1) weighted homogeneous points (w P, w)."""
+    w = weights.unsqueeze(-1)
+    return torch.cat([control_points * w, w], dim=-1)
+
+
+def _flatten_batch(t: torch.Tensor, batch_shape, trailing: int) -> torch.Tensor:
+    """Broadcast ``t`` to ``batch_shape + t.shape[-trailing:]`` and flatten the batch to one dim."""
+    tail = t.shape[t.dim() - trailing:]
+    return t.expand(*batch_shape, *tail).reshape(-1, *tail)
+
+
+def _basis(knots, degree, u, bandwidth, want_knot_grad):
+    """Spans, compact basis and (optionally) knot derivatives on flattened (B, M) inputs."""
+    with torch.no_grad():
+        detached = knots.detach()
+        span = find_span(detached, degree, u.detach())
+        if want_knot_grad:
+            domain = (detached[:, -degree - 1] - detached[:, degree]).unsqueeze(-1)
+            sigma = float((bandwidth * domain).max())
+            basis, d_basis = basis_with_knot_derivatives(detached, degree, u.detach(), span, sigma)
+        else:
+            basis, d_basis = basis_functions(detached, degree, u.detach(), span), None
+    return span, basis, d_basis
+
+
+def _needs_knot_grad(knots: torch.Tensor) -> bool:
+    return knots.requires_grad and torch.is_grad_enabled()
+
+
+def curve_points(control_points, weights, knots, degree, u, knot_bandwidth=DEFAULT_KNOT_BANDWIDTH):
+    """Points of rational curves. control_points (*B, n, d); weights (*B, n); knots (K,) or (*B, K);
+    u (M,) or (*B, M). Returns (*B, M, d)."""
+    batch_shape = control_points.shape[:-2]
+    control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 2)
+    flat_knots = _flatten_batch(knots, batch_shape, 1)
+    flat_u = _flatten_batch(u.to(control_points.dtype), batch_shape, 1)
+    want = _needs_knot_grad(knots)
+    span, basis, d_basis = _basis(flat_knots, degree, flat_u, knot_bandwidth, want)
+    points = _fn.CurvePoints.apply(control_w, flat_knots, basis, d_basis, span, degree)
+    return points.reshape(*batch_shape, *points.shape[1:])
+
+
+def surface_points(control_points, weights, knots_u, knots_v, degree_u, degree_v, u, v,
+                   knot_bandwidth=DEFAULT_KNOT_BANDWIDTH):
+    """Points of rational surfaces at paired parameters (u[k], v[k]).
+
+    control_points (*B, n, m, 3); weights (*B, n, m); u, v (M,) or (*B, M). Returns (*B, M, 3)."""
+    batch_shape = control_points.shape[:-3]
+    control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 3)
+    ku = _flatten_batch(knots_u, batch_shape, 1)
+    kv = _flatten_batch(knots_v, batch_shape, 1)
+    fu = _flatten_batch(u.to(control_points.dtype), batch_shape, 1)
+    fv = _flatten_batch(v.to(control_points.dtype), batch_shape, 1)
+    span_u, basis_u, d_u = _basis(ku, degree_u, fu, knot_bandwidth, _needs_knot_grad(knots_u))
+    span_v, basis_v, d_v = _basis(kv, degree_v, fv, knot_bandwidth, _needs_knot_grad(knots_v))
+    points = _fn.SurfacePoints.apply(control_w, ku, kv, basis_u, basis_v, d_u, d_v, span_u, span_v,
+                                     degree_u, degree_v)
+    return points.reshape(*batch_shape, *points.shape[1:])
+
+
+def surface_grid_points(control_points, weights, knots_u, knots_v, degree_u, degree_v, u, v,
+                        knot_bandwidth=DEFAULT_KNOT_BANDWIDTH):
+    """Points on the tensor-product grid u x v. Returns (*B, len(u), len(v), 3)."""
+    batch_shape = control_points.shape[:-3]
+    m = control_points.shape[-2]
+    control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 3)
+    ku = _flatten_batch(knots_u, batch_shape, 1)
+    kv = _flatten_batch(knots_v, batch_shape, 1)
+    fu = _flatten_batch(u.to(control_points.dtype), batch_shape, 1)
+    fv = _flatten_batch(v.to(control_points.dtype), batch_shape, 1)
+    span_u, basis_u, d_u = _basis(ku, degree_u, fu, knot_bandwidth, _needs_knot_grad(knots_u))
+    span_v, basis_v, d_v = _basis(kv, degree_v, fv, knot_bandwidth, _needs_knot_grad(knots_v))
+    dense_v = dense_basis_matrix(basis_v, span_v, degree_v, m)
+    points = _fn.SurfaceGridPoints.apply(control_w, ku, kv, basis_u, dense_v, d_u, d_v, span_u,
+                                         span_v, degree_u, degree_v)
+    return points.reshape(*batch_shape, *points.shape[1:])
+
+
+# --------------------------------------------------------------------------------------------
+# Parametric derivatives (appendix of the paper; The NURBS Book A3.2, A4.2). Differentiable with
+# respect to control points and weights by ordinary autograd.
+
+
+def _homogeneous_curve_derivatives(control_w, knots, degree, u, order):
+    """(B, n, d+1), (B, K), (B, M) -> (order+1, B, M, d+1) derivatives of the homogeneous curve."""
+    with torch.no_grad():
+        span = find_span(knots.detach(), degree, u.detach())
+        ders = basis_derivatives(knots.detach(), degree, u.detach(), span, order)
+    index = span.unsqueeze(-1) - degree + torch.arange(degree + 1, device=span.device)
+    batch, n, dim1 = control_w.shape
+    flat = index + torch.arange(batch, device=span.device).view(-1, 1, 1) * n
+    gathered = control_w.reshape(-1, dim1)[flat.reshape(-1)].view(*index.shape, dim1)
+    return torch.einsum("kbmr,bmrc->kbmc", ders, gathered)
+
+
+def _rational_derivatives(hom):
+    """Homogeneous derivatives (order+1, ..., d+1) -> Euclidean derivatives (order+1, ..., d)."""
+    from math import comb
+
+    a, w = hom[..., :-1], hom[..., -1:]
+    out = []
+    for k in range(hom.shape[0]):
+        value = a[k]
+        for i in range(1, k + 1):
+            value = value - comb(k, i) * w[i] * out[k - i]
+        out.append(value / w[0])
+    return torch.stack(out, dim=0)
+
+
+def curve_derivatives(control_points, weights, knots, degree, u, order=1):
+    """Curve points and derivatives up to ``order``: (*B, order + 1, M, d)."""
+    batch_shape = control_points.shape[:-2]
+    control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 2)
+    fk = _flatten_batch(knots, batch_shape, 1)
+    fu = _flatten_batch(u.to(control_points.dtype), batch_shape, 1)
+    ders = _rational_derivatives(_homogeneous_curve_derivatives(control_w, fk, degree, fu, order))
+    ders = ders.transpose(0, 1)  # (B, order+1, M, d)
+    return ders.reshape(*batch_shape, *ders.shape[1:])
+
+
+def surface_derivatives(control_points, weights, knots_u, knots_v, degree_u, degree_v, u, v):
+    """Points and first partial derivatives at paired parameters: (S, S_u, S_v), each (*B, M, 3)."""
+    batch_shape = control_points.shape[:-3]
+    control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 3)
+    batch, n, m, _ = control_w.shape
+    ku = _flatten_batch(knots_u, batch_shape, 1).detach()
+    kv = _flatten_batch(knots_v, batch_shape, 1).detach()
+    fu = _flatten_batch(u.to(control_points.dtype), batch_shape, 1).detach()
+    fv = _flatten_batch(v.to(control_points.dtype), batch_shape, 1).detach()
+    with torch.no_grad():
+        span_u = find_span(ku, degree_u, fu)
+        span_v = find_span(kv, degree_v, fv)
+        du = basis_derivatives(ku, degree_u, fu, span_u, 1)  # (2, B, M, p+1)
+        dv = basis_derivatives(kv, degree_v, fv, span_v, 1)
+    index_u = span_u.unsqueeze(-1) - degree_u + torch.arange(degree_u + 1, device=fu.device)
+    index_v = span_v.unsqueeze(-1) - degree_v + torch.arange(degree_v + 1, device=fu.device)
+    flat = index_u.unsqueeze(-1) * m + index_v.unsqueeze(-2)
+    flat = flat + torch.arange(batch, device=fu.device).view(-1, 1, 1, 1) * (n * m)
+    gathered = control_w.reshape(-1, 4)[flat.reshape(-1)].view(*flat.shape, 4)
+    h = torch.einsum("bmr,bms,bmrsc->bmc", du[0], dv[0], gathered)
+    h_u = torch.einsum("bmr,bms,bmrsc->bmc", du[1], dv[0], gathered)
+    h_v = torch.einsum("bmr,bms,bmrsc->bmc", du[0], dv[1], gathered)
+    w, w_u, w_v = h[..., 3:], h_u[..., 3:], h_v[..., 3:]
+    s = h[..., :3] / w
+    s_u = (h_u[..., :3] - w_u * s) / w
+    s_v = (h_v[..., :3] - w_v * s) / w
+    shape = (*batch_shape, *s.shape[1:])
+    return s.reshape(shape), s_u.reshape(shape), s_v.reshape(shape)
+
+
+def surface_normals(control_points, weights, knots_u, knots_v, degree_u, degree_v, u, v):
+    """Unit normals ``S_u x S_v / |S_u x S_v|`` at paired parameters: (*B, M, 3)."""
+    _, s_u, s_v = surface_derivatives(control_points, weights, knots_u, knots_v, degree_u,
+                                      degree_v, u, v)
+    normal = torch.linalg.cross(s_u, s_v, dim=-1)
+    return normal / normal.norm(dim=-1, keepdim=True).clamp_min(torch.finfo(normal.dtype).tiny)
+
+
+# --------------------------------------------------------------------------------------------
+# Precomputed-basis evaluators for fixed knots (the paper's B-spline layer).
+
+
+class CurveEvaluator:
+    """Evaluate curves with fixed knots at fixed parameters; spans and basis computed once.
+
+    knots (K,), u (M,). ``evaluator(control_points (*B, n, d), weights (*B, n) | None)``
+    returns (*B, M, d).
+    """
+
+    def __init__(self, knots: torch.Tensor, degree: int, u: torch.Tensor):
+        knots = torch.as_tensor(knots).detach()
+        u = torch.as_tensor(u, dtype=knots.dtype, device=knots.device).detach()
+        self.degree, self.knots = degree, knots
+        self.span = find_span(knots.unsqueeze(0), degree, u.unsqueeze(0))
+        self.basis = basis_functions(knots.unsqueeze(0), degree, u.unsqueeze(0), self.span)
+
+    def __call__(self, control_points, weights=None):
+        if weights is None:
+            weights = control_points.new_ones(control_points.shape[:-1])
+        batch_shape = control_points.shape[:-2]
+        control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 2)
+        b = control_w.shape[0]
+        points = _fn.CurvePoints.apply(control_w, self.knots, self.basis.expand(b, -1, -1), None,
+                                       self.span.expand(b, -1), self.degree)
+        return points.reshape(*batch_shape, *points.shape[1:])
+
+
+class SurfaceEvaluator:
+    """Fixed knots and fixed paired parameters (u[k], v[k]); returns (*B, M, 3)."""
+
+    def __init__(self, knots_u, knots_v, degree_u, degree_v, u, v):
+        ku = torch.as_tensor(knots_u).detach()
+        kv = torch.as_tensor(knots_v, dtype=ku.dtype, device=ku.device).detach()
+        u = torch.as_tensor(u, dtype=ku.dtype, device=ku.device).detach().unsqueeze(0)
+        v = torch.as_tensor(v, dtype=ku.dtype, device=ku.device).detach().unsqueeze(0)
+        self.knots_u, self.knots_v, self.degrees = ku, kv, (degree_u, degree_v)
+        self.span_u = find_span(ku.unsqueeze(0), degree_u, u)
+        self.span_v = find_span(kv.unsqueeze(0), degree_v, v)
+        self.basis_u = basis_functions(ku.unsqueeze(0), degree_u, u, self.span_u)
+        self.basis_v = basis_functions(kv.unsqueeze(0), degree_v, v, self.span_v)
+
+    def __call__(self, control_points, weights=None):
+        if weights is None:
+            weights = control_points.new_ones(control_points.shape[:-1])
+        batch_shape = control_points.shape[:-3]
+        control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 3)
+        b = control_w.shape[0]
+        points = _fn.SurfacePoints.apply(
+            control_w, self.knots_u, self.knots_v, self.basis_u.expand(b, -1, -1),
+            self.basis_v.expand(b, -1, -1), None, None, self.span_u.expand(b, -1),
+            self.span_v.expand(b, -1), *self.degrees)
+        return points.reshape(*batch_shape, *points.shape[1:])
+
+
+class SurfaceGridEvaluator:
+    """Fixed knots, fixed grid u x v; returns (*B, len(u), len(v), 3)."""
+
+    def __init__(self, knots_u, knots_v, degree_u, degree_v, u, v):
+        ku = torch.as_tensor(knots_u).detach()
+        kv = torch.as_tensor(knots_v, dtype=ku.dtype, device=ku.device).detach()
+        u = torch.as_tensor(u, dtype=ku.dtype, device=ku.device).detach().unsqueeze(0)
+        v = torch.as_tensor(v, dtype=ku.dtype, device=ku.device).detach().unsqueeze(0)
+        self.knots_u, self.knots_v, self.degrees = ku, kv, (degree_u, degree_v)
+        self.span_u = find_span(ku.unsqueeze(0), degree_u, u)
+        self.span_v = find_span(kv.unsqueeze(0), degree_v, v)
+        self.basis_u = basis_functions(ku.unsqueeze(0), degree_u, u, self.span_u)
+        basis_v = basis_functions(kv.unsqueeze(0), degree_v, v, self.span_v)
+        self.dense_v = dense_basis_matrix(basis_v, self.span_v, degree_v, kv.shape[0] - degree_v - 1)
+
+    def __call__(self, control_points, weights=None):
+        if weights is None:
+            weights = control_points.new_ones(control_points.shape[:-1])
+        batch_shape = control_points.shape[:-3]
+        control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 3)
+        b = control_w.shape[0]
+        points = _fn.SurfaceGridPoints.apply(
+            control_w, self.knots_u, self.knots_v, self.basis_u.expand(b, -1, -1),
+            self.dense_v.expand(b, -1, -1), None, None, self.span_u.expand(b, -1),
+            self.span_v.expand(b, -1), *self.degrees)
+        return points.reshape(*batch_shape, *points.shape[1:])
