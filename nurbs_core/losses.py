@@ -1,0 +1,278 @@
+"""Loss functions for fitting NURBS to points, and their weighted composition.
+
+Every loss is a pure function of tensors and returns a scalar tensor. Reductions:
+
+* pointwise losses (paired points ``predicted[i] <-> target[i]``, both (N, d)):
+  ``l1_loss`` = mean over points of the L1 norm of the difference (paper eq. L1);
+  ``l2_loss`` = mean over points of the Euclidean distance (the paper's L2, *not* squared);
+  ``mse_loss`` = mean over points of the *squared* Euclidean distance (sum over coordinates, so it
+  equals ``d * torch.nn.functional.mse_loss``); the linear least-squares fit minimises exactly this.
+* set losses (point sets A (M, d) and B (N, d), no pairing):
+  ``chamfer_distance`` = mean_a min_b |a - b| + mean_b min_a |a - b| (two-sided, Euclidean; the
+  paper writes sums, we take means so the value does not grow with the sampling density);
+  ``hausdorff_distance`` = max_a min_b |a - b| + max_b min_a |a - b| (two-sided, as in the paper).
+  Nearest neighbours come from scipy's cKDTree on detached CPU copies (indices carry no gradient);
+  the distances are recomputed in torch so gradients flow to both sets. No N x M matrix is formed.
+* regularisers: ``laplacian_loss`` (control net, mean squared umbrella Laplacian) and
+  ``curve_length`` (length of an ordered polyline of curve samples).
+
+``parse_loss("chamfer+0.1*laplacian+10*hausdorff")`` returns a :class:`CompositeLoss` that evaluates
+the weighted sum and reports every term.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from scipy.spatial import cKDTree
+
+# --------------------------------------------------------------------------------------------
+# Pointwise losses
+
+
+def _check_paired(predicted: torch.Tensor, target: torch.Tensor):
+    if predicted.shape != target.shape:
+        raise ValueError(f"paired losses need equal shapes, got {tuple(predicted.shape)} and "
+                         f"{tuple(target.shape)}")
+    if predicted.shape[0] == 0:
+        raise ValueError("paired losses need at least one point")
+
+
+def l1_loss(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Mean over points of ``|predicted_i - target_i|_1``. predicted, target (N, d) -> scalar."""
+    _check_paired(predicted, target)
+    return (predicted - target).abs().sum(-1).mean()
+
+
+def l2_loss(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """The paper's L2: mean over points of ``|predicted_i - target_i|_2``. (N, d) -> scalar."""
+    _check_paired(predicted, target)
+    return torch.linalg.vector_norm(predicted - target, dim=-1).mean()
+
+
+def mse_loss(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Mean over points of ``|predicted_i - target_i|_2 ** 2``. (N, d) -> scalar."""
+    _check_paired(predicted, target)
+    return (predicted - target).pow(2).sum(-1).mean()
+
+
+# --------------------------------------------------------------------------------------------
+# Nearest neighbours and set losses
+
+
+def _numpy(points: torch.Tensor) -> np.ndarray:
+    return points.detach().cpu().double().numpy()
+
+
+def build_tree(points: torch.Tensor | np.ndarray) -> cKDTree:
+    """A cKDTree over (N, d) points (detached, float64). Build it once for a fixed cloud."""
+    array = _numpy(points) if isinstance(points, torch.Tensor) else np.asarray(points, np.float64)
+    if array.ndim != 2 or array.shape[0] == 0:
+        raise ValueError(f"a nearest-neighbour tree needs (N, d) points with N >= 1, got shape "
+                         f"{array.shape}")
+    return cKDTree(array)
+
+
+def nearest_indices(query: torch.Tensor, tree: cKDTree, workers: int = -1) -> torch.Tensor:
+    """Index (int64, on ``query``'s device) of each query point's nearest point in ``tree``.
+
+    query (M, d). Computed without gradient on a detached CPU copy."""
+    _, index = tree.query(_numpy(query), k=1, workers=workers)
+    return torch.as_tensor(index, dtype=torch.int64, device=query.device)
+
+
+def nearest_distances(query: torch.Tensor, points: torch.Tensor,
+                      tree: cKDTree | None = None) -> torch.Tensor:
+    """Distance from each query (M, d) to its nearest neighbour in ``points`` (N, d): (M,).
+
+    ``tree`` must be a cKDTree over ``points`` if given (build it once for a fixed cloud).
+    Differentiable with respect to both ``query`` and ``points``."""
+    if query.shape[0] == 0 or points.shape[0] == 0:
+        raise ValueError(f"nearest-neighbour distances need non-empty sets, got {query.shape[0]} "
+                         f"and {points.shape[0]} points")
+    if query.shape[-1] != points.shape[-1]:
+        raise ValueError(f"point dimensions differ: {query.shape[-1]} and {points.shape[-1]}")
+    tree = build_tree(points) if tree is None else tree
+    index = nearest_indices(query, tree)
+    return torch.linalg.vector_norm(query - points[index], dim=-1)
+
+
+def chamfer_distance(a: torch.Tensor, b: torch.Tensor, *, tree_a: cKDTree | None = None,
+                     tree_b: cKDTree | None = None, b_query: torch.Tensor | None = None,
+                     ) -> torch.Tensor:
+    """Two-sided Chamfer distance ``mean_a d(a, B) + mean_b d(b, A)``. a (M, d), b (N, d).
+
+    ``tree_a`` / ``tree_b``: prebuilt cKDTrees over ``a`` / ``b`` (e.g. over a fixed cloud).
+    ``b_query``: optional subset of ``b`` used for the ``b -> A`` direction (an unbiased estimate of
+    its mean when ``b`` is huge and the subset is random)."""
+    forward = nearest_distances(a, b, tree_b).mean()
+    backward = nearest_distances(b if b_query is None else b_query, a, tree_a).mean()
+    return forward + backward
+
+
+def hausdorff_distance(a: torch.Tensor, b: torch.Tensor, *, tree_a: cKDTree | None = None,
+                       tree_b: cKDTree | None = None, b_query: torch.Tensor | None = None,
+                       ) -> torch.Tensor:
+    """Two-sided Hausdorff sum ``max_a d(a, B) + max_b d(b, A)`` (the paper's L_HD).
+
+    Arguments as in :func:`chamfer_distance`."""
+    forward = nearest_distances(a, b, tree_b).max()
+    backward = nearest_distances(b if b_query is None else b_query, a, tree_a).max()
+    return forward + backward
+
+
+# --------------------------------------------------------------------------------------------
+# Regularisers
+
+
+def laplacian_loss(control_points: torch.Tensor) -> torch.Tensor:
+    """Mean squared umbrella Laplacian of a control net.
+
+    Surfaces: control_points (n_u, n_v, d); for every interior control point
+    ``L = P_ij - (P_i-1,j + P_i+1,j + P_i,j-1 + P_i,j+1) / 4``. Curves: (n, d) with
+    ``L = P_i - (P_i-1 + P_i+1) / 2``. Returns the mean of ``|L|^2`` over interior points (0 when
+    the net has no interior point)."""
+    if control_points.dim() == 3:
+        if min(control_points.shape[0], control_points.shape[1]) < 3:
+            return control_points.new_zeros(())
+        c = control_points
+        neighbours = c[:-2, 1:-1] + c[2:, 1:-1] + c[1:-1, :-2] + c[1:-1, 2:]
+        lap = c[1:-1, 1:-1] - 0.25 * neighbours
+    elif control_points.dim() == 2:
+        if control_points.shape[0] < 3:
+            return control_points.new_zeros(())
+        c = control_points
+        lap = c[1:-1] - 0.5 * (c[:-2] + c[2:])
+    else:
+        raise ValueError(f"laplacian_loss needs (n_u, n_v, d) or (n, d) control points, got "
+                         f"{tuple(control_points.shape)}")
+    return lap.pow(2).sum(-1).mean()
+
+
+def curve_length(samples: torch.Tensor) -> torch.Tensor:
+    """Length of the polyline through ordered curve samples (M, d): ``sum |s_{k+1} - s_k|``."""
+    if samples.dim() != 2 or samples.shape[0] < 2:
+        raise ValueError(f"curve_length needs (M, d) samples with M >= 2, got "
+                         f"{tuple(samples.shape)}")
+    return torch.linalg.vector_norm(samples[1:] - samples[:-1], dim=-1).sum()
+
+
+# --------------------------------------------------------------------------------------------
+# Composition
+
+
+@dataclass
+class LossInputs:
+    """What a composite loss may use (missing fields are only needed by some terms).
+
+    samples (M, d): points sampled on the geometry (ordered along the curve for curves);
+    cloud (N, d): the target point cloud; cloud_tree: a cKDTree over ``cloud`` built once;
+    cloud_query (K, d): optional random subset of ``cloud`` for the cloud -> geometry direction;
+    paired_predicted / paired_target (K, d): geometry points at per-point parameters (known or
+    foot-point) and the matching target points; control_points (n_u, n_v, d) or (n, d)."""
+
+    samples: torch.Tensor | None = None
+    cloud: torch.Tensor | None = None
+    cloud_tree: cKDTree | None = None
+    cloud_query: torch.Tensor | None = None
+    paired_predicted: torch.Tensor | None = None
+    paired_target: torch.Tensor | None = None
+    control_points: torch.Tensor | None = None
+
+
+def _need(inputs: LossInputs, name: str, term: str):
+    value = getattr(inputs, name)
+    if value is None:
+        raise ValueError(f"loss term {term!r} needs {name}, which this fit does not provide")
+    return value
+
+
+def _paired(fn):
+    def term(inputs: LossInputs, name: str) -> torch.Tensor:
+        return fn(_need(inputs, "paired_predicted", name), _need(inputs, "paired_target", name))
+    return term
+
+
+def _set(fn):
+    def term(inputs: LossInputs, name: str) -> torch.Tensor:
+        return fn(_need(inputs, "samples", name), _need(inputs, "cloud", name),
+                  tree_b=inputs.cloud_tree, b_query=inputs.cloud_query)
+    return term
+
+
+#: Term name -> (function of (LossInputs, name), kind). ``pointwise`` terms use paired points;
+#: for unordered clouds those are the foot points (point-to-surface distance).
+TERMS: dict[str, tuple[Callable[[LossInputs, str], torch.Tensor], str]] = {
+    "l1": (_paired(l1_loss), "pointwise"),
+    "l2": (_paired(l2_loss), "pointwise"),
+    "mse": (_paired(mse_loss), "pointwise"),
+    "chamfer": (_set(chamfer_distance), "set"),
+    "hausdorff": (_set(hausdorff_distance), "set"),
+    "laplacian": (lambda inputs, name: laplacian_loss(_need(inputs, "control_points", name)),
+                  "regulariser"),
+    "length": (lambda inputs, name: curve_length(_need(inputs, "samples", name)), "regulariser"),
+}
+ALIASES = {"cd": "chamfer", "hd": "hausdorff", "lap": "laplacian", "curve_length": "length",
+           "p2s": "mse", "point_to_surface": "mse"}
+
+_TERM = re.compile(r"^\s*(?:(?P<weight>[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*\*\s*)?"
+                   r"(?P<name>[A-Za-z_][A-Za-z0-9_]*)\s*$")
+
+
+class CompositeLoss:
+    """A weighted sum of named terms. ``loss(inputs) -> (total, {name: value tensor})``."""
+
+    def __init__(self, terms: list[tuple[float, str]]):
+        if not terms:
+            raise ValueError("a loss needs at least one term")
+        self.terms = list(terms)
+
+    @property
+    def names(self) -> list[str]:
+        return [name for _, name in self.terms]
+
+    def kinds(self) -> set[str]:
+        return {TERMS[name][1] for name in self.names}
+
+    def with_term(self, weight: float, name: str) -> CompositeLoss:
+        return CompositeLoss([*self.terms, (float(weight), name)])
+
+    def __call__(self, inputs: LossInputs) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        values: dict[str, torch.Tensor] = {}
+        total = None
+        for weight, name in self.terms:
+            value = TERMS[name][0](inputs, name)
+            values[name] = value
+            total = weight * value if total is None else total + weight * value
+        return total, values
+
+    def __repr__(self):
+        return "CompositeLoss(" + " + ".join(f"{w:g}*{n}" for w, n in self.terms) + ")"
+
+
+def parse_loss(expression: str) -> CompositeLoss:
+    """Parse ``"chamfer+0.1*laplacian+10*hausdorff"``: terms joined by ``+``, each ``[w*]name``.
+
+    Names: l1, l2, mse (alias p2s / point_to_surface), chamfer (cd), hausdorff (hd),
+    laplacian (lap), length (curve_length). Weights must be non-negative numbers; a repeated term
+    has its weights added. Raises ValueError naming the offending part."""
+    if not isinstance(expression, str) or not expression.strip():
+        raise ValueError("the loss expression is empty; try 'chamfer+0.1*laplacian+10*hausdorff'")
+    weights: dict[str, float] = {}
+    for part in expression.split("+"):
+        match = _TERM.match(part)
+        if match is None:
+            raise ValueError(f"cannot parse loss term {part.strip()!r} in {expression!r}: expected "
+                             "'name' or 'weight*name', e.g. '0.1*laplacian'")
+        name = match.group("name").lower()
+        name = ALIASES.get(name, name)
+        if name not in TERMS:
+            raise ValueError(f"unknown loss term {match.group('name')!r} in {expression!r}; known: "
+                             f"{', '.join(sorted(TERMS))}")
+        weight = float(match.group("weight")) if match.group("weight") else 1.0
+        weights[name] = weights.get(name, 0.0) + weight
+    return CompositeLoss([(w, n) for n, w in weights.items()])
