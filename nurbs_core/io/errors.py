@@ -1,0 +1,40 @@
+"""Typed errors raised by the readers and writers of :mod:`nurbs_core.io`."""
+
+from __future__ import annotations
+
+import os
+
+CAD_INSTALL_HINT = 'pip install "nurbs-studio[cad]"  (or: pip install cadquery-ocp-novtk)'
+
+
+class FileFormatError(ValueError):
+    """A file could not be read (or written) in the format its suffix announces.
+
+    ``path`` is the file, ``line`` the 1-based line of a text format where the problem is (None
+    when not applicable, e.g. for binary formats). The message always names the file, and the
+    line when there is one, as ``path:line: problem``.
+    """
+
+    def __init__(self, path, message: str, line: int | None = None):
+        self.path = os.fspath(path) if path is not None else None
+        self.line = line
+        self.problem = message
+        where = self.path if line is None else f"{self.path}:{line}"
+        super().__init__(f"{where}: {message}")
+
+
+class MissingDependencyError(ImportError):
+    """An optional package needed for a format is not installed; the message says how to get it."""
+
+    def __init__(self, what: str, install: str):
+        self.install = install
+        super().__init__(f"{what} needs an optional package that is not installed. "
+                         f"Install it with: {install}")
+
+
+def require_ocp(what: str):
+    """Import OCP (the STEP/IGES extra) or raise MissingDependencyError with the install line."""
+    try:
+        import OCP  # noqa: F401
+    except ImportError:
+        raise MissingDependencyError(what, CAD_INSTALL_HINT) from None
