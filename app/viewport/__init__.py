@@ -1,0 +1,1 @@
+"""The VTK viewport (pyvistaqt); scene updates happen in place, on the GUI thread only."""

@@ -1,0 +1,295 @@
+"""The 3D scene: point cloud, fitted surface or curve, control net, knot lines, deviation map,
+loaded patches and their offsets.
+
+Meshes are created once per layer and then updated in place (``mesh.points = ...`` or
+``copy_from`` when the topology changes), never re-added per frame. Rendering is explicit
+(``auto_update=False``) and coalesced: ``request_render()`` draws at most ~30 times a second.
+Only the GUI thread calls into this module.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyvista as pv
+from PySide6.QtCore import QObject, QTimer
+from PySide6.QtWidgets import QWidget
+from pyvistaqt import QtInteractor
+
+from app.workers.display import DisplayGeometry
+
+RENDER_INTERVAL_MS = 33
+DEVIATION_COLORMAP = "viridis"  # perceptually uniform, readable in grey scale
+DEVIATION_TITLE = "Deviation"
+
+COLORS = {
+    "cloud": "#3a3f44",
+    "surface": "#5fa8e8",
+    "curve": "#1f77d0",
+    "control_net": "#e8891c",
+    "knot_lines": "#1b2b3a",
+    "patch": "#9fb8d0",
+    "offset": "#f2a33a",
+}
+
+#: Layers the document tree and the View menu toggle.
+LAYERS = ("cloud", "surface", "curve", "control_net", "knot_lines", "patches", "offsets")
+
+
+def quad_faces(rows: int, columns: int) -> np.ndarray:
+    """VTK face array of the quads of a rows x columns point grid (row-major)."""
+    index = np.arange(rows * columns).reshape(rows, columns)
+    quads = np.stack([index[:-1, :-1], index[1:, :-1], index[1:, 1:], index[:-1, 1:]], axis=-1)
+    return np.hstack([np.full((quads.shape[0] * quads.shape[1], 1), 4),
+                      quads.reshape(-1, 4)]).ravel()
+
+
+def grid_normals(grid: np.ndarray) -> np.ndarray:
+    """Unit normals (Mu*Mv, 3) of a sampled surface grid (Mu, Mv, 3) by central differences."""
+    normals = np.cross(np.gradient(grid, axis=0), np.gradient(grid, axis=1)).reshape(-1, 3)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.where(length > 0, normals / np.where(length > 0, length, 1.0), [0.0, 0.0, 1.0])
+
+
+def surface_mesh(grid: np.ndarray) -> pv.PolyData:
+    mesh = pv.PolyData(grid.reshape(-1, 3).copy(), quad_faces(grid.shape[0], grid.shape[1]))
+    mesh.point_data["Normals"] = grid_normals(grid)
+    mesh.point_data.active_normals_name = "Normals"
+    return mesh
+
+
+def polylines_mesh(polylines: list[np.ndarray]) -> pv.PolyData:
+    """One PolyData holding several polylines (each (K, 3))."""
+    polylines = [np.asarray(line, dtype=np.float64) for line in polylines if len(line) >= 2]
+    if not polylines:
+        return pv.PolyData()
+    points = np.concatenate(polylines)
+    cells, start = [], 0
+    for line in polylines:
+        cells.append(np.concatenate([[len(line)], np.arange(start, start + len(line))]))
+        start += len(line)
+    return pv.PolyData(points, lines=np.concatenate(cells).astype(np.int64))
+
+
+def control_net_mesh(net: np.ndarray) -> pv.PolyData:
+    """Control polygon (n, 3) or control net (n_u, n_v, 3) as lines with vertices."""
+    if net.ndim == 2:
+        lines = [net]
+    else:
+        lines = list(net) + list(np.swapaxes(net, 0, 1))
+    mesh = polylines_mesh(lines)
+    if mesh.n_points:
+        mesh.verts = np.hstack([np.ones((mesh.n_points, 1), dtype=np.int64),
+                                np.arange(mesh.n_points)[:, None]]).ravel()
+    return mesh
+
+
+class SceneView(QObject):
+    """Owns the QtInteractor and every mesh in it."""
+
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.plotter = QtInteractor(parent, auto_update=False)
+        self.plotter.setAcceptDrops(False)  # drops must reach the main window
+        self.plotter.set_background("#fbfbfd", top="#c9d6e3")
+        self.plotter.enable_lightkit()
+        self.plotter.add_axes(interactive=False)
+        self._meshes: dict[str, pv.PolyData] = {}
+        self._actors: dict[str, object] = {}
+        self._visible = {layer: True for layer in LAYERS}
+        self._visible["control_net"] = False
+        self._deviation_on = True
+        self._has_deviation = False
+        self._extra_meshes: dict[str, list] = {"patches": [], "offsets": []}
+        self._closed = False
+        self._render_timer = QTimer(self)
+        self._render_timer.setSingleShot(True)
+        self._render_timer.setInterval(RENDER_INTERVAL_MS)
+        self._render_timer.timeout.connect(self.render_now)
+
+    @property
+    def widget(self) -> QWidget:
+        return self.plotter
+
+    # --- layers --------------------------------------------------------------------------------
+    def _layer(self, name: str, mesh: pv.PolyData, **style):
+        """Create the layer's actor once; afterwards update its mesh in place."""
+        if name in self._meshes:
+            self._meshes[name].copy_from(mesh)
+            return self._meshes[name]
+        self._meshes[name] = mesh
+        self._actors[name] = self.plotter.add_mesh(mesh, name=name, reset_camera=False, **style)
+        self._apply_visibility(name)
+        return mesh
+
+    def _apply_visibility(self, name: str):
+        actor = self._actors.get(name)
+        if actor is None:
+            return
+        visible = self._visible.get(name, True) and self._meshes[name].n_points > 0
+        actor.SetVisibility(visible)
+        if name == "cloud":
+            self._update_scalar_bar()
+
+    def set_cloud(self, points: np.ndarray | None):
+        """The (stacked) target cloud (N, 3); resets its deviation colouring."""
+        mesh = pv.PolyData(np.zeros((0, 3)) if points is None else np.asarray(points, float))
+        mesh.point_data[DEVIATION_TITLE] = np.zeros(mesh.n_points)
+        if "cloud" not in self._meshes:
+            self._layer("cloud", mesh, color=COLORS["cloud"], point_size=3.0,
+                        scalars=DEVIATION_TITLE, cmap=DEVIATION_COLORMAP, clim=(0.0, 1.0),
+                        show_scalar_bar=False)
+            self.plotter.add_scalar_bar(DEVIATION_TITLE, mapper=self._actors["cloud"].mapper,
+                                        vertical=True, position_x=0.88, position_y=0.25,
+                                        height=0.5, width=0.06, fmt="%.3g", color="#222222")
+        else:
+            self._layer("cloud", mesh)
+        self.set_deviation(None)
+
+    def set_deviation(self, deviation: np.ndarray | None, stats: dict | None = None):
+        """Colour the cloud by each point's distance to the fitted shape (None: plain)."""
+        mesh, actor = self._meshes.get("cloud"), self._actors.get("cloud")
+        if mesh is None:
+            return
+        valid = deviation is not None and len(deviation) == mesh.n_points and mesh.n_points > 0
+        self._has_deviation = bool(valid)
+        if valid:
+            mesh.point_data[DEVIATION_TITLE][:] = deviation
+            mesh.point_data[DEVIATION_TITLE] = mesh.point_data[DEVIATION_TITLE]  # mark modified
+            top = float(np.max(deviation))
+            actor.mapper.scalar_range = (0.0, top if top > 0 else 1.0)
+        self._update_scalar_bar()
+        if valid and stats is not None:
+            text = (f"Deviation ({stats['count']} points)\nmean {stats['mean']:.4g}\n"
+                    f"RMS  {stats['rms']:.4g}\nmax  {stats['max']:.4g}")
+            self.plotter.add_text(text, position="upper_right", font_size=9, color="#222222",
+                                  name="deviation_stats")
+        elif not valid:
+            self.plotter.remove_actor("deviation_stats", render=False)
+        self.request_render()
+
+    def set_deviation_visible(self, on: bool):
+        self._deviation_on = bool(on)
+        self._update_scalar_bar()
+        stats_actor = self.plotter.actors.get("deviation_stats")
+        if stats_actor is not None:
+            stats_actor.SetVisibility(self._deviation_on and self._has_deviation)
+        self.request_render()
+
+    def deviation_shown(self) -> bool:
+        return self._deviation_on and self._has_deviation
+
+    def _update_scalar_bar(self):
+        actor = self._actors.get("cloud")
+        if actor is None:
+            return
+        colour = self.deviation_shown() and self._visible["cloud"]
+        actor.mapper.scalar_visibility = colour
+        bar = self.plotter.scalar_bars.get(DEVIATION_TITLE)
+        if bar is not None:
+            bar.SetVisibility(colour)
+
+    def show_fit(self, display: DisplayGeometry | None):
+        """The fitted surface or curve with its control net and knot lines (None clears)."""
+        empty = pv.PolyData()
+        if display is None or display.kind == "surface":
+            surface = empty if display is None else surface_mesh(display.surface_grid)
+            if "surface" in self._meshes and display is not None and (
+                    self._meshes["surface"].n_points == surface.n_points):
+                mesh = self._meshes["surface"]
+                mesh.points = surface.points
+                mesh.point_data["Normals"] = surface.point_data["Normals"]
+            else:
+                self._layer("surface", surface, color=COLORS["surface"], smooth_shading=False,
+                            specular=0.4, specular_power=20.0)
+                self._actors["surface"].prop.interpolation = "phong"
+            self._layer("curve", empty, color=COLORS["curve"], line_width=4.0)
+        else:
+            self._layer("curve", polylines_mesh([display.curve_points]), color=COLORS["curve"],
+                        line_width=4.0)
+            self._layer("surface", empty, color=COLORS["surface"])
+        net = empty if display is None else control_net_mesh(display.control_net)
+        self._layer("control_net", net, color=COLORS["control_net"], line_width=1.5,
+                    point_size=8.0, render_points_as_spheres=True)
+        if display is None:
+            knots = empty
+        elif display.kind == "curve":
+            knots = pv.PolyData(display.knot_lines[0]) if display.knot_lines else empty
+        else:
+            knots = polylines_mesh(display.knot_lines)
+        self._layer("knot_lines", knots, color=COLORS["knot_lines"], line_width=1.0,
+                    point_size=9.0, render_points_as_spheres=True)
+        for name in ("surface", "curve", "control_net", "knot_lines"):
+            self._apply_visibility(name)
+        self.request_render()
+
+    def set_group(self, group: str, displays: list[DisplayGeometry], opacity: float = 1.0):
+        """Loaded patches or offset patches: one mesh per surface (or curve)."""
+        for name in self._extra_meshes[group]:
+            self.plotter.remove_actor(name, render=False)
+        self._extra_meshes[group] = []
+        colour = COLORS["patch" if group == "patches" else "offset"]
+        for index, display in enumerate(displays):
+            name = f"{group}:{index}"
+            if display.kind == "surface":
+                mesh = surface_mesh(display.surface_grid)
+                actor = self.plotter.add_mesh(mesh, name=name, color=colour, opacity=opacity,
+                                              reset_camera=False, specular=0.3)
+                actor.prop.interpolation = "phong"
+            else:
+                actor = self.plotter.add_mesh(polylines_mesh([display.curve_points]), name=name,
+                                              color=colour, line_width=3.0, reset_camera=False)
+            actor.SetVisibility(self._visible[group])
+            self._extra_meshes[group].append(name)
+        self.request_render()
+
+    def set_visible(self, layer: str, visible: bool):
+        self._visible[layer] = bool(visible)
+        if layer in self._extra_meshes:
+            for name in self._extra_meshes[layer]:
+                actor = self.plotter.actors.get(name)
+                if actor is not None:
+                    actor.SetVisibility(self._visible[layer])
+        else:
+            self._apply_visibility(layer)
+        self.request_render()
+
+    def is_visible(self, layer: str) -> bool:
+        return self._visible[layer]
+
+    def set_note(self, text: str):
+        """A line of text in the lower-left corner (e.g. the offsets' largest gap)."""
+        if text:
+            self.plotter.add_text(text, position="lower_left", font_size=9, color="#222222",
+                                  name="note")
+        else:
+            self.plotter.remove_actor("note", render=False)
+        self.request_render()
+
+    # --- camera and drawing --------------------------------------------------------------------
+    def reset_camera(self):
+        self.plotter.view_isometric(render=False)
+        self.plotter.reset_camera(render=False)
+        self.request_render()
+
+    def request_render(self):
+        if not self._closed and not self._render_timer.isActive():
+            self._render_timer.start()
+
+    def render_now(self):
+        if not self._closed:
+            self.plotter.render()
+
+    def screenshot(self, path: str):
+        self.render_now()
+        self.plotter.screenshot(path)
+
+    def live_timers(self) -> int:
+        return int(self._render_timer.isActive())
+
+    def close(self):
+        """Stop drawing and release the render window; idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        self._render_timer.stop()
+        self.plotter.close()

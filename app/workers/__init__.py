@@ -1,0 +1,1 @@
+"""Worker-thread code: the only place in the app where torch runs."""

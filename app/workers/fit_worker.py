@@ -1,0 +1,158 @@
+"""The fit worker: a QObject living in its own QThread, the only place the live fit runs.
+
+It calls :func:`nurbs_core.fit.iter_fit` with a :class:`StopToken` and turns each (already
+throttled) engine snapshot into a :class:`DisplaySnapshot`: numpy arrays the GUI thread copies
+into its meshes (tessellated surface, control net, knot lines) and, at a lower rate, each target
+point's deviation from the fitted shape. Nothing here touches Qt widgets, VTK or pyvista.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import traceback
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from PySide6.QtCore import QObject, Signal, Slot
+
+from app.state import FitSettings
+from app.workers.display import DisplayGeometry, display_geometry, resample
+
+#: Deviation needs a closest-point search over the whole cloud: do it at most this often (s).
+DEVIATION_INTERVAL = 0.5
+
+
+@dataclass
+class FitRequest:
+    """What one run needs. target (N, 3) or (N, 2); initial: geometry dict to continue from."""
+
+    run_id: int
+    target: np.ndarray
+    settings: FitSettings
+    initial: dict[str, Any] | None = None
+
+
+@dataclass
+class DisplaySnapshot:
+    """An engine snapshot plus display arrays. deviation (N,) per target point, or None."""
+
+    run_id: int
+    iteration: int
+    iterations: int
+    geometry: dict[str, Any]
+    display: DisplayGeometry
+    losses: list[dict[str, float]] = field(default_factory=list)
+    elapsed: float = 0.0
+    done: bool = False
+    status: str = "running"
+    message: str = ""
+    deviation: np.ndarray | None = None
+
+
+def deviation_stats(deviation: np.ndarray) -> dict[str, float]:
+    """Mean, RMS and max of per-point distances (as Rhino's PointDeviation reports them)."""
+    return {"mean": float(np.mean(deviation)), "rms": float(np.sqrt(np.mean(deviation ** 2))),
+            "max": float(np.max(deviation)), "count": int(deviation.size)}
+
+
+def matches_structure(geometry: dict[str, Any], settings: FitSettings) -> bool:
+    """True when ``geometry`` already has the degree, control grid and knots of ``settings``."""
+    if geometry.get("kind") != settings.kind:
+        return False
+    if settings.kind == "curve":
+        ok = (geometry["degree"] == settings.degree_u
+              and len(geometry["control_points"]) == settings.control_points_u)
+        return ok and (settings.knots_u is None
+                       or np.allclose(geometry["knots"], settings.knots_u))
+    shape = geometry["control_points"].shape
+    ok = (geometry["degree_u"], geometry["degree_v"], shape[0], shape[1]) == (
+        settings.degree_u, settings.degree_v, settings.control_points_u, settings.control_points_v)
+    for name in ("knots_u", "knots_v"):
+        custom = getattr(settings, name)
+        ok = ok and (custom is None or np.allclose(geometry[name], custom))
+    return ok
+
+
+def starting_geometry(request: FitRequest) -> dict[str, Any] | None:
+    """The run's initial geometry: the current one, re-approximated if its structure changed.
+
+    With no current geometry but custom knots, the engine's own initialization is re-approximated
+    on those knots; with neither, None (the engine initializes per ``settings.init``).
+    """
+    settings, initial = request.settings, request.initial
+    if initial is not None and initial.get("kind") == "curve" and request.target.shape[1] != (
+            initial["control_points"].shape[-1]):
+        initial = None  # a 3D curve cannot continue on a 2D target (or the reverse)
+    if initial is None and (settings.knots_u is not None or settings.knots_v is not None):
+        from nurbs_core.fit import FitConfig, iter_fit
+
+        # zero iterations: the engine's initialization only (its final snapshot)
+        config = FitConfig(**{**settings.fit_fields(), "iterations": 0})
+        initial = None
+        for snapshot in iter_fit(request.target, config):
+            initial = snapshot.geometry
+    if initial is None or matches_structure(initial, settings):
+        return initial
+    return resample(initial, settings.degree_u, settings.degree_v, settings.control_points_u,
+                    settings.control_points_v, settings.knots_u, settings.knots_v)
+
+
+class FitWorker(QObject):
+    """Runs one fit. Signals carry plain Python/numpy payloads (queued to the GUI thread)."""
+
+    snapshot_ready = Signal(object)  # DisplaySnapshot
+    run_failed = Signal(int, str)  # run id, message
+    run_finished = Signal(int)  # run id, always emitted last
+
+    def __init__(self, request: FitRequest, stop_token):
+        super().__init__()
+        self._request, self._stop = request, stop_token
+
+    @Slot()
+    def run(self):
+        request = self._request
+        try:
+            import torch
+
+            # leave one core to the GUI thread: the event loop must keep answering
+            torch.set_num_threads(max(1, (os.cpu_count() or 2) - 1))
+            self._run(request)
+        except Exception as exc:  # noqa: BLE001 - reported to the user, never re-raised
+            detail = traceback.format_exc(limit=6)
+            self.run_failed.emit(request.run_id, f"{type(exc).__name__}: {exc}\n{detail}")
+        finally:
+            self.run_finished.emit(request.run_id)
+
+    def _run(self, request: FitRequest):
+        from nurbs_core.fit import FitConfig, deviation, iter_fit
+
+        settings = request.settings
+        config = FitConfig(**settings.fit_fields())
+        initial = starting_geometry(request)
+        initial_shape = None
+        if initial is not None:
+            from nurbs_core import geometry_from_numpy
+
+            initial_shape = geometry_from_numpy(initial)
+        last_deviation = -np.inf
+        for snapshot in iter_fit(request.target, config, stop=self._stop, initial=initial_shape):
+            now = time.monotonic()
+            dev = None
+            if snapshot.done or now - last_deviation >= DEVIATION_INTERVAL:
+                shape_for_deviation = _rebuild(snapshot.geometry)
+                dev = np.asarray(deviation(shape_for_deviation, request.target), dtype=np.float64)
+                last_deviation = time.monotonic()
+            self.snapshot_ready.emit(DisplaySnapshot(
+                run_id=request.run_id, iteration=int(snapshot.iteration),
+                iterations=settings.iterations, geometry=snapshot.geometry,
+                display=display_geometry(snapshot.geometry), losses=list(snapshot.losses),
+                elapsed=float(snapshot.elapsed), done=bool(snapshot.done),
+                status=str(snapshot.status), message=str(snapshot.message or ""), deviation=dev))
+
+
+def _rebuild(geometry: dict[str, Any]):
+    from nurbs_core import geometry_from_numpy
+
+    return geometry_from_numpy(geometry)
