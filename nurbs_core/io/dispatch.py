@@ -1,0 +1,122 @@
+"""``load`` / ``load_any`` / ``save``: one entry point per direction, dispatched on the suffix."""
+
+from __future__ import annotations
+
+import os
+
+from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.points import POINT_CLOUD_SUFFIXES, load_points, suffix_of
+
+CAD_SUFFIXES = (".step", ".stp", ".iges", ".igs")
+NURBS_SUFFIXES = (".3dm", ".json", ".dat", ".smesh", *CAD_SUFFIXES)
+EXPORT_SUFFIXES = (".3dm", ".step", ".stp", ".iges", ".igs", ".json", ".obj", ".stl", ".ply",
+                   ".glb", ".csv", ".dat")
+
+
+def _check_file(path) -> None:
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"{os.fspath(path)}: no such file")
+    if os.path.isdir(path):
+        raise FileFormatError(path, "is a directory, not a file")
+    if os.path.getsize(path) == 0:
+        raise FileFormatError(path, "the file is empty")
+
+
+def _load_json(path) -> list:
+    from nurbs_core.io import geomdl_json, json_format
+
+    document = json_format.read_json_file(path)
+    if isinstance(document, dict):
+        if document.get("format") == json_format.FORMAT_NAME:
+            return json_format.read_document(path, document)[0]
+        if document.get("format") == json_format.SHARED_FORMAT_NAME or "ctrlpts" in document:
+            return json_format.read_shared_json(path, document)
+        if geomdl_json.is_geomdl_document(document):
+            return geomdl_json.read_geomdl_json(path, document)
+    raise FileFormatError(path, "unrecognised JSON: expected a nurbs-studio document "
+                                "(\"format\": \"nurbs-studio\"), a nurbs-surface-json-v1 surface "
+                                "or a geomdl export ({\"shape\": {\"data\": ...}})")
+
+
+def load(path) -> list:
+    """Read NURBS geometry: a list of NurbsCurve / NurbsSurface (float64), one per item.
+
+    .3dm (rhino3dm), .json (ours, geomdl, nurbs-surface-json-v1; sniffed), .dat/.smesh,
+    .step/.stp/.iges/.igs (OCP extra). Each item carries a ``metadata`` dict attribute.
+    """
+    suffix = suffix_of(path)
+    if suffix not in NURBS_SUFFIXES:
+        raise FileFormatError(path, f"unknown NURBS suffix {suffix!r}; supported: "
+                                    f"{', '.join(NURBS_SUFFIXES)}")
+    _check_file(path)
+    if suffix == ".3dm":
+        from nurbs_core.io.rhino import read_3dm
+
+        return read_3dm(path)
+    if suffix == ".json":
+        return _load_json(path)
+    if suffix in (".dat", ".smesh"):
+        from nurbs_core.io.smesh import read_smesh
+
+        return read_smesh(path)
+    from nurbs_core.io.cad import read_cad
+
+    return read_cad(path, "step" if suffix in (".step", ".stp") else "iges")
+
+
+def load_any(path, **point_options):
+    """A PointCloud for point/mesh formats, a list of geometry for NURBS formats.
+
+    ``.ply`` is a point cloud; ``.json`` and ``.dat`` are NURBS; keyword options go to
+    :func:`load_points`.
+    """
+    suffix = suffix_of(path)
+    if suffix in NURBS_SUFFIXES:
+        return load(path)
+    if suffix in POINT_CLOUD_SUFFIXES:
+        return load_points(path, **point_options)
+    raise FileFormatError(path, f"unknown suffix {suffix!r}; supported: "
+                                f"{', '.join(sorted(set(NURBS_SUFFIXES + POINT_CLOUD_SUFFIXES)))}")
+
+
+def save(geometry_or_list, path, **options) -> None:
+    """Write one NurbsCurve / NurbsSurface or a list of them; the suffix picks the format.
+
+    .3dm (rhino3dm; option ``version``), .step/.stp and .iges/.igs (OCP extra), .json (ours,
+    lossless; option ``metadata`` for the document, ``indent``), .obj/.stl/.ply/.glb (surfaces
+    tessellated on a uniform grid; option ``resolution``, int or (r_u, r_v), default 64), .csv
+    (control points and weights), .dat (smesh, one surface). Batched geometry is split into
+    one item per batch entry.
+    """
+    suffix = suffix_of(path)
+    if suffix == ".3dm":
+        from nurbs_core.io.rhino import write_3dm
+
+        write_3dm(geometry_or_list, path, **options)
+    elif suffix in (".step", ".stp"):
+        from nurbs_core.io.cad import write_step
+
+        write_step(geometry_or_list, path, **options)
+    elif suffix in (".iges", ".igs"):
+        from nurbs_core.io.cad import write_iges
+
+        write_iges(geometry_or_list, path, **options)
+    elif suffix == ".json":
+        from nurbs_core.io.json_format import write_json
+
+        write_json(geometry_or_list, path, **options)
+    elif suffix in (".obj", ".stl", ".ply", ".glb"):
+        from nurbs_core.io.tessellate import write_mesh
+
+        write_mesh(geometry_or_list, path, **options)
+    elif suffix == ".csv":
+        from nurbs_core.io.control_points_csv import write_control_points_csv
+
+        write_control_points_csv(geometry_or_list, path, **options)
+    elif suffix == ".dat":
+        from nurbs_core.io.smesh import write_smesh
+
+        write_smesh(geometry_or_list, path, **options)
+    else:
+        raise FileFormatError(path, f"cannot save geometry as {suffix!r}; supported: "
+                                    f"{', '.join(EXPORT_SUFFIXES)}")

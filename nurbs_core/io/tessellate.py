@@ -1,0 +1,55 @@
+"""Triangle meshes of surfaces (for OBJ / STL / PLY / GLB export) on a uniform parameter grid."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from nurbs_core.geometry import NurbsSurface
+from nurbs_core.io.geometry_io import as_geometry_list
+
+MESH_EXPORT_SUFFIXES = (".obj", ".stl", ".ply", ".glb")
+
+
+def grid_faces(count_u: int, count_v: int, offset: int = 0) -> np.ndarray:
+    """Two triangles per grid cell of a (count_u, count_v) vertex grid stored u-major:
+    (2 (count_u - 1) (count_v - 1), 3) vertex indices, counter-clockwise seen along S_u x S_v."""
+    index = np.arange(count_u * count_v).reshape(count_u, count_v) + offset
+    a, b = index[:-1, :-1].ravel(), index[1:, :-1].ravel()
+    c, d = index[1:, 1:].ravel(), index[:-1, 1:].ravel()
+    return np.concatenate([np.stack([a, b, c], axis=1), np.stack([a, c, d], axis=1)])
+
+
+def tessellate_surface(surface: NurbsSurface, resolution=64) -> tuple[np.ndarray, np.ndarray]:
+    """Evaluate on a uniform (r_u, r_v) grid over the domain: vertices (r_u r_v, 3) float64,
+    faces (2 (r_u - 1)(r_v - 1), 3)."""
+    count_u, count_v = (resolution, resolution) if np.isscalar(resolution) else resolution
+    count_u, count_v = int(count_u), int(count_v)
+    if count_u < 2 or count_v < 2:
+        raise ValueError(f"resolution must be at least 2 per direction, got {resolution}")
+    surface = surface.detach().to(dtype=torch.float64, device="cpu")
+    u, v = surface.grid_parameters(count_u, count_v)
+    with torch.no_grad():
+        vertices = surface.evaluate_grid(u, v).reshape(-1, 3).numpy()
+    return vertices, grid_faces(count_u, count_v)
+
+
+def tessellate(geometry_or_list, resolution=64):
+    """One trimesh.Trimesh holding every surface (curves cannot be meshed: ValueError)."""
+    import trimesh
+
+    vertices, faces, offset = [], [], 0
+    for item in as_geometry_list(geometry_or_list):
+        if not isinstance(item, NurbsSurface):
+            raise ValueError("curves cannot be written to a mesh format; save them as .3dm, "
+                             ".step, .iges or .json")
+        item_vertices, item_faces = tessellate_surface(item, resolution)
+        vertices.append(item_vertices)
+        faces.append(item_faces + offset)
+        offset += len(item_vertices)
+    return trimesh.Trimesh(np.concatenate(vertices), np.concatenate(faces), process=False)
+
+
+def write_mesh(geometry_or_list, path, resolution=64) -> None:
+    mesh = tessellate(geometry_or_list, resolution)
+    mesh.export(str(path))
