@@ -77,10 +77,14 @@ def build_tree(points: torch.Tensor | np.ndarray) -> cKDTree:
     return cKDTree(array)
 
 
-def nearest_indices(query: torch.Tensor, tree: cKDTree, workers: int = -1) -> torch.Tensor:
+def nearest_indices(query: torch.Tensor, tree: cKDTree,
+                    workers: int | None = None) -> torch.Tensor:
     """Index (int64, on ``query``'s device) of each query point's nearest point in ``tree``.
 
-    query (M, d). Computed without gradient on a detached CPU copy."""
+    query (M, d). Computed without gradient on a detached CPU copy. ``workers`` defaults to all
+    cores for large queries and one thread for small ones (thread start-up would dominate)."""
+    if workers is None:
+        workers = -1 if query.shape[0] >= 20000 else 1
     _, index = tree.query(_numpy(query), k=1, workers=workers)
     return torch.as_tensor(index, dtype=torch.int64, device=query.device)
 
@@ -210,6 +214,8 @@ TERMS: dict[str, tuple[Callable[[LossInputs, str], torch.Tensor], str]] = {
     "l1": (_paired(l1_loss), "pointwise"),
     "l2": (_paired(l2_loss), "pointwise"),
     "mse": (_paired(mse_loss), "pointwise"),
+    # point-to-surface: mse at foot-point parameters (added for unordered clouds by the fitter)
+    "p2s": (_paired(mse_loss), "pointwise"),
     "chamfer": (_set(chamfer_distance), "set"),
     "hausdorff": (_set(hausdorff_distance), "set"),
     "laplacian": (lambda inputs, name: laplacian_loss(_need(inputs, "control_points", name)),
@@ -217,7 +223,7 @@ TERMS: dict[str, tuple[Callable[[LossInputs, str], torch.Tensor], str]] = {
     "length": (lambda inputs, name: curve_length(_need(inputs, "samples", name)), "regulariser"),
 }
 ALIASES = {"cd": "chamfer", "hd": "hausdorff", "lap": "laplacian", "curve_length": "length",
-           "p2s": "mse", "point_to_surface": "mse"}
+           "point_to_surface": "p2s"}
 
 _TERM = re.compile(r"^\s*(?:(?P<weight>[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*\*\s*)?"
                    r"(?P<name>[A-Za-z_][A-Za-z0-9_]*)\s*$")
@@ -257,7 +263,7 @@ class CompositeLoss:
 def parse_loss(expression: str) -> CompositeLoss:
     """Parse ``"chamfer+0.1*laplacian+10*hausdorff"``: terms joined by ``+``, each ``[w*]name``.
 
-    Names: l1, l2, mse (alias p2s / point_to_surface), chamfer (cd), hausdorff (hd),
+    Names: l1, l2, mse, p2s (point_to_surface; mse at foot points), chamfer (cd), hausdorff (hd),
     laplacian (lap), length (curve_length). Weights must be non-negative numbers; a repeated term
     has its weights added. Raises ValueError naming the offending part."""
     if not isinstance(expression, str) or not expression.strip():

@@ -1,0 +1,176 @@
+"""Configuration, stop token, snapshots and results of a fit (no torch state lives here)."""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+OPTIMIZERS = ("sgd", "momentum", "adam", "adagrad", "lbfgs")
+INITS = ("pca", "random", "least_squares")
+KINDS = ("surface", "curve")
+LR_SCHEDULES = ("plateau", "cosine", "none")
+STATUSES = ("running", "paused", "converged", "stopped", "budget", "diverged", "failed")
+
+
+@dataclass
+class FitConfig:
+    """Settings of a fit.
+
+    Coordinates are normalised before fitting: the cloud is centred on its bounding-box centre and
+    divided by its bounding-box diagonal. ``learning_rate`` is therefore relative to the cloud's
+    size (0.01 = steps of about 1% of the diagonal for Adam) and the loss values in snapshots are in
+    units of the diagonal (squared for ``mse`` / ``p2s``). For ``lbfgs`` the learning rate is the
+    initial trial step of its strong-Wolfe line search (1.0 is the usual choice).
+
+    kind "curve" uses ``degree_u`` and ``control_points_u`` and accepts 2-D or 3-D points.
+    ``loss`` is parsed by :func:`nurbs_core.losses.parse_loss`. For unordered clouds the pointwise
+    terms (l1, l2, mse, p2s) use per-point foot-point parameters; with ``parameter_correction`` they
+    are refined by Gauss-Newton steps every ``correction_interval`` iterations, and a ``p2s`` term
+    (mean squared point-to-surface distance, weight 1) is added when the expression has no
+    pointwise term. At most ``batch_size`` cloud points are used per iteration (a fresh random
+    subset each iteration when the cloud is larger); the KD-tree over the whole cloud is built once.
+    ``refinements`` > 0 splits the iteration budget into ``refinements + 1`` stages and, between
+    stages, inserts a knot in each direction in the span where the error is largest.
+    """
+
+    kind: str = "surface"
+    degree_u: int = 3
+    degree_v: int = 3
+    control_points_u: int = 12
+    control_points_v: int = 12
+    loss: str = "chamfer+0.1*laplacian+10*hausdorff"
+    optimizer: str = "adam"
+    learning_rate: float = 0.01
+    iterations: int = 500
+    tolerance: float = 1e-7
+    free_knots: bool = False
+    free_weights: bool = False
+    pin_boundary: bool = False
+    init: str = "pca"
+    samples_u: int = 64
+    samples_v: int = 64
+    parameter_correction: bool = True
+    seed: int = 0
+    snapshot_interval: float = 0.04
+    dtype: str = "float64"
+    # extensions beyond the shared contract (all optional)
+    momentum: float = 0.9
+    lr_schedule: str = "plateau"
+    correction_interval: int = 5
+    batch_size: int = 65536
+    refinements: int = 0
+
+    def validate(self) -> None:
+        """Raise ValueError naming the first bad setting."""
+        def integer(name, minimum):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise ValueError(f"{name} must be an integer, got {value!r}")
+            if value < minimum:
+                raise ValueError(f"{name} must be at least {minimum}, got {value}")
+
+        def choice(name, options):
+            if getattr(self, name) not in options:
+                raise ValueError(f"{name} must be one of {', '.join(options)}; got "
+                                 f"{getattr(self, name)!r}")
+
+        choice("kind", KINDS)
+        choice("optimizer", OPTIMIZERS)
+        choice("init", INITS)
+        choice("lr_schedule", LR_SCHEDULES)
+        choice("dtype", ("float32", "float64"))
+        directions = ("u",) if self.kind == "curve" else ("u", "v")
+        for d in directions:
+            integer(f"degree_{d}", 1)
+            integer(f"control_points_{d}", 2)
+            integer(f"samples_{d}", 2)
+            degree, count = getattr(self, f"degree_{d}"), getattr(self, f"control_points_{d}")
+            if count < degree + 1:
+                raise ValueError(f"control_points_{d}={count} cannot carry degree_{d}={degree}: "
+                                 f"a degree p needs at least p + 1 control points")
+        integer("iterations", 0)
+        integer("seed", 0)
+        integer("correction_interval", 1)
+        integer("batch_size", 16)
+        integer("refinements", 0)
+        for name in ("learning_rate", "tolerance", "snapshot_interval", "momentum"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float, np.floating)) or not np.isfinite(value):
+                raise ValueError(f"{name} must be a finite number, got {value!r}")
+        if self.learning_rate <= 0:
+            raise ValueError(f"learning_rate must be positive, got {self.learning_rate}")
+        if self.tolerance < 0 or self.snapshot_interval < 0:
+            raise ValueError("tolerance and snapshot_interval must not be negative")
+        if not 0 <= self.momentum < 1:
+            raise ValueError(f"momentum must lie in [0, 1), got {self.momentum}")
+
+
+class StopToken:
+    """Thread-safe stop / pause switch checked by :func:`iter_fit` every iteration."""
+
+    def __init__(self):
+        self._stop = threading.Event()
+        self._running = threading.Event()
+        self._running.set()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._running.set()  # wake a paused fit so it can see the stop
+
+    def pause(self) -> None:
+        self._running.clear()
+
+    def resume(self) -> None:
+        self._running.set()
+
+    @property
+    def stopped(self) -> bool:
+        return self._stop.is_set()
+
+    @property
+    def paused(self) -> bool:
+        return not self._running.is_set()
+
+    def wait_while_paused(self, timeout: float = 0.1) -> None:
+        """Block (without spinning) until resumed or stopped; returns after ``timeout`` at most."""
+        self._running.wait(timeout)
+
+
+@dataclass(frozen=True)
+class FitSnapshot:
+    """An immutable view of a running fit; only numpy copies, never live tensors.
+
+    geometry: ``NurbsSurface.numpy()`` / ``NurbsCurve.numpy()`` dict in the input's coordinates.
+    losses: one dict per iteration since the previous snapshot,
+    ``{"iteration": k, "total": value, <term>: value, ...}`` (normalised units, see FitConfig).
+    status: one of "running", "paused", "converged", "stopped", "budget", "diverged", "failed".
+    """
+
+    iteration: int
+    geometry: dict[str, Any]
+    losses: list[dict[str, float]]
+    elapsed: float
+    done: bool
+    status: str
+    message: str | None = None
+
+
+@dataclass
+class FitResult:
+    """Outcome of :func:`fit`: geometry (NurbsSurface / NurbsCurve, detached), every iteration's
+    losses (``history``), final status and message, and ``statistics`` in input units:
+    ``mean``, ``rms``, ``max`` point-to-geometry (foot-point) distance; with known parameters also
+    ``paired_mean`` (the paper's L2), ``paired_rms``, ``paired_max`` at those parameters."""
+
+    geometry: Any
+    history: list[dict[str, float]]
+    status: str
+    message: str | None
+    statistics: dict[str, float]
+    iterations: int
+    elapsed: float
+    snapshots: int = 0
+    extra: dict[str, Any] = field(default_factory=dict)

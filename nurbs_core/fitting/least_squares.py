@@ -1,0 +1,162 @@
+"""Linear least squares with fixed knots and known parameters, and the PCA plane/line start.
+
+The least-squares control points minimise ``sum_k |S(u_k, v_k) - Q_k|^2`` exactly (non-rational,
+fixed knots): the accuracy yardstick for gradient fits. The collocation matrix is sparse
+((p + 1)(q + 1) non-zeros per row), so the normal equations cost O(N) to assemble.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse
+import torch
+
+from nurbs_core.basis import basis_functions, find_span
+from nurbs_core.geometry import NurbsCurve, NurbsSurface
+from nurbs_core.knots import check_knots, clamped_uniform
+
+
+def compact_basis(knots, degree: int, parameters) -> tuple[np.ndarray, np.ndarray]:
+    """Spans (M,) int and non-zero basis values (M, p + 1) at ``parameters`` (float64 numpy)."""
+    U = torch.as_tensor(np.asarray(knots, np.float64)).unsqueeze(0)
+    t = torch.as_tensor(np.asarray(parameters, np.float64)).unsqueeze(0)
+    span = find_span(U, degree, t)
+    return span[0].numpy(), basis_functions(U, degree, t, span)[0].numpy()
+
+
+def collocation_matrix(knots, degree, parameters, knots_v=None, degree_v=None, parameters_v=None):
+    """Sparse CSR collocation matrix: (M, n) for curves, (M, n*m) for surfaces (col i*m + j)."""
+    span_u, basis_u = compact_basis(knots, degree, parameters)
+    n = len(knots) - degree - 1
+    rows = np.arange(len(span_u))
+    cols_u = span_u[:, None] - degree + np.arange(degree + 1)
+    if knots_v is None:
+        return scipy.sparse.csr_matrix(
+            (basis_u.ravel(), (np.repeat(rows, degree + 1), cols_u.ravel())), shape=(len(rows), n))
+    span_v, basis_v = compact_basis(knots_v, degree_v, parameters_v)
+    m = len(knots_v) - degree_v - 1
+    cols_v = span_v[:, None] - degree_v + np.arange(degree_v + 1)
+    cols = (cols_u[:, :, None] * m + cols_v[:, None, :]).reshape(len(rows), -1)
+    values = (basis_u[:, :, None] * basis_v[:, None, :]).reshape(len(rows), -1)
+    return scipy.sparse.csr_matrix(
+        (values.ravel(), (np.repeat(rows, cols.shape[1]), cols.ravel())), shape=(len(rows), n * m))
+
+
+def _second_difference(count: int) -> scipy.sparse.csr_matrix:
+    if count < 3:
+        return scipy.sparse.csr_matrix((0, count))
+    eye = scipy.sparse.eye(count, format="csr")
+    return (eye[:-2] - 2 * eye[1:-1] + eye[2:]).tocsr()
+
+
+def _solve(matrix, points, smoothing_matrix=None, smoothing=0.0):
+    """Least squares via the normal equations (tiny: one unknown per control point)."""
+    normal = (matrix.T @ matrix).toarray()
+    rhs = matrix.T @ points
+    if smoothing > 0 and smoothing_matrix is not None and smoothing_matrix.shape[0]:
+        # scale the penalty relative to the data term so it means the same for any point count
+        penalty = (smoothing_matrix.T @ smoothing_matrix).toarray()
+        normal = normal + smoothing * np.trace(normal) / max(np.trace(penalty), 1e-300) * penalty
+    try:
+        factor = np.linalg.cholesky(normal)
+        return np.linalg.solve(factor.T, np.linalg.solve(factor, rhs))
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(normal, rhs, rcond=None)[0]
+
+
+def _knots_for(knots, count, degree, parameters, name):
+    if knots is not None:
+        array = np.asarray(knots, np.float64)
+        check_knots(torch.as_tensor(array), degree, count, name)
+        lo, hi = array[degree], array[count]
+        if parameters.min() < lo - 1e-12 * (hi - lo) or parameters.max() > hi + 1e-12 * (hi - lo):
+            raise ValueError(f"parameters for {name} lie outside its domain [{lo:g}, {hi:g}]")
+        return array
+    lo, hi = float(parameters.min()), float(parameters.max())
+    if not hi > lo:
+        raise ValueError(f"all parameters for {name} are equal ({lo:g}); they must span an "
+                         "interval")
+    return clamped_uniform(count, degree, (lo, hi)).numpy()
+
+
+def least_squares_fit(points, parameters, degree_u: int = 3, degree_v: int | None = 3,
+                      control_points_u: int = 12, control_points_v: int | None = 12,
+                      knots_u=None, knots_v=None, *, kind: str | None = None,
+                      smoothing: float = 0.0):
+    """Exact L2 (least-squares) fit with fixed knots and known parameters.
+
+    points (N, 3) with parameters (N, 2) -> NurbsSurface; points (N, d) with parameters (N,) (or
+    ``kind="curve"``) -> NurbsCurve using ``degree_u`` / ``control_points_u`` / ``knots_u``.
+    Knots default to clamped uniform over the parameters' range. ``smoothing`` > 0 adds a
+    second-difference penalty on the control net (relative weight), which keeps control points
+    with no data in their support well defined; 0 gives the pure least-squares optimum.
+    """
+    points = np.asarray(points, np.float64)
+    params = np.asarray(parameters, np.float64)
+    if points.ndim != 2 or points.shape[0] == 0:
+        raise ValueError(f"points must have shape (N, d) with N >= 1, got {points.shape}")
+    if not np.isfinite(points).all() or not np.isfinite(params).all():
+        raise ValueError("points and parameters must be finite (found NaN or inf)")
+    is_curve = kind == "curve" or params.ndim == 1 or (params.ndim == 2 and params.shape[1] == 1)
+    if is_curve:
+        params = params.reshape(-1)
+        if params.shape[0] != points.shape[0]:
+            raise ValueError(f"{points.shape[0]} points but {params.shape[0]} parameters")
+        if points.shape[0] < control_points_u:
+            raise ValueError(f"{points.shape[0]} points cannot determine {control_points_u} "
+                             "control points")
+        if control_points_u < degree_u + 1:
+            raise ValueError(f"{control_points_u} control points cannot carry degree {degree_u}")
+        U = _knots_for(knots_u, control_points_u, degree_u, params, "knots_u")
+        matrix = collocation_matrix(U, degree_u, params)
+        control = _solve(matrix, points, _second_difference(control_points_u), smoothing)
+        return NurbsCurve(control, degree_u, U)
+    if params.shape != (points.shape[0], 2):
+        raise ValueError(f"surface parameters must have shape ({points.shape[0]}, 2), got "
+                         f"{params.shape}")
+    if points.shape[1] != 3:
+        raise ValueError(f"surface points must be 3-D, got shape {points.shape}")
+    n, m = control_points_u, control_points_v
+    for count, degree, d in ((n, degree_u, "u"), (m, degree_v, "v")):
+        if count < degree + 1:
+            raise ValueError(f"{count} control points in {d} cannot carry degree {degree}")
+    if smoothing == 0 and points.shape[0] < n * m:
+        raise ValueError(f"{points.shape[0]} points cannot determine {n} x {m} control points")
+    U = _knots_for(knots_u, n, degree_u, params[:, 0], "knots_u")
+    V = _knots_for(knots_v, m, degree_v, params[:, 1], "knots_v")
+    matrix = collocation_matrix(U, degree_u, params[:, 0], V, degree_v, params[:, 1])
+    eye_u, eye_v = scipy.sparse.eye(n), scipy.sparse.eye(m)
+    penalty = scipy.sparse.vstack([scipy.sparse.kron(_second_difference(n), eye_v),
+                                   scipy.sparse.kron(eye_u, _second_difference(m))]).tocsr()
+    control = _solve(matrix, points, penalty, smoothing)
+    return NurbsSurface(control.reshape(n, m, 3), degree_u, degree_v, U, V)
+
+
+# --------------------------------------------------------------------------------------------
+# Principal axes of a cloud
+
+
+def principal_axes(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centroid (d,), axes (d, d) as rows sorted by decreasing spread, singular values (d,)."""
+    centroid = points.mean(axis=0)
+    # an SVD of the d x d covariance is O(N d^2) and never forms an N x N matrix
+    covariance = (points - centroid).T @ (points - centroid) / max(len(points), 1)
+    values, vectors = np.linalg.eigh(covariance)
+    order = np.argsort(values)[::-1]
+    return centroid, vectors[:, order].T, np.sqrt(np.clip(values[order], 0, None))
+
+
+def pca_parameters(points: np.ndarray, dimensions: int) -> tuple[np.ndarray, np.ndarray]:
+    """Project on the first ``dimensions`` principal axes and rescale each to [0, 1].
+
+    Returns parameters (N, dimensions) and the affine map (origin (d,), edges (dimensions, d)) so
+    that ``origin + params @ edges`` is the projected point."""
+    centroid, axes, _ = principal_axes(points)
+    axes = axes[:dimensions]
+    coords = (points - centroid) @ axes.T
+    lo, hi = coords.min(axis=0), coords.max(axis=0)
+    extent = np.where(hi > lo, hi - lo, 1.0)
+    params = (coords - lo) / extent
+    origin = centroid + lo @ axes
+    edges = axes * extent[:, None]
+    return np.clip(params, 0.0, 1.0), (origin, edges)

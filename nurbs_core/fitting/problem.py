@@ -1,0 +1,252 @@
+"""Input checking, normalisation and the starting geometry of a fit."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from nurbs_core.fitting.config import FitConfig
+from nurbs_core.fitting.least_squares import least_squares_fit, pca_parameters, principal_axes
+from nurbs_core.geometry import NurbsCurve, NurbsSurface, geometry_from_numpy
+from nurbs_core.knots import clamped_uniform, greville
+
+
+@dataclass
+class Problem:
+    """A validated fitting problem in normalised coordinates ``(x - center) / scale``.
+
+    points (N, d) tensor; parameters: known (N, 2) / (N,) tensor or None (unordered);
+    domains: the knot domain per direction."""
+
+    kind: str
+    points_input: np.ndarray
+    points: torch.Tensor
+    center: np.ndarray
+    scale: float
+    parameters: torch.Tensor | None
+    domains: list[tuple[float, float]]
+    dtype: torch.dtype
+
+    @property
+    def known(self) -> bool:
+        return self.parameters is not None
+
+    @property
+    def count(self) -> int:
+        return self.points.shape[0]
+
+
+def _check_points(target, config: FitConfig) -> np.ndarray:
+    try:
+        points = np.asarray(target, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"the target points are not numeric: {exc}") from None
+    expected = "(N, 3)" if config.kind == "surface" else "(N, 2) or (N, 3)"
+    if points.ndim != 2 or points.shape[-1] not in ((3,) if config.kind == "surface" else (2, 3)):
+        raise ValueError(f"a {config.kind} fit needs target points of shape {expected}, got "
+                         f"{points.shape}")
+    n = points.shape[0]
+    if n == 0:
+        raise ValueError("the point cloud is empty")
+    if n == 1:
+        raise ValueError(f"a single point cannot define a {config.kind}")
+    bad = ~np.isfinite(points).all(axis=1)
+    if bad.any():
+        rows = np.flatnonzero(bad)
+        raise ValueError(f"the point cloud contains NaN or inf in {rows.size} row(s), first at "
+                         f"row {rows[0]} (0-based)")
+    extent = points.max(axis=0) - points.min(axis=0)
+    if not np.linalg.norm(extent) > 0:
+        raise ValueError(f"all {n} points coincide; a {config.kind} needs points that spread out")
+    if config.kind == "surface":
+        _, _, spread = principal_axes(points)
+        if spread[1] <= 1e-9 * spread[0]:
+            raise ValueError("the points are collinear; a surface needs points spread over an "
+                             "area (fit a curve instead)")
+    controls = config.control_points_u * (config.control_points_v if config.kind == "surface"
+                                          else 1)
+    if n < controls:
+        raise ValueError(f"{n} points cannot determine {controls} control points; use fewer "
+                         "control points")
+    return points
+
+
+def _check_parameters(parameters, n: int, config: FitConfig) -> np.ndarray:
+    try:
+        params = np.asarray(parameters, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"parameters are not numeric: {exc}") from None
+    if config.kind == "curve":
+        if params.ndim == 2 and params.shape[1] == 1:
+            params = params[:, 0]
+        if params.shape != (n,):
+            raise ValueError(f"curve parameters must have shape ({n},), got {params.shape}")
+    elif params.shape != (n, 2):
+        raise ValueError(f"surface parameters must have shape ({n}, 2), got {params.shape}")
+    if not np.isfinite(params).all():
+        raise ValueError("parameters contain NaN or inf")
+    columns = params.reshape(n, -1)
+    for k in range(columns.shape[1]):
+        if not columns[:, k].max() > columns[:, k].min():
+            raise ValueError(f"all parameters in {'uv'[k]} are equal; they must span an interval")
+    return params
+
+
+def prepare(target, config: FitConfig, parameters=None) -> Problem:
+    config.validate()
+    points = _check_points(target, config)
+    dtype = torch.float32 if config.dtype == "float32" else torch.float64
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    center = (lo + hi) / 2
+    scale = float(np.linalg.norm(hi - lo))
+    normalised = torch.as_tensor((points - center) / scale, dtype=dtype)
+    dims = 1 if config.kind == "curve" else 2
+    if parameters is not None:
+        params = _check_parameters(parameters, points.shape[0], config)
+        columns = params.reshape(points.shape[0], -1)
+        domains = [(float(columns[:, k].min()), float(columns[:, k].max())) for k in range(dims)]
+        param_tensor = torch.as_tensor(params, dtype=dtype)
+    else:
+        domains, param_tensor = [(0.0, 1.0)] * dims, None
+    return Problem(config.kind, points, normalised, center, scale, param_tensor, domains, dtype)
+
+
+# --------------------------------------------------------------------------------------------
+# Starting geometry
+
+
+def _uniform_knots(problem: Problem, config: FitConfig):
+    counts = (config.control_points_u, config.control_points_v)
+    degrees = (config.degree_u, config.degree_v)
+    return [clamped_uniform(counts[k], degrees[k], problem.domains[k], dtype=torch.float64).numpy()
+            for k in range(len(problem.domains))]
+
+
+def _plane_geometry(problem: Problem, config: FitConfig, knots):
+    """Plane (or line) through the cloud's principal axes, linearly parameterised."""
+    points = problem.points.double().numpy()
+    dims = len(knots)
+    _, (origin, edges) = pca_parameters(points, dims)
+    degrees = (config.degree_u, config.degree_v)[:dims]
+    # Greville abscissae reproduce linear functions exactly: the net spans a flat rectangle
+    g = [(greville(knots[k], degrees[k]) - problem.domains[k][0])
+         / (problem.domains[k][1] - problem.domains[k][0]) for k in range(dims)]
+    if dims == 1:
+        control = origin + g[0][:, None] * edges[0]
+        return NurbsCurve(control, degrees[0], knots[0], dtype=problem.dtype)
+    control = (origin + g[0][:, None, None] * edges[0] + g[1][None, :, None] * edges[1])
+    return NurbsSurface(control, *degrees, *knots, dtype=problem.dtype)
+
+
+def _random_geometry(problem: Problem, config: FitConfig, knots):
+    """Gaussian control points around the centroid (the paper's random start)."""
+    gen = torch.Generator().manual_seed(config.seed)
+    points = problem.points.double()
+    centroid = points.mean(0)
+    radius = float((points - centroid).pow(2).sum(-1).mean().sqrt())
+    counts = (config.control_points_u, config.control_points_v)[:len(knots)]
+    noise = torch.randn(*counts, points.shape[1], generator=gen, dtype=torch.float64)
+    control = centroid + radius * noise / np.sqrt(points.shape[1])
+    if len(knots) == 1:
+        return NurbsCurve(control, config.degree_u, knots[0], dtype=problem.dtype)
+    return NurbsSurface(control, config.degree_u, config.degree_v, *knots, dtype=problem.dtype)
+
+
+def start_parameters(problem: Problem) -> np.ndarray:
+    """Initial per-point parameters: the known ones, else the PCA projection in [0, 1]."""
+    if problem.known:
+        return problem.parameters.double().numpy()
+    dims = len(problem.domains)
+    params, _ = pca_parameters(problem.points.double().numpy(), dims)
+    return params[:, 0] if dims == 1 else params
+
+
+def initial_geometry(problem: Problem, config: FitConfig, initial=None):
+    """Starting geometry in normalised coordinates (see FitConfig.init and iter_fit's initial)."""
+    if initial is not None:
+        return _from_initial(problem, config, initial)
+    knots = _uniform_knots(problem, config)
+    if config.init == "pca":
+        return _plane_geometry(problem, config, knots)
+    if config.init == "random":
+        return _random_geometry(problem, config, knots)
+    params = start_parameters(problem)
+    smoothing = 0.0 if problem.known else 1e-4
+    kind_kw = dict(kind="curve") if config.kind == "curve" else {}
+    geometry = least_squares_fit(problem.points.double().numpy(), params, config.degree_u,
+                                 config.degree_v, config.control_points_u, config.control_points_v,
+                                 *knots + [None] * (2 - len(knots)), smoothing=smoothing, **kind_kw)
+    return geometry.to(dtype=problem.dtype)
+
+
+def _from_initial(problem: Problem, config: FitConfig, initial):
+    geometry = geometry_from_numpy(initial) if isinstance(initial, dict) else initial
+    if not isinstance(geometry, (NurbsCurve, NurbsSurface)):
+        raise ValueError(f"initial must be a NurbsCurve, NurbsSurface or their numpy dict, got "
+                         f"{type(initial).__name__}")
+    is_curve = isinstance(geometry, NurbsCurve)
+    if is_curve != (config.kind == "curve"):
+        raise ValueError(f"initial is a {'curve' if is_curve else 'surface'} but the fit is a "
+                         f"{config.kind}")
+    if len(geometry.batch_shape):
+        raise ValueError("initial must be a single curve or surface, not a batch")
+    geometry = geometry.detach().to(dtype=torch.float64)
+    if is_curve and geometry.dimension != problem.points.shape[1]:
+        raise ValueError(f"initial curve is {geometry.dimension}-D but the points are "
+                         f"{problem.points.shape[1]}-D")
+    geometry = conform(geometry, config)
+    center = torch.as_tensor(problem.center)
+    control = (geometry.control_points - center) / problem.scale
+    if is_curve:
+        normalised = NurbsCurve(control, geometry.degree, geometry.knots, geometry.weights)
+        domains = [geometry.domain]
+    else:
+        normalised = NurbsSurface(control, geometry.degree_u, geometry.degree_v, geometry.knots_u,
+                                  geometry.knots_v, geometry.weights)
+        domains = list(geometry.domain)
+    if problem.known:
+        columns = problem.parameters.double().numpy().reshape(problem.count, -1)
+        for k, (lo, hi) in enumerate(domains):
+            tol = 1e-9 * (hi - lo)
+            if columns[:, k].min() < lo - tol or columns[:, k].max() > hi + tol:
+                raise ValueError(f"the known parameters in {'uv'[k]} leave the initial geometry's "
+                                 f"domain [{lo:g}, {hi:g}]")
+    problem.domains = domains
+    return normalised.to(dtype=problem.dtype)
+
+
+def conform(geometry, config: FitConfig):
+    """Bring ``geometry`` to the config's degrees and control counts: exactly when degree elevation
+    gets there, otherwise by least squares on dense samples of it (non-rational result)."""
+    is_curve = isinstance(geometry, NurbsCurve)
+    target_degrees = (config.degree_u,) if is_curve else (config.degree_u, config.degree_v)
+    target_counts = ((config.control_points_u,) if is_curve
+                     else (config.control_points_u, config.control_points_v))
+    degrees = (geometry.degree,) if is_curve else (geometry.degree_u, geometry.degree_v)
+    counts = (geometry.n_control_points,) if is_curve else tuple(geometry.shape)
+    if degrees == target_degrees and counts == target_counts:
+        return geometry
+    raise_by = [t - d for t, d in zip(target_degrees, degrees, strict=True)]
+    if all(r >= 0 for r in raise_by):
+        elevated = (geometry.elevate_degree(raise_by[0]) if is_curve
+                    else geometry.elevate_degree(*raise_by))
+        new_counts = ((elevated.n_control_points,) if is_curve else tuple(elevated.shape))
+        if new_counts == target_counts:
+            return elevated
+    # least squares on samples of the initial geometry
+    density = [max(4 * c, 64) for c in target_counts]
+    if is_curve:
+        lo, hi = geometry.domain
+        u = np.linspace(lo, hi, density[0])
+        points = geometry.evaluate(torch.as_tensor(u)).detach().numpy()
+        return least_squares_fit(points, u, config.degree_u, None, config.control_points_u, None,
+                                 kind="curve")
+    (u0, u1), (v0, v1) = geometry.domain
+    u, v = np.linspace(u0, u1, density[0]), np.linspace(v0, v1, density[1])
+    points = geometry.evaluate_grid(torch.as_tensor(u), torch.as_tensor(v)).detach().numpy()
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    return least_squares_fit(points.reshape(-1, 3), np.stack([uu.ravel(), vv.ravel()], -1),
+                             config.degree_u, config.degree_v, config.control_points_u,
+                             config.control_points_v)

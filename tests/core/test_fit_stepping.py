@@ -1,0 +1,135 @@
+"""The stepping API: snapshots, stop / pause, determinism, roll-back of diverging steps."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+import torch
+
+from nurbs_core import NurbsSurface, geometry_from_numpy
+from nurbs_core.fit import FitConfig, FitSnapshot, StopToken, fit, iter_fit
+
+
+def _grid(count=20):
+    x = np.linspace(-1, 1, count)
+    xx, yy = np.meshgrid(x, x, indexing="ij")
+    points = np.stack([xx, yy, 0.3 * np.sin(2 * xx) * np.cos(yy)], -1).reshape(-1, 3)
+    return points, np.stack([xx, yy], -1).reshape(-1, 2)
+
+
+def _small(**kw):
+    base = dict(control_points_u=6, control_points_v=6, samples_u=16, samples_v=16,
+                iterations=30, snapshot_interval=0.0)
+    base.update(kw)
+    return FitConfig(**base)
+
+
+def test_snapshots_hold_numpy_copies_and_every_iteration():
+    points, _ = _grid()
+    snapshots = list(iter_fit(points, _small(iterations=12)))
+    assert all(isinstance(s, FitSnapshot) for s in snapshots)
+    assert snapshots[-1].done and snapshots[-1].status == "budget"
+    assert not any(s.done for s in snapshots[:-1])
+    iterations = [record["iteration"] for s in snapshots for record in s.losses]
+    assert iterations == list(range(1, 13))
+    for snapshot in snapshots:
+        for value in snapshot.geometry.values():
+            assert not isinstance(value, torch.Tensor)
+        for record in snapshot.losses:
+            assert {"iteration", "total", "chamfer", "laplacian", "hausdorff", "p2s"} <= set(record)
+    surface = geometry_from_numpy(snapshots[-1].geometry)
+    assert isinstance(surface, NurbsSurface) and surface.shape == (6, 6)
+    # the geometry is in the input's coordinates, not the normalised ones
+    assert np.abs(surface.control_points.numpy()[..., :2]).max() > 0.8
+
+
+def test_snapshots_are_throttled():
+    points, _ = _grid()
+    snapshots = list(iter_fit(points, _small(iterations=40, snapshot_interval=10.0)))
+    # the first iteration is always shown, then nothing within 10 s, then the final one
+    assert len(snapshots) == 2
+    assert sum(len(s.losses) for s in snapshots) == 40
+
+
+def test_same_seed_same_run_and_different_seed_differs():
+    points, _ = _grid()
+    config = _small(init="random", iterations=15, seed=3)
+    first = fit(points, config)
+    second = fit(points, config)
+    assert [r["total"] for r in first.history] == [r["total"] for r in second.history]
+    assert torch.equal(first.geometry.control_points, second.geometry.control_points)
+    other = fit(points, _small(init="random", iterations=15, seed=4))
+    assert not torch.equal(first.geometry.control_points, other.geometry.control_points)
+
+
+def test_stop_token_ends_the_run_with_status_stopped():
+    points, _ = _grid()
+    stop = StopToken()
+    seen = []
+    for snapshot in iter_fit(points, _small(iterations=10_000), stop=stop):
+        seen.append(snapshot)
+        if snapshot.iteration >= 3:
+            stop.stop()
+    assert seen[-1].done and seen[-1].status == "stopped"
+    assert seen[-1].iteration < 10
+
+
+def test_pause_blocks_without_iterating_and_resume_continues():
+    points, _ = _grid()
+    stop = StopToken()
+    run = iter_fit(points, _small(iterations=10_000), stop=stop)
+    next(run)
+    stop.pause()
+    paused = next(run)
+    assert paused.status == "paused" and not paused.done
+    result = {}
+
+    def consume():
+        result["next"] = next(run)
+
+    worker = threading.Thread(target=consume)
+    start = time.process_time()
+    worker.start()
+    worker.join(0.5)
+    assert worker.is_alive()  # blocked while paused
+    assert time.process_time() - start < 0.3  # and not burning CPU while waiting
+    stop.resume()
+    worker.join(10)
+    assert not worker.is_alive() and result["next"].iteration > paused.iteration
+    stop.stop()
+    assert list(run)[-1].status == "stopped"
+
+
+def test_stop_while_paused_finishes():
+    points, _ = _grid()
+    stop = StopToken()
+    run = iter_fit(points, _small(iterations=10_000), stop=stop)
+    next(run)
+    stop.pause()
+    assert next(run).status == "paused"
+    threading.Timer(0.2, stop.stop).start()
+    final = list(run)[-1]
+    assert final.done and final.status == "stopped"
+
+
+def test_diverging_steps_roll_back_and_halve_the_learning_rate():
+    points, params = _grid()
+    config = _small(optimizer="sgd", learning_rate=1e9, loss="mse", iterations=150,
+                    lr_schedule="none")
+    snapshots = list(iter_fit(points, config, parameters=params))
+    messages = [s.message for s in snapshots if s.message]
+    assert any("rolled back" in m and "halved the learning rate" in m for m in messages)
+    final = snapshots[-1]
+    assert final.status == "budget"
+    assert np.isfinite(final.geometry["control_points"]).all()
+    totals = [r["total"] for s in snapshots for r in s.losses]
+    assert all(np.isfinite(totals))
+    assert totals[-1] < totals[0]  # it recovered and kept fitting
+
+
+def test_iter_fit_validates_before_returning():
+    with pytest.raises(ValueError, match="empty"):
+        iter_fit(np.zeros((0, 3)), FitConfig())
