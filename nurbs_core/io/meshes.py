@@ -22,10 +22,14 @@ def _load_trimesh(path, suffix: str):
     if suffix == ".obj":
         kwargs["maintain_order"] = True  # keep the file's vertex order
     try:
-        loaded = trimesh.load(str(path), force="mesh", **kwargs)
+        loaded = trimesh.load(str(path), **kwargs)
+        if isinstance(loaded, trimesh.Scene):  # GLB/GLTF: every node with its transform applied
+            loaded = loaded.to_mesh() if len(loaded.geometry) else None
     except Exception as exc:  # trimesh raises many different types for unreadable files
         raise FileFormatError(path, f"not a readable {suffix.lstrip('.').upper()} mesh: "
                                     f"{type(exc).__name__}: {exc}") from None
+    if loaded is None:
+        raise FileFormatError(path, "the file contains no geometry")
     return loaded
 
 
