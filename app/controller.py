@@ -105,6 +105,7 @@ class FitController(QObject):
         self._worker.run_failed.connect(self._on_failed)
         self._worker.run_finished.connect(self._on_run_finished)
         self._rate_history.clear()
+        self._last_loss = float("nan")
         self._thread.start()
         self._timer.start()
         self._set_state("paused" if paused else "running")
@@ -232,7 +233,9 @@ class FitController(QObject):
         if len(self._rate_history) >= 2:
             (t0, i0), (t1, i1) = self._rate_history[0], self._rate_history[-1]
             rate = (i1 - i0) / (t1 - t0) if t1 > t0 else 0.0
-        loss = snapshot.losses[-1]["total"] if snapshot.losses else float("nan")
+        if snapshot.losses:
+            self._last_loss = float(snapshot.losses[-1]["total"])
+        loss = getattr(self, "_last_loss", float("nan"))
         remaining = (snapshot.iterations - snapshot.iteration) / rate if rate > 0 else float("nan")
         return {"iteration": snapshot.iteration, "iterations": snapshot.iterations, "loss": loss,
                 "rate": rate, "remaining": 0.0 if snapshot.done else remaining,

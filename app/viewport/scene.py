@@ -88,7 +88,9 @@ class SceneView(QObject):
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
-        self.plotter = QtInteractor(parent, auto_update=False)
+        theme = pv.themes.DocumentTheme()
+        theme.allow_empty_mesh = True  # layers exist before their content (e.g. no fit yet)
+        self.plotter = QtInteractor(parent, auto_update=False, theme=theme)
         self.plotter.setAcceptDrops(False)  # drops must reach the main window
         self.plotter.set_background("#fbfbfd", top="#c9d6e3")
         self.plotter.enable_lightkit()
@@ -139,7 +141,7 @@ class SceneView(QObject):
                         scalars=DEVIATION_TITLE, cmap=DEVIATION_COLORMAP, clim=(0.0, 1.0),
                         show_scalar_bar=False)
             self.plotter.add_scalar_bar(DEVIATION_TITLE, mapper=self._actors["cloud"].mapper,
-                                        vertical=True, position_x=0.88, position_y=0.25,
+                                        vertical=True, position_x=0.88, position_y=0.12,
                                         height=0.5, width=0.06, fmt="%.3g", color="#222222")
         else:
             self._layer("cloud", mesh)
@@ -184,15 +186,16 @@ class SceneView(QObject):
             return
         colour = self.deviation_shown() and self._visible["cloud"]
         actor.mapper.scalar_visibility = colour
-        bar = self.plotter.scalar_bars.get(DEVIATION_TITLE)
-        if bar is not None:
-            bar.SetVisibility(colour)
+        if DEVIATION_TITLE in self.plotter.scalar_bars:
+            self.plotter.scalar_bars[DEVIATION_TITLE].SetVisibility(colour)
 
     def show_fit(self, display: DisplayGeometry | None):
         """The fitted surface or curve with its control net and knot lines (None clears)."""
-        empty = pv.PolyData()
+        def empty():  # a fresh one per layer: layers must never share a dataset
+            return pv.PolyData()
+
         if display is None or display.kind == "surface":
-            surface = empty if display is None else surface_mesh(display.surface_grid)
+            surface = empty() if display is None else surface_mesh(display.surface_grid)
             if "surface" in self._meshes and display is not None and (
                     self._meshes["surface"].n_points == surface.n_points):
                 mesh = self._meshes["surface"]
@@ -202,18 +205,18 @@ class SceneView(QObject):
                 self._layer("surface", surface, color=COLORS["surface"], smooth_shading=False,
                             specular=0.4, specular_power=20.0)
                 self._actors["surface"].prop.interpolation = "phong"
-            self._layer("curve", empty, color=COLORS["curve"], line_width=4.0)
+            self._layer("curve", empty(), color=COLORS["curve"], line_width=4.0)
         else:
             self._layer("curve", polylines_mesh([display.curve_points]), color=COLORS["curve"],
                         line_width=4.0)
-            self._layer("surface", empty, color=COLORS["surface"])
-        net = empty if display is None else control_net_mesh(display.control_net)
+            self._layer("surface", empty(), color=COLORS["surface"])
+        net = empty() if display is None else control_net_mesh(display.control_net)
         self._layer("control_net", net, color=COLORS["control_net"], line_width=1.5,
                     point_size=8.0, render_points_as_spheres=True)
         if display is None:
-            knots = empty
+            knots = empty()
         elif display.kind == "curve":
-            knots = pv.PolyData(display.knot_lines[0]) if display.knot_lines else empty
+            knots = pv.PolyData(display.knot_lines[0]) if display.knot_lines else empty()
         else:
             knots = polylines_mesh(display.knot_lines)
         self._layer("knot_lines", knots, color=COLORS["knot_lines"], line_width=1.0,

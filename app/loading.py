@@ -1,0 +1,117 @@
+"""Reading and writing files for the app (runs inside worker jobs; torch may run here).
+
+Loading is all-or-nothing: every file is read first, and only when all succeed does the window
+swap them into the document, so a bad file leaves the current document untouched.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.state import OffsetDisplay, Target
+from app.workers.display import DisplayGeometry, display_geometry
+
+#: (menu label, suffix, needs the optional OCP package)
+EXPORT_FORMATS = (
+    ("Rhino 3DM", ".3dm", False),
+    ("STEP", ".step", True),
+    ("IGES", ".iges", True),
+    ("NURBS JSON", ".json", False),
+    ("Wavefront OBJ (tessellated)", ".obj", False),
+    ("STL (tessellated)", ".stl", False),
+    ("PLY (tessellated)", ".ply", False),
+    ("glTF binary (tessellated)", ".glb", False),
+    ("Control points CSV", ".csv", False),
+)
+CAD_INSTALL_HINT = 'pip install "nurbs-studio[cad]"'
+
+
+@dataclass
+class LoadedFiles:
+    targets: list[Target] = field(default_factory=list)
+    patches: list[dict[str, Any]] = field(default_factory=list)
+    patch_names: list[str] = field(default_factory=list)
+
+
+def open_suffixes() -> tuple[str, ...]:
+    from nurbs_core import io
+
+    suffixes = set(io.POINT_CLOUD_SUFFIXES) | set(getattr(io, "NURBS_SUFFIXES", ()))
+    return tuple(sorted(suffixes))
+
+
+def _read(path: Path):
+    from nurbs_core import io
+
+    load_any = getattr(io, "load_any", None)
+    if load_any is not None:
+        return load_any(path)
+    return io.load_points(path)  # until NURBS reading lands: point clouds only
+
+
+def load_files(paths: list[str]) -> LoadedFiles:
+    """Read every file; raise on the first failure (the exception names the file)."""
+    loaded = LoadedFiles()
+    for name in paths:
+        path = Path(name)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such file")
+        result = _read(path)
+        if isinstance(result, (list, tuple)):
+            if not result:
+                raise ValueError(f"{path}: contains no curves or surfaces")
+            for index, geometry in enumerate(result):
+                loaded.patches.append(geometry.numpy())
+                suffix = f" #{index + 1}" if len(result) > 1 else ""
+                loaded.patch_names.append(f"{path.name}{suffix}")
+        else:
+            points = np.asarray(result.points, dtype=np.float64)
+            if points.ndim != 2 or points.shape[1] != 3 or len(points) < 4:
+                raise ValueError(f"{path}: needs at least 4 points with x, y, z "
+                                 f"(got an array of shape {points.shape})")
+            loaded.targets.append(Target(path.name, points, str(path)))
+    return loaded
+
+
+def tessellate(geometries: list[dict[str, Any]]) -> list[DisplayGeometry]:
+    return [display_geometry(g) for g in geometries]
+
+
+def fitted_display(geometry: dict[str, Any], points: np.ndarray | None):
+    """Display arrays and per-point deviation of a fitted shape (e.g. from a session)."""
+    from nurbs_core import geometry_from_numpy
+    from nurbs_core.fit import deviation
+
+    display = display_geometry(geometry)
+    dev = None
+    if points is not None:
+        target = points[:, :2] if (geometry["kind"] == "curve" and
+                                   geometry["control_points"].shape[-1] == 2) else points
+        dev = np.asarray(deviation(geometry_from_numpy(geometry), target), dtype=np.float64)
+    return display, dev
+
+
+def compute_offsets(surfaces: list[dict[str, Any]], distance: float, constrain_shared: bool):
+    """Offset patches; returns (OffsetDisplay, list of DisplayGeometry)."""
+    from nurbs_core import geometry_from_numpy
+    from nurbs_core.offset import offset_patches
+
+    result = offset_patches([geometry_from_numpy(s) for s in surfaces], distance,
+                            constrain_shared=constrain_shared)
+    geometries = [s.numpy() for s in result.surfaces]
+    return (OffsetDisplay(geometries, float(result.max_gap), len(result.shared_edges)),
+            tessellate(geometries))
+
+
+def export_geometry(geometries: list[dict[str, Any]], path: str) -> int:
+    """Write the shapes with ``nurbs_core.io.save`` (format from the suffix); returns the count."""
+    from nurbs_core import geometry_from_numpy
+    from nurbs_core.io import save
+
+    shapes = [geometry_from_numpy(g) for g in geometries]
+    save(shapes, path)
+    return len(shapes)

@@ -1,0 +1,687 @@
+"""The main window: menus, docks, status bar and the wiring between them (no fitting logic).
+
+Layout: the VTK viewport in the centre; on the left the document tree; on the right the fit
+settings, knots and offsets; at the bottom the loss plot and the log. Long work (reading files,
+tessellating patches, offsets, export) runs in :class:`JobRunner` threads, the fit in the
+controller's worker thread; this module only touches widgets, on the GUI thread.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+from PySide6.QtCore import QSettings, Qt, Signal, Slot
+from PySide6.QtGui import QAction, QIcon, QKeySequence
+from PySide6.QtWidgets import (
+    QApplication,
+    QDockWidget,
+    QFileDialog,
+    QLabel,
+    QMainWindow,
+    QMessageBox,
+    QScrollArea,
+    QStyle,
+    QWidget,
+)
+
+from app import loading
+from app.controller import FitController
+from app.demo import ICON_FILE, demo_path
+from app.panels.document_tree import DocumentTree
+from app.panels.fit_panel import POLICY_TEXT, FitSettingsPanel
+from app.panels.knot_panel import KnotPanel
+from app.panels.log_panel import LogPanel
+from app.panels.loss_plot import LossPlot
+from app.panels.offset_panel import OffsetPanel
+from app.state import Document, FitSettings, OffsetDisplay
+from app.viewport.scene import SceneView
+from app.workers.fit_worker import DisplaySnapshot, deviation_stats
+from app.workers.jobs import JobRunner
+
+log = logging.getLogger("app")
+
+MAX_RECENT = 10
+OFFSET_FIELDS = {"offset_distance", "constrain_shared_edges", "show_offsets"}
+SESSION_FILTER = "NURBS Studio session (*.json)"
+
+
+def _changed_fields(old: FitSettings, new: FitSettings) -> set[str]:
+    return {name for name in old.__dataclass_fields__ if getattr(old, name) != getattr(new, name)}
+
+
+def _format_seconds(seconds: float) -> str:
+    if not math.isfinite(seconds):
+        return "-"
+    seconds = max(0.0, seconds)
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.1f} min"
+
+
+class MainWindow(QMainWindow):
+    """NURBS Studio's window. Public methods are what menus, drops, scripts and tests call."""
+
+    files_loaded = Signal(bool)  # True: the document now holds the files; False: load failed
+    export_finished = Signal(str, bool)  # path, success
+    offsets_updated = Signal(bool)
+    error_shown = Signal(str)
+
+    def __init__(self, settings_store: QSettings | None = None):
+        super().__init__()
+        self.setWindowTitle("NURBS Studio")
+        if ICON_FILE.is_file():
+            self.setWindowIcon(QIcon(str(ICON_FILE)))
+        self.resize(1400, 900)
+        self.setAcceptDrops(True)
+        self._store = settings_store or QSettings("NURBS Studio", "nurbs-studio")
+        self._is_shut_down = False
+        self._message_box: QMessageBox | None = None
+        self._offset_job_running = False
+        self._offset_dirty = False
+        self.last_error = ""
+
+        self.document = Document(self)
+        self.controller = FitController(self.document, self)
+        self.jobs = JobRunner(self)
+        self.scene = SceneView(self)
+        self.setCentralWidget(self.scene.widget)
+
+        self._build_docks()
+        self._build_actions()
+        self._build_menus()
+        self._build_status_bar()
+        self._connect()
+        self._show_settings(self.document.settings)
+        self._on_state_changed("idle")
+        app = QApplication.instance()
+        if app is not None:
+            app.aboutToQuit.connect(self.shutdown)
+
+    # --- construction ----------------------------------------------------------------------------
+    def _dock(self, title: str, widget: QWidget, area, name: str, scroll: bool = False):
+        dock = QDockWidget(title, self)
+        dock.setObjectName(name)
+        if scroll:
+            area_widget = QScrollArea()
+            area_widget.setWidgetResizable(True)
+            area_widget.setWidget(widget)
+            widget = area_widget
+        dock.setWidget(widget)
+        self.addDockWidget(area, dock)
+        return dock
+
+    def _build_docks(self):
+        right = Qt.DockWidgetArea.RightDockWidgetArea
+        bottom = Qt.DockWidgetArea.BottomDockWidgetArea
+        self.tree = DocumentTree(self.set_layer_visible, self.set_target_visible)
+        self.fit_panel = FitSettingsPanel(self.document.edit_settings)
+        self.knot_panel = KnotPanel(self.document.edit_settings, self.report)
+        self.offset_panel = OffsetPanel(self.document.edit_settings)
+        self.loss_plot = LossPlot()
+        self.log_panel = LogPanel()
+        logging.getLogger().addHandler(self.log_panel.handler)
+        if logging.getLogger().level > logging.INFO or logging.getLogger().level == 0:
+            logging.getLogger().setLevel(logging.INFO)
+        self.tree_dock = self._dock("Document", self.tree, Qt.DockWidgetArea.LeftDockWidgetArea,
+                                    "document_dock")
+        self.fit_dock = self._dock("Fit settings", self.fit_panel, right, "fit_dock", True)
+        self.knot_dock = self._dock("Knots", self.knot_panel, right, "knot_dock")
+        self.offset_dock = self._dock("Offsets", self.offset_panel, right, "offset_dock", True)
+        self.tabifyDockWidget(self.fit_dock, self.knot_dock)
+        self.tabifyDockWidget(self.knot_dock, self.offset_dock)
+        self.fit_dock.raise_()
+        self.loss_dock = self._dock("Loss", self.loss_plot, bottom, "loss_dock")
+        self.log_dock = self._dock("Log", self.log_panel, bottom, "log_dock")
+        self.splitDockWidget(self.loss_dock, self.log_dock, Qt.Orientation.Horizontal)
+        self.resizeDocks([self.tree_dock, self.fit_dock], [240, 330], Qt.Orientation.Horizontal)
+        self.resizeDocks([self.loss_dock], [210], Qt.Orientation.Vertical)
+
+    def _action(self, text: str, slot, shortcut=None, icon=None, checkable=False, checked=False):
+        action = QAction(text, self)
+        if shortcut:
+            action.setShortcut(QKeySequence(shortcut))
+        if icon is not None:
+            action.setIcon(self.style().standardIcon(icon))
+        if checkable:
+            action.setCheckable(True)
+            action.setChecked(checked)
+            action.toggled.connect(slot)
+        else:
+            action.triggered.connect(slot)
+        return action
+
+    def _build_actions(self):
+        pixmap = QStyle.StandardPixmap
+        self.open_action = self._action("&Open...", self._open_dialog,
+                                        QKeySequence.StandardKey.Open, pixmap.SP_DialogOpenButton)
+        self.demo_action = self._action("Open &Demo", self.open_demo)
+        self.open_session_action = self._action("Open &Session...", self._open_session_dialog)
+        self.save_session_action = self._action("&Save Session...", self._save_session_dialog,
+                                                QKeySequence.StandardKey.Save,
+                                                pixmap.SP_DialogSaveButton)
+        self.screenshot_action = self._action("Save Screens&hot...", self._screenshot_dialog)
+        self.quit_action = self._action("&Quit", self.close, QKeySequence.StandardKey.Quit)
+        self.start_action = self._action("&Start", self.controller.start, "F5",
+                                         pixmap.SP_MediaPlay)
+        self.pause_action = self._action("&Pause", self.controller.pause, "F6",
+                                         pixmap.SP_MediaPause)
+        self.resume_action = self._action("Res&ume", self.controller.resume, "F7",
+                                          pixmap.SP_MediaSeekForward)
+        self.stop_action = self._action("S&top", self.controller.stop, "Shift+F5",
+                                        pixmap.SP_MediaStop)
+        self.reset_action = self._action("&Reset", self.reset_fit, "Ctrl+R",
+                                         pixmap.SP_BrowserReload)
+        for action, tip in ((self.start_action, "Start fitting (continues from the current shape)"),
+                            (self.reset_action, "Stop and discard the fitted shape")):
+            action.setToolTip(tip)
+        self.undo_action = self.document.undo_stack.createUndoAction(self, "&Undo")
+        self.undo_action.setShortcut(QKeySequence.StandardKey.Undo)
+        self.redo_action = self.document.undo_stack.createRedoAction(self, "&Redo")
+        self.redo_action.setShortcut(QKeySequence.StandardKey.Redo)
+        self.layer_actions = {}
+        for layer, text, on in (("cloud", "Point Cloud", True), ("surface", "Fitted Surface", True),
+                                ("curve", "Fitted Curve", True),
+                                ("control_net", "Control Net", False),
+                                ("knot_lines", "Knot Lines", True), ("patches", "Patches", True),
+                                ("offsets", "Offsets", True)):
+            self.layer_actions[layer] = self._action(
+                text, lambda checked, layer=layer: self.set_layer_visible(layer, checked),
+                checkable=True, checked=on)
+        self.layer_actions["control_net"].setShortcut(QKeySequence("N"))
+        self.deviation_action = self._action("&Deviation Map", self.set_deviation_visible, "D",
+                                             checkable=True, checked=True)
+        self.camera_action = self._action("&Fit View", self.scene.reset_camera, "F")
+
+    def _build_menus(self):
+        bar = self.menuBar()
+        file_menu = bar.addMenu("&File")
+        file_menu.addAction(self.open_action)
+        self.recent_menu = file_menu.addMenu("Open &Recent")
+        self.recent_menu.aboutToShow.connect(self._fill_recent_menu)
+        file_menu.addAction(self.demo_action)
+        file_menu.addSeparator()
+        file_menu.addAction(self.open_session_action)
+        file_menu.addAction(self.save_session_action)
+        file_menu.addSeparator()
+        self.export_menu = file_menu.addMenu("&Export")
+        self.export_actions = {}
+        has_ocp = importlib.util.find_spec("OCP") is not None
+        for label, suffix, needs_ocp in loading.EXPORT_FORMATS:
+            if needs_ocp and not has_ocp:
+                text = f"{label} ({suffix}): needs {loading.CAD_INSTALL_HINT}"
+                action = self._action(text, lambda _=False, label=label: self.report(
+                    f"{label} export needs the optional CAD extra. Install it with: "
+                    f"{loading.CAD_INSTALL_HINT}", error=True))
+            else:
+                action = self._action(f"{label} ({suffix})...",
+                                      lambda _=False, label=label, suffix=suffix:
+                                      self._export_dialog(label, suffix))
+            self.export_menu.addAction(action)
+            self.export_actions[suffix] = action
+        file_menu.addAction(self.screenshot_action)
+        file_menu.addSeparator()
+        file_menu.addAction(self.quit_action)
+
+        edit_menu = bar.addMenu("&Edit")
+        edit_menu.addAction(self.undo_action)
+        edit_menu.addAction(self.redo_action)
+
+        fit_menu = bar.addMenu("F&it")
+        for action in (self.start_action, self.pause_action, self.resume_action,
+                       self.stop_action, self.reset_action):
+            fit_menu.addAction(action)
+        fit_menu.addSeparator()
+        policy = fit_menu.addAction(POLICY_TEXT)
+        policy.setEnabled(False)
+
+        view_menu = bar.addMenu("&View")
+        for action in self.layer_actions.values():
+            view_menu.addAction(action)
+        view_menu.addAction(self.deviation_action)
+        view_menu.addSeparator()
+        view_menu.addAction(self.camera_action)
+        view_menu.addSeparator()
+        for dock in (self.tree_dock, self.fit_dock, self.knot_dock, self.offset_dock,
+                     self.loss_dock, self.log_dock):
+            view_menu.addAction(dock.toggleViewAction())
+
+        toolbar = self.addToolBar("Fit")
+        toolbar.setObjectName("fit_toolbar")
+        toolbar.setToolButtonStyle(Qt.ToolButtonStyle.ToolButtonTextBesideIcon)
+        toolbar.addAction(self.open_action)
+        toolbar.addSeparator()
+        for action in (self.start_action, self.pause_action, self.resume_action,
+                       self.stop_action, self.reset_action):
+            toolbar.addAction(action)
+        toolbar.addSeparator()
+        toolbar.addAction(self.undo_action)
+        toolbar.addAction(self.redo_action)
+
+    def _build_status_bar(self):
+        self.status_labels = {}
+        for name, width in (("state", 90), ("iteration", 130), ("loss", 140), ("rate", 100),
+                            ("remaining", 120)):
+            label = QLabel("-")
+            label.setMinimumWidth(width)
+            self.statusBar().addPermanentWidget(label)
+            self.status_labels[name] = label
+
+    def _connect(self):
+        doc, ctl = self.document, self.controller
+        doc.settings_changed.connect(self._on_settings_changed)
+        doc.content_changed.connect(self._on_content_changed)
+        doc.fitted_changed.connect(self._on_fitted_changed)
+        ctl.state_changed.connect(self._on_state_changed)
+        ctl.snapshot_shown.connect(self._on_snapshot_shown)
+        ctl.losses_received.connect(self.loss_plot.append)
+        ctl.progress_changed.connect(self._on_progress)
+        ctl.fit_finished.connect(self._on_fit_finished)
+        ctl.fit_failed.connect(lambda message: self.report(message, error=True))
+
+    # --- messages --------------------------------------------------------------------------------
+    def report(self, message: str, error: bool = False):
+        """Tell the user: log dock, status bar, and a (non-blocking) dialog for errors."""
+        (log.error if error else log.info)(message)
+        self.statusBar().showMessage(message, 8000)
+        if error:
+            self.last_error = message
+            if self._message_box is not None:
+                self._message_box.close()
+            self._message_box = QMessageBox(QMessageBox.Icon.Warning, "NURBS Studio", message,
+                                            QMessageBox.StandardButton.Ok, self)
+            self._message_box.open()
+            self.error_shown.emit(message)
+
+    # --- loading ---------------------------------------------------------------------------------
+    def open_files(self, paths: list[str]) -> bool:
+        """Read the files in a worker; the document changes only if every file reads."""
+        paths = [str(p) for p in paths]
+        if not paths:
+            return False
+        self.statusBar().showMessage(f"Reading {', '.join(Path(p).name for p in paths)}...")
+        return self.jobs.submit("load", lambda: loading.load_files(paths),
+                                lambda loaded: self._apply_loaded(paths, loaded),
+                                lambda exc: self._load_failed(paths, exc))
+
+    def open_demo(self) -> bool:
+        return self.open_files([str(demo_path())])
+
+    def _apply_loaded(self, paths: list[str], loaded: loading.LoadedFiles):
+        self.controller.reset()
+        self.loss_plot.clear()
+        self.document.replace_content(loaded.targets, loaded.patches, loaded.patch_names)
+        points = self.document.target_points()
+        if points is not None and np.ptp(points[:, 2]) == 0 and self.document.settings.kind != (
+                "curve"):
+            self.document.edit_settings("Kind (planar cloud)", kind="curve")
+            self.report("The cloud is planar: switched to curve fitting (2D).")
+        for path in paths:
+            self._add_recent(path)
+        counts = [f"{len(t.points)} points in {t.name}" for t in loaded.targets]
+        counts += [f"{name}" for name in loaded.patch_names]
+        self.report(f"Opened {'; '.join(counts)}")
+        self.setWindowTitle(f"NURBS Studio - {', '.join(Path(p).name for p in paths)}")
+        self.files_loaded.emit(True)
+
+    def _load_failed(self, paths: list[str], exc: Exception):
+        hint = getattr(exc, "install", None)
+        message = f"Could not open {', '.join(Path(p).name for p in paths)}:\n{exc}"
+        if hint:
+            message += f"\nInstall the missing package with: {hint}"
+        self.report(message + "\nThe document was left unchanged.", error=True)
+        self.files_loaded.emit(False)
+
+    def _open_dialog(self):
+        suffixes = " ".join(f"*{s}" for s in loading.open_suffixes())
+        paths, _ = QFileDialog.getOpenFileNames(
+            self, "Open point clouds or NURBS files", self._last_directory(),
+            f"Supported files ({suffixes});;All files (*)")
+        if paths:
+            self.open_files(paths)
+
+    def _last_directory(self) -> str:
+        recent = self.recent_files()
+        return str(Path(recent[0]).parent) if recent else str(Path.home())
+
+    def recent_files(self) -> list[str]:
+        value = self._store.value("recent_files", [])
+        if isinstance(value, str):
+            value = [value]
+        return [str(v) for v in (value or [])]
+
+    def _add_recent(self, path: str):
+        if Path(path).resolve() == Path(demo_path()).resolve():
+            return
+        recent = [p for p in self.recent_files() if p != path]
+        self._store.setValue("recent_files", [path, *recent][:MAX_RECENT])
+
+    def _fill_recent_menu(self):
+        self.recent_menu.clear()
+        recent = self.recent_files()
+        if not recent:
+            self.recent_menu.addAction("(none)").setEnabled(False)
+        for path in recent:
+            action = self.recent_menu.addAction(path)
+            action.triggered.connect(lambda _=False, path=path: self.open_files([path]))
+
+    def dragEnterEvent(self, event):  # noqa: N802 - Qt override
+        if event.mimeData().hasUrls() and all(u.isLocalFile() for u in event.mimeData().urls()):
+            event.acceptProposedAction()
+        else:
+            event.ignore()
+
+    def dropEvent(self, event):  # noqa: N802 - Qt override
+        paths = [u.toLocalFile() for u in event.mimeData().urls() if u.isLocalFile()]
+        if paths:
+            event.acceptProposedAction()
+            self.open_files(paths)
+
+    # --- document -> view ------------------------------------------------------------------------
+    @Slot()
+    def _on_content_changed(self):
+        points = self.document.target_points()
+        self.scene.set_cloud(points)
+        self.knot_panel.set_points(points)
+        patches = list(self.document.patches)
+        self.scene.set_group("patches", [])
+        self.scene.set_group("offsets", [])
+        self.scene.set_note("")
+        if patches:
+            self.jobs.submit("tessellate", lambda: loading.tessellate(patches),
+                             self._show_patches,
+                             lambda exc: self.report(f"Cannot display the patches: {exc}", True))
+            self._request_offsets()
+        self.scene.reset_camera()
+        self._rebuild_tree()
+
+    def _show_patches(self, displays):
+        self.scene.set_group("patches", displays)
+        self.scene.reset_camera()
+
+    @Slot()
+    def _on_fitted_changed(self):
+        """The fitted shape was replaced outside a live run (reset, session): redisplay it."""
+        fitted = self.document.fitted
+        if fitted is None:
+            self.scene.show_fit(None)
+            self.scene.set_deviation(None)
+        else:
+            points = self.document.target_points()
+            self.jobs.submit("fitted", lambda: loading.fitted_display(fitted, points),
+                             self._show_fitted_display,
+                             lambda exc: self.report(f"Cannot display the fit: {exc}", True))
+        self._rebuild_tree()
+        self.knot_panel.show_state(self.document.settings, fitted)
+
+    def _show_fitted_display(self, result):
+        display, deviation = result
+        self.scene.show_fit(display)
+        if deviation is not None:
+            self.scene.set_deviation(deviation, deviation_stats(deviation))
+        self._rebuild_tree()
+
+    def _rebuild_tree(self):
+        self.tree.rebuild(self.document, self.scene.is_visible, self.deviation_action.isChecked())
+
+    def set_layer_visible(self, layer: str, visible: bool):
+        if layer == "deviation":
+            self.set_deviation_visible(visible)
+            return
+        self.scene.set_visible(layer, visible)
+        action = self.layer_actions.get(layer)
+        if action is not None and action.isChecked() != visible:
+            action.blockSignals(True)
+            action.setChecked(visible)
+            action.blockSignals(False)
+        self._rebuild_tree()
+
+    def set_deviation_visible(self, visible: bool):
+        self.scene.set_deviation_visible(visible)
+        if self.deviation_action.isChecked() != visible:
+            self.deviation_action.blockSignals(True)
+            self.deviation_action.setChecked(visible)
+            self.deviation_action.blockSignals(False)
+        self._rebuild_tree()
+
+    def set_target_visible(self, index: int, visible: bool):
+        """Hide a cloud from the view and from the fit target (applies to the next run)."""
+        self.document.targets[index].visible = visible
+        self.scene.set_cloud(self.document.target_points())
+        self.knot_panel.set_points(self.document.target_points())
+        role = "part of" if visible else "left out of"
+        self.report(f"{self.document.targets[index].name} is {role} the fit target from the "
+                    "next Start.")
+
+    # --- settings --------------------------------------------------------------------------------
+    def _show_settings(self, settings: FitSettings):
+        self.fit_panel.show_settings(settings)
+        self.offset_panel.show_settings(settings)
+        self.knot_panel.show_state(settings, self.document.fitted)
+
+    @Slot(object, object)
+    def _on_settings_changed(self, old: FitSettings, new: FitSettings):
+        self._show_settings(new)
+        changed = _changed_fields(old, new)
+        if changed - OFFSET_FIELDS:
+            if self.controller.state in ("running", "paused", "stopping"):
+                self.controller.schedule_restart()
+                self.statusBar().showMessage("Settings changed: restarting the fit from the "
+                                             "current shape", 4000)
+            else:
+                self.statusBar().showMessage("Settings changed: they apply at the next Start",
+                                             4000)
+        if changed & OFFSET_FIELDS:
+            self._request_offsets()
+
+    # --- fit -------------------------------------------------------------------------------------
+    def reset_fit(self):
+        self.controller.reset()
+        self.loss_plot.clear()
+        self.report("Reset: the next Start initializes a new shape.")
+
+    @Slot(str)
+    def _on_state_changed(self, state: str):
+        busy = state in ("running", "paused", "stopping")
+        self.start_action.setEnabled(not busy)
+        self.pause_action.setEnabled(state == "running")
+        self.resume_action.setEnabled(state == "paused")
+        self.stop_action.setEnabled(state in ("running", "paused"))
+        self.status_labels["state"].setText(state.capitalize())
+        if state == "paused":
+            self.knot_panel.show_state(self.document.settings, self.document.fitted)
+
+    @Slot(object)
+    def _on_snapshot_shown(self, snapshot: DisplaySnapshot):
+        first = self.tree.topLevelItemCount() < 2
+        self.scene.show_fit(snapshot.display)
+        if snapshot.deviation is not None:
+            self.scene.set_deviation(snapshot.deviation, deviation_stats(snapshot.deviation))
+        if first:
+            self._rebuild_tree()
+
+    @Slot(dict)
+    def _on_progress(self, progress: dict):
+        labels = self.status_labels
+        labels["iteration"].setText(f"Iteration {progress['iteration']}/{progress['iterations']}")
+        loss = progress["loss"]
+        labels["loss"].setText(f"Loss {loss:.4g}" if math.isfinite(loss) else "Loss -")
+        labels["rate"].setText(f"{progress['rate']:.1f} it/s" if progress["rate"] else "- it/s")
+        labels["remaining"].setText(f"Left {_format_seconds(progress['remaining'])}")
+
+    @Slot(object)
+    def _on_fit_finished(self, snapshot: DisplaySnapshot):
+        self.document.fitted_changed.disconnect(self._on_fitted_changed)
+        try:
+            self.document.set_fitted(snapshot.geometry)  # tree and tables, no re-tessellation
+        finally:
+            self.document.fitted_changed.connect(self._on_fitted_changed)
+        self._rebuild_tree()
+        self.knot_panel.show_state(self.document.settings, snapshot.geometry)
+        text = f"Fit {snapshot.status} after {snapshot.iteration} iterations"
+        if snapshot.deviation is not None:
+            stats = deviation_stats(snapshot.deviation)
+            text += (f"; deviation mean {stats['mean']:.4g}, RMS {stats['rms']:.4g}, "
+                     f"max {stats['max']:.4g}")
+        if snapshot.message:
+            text += f" ({snapshot.message})"
+        self.report(text)
+        if self.document.settings.show_offsets and not self.document.patches:
+            self._request_offsets()
+
+    # --- offsets ---------------------------------------------------------------------------------
+    def _offset_sources(self) -> list[dict]:
+        surfaces = [p for p in self.document.patches if p["kind"] == "surface"]
+        fitted = self.document.fitted
+        if not surfaces and fitted is not None and fitted["kind"] == "surface":
+            surfaces = [fitted]
+        return surfaces
+
+    def _request_offsets(self):
+        settings = self.document.settings
+        if not settings.show_offsets:
+            self.document.set_offsets(OffsetDisplay())
+            self.scene.set_group("offsets", [])
+            self.scene.set_note("")
+            self.offset_panel.show_result(OffsetDisplay())
+            self._rebuild_tree()
+            return
+        if self._offset_job_running:
+            self._offset_dirty = True  # recompute with the newest settings when this one ends
+            return
+        surfaces = self._offset_sources()
+        if not surfaces:
+            self.report("Offsets need surface patches (open NURBS files) or a fitted surface.")
+            return
+        distance, constrain = settings.offset_distance, settings.constrain_shared_edges
+        self._offset_job_running = True
+        self.offset_panel.show_result(OffsetDisplay(), busy=True)
+        self.jobs.submit("offsets",
+                         lambda: loading.compute_offsets(surfaces, distance, constrain),
+                         lambda result: self._offsets_done(result, distance, constrain),
+                         self._offsets_failed)
+
+    def _offsets_done(self, result, distance: float, constrain: bool):
+        self._offset_job_running = False
+        offsets, displays = result
+        self.document.set_offsets(offsets)
+        self.scene.set_group("offsets", displays, opacity=0.85)
+        note = f"Offset {distance:g}: {len(displays)} patch(es)"
+        if offsets.shared_edges:
+            note += (f", {offsets.shared_edges} shared edge(s), largest gap {offsets.max_gap:.3g}"
+                     f" ({'constrained' if constrain else 'unconstrained'})")
+        self.scene.set_note(note)
+        self.offset_panel.show_result(offsets)
+        self._rebuild_tree()
+        log.info(note)
+        self.offsets_updated.emit(True)
+        if self._offset_dirty:
+            self._offset_dirty = False
+            self._request_offsets()
+
+    def _offsets_failed(self, exc: Exception):
+        self._offset_job_running = False
+        self._offset_dirty = False
+        self.offset_panel.show_result(OffsetDisplay())
+        self.report(f"Offset failed: {exc}", error=True)
+        self.offsets_updated.emit(False)
+
+    # --- export and sessions ---------------------------------------------------------------------
+    def _export_dialog(self, label: str, suffix: str):
+        start = str(Path(self._last_directory()) / f"nurbs_studio{suffix}")
+        path, _ = QFileDialog.getSaveFileName(self, f"Export {label}", start,
+                                              f"{label} (*{suffix})")
+        if path:
+            if not path.lower().endswith(suffix):
+                path += suffix
+            self.export_to(path)
+
+    def export_to(self, path: str) -> bool:
+        geometries = self.document.all_geometry()
+        if not geometries:
+            self.report("Nothing to export yet: run a fit or open NURBS files first.", error=True)
+            self.export_finished.emit(path, False)
+            return False
+        self.jobs.submit("export", lambda: loading.export_geometry(geometries, path),
+                         lambda count: self._exported(path, count),
+                         lambda exc: self._export_failed(path, exc))
+        return True
+
+    def _exported(self, path: str, count: int):
+        self.report(f"Exported {count} shape(s) to {path}")
+        self.export_finished.emit(path, True)
+
+    def _export_failed(self, path: str, exc: Exception):
+        hint = getattr(exc, "install", None)
+        message = f"Export to {path} failed: {exc}"
+        if hint and hint not in message:
+            message += f"\nInstall the missing package with: {hint}"
+        self.report(message, error=True)
+        self.export_finished.emit(path, False)
+
+    def _save_session_dialog(self):
+        path, _ = QFileDialog.getSaveFileName(self, "Save session", self._last_directory(),
+                                              SESSION_FILTER)
+        if path:
+            self.save_session(path)
+
+    def _open_session_dialog(self):
+        path, _ = QFileDialog.getOpenFileName(self, "Open session", self._last_directory(),
+                                              SESSION_FILTER)
+        if path:
+            self.open_session(path)
+
+    def save_session(self, path: str) -> bool:
+        try:
+            self.document.save_session(path)
+        except OSError as exc:
+            self.report(f"Cannot save the session: {exc}", error=True)
+            return False
+        self.report(f"Session saved to {path}")
+        return True
+
+    def open_session(self, path: str) -> bool:
+        self.controller.reset()
+        self.loss_plot.clear()
+        try:
+            self.document.load_session(path)
+        except ValueError as exc:
+            self.report(f"{exc}\nThe document was left unchanged.", error=True)
+            return False
+        self.report(f"Session opened from {path}")
+        return True
+
+    def _screenshot_dialog(self):
+        path, _ = QFileDialog.getSaveFileName(self, "Save screenshot", self._last_directory(),
+                                              "PNG image (*.png)")
+        if path:
+            self.save_screenshot(path)
+
+    def save_screenshot(self, path: str) -> bool:
+        """The whole window (viewport included) as a PNG."""
+        self.scene.render_now()
+        ok = self.grab().save(path)
+        if not ok:
+            self.report(f"Cannot write the screenshot {path}", error=True)
+        return ok
+
+    # --- shutdown --------------------------------------------------------------------------------
+    def live_timers(self) -> int:
+        return self.controller.live_timers() + self.scene.live_timers()
+
+    def shutdown(self):
+        """Stop the worker, jobs and timers and release the render window; idempotent."""
+        if self._is_shut_down:
+            return
+        self._is_shut_down = True
+        self.controller.shutdown()
+        self.jobs.shutdown()
+        logging.getLogger().removeHandler(self.log_panel.handler)
+        if self._message_box is not None:
+            self._message_box.close()
+        self.scene.close()
+
+    def closeEvent(self, event):  # noqa: N802 - Qt override
+        self.shutdown()
+        event.accept()

@@ -1,0 +1,1 @@
+"""Dock panels: controls that show the document and turn user input into settings edits."""

@@ -1,0 +1,78 @@
+"""The document tree: point clouds, fitted shape, patches, offsets; checkboxes set visibility."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QTreeWidget, QTreeWidgetItem
+
+from app.state import Document
+
+ROLE = Qt.ItemDataRole.UserRole
+
+
+class DocumentTree(QTreeWidget):
+    """Items carry ("layer", name) or ("target", index) in their user data."""
+
+    def __init__(self, set_layer_visible: Callable[[str, bool], None],
+                 set_target_visible: Callable[[int, bool], None], parent=None):
+        super().__init__(parent)
+        self._set_layer_visible, self._set_target_visible = set_layer_visible, set_target_visible
+        self._updating = False
+        self.setHeaderLabels(["Document"])
+        self.itemChanged.connect(self._item_changed)
+
+    def _item(self, parent, text: str, data, checked: bool, tooltip: str = ""):
+        item = QTreeWidgetItem(parent, [text])
+        item.setData(0, ROLE, data)
+        item.setFlags(item.flags() | Qt.ItemFlag.ItemIsUserCheckable)
+        item.setCheckState(0, Qt.CheckState.Checked if checked else Qt.CheckState.Unchecked)
+        item.setToolTip(0, tooltip or text)
+        return item
+
+    def rebuild(self, document: Document, layer_visible: Callable[[str], bool],
+                deviation_visible: bool):
+        self._updating = True
+        try:
+            self.clear()
+            clouds = self._item(self, "Point clouds", ("layer", "cloud"), layer_visible("cloud"),
+                                "the fit target: every checked cloud")
+            for index, target in enumerate(document.targets):
+                self._item(clouds, f"{target.name} ({len(target.points)} points)",
+                           ("target", index), target.visible, target.path)
+            fitted = document.fitted
+            if fitted is not None:
+                kind = fitted["kind"]
+                label = "Fitted surface" if kind == "surface" else "Fitted curve"
+                top = self._item(self, label, ("layer", kind), layer_visible(kind))
+                self._item(top, "Control net", ("layer", "control_net"),
+                           layer_visible("control_net"))
+                self._item(top, "Knot lines", ("layer", "knot_lines"), layer_visible("knot_lines"))
+                self._item(top, "Deviation map", ("layer", "deviation"), deviation_visible,
+                           "colour the cloud by each point's distance to the fitted shape")
+            if document.patches:
+                patches = self._item(self, f"Patches ({len(document.patches)})",
+                                     ("layer", "patches"), layer_visible("patches"))
+                for name in document.patch_names:
+                    child = QTreeWidgetItem(patches, [name])
+                    child.setToolTip(0, name)
+            if document.offsets.surfaces:
+                self._item(self, f"Offsets ({len(document.offsets.surfaces)})",
+                           ("layer", "offsets"), layer_visible("offsets"))
+            self.expandAll()
+        finally:
+            self._updating = False
+
+    def _item_changed(self, item: QTreeWidgetItem, _column: int):
+        if self._updating:
+            return
+        data = item.data(0, ROLE)
+        if not data:
+            return
+        checked = item.checkState(0) == Qt.CheckState.Checked
+        kind, key = data
+        if kind == "layer":
+            self._set_layer_visible(key, checked)
+        else:
+            self._set_target_visible(key, checked)

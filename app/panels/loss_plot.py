@@ -1,0 +1,74 @@
+"""The loss plot: one curve per term and the total, log scale, x = iterations in this session."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtWidgets import QVBoxLayout, QWidget
+
+PALETTE = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#17becf",
+           "#e377c2"]
+FLOOR = 1e-16  # log scale: zero or negative values are drawn at this floor
+
+
+class LossPlot(QWidget):
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(parent)
+        pg.setConfigOptions(antialias=True, background="w", foreground="#333333")
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        self.plot = pg.PlotWidget()
+        self.plot.setLogMode(x=False, y=True)
+        self.plot.showGrid(x=True, y=True, alpha=0.25)
+        self.plot.setLabel("bottom", "iteration")
+        self.plot.setLabel("left", "loss (normalised units)")
+        self.plot.addLegend(offset=(-10, 10))
+        layout.addWidget(self.plot)
+        self._x: list[float] = []
+        self._values: dict[str, list[float]] = {}
+        self._curves: dict[str, pg.PlotDataItem] = {}
+        self._offset = 0
+        self._last_iteration = -1
+
+    def clear(self):
+        self._x, self._values, self._offset, self._last_iteration = [], {}, 0, -1
+        for curve in self._curves.values():
+            self.plot.removeItem(curve)
+        legend = self.plot.plotItem.legend
+        if legend is not None:
+            legend.clear()
+        self._curves = {}
+
+    def append(self, rows: list[dict]):
+        """Rows ``{"iteration", "total", <term>: value}``; a restart (iteration drops) continues
+        the x axis where the previous run ended."""
+        for row in rows:
+            iteration = int(row.get("iteration", 0))
+            if self._x and iteration <= self._last_iteration:
+                self._offset = self._x[-1] + 1 - iteration  # a new run: continue the x axis
+            self._last_iteration = iteration
+            self._x.append(iteration + self._offset)
+            for name, value in row.items():
+                if name != "iteration":
+                    series = self._values.setdefault(name, [np.nan] * (len(self._x) - 1))
+                    series.append(float(value))
+            for series in self._values.values():
+                if len(series) < len(self._x):
+                    series.append(np.nan)
+        self._redraw()
+
+    def series(self, name: str) -> np.ndarray:
+        return np.asarray(self._values.get(name, []), dtype=np.float64)
+
+    def _redraw(self):
+        x = np.asarray(self._x, dtype=np.float64)
+        for index, (name, values) in enumerate(sorted(self._values.items(),
+                                                      key=lambda kv: kv[0] != "total")):
+            y = np.clip(np.asarray(values, dtype=np.float64), FLOOR, None)
+            curve = self._curves.get(name)
+            if curve is None:
+                width = 2.5 if name == "total" else 1.5
+                pen = pg.mkPen(PALETTE[index % len(PALETTE)], width=width)
+                curve = self.plot.plot(name=name, pen=pen, connect="finite")
+                self._curves[name] = curve
+            curve.setData(x, y)

@@ -1,0 +1,70 @@
+"""Multi-patch offsets: distance, shared-edge constraint, and the largest gap along shared edges."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from PySide6.QtWidgets import (
+    QAbstractSpinBox,
+    QCheckBox,
+    QDoubleSpinBox,
+    QFormLayout,
+    QLabel,
+    QWidget,
+)
+
+from app.state import FitSettings, OffsetDisplay
+
+
+class OffsetPanel(QWidget):
+    def __init__(self, edit: Callable[..., bool], parent: QWidget | None = None):
+        super().__init__(parent)
+        self._edit = edit
+        self._updating = False
+        form = QFormLayout(self)
+        note = QLabel("Offsets the loaded surface patches (or the fitted surface when no patches "
+                      "are loaded) along their normals. Changes recompute the offsets at once.")
+        note.setWordWrap(True)
+        form.addRow(note)
+        self.show_offsets = QCheckBox("Show offset patches")
+        self.distance = QDoubleSpinBox()
+        self.distance.setRange(-1e6, 1e6)
+        self.distance.setDecimals(4)
+        self.distance.setStepType(QAbstractSpinBox.StepType.AdaptiveDecimalStepType)
+        self.distance.setKeyboardTracking(False)
+        self.constrain = QCheckBox("Keep shared edges together")
+        self.constrain.setToolTip("offset the points of edges shared by two patches once, so the "
+                                  "offset patches stay watertight along them")
+        self.gap = QLabel("-")
+        self.gap.setObjectName("offset_gap")
+        form.addRow(self.show_offsets)
+        form.addRow("Distance", self.distance)
+        form.addRow(self.constrain)
+        form.addRow("Largest gap on shared edges", self.gap)
+        self.show_offsets.toggled.connect(
+            lambda on: self._changed("Show offsets", show_offsets=bool(on)))
+        self.distance.valueChanged.connect(
+            lambda value: self._changed("Offset distance", offset_distance=float(value)))
+        self.constrain.toggled.connect(
+            lambda on: self._changed("Shared-edge constraint", constrain_shared_edges=bool(on)))
+
+    def _changed(self, text: str, **changes):
+        if not self._updating:
+            self._edit(text, **changes)
+
+    def show_settings(self, settings: FitSettings):
+        self._updating = True
+        try:
+            self.show_offsets.setChecked(settings.show_offsets)
+            self.distance.setValue(settings.offset_distance)
+            self.constrain.setChecked(settings.constrain_shared_edges)
+        finally:
+            self._updating = False
+
+    def show_result(self, offsets: OffsetDisplay, busy: bool = False):
+        if busy:
+            self.gap.setText("computing...")
+        elif not offsets.surfaces:
+            self.gap.setText("-")
+        else:
+            self.gap.setText(f"{offsets.max_gap:.3g} ({offsets.shared_edges} shared edges)")
