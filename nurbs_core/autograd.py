@@ -1,18 +1,24 @@
 """Custom autograd Functions with the NURBS-Diff block-sparse backward (paper, Algorithm 2).
 
-All Functions take *homogeneous* control points ``Pw = (w * P, w)`` with a flattened batch ``B`` and
-return Euclidean points (the rational division happens inside, so its backward is fused).
+Every Function takes Euclidean control points and weights with any leading batch shape ``*B``,
+forms the homogeneous points ``Pw = (w P, w)`` itself and returns Euclidean points, so the rational
+division and the homogeneous map are differentiated inside one node (eqs. for ``S_{,P}`` and
+``S_{,w}`` in the paper) instead of by a chain of generic autograd nodes.
 
-The forward stores the spans and the ``p + 1`` non-zero basis functions per parameter; the backward
-gathers/scatter-adds only those entries, never forming the dense ``M x (n m)`` Jacobian.
-Knot gradients use the stored derivatives of the basis functions with respect to the local knots
-(see :func:`nurbs_core.basis.basis_with_knot_derivatives`) and are scatter-added into the knot vector.
+The forward receives the spans and the ``p + 1`` non-zero basis functions of each parameter (computed
+once per call, or once per fit for fixed knots); the backward gathers and scatter-adds only those
+entries and never forms the dense ``M x nm`` Jacobian. Knot gradients use the derivatives of the
+non-zero basis functions with respect to their local knots
+(:func:`nurbs_core.basis.basis_with_knot_derivatives`), scatter-added into the knot vector; the first
+and last ``p + 1`` knots get no gradient (the domain stays put).
 
-Shapes
+Shapes (``Bb`` is the flattened batch or 1 when the basis is shared by the batch)
 ------
-curve:  Pw (B, n, d+1); basis (B, M, p+1); span (B, M)  -> points (B, M, d)
-paired: Pw (B, n, m, 4); basis_u (B, M, p+1); basis_v (B, M, q+1) -> points (B, M, 3)
-grid:   Pw (B, n, m, 4); basis_u (B, Mu, p+1); dense_v (B, Mv, m) -> points (B, Mu, Mv, 3)
+curve:  control (*B, n, d), weights (*B, n); basis (Bb, M, p+1); span (Bb, M) -> (*B, M, d)
+paired: control (*B, n, m, 3), weights (*B, n, m); basis_u (Bb, M, p+1), basis_v (Bb, M, q+1)
+        -> (*B, M, 3)
+grid:   control (*B, n, m, 3), weights (*B, n, m); banded dense_u (Bb, Mu, n), dense_v (Bb, Mv, m)
+        -> (*B, Mu, Mv, 3)
 """
 
 from __future__ import annotations
@@ -21,159 +27,219 @@ import torch
 
 
 def _local_index(span: torch.Tensor, degree: int) -> torch.Tensor:
+    """Control-point indices ``span - p .. span`` of the non-zero basis functions: (..., p+1)."""
     return span.unsqueeze(-1) - degree + torch.arange(degree + 1, device=span.device)
 
 
-def _rational_backward(grad_points: torch.Tensor, points: torch.Tensor, w: torch.Tensor):
-    """Gradient of the homogeneous sum from the gradient of ``points = S4[:d] / S4[d]``."""
-    inv_w = 1.0 / w
+def _homogeneous(control_points, weights, net_dims):
+    """(*B, <net>, d), (*B, <net>) -> flattened (B, <net>, d+1) homogeneous points, batch shape."""
+    batch_shape = control_points.shape[: control_points.dim() - net_dims - 1]
+    w = weights.unsqueeze(-1)
+    control_w = torch.cat([control_points * w, w], dim=-1)
+    return control_w.reshape(-1, *control_w.shape[len(batch_shape):]), batch_shape
+
+
+def _split_homogeneous_grad(grad_control_w, control_points, weights):
+    """Chain rule through ``Pw = (w P, w)``: returns (dL/dP, dL/dw) shaped like the inputs."""
+    grad_control_w = grad_control_w.reshape(*control_points.shape[:-1], -1)
+    grad_xyz = grad_control_w[..., :-1]
+    grad_points = grad_xyz * weights.unsqueeze(-1)
+    grad_weights = grad_control_w[..., -1] + (grad_xyz * control_points).sum(-1)
+    return grad_points, grad_weights
+
+
+def _rational_backward(grad_points: torch.Tensor, points: torch.Tensor, inv_w: torch.Tensor):
+    """dL/d(homogeneous sum) from dL/d(points), where ``points = h[:d] / h[d]``: (..., d+1)."""
     grad_xyz = grad_points * inv_w
     grad_w = -(grad_xyz * points).sum(-1, keepdim=True)
     return torch.cat([grad_xyz, grad_w], dim=-1)
 
 
 def _scatter_knot_grad(grad_basis, d_basis, span, degree, n_knots):
-    """Sum ``dL/dN * dN/dU`` over parameters and scatter into the knot vector (B, K)."""
-    # grad_basis (B, M, p+1); d_basis (B, M, p+1, 2p) -> per-parameter local knot grads (B, M, 2p)
+    """Sum ``dL/dN * dN/dU`` over parameters into the knot vector: (Bb, K).
+
+    grad_basis (Bb, M, p+1); d_basis (Bb, M, p+1, 2p) with the 2p local knots ``U[k-p+1 .. k+p]``.
+    """
     local = torch.einsum("bmr,bmrt->bmt", grad_basis, d_basis)
     index = span.unsqueeze(-1) + torch.arange(-degree + 1, degree + 1, device=span.device)
     out = local.new_zeros(local.shape[0], n_knots)
     out.scatter_add_(1, index.reshape(local.shape[0], -1), local.reshape(local.shape[0], -1))
-    # End knots (the first and last p + 1) are held fixed: the domain does not move.
     out[:, : degree + 1] = 0
-    out[:, n_knots - degree - 1 :] = 0
+    out[:, n_knots - degree - 1:] = 0
     return out
+
+
+def _fit_knot_grad(grad: torch.Tensor, knots_shape: torch.Size) -> torch.Tensor:
+    """Reduce a (Bb, K) knot gradient to the knot tensor's own shape (shared or batched)."""
+    if len(knots_shape) == 1:
+        return grad.sum(0)
+    return grad.reshape(knots_shape)
+
+
+def _batch_offsets(index: torch.Tensor, batch: int, stride: int) -> torch.Tensor:
+    """Flat row indices into a (batch * stride) table for a (Bb, ...) index, Bb in {1, batch}."""
+    index = index.expand(batch, *index.shape[1:])
+    shape = (batch,) + (1,) * (index.dim() - 1)
+    return index + torch.arange(batch, device=index.device).view(shape) * stride
 
 
 class CurvePoints(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, control_w, knots, basis, d_basis, span, degree):
+    def forward(ctx, control_points, weights, knots, basis, d_basis, span, degree):
+        control_w, batch_shape = _homogeneous(control_points, weights, 1)
         batch, n, dim1 = control_w.shape
-        index = _local_index(span, degree)  # (B, M, p+1)
-        flat = index + torch.arange(batch, device=span.device).view(-1, 1, 1) * n
-        gathered = control_w.reshape(-1, dim1)[flat.reshape(-1)].view(*index.shape, dim1)
-        homogeneous = torch.einsum("bmr,bmrc->bmc", basis, gathered)
-        w = homogeneous[..., -1:]
-        points = homogeneous[..., :-1] / w
-        ctx.save_for_backward(control_w, basis, d_basis, span, points, w, gathered, flat)
-        ctx.degree = degree
-        ctx.n_knots = knots.shape[-1]
-        return points
+        flat = _batch_offsets(_local_index(span, degree), batch, n)  # (B, M, p+1)
+        gathered = control_w.reshape(-1, dim1)[flat.reshape(-1)].view(*flat.shape, dim1)
+        homogeneous = torch.einsum("bmr,bmrc->bmc", basis.expand(batch, -1, -1), gathered)
+        inv_w = homogeneous[..., -1:].reciprocal()
+        points = homogeneous[..., :-1] * inv_w
+        ctx.save_for_backward(control_points, weights, basis, d_basis, span, points, inv_w,
+                              gathered, flat)
+        ctx.degree, ctx.n_knots, ctx.knots_shape = degree, knots.shape[-1], knots.shape
+        return points.view(*batch_shape, *points.shape[1:])
 
     @staticmethod
     def backward(ctx, grad_points):
-        control_w, basis, d_basis, span, points, w, gathered, flat = ctx.saved_tensors
-        degree = ctx.degree
-        grad_h = _rational_backward(grad_points, points, w)  # (B, M, d+1)
-        grad_control = grad_knots = None
-        if ctx.needs_input_grad[0]:
-            batch, n, dim1 = control_w.shape
-            contrib = basis.unsqueeze(-1) * grad_h.unsqueeze(-2)  # (B, M, p+1, d+1)
-            grad_control = control_w.new_zeros(batch * n, dim1)
-            grad_control.index_add_(0, flat.reshape(-1), contrib.reshape(-1, dim1))
-            grad_control = grad_control.view(batch, n, dim1)
-        if ctx.needs_input_grad[1] and d_basis is not None:
+        (control_points, weights, basis, d_basis, span, points, inv_w, gathered,
+         flat) = ctx.saved_tensors
+        batch, n_params = points.shape[0], points.shape[1]
+        grad_h = _rational_backward(grad_points.reshape(points.shape), points, inv_w)
+        grad_cp = grad_w = grad_knots = None
+        if ctx.needs_input_grad[0] or ctx.needs_input_grad[1]:
+            dim1 = grad_h.shape[-1]
+            contrib = basis.expand(batch, -1, -1).unsqueeze(-1) * grad_h.unsqueeze(-2)
+            n = control_points.shape[-2]
+            grad_cw = grad_h.new_zeros(batch * n, dim1)
+            grad_cw.index_add_(0, flat.reshape(-1), contrib.reshape(-1, dim1))
+            grad_cp, grad_w = _split_homogeneous_grad(grad_cw, control_points, weights)
+        if ctx.needs_input_grad[2] and d_basis is not None:
             grad_basis = torch.einsum("bmc,bmrc->bmr", grad_h, gathered)
-            grad_knots = _scatter_knot_grad(grad_basis, d_basis, span, degree, ctx.n_knots)
-        return grad_control, grad_knots, None, None, None, None
+            if basis.shape[0] == 1 and batch > 1:
+                grad_basis = grad_basis.sum(0, keepdim=True)
+            grad_knots = _scatter_knot_grad(grad_basis, d_basis, span, ctx.degree, ctx.n_knots)
+            grad_knots = _fit_knot_grad(grad_knots, ctx.knots_shape)
+        del n_params
+        return grad_cp, grad_w, grad_knots, None, None, None, None
 
 
 class SurfacePoints(torch.autograd.Function):
-    """Paired parameters (u_k, v_k)."""
+    """Paired parameters (u_k, v_k): the paper's Algorithms 1 and 2."""
 
     @staticmethod
-    def forward(ctx, control_w, knots_u, knots_v, basis_u, basis_v, d_basis_u, d_basis_v,
-                span_u, span_v, degree_u, degree_v):
+    def forward(ctx, control_points, weights, knots_u, knots_v, basis_u, basis_v, d_basis_u,
+                d_basis_v, span_u, span_v, degree_u, degree_v):
+        control_w, batch_shape = _homogeneous(control_points, weights, 2)
         batch, n, m, _ = control_w.shape
-        index_u = _local_index(span_u, degree_u)  # (B, M, p+1)
-        index_v = _local_index(span_v, degree_v)  # (B, M, q+1)
-        flat = (index_u.unsqueeze(-1) * m + index_v.unsqueeze(-2))  # (B, M, p+1, q+1)
-        flat = flat + torch.arange(batch, device=flat.device).view(-1, 1, 1, 1) * (n * m)
+        index_u = _local_index(span_u, degree_u)  # (Bb, M, p+1)
+        index_v = _local_index(span_v, degree_v)  # (Bb, M, q+1)
+        flat = _batch_offsets(index_u.unsqueeze(-1) * m + index_v.unsqueeze(-2), batch, n * m)
         gathered = control_w.reshape(-1, 4)[flat.reshape(-1)].view(*flat.shape, 4)
-        homogeneous = torch.einsum("bmr,bms,bmrsc->bmc", basis_u, basis_v, gathered)
-        w = homogeneous[..., 3:]
-        points = homogeneous[..., :3] / w
-        ctx.save_for_backward(control_w, basis_u, basis_v, d_basis_u, d_basis_v, span_u, span_v,
-                              points, w, gathered, flat)
+        homogeneous = torch.einsum("bmr,bms,bmrsc->bmc", basis_u.expand(batch, -1, -1),
+                                   basis_v.expand(batch, -1, -1), gathered)
+        inv_w = homogeneous[..., 3:].reciprocal()
+        points = homogeneous[..., :3] * inv_w
+        ctx.save_for_backward(control_points, weights, basis_u, basis_v, d_basis_u, d_basis_v,
+                              span_u, span_v, points, inv_w, gathered, flat)
         ctx.degrees = (degree_u, degree_v)
         ctx.n_knots = (knots_u.shape[-1], knots_v.shape[-1])
-        return points
+        ctx.knot_shapes = (knots_u.shape, knots_v.shape)
+        return points.view(*batch_shape, *points.shape[1:])
 
     @staticmethod
     def backward(ctx, grad_points):
-        (control_w, basis_u, basis_v, d_basis_u, d_basis_v, span_u, span_v,
-         points, w, gathered, flat) = ctx.saved_tensors
+        (control_points, weights, basis_u, basis_v, d_basis_u, d_basis_v, span_u, span_v,
+         points, inv_w, gathered, flat) = ctx.saved_tensors
         degree_u, degree_v = ctx.degrees
-        grad_h = _rational_backward(grad_points, points, w)  # (B, M, 4)
-        grad_control = grad_ku = grad_kv = None
-        if ctx.needs_input_grad[0]:
-            contrib = torch.einsum("bmr,bms,bmc->bmrsc", basis_u, basis_v, grad_h)
-            grad_control = control_w.new_zeros(control_w.numel() // 4, 4)
-            grad_control.index_add_(0, flat.reshape(-1), contrib.reshape(-1, 4))
-            grad_control = grad_control.view_as(control_w)
-        if ctx.needs_input_grad[1] or ctx.needs_input_grad[2]:
-            # dS4/dN_u[r] = sum_s N_v[s] Pw[r, s]
+        batch = points.shape[0]
+        grad_h = _rational_backward(grad_points.reshape(points.shape), points, inv_w)  # (B, M, 4)
+        bu, bv = basis_u.expand(batch, -1, -1), basis_v.expand(batch, -1, -1)
+        grad_cp = grad_w = grad_ku = grad_kv = None
+        if ctx.needs_input_grad[0] or ctx.needs_input_grad[1]:
+            contrib = torch.einsum("bmr,bms,bmc->bmrsc", bu, bv, grad_h)
+            grad_cw = grad_h.new_zeros(weights.numel(), 4)
+            grad_cw.index_add_(0, flat.reshape(-1), contrib.reshape(-1, 4))
+            grad_cp, grad_w = _split_homogeneous_grad(grad_cw, control_points, weights)
+        if ctx.needs_input_grad[2] or ctx.needs_input_grad[3]:
             per_point = torch.einsum("bmc,bmrsc->bmrs", grad_h, gathered)
-            if ctx.needs_input_grad[1] and d_basis_u is not None:
-                grad_bu = torch.einsum("bmrs,bms->bmr", per_point, basis_v)
+            shared = basis_u.shape[0] == 1 and batch > 1
+            if ctx.needs_input_grad[2] and d_basis_u is not None:
+                grad_bu = torch.einsum("bmrs,bms->bmr", per_point, bv)
+                grad_bu = grad_bu.sum(0, keepdim=True) if shared else grad_bu
                 grad_ku = _scatter_knot_grad(grad_bu, d_basis_u, span_u, degree_u, ctx.n_knots[0])
-            if ctx.needs_input_grad[2] and d_basis_v is not None:
-                grad_bv = torch.einsum("bmrs,bmr->bms", per_point, basis_u)
+                grad_ku = _fit_knot_grad(grad_ku, ctx.knot_shapes[0])
+            if ctx.needs_input_grad[3] and d_basis_v is not None:
+                grad_bv = torch.einsum("bmrs,bmr->bms", per_point, bu)
+                grad_bv = grad_bv.sum(0, keepdim=True) if shared else grad_bv
                 grad_kv = _scatter_knot_grad(grad_bv, d_basis_v, span_v, degree_v, ctx.n_knots[1])
-        return grad_control, grad_ku, grad_kv, None, None, None, None, None, None, None, None
+                grad_kv = _fit_knot_grad(grad_kv, ctx.knot_shapes[1])
+        return grad_cp, grad_w, grad_ku, grad_kv, None, None, None, None, None, None, None, None
 
 
 class SurfaceGridPoints(torch.autograd.Function):
-    """Tensor-product grid u x v, using the Kronecker structure of the basis.
+    """Tensor-product grid u x v through the Kronecker structure of the surface basis.
 
-    Stage 1 (compact, block-sparse along u): ``T[a, j] = sum_r N_u[a, r] Pw[span_a - p + r, j]``.
-    Stage 2 (banded along v): ``S4[a, b] = sum_j T[a, j] N_v[b, j]`` as one matrix product with the
-    banded basis matrix (q + 1 non-zeros per row); its cost is that of the output, and BLAS does it.
+    The Jacobian of a grid evaluation is ``kron(N_u, N_v)``; each factor is banded (p + 1 non-zeros
+    per row, placed by the stored spans). Instead of scattering ``(p+1)(q+1)`` products per point
+    the two factors are applied one after the other: ``H = N_u Pw N_v^T`` (forward) and
+    ``dPw = N_u^T dH N_v`` (backward). The banded factors are held as small dense (M x n) matrices
+    so that BLAS does both products; the dense (Mu Mv x n m) Jacobian is never formed. Stage 2 runs
+    channel-first (4 Mu x m times m x Mv, one matrix product); the result is written channel-last.
     """
 
     @staticmethod
-    def forward(ctx, control_w, knots_u, knots_v, basis_u, dense_v, d_basis_u, d_basis_v,
-                span_u, span_v, degree_u, degree_v):
+    def forward(ctx, control_points, weights, knots_u, knots_v, dense_u, dense_v, d_basis_u,
+                d_basis_v, span_u, span_v, degree_u, degree_v):
+        control_w, batch_shape = _homogeneous(control_points, weights, 2)
         batch, n, m, _ = control_w.shape
-        index_u = _local_index(span_u, degree_u)  # (B, Mu, p+1)
-        rows = control_w[torch.arange(batch, device=index_u.device).view(-1, 1, 1), index_u]
-        # rows: (B, Mu, p+1, m, 4)
-        partial = torch.einsum("bar,barjc->bajc", basis_u, rows)  # (B, Mu, m, 4)
-        homogeneous = torch.matmul(
-            dense_v.unsqueeze(1), partial
-        )  # (B, 1, Mv, m) @ (B, Mu, m, 4) -> (B, Mu, Mv, 4)
-        w = homogeneous[..., 3:]
-        points = homogeneous[..., :3] / w
-        ctx.save_for_backward(control_w, basis_u, dense_v, d_basis_u, d_basis_v, span_u, span_v,
-                              points, w, rows, partial)
+        size_u, size_v = dense_u.shape[1], dense_v.shape[1]
+        # stage 1, all four channels in one product: (Bb, Mu, n) @ (B, n, 4m) -> (B, Mu, m, 4)
+        partial = torch.matmul(dense_u, control_w.view(batch, n, m * 4))
+        partial = partial.view(batch, size_u, m, 4).permute(0, 3, 1, 2).reshape(batch, 4 * size_u, m)
+        # stage 2: (B, 4 Mu, m) @ (Bb, m, Mv) -> channel-first homogeneous points (B, 4, Mu, Mv)
+        homogeneous = torch.matmul(partial, dense_v.transpose(-1, -2)).view(batch, 4, size_u, size_v)
+        inv_w = homogeneous[:, 3].reciprocal()  # (B, Mu, Mv)
+        points = homogeneous.new_empty(batch, size_u, size_v, 3)
+        torch.mul(homogeneous[:, :3], inv_w.unsqueeze(1), out=points.permute(0, 3, 1, 2))
+        ctx.save_for_backward(control_points, weights, control_w, dense_u, dense_v, d_basis_u,
+                              d_basis_v, span_u, span_v, points, inv_w, partial)
         ctx.degrees = (degree_u, degree_v)
         ctx.n_knots = (knots_u.shape[-1], knots_v.shape[-1])
-        return points
+        ctx.knot_shapes = (knots_u.shape, knots_v.shape)
+        return points.view(*batch_shape, size_u, size_v, 3)
 
     @staticmethod
     def backward(ctx, grad_points):
-        (control_w, basis_u, dense_v, d_basis_u, d_basis_v, span_u, span_v,
-         points, w, rows, partial) = ctx.saved_tensors
+        (control_points, weights, control_w, dense_u, dense_v, d_basis_u, d_basis_v, span_u,
+         span_v, points, inv_w, partial) = ctx.saved_tensors
         degree_u, degree_v = ctx.degrees
         batch, n, m, _ = control_w.shape
-        grad_h = _rational_backward(grad_points, points, w)  # (B, Mu, Mv, 4)
-        # dL/dT = dL/dS4 @ N_v  : (B, Mu, Mv, 4) -> (B, Mu, m, 4)
-        grad_partial = torch.matmul(dense_v.transpose(-1, -2).unsqueeze(1), grad_h)
-        grad_control = grad_ku = grad_kv = None
-        if ctx.needs_input_grad[0]:
-            contrib = basis_u.unsqueeze(-1).unsqueeze(-1) * grad_partial.unsqueeze(2)
-            index_u = _local_index(span_u, degree_u)
-            flat = (index_u + torch.arange(batch, device=span_u.device).view(-1, 1, 1) * n).reshape(-1)
-            grad_control = control_w.new_zeros(batch * n, m, 4)
-            grad_control.index_add_(0, flat, contrib.reshape(-1, m, 4))
-            grad_control = grad_control.view_as(control_w)
-        if ctx.needs_input_grad[1] and d_basis_u is not None:
-            grad_bu = torch.einsum("bajc,barjc->bar", grad_partial, rows)
+        size_u, size_v = dense_u.shape[1], dense_v.shape[1]
+        grad_points = grad_points.reshape(points.shape)
+        grad_h = points.new_empty(batch, 4, size_u, size_v)  # channel-first
+        torch.mul(grad_points.permute(0, 3, 1, 2), inv_w.unsqueeze(1), out=grad_h[:, :3])
+        # d/dw of x / w is -(g . S) / w
+        torch.mul((grad_points * points).sum(-1), inv_w.neg(), out=grad_h[:, 3])
+        grad_h = grad_h.view(batch, 4 * size_u, size_v)
+        grad_partial = torch.matmul(grad_h, dense_v)  # (B, 4 Mu, m)
+        per_row = grad_partial.view(batch, 4, size_u, m).permute(0, 2, 3, 1).reshape(
+            batch, size_u, m * 4)
+        grad_cp = grad_w = grad_ku = grad_kv = None
+        if ctx.needs_input_grad[0] or ctx.needs_input_grad[1]:
+            grad_cw = torch.matmul(dense_u.transpose(-1, -2), per_row)  # (B, n, 4m)
+            grad_cp, grad_w = _split_homogeneous_grad(grad_cw, control_points, weights)
+        shared = dense_u.shape[0] == 1 and batch > 1
+        if ctx.needs_input_grad[2] and d_basis_u is not None:
+            # dL/dN_u[a, i] = sum_{j, c} dL/dpartial[a, j, c] Pw[i, j, c]; keep the local entries
+            grad_dense_u = torch.matmul(per_row, control_w.view(batch, n, m * 4).transpose(-1, -2))
+            grad_dense_u = grad_dense_u.sum(0, keepdim=True) if shared else grad_dense_u
+            grad_bu = torch.gather(grad_dense_u, 2, _local_index(span_u, degree_u))
             grad_ku = _scatter_knot_grad(grad_bu, d_basis_u, span_u, degree_u, ctx.n_knots[0])
-        if ctx.needs_input_grad[2] and d_basis_v is not None:
-            # dL/dN_v[b, j] = sum_{a, c} grad_h[a, b, c] T[a, j, c]; keep only the q + 1 local entries
-            grad_dense_v = torch.einsum("zabc,zajc->zbj", grad_h, partial)
-            index_v = _local_index(span_v, degree_v)
-            grad_bv = torch.gather(grad_dense_v, 2, index_v)
+            grad_ku = _fit_knot_grad(grad_ku, ctx.knot_shapes[0])
+        if ctx.needs_input_grad[3] and d_basis_v is not None:
+            # dL/dN_v[b, j] = sum_{c, a} dL/dH[c, a, b] partial[c, a, j]
+            grad_dense_v = torch.matmul(grad_h.transpose(-1, -2), partial)  # (B, Mv, m)
+            grad_dense_v = grad_dense_v.sum(0, keepdim=True) if shared else grad_dense_v
+            grad_bv = torch.gather(grad_dense_v, 2, _local_index(span_v, degree_v))
             grad_kv = _scatter_knot_grad(grad_bv, d_basis_v, span_v, degree_v, ctx.n_knots[1])
-        return grad_control, grad_ku, grad_kv, None, None, None, None, None, None, None, None
+            grad_kv = _fit_knot_grad(grad_kv, ctx.knot_shapes[1])
+        return grad_cp, grad_w, grad_ku, grad_kv, None, None, None, None, None, None, None, None

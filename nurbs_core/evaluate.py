@@ -40,35 +40,49 @@ def _flatten_batch(t: torch.Tensor, batch_shape, trailing: int) -> torch.Tensor:
     return t.expand(*batch_shape, *tail).reshape(-1, *tail)
 
 
-def _basis(knots, degree, u, bandwidth, want_knot_grad):
-    """Spans, compact basis and (optionally) knot derivatives on flattened (B, M) inputs."""
-    with torch.no_grad():
-        detached = knots.detach()
-        span = find_span(detached, degree, u.detach())
-        if want_knot_grad:
-            domain = (detached[:, -degree - 1] - detached[:, degree]).unsqueeze(-1)
-            sigma = float((bandwidth * domain).max())
-            basis, d_basis = basis_with_knot_derivatives(detached, degree, u.detach(), span, sigma)
-        else:
-            basis, d_basis = basis_functions(detached, degree, u.detach(), span), None
-    return span, basis, d_basis
-
-
 def _needs_knot_grad(knots: torch.Tensor) -> bool:
     return knots.requires_grad and torch.is_grad_enabled()
+
+
+def _basis(knots, degree, u, bandwidth, want_knot_grad):
+    """Spans, compact basis and (optionally) knot derivatives on (Bb, K) knots, (Bb, M) params."""
+    with torch.no_grad():
+        knots, u = knots.detach(), u.detach()
+        span = find_span(knots, degree, u)
+        if not want_knot_grad:
+            return span, basis_functions(knots, degree, u, span), None
+        domain = knots[:, -degree - 1] - knots[:, degree]
+        sigma = float(bandwidth * domain.max())
+        basis, d_basis = basis_with_knot_derivatives(knots, degree, u, span, sigma)
+        return span, basis, d_basis
+
+
+def _directions(batch_shape, dtype, knots_and_params):
+    """Shared (Bb = 1) when every knot vector and parameter array is 1-D, else batched (Bb = B)."""
+    shared = all(t.dim() == 1 for t in knots_and_params)
+    out = []
+    for t in knots_and_params:
+        t = t.to(dtype)
+        out.append(t.unsqueeze(0) if shared else _flatten_batch(t, batch_shape, 1))
+    return out
 
 
 def curve_points(control_points, weights, knots, degree, u, knot_bandwidth=DEFAULT_KNOT_BANDWIDTH):
     """Points of rational curves. control_points (*B, n, d); weights (*B, n); knots (K,) or (*B, K);
     u (M,) or (*B, M). Returns (*B, M, d)."""
     batch_shape = control_points.shape[:-2]
-    control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 2)
-    flat_knots = _flatten_batch(knots, batch_shape, 1)
-    flat_u = _flatten_batch(u.to(control_points.dtype), batch_shape, 1)
-    want = _needs_knot_grad(knots)
-    span, basis, d_basis = _basis(flat_knots, degree, flat_u, knot_bandwidth, want)
-    points = _fn.CurvePoints.apply(control_w, flat_knots, basis, d_basis, span, degree)
-    return points.reshape(*batch_shape, *points.shape[1:])
+    weights = weights.expand(control_points.shape[:-1])
+    k, t = _directions(batch_shape, control_points.dtype, (knots, u))
+    span, basis, d_basis = _basis(k, degree, t, knot_bandwidth, _needs_knot_grad(knots))
+    return _fn.CurvePoints.apply(control_points, weights, knots, basis, d_basis, span, degree)
+
+
+def _surface_basis(control_points, knots_u, knots_v, degree_u, degree_v, u, v, bandwidth):
+    batch_shape = control_points.shape[:-3]
+    ku, kv, fu, fv = _directions(batch_shape, control_points.dtype, (knots_u, knots_v, u, v))
+    span_u, basis_u, d_u = _basis(ku, degree_u, fu, bandwidth, _needs_knot_grad(knots_u))
+    span_v, basis_v, d_v = _basis(kv, degree_v, fv, bandwidth, _needs_knot_grad(knots_v))
+    return span_u, basis_u, d_u, span_v, basis_v, d_v
 
 
 def surface_points(control_points, weights, knots_u, knots_v, degree_u, degree_v, u, v,
@@ -76,35 +90,24 @@ def surface_points(control_points, weights, knots_u, knots_v, degree_u, degree_v
     """Points of rational surfaces at paired parameters (u[k], v[k]).
 
     control_points (*B, n, m, 3); weights (*B, n, m); u, v (M,) or (*B, M). Returns (*B, M, 3)."""
-    batch_shape = control_points.shape[:-3]
-    control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 3)
-    ku = _flatten_batch(knots_u, batch_shape, 1)
-    kv = _flatten_batch(knots_v, batch_shape, 1)
-    fu = _flatten_batch(u.to(control_points.dtype), batch_shape, 1)
-    fv = _flatten_batch(v.to(control_points.dtype), batch_shape, 1)
-    span_u, basis_u, d_u = _basis(ku, degree_u, fu, knot_bandwidth, _needs_knot_grad(knots_u))
-    span_v, basis_v, d_v = _basis(kv, degree_v, fv, knot_bandwidth, _needs_knot_grad(knots_v))
-    points = _fn.SurfacePoints.apply(control_w, ku, kv, basis_u, basis_v, d_u, d_v, span_u, span_v,
-                                     degree_u, degree_v)
-    return points.reshape(*batch_shape, *points.shape[1:])
+    weights = weights.expand(control_points.shape[:-1])
+    span_u, basis_u, d_u, span_v, basis_v, d_v = _surface_basis(
+        control_points, knots_u, knots_v, degree_u, degree_v, u, v, knot_bandwidth)
+    return _fn.SurfacePoints.apply(control_points, weights, knots_u, knots_v, basis_u, basis_v,
+                                   d_u, d_v, span_u, span_v, degree_u, degree_v)
 
 
 def surface_grid_points(control_points, weights, knots_u, knots_v, degree_u, degree_v, u, v,
                         knot_bandwidth=DEFAULT_KNOT_BANDWIDTH):
     """Points on the tensor-product grid u x v. Returns (*B, len(u), len(v), 3)."""
-    batch_shape = control_points.shape[:-3]
-    m = control_points.shape[-2]
-    control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 3)
-    ku = _flatten_batch(knots_u, batch_shape, 1)
-    kv = _flatten_batch(knots_v, batch_shape, 1)
-    fu = _flatten_batch(u.to(control_points.dtype), batch_shape, 1)
-    fv = _flatten_batch(v.to(control_points.dtype), batch_shape, 1)
-    span_u, basis_u, d_u = _basis(ku, degree_u, fu, knot_bandwidth, _needs_knot_grad(knots_u))
-    span_v, basis_v, d_v = _basis(kv, degree_v, fv, knot_bandwidth, _needs_knot_grad(knots_v))
+    n, m = control_points.shape[-3], control_points.shape[-2]
+    weights = weights.expand(control_points.shape[:-1])
+    span_u, basis_u, d_u, span_v, basis_v, d_v = _surface_basis(
+        control_points, knots_u, knots_v, degree_u, degree_v, u, v, knot_bandwidth)
+    dense_u = dense_basis_matrix(basis_u, span_u, degree_u, n)
     dense_v = dense_basis_matrix(basis_v, span_v, degree_v, m)
-    points = _fn.SurfaceGridPoints.apply(control_w, ku, kv, basis_u, dense_v, d_u, d_v, span_u,
-                                         span_v, degree_u, degree_v)
-    return points.reshape(*batch_shape, *points.shape[1:])
+    return _fn.SurfaceGridPoints.apply(control_points, weights, knots_u, knots_v, dense_u, dense_v,
+                                       d_u, d_v, span_u, span_v, degree_u, degree_v)
 
 
 # --------------------------------------------------------------------------------------------
@@ -198,74 +201,57 @@ class CurveEvaluator:
     returns (*B, M, d).
     """
 
-    def __init__(self, knots: torch.Tensor, degree: int, u: torch.Tensor):
-        knots = torch.as_tensor(knots).detach()
-        u = torch.as_tensor(u, dtype=knots.dtype, device=knots.device).detach()
-        self.degree, self.knots = degree, knots
-        self.span = find_span(knots.unsqueeze(0), degree, u.unsqueeze(0))
-        self.basis = basis_functions(knots.unsqueeze(0), degree, u.unsqueeze(0), self.span)
+    def __init__(self, knots, degree: int, u):
+        self.knots = torch.as_tensor(knots).detach()
+        u = torch.as_tensor(u, dtype=self.knots.dtype, device=self.knots.device).detach()
+        self.degree = degree
+        self.span, self.basis, _ = _basis(self.knots.unsqueeze(0), degree, u.unsqueeze(0), 0, False)
 
     def __call__(self, control_points, weights=None):
-        if weights is None:
-            weights = control_points.new_ones(control_points.shape[:-1])
-        batch_shape = control_points.shape[:-2]
-        control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 2)
-        b = control_w.shape[0]
-        points = _fn.CurvePoints.apply(control_w, self.knots, self.basis.expand(b, -1, -1), None,
-                                       self.span.expand(b, -1), self.degree)
-        return points.reshape(*batch_shape, *points.shape[1:])
+        weights = _default_weights(control_points, weights)
+        return _fn.CurvePoints.apply(control_points, weights, self.knots, self.basis, None,
+                                     self.span, self.degree)
 
 
-class SurfaceEvaluator:
-    """Fixed knots and fixed paired parameters (u[k], v[k]); returns (*B, M, 3)."""
+def _default_weights(control_points, weights):
+    if weights is None:
+        return control_points.new_ones(()).expand(control_points.shape[:-1])
+    return weights.expand(control_points.shape[:-1])
 
+
+class _FixedSurfaceBasis:
     def __init__(self, knots_u, knots_v, degree_u, degree_v, u, v):
         ku = torch.as_tensor(knots_u).detach()
         kv = torch.as_tensor(knots_v, dtype=ku.dtype, device=ku.device).detach()
         u = torch.as_tensor(u, dtype=ku.dtype, device=ku.device).detach().unsqueeze(0)
         v = torch.as_tensor(v, dtype=ku.dtype, device=ku.device).detach().unsqueeze(0)
         self.knots_u, self.knots_v, self.degrees = ku, kv, (degree_u, degree_v)
-        self.span_u = find_span(ku.unsqueeze(0), degree_u, u)
-        self.span_v = find_span(kv.unsqueeze(0), degree_v, v)
-        self.basis_u = basis_functions(ku.unsqueeze(0), degree_u, u, self.span_u)
-        self.basis_v = basis_functions(kv.unsqueeze(0), degree_v, v, self.span_v)
+        self.span_u, self.basis_u, _ = _basis(ku.unsqueeze(0), degree_u, u, 0, False)
+        self.span_v, self.basis_v, _ = _basis(kv.unsqueeze(0), degree_v, v, 0, False)
+
+
+class SurfaceEvaluator(_FixedSurfaceBasis):
+    """Fixed knots and fixed paired parameters (u[k], v[k]); returns (*B, M, 3)."""
 
     def __call__(self, control_points, weights=None):
-        if weights is None:
-            weights = control_points.new_ones(control_points.shape[:-1])
-        batch_shape = control_points.shape[:-3]
-        control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 3)
-        b = control_w.shape[0]
-        points = _fn.SurfacePoints.apply(
-            control_w, self.knots_u, self.knots_v, self.basis_u.expand(b, -1, -1),
-            self.basis_v.expand(b, -1, -1), None, None, self.span_u.expand(b, -1),
-            self.span_v.expand(b, -1), *self.degrees)
-        return points.reshape(*batch_shape, *points.shape[1:])
+        weights = _default_weights(control_points, weights)
+        return _fn.SurfacePoints.apply(control_points, weights, self.knots_u, self.knots_v,
+                                       self.basis_u, self.basis_v, None, None, self.span_u,
+                                       self.span_v, *self.degrees)
 
 
-class SurfaceGridEvaluator:
+class SurfaceGridEvaluator(_FixedSurfaceBasis):
     """Fixed knots, fixed grid u x v; returns (*B, len(u), len(v), 3)."""
 
     def __init__(self, knots_u, knots_v, degree_u, degree_v, u, v):
-        ku = torch.as_tensor(knots_u).detach()
-        kv = torch.as_tensor(knots_v, dtype=ku.dtype, device=ku.device).detach()
-        u = torch.as_tensor(u, dtype=ku.dtype, device=ku.device).detach().unsqueeze(0)
-        v = torch.as_tensor(v, dtype=ku.dtype, device=ku.device).detach().unsqueeze(0)
-        self.knots_u, self.knots_v, self.degrees = ku, kv, (degree_u, degree_v)
-        self.span_u = find_span(ku.unsqueeze(0), degree_u, u)
-        self.span_v = find_span(kv.unsqueeze(0), degree_v, v)
-        self.basis_u = basis_functions(ku.unsqueeze(0), degree_u, u, self.span_u)
-        basis_v = basis_functions(kv.unsqueeze(0), degree_v, v, self.span_v)
-        self.dense_v = dense_basis_matrix(basis_v, self.span_v, degree_v, kv.shape[0] - degree_v - 1)
+        super().__init__(knots_u, knots_v, degree_u, degree_v, u, v)
+        n_u = self.knots_u.shape[0] - degree_u - 1
+        n_v = self.knots_v.shape[0] - degree_v - 1
+        self.dense_u = dense_basis_matrix(self.basis_u, self.span_u, degree_u, n_u)
+        self.dense_v = dense_basis_matrix(self.basis_v, self.span_v, degree_v, n_v)
 
     def __call__(self, control_points, weights=None):
-        if weights is None:
-            weights = control_points.new_ones(control_points.shape[:-1])
-        batch_shape = control_points.shape[:-3]
-        control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 3)
-        b = control_w.shape[0]
-        points = _fn.SurfaceGridPoints.apply(
-            control_w, self.knots_u, self.knots_v, self.basis_u.expand(b, -1, -1),
-            self.dense_v.expand(b, -1, -1), None, None, self.span_u.expand(b, -1),
-            self.span_v.expand(b, -1), *self.degrees)
-        return points.reshape(*batch_shape, *points.shape[1:])
+        weights = _default_weights(control_points, weights)
+        return _fn.SurfaceGridPoints.apply(control_points, weights, self.knots_u, self.knots_v,
+                                           self.dense_u, self.dense_v, None, None, self.span_u,
+                                           self.span_v, *self.degrees)

@@ -1,0 +1,25 @@
+"""The engine is a pure library: importing it and its modules loads no GUI stack."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+FORBIDDEN = ("PySide6", "PyQt5", "PyQt6", "qtpy", "vtk", "vtkmodules", "pyvista", "pyvistaqt",
+             "superqt", "pyqtgraph", "app")
+
+
+def test_import_nurbs_core_loads_no_qt_or_vtk():
+    code = (
+        "import importlib, pkgutil, sys\n"
+        "import nurbs_core\n"
+        "for info in pkgutil.walk_packages(nurbs_core.__path__, 'nurbs_core.'):\n"
+        "    if info.name != 'nurbs_core.cli':\n"
+        "        importlib.import_module(info.name)\n"
+        f"bad = sorted(m for m in sys.modules if m.split('.')[0] in {FORBIDDEN!r})\n"
+        "print(','.join(bad))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "", f"nurbs_core imported GUI modules: {result.stdout}"
