@@ -2,7 +2,9 @@
 
 ``mesh_mode="vertices"`` returns the file's vertices (STL's per-triangle copies merged);
 ``mesh_mode="sample"`` draws ``sample_count`` points uniformly over the surface area (trimesh's
-area-weighted triangle sampling) with the face normal of each sample as ``normals``.
+area-weighted triangle sampling) with the face normal of each sample as ``normals`` and the
+face each came from as ``face_index``. A file with no faces (a point cloud stored as OBJ or PLY)
+gives its vertices in either mode.
 """
 
 from __future__ import annotations
@@ -45,10 +47,7 @@ def read_mesh_points(path, suffix: str, mesh_mode: str = "vertices",
         raise FileFormatError(path, "the file contains no vertices")
     faces = np.asarray(getattr(mesh, "faces", np.empty((0, 3))))
     attributes: dict[str, np.ndarray] = {}
-    if mesh_mode == "sample":
-        if not isinstance(mesh, trimesh.Trimesh) or len(faces) == 0:
-            raise FileFormatError(path, "the file has no faces, so it cannot be sampled over its "
-                                        "area; load it with mesh_mode='vertices'")
+    if mesh_mode == "sample" and isinstance(mesh, trimesh.Trimesh) and len(faces) > 0:
         check_points(path, vertices)
         if not mesh.area > 0:
             raise FileFormatError(path, "the mesh has zero area, so it cannot be sampled")

@@ -40,6 +40,8 @@ def load_points(path, *, mesh_mode: str = "vertices", sample_count: int = 100_00
     ``mesh_mode="sample"`` and ``seed``). Raises FileFormatError (naming the file and line) for
     unreadable content, MissingDependencyError when an optional package is needed.
     """
+    if mesh_mode not in ("vertices", "sample"):
+        raise ValueError(f"mesh_mode must be 'vertices' or 'sample', got {mesh_mode!r}")
     suffix = suffix_of(path)
     if suffix not in POINT_CLOUD_SUFFIXES:
         raise FileFormatError(path, f"unknown point-cloud suffix {suffix!r}; supported: "
@@ -52,8 +54,6 @@ def load_points(path, *, mesh_mode: str = "vertices", sample_count: int = 100_00
             from nurbs_core.io.meshes import read_mesh_points
 
             return read_mesh_points(path, suffix, mesh_mode, sample_count, seed)
-        if mesh_mode not in ("vertices", "sample"):
-            raise ValueError(f"mesh_mode must be 'vertices' or 'sample', got {mesh_mode!r}")
         return ply.read_ply_points(path)
     if suffix in TEXT_SUFFIXES:
         from nurbs_core.io.text_points import read_text_points

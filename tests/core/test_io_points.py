@@ -414,11 +414,15 @@ def test_non_numeric_token_names_the_line(tmp_path):
     assert "'five'" in str(_expect(path, line=2))
 
 
-def test_sampling_a_point_only_file_is_refused(tmp_path, cloud):
-    path = tmp_path / "points.obj"
-    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
-    assert len(load_points(path)) == 3
-    assert "no faces" in str(_expect(path, mode="sample"))
+@pytest.mark.parametrize("suffix", [".obj", ".ply"])
+def test_a_point_only_file_gives_its_vertices_in_sample_mode(tmp_path, suffix):
+    path = tmp_path / f"points{suffix}"
+    trimesh.PointCloud([[0, 0, 0], [1, 0, 0], [0, 1, 0]]).export(path)
+    for mode in ("vertices", "sample"):
+        cloud = load_points(path, mesh_mode=mode, sample_count=50)
+        np.testing.assert_allclose(cloud.points, [[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    with pytest.raises(ValueError, match="mesh_mode"):
+        load_points(path, mesh_mode="surface")
 
 
 def test_unknown_suffix_and_missing_file(tmp_path):
