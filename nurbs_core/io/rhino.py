@@ -83,6 +83,8 @@ def read_3dm(path) -> list:
         name = obj.Attributes.Name if obj.Attributes is not None else ""
         what = f"object {index}" + (f" ({name!r})" if name else "")
         items = []
+        if isinstance(geometry, rhino3dm.Extrusion) and geometry.CapCount > 0:
+            geometry = geometry.ToBrep(False)  # the caps are faces of its B-rep form only
         if isinstance(geometry, rhino3dm.Brep):
             for face_index in range(len(geometry.Faces)):
                 face = geometry.Faces[face_index]

@@ -156,10 +156,18 @@ def test_3dm_made_by_rhino3dm_evaluates_as_rhino(tmp_path):
     circle = rhino3dm.Circle(rhino3dm.Point3d(0, 0, 1), 2.5)
     model.Objects.AddCircle(circle)
     model.Objects.AddPoint(rhino3dm.Point3d(9, 9, 9))  # ignored: not a surface or curve
+    tube = rhino3dm.Extrusion.Create(rhino3dm.Circle(rhino3dm.Point3d(0, 0, 0), 2.0)
+                                     .ToNurbsCurve(), 5.0, True)
+    model.Objects.AddExtrusion(tube)  # capped: its side and two caps
     path = tmp_path / "third_party.3dm"
     assert model.Write(str(path), 7)
     geometry = load(path)
-    assert [type(g).__name__ for g in geometry] == ["NurbsSurface"] * 7 + ["NurbsCurve"]
+    assert [type(g).__name__ for g in geometry] == (["NurbsSurface"] * 7 + ["NurbsCurve"] +
+                                                    ["NurbsSurface"] * 3)
+    side = geometry[8]
+    u, v = _parameters(side, count=60)
+    np.testing.assert_allclose(np.linalg.norm(_ours(side, u, v)[:, :2], axis=1), 2.0,
+                               atol=1e-12)
     reference = rhino3dm.File3dm.Read(str(path))
     rhino_surfaces = [reference.Objects[0].Geometry]
     brep = reference.Objects[1].Geometry
@@ -345,6 +353,26 @@ def test_smesh_written_by_us_reads_in_geomdl(tmp_path):
     u, v = _parameters(surface, count=50)
     np.testing.assert_allclose(_geomdl_points(theirs, surface, u, v), _ours(surface, u, v),
                                atol=1e-9)
+
+
+def test_smesh_written_by_geomdl(tmp_path):
+    pytest.importorskip("geomdl")
+    from geomdl import NURBS, exchange
+
+    rng = np.random.default_rng(6)
+    reference = NURBS.Surface()
+    reference.degree_u, reference.degree_v = 3, 2
+    reference.ctrlpts_size_u, reference.ctrlpts_size_v = 5, 4
+    reference.ctrlpts = rng.normal(size=(20, 3)).tolist()
+    reference.weights = rng.uniform(0.5, 2.0, 20).tolist()
+    reference.knotvector_u = [0, 0, 0, 0, 0.4, 1, 1, 1, 1]
+    reference.knotvector_v = [0, 0, 0, 0.7, 1, 1, 1]
+    path = tmp_path / "geomdl.dat"
+    exchange.export_smesh(reference, str(path))
+    (ours,) = load(path)
+    u, v = _parameters(ours, count=60)
+    np.testing.assert_allclose(_ours(ours, u, v), _geomdl_points(reference, ours, u, v),
+                               atol=1e-12)
 
 
 def test_bad_smesh_files_name_the_line(tmp_path, paper_data):
