@@ -1,8 +1,9 @@
 """Delimited text point clouds: XYZ, TXT, PTS, ASC, CSV.
 
 Whitespace, comma, semicolon or tab separated; ``#`` and ``//`` comment lines are skipped; an
-optional header line names the columns (``x,y,z,nx,ny,nz,red,green,blue,intensity``...); a Leica
-PTS count line (a single integer before the data) is skipped. Without a header, the first three
+optional header line names the columns (``x,y,z,nx,ny,nz,red,green,blue,intensity``...), also
+as the comment right before the data (CloudCompare's ``//X,Y,Z,R,G,B``); a Leica PTS count line
+(a single integer before the data) is skipped. Without a header, the first three
 columns are x, y, z and extra columns are named by :func:`classify_extra_columns`.
 """
 
@@ -49,6 +50,19 @@ def _tokens(line: str) -> list[str]:
     return [t for t in _SPLIT.split(line.strip()) if t != ""]
 
 
+def _commented_header(lines: list[str], first_data_line: int, width: int):
+    """Column names from a comment line right before the data (CloudCompare writes
+    ``//X,Y,Z,R,G,B``), when it names x, y and z and has one name per column."""
+    if first_data_line < 2:
+        return None, None
+    text = lines[first_data_line - 2].strip().lstrip("#/").strip()
+    names = [t.strip("\"'") for t in _tokens(text)]
+    lowered = {n.lower() for n in names}
+    if len(names) == width and {"x", "y", "z"} <= lowered:
+        return names, first_data_line - 1
+    return None, None
+
+
 def read_text_points(path) -> PointCloud:
     text = _read_text(path)
     lines = text.splitlines()
@@ -66,6 +80,8 @@ def read_text_points(path) -> PointCloud:
         rows = rows[1:]
     elif len(first_tokens) == 1 and len(rows) > 1 and len(_tokens(rows[1][1])) >= 3:
         rows = rows[1:]  # PTS: the first line is the point count
+    else:
+        names, header_line = _commented_header(lines, rows[0][0], len(first_tokens))
     if not rows:
         raise FileFormatError(path, "the file has a header but no data lines")
     width = len(names) if names is not None else len(_tokens(rows[0][1]))

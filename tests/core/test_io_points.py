@@ -129,6 +129,15 @@ def test_text_formats_with_header_and_extra_columns(tmp_path):
     np.testing.assert_array_equal(cloud.attributes["intensity"], [9, 8])
 
 
+def test_cloudcompare_commented_header(tmp_path):
+    path = tmp_path / "cc.asc"
+    path.write_text("//X,Y,Z,Nx,Ny,Nz,R,G,B\n1,2,3,0.8,0.6,0,7,8,9\n4,5,6,0,0,1,1,2,3\n")
+    cloud = load_points(path)
+    np.testing.assert_array_equal(cloud.points, [[1, 2, 3], [4, 5, 6]])
+    np.testing.assert_array_equal(cloud.attributes["normals"], [[0.8, 0.6, 0], [0, 0, 1]])
+    np.testing.assert_array_equal(cloud.attributes["colors"], [[7, 8, 9], [1, 2, 3]])
+
+
 def test_headerless_extra_columns_follow_count_rules(tmp_path):
     rng = np.random.default_rng(0)
     xyz = rng.normal(size=(20, 3))
