@@ -53,6 +53,7 @@ class FitController(QObject):
         self._rate_history: deque[tuple[float, int]] = deque()
         self._is_shut_down = False
         self.snapshots_shown = 0  # for tests and the status bar
+        self.latest_shown: DisplaySnapshot | None = None
         self._timer = QTimer(self)
         self._timer.setInterval(RENDER_INTERVAL_MS)
         self._timer.timeout.connect(self._tick)
@@ -222,7 +223,7 @@ class FitController(QObject):
         snapshot, self._latest = self._latest, None
         if snapshot is None:
             return
-        self._latest_shown = snapshot
+        self.latest_shown = snapshot
         self._document.set_fitted(snapshot.geometry, notify=False)
         self.snapshots_shown += 1
         self.snapshot_shown.emit(snapshot)

@@ -40,17 +40,13 @@ class LoadedFiles:
 def open_suffixes() -> tuple[str, ...]:
     from nurbs_core import io
 
-    suffixes = set(io.POINT_CLOUD_SUFFIXES) | set(getattr(io, "NURBS_SUFFIXES", ()))
-    return tuple(sorted(suffixes))
+    return tuple(sorted(set(io.POINT_CLOUD_SUFFIXES) | set(io.NURBS_SUFFIXES)))
 
 
 def _read(path: Path):
-    from nurbs_core import io
+    from nurbs_core.io import load_any
 
-    load_any = getattr(io, "load_any", None)
-    if load_any is not None:
-        return load_any(path)
-    return io.load_points(path)  # until NURBS reading lands: point clouds only
+    return load_any(path)
 
 
 def load_files(paths: list[str]) -> LoadedFiles:

@@ -25,6 +25,7 @@ from PySide6.QtWidgets import (
     QMessageBox,
     QScrollArea,
     QStyle,
+    QVBoxLayout,
     QWidget,
 )
 
@@ -86,7 +87,7 @@ class MainWindow(QMainWindow):
         self.controller = FitController(self.document, self)
         self.jobs = JobRunner(self)
         self.scene = SceneView(self)
-        self.setCentralWidget(self.scene.widget)
+        self.setCentralWidget(self._native_container(self.scene.widget))
 
         self._build_docks()
         self._build_actions()
@@ -100,6 +101,23 @@ class MainWindow(QMainWindow):
             app.aboutToQuit.connect(self.shutdown)
 
     # --- construction ----------------------------------------------------------------------------
+    @staticmethod
+    def _native_container(viewport: QWidget) -> QWidget:
+        """Host the OpenGL viewport in its own native child window.
+
+        A QOpenGLWidget makes Qt composite its whole top-level window through OpenGL on every
+        repaint of any widget (a status label, the loss plot). With software OpenGL that cost
+        ~100 ms per repaint of a large window and stalled the event loop during fits; in a native
+        child window only the viewport's own area is composited.
+        """
+        container = QWidget()
+        container.setAttribute(Qt.WidgetAttribute.WA_DontCreateNativeAncestors)
+        container.setAttribute(Qt.WidgetAttribute.WA_NativeWindow)
+        layout = QVBoxLayout(container)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(viewport)
+        return container
+
     def _dock(self, title: str, widget: QWidget, area, name: str, scroll: bool = False):
         dock = QDockWidget(title, self)
         dock.setObjectName(name)

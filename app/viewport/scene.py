@@ -9,6 +9,8 @@ Only the GUI thread calls into this module.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pyvista as pv
 from PySide6.QtCore import QObject, QTimer
@@ -30,6 +32,8 @@ COLORS = {
     "patch": "#9fb8d0",
     "offset": "#f2a33a",
 }
+
+UPPER_RIGHT, LOWER_RIGHT = 3, 1  # vtkCornerAnnotation corner indices
 
 #: Layers the document tree and the View menu toggle.
 LAYERS = ("cloud", "surface", "curve", "control_net", "knot_lines", "patches", "offsets")
@@ -90,7 +94,9 @@ class SceneView(QObject):
         super().__init__(parent)
         theme = pv.themes.DocumentTheme()
         theme.allow_empty_mesh = True  # layers exist before their content (e.g. no fit yet)
-        self.plotter = QtInteractor(parent, auto_update=False, theme=theme)
+        # no multisampling and no FXAA: with software OpenGL (llvmpipe under Xvfb) 8x MSAA made
+        # each frame 5-10x slower and FXAA added ~100 ms, stalling the event loop
+        self.plotter = QtInteractor(parent, auto_update=False, theme=theme, multi_samples=0)
         self.plotter.setAcceptDrops(False)  # drops must reach the main window
         self.plotter.set_background("#fbfbfd", top="#c9d6e3")
         self.plotter.enable_lightkit()
@@ -101,8 +107,13 @@ class SceneView(QObject):
         self._visible["control_net"] = False
         self._deviation_on = True
         self._has_deviation = False
+        self._stats_text = ""
         self._extra_meshes: dict[str, list] = {"patches": [], "offsets": []}
+        self._corners = self.plotter.add_text(" ", position="upper_right", font_size=9,
+                                              color="#222222", name="corner_texts")
+        self._corners.SetText(UPPER_RIGHT, "")
         self._closed = False
+        self.last_render_ms = 0.0
         self._render_timer = QTimer(self)
         self._render_timer.setSingleShot(True)
         self._render_timer.setInterval(RENDER_INTERVAL_MS)
@@ -160,21 +171,18 @@ class SceneView(QObject):
             top = float(np.max(deviation))
             actor.mapper.scalar_range = (0.0, top if top > 0 else 1.0)
         self._update_scalar_bar()
-        if valid and stats is not None:
-            text = (f"Deviation ({stats['count']} points)\nmean {stats['mean']:.4g}\n"
-                    f"RMS  {stats['rms']:.4g}\nmax  {stats['max']:.4g}")
-            self.plotter.add_text(text, position="upper_right", font_size=9, color="#222222",
-                                  name="deviation_stats")
-        elif not valid:
-            self.plotter.remove_actor("deviation_stats", render=False)
+        if not valid:
+            self._stats_text = ""
+        elif stats is not None:
+            self._stats_text = (f"Deviation ({stats['count']} points)\nmean {stats['mean']:.4g}\n"
+                                f"RMS  {stats['rms']:.4g}\nmax  {stats['max']:.4g}")
+        self._corner_text(UPPER_RIGHT, self._stats_text if self.deviation_shown() else "")
         self.request_render()
 
     def set_deviation_visible(self, on: bool):
         self._deviation_on = bool(on)
         self._update_scalar_bar()
-        stats_actor = self.plotter.actors.get("deviation_stats")
-        if stats_actor is not None:
-            stats_actor.SetVisibility(self._deviation_on and self._has_deviation)
+        self._corner_text(UPPER_RIGHT, self._stats_text if self.deviation_shown() else "")
         self.request_render()
 
     def deviation_shown(self) -> bool:
@@ -260,13 +268,17 @@ class SceneView(QObject):
         return self._visible[layer]
 
     def set_note(self, text: str):
-        """A line of text in the lower-left corner (e.g. the offsets' largest gap)."""
-        if text:
-            self.plotter.add_text(text, position="lower_left", font_size=9, color="#222222",
-                                  name="note")
-        else:
-            self.plotter.remove_actor("note", render=False)
+        """A line of text in the lower-right corner (e.g. the offsets' largest gap)."""
+        self._corner_text(LOWER_RIGHT, text)
         self.request_render()
+
+    def _corner_text(self, corner: int, text: str):
+        """Corner texts live in one vtkCornerAnnotation, updated in place (no new actors)."""
+        self._corners.SetText(corner, text)
+        self._corners.Modified()
+
+    def corner_text(self, corner: int) -> str:
+        return self._corners.GetText(corner) or ""
 
     # --- camera and drawing --------------------------------------------------------------------
     def reset_camera(self):
@@ -279,8 +291,14 @@ class SceneView(QObject):
             self._render_timer.start()
 
     def render_now(self):
-        if not self._closed:
-            self.plotter.render()
+        if self._closed:
+            return
+        started = time.perf_counter()
+        self.plotter.render()
+        spent_ms = (time.perf_counter() - started) * 1000.0
+        # slow (software) OpenGL: leave the event loop at least as much time as a frame takes
+        self._render_timer.setInterval(int(max(RENDER_INTERVAL_MS, 1.5 * spent_ms)))
+        self.last_render_ms = spent_ms
 
     def screenshot(self, path: str):
         self.render_now()

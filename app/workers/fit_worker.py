@@ -9,6 +9,8 @@ point's deviation from the fitted shape. Nothing here touches Qt widgets, VTK or
 from __future__ import annotations
 
 import os
+import sys
+import threading
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -106,6 +108,20 @@ def starting_geometry(request: FitRequest) -> dict[str, Any] | None:
                     settings.control_points_v, settings.knots_u, settings.knots_v)
 
 
+def lower_thread_priority(niceness: int = 10):
+    """Make the calling thread (and threads it starts) yield the CPU to the GUI thread.
+
+    On Linux the nice value is per thread; a busy machine otherwise gives the GUI thread only a
+    share of a core and the event loop stalls behind the fit. Elsewhere this does nothing.
+    """
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), niceness)
+    except (AttributeError, OSError):
+        pass
+
+
 class FitWorker(QObject):
     """Runs one fit. Signals carry plain Python/numpy payloads (queued to the GUI thread)."""
 
@@ -125,6 +141,7 @@ class FitWorker(QObject):
 
             # leave one core to the GUI thread: the event loop must keep answering
             torch.set_num_threads(max(1, (os.cpu_count() or 2) - 1))
+            lower_thread_priority()
             self._run(request)
         except Exception as exc:  # noqa: BLE001 - reported to the user, never re-raised
             detail = traceback.format_exc(limit=6)

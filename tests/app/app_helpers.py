@@ -1,0 +1,44 @@
+"""Helpers for the app tests: simulated drops, viewport pixels, quick settings."""
+
+from __future__ import annotations
+
+import numpy as np
+from PySide6.QtCore import QMimeData, QPointF, Qt, QUrl
+from PySide6.QtGui import QDragEnterEvent, QDropEvent
+from PySide6.QtWidgets import QApplication
+
+#: Small, quick fits: the tests check behaviour, not accuracy.
+QUICK = {"control_points_u": 8, "control_points_v": 8, "iterations": 100000}
+
+
+def sin_cos_cloud(count: int = 1500, seed: int = 3) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(-3.0, 3.0, size=(count, 2))
+    return np.column_stack([xy, np.sin(xy[:, 0]) * np.cos(xy[:, 1])])
+
+
+def drop_files(widget, paths):
+    """Simulate dropping files on the widget (drag-enter then drop, as Qt delivers them)."""
+    mime = QMimeData()
+    mime.setUrls([QUrl.fromLocalFile(str(p)) for p in paths])
+    position = QPointF(widget.width() / 2, widget.height() / 2)
+    buttons, modifiers = Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier
+    enter = QDragEnterEvent(position, Qt.DropAction.CopyAction, mime, buttons, modifiers)
+    QApplication.sendEvent(widget, enter)
+    assert enter.isAccepted(), "the window refused the drag"
+    drop = QDropEvent(position, Qt.DropAction.CopyAction, mime, buttons, modifiers)
+    QApplication.sendEvent(widget, drop)
+    return drop.isAccepted()
+
+
+def open_by_drop(qtbot, window, paths, expect: bool = True, timeout: int = 20000):
+    with qtbot.waitSignal(window.files_loaded, timeout=timeout) as blocker:
+        drop_files(window, paths)
+    assert blocker.args == [expect], window.last_error
+    return blocker
+
+
+def viewport_image(window) -> np.ndarray:
+    """The viewport's rendered pixels (H, W, 3) uint8, straight from the render window."""
+    window.scene.render_now()
+    return np.asarray(window.scene.plotter.screenshot(return_img=True))[..., :3]
