@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import torch
 
+from nurbs_core.sparse import curve_sparse_basis, surface_sparse_basis
+
 
 def _local_index(span: torch.Tensor, degree: int) -> torch.Tensor:
     """Control-point indices ``span - p .. span`` of the non-zero basis functions: (..., p+1)."""
@@ -76,103 +78,96 @@ def _fit_knot_grad(grad: torch.Tensor, knots_shape: torch.Size) -> torch.Tensor:
     return grad.reshape(knots_shape)
 
 
-def _batch_offsets(index: torch.Tensor, batch: int, stride: int) -> torch.Tensor:
-    """Flat row indices into a (batch * stride) table for a (Bb, ...) index, Bb in {1, batch}."""
-    index = index.expand(batch, *index.shape[1:])
-    shape = (batch,) + (1,) * (index.dim() - 1)
-    return index + torch.arange(batch, device=index.device).view(shape) * stride
-
-
 class CurvePoints(torch.autograd.Function):
+    """Curves at arbitrary parameters. ``plan`` (optional) is a precomputed
+    :class:`~nurbs_core.sparse.SparseBasisMatrix` for this batch size (fixed knots and parameters)."""
+
     @staticmethod
-    def forward(ctx, control_points, weights, knots, basis, d_basis, span, degree):
+    def forward(ctx, control_points, weights, knots, basis, d_basis, span, degree, plan=None):
         control_w, batch_shape = _homogeneous(control_points, weights, 1)
         batch, n, dim1 = control_w.shape
-        flat = _batch_offsets(_local_index(span, degree), batch, n)  # (B, M, p+1)
-        gathered = control_w.reshape(-1, dim1)[flat.reshape(-1)].view(*flat.shape, dim1)
-        homogeneous = torch.einsum("bmr,bmrc->bmc", basis.expand(batch, -1, -1), gathered)
+        if plan is None:
+            plan = curve_sparse_basis(basis, span, degree, n, batch)
+        homogeneous = plan.matmul(control_w.reshape(batch * n, dim1)).view(batch, -1, dim1)
         inv_w = homogeneous[..., -1:].reciprocal()
         points = homogeneous[..., :-1] * inv_w
-        ctx.save_for_backward(control_points, weights, basis, d_basis, span, points, inv_w,
-                              gathered, flat)
-        ctx.degree, ctx.n_knots, ctx.knots_shape = degree, knots.shape[-1], knots.shape
+        ctx.save_for_backward(control_points, weights, control_w, basis, d_basis, span, points,
+                              inv_w)
+        ctx.plan, ctx.degree, ctx.knots_shape = plan, degree, knots.shape
         return points.view(*batch_shape, *points.shape[1:])
 
     @staticmethod
     def backward(ctx, grad_points):
-        (control_points, weights, basis, d_basis, span, points, inv_w, gathered,
-         flat) = ctx.saved_tensors
-        batch, n_params = points.shape[0], points.shape[1]
+        control_points, weights, control_w, basis, d_basis, span, points, inv_w = ctx.saved_tensors
+        batch, size, dim = points.shape
         grad_h = _rational_backward(grad_points.reshape(points.shape), points, inv_w)
         grad_cp = grad_w = grad_knots = None
         if ctx.needs_input_grad[0] or ctx.needs_input_grad[1]:
-            dim1 = grad_h.shape[-1]
-            contrib = basis.expand(batch, -1, -1).unsqueeze(-1) * grad_h.unsqueeze(-2)
-            n = control_points.shape[-2]
-            grad_cw = grad_h.new_zeros(batch * n, dim1)
-            grad_cw.index_add_(0, flat.reshape(-1), contrib.reshape(-1, dim1))
+            grad_cw = ctx.plan.transpose_matmul(grad_h.reshape(batch * size, dim + 1))
             grad_cp, grad_w = _split_homogeneous_grad(grad_cw, control_points, weights)
         if ctx.needs_input_grad[2] and d_basis is not None:
+            gathered = control_w.reshape(-1, dim + 1)[ctx.plan.columns].view(batch, size, -1, dim + 1)
             grad_basis = torch.einsum("bmc,bmrc->bmr", grad_h, gathered)
             if basis.shape[0] == 1 and batch > 1:
                 grad_basis = grad_basis.sum(0, keepdim=True)
-            grad_knots = _scatter_knot_grad(grad_basis, d_basis, span, ctx.degree, ctx.n_knots)
+            n_knots = ctx.knots_shape[-1]
+            grad_knots = _scatter_knot_grad(grad_basis, d_basis, span, ctx.degree, n_knots)
             grad_knots = _fit_knot_grad(grad_knots, ctx.knots_shape)
-        del n_params
-        return grad_cp, grad_w, grad_knots, None, None, None, None
+        return grad_cp, grad_w, grad_knots, None, None, None, None, None
 
 
 class SurfacePoints(torch.autograd.Function):
-    """Paired parameters (u_k, v_k): the paper's Algorithms 1 and 2."""
+    """Paired parameters (u_k, v_k): the paper's Algorithms 1 and 2 through the block-sparse basis
+    matrix (:mod:`nurbs_core.sparse`). ``plan`` as in :class:`CurvePoints`."""
 
     @staticmethod
     def forward(ctx, control_points, weights, knots_u, knots_v, basis_u, basis_v, d_basis_u,
-                d_basis_v, span_u, span_v, degree_u, degree_v):
+                d_basis_v, span_u, span_v, degree_u, degree_v, plan=None):
         control_w, batch_shape = _homogeneous(control_points, weights, 2)
         batch, n, m, _ = control_w.shape
-        index_u = _local_index(span_u, degree_u)  # (Bb, M, p+1)
-        index_v = _local_index(span_v, degree_v)  # (Bb, M, q+1)
-        flat = _batch_offsets(index_u.unsqueeze(-1) * m + index_v.unsqueeze(-2), batch, n * m)
-        gathered = control_w.reshape(-1, 4)[flat.reshape(-1)].view(*flat.shape, 4)
-        homogeneous = torch.einsum("bmr,bms,bmrsc->bmc", basis_u.expand(batch, -1, -1),
-                                   basis_v.expand(batch, -1, -1), gathered)
+        if plan is None:
+            plan = surface_sparse_basis(basis_u, basis_v, span_u, span_v, degree_u, degree_v, n, m,
+                                        batch)
+        homogeneous = plan.matmul(control_w.reshape(batch * n * m, 4)).view(batch, -1, 4)
         inv_w = homogeneous[..., 3:].reciprocal()
         points = homogeneous[..., :3] * inv_w
-        ctx.save_for_backward(control_points, weights, basis_u, basis_v, d_basis_u, d_basis_v,
-                              span_u, span_v, points, inv_w, gathered, flat)
-        ctx.degrees = (degree_u, degree_v)
-        ctx.n_knots = (knots_u.shape[-1], knots_v.shape[-1])
+        ctx.save_for_backward(control_points, weights, control_w, basis_u, basis_v, d_basis_u,
+                              d_basis_v, span_u, span_v, points, inv_w)
+        ctx.plan, ctx.degrees = plan, (degree_u, degree_v)
         ctx.knot_shapes = (knots_u.shape, knots_v.shape)
         return points.view(*batch_shape, *points.shape[1:])
 
     @staticmethod
     def backward(ctx, grad_points):
-        (control_points, weights, basis_u, basis_v, d_basis_u, d_basis_v, span_u, span_v,
-         points, inv_w, gathered, flat) = ctx.saved_tensors
+        (control_points, weights, control_w, basis_u, basis_v, d_basis_u, d_basis_v, span_u,
+         span_v, points, inv_w) = ctx.saved_tensors
         degree_u, degree_v = ctx.degrees
-        batch = points.shape[0]
+        batch, size = points.shape[:2]
         grad_h = _rational_backward(grad_points.reshape(points.shape), points, inv_w)  # (B, M, 4)
-        bu, bv = basis_u.expand(batch, -1, -1), basis_v.expand(batch, -1, -1)
         grad_cp = grad_w = grad_ku = grad_kv = None
         if ctx.needs_input_grad[0] or ctx.needs_input_grad[1]:
-            contrib = torch.einsum("bmr,bms,bmc->bmrsc", bu, bv, grad_h)
-            grad_cw = grad_h.new_zeros(weights.numel(), 4)
-            grad_cw.index_add_(0, flat.reshape(-1), contrib.reshape(-1, 4))
+            grad_cw = ctx.plan.transpose_matmul(grad_h.reshape(batch * size, 4))
             grad_cp, grad_w = _split_homogeneous_grad(grad_cw, control_points, weights)
         if ctx.needs_input_grad[2] or ctx.needs_input_grad[3]:
+            gathered = control_w.reshape(-1, 4)[ctx.plan.columns].view(
+                batch, size, degree_u + 1, degree_v + 1, 4)
             per_point = torch.einsum("bmc,bmrsc->bmrs", grad_h, gathered)
+            bu, bv = basis_u.expand(batch, -1, -1), basis_v.expand(batch, -1, -1)
             shared = basis_u.shape[0] == 1 and batch > 1
             if ctx.needs_input_grad[2] and d_basis_u is not None:
                 grad_bu = torch.einsum("bmrs,bms->bmr", per_point, bv)
                 grad_bu = grad_bu.sum(0, keepdim=True) if shared else grad_bu
-                grad_ku = _scatter_knot_grad(grad_bu, d_basis_u, span_u, degree_u, ctx.n_knots[0])
+                grad_ku = _scatter_knot_grad(grad_bu, d_basis_u, span_u, degree_u,
+                                             ctx.knot_shapes[0][-1])
                 grad_ku = _fit_knot_grad(grad_ku, ctx.knot_shapes[0])
             if ctx.needs_input_grad[3] and d_basis_v is not None:
                 grad_bv = torch.einsum("bmrs,bmr->bms", per_point, bu)
                 grad_bv = grad_bv.sum(0, keepdim=True) if shared else grad_bv
-                grad_kv = _scatter_knot_grad(grad_bv, d_basis_v, span_v, degree_v, ctx.n_knots[1])
+                grad_kv = _scatter_knot_grad(grad_bv, d_basis_v, span_v, degree_v,
+                                             ctx.knot_shapes[1][-1])
                 grad_kv = _fit_knot_grad(grad_kv, ctx.knot_shapes[1])
-        return grad_cp, grad_w, grad_ku, grad_kv, None, None, None, None, None, None, None, None
+        return (grad_cp, grad_w, grad_ku, grad_kv, None, None, None, None, None, None, None, None,
+                None)
 
 
 class SurfaceGridPoints(torch.autograd.Function):

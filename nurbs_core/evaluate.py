@@ -12,6 +12,8 @@ each call then costs only the sparse products.
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from nurbs_core import autograd as _fn
@@ -22,6 +24,7 @@ from nurbs_core.basis import (
     dense_basis_matrix,
     find_span,
 )
+from nurbs_core.sparse import curve_sparse_basis, surface_sparse_basis
 
 #: Standard deviation of the Gaussian that smooths the derivative of the degree-0 indicator,
 #: as a fraction of the knot domain's length (NURBS-Diff paper, "Backward Evaluation").
@@ -207,10 +210,18 @@ class CurveEvaluator:
         self.degree = degree
         self.span, self.basis, _ = _basis(self.knots.unsqueeze(0), degree, u.unsqueeze(0), 0, False)
 
+        self._plans: dict[int, object] = {}
+
     def __call__(self, control_points, weights=None):
         weights = _default_weights(control_points, weights)
+        batch = math.prod(control_points.shape[:-2])
+        plan = self._plans.get(batch)
+        if plan is None:
+            n = self.knots.shape[0] - self.degree - 1
+            plan = self._plans[batch] = curve_sparse_basis(self.basis, self.span, self.degree, n,
+                                                           batch)
         return _fn.CurvePoints.apply(control_points, weights, self.knots, self.basis, None,
-                                     self.span, self.degree)
+                                     self.span, self.degree, plan)
 
 
 def _default_weights(control_points, weights):
@@ -235,9 +246,15 @@ class SurfaceEvaluator(_FixedSurfaceBasis):
 
     def __call__(self, control_points, weights=None):
         weights = _default_weights(control_points, weights)
+        batch = math.prod(control_points.shape[:-3])
+        plans = self.__dict__.setdefault("_plans", {})
+        if batch not in plans:
+            n, m = control_points.shape[-3], control_points.shape[-2]
+            plans[batch] = surface_sparse_basis(self.basis_u, self.basis_v, self.span_u,
+                                                self.span_v, *self.degrees, n, m, batch)
         return _fn.SurfacePoints.apply(control_points, weights, self.knots_u, self.knots_v,
                                        self.basis_u, self.basis_v, None, None, self.span_u,
-                                       self.span_v, *self.degrees)
+                                       self.span_v, *self.degrees, plans[batch])
 
 
 class SurfaceGridEvaluator(_FixedSurfaceBasis):
