@@ -11,8 +11,16 @@ Reals are written with 17 significant digits, so float64 geometry round-trips ex
 
 from __future__ import annotations
 
+import atexit
 import io
+import json
 import os
+import select
+import subprocess
+import sys
+import tempfile
+import threading
+from pathlib import Path
 
 import numpy as np
 
@@ -175,122 +183,95 @@ def write_iges(geometry_or_list, path) -> None:
         handle.write(stream.getvalue())
 
 
-def _sequence(array) -> np.ndarray:
-    return np.array([array.Value(k) for k in range(array.Lower(), array.Upper() + 1)])
+READ_TIMEOUT_SECONDS = 600.0
 
 
-def surface_from_occ(path, surface, what: str):
-    """A NurbsSurface from a Geom_BSplineSurface (periodic ones are made non-periodic)."""
-    if surface.IsUPeriodic() or surface.IsVPeriodic():
-        surface = surface.Copy()
-        if surface.IsUPeriodic():
-            surface.SetUNotPeriodic()
-        if surface.IsVPeriodic():
-            surface.SetVNotPeriodic()
-    n_u, n_v = surface.NbUPoles(), surface.NbVPoles()
-    control = np.empty((n_u, n_v, 3))
-    weights = np.empty((n_u, n_v))
-    for i in range(n_u):
-        for j in range(n_v):
-            pole = surface.Pole(i + 1, j + 1)
-            control[i, j] = (pole.X(), pole.Y(), pole.Z())
-            weights[i, j] = surface.Weight(i + 1, j + 1)
-    return make_surface(path, control, weights, _sequence(surface.UKnotSequence()),
-                        _sequence(surface.VKnotSequence()), surface.UDegree(), surface.VDegree(),
-                        what=what)
+class _ReaderProcess:
+    """The long-lived child running ``_occ_reader.py`` (OpenCASCADE may segfault on damaged
+    files: a crash ends the child, not the program, and the next read starts a new one)."""
+
+    def __init__(self):
+        self._process: subprocess.Popen | None = None
+        self._lock = threading.Lock()
+
+    def _start(self) -> subprocess.Popen:
+        script = Path(__file__).with_name("_occ_reader.py")
+        # -I: the child sees neither this folder nor PYTHONPATH, only the installed packages
+        return subprocess.Popen([sys.executable, "-I", str(script)], stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                                bufsize=1)
+
+    def request(self, path: str, kind: str, output: str, timeout: float) -> dict:
+        with self._lock:
+            if self._process is None or self._process.poll() is not None:
+                self._process = self._start()
+            process = self._process
+            try:
+                process.stdin.write(json.dumps({"path": path, "kind": kind,
+                                                "output": output}) + "\n")
+                process.stdin.flush()
+            except BrokenPipeError:
+                process.wait()
+                self._process = None
+                return {"ok": False, "crashed": process.returncode}
+            ready, _, _ = select.select([process.stdout], [], [], timeout)
+            if not ready:
+                process.kill()
+                process.wait()
+                self._process = None
+                return {"ok": False, "error": f"reading took longer than {timeout:g} s"}
+            line = process.stdout.readline()
+            if not line:  # the child died while reading this file
+                process.wait()
+                self._process = None
+                return {"ok": False, "crashed": process.returncode}
+            return json.loads(line)
+
+    def close(self) -> None:
+        with self._lock:
+            if self._process is not None and self._process.poll() is None:
+                self._process.stdin.close()
+                try:
+                    self._process.wait(timeout=5)
+                except subprocess.TimeoutExpired:
+                    self._process.kill()
+                    self._process.wait()
+            self._process = None
 
 
-def curve_from_occ(path, curve, what: str):
-    if curve.IsPeriodic():
-        curve = curve.Copy()
-        curve.SetNotPeriodic()
-    n = curve.NbPoles()
-    control = np.array([[curve.Pole(k).X(), curve.Pole(k).Y(), curve.Pole(k).Z()]
-                        for k in range(1, n + 1)])
-    weights = np.array([curve.Weight(k) for k in range(1, n + 1)])
-    return make_curve(path, control, weights, _sequence(curve.KnotSequence()), curve.Degree(),
-                      what=what)
+_READER = _ReaderProcess()
+atexit.register(_READER.close)
 
 
-def _read_shape(path, kind: str):
-    from OCP.IFSelect import IFSelect_ReturnStatus
+def read_cad(path, kind: str, timeout: float = READ_TIMEOUT_SECONDS) -> list:
+    """All surfaces (untrimmed) of a STEP or IGES file; its curves when it has no faces.
 
-    if kind == "step":
-        from OCP.STEPControl import STEPControl_Reader
-
-        reader = STEPControl_Reader()
-    else:
-        from OCP.IGESControl import IGESControl_Reader
-
-        reader = IGESControl_Reader()
-    status = reader.ReadFile(os.fspath(path))
-    if status != IFSelect_ReturnStatus.IFSelect_RetDone:
-        raise FileFormatError(path, f"not a readable {kind.upper()} file (OpenCASCADE: "
-                                    f"{status.name})")
-    reader.TransferRoots()
-    if reader.NbShapes() == 0:
-        raise FileFormatError(path, f"the {kind.upper()} file has no shapes")
-    return reader.OneShape()
-
-
-def _bspline_surface_of_face(face):
-    from OCP.BRep import BRep_Tool
-    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
-    from OCP.Geom import Geom_BSplineSurface
-    from OCP.TopoDS import TopoDS
-
-    surface = BRep_Tool.Surface_s(face)  # with the face's placement applied
-    if isinstance(surface, Geom_BSplineSurface):
-        return surface
-    converted = BRepBuilderAPI_NurbsConvert(face, True).Shape()  # analytic -> bounded B-spline
-    surface = BRep_Tool.Surface_s(TopoDS.Face(converted))
-    return surface if isinstance(surface, Geom_BSplineSurface) else None
-
-
-def read_cad(path, kind: str) -> list:
-    """All surfaces (untrimmed) of a STEP or IGES file; its curves when it has no faces."""
+    OpenCASCADE runs in a child process (see ``_occ_reader.py``), so a file that crashes it
+    gives a FileFormatError here.
+    """
     require_ocp(f"Reading {kind.upper()}")
-    quiet_occ()
-    from OCP.BRep import BRep_Tool
-    from OCP.BRepAdaptor import BRepAdaptor_Curve
-    from OCP.Geom import Geom_BSplineCurve, Geom_TrimmedCurve
-    from OCP.GeomConvert import GeomConvert
-    from OCP.TopAbs import TopAbs_ShapeEnum
-    from OCP.TopExp import TopExp_Explorer
-    from OCP.TopoDS import TopoDS
-
     with open(path, "rb") as handle:
         if not handle.read(1):
             raise FileFormatError(path, "the file is empty")
-    shape = _read_shape(path, kind)
+    with tempfile.TemporaryDirectory(prefix="nurbs_io_") as folder:
+        output = os.path.join(folder, "items.npz")
+        reply = _READER.request(os.path.abspath(path), kind, output, timeout)
+        if "crashed" in reply:
+            raise FileFormatError(path, f"OpenCASCADE crashed reading this {kind.upper()} file "
+                                        f"(exit status {reply['crashed']}): it is damaged or "
+                                        "uses something OpenCASCADE cannot handle")
+        if not reply["ok"]:
+            raise FileFormatError(path, reply["error"])
+        with np.load(output, allow_pickle=False) as data:
+            arrays = {key: data[key] for key in data.files}
     result = []
-    explorer = TopExp_Explorer(shape, TopAbs_ShapeEnum.TopAbs_FACE)
-    index = 0
-    while explorer.More():
-        face = TopoDS.Face(explorer.Current())
-        surface = _bspline_surface_of_face(face)
-        if surface is None:
-            raise FileFormatError(path, f"face {index} could not be converted to a B-spline "
-                                        "surface")
-        result.append(surface_from_occ(path, surface, f"face {index}"))
-        explorer.Next()
-        index += 1
-    if result:
-        return result
-    explorer = TopExp_Explorer(shape, TopAbs_ShapeEnum.TopAbs_EDGE)
-    while explorer.More():
-        edge = TopoDS.Edge(explorer.Current())
-        adaptor = BRepAdaptor_Curve(edge)
-        first, last = adaptor.FirstParameter(), adaptor.LastParameter()
-        curve = BRep_Tool.Curve_s(edge, first, last)  # with the edge's placement applied
-        if curve is not None:
-            if not (isinstance(curve, Geom_BSplineCurve) and
-                    abs(curve.FirstParameter() - first) < 1e-12 and
-                    abs(curve.LastParameter() - last) < 1e-12):
-                curve = GeomConvert.CurveToBSplineCurve_s(Geom_TrimmedCurve(curve, first, last))
-            result.append(curve_from_occ(path, curve, f"edge {index}"))
-        explorer.Next()
-        index += 1
-    if not result:
-        raise FileFormatError(path, f"the {kind.upper()} file has no surfaces or curves")
+    for k in range(reply["count"]):
+        degrees = arrays[f"degrees_{k}"]
+        if str(arrays[f"kind_{k}"]) == "surface":
+            result.append(make_surface(path, arrays[f"control_{k}"], arrays[f"weights_{k}"],
+                                       arrays[f"knots_u_{k}"], arrays[f"knots_v_{k}"],
+                                       int(degrees[0]), int(degrees[1]), what=f"face {k}"))
+        else:
+            result.append(make_curve(path, arrays[f"control_{k}"], arrays[f"weights_{k}"],
+                                     arrays[f"knots_{k}"], int(degrees[0]), what=f"edge {k}"))
     return result

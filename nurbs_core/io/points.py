@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -94,15 +96,24 @@ def _table_to_cloud(path, table: np.ndarray) -> PointCloud:
     return PointCloud(check_points(path, points), attributes, path)
 
 
+_NUMPY_READ_ERRORS = (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error)
+
+
 def _read_numpy(path, suffix: str) -> PointCloud:
     try:
         data = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
+        if suffix == ".npy":
+            if not isinstance(data, np.ndarray):
+                raise ValueError("it holds an archive, not a single array")
+        else:
+            if not isinstance(data, np.lib.npyio.NpzFile):
+                raise ValueError("it holds a single array, not an .npz archive")
+            with data:  # .npz members are read lazily: read them all here, inside the try
+                arrays = {key: data[key] for key in data.files}
+    except _NUMPY_READ_ERRORS as exc:
         raise FileFormatError(path, f"not a readable {suffix} file: {exc}") from None
     if suffix == ".npy":
         return _table_to_cloud(path, data)
-    with data:
-        arrays = {key: data[key] for key in data.files}
     if not arrays:
         raise FileFormatError(path, "the .npz archive is empty")
     key = "points" if "points" in arrays else next(

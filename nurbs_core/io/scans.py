@@ -22,8 +22,9 @@ def read_las_points(path) -> PointCloud:
         if "lazbackend" in message.lower().replace(" ", ""):
             raise MissingDependencyError("Reading LAZ", 'pip install "laspy[lazrs]"') from None
         raise FileFormatError(path, f"not a readable LAS/LAZ file: {message}") from None
-    except (ValueError, OSError, EOFError) as exc:
-        raise FileFormatError(path, f"not a readable LAS/LAZ file: {exc}") from None
+    except Exception as exc:  # lazrs and numpy raise their own exception types on bad data
+        raise FileFormatError(path, f"not a readable LAS/LAZ file: {type(exc).__name__}: "
+                                    f"{exc}") from None
     # x, y, z apply the header's scale and offset to the stored integers
     points = np.stack([np.asarray(las.x, dtype=np.float64), np.asarray(las.y, dtype=np.float64),
                        np.asarray(las.z, dtype=np.float64)], axis=1)

@@ -528,3 +528,29 @@ def test_load_any_dispatches(tmp_path, paper_data):
         load_any(tmp_path / "file.docx")
     with pytest.raises(FileFormatError, match="cannot save geometry"):
         save(_random_surface(), tmp_path / "file.xyz")
+
+
+def test_opencascade_crash_becomes_file_format_error(tmp_path, monkeypatch):
+    pytest.importorskip("OCP")
+    import subprocess
+
+    from nurbs_core.io import cad
+
+    surface = _random_surface()
+    path = tmp_path / "fit.step"
+    save(surface, path)
+
+    def crashing_child(self):  # stands in for OpenCASCADE dying with SIGSEGV
+        return subprocess.Popen([sys.executable, "-c", "import os, signal; "
+                                 "os.kill(os.getpid(), signal.SIGSEGV)"], stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, text=True)
+
+    cad._READER.close()
+    monkeypatch.setattr(cad._ReaderProcess, "_start", crashing_child)
+    with pytest.raises(FileFormatError, match="crashed") as info:
+        load(path)
+    assert str(path) in str(info.value)
+    monkeypatch.undo()
+    (back,) = load(path)  # a fresh reader process takes over
+    u, v = _parameters(surface, count=20)
+    np.testing.assert_allclose(_ours(back, u, v), _ours(surface, u, v), atol=TOLERANCE)
