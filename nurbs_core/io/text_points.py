@@ -21,7 +21,8 @@ from nurbs_core.io.cloud import (
 )
 from nurbs_core.io.errors import FileFormatError
 
-_SPLIT = re.compile(r"[,;\s]+")
+_SEPARATORS_TO_SPACE = str.maketrans({",": " ", ";": " ", "\t": " "})
+_BLANK_LINE = re.compile(r"\n[ \r]*\n")
 
 
 def _read_text(path) -> str:
@@ -46,71 +47,83 @@ def _is_number(token: str) -> bool:
     return True
 
 
-def _tokens(line: str) -> list[str]:
-    return [t for t in _SPLIT.split(line.strip()) if t != ""]
-
-
 def _commented_header(lines: list[str], first_data_line: int, width: int):
     """Column names from a comment line right before the data (CloudCompare writes
     ``//X,Y,Z,R,G,B``), when it names x, y and z and has one name per column."""
     if first_data_line < 2:
         return None, None
     text = lines[first_data_line - 2].strip().lstrip("#/").strip()
-    names = [t.strip("\"'") for t in _tokens(text)]
+    names = [t.strip("\"'") for t in text.split()]
     lowered = {n.lower() for n in names}
     if len(names) == width and {"x", "y", "z"} <= lowered:
         return names, first_data_line - 1
     return None, None
 
 
-def read_text_points(path) -> PointCloud:
-    text = _read_text(path)
+def _data_lines(text: str) -> tuple[list[str], list[str], np.ndarray | None]:
+    """All lines, the lines that are not comments, and the latter's 1-based file line numbers
+    (None when there are no comments: the fast case). Blank lines are dropped later."""
     lines = text.splitlines()
-    # (1-based line number, stripped text) of every line that carries data or the header
-    rows = [(k + 1, s) for k, s in ((k, line.strip()) for k, line in enumerate(lines))
-            if s and not s.startswith("#") and not s.startswith("//")]
+    if "#" not in text and "//" not in text:
+        return lines, lines, None
+    keep = [k for k, line in enumerate(lines) if not line.lstrip().startswith(("#", "//"))]
+    return lines, [lines[k] for k in keep], np.asarray(keep, dtype=np.int64) + 1
+
+
+def _parse_table(path, rows: list[str], width: int, line_of) -> np.ndarray:
+    """(len(rows), width) float64 from whitespace-separated rows; errors name the line.
+
+    numpy's C parser (np.loadtxt) reads well-formed rows and refuses ragged or non-numeric
+    ones; only then are the rows walked in Python to find and name the first bad line.
+    """
+    try:
+        table = np.loadtxt(rows, dtype=np.float64, comments=None, ndmin=2)
+    except ValueError:
+        table = None
+    if table is not None and table.shape == (len(rows), width):
+        return table
+    for k, row in enumerate(rows):
+        tokens = row.split()
+        if len(tokens) != width:
+            raise FileFormatError(path, f"expected {width} columns, found {len(tokens)}",
+                                  line=line_of(k))
+        for token in tokens:
+            if not _is_number(token):
+                raise FileFormatError(path, f"{token!r} is not a number", line=line_of(k))
+    raise FileFormatError(path, "the numbers could not be parsed")
+
+
+def read_text_points(path) -> PointCloud:
+    # one C-speed pass turns every separator into a space; from here on, str.split() splits
+    text = _read_text(path).translate(_SEPARATORS_TO_SPACE).rstrip()
+    lines, rows, line_numbers = _data_lines(text)
+    if any(not row.strip() for row in rows[:1]) or "\n\n" in text or _BLANK_LINE.search(text):
+        keep = [k for k, row in enumerate(rows) if row.strip()]
+        numbers = np.arange(1, len(rows) + 1) if line_numbers is None else line_numbers
+        rows, line_numbers = [rows[k] for k in keep], numbers[keep]
     if not rows:
         raise FileFormatError(path, "the file has only comments or blank lines")
-    names = None
-    header_line = None
-    first_tokens = _tokens(rows[0][1])
+
+    def line_of(k):  # row index -> 1-based file line
+        return int(line_numbers[k]) if line_numbers is not None else k + 1
+
+    names, header_line, first = None, None, 0
+    first_tokens = rows[0].split()
     if not all(_is_number(t) for t in first_tokens):
         names = [t.strip("\"'") for t in first_tokens]
-        header_line = rows[0][0]
-        rows = rows[1:]
-    elif len(first_tokens) == 1 and len(rows) > 1 and len(_tokens(rows[1][1])) >= 3:
-        rows = rows[1:]  # PTS: the first line is the point count
+        header_line, first = line_of(0), 1
+    elif len(first_tokens) == 1 and len(rows) > 1 and len(rows[1].split()) >= 3:
+        first = 1  # PTS: the first line is the point count
     else:
-        names, header_line = _commented_header(lines, rows[0][0], len(first_tokens))
-    if not rows:
+        names, header_line = _commented_header(lines, line_of(0), len(first_tokens))
+    if first >= len(rows):
         raise FileFormatError(path, "the file has a header but no data lines")
-    width = len(names) if names is not None else len(_tokens(rows[0][1]))
+    width = len(names) if names is not None else len(rows[first].split())
     if width < 3:
         raise FileFormatError(path, f"a point needs at least 3 columns (x y z), found {width}",
-                              line=rows[0][0])
-    # Join the data lines and let numpy parse them in one go; rows with the wrong column count
-    # are found by counting tokens per line (cheap compared with float parsing).
-    counts = np.fromiter((len(_tokens(s)) for _, s in rows), dtype=np.int64, count=len(rows))
-    wrong = np.flatnonzero(counts != width)
-    if wrong.size:
-        k = int(wrong[0])
-        raise FileFormatError(path, f"expected {width} columns, found {counts[k]} "
-                                    f"({wrong.size} line(s) differ)", line=rows[k][0])
-    joined = " ".join(s for _, s in rows)
-    try:
-        values = np.array(_SPLIT.split(joined.strip()), dtype=np.float64)
-    except ValueError:
-        for line_number, s in rows:
-            for token in _tokens(s):
-                if not _is_number(token):
-                    raise FileFormatError(path, f"{token!r} is not a number",
-                                          line=line_number) from None
-        raise
-    table = values.reshape(len(rows), width)
-
-    def line_of_row(k):
-        return rows[k][0]
-
+                              line=line_of(first))
+    table = _parse_table(path, rows[first:] if first else rows, width,
+                         lambda k: line_of(k + first))
     if names is not None:
         columns = {name: table[:, j] for j, name in enumerate(names)}
         try:
@@ -120,7 +133,7 @@ def read_text_points(path) -> PointCloud:
     else:
         points = table[:, :3].copy()
         attributes = classify_extra_columns(table[:, 3:]) if width > 3 else {}
-    check_points(path, points, line_of_row)
+    check_points(path, points, lambda k: line_of(k + first))
     return PointCloud(points, attributes, path)
 
 
