@@ -12,6 +12,7 @@ import numpy as np
 
 from nurbs_core.io.cloud import PointCloud, check_points, split_named_columns
 from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.text_points import parse_table
 
 _HEADER_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT",
                 "POINTS", "DATA")
@@ -162,24 +163,13 @@ def read_pcd_points(path) -> PointCloud:
 
 
 def _read_ascii(path, body: bytes, fields, dtype, n_points, first_line):
-    lines = [s for s in body.decode("ascii", errors="replace").splitlines()][:n_points]
+    lines = body.decode("ascii", errors="replace").splitlines()[:n_points]
     width = sum(count for _, _, count in fields)
     if len(lines) < n_points:
         raise FileFormatError(path, f"truncated: POINTS says {n_points}, found {len(lines)} "
                                     "data lines", line=first_line + len(lines))
     records = np.empty(n_points, dtype=dtype)
-    rows = []
-    for k, line in enumerate(lines):
-        tokens = line.split()
-        if len(tokens) != width:
-            raise FileFormatError(path, f"expected {width} values, found {len(tokens)}",
-                                  line=first_line + k)
-        rows.append(tokens)
-    try:
-        table = np.array(rows, dtype=np.float64)
-    except ValueError:
-        raise FileFormatError(path, "a data line holds something that is not a number",
-                              line=first_line) from None
+    table = parse_table(path, lines, width, lambda k: first_line + k)
     column = 0
     for name, code, count in fields:
         values = table[:, column: column + count]

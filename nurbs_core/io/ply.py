@@ -15,6 +15,7 @@ import numpy as np
 
 from nurbs_core.io.cloud import NAMED_COLUMNS, PointCloud, check_points
 from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.text_points import parse_table
 
 _TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
@@ -227,24 +228,8 @@ def _read_ascii(path, header: PlyHeader, vertex: PlyElement, plan) -> tuple[dict
         raise FileFormatError(path, f"truncated: the header declares {vertex.count} vertices, "
                                     f"the file has {len(vertex_lines)} vertex lines",
                               line=first_data_line + skip + len(vertex_lines))
-    width = len(vertex.properties)
-    counts = np.fromiter((len(s.split()) for s in vertex_lines), np.int64, len(vertex_lines))
-    wrong = np.flatnonzero(counts != width)
-    if wrong.size:
-        k = int(wrong[0])
-        raise FileFormatError(path, f"a vertex line needs {width} values, found {counts[k]}",
-                              line=first_data_line + skip + k)
-    try:
-        table = np.array(" ".join(vertex_lines).split(), dtype=np.float64).reshape(-1, width)
-    except ValueError:
-        for k, s in enumerate(vertex_lines):
-            for token in s.split():
-                try:
-                    float(token)
-                except ValueError:
-                    raise FileFormatError(path, f"{token!r} is not a number",
-                                          line=first_data_line + skip + k) from None
-        raise
+    table = parse_table(path, vertex_lines, len(vertex.properties),
+                        lambda k: first_data_line + skip + k)
     dtype = np.dtype([(name, "<" + kind) for name, kind in vertex.properties])
     block = np.empty(vertex.count, dtype=dtype)
     for j, (name, _) in enumerate(vertex.properties):

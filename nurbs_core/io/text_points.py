@@ -70,7 +70,7 @@ def _data_lines(text: str) -> tuple[list[str], list[str], np.ndarray | None]:
     return lines, [lines[k] for k in keep], np.asarray(keep, dtype=np.int64) + 1
 
 
-def _parse_table(path, rows: list[str], width: int, line_of) -> np.ndarray:
+def parse_table(path, rows: list[str], width: int, line_of) -> np.ndarray:
     """(len(rows), width) float64 from whitespace-separated rows; errors name the line.
 
     numpy's C parser (np.loadtxt) reads well-formed rows and refuses ragged or non-numeric
@@ -122,7 +122,7 @@ def read_text_points(path) -> PointCloud:
     if width < 3:
         raise FileFormatError(path, f"a point needs at least 3 columns (x y z), found {width}",
                               line=line_of(first))
-    table = _parse_table(path, rows[first:] if first else rows, width,
+    table = parse_table(path, rows[first:] if first else rows, width,
                          lambda k: line_of(k + first))
     if names is not None:
         columns = {name: table[:, j] for j, name in enumerate(names)}
