@@ -32,6 +32,8 @@ class FitConfig:
     (mean squared point-to-surface distance, weight 1) is added when the expression has no
     pointwise term. At most ``batch_size`` cloud points are used per iteration (a fresh random
     subset each iteration when the cloud is larger); the KD-tree over the whole cloud is built once.
+    ``threads``: torch intra-op threads while the fit runs (process-wide; restored afterwards);
+    None leaves torch's setting alone. One thread is fastest for small fits and on busy machines.
     ``refinements`` > 0 splits the iteration budget into ``refinements + 1`` stages and, between
     stages, inserts a knot in each direction in the span where the error is largest.
     """
@@ -62,6 +64,7 @@ class FitConfig:
     correction_interval: int = 5
     batch_size: int = 65536
     refinements: int = 0
+    threads: int | None = None
 
     def validate(self) -> None:
         """Raise ValueError naming the first bad setting."""
@@ -96,6 +99,8 @@ class FitConfig:
         integer("correction_interval", 1)
         integer("batch_size", 16)
         integer("refinements", 0)
+        if self.threads is not None:
+            integer("threads", 1)
         for name in ("learning_rate", "tolerance", "snapshot_interval", "momentum"):
             value = getattr(self, name)
             if not isinstance(value, (int, float, np.floating)) or not np.isfinite(value):

@@ -25,6 +25,7 @@ from nurbs_core.evaluate import (
     surface_points,
 )
 from nurbs_core.fitting.config import FitConfig, FitResult, FitSnapshot, StopToken
+from nurbs_core.fitting.least_squares import least_squares_fit
 from nurbs_core.fitting.model import TrainableGeometry
 from nurbs_core.fitting.problem import Problem, initial_geometry, prepare, start_parameters
 from nurbs_core.fitting.projection import curve_newton, project, surface_gauss_newton
@@ -35,6 +36,8 @@ from nurbs_core.geometry import geometry_from_numpy
 EXPLOSION_FACTOR = 1e3
 #: Give up (status "diverged") after this many roll-backs in one fit.
 MAX_ROLLBACKS = 60
+#: L-BFGS iterations per engine iteration (each with its own strong-Wolfe line search).
+LBFGS_INNER = 5
 
 
 def iter_fit(target, config: FitConfig | None = None, *, stop: StopToken | None = None,
@@ -87,10 +90,20 @@ class _Run:
         self.model = TrainableGeometry(geometry, free_knots=config.free_knots,
                                        free_weights=config.free_weights,
                                        pin_boundary=config.pin_boundary)
-        knots = self.model.knot_tensors()
+        knots = [k.detach() for k in self.model.knot_tensors()]
         dtype = problem.dtype
         domains = [(float(k[d]), float(k[-d - 1])) for k, d in zip(knots, self.model.degrees,
                                                                   strict=True)]
+        # Variable projection: with known parameters, free knots and a pure least-squares loss the
+        # best control points for given knots are a linear solve, so solve them exactly every
+        # evaluation and let the optimizer move only the knots (the envelope theorem makes the
+        # knot gradient at the solved control points the gradient of the projected objective).
+        self.variable_projection = (problem.known and self.model.free_knots
+                                    and not config.free_weights and not config.pin_boundary
+                                    and set(self.loss.names) == {"mse"})
+        if self.variable_projection:
+            self.pending_message = ("control points solved by least squares at every step "
+                                    "(variable projection); the optimizer moves the knots")
         counts = (config.samples_u, config.samples_v)
         self.sample_params = [torch.linspace(lo, hi, counts[i], dtype=dtype)
                               for i, (lo, hi) in enumerate(domains)]
@@ -102,7 +115,10 @@ class _Run:
             else:
                 self.sample_eval = SurfaceGridEvaluator(*knots, *self.model.degrees,
                                                         *self.sample_params)
-            if problem.known and problem.count <= config.batch_size:
+            if problem.grid is not None:
+                self.paired_eval = SurfaceGridEvaluator(*knots, *self.model.degrees,
+                                                        *problem.grid)
+            elif problem.known and problem.count <= config.batch_size:
                 params = self.params
                 if self.model.is_curve:
                     self.paired_eval = CurveEvaluator(knots[0], self.model.degrees[0], params)
@@ -113,17 +129,20 @@ class _Run:
 
     def _make_optimizer(self):
         config, leaves, lr = self.config, self.model.parameters(), self.learning_rate
+        if self.variable_projection:
+            leaves = [leaf for leaf in leaves if leaf is not self.model.control_points]
         name = config.optimizer
         if name == "sgd":
             self.optimizer = torch.optim.SGD(leaves, lr=lr)
         elif name == "momentum":
             self.optimizer = torch.optim.SGD(leaves, lr=lr, momentum=config.momentum)
         elif name == "adam":
-            self.optimizer = torch.optim.Adam(leaves, lr=lr)
+            # a tiny eps keeps Adam scale-free: losses of 1e-10 (tight fits) give tiny gradients
+            self.optimizer = torch.optim.Adam(leaves, lr=lr, eps=1e-20)
         elif name == "adagrad":
-            self.optimizer = torch.optim.Adagrad(leaves, lr=lr)
+            self.optimizer = torch.optim.Adagrad(leaves, lr=lr, eps=1e-20)
         else:
-            self.optimizer = torch.optim.LBFGS(leaves, lr=lr, max_iter=1, history_size=20,
+            self.optimizer = torch.optim.LBFGS(leaves, lr=lr, max_iter=LBFGS_INNER, history_size=20,
                                                line_search_fn="strong_wolfe",
                                                tolerance_grad=0.0, tolerance_change=0.0)
         self.scheduler = None
@@ -154,8 +173,26 @@ class _Run:
                                         self.params[index, 1])
             self.params[index] = torch.stack([u, v], -1)
 
+    def _solve_control_points(self):
+        """Least-squares control points for the current knots (variable projection)."""
+        knots = [k.detach().double().numpy() for k in self.model.knot_tensors()]
+        points = self.problem.points.double().numpy()
+        params = self.problem.parameters.double().numpy()
+        degrees = self.model.degrees
+        if self.model.is_curve:
+            solved = least_squares_fit(points, params, degrees[0], None,
+                                       self.model.control_points.shape[0], None, knots[0],
+                                       kind="curve")
+        else:
+            shape = self.model.control_points.shape
+            solved = least_squares_fit(points, params, *degrees, shape[0], shape[1], *knots)
+        with torch.no_grad():
+            self.model.control_points.copy_(solved.control_points)
+
     def _evaluate(self, batch):
         model, problem = self.model, self.problem
+        if self.variable_projection:
+            self._solve_control_points()
         inputs = _losses.LossInputs(control_points=model.control_points)
         weights = model.weights()
         knots = model.knot_tensors() if model.free_knots else [k.fixed for k in model.knots]
@@ -175,6 +212,10 @@ class _Run:
         if self.needs_paired:
             if self.paired_eval is not None and batch is None:
                 predicted = self.paired_eval(model.control_points, weights)
+                predicted = predicted.reshape(-1, predicted.shape[-1])
+            elif problem.grid is not None and batch is None:
+                predicted = surface_grid_points(model.control_points, weights, *knots,
+                                                *model.degrees, *problem.grid).reshape(-1, 3)
             else:
                 params = self.params if batch is None else self.params[batch]
                 if model.is_curve:
@@ -217,6 +258,16 @@ class _Run:
 
     # ---------------------------------------------------------------------------------------
     def run(self) -> Iterator[FitSnapshot]:
+        saved_threads = torch.get_num_threads()
+        if self.config.threads is not None:
+            torch.set_num_threads(self.config.threads)
+        try:
+            yield from self._loop()
+        finally:
+            if self.config.threads is not None:
+                torch.set_num_threads(saved_threads)
+
+    def _loop(self) -> Iterator[FitSnapshot]:
         config, problem = self.config, self.problem
         self.started = time.perf_counter()
         self.params = torch.as_tensor(start_parameters(problem), dtype=problem.dtype).clone() \

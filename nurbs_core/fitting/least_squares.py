@@ -18,10 +18,25 @@ from nurbs_core.knots import check_knots, clamped_uniform
 
 def compact_basis(knots, degree: int, parameters) -> tuple[np.ndarray, np.ndarray]:
     """Spans (M,) int and non-zero basis values (M, p + 1) at ``parameters`` (float64 numpy)."""
+    # grid and scanline data repeat parameter values: evaluate each distinct value once
+    values, inverse = np.unique(np.asarray(parameters, np.float64), return_inverse=True)
     U = torch.as_tensor(np.asarray(knots, np.float64)).unsqueeze(0)
-    t = torch.as_tensor(np.asarray(parameters, np.float64)).unsqueeze(0)
+    t = torch.as_tensor(values).unsqueeze(0)
     span = find_span(U, degree, t)
-    return span[0].numpy(), basis_functions(U, degree, t, span)[0].numpy()
+    basis = basis_functions(U, degree, t, span)[0].numpy()
+    return span[0].numpy()[inverse.ravel()], basis[inverse.ravel()]
+
+
+def grid_axes(parameters: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """(u, v) if the (N, 2) parameters are exactly the u-major tensor grid u x v, else None."""
+    u = np.unique(parameters[:, 0])
+    v = np.unique(parameters[:, 1])
+    if u.size * v.size != parameters.shape[0] or u.size < 2 or v.size < 2:
+        return None
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    if np.array_equal(uu.ravel(), parameters[:, 0]) and np.array_equal(vv.ravel(), parameters[:, 1]):
+        return u, v
+    return None
 
 
 def collocation_matrix(knots, degree, parameters, knots_v=None, degree_v=None, parameters_v=None):
@@ -124,6 +139,17 @@ def least_squares_fit(points, parameters, degree_u: int = 3, degree_v: int | Non
         raise ValueError(f"{points.shape[0]} points cannot determine {n} x {m} control points")
     U = _knots_for(knots_u, n, degree_u, params[:, 0], "knots_u")
     V = _knots_for(knots_v, m, degree_v, params[:, 1], "knots_v")
+    axes = grid_axes(params) if smoothing == 0 else None
+    if axes is not None and axes[0].size >= n and axes[1].size >= m:
+        # grid data: the collocation matrix is a Kronecker product, so the least-squares solution
+        # is separable, C = pinv(A_u) Z pinv(A_v)^T, at O(N) cost
+        matrix_u = collocation_matrix(U, degree_u, axes[0])
+        matrix_v = collocation_matrix(V, degree_v, axes[1])
+        grid = points.reshape(axes[0].size, axes[1].size, 3)
+        step = _solve(matrix_u, grid.reshape(axes[0].size, -1)).reshape(n, axes[1].size, 3)
+        control = _solve(matrix_v, step.transpose(1, 0, 2).reshape(axes[1].size, -1))
+        control = control.reshape(m, n, 3).transpose(1, 0, 2)
+        return NurbsSurface(np.ascontiguousarray(control), degree_u, degree_v, U, V)
     matrix = collocation_matrix(U, degree_u, params[:, 0], V, degree_v, params[:, 1])
     eye_u, eye_v = scipy.sparse.eye(n), scipy.sparse.eye(m)
     penalty = scipy.sparse.vstack([scipy.sparse.kron(_second_difference(n), eye_v),

@@ -8,7 +8,12 @@ import numpy as np
 import torch
 
 from nurbs_core.fitting.config import FitConfig
-from nurbs_core.fitting.least_squares import least_squares_fit, pca_parameters, principal_axes
+from nurbs_core.fitting.least_squares import (
+    grid_axes,
+    least_squares_fit,
+    pca_parameters,
+    principal_axes,
+)
 from nurbs_core.geometry import NurbsCurve, NurbsSurface, geometry_from_numpy
 from nurbs_core.knots import clamped_uniform, greville
 
@@ -28,6 +33,8 @@ class Problem:
     parameters: torch.Tensor | None
     domains: list[tuple[float, float]]
     dtype: torch.dtype
+    #: (u (Mu,), v (Mv,)) when the known surface parameters are the u-major grid u x v
+    grid: tuple[torch.Tensor, torch.Tensor] | None = None
 
     @property
     def known(self) -> bool:
@@ -110,7 +117,13 @@ def prepare(target, config: FitConfig, parameters=None) -> Problem:
         param_tensor = torch.as_tensor(params, dtype=dtype)
     else:
         domains, param_tensor = [(0.0, 1.0)] * dims, None
-    return Problem(config.kind, points, normalised, center, scale, param_tensor, domains, dtype)
+    grid = None
+    if parameters is not None and dims == 2:
+        axes = grid_axes(params)
+        if axes is not None:
+            grid = (torch.as_tensor(axes[0], dtype=dtype), torch.as_tensor(axes[1], dtype=dtype))
+    return Problem(config.kind, points, normalised, center, scale, param_tensor, domains, dtype,
+                   grid)
 
 
 # --------------------------------------------------------------------------------------------
