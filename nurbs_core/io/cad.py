@@ -117,12 +117,16 @@ def _compound(items):
     builder = BRep_Builder()
     compound = TopoDS_Compound()
     builder.MakeCompound(compound)
-    for item in items:
+    for index, item in enumerate(items):
         data = numpy_of(item)
-        if data["kind"] == "surface":
-            shape = BRepBuilderAPI_MakeFace(occ_surface(data), 1e-7).Face()
-        else:
-            shape = BRepBuilderAPI_MakeEdge(occ_curve(data)).Edge()
+        try:
+            if data["kind"] == "surface":
+                shape = BRepBuilderAPI_MakeFace(occ_surface(data), 1e-7).Face()
+            else:
+                shape = BRepBuilderAPI_MakeEdge(occ_curve(data)).Edge()
+        except Exception as exc:  # OpenCASCADE's Standard_Failure family
+            raise ValueError(f"OpenCASCADE rejects item {index} ({item!r}): "
+                             f"{type(exc).__name__}: {exc}") from None
         builder.Add(compound, shape)
     return compound
 

@@ -554,3 +554,11 @@ def test_opencascade_crash_becomes_file_format_error(tmp_path, monkeypatch):
     (back,) = load(path)  # a fresh reader process takes over
     u, v = _parameters(surface, count=20)
     np.testing.assert_allclose(_ours(back, u, v), _ours(surface, u, v), atol=TOLERANCE)
+
+
+def test_opencascade_refusal_is_a_clear_value_error(tmp_path):
+    pytest.importorskip("OCP")
+    knots_u = np.array([0, 0, 0, 0, 0.5, 0.5 + 1e-16, 1, 1, 1, 1])  # two knots 1e-16 apart
+    surface = NurbsSurface(np.random.default_rng(0).normal(size=(6, 4, 3)), 3, 3, knots_u)
+    with pytest.raises(ValueError, match="OpenCASCADE rejects item 0"):
+        save(surface, tmp_path / "close_knots.step")
