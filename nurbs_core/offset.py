@@ -28,7 +28,8 @@ share the boundary curve exactly. On those edges the sample normals of both patc
 and normalised, so both patches move their common boundary to the same place. With
 ``constrain_shared=True`` the coinciding control points are one unknown in the least-squares
 problem (the equality constraint is eliminated, rather than averaging after each step as the
-paper does), so the offset boundary curves are identical and the offset is watertight.
+paper does), so the offset boundary curves are identical and the offset is watertight. Two
+sides of one patch can be shared too (the seam of a closed patch).
 Patches whose normals point to opposite sides across a shared edge are offset to the side of
 the first patch of their group (``OffsetResult.orientation``).
 
@@ -309,7 +310,8 @@ def _size(patches: Sequence[_Patch]) -> float:
 
 def find_shared_edges(surfaces: Sequence[NurbsSurface], tolerance: float | None = None
                       ) -> list[SharedEdge]:
-    """Boundary curves shared by pairs of patches (see the module docstring for the rules).
+    """Boundary curves shared by pairs of patches, or by two sides of one closed patch (a seam),
+    see the module docstring for the rules.
 
     ``tolerance``: largest distance between coinciding control points; default 1e-6 times the
     diagonal of the control points' bounding box.
@@ -323,9 +325,10 @@ def _find_shared_edges(patches: Sequence[_Patch], tolerance: float | None) -> li
         tolerance = 1e-6 * max(_size(patches), 1e-300)
     edges = []
     for a in range(len(patches)):
-        for b in range(a + 1, len(patches)):
-            for side_a in SIDES:
-                for side_b in SIDES:
+        for b in range(a, len(patches)):
+            for k, side_a in enumerate(SIDES):
+                # a == b: a closed patch whose two opposite or adjacent sides meet (a seam)
+                for side_b in SIDES[k + 1:] if a == b else SIDES:
                     match = _match_sides(patches[a], side_a, patches[b], side_b, tolerance)
                     if match is not None:
                         edges.append(SharedEdge(a, side_a, b, side_b, match[0], match[1]))

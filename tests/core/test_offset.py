@@ -248,12 +248,14 @@ def test_c0_shared_edge_is_found_reversed():
     assert (edge.first, edge.first_side, edge.second, edge.second_side) == (0, "u_max", 1,
                                                                             "v_min")
     assert edge.reversed and edge.mismatch == 0.0
-    # Different knots along the edge: the rows coincide but the curves differ, so no edge.
-    knots = np.array([0, 0, 0, 0, 0.3, 1, 1, 1, 1.0])
-    moved = NurbsSurface(control_points=np.concatenate(
-        [second.control_points.numpy(), second.control_points.numpy()[:1]]), degree_u=3,
-        degree_v=3, knots_u=knots)
-    assert find_shared_edges([first, moved]) == []
+    # Degree 2 along the edge: the control rows coincide, but the curves only coincide when the
+    # knots along the edge match (after reversing the second patch's edge parameter).
+    first_q2 = NurbsSurface(control_points=first.control_points, degree_u=3, degree_v=2,
+                            knots_v=[0, 0, 0, 0.5, 1, 1, 1])
+    for interior, shared in ((0.5, True), (0.3, False)):
+        second_p2 = NurbsSurface(control_points=second.control_points, degree_u=2, degree_v=3,
+                                 knots_u=[0, 0, 0, interior, 1, 1, 1])
+        assert bool(find_shared_edges([first_q2, second_p2])) == shared
 
 
 def test_c0_offset_is_watertight_only_with_the_constraint():
@@ -311,3 +313,23 @@ def test_roof_split_in_two_c1_patches(roof):
     assert fitted.max_gap < 1e-9 * fitted.size
     assert fitted.rms_residual < 1e-9 * fitted.size
     assert _chamfer(fitted, halves) < _chamfer(baseline, halves)
+
+
+def test_closed_patch_seam_is_kept_closed():
+    """A tube closed in u (first row == last row, a C0 seam) is one patch sharing an edge with
+    itself: the seam is found, its normals averaged and its control points merged."""
+    angles = np.linspace(0.0, 2.0 * np.pi, 7)
+    ring = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    ring[-1] = ring[0]
+    heights = np.linspace(0.0, 1.0, 4)
+    control = np.array([[[x * (1 + 0.2 * z), y * (1 + 0.2 * z), z] for z in heights]
+                        for x, y in ring])
+    tube = NurbsSurface(control_points=control, degree_u=3, degree_v=3)
+    (seam,) = find_shared_edges([tube])
+    assert (seam.first, seam.first_side, seam.second, seam.second_side) == (0, "u_min", 0,
+                                                                            "u_max")
+    closed = offset_patches([tube], 0.1)
+    assert closed.max_gap < 1e-12
+    torn = offset_patches([tube], 0.1, constrain_shared=False, average_normals=False)
+    assert torn.max_gap > 0.05  # about d * |n1 - n2| at the 60 degree seam corner
+    assert offset_patches([tube], 0.1, constrain_shared=False).max_gap > 1e-3
