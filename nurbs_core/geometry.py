@@ -84,7 +84,7 @@ class NurbsCurve:
     """
 
     def __init__(self, control_points, degree: int, knots=None, weights=None, *, dtype=None,
-                 device=None, validate: bool = True):
+                 device=None, validate: bool = True, metadata: dict | None = None):
         cp = _as_tensor(control_points, dtype, device, "control_points")
         if cp.dim() < 2 or cp.shape[-1] not in (2, 3):
             raise ValueError(f"control_points must have shape (..., n, 2) or (..., n, 3), got "
@@ -106,6 +106,8 @@ class NurbsCurve:
                                  f"points batch shape {tuple(cp.shape[:-2])}")
             _check_weights(w, cp.shape[:-1])
         self.control_points, self.weights, self.knots, self.degree = cp, w, kt, int(degree)
+        #: free-form information carried along (name, source file, fit statistics...)
+        self.metadata: dict[str, Any] = dict(metadata or {})
 
     # --- properties --------------------------------------------------------------------------
     @property
@@ -170,7 +172,7 @@ class NurbsCurve:
         w = cw[..., -1]
         return NurbsCurve(torch.as_tensor(cw[..., :-1] / w[..., None]).to(self.dtype), degree,
                           torch.as_tensor(knots).to(self.dtype), torch.as_tensor(w).to(self.dtype),
-                          device=self.device)
+                          device=self.device, metadata=self.metadata)
 
     def insert_knot(self, value: float, times: int = 1) -> NurbsCurve:
         """Knot insertion (A5.1): same curve, ``times`` more control points."""
@@ -195,11 +197,12 @@ class NurbsCurve:
     def to(self, dtype=None, device=None) -> NurbsCurve:
         return NurbsCurve(self.control_points.to(dtype=dtype or self.dtype, device=device),
                           self.degree, self.knots.to(dtype=dtype or self.dtype, device=device),
-                          self.weights.to(dtype=dtype or self.dtype, device=device), validate=False)
+                          self.weights.to(dtype=dtype or self.dtype, device=device), validate=False,
+                          metadata=self.metadata)
 
     def detach(self) -> NurbsCurve:
         return NurbsCurve(self.control_points.detach(), self.degree, self.knots.detach(),
-                          self.weights.detach(), validate=False)
+                          self.weights.detach(), validate=False, metadata=self.metadata)
 
     def numpy(self) -> dict[str, Any]:
         return {"kind": "curve", "degree": self.degree,
@@ -226,7 +229,8 @@ class NurbsSurface:
     """
 
     def __init__(self, control_points, degree_u: int, degree_v: int, knots_u=None, knots_v=None,
-                 weights=None, *, dtype=None, device=None, validate: bool = True):
+                 weights=None, *, dtype=None, device=None, validate: bool = True,
+                 metadata: dict | None = None):
         cp = _as_tensor(control_points, dtype, device, "control_points")
         if cp.dim() < 3 or cp.shape[-1] != 3:
             raise ValueError(f"control_points must have shape (..., n_u, n_v, 3), got "
@@ -256,6 +260,8 @@ class NurbsSurface:
         self.control_points, self.weights = cp, w
         self.knots_u, self.knots_v = ku, kv
         self.degree_u, self.degree_v = int(degree_u), int(degree_v)
+        #: free-form information carried along (name, source file, fit statistics...)
+        self.metadata: dict[str, Any] = dict(metadata or {})
 
     # --- properties --------------------------------------------------------------------------
     @property
@@ -344,7 +350,7 @@ class NurbsSurface:
         return NurbsSurface(torch.as_tensor(cw[..., :-1] / w[..., None]).to(self.dtype), degree_u,
                             degree_v, torch.as_tensor(ku).to(self.dtype),
                             torch.as_tensor(kv).to(self.dtype), torch.as_tensor(w).to(self.dtype),
-                            device=self.device)
+                            device=self.device, metadata=self.metadata)
 
     def insert_knot(self, u: float | None = None, v: float | None = None,
                     times: int = 1) -> NurbsSurface:
@@ -371,12 +377,13 @@ class NurbsSurface:
         return NurbsSurface(self.control_points.to(dtype=dt, device=device), self.degree_u,
                             self.degree_v, self.knots_u.to(dtype=dt, device=device),
                             self.knots_v.to(dtype=dt, device=device),
-                            self.weights.to(dtype=dt, device=device), validate=False)
+                            self.weights.to(dtype=dt, device=device), validate=False,
+                            metadata=self.metadata)
 
     def detach(self) -> NurbsSurface:
         return NurbsSurface(self.control_points.detach(), self.degree_u, self.degree_v,
                             self.knots_u.detach(), self.knots_v.detach(), self.weights.detach(),
-                            validate=False)
+                            validate=False, metadata=self.metadata)
 
     def numpy(self) -> dict[str, Any]:
         return {"kind": "surface", "degree_u": self.degree_u, "degree_v": self.degree_v,
