@@ -45,11 +45,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import torch
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.linalg import lsqr
 from scipy.spatial import cKDTree
 
-from nurbs_core.basis import basis_functions, dense_basis_matrix, find_span
+from nurbs_core.basis import basis_functions, find_span
 from nurbs_core.evaluate import SurfaceGridEvaluator
 from nurbs_core.geometry import NurbsSurface
 
@@ -170,13 +170,12 @@ def _check_samples(samples, patch: _Patch, index: int) -> tuple[int, int]:
     return count_u, count_v
 
 
-def _basis_matrix(knots: np.ndarray, degree: int, parameters: np.ndarray) -> np.ndarray:
-    """Dense B-spline basis (len(parameters), n) with the engine's span search and basis."""
+def _compact_basis(knots: np.ndarray, degree: int, parameters: np.ndarray):
+    """Spans (M,) and the p + 1 non-zero basis values (M, p + 1), from the engine's basis."""
     U = torch.as_tensor(knots, dtype=torch.float64).unsqueeze(0)
     t = torch.as_tensor(parameters, dtype=torch.float64).unsqueeze(0)
     span = find_span(U, degree, t)
-    values = basis_functions(U, degree, t, span)
-    return dense_basis_matrix(values, span, degree, len(knots) - degree - 1)[0].numpy()
+    return span[0].numpy(), basis_functions(U, degree, t, span)[0].numpy()
 
 
 def _grid_parameters(patch: _Patch, counts: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -184,13 +183,24 @@ def _grid_parameters(patch: _Patch, counts: tuple[int, int]) -> tuple[np.ndarray
     return np.linspace(u0, u1, counts[0]), np.linspace(v0, v1, counts[1])
 
 
-def _collocation(patch: _Patch, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rational basis of the patch on the grid u x v: (len(u) * len(v), n_u * n_v), u-major."""
-    basis_u = _basis_matrix(patch.knots_u, patch.degree_u, u)
-    basis_v = _basis_matrix(patch.knots_v, patch.degree_v, v)
-    products = np.einsum("ai,bj,ij->abij", basis_u, basis_v, patch.weights)
-    denominator = products.sum(axis=(2, 3), keepdims=True)
-    return (products / denominator).reshape(len(u) * len(v), -1)
+def _collocation(patch: _Patch, u: np.ndarray, v: np.ndarray) -> csr_matrix:
+    """Rational basis of the patch on the grid u x v, sparse: (len(u) * len(v), n_u * n_v).
+
+    Row a * len(v) + b is the sample (u_a, v_b); column i * n_v + j the control point P_ij; each
+    row holds the (p + 1)(q + 1) non-zeros N_i(u_a) N_j(v_b) w_ij / sum_kl N_k(u_a) N_l(v_b) w_kl.
+    """
+    span_u, basis_u = _compact_basis(patch.knots_u, patch.degree_u, u)
+    span_v, basis_v = _compact_basis(patch.knots_v, patch.degree_v, v)
+    columns_u = span_u[:, None] - patch.degree_u + np.arange(patch.degree_u + 1)  # (Mu, p+1)
+    columns_v = span_v[:, None] - patch.degree_v + np.arange(patch.degree_v + 1)  # (Mv, q+1)
+    cu, cv = columns_u[:, None, :, None], columns_v[None, :, None, :]
+    values = basis_u[:, None, :, None] * basis_v[None, :, None, :] * patch.weights[cu, cv]
+    values /= values.sum(axis=(2, 3), keepdims=True)
+    columns = np.broadcast_to(cu * patch.shape[1] + cv, values.shape)
+    rows = np.broadcast_to(np.arange(len(u) * len(v)).reshape(len(u), len(v), 1, 1),
+                           values.shape)
+    return csr_matrix((values.ravel(), (rows.ravel(), columns.ravel())),
+                      shape=(len(u) * len(v), patch.shape[0] * patch.shape[1]))
 
 
 def _points_and_normals(patch: _Patch, u: np.ndarray, v: np.ndarray):
@@ -473,14 +483,15 @@ def _merge(values_per_patch, index_per_patch, count: int) -> np.ndarray:
 
 
 def _solve_lstsq(matrices, index_per_patch, count, targets, start):
-    """min |A (start + D) - Q| with the minimum-norm D; A assembled from the patch blocks."""
+    """min |A (start + D) - Q| with the minimum-norm D; A assembled from the sparse patch blocks
+    with their columns mapped to the shared unknowns."""
     rows, columns, values = [], [], []
     offset = 0
     for matrix, index in zip(matrices, index_per_patch, strict=True):
-        r, c = np.nonzero(matrix)
-        rows.append(r + offset)
-        columns.append(index[c])
-        values.append(matrix[r, c])
+        block = matrix.tocoo()
+        rows.append(block.row + offset)
+        columns.append(index[block.col])
+        values.append(block.data)
         offset += matrix.shape[0]
     system = coo_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(columns))),
                         shape=(offset, count)).tocsr()
@@ -488,6 +499,7 @@ def _solve_lstsq(matrices, index_per_patch, count, targets, start):
     if offset * count <= _DENSE_LIMIT:
         correction = np.linalg.lstsq(system.toarray(), rhs, rcond=None)[0]
     else:
+        # LSQR started at zero converges to the minimum-norm least-squares solution too.
         scale = float(np.abs(rhs).max()) or 1.0
         correction = np.stack([
             lsqr(system, rhs[:, k] / scale, atol=1e-14, btol=1e-14, iter_lim=20 * count)[0]
