@@ -202,9 +202,11 @@ class FitController(QObject):
         if run_id != self._run_id or self._is_shut_down:
             return
         self._join()
-        final = self._latest
-        self._tick()
+        self._tick()  # show the final snapshot if a tick has not yet
         self._timer.stop()
+        final = self.latest_shown
+        if final is not None and final.run_id != run_id:
+            final = None  # this run produced no snapshot (it failed at once)
         if self._restart_pending:
             self._restart_pending = False
             self.start(paused=getattr(self, "_restart_paused", False))

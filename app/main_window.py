@@ -530,6 +530,7 @@ class MainWindow(QMainWindow):
 
     @Slot(object)
     def _on_fit_finished(self, snapshot: DisplaySnapshot):
+        self.loss_plot.flush()
         self.document.fitted_changed.disconnect(self._on_fitted_changed)
         try:
             self.document.set_fitted(snapshot.geometry)  # tree and tables, no re-tessellation
@@ -678,6 +679,7 @@ class MainWindow(QMainWindow):
 
     def save_screenshot(self, path: str) -> bool:
         """The whole window (viewport included) as a PNG."""
+        self.loss_plot.flush()
         self.scene.render_now()
         ok = self.grab().save(path)
         if not ok:
@@ -686,7 +688,8 @@ class MainWindow(QMainWindow):
 
     # --- shutdown --------------------------------------------------------------------------------
     def live_timers(self) -> int:
-        return self.controller.live_timers() + self.scene.live_timers()
+        return (self.controller.live_timers() + self.scene.live_timers()
+                + self.loss_plot.live_timers())
 
     def shutdown(self):
         """Stop the worker, jobs and timers and release the render window; idempotent."""
@@ -695,6 +698,7 @@ class MainWindow(QMainWindow):
         self._is_shut_down = True
         self.controller.shutdown()
         self.jobs.shutdown()
+        self.loss_plot.stop()
         logging.getLogger().removeHandler(self.log_panel.handler)
         if self._message_box is not None:
             self._message_box.close()

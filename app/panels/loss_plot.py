@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pyqtgraph as pg
+from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QVBoxLayout, QWidget
 
 PALETTE = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#17becf",
            "#e377c2"]
-FLOOR = 1e-16  # log scale: zero or negative values are drawn at this floor
+FLOOR = 1e-16
+REDRAW_INTERVAL_MS = 200  # log scale: zero or negative values are drawn at this floor
 
 
 class LossPlot(QWidget):
@@ -29,8 +31,14 @@ class LossPlot(QWidget):
         self._curves: dict[str, pg.PlotDataItem] = {}
         self._offset = 0
         self._last_iteration = -1
+        # redraw at most 5 times a second: rows arrive with every snapshot (~25/s)
+        self._redraw_timer = QTimer(self)
+        self._redraw_timer.setSingleShot(True)
+        self._redraw_timer.setInterval(REDRAW_INTERVAL_MS)
+        self._redraw_timer.timeout.connect(self._redraw)
 
     def clear(self):
+        self._redraw_timer.stop()
         self._x, self._values, self._offset, self._last_iteration = [], {}, 0, -1
         for curve in self._curves.values():
             self.plot.removeItem(curve)
@@ -55,7 +63,19 @@ class LossPlot(QWidget):
             for series in self._values.values():
                 if len(series) < len(self._x):
                     series.append(np.nan)
+        if not self._redraw_timer.isActive():
+            self._redraw_timer.start()
+
+    def flush(self):
+        """Draw pending rows now (end of a run, screenshots)."""
+        self._redraw_timer.stop()
         self._redraw()
+
+    def stop(self):
+        self._redraw_timer.stop()
+
+    def live_timers(self) -> int:
+        return int(self._redraw_timer.isActive())
 
     def series(self, name: str) -> np.ndarray:
         return np.asarray(self._values.get(name, []), dtype=np.float64)

@@ -296,8 +296,9 @@ class SceneView(QObject):
         started = time.perf_counter()
         self.plotter.render()
         spent_ms = (time.perf_counter() - started) * 1000.0
-        # slow (software) OpenGL: leave the event loop at least as much time as a frame takes
-        self._render_timer.setInterval(int(max(RENDER_INTERVAL_MS, 1.5 * spent_ms)))
+        # slow (software) OpenGL: keep the event loop free at least 60% of the time, so input,
+        # timers and the other widgets are answered between frames
+        self._render_timer.setInterval(int(max(RENDER_INTERVAL_MS, 2.5 * spent_ms)))
         self.last_render_ms = spent_ms
 
     def screenshot(self, path: str):

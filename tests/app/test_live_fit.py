@@ -155,7 +155,11 @@ def test_event_loop_answers_within_100ms_during_a_fit(qtbot, window, ply_cloud):
         timer.stop()
     assert window.controller.snapshots_shown > start_snapshots  # the fit kept drawing meanwhile
     # the first gap includes the time before the probe ran; the rest is the event loop's answer
-    assert max(gaps[1:]) < 0.100, f"longest stall {max(gaps[1:]) * 1000:.0f} ms"
+    answers = np.asarray(gaps[1:])
+    report = (f"probe intervals: median {np.median(answers) * 1000:.0f} ms, 99th percentile "
+              f"{np.percentile(answers, 99) * 1000:.0f} ms, max {answers.max() * 1000:.0f} ms")
+    print(report)
+    assert answers.max() < 0.100, report
     window.controller.stop()
     qtbot.waitUntil(lambda: window.controller.state == "idle", timeout=20000)
 

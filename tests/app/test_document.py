@@ -1,0 +1,122 @@
+"""Sessions, curves, offsets, knots and undo through the real window."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from app_helpers import QUICK, open_by_drop
+
+
+def _fit_briefly(qtbot, window, snapshots: int = 2):
+    window.controller.start()
+    start = window.controller.snapshots_shown
+    qtbot.waitUntil(lambda: window.controller.snapshots_shown >= start + snapshots, timeout=60000)
+    with qtbot.waitSignal(window.controller.fit_finished, timeout=20000):
+        window.controller.stop()
+
+
+def test_session_round_trip(qtbot, window, ply_cloud, tmp_path):
+    open_by_drop(qtbot, window, [ply_cloud[0]])
+    window.document.edit_settings("quick", **QUICK)
+    window.document.edit_settings("Optimizer", optimizer="sgd", learning_rate=0.02)
+    _fit_briefly(qtbot, window)
+    fitted = window.document.fitted
+    points = window.document.targets[0].points.copy()
+    session = tmp_path / "work.json"
+    assert window.save_session(str(session))
+    data = json.loads(session.read_text())
+    assert data["settings"]["optimizer"] == "sgd"
+
+    window.reset_fit()
+    window.document.edit_settings("Optimizer", optimizer="adam")
+    assert window.document.fitted is None
+    with qtbot.waitSignal(window.jobs.job_finished, timeout=30000):  # re-tessellation of the fit
+        assert window.open_session(str(session))
+    settings = window.document.settings
+    assert (settings.optimizer, settings.learning_rate, settings.control_points_u) == (
+        "sgd", 0.02, 8)
+    np.testing.assert_array_equal(window.document.fitted["control_points"],
+                                  fitted["control_points"])
+    np.testing.assert_array_equal(window.document.targets[0].points, points)
+    assert window.scene.deviation_shown()
+
+    # a damaged session changes nothing
+    broken = tmp_path / "broken.json"
+    broken.write_text('{"format": "nurbs-studio-session-v1", "targets": [{"name": 1}]}')
+    targets = window.document.targets
+    assert not window.open_session(str(broken))
+    assert "broken.json" in window.last_error
+    assert window.document.targets is targets
+
+
+def test_planar_cloud_fits_a_2d_curve(qtbot, window, tmp_path):
+    angle = np.linspace(0.0, 1.5 * np.pi, 300)
+    points = np.column_stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)])
+    path = tmp_path / "arc.csv"
+    np.savetxt(path, points, delimiter=",", header="x,y,z", comments="")
+    open_by_drop(qtbot, window, [path])
+    assert window.document.settings.kind == "curve"
+    window.document.edit_settings("quick", control_points_u=8, iterations=100000)
+    _fit_briefly(qtbot, window, snapshots=3)
+    fitted = window.document.fitted
+    assert fitted["kind"] == "curve" and fitted["control_points"].shape == (8, 2)
+    assert window.scene._meshes["curve"].n_points > 100
+    assert window.scene._meshes["surface"].n_points == 0
+
+
+def test_offsets_of_the_turbine_blade_patches(qtbot, window, paper_data):
+    patches = [paper_data / "offset_surfaces" / f"turbine_blade_patch{k}.json" for k in (0, 1)]
+    open_by_drop(qtbot, window, patches)
+    assert len(window.document.patches) == 2
+    window.offset_panel.distance.setValue(0.5)
+    with qtbot.waitSignal(window.offsets_updated, timeout=60000) as blocker:
+        window.offset_panel.show_offsets.setChecked(True)
+    assert blocker.args == [True], window.last_error
+    offsets = window.document.offsets
+    assert len(offsets.surfaces) == 2 and offsets.shared_edges == 1
+    constrained_gap = offsets.max_gap
+    assert "largest gap" in window.scene.corner_text(1)
+    # the offset patch lies at the chosen distance from its base patch (sampled check)
+    from scipy.spatial import cKDTree
+
+    from nurbs_core import geometry_from_numpy
+
+    base = geometry_from_numpy(window.document.patches[0])
+    offset = geometry_from_numpy(offsets.surfaces[0])
+    u, v = base.grid_parameters(120, 60)
+    dense = base.evaluate_grid(u, v).numpy().reshape(-1, 3)
+    u, v = offset.grid_parameters(15, 15)
+    distance, _ = cKDTree(dense).query(offset.evaluate_grid(u, v).numpy().reshape(-1, 3))
+    assert np.median(distance) == pytest.approx(0.5, rel=0.05)
+
+    with qtbot.waitSignal(window.offsets_updated, timeout=60000):
+        window.offset_panel.constrain.setChecked(False)
+    assert window.document.offsets.max_gap >= constrained_gap
+    assert constrained_gap < 1e-6
+
+
+def test_knot_table_edit_undo_and_validation(qtbot, window, ply_cloud):
+    open_by_drop(qtbot, window, [ply_cloud[0]])
+    window.document.edit_settings("quick", **QUICK)
+    table = window.knot_panel.tables["u"]
+    assert table.rowCount() == 8 + 3 + 1
+    table.item(5, 0).setText("0.45")  # an interior knot moves
+    knots = window.document.settings.knots_u
+    assert knots is not None and knots[5] == pytest.approx(0.45)
+    table.item(5, 0).setText("2.0")  # breaks the order: refused, the table shows the old value
+    assert "decrease" in window.statusBar().currentMessage()
+    assert window.document.settings.knots_u == knots
+    assert float(table.item(5, 0).text()) == pytest.approx(0.45)
+    window.document.undo_stack.undo()
+    assert window.document.settings.knots_u is None
+    window.knot_panel.averaged_button.click()
+    averaged = np.asarray(window.document.settings.knots_u)
+    assert averaged[0] == 0.0 and averaged[-1] == 1.0 and np.all(np.diff(averaged) >= 0)
+    # the fit starts on the custom knots
+    _fit_briefly(qtbot, window)
+    np.testing.assert_allclose(window.document.fitted["knots_u"], averaged, atol=1e-12)
+    # a grid change drops knots that no longer fit
+    window.fit_panel.control_points_u.setValue(9)
+    assert window.document.settings.knots_u is None

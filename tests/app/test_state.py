@@ -1,0 +1,53 @@
+"""The document model without a window: loss strings, undo/redo, settings validation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.state import Document, FitSettings, format_loss, parse_loss, with_changes
+
+
+def test_loss_text_round_trips_and_matches_the_engine_parser():
+    from nurbs_core.losses import parse_loss as engine_parse
+
+    text = "chamfer+0.1*laplacian+10*hausdorff+0.00001*mse"
+    terms = parse_loss(text)
+    assert format_loss(terms) == text
+    engine = engine_parse(format_loss((name, 1e6) for name in ("chamfer",)))
+    assert engine is not None
+    with pytest.raises(ValueError, match="cannot read"):
+        parse_loss("chamfer+*")
+    with pytest.raises(ValueError, match="at least one term"):
+        format_loss((("chamfer", 0.0),))
+
+
+def test_settings_edits_undo_and_redo(qtbot):
+    document = Document()
+    seen = []
+    document.settings_changed.connect(lambda old, new: seen.append((old.degree_u, new.degree_u)))
+    assert document.edit_settings("Degree u", degree_u=2)
+    assert not document.edit_settings("Degree u", degree_u=2)  # no change, no undo step
+    assert document.settings.degree_u == 2
+    document.undo_stack.undo()
+    assert document.settings.degree_u == 3
+    document.undo_stack.redo()
+    assert document.settings.degree_u == 2
+    assert seen == [(3, 2), (2, 3), (3, 2)]
+    assert document.undo_stack.undoText() == "Degree u"
+
+
+def test_custom_knots_are_dropped_when_the_grid_changes():
+    knots = tuple(np.r_[[0.0] * 4, [0.2, 0.5, 0.7], [1.0] * 4])
+    settings = with_changes(FitSettings(control_points_u=7), knots_u=knots)
+    assert settings.knots_u == knots
+    assert with_changes(settings, control_points_u=8).knots_u is None
+    assert with_changes(settings, learning_rate=0.5).knots_u == knots
+
+
+def test_settings_json_round_trip_and_unknown_fields():
+    settings = FitSettings(optimizer="lbfgs", knots_u=(0, 0, 0, 0, 0.5, 1, 1, 1, 1),
+                           control_points_u=5)
+    assert FitSettings.from_json(settings.to_json()) == settings
+    with pytest.raises(ValueError, match="unknown settings"):
+        FitSettings.from_json({"degree": 3})
