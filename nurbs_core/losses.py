@@ -187,6 +187,18 @@ class LossInputs:
     paired_target: torch.Tensor | None = None
     control_points: torch.Tensor | None = None
 
+    def set_distances(self, term: str) -> tuple[torch.Tensor, torch.Tensor]:
+        """Nearest distances samples -> cloud (M,) and cloud (or cloud_query) -> samples (K,),
+        computed once and shared by every set term of one evaluation."""
+        cached = self.__dict__.get("_set_distances")
+        if cached is None:
+            samples, cloud = _need(self, "samples", term), _need(self, "cloud", term)
+            query = cloud if self.cloud_query is None else self.cloud_query
+            cached = (nearest_distances(samples, cloud, self.cloud_tree),
+                      nearest_distances(query, samples))
+            self.__dict__["_set_distances"] = cached
+        return cached
+
 
 def _need(inputs: LossInputs, name: str, term: str):
     value = getattr(inputs, name)
@@ -201,10 +213,10 @@ def _paired(fn):
     return term
 
 
-def _set(fn):
+def _set(reduce):
     def term(inputs: LossInputs, name: str) -> torch.Tensor:
-        return fn(_need(inputs, "samples", name), _need(inputs, "cloud", name),
-                  tree_b=inputs.cloud_tree, b_query=inputs.cloud_query)
+        forward, backward = inputs.set_distances(name)
+        return reduce(forward) + reduce(backward)
     return term
 
 
@@ -216,8 +228,9 @@ TERMS: dict[str, tuple[Callable[[LossInputs, str], torch.Tensor], str]] = {
     "mse": (_paired(mse_loss), "pointwise"),
     # point-to-surface: mse at foot-point parameters (added for unordered clouds by the fitter)
     "p2s": (_paired(mse_loss), "pointwise"),
-    "chamfer": (_set(chamfer_distance), "set"),
-    "hausdorff": (_set(hausdorff_distance), "set"),
+    # the same as chamfer_distance / hausdorff_distance, sharing one nearest-neighbour search
+    "chamfer": (_set(torch.mean), "set"),
+    "hausdorff": (_set(torch.amax), "set"),
     "laplacian": (lambda inputs, name: laplacian_loss(_need(inputs, "control_points", name)),
                   "regulariser"),
     "length": (lambda inputs, name: curve_length(_need(inputs, "samples", name)), "regulariser"),

@@ -432,7 +432,8 @@ def fit(target, config: FitConfig | None = None, *, stop: StopToken | None = Non
         last, count = snapshot, count + 1
         if on_snapshot is not None:
             on_snapshot(snapshot)
-    geometry = geometry_from_numpy(last.geometry)
+    dtype = torch.float32 if (config or FitConfig()).dtype == "float32" else torch.float64
+    geometry = geometry_from_numpy(last.geometry, dtype=dtype)
     stats = statistics(geometry, target, parameters)
     return FitResult(geometry=geometry, history=history, status=last.status, message=last.message,
                      statistics=stats, iterations=last.iteration, elapsed=last.elapsed,

@@ -60,11 +60,15 @@ class TrainableGeometry:
     def __init__(self, geometry, *, free_knots: bool, free_weights: bool, pin_boundary: bool):
         self.is_curve = isinstance(geometry, NurbsCurve)
         geometry = geometry.detach()
-        self.control_points = geometry.control_points.clone().requires_grad_(True)
+        # contiguous leaves: optimizers such as L-BFGS flatten them with view(), and geometry made
+        # by knot insertion may carry permuted strides
+        contiguous = torch.contiguous_format
+        self.control_points = geometry.control_points.clone(memory_format=contiguous)
+        self.control_points.requires_grad_(True)
         self.log_weights = None
-        self.fixed_weights = geometry.weights.clone()
+        self.fixed_weights = geometry.weights.clone(memory_format=contiguous)
         if free_weights:
-            self.log_weights = torch.log(geometry.weights).clone().requires_grad_(True)
+            self.log_weights = torch.log(self.fixed_weights).requires_grad_(True)
         if self.is_curve:
             self.degrees = (geometry.degree,)
             self.knots = [KnotVector(geometry.knots, geometry.degree, free_knots)]
