@@ -168,3 +168,21 @@ def test_colour_png_is_read_as_greyscale(tmp_path):
     path = tmp_path / "rgb.png"
     Image.fromarray(rgb).save(path)
     assert len(boundary_points(path)) == 20
+
+
+@pytest.mark.parametrize("name", ("apple", "cat"))
+def test_ordered_contour_supports_fitting_with_chord_length_parameters(paper_data, name):
+    """Known parameters make the outline a linear least-squares problem: an 80-control-point
+    cubic through the closed contour stays within a pixel of every boundary pixel on average."""
+    from scipy.spatial import cKDTree
+
+    from nurbs_core.fit import least_squares_fit
+
+    path = paper_data / "skeletons" / f"{name}.png"
+    contour = ordered_boundary(path)[0]
+    closed = np.vstack([contour, contour[:1]])
+    curve = least_squares_fit(closed, chord_length_parameters(closed), 3, None, 80, None,
+                              kind="curve")
+    assert np.allclose(curve.evaluate([0.0]).numpy(), curve.evaluate([1.0]).numpy(), atol=1.0)
+    distances = cKDTree(curve.sample(20000).numpy()).query(boundary_points(path))[0]
+    assert distances.mean() < 1.0 and distances.max() < 4.0

@@ -19,6 +19,7 @@ from nurbs_core.offset import (
     find_shared_edges,
     minimum_bounding_box_size,
     offset_chamfer,
+    offset_deviation,
     offset_patches,
     offset_surface,
 )
@@ -185,6 +186,9 @@ def test_roof_offset_is_exact(roof):
     u, v = check.parameters[0]
     dense = fitted.surfaces[0].evaluate_grid(u, v).reshape(-1, 3).numpy()
     assert np.abs(dense - check.targets[0]).max() < 1e-9 * size
+    assert offset_deviation(fitted, [roof])[1] < 1e-12
+    mean, largest = offset_deviation(baseline, [roof])
+    assert 1e-4 < mean < largest
 
 
 def test_gradient_solver_reaches_the_least_squares_optimum():
