@@ -333,6 +333,9 @@ def find_shared_edges(surfaces: Sequence[NurbsSurface], tolerance: float | None 
 def _find_shared_edges(patches: Sequence[_Patch], tolerance: float | None) -> list[SharedEdge]:
     if tolerance is None:
         tolerance = 1e-6 * max(_size(patches), 1e-300)
+    elif not (isinstance(tolerance, (int, float, np.floating)) and math.isfinite(tolerance)
+              and tolerance >= 0):
+        raise ValueError(f"tolerance must be a finite number >= 0, got {tolerance!r}")
     edges = []
     for a in range(len(patches)):
         for b in range(a, len(patches)):

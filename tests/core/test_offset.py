@@ -236,6 +236,8 @@ def test_bad_input_gives_clear_errors(double_curve):
         offset_surface(double_curve, 1.0, samples=(1, 20))
     with pytest.raises(TypeError, match="NurbsSurface"):
         offset_patches([double_curve.control_points], 1.0)
+    with pytest.raises(ValueError, match="tolerance"):
+        offset_patches([double_curve], 1.0, tolerance=-1.0)
     batch = NurbsSurface(control_points=torch.stack([double_curve.control_points] * 2),
                          degree_u=3, degree_v=3)
     with pytest.raises(ValueError, match="batch"):
@@ -337,3 +339,25 @@ def test_closed_patch_seam_is_kept_closed():
     torn = offset_patches([tube], 0.1, constrain_shared=False, average_normals=False)
     assert torn.max_gap > 0.05  # about d * |n1 - n2| at the 60 degree seam corner
     assert offset_patches([tube], 0.1, constrain_shared=False).max_gap > 1e-3
+
+
+def test_collapsed_side_uses_the_normal_just_inside():
+    """A cone patch whose u_min side collapses to the apex: S_v = 0 there, so the normal is taken
+    slightly inside the domain; a collapsed side is never a shared edge."""
+    control = np.zeros((4, 4, 3))
+    for i in range(4):
+        radius = i / 3
+        for j, angle in enumerate(np.linspace(0.0, np.pi, 4)):
+            control[i, j] = [radius * np.cos(angle), radius * np.sin(angle), 1.0 - radius]
+    cone = NurbsSurface(control_points=control, degree_u=3, degree_v=3)
+    assert float(cone.normals([0.0], [0.5]).norm()) == 0.0  # the engine's normal vanishes
+    result = offset_patches([cone], 0.1)
+    assert np.isfinite(result.targets[0]).all()
+    apex_targets = result.targets[0][: result.details["samples"][0][1]]
+    assert np.allclose(np.linalg.norm(apex_targets - [0.0, 0.0, 1.0], axis=1), 0.1)
+    # The other half of the cone shares the apex and two straight edges with it.
+    other = control.copy()
+    other[..., :2] *= -1.0  # rotated by 180 degrees about the axis
+    edges = find_shared_edges([cone, NurbsSurface(control_points=other, degree_u=3, degree_v=3)])
+    assert sorted((e.first_side, e.second_side) for e in edges) == [("v_max", "v_min"),
+                                                                   ("v_min", "v_max")]
