@@ -1,0 +1,241 @@
+"""``nurbs-fit``: fit a NURBS surface or curve to a point-cloud file from the command line.
+
+    nurbs-fit scan.xyz --output fit.3dm fit.json --control-points 12 12 --iterations 500 \\
+        --loss "chamfer+0.1*laplacian+10*hausdorff" --optimizer adam --free-knots
+
+Reads any point-cloud format :func:`nurbs_core.io.load_points` supports, shows progress on stderr,
+prints the final error statistics and writes every ``--output`` file with
+:func:`nurbs_core.io.save` (the suffix picks the format: .3dm, .json, .step, ...). ``--offset D``
+also writes the fitted surface offset by D along its normals (``<name>_offset<suffix>``).
+Errors print one line (``nurbs-fit: error: ...``) and exit with status 1; Ctrl-C stops the fit
+and still writes the result reached so far.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from nurbs_core.fit import FitConfig, StopToken, fit
+from nurbs_core.geometry import NurbsCurve
+from nurbs_core.losses import chamfer_distance
+
+PROGRESS_INTERVAL = 0.5  # seconds between progress lines
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="nurbs-fit", description="Fit a NURBS surface (or curve) to a point cloud.",
+        epilog="Learning rates are relative to the cloud's bounding-box diagonal (see FitConfig).")
+    parser.add_argument("input", help="point cloud (.xyz, .txt, .ply, .pcd, .las, .npy, ...)")
+    parser.add_argument("--output", "-o", nargs="+", required=True, metavar="OUT",
+                        help="result file(s); the suffix picks the format (.3dm, .json, .step, "
+                             "...)")
+    parser.add_argument("--curve", action="store_true",
+                        help="fit a curve instead of a surface (2-D when every z is equal)")
+    parser.add_argument("--degree", type=int, nargs="+", default=[3], metavar="P",
+                        help="degree, or degrees in u and v (default 3)")
+    parser.add_argument("--control-points", type=int, nargs="+", default=None,
+                        metavar="N", help="control points: NU NV for surfaces, N for curves "
+                        "(default 12 12 / 16)")
+    parser.add_argument("--iterations", type=int, default=500)
+    parser.add_argument("--loss", default=None,
+                        help="weighted terms, e.g. 'chamfer+0.1*laplacian+10*hausdorff' "
+                             "(default; curves: 'chamfer+p2s')")
+    parser.add_argument("--optimizer", default="adam",
+                        choices=["sgd", "momentum", "adam", "adagrad", "lbfgs"])
+    parser.add_argument("--learning-rate", type=float, default=None,
+                        help="step size (default 0.01; 1.0 for lbfgs)")
+    parser.add_argument("--tolerance", type=float, default=1e-7,
+                        help="relative loss change that counts as converged")
+    parser.add_argument("--init", default="pca", choices=["pca", "random", "least_squares"])
+    parser.add_argument("--free-knots", action="store_true", help="optimize the interior knots")
+    parser.add_argument("--free-weights", action="store_true", help="optimize the weights")
+    parser.add_argument("--pin-boundary", action="store_true",
+                        help="keep the boundary control points of the start fixed")
+    parser.add_argument("--no-parameter-correction", action="store_true",
+                        help="keep the initial foot-point parameters (unordered clouds)")
+    parser.add_argument("--grid", type=int, nargs=2, metavar=("NU", "NV"), default=None,
+                        help="the points are an NU x NV grid, u-major: use known uniform "
+                             "parameters instead of foot points")
+    parser.add_argument("--samples", type=int, nargs="+", default=[64], metavar="S",
+                        help="evaluation grid for set losses (default 64 64)")
+    parser.add_argument("--refine", type=int, default=0, metavar="K",
+                        help="insert K knots per direction where the error is largest")
+    parser.add_argument("--offset", type=float, default=None, metavar="DIST",
+                        help="also write the fitted surface offset by DIST along its normals")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--threads", type=int, default=1,
+                        help="torch threads (default 1: fastest for typical fits)")
+    parser.add_argument("--dtype", default="float64", choices=["float32", "float64"])
+    parser.add_argument("--quiet", "-q", action="store_true", help="no progress lines")
+    return parser
+
+
+def _pair(values: list[int], name: str, count: int) -> list[int]:
+    if len(values) == 1:
+        return values * count
+    if len(values) != count:
+        raise ValueError(f"{name} takes {'one value' if count == 1 else 'one or two values'}, "
+                         f"got {len(values)}")
+    return values
+
+
+def _config(args, dimensions: int) -> FitConfig:
+    directions = 1 if args.curve else 2
+    degrees = _pair(args.degree, "--degree", directions)
+    default_counts = [16] if args.curve else [12, 12]
+    counts = _pair(args.control_points or default_counts, "--control-points", directions)
+    samples = _pair(args.samples, "--samples", directions)
+    if args.curve:
+        samples = [max(samples[0], 4 * counts[0])]
+    learning_rate = args.learning_rate
+    if learning_rate is None:
+        learning_rate = 1.0 if args.optimizer == "lbfgs" else 0.01
+    loss = args.loss or ("chamfer+p2s" if args.curve else "chamfer+0.1*laplacian+10*hausdorff")
+    return FitConfig(
+        kind="curve" if args.curve else "surface", degree_u=degrees[0],
+        degree_v=degrees[-1], control_points_u=counts[0], control_points_v=counts[-1],
+        loss=loss, optimizer=args.optimizer, learning_rate=learning_rate,
+        iterations=args.iterations, tolerance=args.tolerance, free_knots=args.free_knots,
+        free_weights=args.free_weights, pin_boundary=args.pin_boundary, init=args.init,
+        samples_u=samples[0], samples_v=samples[-1],
+        parameter_correction=not args.no_parameter_correction, seed=args.seed,
+        snapshot_interval=0.1, dtype=args.dtype, refinements=args.refine, threads=args.threads)
+
+
+def _grid_parameters(count_u: int, count_v: int, points: int) -> np.ndarray:
+    if count_u * count_v != points:
+        raise ValueError(f"--grid {count_u} {count_v} needs {count_u * count_v} points, the file "
+                         f"has {points}")
+    uu, vv = np.meshgrid(np.linspace(0, 1, count_u), np.linspace(0, 1, count_v), indexing="ij")
+    return np.stack([uu.ravel(), vv.ravel()], -1)
+
+
+class _Progress:
+    def __init__(self, total: int, quiet: bool):
+        self.total, self.quiet, self.last = total, quiet, -math.inf
+
+    def __call__(self, snapshot):
+        if self.quiet or not snapshot.losses:
+            return
+        now = time.perf_counter()
+        if now - self.last < PROGRESS_INTERVAL and not snapshot.done:
+            return
+        self.last = now
+        record = snapshot.losses[-1]
+        terms = ", ".join(f"{k} {v:.3g}" for k, v in record.items()
+                          if k not in ("iteration", "total"))
+        line = (f"iteration {snapshot.iteration}/{self.total}  loss {record['total']:.4g} "
+                f"({terms})  {snapshot.elapsed:.1f} s")
+        if snapshot.message:
+            line += f"  [{snapshot.message}]"
+        print(line, file=sys.stderr, flush=True)
+
+
+def _chamfer(geometry, points: np.ndarray, gen: np.random.Generator) -> float:
+    """Two-sided Chamfer between dense samples of the result and (up to 200k of) the points."""
+    with torch.no_grad():
+        if isinstance(geometry, NurbsCurve):
+            samples = geometry.sample(2000)
+        else:
+            (u0, u1), (v0, v1) = geometry.domain
+            grid = geometry.evaluate_grid(torch.linspace(u0, u1, 200, dtype=geometry.dtype),
+                                          torch.linspace(v0, v1, 200, dtype=geometry.dtype))
+            samples = grid.reshape(-1, 3)
+    if len(points) > 200_000:
+        points = points[gen.choice(len(points), 200_000, replace=False)]
+    return float(chamfer_distance(samples.double(), torch.as_tensor(points)))
+
+
+def _lift(curve: NurbsCurve, z: float) -> NurbsCurve:
+    """A 2-D curve fitted in the xy-plane back in 3-D at height z (for the file writers)."""
+    control = curve.control_points
+    lifted = torch.cat([control, torch.full_like(control[:, :1], z)], dim=-1)
+    return NurbsCurve(lifted, curve.degree, curve.knots, curve.weights)
+
+
+def _offset_path(path: Path) -> Path:
+    return path.with_name(f"{path.stem}_offset{path.suffix}")
+
+
+def run(args) -> int:
+    from nurbs_core.io import load_points, save
+
+    cloud = load_points(args.input)
+    points = cloud.points
+    flat_z = args.curve and len(points) and np.ptp(points[:, 2]) == 0
+    target = points[:, :2] if flat_z else points
+    config = _config(args, target.shape[1])
+    parameters = None
+    if args.grid is not None:
+        if args.curve:
+            raise ValueError("--grid applies to surfaces only")
+        parameters = _grid_parameters(*args.grid, len(points))
+    if args.offset is not None and args.curve:
+        raise ValueError("--offset applies to surfaces only")
+    outputs = [Path(p) for p in args.output]
+    for path in outputs:
+        if not path.parent.exists():
+            raise ValueError(f"cannot write {path}: folder {path.parent} does not exist")
+    print(f"{args.input}: {len(points)} points; fitting a {config.kind} "
+          f"(degree {config.degree_u}" + ("" if args.curve else f"x{config.degree_v}")
+          + f", {config.control_points_u}" + ("" if args.curve else f"x{config.control_points_v}")
+          + f" control points) with {config.optimizer}, loss {config.loss}", file=sys.stderr)
+    stop = StopToken()
+    previous = signal.signal(signal.SIGINT, lambda *_: stop.stop())
+    try:
+        result = fit(target, config, stop=stop, parameters=parameters,
+                     on_snapshot=_Progress(config.iterations, args.quiet))
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if result.status == "failed":
+        raise RuntimeError(f"the fit failed: {result.message}")
+    geometry = result.geometry.to(dtype=torch.float64)
+    diagonal = float(np.linalg.norm(np.ptp(target, axis=0)))
+    chamfer = _chamfer(geometry, target, np.random.default_rng(args.seed))
+    stats = result.statistics
+    print(f"status: {result.status} after {result.iterations} iterations in "
+          f"{result.elapsed:.2f} s" + (f" ({result.message})" if result.message else ""))
+    print(f"point-to-{config.kind} distance: mean {stats['mean']:.6g}, rms {stats['rms']:.6g}, "
+          f"max {stats['max']:.6g}  (bounding-box diagonal {diagonal:.6g})")
+    if "paired_mean" in stats:
+        print(f"at the known parameters: mean {stats['paired_mean']:.6g}, "
+              f"rms {stats['paired_rms']:.6g}, max {stats['paired_max']:.6g}")
+    print(f"chamfer distance: {chamfer:.6g} ({chamfer / diagonal:.3%} of the diagonal)")
+    if flat_z:
+        geometry = _lift(geometry, float(points[0, 2]))
+    offset = None
+    if args.offset is not None:
+        from nurbs_core.offset import offset_surface
+
+        offset = offset_surface(geometry, args.offset)
+    for path in outputs:
+        save(geometry, path)
+        print(f"wrote {path}")
+        if offset is not None:
+            save(offset, _offset_path(path))
+            print(f"wrote {_offset_path(path)}")
+    return 0
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return run(args)
+    except (ValueError, OSError, ImportError, RuntimeError) as exc:
+        message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        print(f"nurbs-fit: error: {message}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,159 @@
+"""The nurbs-fit command line: files in and out, progress, statistics, one-line errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import rhino3dm
+import torch
+import trimesh
+
+from nurbs_core.cli import main
+
+
+@pytest.fixture(autouse=True)
+def restore_threads():
+    saved = torch.get_num_threads()
+    yield
+    torch.set_num_threads(saved)
+
+
+def _sheet(count=900, seed=0):
+    gen = np.random.default_rng(seed)
+    xy = gen.uniform(-1, 1, (count, 2))
+    return np.column_stack([xy, 0.2 * np.sin(2 * xy[:, 0]) * xy[:, 1]])
+
+
+def test_fit_xyz_to_3dm_and_json(tmp_path, capsys):
+    source = tmp_path / "sheet.xyz"
+    np.savetxt(source, _sheet())
+    out_3dm, out_json = tmp_path / "fit.3dm", tmp_path / "fit.json"
+    code = main([str(source), "--output", str(out_3dm), str(out_json), "--control-points", "6",
+                 "5", "--degree", "3", "2", "--iterations", "60", "--samples", "24"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "iteration 60/60" in captured.err  # progress, with the last iteration always shown
+    assert "point-to-surface distance: mean" in captured.out and "chamfer distance" in captured.out
+    model = rhino3dm.File3dm.Read(str(out_3dm))  # openNURBS reads it back
+    surfaces = [obj.Geometry for obj in model.Objects]
+    assert len(surfaces) == 1
+    surface = surfaces[0]
+    if isinstance(surface, rhino3dm.Brep):
+        surface = surface.Faces[0].UnderlyingSurface()
+    assert (surface.Points.CountU, surface.Points.CountV) == (6, 5)
+    assert (surface.Degree(0), surface.Degree(1)) == (3, 2)
+    assert json.loads(out_json.read_text())  # valid JSON
+
+
+def test_fit_ply_curve_with_free_weights(tmp_path, capsys):
+    t = np.linspace(0, 3, 400)
+    points = np.column_stack([np.cos(t), np.sin(t), 0.2 * t])
+    source = tmp_path / "helix.ply"
+    trimesh.PointCloud(points).export(source)
+    out = tmp_path / "helix.json"
+    code = main([str(source), "-o", str(out), "--curve", "--control-points", "10",
+                 "--iterations", "80", "--free-weights", "--free-knots", "--quiet"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "iteration" not in captured.err  # --quiet
+    from nurbs_core.io import load
+
+    (curve,) = load(out)
+    assert curve.n_control_points == 10
+    mean = float(captured.out.split("mean ")[1].split(",")[0])
+    assert mean < 0.01
+
+
+def test_grid_option_uses_known_parameters_and_lbfgs(tmp_path, capsys):
+    x = np.linspace(-1, 1, 20)
+    xx, yy = np.meshgrid(x, x, indexing="ij")
+    grid = np.stack([xx, yy, xx * yy], -1).reshape(-1, 3)
+    source = tmp_path / "grid.txt"
+    np.savetxt(source, grid)
+    code = main([str(source), "-o", str(tmp_path / "g.json"), "--grid", "20", "20",
+                 "--loss", "mse", "--optimizer", "lbfgs", "--control-points", "4", "4",
+                 "--iterations", "30"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    # x*y is bilinear: a bicubic 4x4 patch reproduces it exactly
+    known = captured.out.split("at the known parameters:")[1]
+    paired_max = float(known.split("max ")[1].split()[0])
+    assert paired_max < 1e-4
+
+
+def test_offset_option_writes_the_offset_surface(tmp_path, capsys):
+    source = tmp_path / "sheet.xyz"
+    np.savetxt(source, _sheet(400))
+    out = tmp_path / "fit.json"
+    code = main([str(source), "-o", str(out), "--control-points", "5", "5", "--iterations", "20",
+                 "--offset", "0.1", "-q"])
+    assert code == 0, capsys.readouterr().err
+    from nurbs_core.io import load
+
+    (base,), (moved,) = load(out), load(tmp_path / "fit_offset.json")
+    u = torch.linspace(0.2, 0.8, 5, dtype=torch.float64)
+    gap = (moved.evaluate(u, u) - base.evaluate(u, u)).norm(dim=-1)
+    assert torch.allclose(gap, torch.full_like(gap, 0.1), atol=0.01)
+
+
+def _error_line(capsys):
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err and err[-1].startswith("nurbs-fit: error: ")
+    assert not any("Traceback" in line for line in err)
+    return err[-1]
+
+
+@pytest.mark.parametrize("content, message", [
+    ("", "empty"),
+    ("1 2 3\n", "single point"),
+    ("0 0 0\n1 1 nan\n2 0 1\n", "nan"),
+    ("1 1 1\n" * 50, "coincide"),
+    ("".join(f"{k} {2 * k} {3 * k}\n" for k in range(50)), "collinear"),
+])
+def test_bad_clouds_exit_with_one_line(tmp_path, capsys, content, message):
+    source = tmp_path / "bad.xyz"
+    source.write_text(content)
+    code = main([str(source), "-o", str(tmp_path / "out.json"), "--iterations", "5"])
+    assert code == 1
+    assert message in _error_line(capsys).lower()
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--degree", "7", "--control-points", "5", "5"], "cannot carry"),
+    (["--control-points", "40", "40"], "cannot determine"),
+    (["--loss", "chamfer+banana"], "unknown loss term"),
+    (["--grid", "7", "7"], "--grid 7 7 needs 49 points"),
+    (["--degree", "3", "3", "3"], "--degree takes"),
+])
+def test_bad_settings_exit_with_one_line(tmp_path, capsys, extra, message):
+    source = tmp_path / "sheet.xyz"
+    np.savetxt(source, _sheet(300))
+    code = main([str(source), "-o", str(tmp_path / "out.json"), "--iterations", "5", *extra])
+    assert code == 1
+    assert message in _error_line(capsys)
+
+
+def test_missing_input_and_unwritable_output(tmp_path, capsys):
+    assert main([str(tmp_path / "nope.xyz"), "-o", str(tmp_path / "o.json")]) == 1
+    assert "nope.xyz" in _error_line(capsys)
+    source = tmp_path / "sheet.xyz"
+    np.savetxt(source, _sheet(300))
+    assert main([str(source), "-o", str(tmp_path / "missing" / "o.json")]) == 1
+    assert "does not exist" in _error_line(capsys)
+
+
+def test_console_script_entry_point(tmp_path):
+    source = tmp_path / "sheet.xyz"
+    np.savetxt(source, _sheet(300))
+    done = subprocess.run([sys.executable, "-m", "nurbs_core.cli", str(source), "-o",
+                           str(tmp_path / "o.3dm"), "--control-points", "4", "4", "--iterations",
+                           "5", "-q"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "o.3dm").exists() and "status: budget" in done.stdout
+    bad = subprocess.run([sys.executable, "-m", "nurbs_core.cli", str(tmp_path / "x.xyz"), "-o",
+                          str(tmp_path / "o.json")], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 1 and "Traceback" not in bad.stderr
