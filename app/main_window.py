@@ -329,6 +329,9 @@ class MainWindow(QMainWindow):
     def _apply_loaded(self, paths: list[str], loaded: loading.LoadedFiles):
         self.controller.reset()
         self.loss_plot.clear()
+        for label in self.status_labels.values():
+            label.setText("-")
+        self.status_labels["state"].setText("Idle")
         self.document.replace_content(loaded.targets, loaded.patches, loaded.patch_names)
         points = self.document.target_points()
         if points is not None and np.ptp(points[:, 2]) == 0 and self.document.settings.kind != (

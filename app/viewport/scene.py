@@ -34,6 +34,11 @@ COLORS = {
 }
 
 UPPER_RIGHT, LOWER_RIGHT = 3, 1  # vtkCornerAnnotation corner indices
+VIEW_ELEVATION_DEG = 50.0  # camera height above the best-fit plane of what is shown
+
+#: neighbouring patches get different colours, so shared edges show
+PATCH_COLORS = ("#8fb3d9", "#b7c7a4", "#c9a9c9", "#d9c38f", "#9fc9c4")
+OFFSET_COLORS = ("#f2a33a", "#e8743b", "#f2c94c", "#d9822b")
 
 #: Layers the document tree and the View menu toggle.
 LAYERS = ("cloud", "surface", "curve", "control_net", "knot_lines", "patches", "offsets")
@@ -238,8 +243,9 @@ class SceneView(QObject):
         for name in self._extra_meshes[group]:
             self.plotter.remove_actor(name, render=False)
         self._extra_meshes[group] = []
-        colour = COLORS["patch" if group == "patches" else "offset"]
+        palette = PATCH_COLORS if group == "patches" else OFFSET_COLORS
         for index, display in enumerate(displays):
+            colour = palette[index % len(palette)]
             name = f"{group}:{index}"
             if display.kind == "surface":
                 mesh = surface_mesh(display.surface_grid)
@@ -282,9 +288,47 @@ class SceneView(QObject):
 
     # --- camera and drawing --------------------------------------------------------------------
     def reset_camera(self):
+        """Frame everything visible, looking at the shape's broad side.
+
+        The view comes from the principal axes of the visible points: a planar (2D) cloud is seen
+        straight on (from +z, x to the right, when it lies in the xy plane); anything else is seen
+        from 50 degrees above its best-fit plane with its longest axis across the screen, so long
+        thin parts (a blade) fill the view instead of running diagonally through it.
+        """
+        points = self._visible_points()
         self.plotter.view_isometric(render=False)
+        if points is not None and len(points) >= 3:
+            centre = points.mean(axis=0)
+            _, spread, axes = np.linalg.svd(points - centre, full_matrices=False)
+            normal = axes[2] if axes[2][2] >= 0 else -axes[2]
+            size = float(np.linalg.norm(np.ptp(points, axis=0))) or 1.0
+            if spread[2] <= 1e-9 * max(spread[0], 1e-300):  # planar
+                if abs(normal[2]) > 0.9:
+                    self.plotter.view_xy(render=False)
+                    self.plotter.reset_camera(render=False)
+                    self.request_render()
+                    return
+                direction, up = normal, axes[1]
+            else:
+                elevation = np.radians(VIEW_ELEVATION_DEG)
+                direction = np.sin(elevation) * normal - np.cos(elevation) * axes[1]
+                up = normal
+            camera = self.plotter.camera
+            camera.focal_point = tuple(centre)
+            camera.position = tuple(centre + direction * size * 2.0)
+            camera.up = tuple(up)
         self.plotter.reset_camera(render=False)
         self.request_render()
+
+    def _visible_points(self) -> np.ndarray | None:
+        parts = [mesh.points for name, mesh in self._meshes.items()
+                 if mesh.n_points and self._visible.get(name, True)]
+        for group in ("patches", "offsets"):
+            for name in self._extra_meshes[group]:
+                actor = self.plotter.actors.get(name)
+                if actor is not None and actor.GetVisibility():
+                    parts.append(np.asarray(actor.mapper.dataset.points))
+        return np.concatenate(parts) if parts else None
 
     def request_render(self):
         if not self._closed and not self._render_timer.isActive():

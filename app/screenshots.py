@@ -1,0 +1,142 @@
+"""Regenerate the documentation screenshots: ``xvfb-run -a python -m app.screenshots OUT_DIR``.
+
+Drives the real window through the main states a user sees: the demo just opened, a fit
+converging, the deviation map after the fit, multi-patch offsets (the paper's two-patch turbine
+blade, when its data is on this machine) and a 2D curve fit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+import app  # noqa: F401 - sets QT_API
+
+PAPER_DATA = Path(os.environ.get("NURBS_STUDIO_DATA", "/work/shared/data")) / "nurbsdiff_paper"
+
+
+def curve_cloud(path: Path) -> Path:
+    """A 2D curve target, y = 1.5 sin x on [0, 2 pi], sampled unordered with slight noise."""
+    rng = np.random.default_rng(5)
+    x = rng.uniform(0.0, 2.0 * np.pi, 600)
+    y = 1.5 * np.sin(x) + rng.normal(0.0, 0.02, x.size)
+    np.savetxt(path, np.column_stack([x, y, np.zeros_like(x)]), fmt="%.6f")
+    return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("out", type=Path)
+    arguments = parser.parse_args(argv)
+    arguments.out.mkdir(parents=True, exist_ok=True)
+
+    from PySide6.QtCore import QSettings, QTimer
+    from PySide6.QtWidgets import QApplication
+
+    from app.main_window import MainWindow
+
+    qapp = QApplication.instance() or QApplication(sys.argv[:1])
+    scratch = Path(tempfile.mkdtemp(prefix="nurbs-studio-shots-"))
+    store = QSettings(str(scratch / "settings.ini"), QSettings.Format.IniFormat)
+    window = MainWindow(settings_store=store)
+    window.resize(1400, 900)
+    window.show()
+    steps: list = []
+    failures: list[str] = []
+
+    def shot(name: str):
+        path = arguments.out / name
+        window.save_screenshot(str(path))
+        print(f"saved {path}")
+
+    def later(function, ms: int = 400):
+        QTimer.singleShot(ms, function)
+
+    def next_step(*_):
+        if steps:
+            steps.pop(0)()
+        else:
+            window.close()
+            qapp.quit()
+
+    def once(signal, handler):
+        def wrapper(*args):
+            signal.disconnect(wrapper)
+            handler(*args)
+        signal.connect(wrapper)
+
+    # 1. the demo, ready to fit
+    def demo():
+        once(window.files_loaded, lambda ok: later(lambda: (shot("01_demo_loaded.png"),
+                                                             next_step())))
+        window.open_demo()
+
+    # 2. a fit converging (screenshot mid-run), 3. the deviation map when it is done
+    def converging():
+        def on_snapshot(snapshot):
+            if snapshot.iteration >= 120:
+                window.controller.snapshot_shown.disconnect(on_snapshot)
+                shot("02_fit_converging.png")
+        window.controller.snapshot_shown.connect(on_snapshot)
+        once(window.controller.fit_finished, lambda snapshot: later(deviation_map))
+        window.controller.start()
+
+    def deviation_map():
+        window.set_layer_visible("surface", False)
+        window.set_layer_visible("knot_lines", False)
+        later(lambda: (shot("03_deviation_map.png"), next_step()))
+
+    # 4. multi-patch offsets of the paper's turbine blade (two patches sharing an edge)
+    def offsets():
+        patches = [PAPER_DATA / "offset_surfaces" / f"turbine_blade_patch{k}.json" for k in (0, 1)]
+        if not all(p.is_file() for p in patches):
+            print("the paper's turbine blade data is not here: no offset screenshot")
+            next_step()
+            return
+        window.set_layer_visible("surface", True)
+        window.set_layer_visible("knot_lines", True)
+
+        def loaded(ok):
+            def close_up(ok):
+                # the blade is 15 times longer than wide: zoom on the middle, where the two
+                # patches (blue, green) and their offsets (orange, red) meet
+                camera = window.scene.plotter.camera
+                camera.elevation -= 30.0  # from below: the offset (orange, red) under the blade
+                camera.azimuth += 20.0
+                window.scene.plotter.reset_camera(render=False)
+                camera.zoom(2.0)
+                later(lambda: (shot("04_multipatch_offset.png"), next_step()), 600)
+            once(window.offsets_updated, close_up)
+            window.document.edit_settings("Offsets", offset_distance=1.0, show_offsets=True)
+        once(window.files_loaded, loaded)
+        window.open_files([str(p) for p in patches])
+
+    # 5. a 2D curve fit
+    def curve():
+        window.document.edit_settings("Offsets", show_offsets=False)
+
+        def loaded(ok):
+            window.document.edit_settings("Curve", control_points_u=8, iterations=400)
+            window.set_layer_visible("control_net", True)
+            once(window.controller.fit_finished, lambda snapshot: later(lambda: (
+                shot("05_curve_fit.png"), next_step())))
+            window.controller.start()
+        once(window.files_loaded, loaded)
+        window.open_files([str(curve_cloud(scratch / "sine_curve.xyz"))])
+
+    steps.extend([converging, offsets, curve])
+    window.controller.fit_failed.connect(lambda message: failures.append(message))
+    demo()
+    qapp.exec()
+    for message in failures:
+        print(f"failed: {message}", file=sys.stderr)
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
