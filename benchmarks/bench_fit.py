@@ -5,7 +5,7 @@ Run: ``python benchmarks/bench_fit.py [--sizes 10000 100000 1000000] [--iteratio
 Ours: :func:`nurbs_core.fit.iter_fit` with the default loss (chamfer + 0.1 laplacian +
 10 hausdorff, plus the foot-point term p2s with parameter correction), a 12 x 12 bicubic surface
 and a 64 x 64 evaluation grid. The KD-tree over the cloud is built once; at most ``batch_size``
-(65,536) cloud points enter each iteration's cloud -> surface terms.
+(32,768) cloud points enter each iteration's cloud -> surface terms.
 Baseline (same run, same surface and grid): two-sided Chamfer over all points with nearest
 neighbours from dense ``torch.cdist`` blocks of 8,192 cloud points x 4,096 samples, forward +
 backward + an Adam step (one term, so it does less than ours per iteration).

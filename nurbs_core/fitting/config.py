@@ -62,7 +62,7 @@ class FitConfig:
     momentum: float = 0.9
     lr_schedule: str = "plateau"
     correction_interval: int = 5
-    batch_size: int = 65536
+    batch_size: int = 32768
     refinements: int = 0
     threads: int | None = None
 
