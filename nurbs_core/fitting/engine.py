@@ -82,6 +82,7 @@ class _Run:
         self.rollbacks = 0
         self.pending_message: str | None = None
         self.stages_done = 0
+        self.loss_scale: float | None = None
 
     # ---------------------------------------------------------------------------------------
     def _setup(self, geometry):
@@ -128,6 +129,7 @@ class _Run:
         self._make_optimizer()
 
     def _make_optimizer(self):
+        self.loss_scale = None
         config, leaves, lr = self.config, self.model.parameters(), self.learning_rate
         if self.variable_projection:
             leaves = [leaf for leaf in leaves if leaf is not self.model.control_points]
@@ -312,8 +314,15 @@ class _Run:
                     if not holder:
                         holder["total"], holder["terms"] = total.detach(), {
                             k: v.detach() for k, v in terms.items()}
-                    if torch.isfinite(total):
-                        total.backward()
+                    if not torch.isfinite(total):
+                        return total
+                    if config.optimizer == "lbfgs":
+                        # L-BFGS skips curvature pairs with y.s below an absolute 1e-10, which a
+                        # tight fit's tiny loss never reaches: optimise loss / (stage's first loss)
+                        if self.loss_scale is None:
+                            self.loss_scale = max(float(total.detach()), 1e-300)
+                        total = total / self.loss_scale
+                    total.backward()
                     return total
 
                 if config.optimizer == "lbfgs":
