@@ -8,6 +8,7 @@ controller's worker thread; this module only touches widgets, on the GUI thread.
 
 from __future__ import annotations
 
+import gc
 import importlib.util
 import logging
 import math
@@ -48,6 +49,18 @@ log = logging.getLogger("app")
 MAX_RECENT = 10
 OFFSET_FIELDS = {"offset_distance", "constrain_shared_edges", "show_offsets"}
 SESSION_FILTER = "NURBS Studio session (*.json)"
+
+
+def freeze_long_lived_objects():
+    """Move everything alive now (torch, VTK, Qt and their modules) out of the garbage collector's
+    reach.
+
+    A full (generation 2) collection otherwise walks all of those objects with the GIL held: we
+    measured 270 ms in the GUI thread and 690 ms in the fit worker, each a frozen event loop. Only
+    objects created later are scanned after ``gc.freeze()``.
+    """
+    gc.collect()
+    gc.freeze()
 
 
 def _changed_fields(old: FitSettings, new: FitSettings) -> set[str]:
@@ -99,6 +112,7 @@ class MainWindow(QMainWindow):
         app = QApplication.instance()
         if app is not None:
             app.aboutToQuit.connect(self.shutdown)
+        freeze_long_lived_objects()
 
     # --- construction ----------------------------------------------------------------------------
     @staticmethod

@@ -44,6 +44,20 @@ OFFSET_COLORS = ("#f2a33a", "#e8743b", "#f2c94c", "#d9822b")
 LAYERS = ("cloud", "surface", "curve", "control_net", "knot_lines", "patches", "offsets")
 
 
+def nice_ceiling(value: float) -> float:
+    """Smallest of 1, 2, 2.5, 5 (times a power of ten) not below ``value`` (1.0 for <= 0).
+
+    The colour scale's top: round numbers label well and change rarely while a fit converges.
+    """
+    if not np.isfinite(value) or value <= 0:
+        return 1.0
+    power = 10.0 ** np.floor(np.log10(value))
+    for step in (1.0, 2.0, 2.5, 5.0, 10.0):
+        if step * power >= value * (1 - 1e-12):
+            return float(step * power)
+    return float(10.0 * power)
+
+
 def quad_faces(rows: int, columns: int) -> np.ndarray:
     """VTK face array of the quads of a rows x columns point grid (row-major)."""
     index = np.arange(rows * columns).reshape(rows, columns)
@@ -173,8 +187,9 @@ class SceneView(QObject):
         if valid:
             mesh.point_data[DEVIATION_TITLE][:] = deviation
             mesh.point_data[DEVIATION_TITLE] = mesh.point_data[DEVIATION_TITLE]  # mark modified
-            top = float(np.max(deviation))
-            actor.mapper.scalar_range = (0.0, top if top > 0 else 1.0)
+            top = nice_ceiling(float(np.max(deviation)))
+            if actor.mapper.scalar_range[1] != top:  # relabelling the bar costs a slow frame
+                actor.mapper.scalar_range = (0.0, top)
         self._update_scalar_bar()
         if not valid:
             self._stats_text = ""

@@ -8,6 +8,7 @@ point's deviation from the fitted shape. Nothing here touches Qt widgets, VTK or
 
 from __future__ import annotations
 
+import gc
 import os
 import sys
 import threading
@@ -151,6 +152,10 @@ class FitWorker(QObject):
 
     def _run(self, request: FitRequest):
         from nurbs_core.fit import FitConfig, deviation, iter_fit
+
+        # the engine's modules (imported above on the first run) are long-lived: keep the
+        # garbage collector's full passes, which hold the GIL, from walking them again
+        gc.freeze()
 
         settings = request.settings
         config = FitConfig(**settings.fit_fields())
