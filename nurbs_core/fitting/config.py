@@ -150,7 +150,9 @@ class FitSnapshot:
 
     geometry: ``NurbsSurface.numpy()`` / ``NurbsCurve.numpy()`` dict in the input's coordinates.
     losses: one dict per iteration since the previous snapshot,
-    ``{"iteration": k, "total": value, <term>: value, ...}`` (normalised units, see FitConfig).
+    ``{"iteration": k, "total": value, <term>: value, ...}`` (normalised units, see FitConfig);
+    an iteration that was rolled back (non-finite or exploding loss) has no entry, and the
+    snapshot's ``message`` says what happened.
     status: one of "running", "paused", "converged", "stopped", "budget", "diverged", "failed".
     """
 

@@ -27,17 +27,23 @@ def surface_gauss_newton(surface: NurbsSurface, points: torch.Tensor, u: torch.T
     """Refine foot-point parameters u, v (M,) of points (M, 3) by damped Gauss-Newton steps.
 
     Each step solves ``(J^T J + mu I) delta = -J^T r`` with ``J = [S_u, S_v]``, ``r = S - Q``,
-    clamps to the domain and keeps the new parameters only where the distance decreased.
-    No gradient."""
+    clamps to the domain and keeps the new parameters only where the distance decreased. Points
+    whose step was rejected or negligible drop out of later steps (most converge in two or
+    three), so the work shrinks as the projection converges. No gradient."""
     (u0, u1), (v0, v1) = _domain_of(surface.knots_u, surface.degree_u), _domain_of(
         surface.knots_v, surface.degree_v)
     args = (surface.control_points.detach(), surface.weights.detach(), surface.knots_u.detach(),
             surface.knots_v.detach(), surface.degree_u, surface.degree_v)
+    negligible = 1e-10 * max(u1 - u0, v1 - v0)
+    u, v = u.clone(), v.clone()
     with torch.no_grad():
         s, s_u, s_v = surface_derivatives(*args, u, v)
         residual = s - points
         dist2 = residual.pow(2).sum(-1)
+        active = torch.arange(u.shape[0], device=u.device)
         for _ in range(steps):
+            if active.numel() == 0:
+                break
             a = (s_u * s_u).sum(-1)
             b = (s_u * s_v).sum(-1)
             c = (s_v * s_v).sum(-1)
@@ -47,22 +53,20 @@ def surface_gauss_newton(surface: NurbsSurface, points: torch.Tensor, u: torch.T
             a, c = a + mu, c + mu
             det = a * c - b * b
             det = torch.where(det.abs() > 0, det, torch.full_like(det, torch.finfo(det.dtype).eps))
-            du = -(c * g_u - b * g_v) / det
-            dv = -(a * g_v - b * g_u) / det
-            new_u = (u + du).clamp(u0, u1)
-            new_v = (v + dv).clamp(v0, v1)
+            cur_u, cur_v = u[active], v[active]
+            new_u = (cur_u - (c * g_u - b * g_v) / det).clamp(u0, u1)
+            new_v = (cur_v - (a * g_v - b * g_u) / det).clamp(v0, v1)
             s_new, s_u_new, s_v_new = surface_derivatives(*args, new_u, new_v)
-            r_new = s_new - points
+            r_new = s_new - points[active]
             d_new = r_new.pow(2).sum(-1)
             better = d_new < dist2
-            keep = better.unsqueeze(-1)
-            u = torch.where(better, new_u, u)
-            v = torch.where(better, new_v, v)
-            s = torch.where(keep, s_new, s)
-            s_u = torch.where(keep, s_u_new, s_u)
-            s_v = torch.where(keep, s_v_new, s_v)
-            residual = torch.where(keep, r_new, residual)
-            dist2 = torch.where(better, d_new, dist2)
+            u[active] = torch.where(better, new_u, cur_u)
+            v[active] = torch.where(better, new_v, cur_v)
+            moved = (new_u - cur_u).abs() + (new_v - cur_v).abs() > negligible
+            going = better & moved
+            active = active[going]
+            s_u, s_v = s_u_new[going], s_v_new[going]
+            residual, dist2 = r_new[going], d_new[going]
     return u, v
 
 
