@@ -233,7 +233,8 @@ def _from_initial(problem: Problem, config: FitConfig, initial):
 
 def conform(geometry, config: FitConfig):
     """Bring ``geometry`` to the config's degrees and control counts: exactly when degree elevation
-    gets there, otherwise by least squares on dense samples of it (non-rational result)."""
+    and knot insertion (midpoints of the widest spans) get there, otherwise by least squares on
+    dense samples of it (non-rational result)."""
     is_curve = isinstance(geometry, NurbsCurve)
     target_degrees = (config.degree_u,) if is_curve else (config.degree_u, config.degree_v)
     target_counts = ((config.control_points_u,) if is_curve
@@ -247,8 +248,8 @@ def conform(geometry, config: FitConfig):
         elevated = (geometry.elevate_degree(raise_by[0]) if is_curve
                     else geometry.elevate_degree(*raise_by))
         new_counts = ((elevated.n_control_points,) if is_curve else tuple(elevated.shape))
-        if new_counts == target_counts:
-            return elevated
+        if all(n <= t for n, t in zip(new_counts, target_counts, strict=True)):
+            return _insert_to_counts(elevated, target_counts)
     # least squares on samples of the initial geometry
     density = [max(4 * c, 64) for c in target_counts]
     if is_curve:
@@ -264,3 +265,22 @@ def conform(geometry, config: FitConfig):
     return least_squares_fit(points.reshape(-1, 3), np.stack([uu.ravel(), vv.ravel()], -1),
                              config.degree_u, config.degree_v, config.control_points_u,
                              config.control_points_v)
+
+
+def _widest_span_midpoint(knots: torch.Tensor) -> float:
+    breaks = np.unique(knots.detach().cpu().double().numpy())
+    widest = int(np.argmax(np.diff(breaks)))
+    return 0.5 * (breaks[widest] + breaks[widest + 1])
+
+
+def _insert_to_counts(geometry, target_counts):
+    """Exact knot insertion until the control counts reach ``target_counts`` (each >= current)."""
+    if isinstance(geometry, NurbsCurve):
+        while geometry.n_control_points < target_counts[0]:
+            geometry = geometry.insert_knot(_widest_span_midpoint(geometry.knots))
+        return geometry
+    while geometry.shape[0] < target_counts[0]:
+        geometry = geometry.insert_knot(u=_widest_span_midpoint(geometry.knots_u))
+    while geometry.shape[1] < target_counts[1]:
+        geometry = geometry.insert_knot(v=_widest_span_midpoint(geometry.knots_v))
+    return geometry

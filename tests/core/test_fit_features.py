@@ -121,7 +121,7 @@ def test_refinement_stages_grow_the_net_and_lower_the_error():
     assert refined.statistics["paired_rms"] < 0.7 * plain.statistics["paired_rms"]
 
 
-def test_initial_geometry_is_converted_exactly_when_degree_elevation_reaches_the_config():
+def test_initial_geometry_is_converted_exactly_by_elevation_and_knot_insertion():
     points, params = _sine_grid(20)
     # 4 control points of degree 2 (one interior knot) elevate to exactly 6 of degree 3
     quadratic = least_squares_fit(points, params, 2, 2, 4, 4)
@@ -132,11 +132,19 @@ def test_initial_geometry_is_converted_exactly_when_degree_elevation_reaches_the
     t = torch.linspace(-5, 5, 9, dtype=torch.float64)
     assert torch.allclose(elevated.evaluate(t, t.flip(0)), quadratic.evaluate(t, t.flip(0)),
                           atol=1e-10)
-    # other counts: a least-squares approximation of the initial surface
-    other = list(iter_fit(points, FitConfig(loss="mse", control_points_u=9, control_points_v=7,
+    # more control points: knot insertion after the elevation, still exact
+    more = list(iter_fit(points, FitConfig(loss="mse", control_points_u=9, control_points_v=7,
+                                           iterations=0), initial=quadratic,
+                         parameters=params))[-1]
+    refined = NurbsSurface.from_numpy(more.geometry)
+    assert refined.shape == (9, 7)
+    assert torch.allclose(refined.evaluate(t, t.flip(0)), quadratic.evaluate(t, t.flip(0)),
+                          atol=1e-10)
+    # fewer control points than elevation gives: a least-squares approximation
+    fewer = list(iter_fit(points, FitConfig(loss="mse", control_points_u=4, control_points_v=5,
                                             iterations=0), initial=quadratic,
                           parameters=params))[-1]
-    assert other.geometry["control_points"].shape == (9, 7, 3)
+    assert fewer.geometry["control_points"].shape == (4, 5, 3)
 
 
 def test_continue_from_a_previous_result_does_not_start_over():
