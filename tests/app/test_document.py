@@ -66,6 +66,37 @@ def test_planar_cloud_fits_a_2d_curve(qtbot, window, tmp_path):
     assert window.scene._meshes["surface"].n_points == 0
 
 
+def test_helix_fits_a_3d_curve(qtbot, window, tmp_path):
+    angle = np.random.default_rng(2).uniform(0.0, 4.0 * np.pi, 400)
+    points = np.column_stack([np.cos(angle), np.sin(angle), 0.15 * angle])
+    path = tmp_path / "helix.xyz"
+    np.savetxt(path, points)
+    open_by_drop(qtbot, window, [path])
+    assert window.document.settings.kind == "surface"  # not planar: the user picks a curve
+    window.fit_panel.kind.setCurrentIndex(window.fit_panel.kind.findData("curve"))
+    assert window.document.settings.kind == "curve"
+    assert not window.fit_panel.degree_v.isEnabled()
+    window.document.edit_settings("quick", control_points_u=12, iterations=100000)
+    _fit_briefly(qtbot, window, snapshots=2)
+    assert window.document.fitted["control_points"].shape == (12, 3)
+
+
+def test_missing_demo_file_is_regenerated(tmp_path, monkeypatch):
+    from app import demo
+    from nurbs_core.io import load_points
+
+    monkeypatch.setattr(demo, "DEMO_FILE", tmp_path / "demo" / "sin_cos.xyz")
+    path = demo.demo_path()
+    assert path == tmp_path / "demo" / "sin_cos.xyz" and path.is_file()
+    points = load_points(path).points
+    assert points.shape == (demo.DEMO_POINT_COUNT, 3)
+    residual = points[:, 2] - np.sin(points[:, 0]) * np.cos(points[:, 1])
+    assert abs(residual.std() - demo.DEMO_NOISE) < 0.2 * demo.DEMO_NOISE
+    # deterministic: the regenerated cloud is the one shipped in resources/
+    shipped = np.loadtxt(demo.RESOURCES / "demo" / "sin_cos.xyz")
+    np.testing.assert_array_equal(points, shipped)
+
+
 def test_offsets_of_the_turbine_blade_patches(qtbot, window, paper_data):
     patches = [paper_data / "offset_surfaces" / f"turbine_blade_patch{k}.json" for k in (0, 1)]
     open_by_drop(qtbot, window, patches)

@@ -28,6 +28,7 @@ def test_drop_fit_pause_edit_export_close(qtbot, window, ply_cloud, tmp_path, mo
     open_by_drop(qtbot, window, [path])
     assert len(window.document.targets) == 1
     np.testing.assert_allclose(window.document.targets[0].points, points, atol=1e-6)
+    assert window.recent_files() == [str(path)]
 
     # an empty scene first: the pixels of the background alone
     for layer in ("cloud", "surface", "knot_lines"):
