@@ -105,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
             def close_up(ok):
                 # the blade is 15 times longer than wide: zoom on the middle, where the two
                 # patches (blue, green) and their offsets (orange, red) meet
+                window.offset_dock.raise_()  # show the offset controls next to the result
                 camera = window.scene.plotter.camera
                 camera.elevation -= 30.0  # from below: the offset (orange, red) under the blade
                 camera.azimuth += 20.0
@@ -119,6 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     # 5. a 2D curve fit
     def curve():
         window.document.edit_settings("Offsets", show_offsets=False)
+        window.fit_dock.raise_()
 
         def loaded(ok):
             window.document.edit_settings("Curve", control_points_u=8, iterations=400)

@@ -306,9 +306,10 @@ class SceneView(QObject):
         """Frame everything visible, looking at the shape's broad side.
 
         The view comes from the principal axes of the visible points: a planar (2D) cloud is seen
-        straight on (from +z, x to the right, when it lies in the xy plane); anything else is seen
-        from 50 degrees above its best-fit plane with its longest axis across the screen, so long
-        thin parts (a blade) fill the view instead of running diagonally through it.
+        straight on (from +z, x to the right, when it lies in the xy plane); a compact height field
+        keeps the isometric view; anything else is seen from 50 degrees above its best-fit plane
+        with its longest axis across the screen, so long thin parts (a blade) fill the view
+        instead of running diagonally through it.
         """
         points = self._visible_points()
         self.plotter.view_isometric(render=False)
@@ -324,6 +325,10 @@ class SceneView(QObject):
                     self.request_render()
                     return
                 direction, up = normal, axes[1]
+            elif abs(normal[2]) > 0.8 and spread[1] > 0.5 * spread[0]:
+                self.plotter.reset_camera(render=False)  # a compact height field: isometric
+                self.request_render()
+                return
             else:
                 elevation = np.radians(VIEW_ELEVATION_DEG)
                 direction = np.sin(elevation) * normal - np.cos(elevation) * axes[1]
