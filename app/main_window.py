@@ -548,11 +548,8 @@ class MainWindow(QMainWindow):
     @Slot(object)
     def _on_fit_finished(self, snapshot: DisplaySnapshot):
         self.loss_plot.flush()
-        self.document.fitted_changed.disconnect(self._on_fitted_changed)
-        try:
-            self.document.set_fitted(snapshot.geometry)  # tree and tables, no re-tessellation
-        finally:
-            self.document.fitted_changed.connect(self._on_fitted_changed)
+        # already on screen: store it without the re-tessellation a notifying change triggers
+        self.document.set_fitted(snapshot.geometry, notify=False)
         self._rebuild_tree()
         self.knot_panel.show_state(self.document.settings, snapshot.geometry)
         text = f"Fit {snapshot.status} after {snapshot.iteration} iterations"

@@ -151,3 +151,43 @@ def test_knot_table_edit_undo_and_validation(qtbot, window, ply_cloud):
     # a grid change drops knots that no longer fit
     window.fit_panel.control_points_u.setValue(9)
     assert window.document.settings.knots_u is None
+
+
+def test_step_export_reads_back_through_opencascade(qtbot, window, ply_cloud, tmp_path):
+    pytest.importorskip("OCP")
+    from nurbs_core.io import load
+
+    open_by_drop(qtbot, window, [ply_cloud[0]])
+    window.document.edit_settings("quick", **QUICK)
+    _fit_briefly(qtbot, window)
+    path = tmp_path / "fit.step"
+    with qtbot.waitSignal(window.export_finished, timeout=60000) as blocker:
+        window.export_to(str(path))
+    assert blocker.args == [str(path), True], window.last_error
+    surfaces = load(path)  # read by OpenCASCADE's STEP reader
+    assert len(surfaces) == 1
+    np.testing.assert_allclose(surfaces[0].control_points.numpy(),
+                               window.document.fitted["control_points"], atol=1e-9)
+
+
+def test_export_menu_says_how_to_install_the_cad_extra(qtbot, tmp_path, monkeypatch):
+    import importlib.util
+
+    from PySide6.QtCore import QSettings
+
+    from app.main_window import MainWindow
+
+    real_find_spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "OCP" else real_find_spec(name, *a))
+    window = MainWindow(QSettings(str(tmp_path / "s.ini"), QSettings.Format.IniFormat))
+    qtbot.addWidget(window)
+    try:
+        for suffix in (".step", ".iges"):
+            assert 'pip install "nurbs-studio[cad]"' in window.export_actions[suffix].text()
+        with qtbot.waitSignal(window.error_shown, timeout=5000) as blocker:
+            window.export_actions[".step"].trigger()
+        assert "pip install" in blocker.args[0]
+        assert "pip install" not in window.export_actions[".3dm"].text()
+    finally:
+        window.close()
