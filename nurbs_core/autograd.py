@@ -175,66 +175,80 @@ class SurfaceGridPoints(torch.autograd.Function):
 
     The Jacobian of a grid evaluation is ``kron(N_u, N_v)``; each factor is banded (p + 1 non-zeros
     per row, placed by the stored spans). Instead of scattering ``(p+1)(q+1)`` products per point
-    the two factors are applied one after the other: ``H = N_u Pw N_v^T`` (forward) and
-    ``dPw = N_u^T dH N_v`` (backward). The banded factors are held as small dense (M x n) matrices
-    so that BLAS does both products; the dense (Mu Mv x n m) Jacobian is never formed. Stage 2 runs
-    channel-first (4 Mu x m times m x Mv, one matrix product); the result is written channel-last.
+    the two factors are applied one after the other: ``H = N_u (Pw N_v^T)`` forward and
+    ``dPw = (N_u^T dH) N_v`` backward. The banded factors are held as small dense (M x n) matrices
+    so that BLAS does the products; the dense (Mu Mv x n m) Jacobian is never formed. The small
+    stage (along v, size n x Mv) comes first, so the large product writes the (Mu, Mv, 4)
+    homogeneous points directly in their final channel-last layout.
     """
 
     @staticmethod
     def forward(ctx, control_points, weights, knots_u, knots_v, dense_u, dense_v, d_basis_u,
                 d_basis_v, span_u, span_v, degree_u, degree_v):
-        control_w, batch_shape = _homogeneous(control_points, weights, 2)
-        batch, n, m, _ = control_w.shape
+        # homogeneous control points built column-major (B, m, n, 4): the layout stage 1 wants
+        by_column, batch_shape = _homogeneous(control_points.transpose(-3, -2),
+                                              weights.transpose(-2, -1), 2)
+        batch, m, n, _ = by_column.shape
         size_u, size_v = dense_u.shape[1], dense_v.shape[1]
-        # stage 1, all four channels in one product: (Bb, Mu, n) @ (B, n, 4m) -> (B, Mu, m, 4)
-        partial = torch.matmul(dense_u, control_w.view(batch, n, m * 4))
-        partial = partial.view(batch, size_u, m, 4).permute(0, 3, 1, 2).reshape(batch, 4 * size_u, m)
-        # stage 2: (B, 4 Mu, m) @ (Bb, m, Mv) -> channel-first homogeneous points (B, 4, Mu, Mv)
-        homogeneous = torch.matmul(partial, dense_v.transpose(-1, -2)).view(batch, 4, size_u, size_v)
-        inv_w = homogeneous[:, 3].reciprocal()  # (B, Mu, Mv)
-        points = homogeneous.new_empty(batch, size_u, size_v, 3)
-        torch.mul(homogeneous[:, :3], inv_w.unsqueeze(1), out=points.permute(0, 3, 1, 2))
-        ctx.save_for_backward(control_points, weights, control_w, dense_u, dense_v, d_basis_u,
-                              d_basis_v, span_u, span_v, points, inv_w, partial)
+        # stage 1 (small): Q[i, b, c] = sum_j Pw[i, j, c] N_v[b, j], split into xyz and w
+        partial = torch.matmul(dense_v, by_column.view(batch, m, n * 4))  # (B, Mv, n*4)
+        partial = partial.view(batch, size_v, n, 4).transpose(1, 2)  # (B, n, Mv, 4)
+        partial_xyz = partial[..., :3].reshape(batch, n, size_v * 3)
+        partial_w = partial[..., 3].reshape(batch, n, size_v)
+        # stage 2 (large): H[a, b, c] = sum_i N_u[a, i] Q[i, b, c]; the xyz part comes out
+        # contiguous in its final (Mu, Mv, 3) layout, the weights as their own (Mu, Mv) plane
+        inv_w = torch.matmul(dense_u, partial_w).reciprocal_()  # (B, Mu, Mv)
+        points = torch.matmul(dense_u, partial_xyz).view(batch, size_u, size_v, 3)
+        points.mul_(inv_w.unsqueeze(-1))
+        ctx.save_for_backward(control_points, weights, by_column, dense_u, dense_v, d_basis_u,
+                              d_basis_v, span_u, span_v, points, inv_w, partial_xyz, partial_w)
         ctx.degrees = (degree_u, degree_v)
-        ctx.n_knots = (knots_u.shape[-1], knots_v.shape[-1])
         ctx.knot_shapes = (knots_u.shape, knots_v.shape)
         return points.view(*batch_shape, size_u, size_v, 3)
 
     @staticmethod
     def backward(ctx, grad_points):
-        (control_points, weights, control_w, dense_u, dense_v, d_basis_u, d_basis_v, span_u,
-         span_v, points, inv_w, partial) = ctx.saved_tensors
+        (control_points, weights, by_column, dense_u, dense_v, d_basis_u, d_basis_v, span_u,
+         span_v, points, inv_w, partial_xyz, partial_w) = ctx.saved_tensors
         degree_u, degree_v = ctx.degrees
-        batch, n, m, _ = control_w.shape
+        batch, m, n, _ = by_column.shape
         size_u, size_v = dense_u.shape[1], dense_v.shape[1]
-        grad_points = grad_points.reshape(points.shape)
-        grad_h = points.new_empty(batch, 4, size_u, size_v)  # channel-first
-        torch.mul(grad_points.permute(0, 3, 1, 2), inv_w.unsqueeze(1), out=grad_h[:, :3])
-        # d/dw of x / w is -(g . S) / w
-        torch.mul((grad_points * points).sum(-1), inv_w.neg(), out=grad_h[:, 3])
-        grad_h = grad_h.view(batch, 4 * size_u, size_v)
-        grad_partial = torch.matmul(grad_h, dense_v)  # (B, 4 Mu, m)
-        per_row = grad_partial.view(batch, 4, size_u, m).permute(0, 2, 3, 1).reshape(
-            batch, size_u, m * 4)
-        grad_cp = grad_w = grad_ku = grad_kv = None
-        if ctx.needs_input_grad[0] or ctx.needs_input_grad[1]:
-            grad_cw = torch.matmul(dense_u.transpose(-1, -2), per_row)  # (B, n, 4m)
-            grad_cp, grad_w = _split_homogeneous_grad(grad_cw, control_points, weights)
+        # through the division: dL/dH_xyz = g / w, dL/dH_w = -(g . S) / w
+        grad_xyz = grad_points.reshape(points.shape) * inv_w.unsqueeze(-1)
+        grad_w = torch.mv((grad_xyz * points).view(-1, 3), points.new_ones(3)).neg_()
+        grad_xyz = grad_xyz.view(batch, size_u, size_v * 3)
+        grad_w = grad_w.view(batch, size_u, size_v)
+        grad_cp = grad_w_out = grad_ku = grad_kv = None
+        need_control = ctx.needs_input_grad[0] or ctx.needs_input_grad[1]
+        need_v = ctx.needs_input_grad[3] and d_basis_v is not None
+        if need_control or need_v:
+            # dL/dQ = N_u^T dL/dH, reassembled as (B, Mv, n*4) for the product with N_v
+            dense_ut = dense_u.transpose(-1, -2)
+            grad_q = torch.cat([torch.matmul(dense_ut, grad_xyz).view(batch, n, size_v, 3),
+                                torch.matmul(dense_ut, grad_w).unsqueeze(-1)], dim=-1)
+            by_row = grad_q.transpose(1, 2).reshape(batch, size_v, n * 4)
+        if need_control:
+            grad_cw = torch.matmul(dense_v.transpose(-1, -2), by_row)  # (B, m, n*4)
+            grad_cp, grad_w_out = _split_homogeneous_grad(
+                grad_cw, control_points.transpose(-3, -2), weights.transpose(-2, -1))
+            grad_cp, grad_w_out = grad_cp.transpose(-3, -2), grad_w_out.transpose(-2, -1)
         shared = dense_u.shape[0] == 1 and batch > 1
         if ctx.needs_input_grad[2] and d_basis_u is not None:
-            # dL/dN_u[a, i] = sum_{j, c} dL/dpartial[a, j, c] Pw[i, j, c]; keep the local entries
-            grad_dense_u = torch.matmul(per_row, control_w.view(batch, n, m * 4).transpose(-1, -2))
+            # dL/dN_u[a, i] = sum_{b, c} dL/dH[a, b, c] Q[i, b, c]; keep the p + 1 local entries
+            grad_dense_u = (torch.matmul(grad_xyz, partial_xyz.transpose(-1, -2))
+                            + torch.matmul(grad_w, partial_w.transpose(-1, -2)))  # (B, Mu, n)
             grad_dense_u = grad_dense_u.sum(0, keepdim=True) if shared else grad_dense_u
             grad_bu = torch.gather(grad_dense_u, 2, _local_index(span_u, degree_u))
-            grad_ku = _scatter_knot_grad(grad_bu, d_basis_u, span_u, degree_u, ctx.n_knots[0])
+            grad_ku = _scatter_knot_grad(grad_bu, d_basis_u, span_u, degree_u,
+                                         ctx.knot_shapes[0][-1])
             grad_ku = _fit_knot_grad(grad_ku, ctx.knot_shapes[0])
-        if ctx.needs_input_grad[3] and d_basis_v is not None:
-            # dL/dN_v[b, j] = sum_{c, a} dL/dH[c, a, b] partial[c, a, j]
-            grad_dense_v = torch.matmul(grad_h.transpose(-1, -2), partial)  # (B, Mv, m)
+        if need_v:
+            # dL/dN_v[b, j] = sum_{i, c} dL/dQ[i, b, c] Pw[i, j, c]
+            grad_dense_v = torch.matmul(by_row, by_column.view(batch, m, n * 4).transpose(-1, -2))
             grad_dense_v = grad_dense_v.sum(0, keepdim=True) if shared else grad_dense_v
             grad_bv = torch.gather(grad_dense_v, 2, _local_index(span_v, degree_v))
-            grad_kv = _scatter_knot_grad(grad_bv, d_basis_v, span_v, degree_v, ctx.n_knots[1])
+            grad_kv = _scatter_knot_grad(grad_bv, d_basis_v, span_v, degree_v,
+                                         ctx.knot_shapes[1][-1])
             grad_kv = _fit_knot_grad(grad_kv, ctx.knot_shapes[1])
-        return grad_cp, grad_w, grad_ku, grad_kv, None, None, None, None, None, None, None, None
+        return (grad_cp, grad_w_out, grad_ku, grad_kv, None, None, None, None, None, None, None,
+                None)
