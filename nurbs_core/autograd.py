@@ -53,8 +53,10 @@ def _split_homogeneous_grad(grad_control_w, control_points, weights):
 def _rational_backward(grad_points: torch.Tensor, points: torch.Tensor, inv_w: torch.Tensor):
     """dL/d(homogeneous sum) from dL/d(points), where ``points = h[:d] / h[d]``: (..., d+1)."""
     grad_xyz = grad_points * inv_w
-    grad_w = -(grad_xyz * points).sum(-1, keepdim=True)
-    return torch.cat([grad_xyz, grad_w], dim=-1)
+    dim = points.shape[-1]
+    # row-wise dot product as a matrix-vector product: much faster than a sum over a size-3 axis
+    grad_w = torch.mv((grad_xyz * points).reshape(-1, dim), points.new_ones(dim)).neg_()
+    return torch.cat([grad_xyz, grad_w.view(*points.shape[:-1], 1)], dim=-1)
 
 
 def _scatter_knot_grad(grad_basis, d_basis, span, degree, n_knots):
