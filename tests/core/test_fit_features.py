@@ -223,3 +223,25 @@ def test_deviation_of_a_curve_matches_the_circle_distance():
     angle, radius = gen.uniform(0.05, 1.5, 200), gen.uniform(0.5, 1.5, 200)
     points = np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
     np.testing.assert_allclose(deviation(arc, points), np.abs(radius - 1), atol=1e-9)
+
+
+def test_free_knots_on_a_curve_beat_the_fixed_knot_optimum():
+    t = np.linspace(0, 4 * np.pi, 300)
+    points = np.stack([np.cos(t), np.sin(t), 0.1 * t], -1)
+    optimum = least_squares_fit(points, t, 3, None, 8, None, kind="curve")
+    best = ((optimum.evaluate(torch.as_tensor(t)).numpy() - points) ** 2).sum(-1).mean()
+    config = FitConfig(kind="curve", control_points_u=8, loss="mse", free_knots=True,
+                       init="least_squares", iterations=200, learning_rate=0.02)
+    result = fit(points, config, parameters=t)
+    assert result.statistics["paired_rms"] ** 2 < 0.5 * best
+    _assert_valid_clamped(result.geometry.knots.numpy(), 3, 0.0, 4 * np.pi)
+
+
+def test_float32_unordered_fit():
+    gen = np.random.default_rng(0)
+    xy = gen.uniform(-1, 1, (3000, 2))
+    points = np.column_stack([xy, np.sin(xy[:, 0])])
+    result = fit(points, FitConfig(dtype="float32", iterations=50, control_points_u=6,
+                                   control_points_v=6))
+    assert result.geometry.dtype == torch.float32
+    assert result.statistics["mean"] < 0.03
