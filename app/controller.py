@@ -50,6 +50,8 @@ class FitController(QObject):
         self._latest: DisplaySnapshot | None = None
         self._pending_losses: list[dict] = []
         self._restart_pending = False
+        self._restart_paused = False
+        self._last_loss = float("nan")
         self._rate_history: deque[tuple[float, int]] = deque()
         self._is_shut_down = False
         self.snapshots_shown = 0  # for tests and the status bar
@@ -209,7 +211,7 @@ class FitController(QObject):
             final = None  # this run produced no snapshot (it failed at once)
         if self._restart_pending:
             self._restart_pending = False
-            self.start(paused=getattr(self, "_restart_paused", False))
+            self.start(paused=self._restart_paused)
             return
         self._set_state("idle")
         if final is not None:
@@ -238,7 +240,7 @@ class FitController(QObject):
             rate = (i1 - i0) / (t1 - t0) if t1 > t0 else 0.0
         if snapshot.losses:
             self._last_loss = float(snapshot.losses[-1]["total"])
-        loss = getattr(self, "_last_loss", float("nan"))
+        loss = self._last_loss
         remaining = (snapshot.iterations - snapshot.iteration) / rate if rate > 0 else float("nan")
         return {"iteration": snapshot.iteration, "iterations": snapshot.iterations, "loss": loss,
                 "rate": rate, "remaining": 0.0 if snapshot.done else remaining,

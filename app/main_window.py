@@ -529,11 +529,10 @@ class MainWindow(QMainWindow):
 
     @Slot(object)
     def _on_snapshot_shown(self, snapshot: DisplaySnapshot):
-        first = self.tree.topLevelItemCount() < 2
         self.scene.show_fit(snapshot.display)
         if snapshot.deviation is not None:
             self.scene.set_deviation(snapshot.deviation, deviation_stats(snapshot.deviation))
-        if first:
+        if not self.tree.shows_fit:  # the first snapshot of a fit: list it in the tree
             self._rebuild_tree()
 
     @Slot(dict)

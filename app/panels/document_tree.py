@@ -20,6 +20,7 @@ class DocumentTree(QTreeWidget):
         super().__init__(parent)
         self._set_layer_visible, self._set_target_visible = set_layer_visible, set_target_visible
         self._updating = False
+        self.shows_fit = False
         self.setHeaderLabels(["Document"])
         self.itemChanged.connect(self._item_changed)
 
@@ -42,6 +43,7 @@ class DocumentTree(QTreeWidget):
                 self._item(clouds, f"{target.name} ({len(target.points)} points)",
                            ("target", index), target.visible, target.path)
             fitted = document.fitted
+            self.shows_fit = fitted is not None
             if fitted is not None:
                 kind = fitted["kind"]
                 label = "Fitted surface" if kind == "surface" else "Fitted curve"

@@ -149,7 +149,8 @@ class SceneView(QObject):
             self._meshes[name].copy_from(mesh)
             return self._meshes[name]
         self._meshes[name] = mesh
-        self._actors[name] = self.plotter.add_mesh(mesh, name=name, reset_camera=False, **style)
+        self._actors[name] = self.plotter.add_mesh(mesh, name=name, reset_camera=False,
+                                                   render=False, **style)
         self._apply_visibility(name)
         return mesh
 
@@ -171,6 +172,7 @@ class SceneView(QObject):
                         scalars=DEVIATION_TITLE, cmap=DEVIATION_COLORMAP, clim=(0.0, 1.0),
                         show_scalar_bar=False)
             self.plotter.add_scalar_bar(DEVIATION_TITLE, mapper=self._actors["cloud"].mapper,
+                                        render=False,
                                         vertical=True, position_x=0.88, position_y=0.12,
                                         height=0.5, width=0.06, fmt="%.3g", color="#222222")
         else:
@@ -265,10 +267,12 @@ class SceneView(QObject):
             if display.kind == "surface":
                 mesh = surface_mesh(display.surface_grid)
                 actor = self.plotter.add_mesh(mesh, name=name, color=colour, opacity=opacity,
+                                              render=False,
                                               reset_camera=False, specular=0.3)
                 actor.prop.interpolation = "phong"
             else:
                 actor = self.plotter.add_mesh(polylines_mesh([display.curve_points]), name=name,
+                                              render=False,
                                               color=colour, line_width=3.0, reset_camera=False)
             actor.SetVisibility(self._visible[group])
             self._extra_meshes[group].append(name)

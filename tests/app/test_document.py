@@ -181,7 +181,8 @@ def test_export_menu_says_how_to_install_the_cad_extra(qtbot, tmp_path, monkeypa
     monkeypatch.setattr(importlib.util, "find_spec",
                         lambda name, *a: None if name == "OCP" else real_find_spec(name, *a))
     window = MainWindow(QSettings(str(tmp_path / "s.ini"), QSettings.Format.IniFormat))
-    qtbot.addWidget(window)
+    window.show()
+    qtbot.waitExposed(window)
     try:
         for suffix in (".step", ".iges"):
             assert 'pip install "nurbs-studio[cad]"' in window.export_actions[suffix].text()

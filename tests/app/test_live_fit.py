@@ -176,17 +176,18 @@ def test_twenty_start_stop_cycles_leave_nothing_behind(qtbot, window, ply_cloud)
     open_by_drop(qtbot, window, [ply_cloud[0]])
     window.document.edit_settings("quick", **QUICK)
     windows_before = len([w for w in QApplication.topLevelWidgets() if w.isVisible()])
-    baseline = None
-    for cycle in range(20):
+    counts = []
+    for _cycle in range(20):
         assert window.controller.start()
         _wait_snapshots(qtbot, window, 1)
         with qtbot.waitSignal(window.controller.fit_finished, timeout=20000):
             window.controller.stop()
         qtbot.waitUntil(lambda: window.controller.state == "idle", timeout=20000)
         assert not window.controller.is_busy()
-        if cycle == 0:
-            baseline = os_threads()  # torch's own pool exists from the first fit on
-    assert os_threads() <= baseline
+        counts.append(os_threads())
+    # torch, llvmpipe and Qt start helper threads lazily during the first runs; after that the
+    # count must stay flat (a thread left behind per cycle would add 17 here)
+    assert counts[-1] <= max(counts[:3]), counts
     assert window.controller.live_timers() == 0
     assert window.jobs.active_count() == 0
     assert len([w for w in QApplication.topLevelWidgets() if w.isVisible()]) == windows_before
