@@ -32,6 +32,11 @@ class FitConfig:
     (mean squared point-to-surface distance, weight 1) is added when the expression has no
     pointwise term. At most ``batch_size`` cloud points are used per iteration (a fresh random
     subset each iteration when the cloud is larger); the KD-tree over the whole cloud is built once.
+    ``pin_boundary`` keeps the boundary control points (and weights) of the starting geometry
+    fixed: pass ``initial`` to iter_fit to prescribe them (the paper's boundary-condition case).
+    ``free_knots`` with known parameters, a pure ``mse`` loss and neither free weights nor pinning
+    solves the control points exactly at every step (variable projection) and lets the optimizer
+    move only the knots; otherwise knots, weights and control points move together.
     ``threads``: torch intra-op threads while the fit runs (process-wide; restored afterwards);
     None leaves torch's setting alone. One thread is fastest for small fits and on busy machines.
     ``refinements`` > 0 splits the iteration budget into ``refinements + 1`` stages and, between
