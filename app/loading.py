@@ -14,6 +14,7 @@ import numpy as np
 
 from app.state import OffsetDisplay, Target
 from app.workers.display import DisplayGeometry, display_geometry
+from app.workers.fit_worker import FINAL_DEVIATION_POINTS, sampled_deviation
 
 #: (menu label, suffix, needs the optional OCP package)
 EXPORT_FORMATS = (
@@ -87,7 +88,8 @@ def fitted_display(geometry: dict[str, Any], points: np.ndarray | None):
     if points is not None:
         target = points[:, :2] if (geometry["kind"] == "curve" and
                                    geometry["control_points"].shape[-1] == 2) else points
-        dev = np.asarray(deviation(geometry_from_numpy(geometry), target), dtype=np.float64)
+        dev = sampled_deviation(deviation, geometry_from_numpy(geometry), target,
+                                FINAL_DEVIATION_POINTS)
     return display, dev
 
 

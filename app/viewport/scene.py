@@ -170,7 +170,7 @@ class SceneView(QObject):
         if "cloud" not in self._meshes:
             self._layer("cloud", mesh, color=COLORS["cloud"], point_size=3.0,
                         scalars=DEVIATION_TITLE, cmap=DEVIATION_COLORMAP, clim=(0.0, 1.0),
-                        show_scalar_bar=False)
+                        nan_color="#b0b0b0", show_scalar_bar=False)
             self.plotter.add_scalar_bar(DEVIATION_TITLE, mapper=self._actors["cloud"].mapper,
                                         render=False,
                                         vertical=True, position_x=0.88, position_y=0.12,
@@ -189,14 +189,17 @@ class SceneView(QObject):
         if valid:
             mesh.point_data[DEVIATION_TITLE][:] = deviation
             mesh.point_data[DEVIATION_TITLE] = mesh.point_data[DEVIATION_TITLE]  # mark modified
-            top = nice_ceiling(float(np.max(deviation)))
+            top = nice_ceiling(float(np.nanmax(deviation)) if np.isfinite(deviation).any()
+                               else 0.0)
             if actor.mapper.scalar_range[1] != top:  # relabelling the bar costs a slow frame
                 actor.mapper.scalar_range = (0.0, top)
         self._update_scalar_bar()
         if not valid:
             self._stats_text = ""
         elif stats is not None:
-            self._stats_text = (f"Deviation ({stats['count']} points)\nmean {stats['mean']:.4g}\n"
+            sampled = "" if stats["count"] == len(deviation) else f" of {len(deviation)}"
+            self._stats_text = (f"Deviation ({stats['count']}{sampled} points)\n"
+                                f"mean {stats['mean']:.4g}\n"
                                 f"RMS  {stats['rms']:.4g}\nmax  {stats['max']:.4g}")
         self._corner_text(UPPER_RIGHT, self._stats_text if self.deviation_shown() else "")
         self.request_render()

@@ -51,3 +51,24 @@ def test_settings_json_round_trip_and_unknown_fields():
     assert FitSettings.from_json(settings.to_json()) == settings
     with pytest.raises(ValueError, match="unknown settings"):
         FitSettings.from_json({"degree": 3})
+
+
+def test_sampled_deviation_measures_a_subset_and_stats_skip_the_rest():
+    from app.workers.fit_worker import deviation_stats, sampled_deviation
+
+    target = np.arange(30.0).reshape(10, 3)
+    calls = []
+
+    def distance(_geometry, points):
+        calls.append(len(points))
+        return points[:, 0]  # stand-in distance: the x coordinate
+
+    full = sampled_deviation(distance, None, target, limit=20)
+    np.testing.assert_array_equal(full, target[:, 0])
+    partial = sampled_deviation(distance, None, target, limit=4)
+    assert calls == [10, 4] and np.isfinite(partial).sum() == 4
+    measured = np.isfinite(partial)
+    np.testing.assert_array_equal(partial[measured], target[measured, 0])
+    stats = deviation_stats(partial)
+    assert stats["count"] == 4 and stats["max"] == target[measured, 0].max()
+    assert stats["rms"] == pytest.approx(np.sqrt(np.mean(target[measured, 0] ** 2)))
