@@ -72,3 +72,20 @@ def test_sampled_deviation_measures_a_subset_and_stats_skip_the_rest():
     stats = deviation_stats(partial)
     assert stats["count"] == 4 and stats["max"] == target[measured, 0].max()
     assert stats["rms"] == pytest.approx(np.sqrt(np.mean(target[measured, 0] ** 2)))
+
+
+def test_worker_side_code_never_imports_widgets_or_vtk():
+    """Modules whose code runs off the GUI thread (workers, file jobs) import no VTK or widgets."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2] / "app"
+    forbidden = ("pyvista", "pyvistaqt", "vtk", "vtkmodules", "PySide6.QtWidgets",
+                 "PySide6.QtGui", "pyqtgraph", "app.viewport", "app.panels", "app.main_window")
+    for path in [*sorted((root / "workers").glob("*.py")), root / "loading.py"]:
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            names = ([alias.name for alias in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            for name in names:
+                assert not name.startswith(forbidden), f"{path.name} imports {name}"
