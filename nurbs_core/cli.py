@@ -69,6 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="evaluation grid for set losses (default 64 64)")
     parser.add_argument("--refine", type=int, default=0, metavar="K",
                         help="insert K knots per direction where the error is largest")
+    parser.add_argument("--initial", default=None, metavar="NURBS",
+                        help="continue from the first curve/surface in this file (.json, .3dm, "
+                             "...); converted to the requested degrees and counts")
     parser.add_argument("--offset", type=float, default=None, metavar="DIST",
                         help="also write the fitted surface offset by DIST along its normals")
     parser.add_argument("--seed", type=int, default=0)
@@ -189,10 +192,21 @@ def run(args) -> int:
           f"(degree {config.degree_u}" + ("" if args.curve else f"x{config.degree_v}")
           + f", {config.control_points_u}" + ("" if args.curve else f"x{config.control_points_v}")
           + f" control points) with {config.optimizer}, loss {config.loss}", file=sys.stderr)
+    initial = None
+    if args.initial is not None:
+        from nurbs_core.io import load
+
+        shapes = load(args.initial)
+        if not shapes:
+            raise ValueError(f"{args.initial} holds no curve or surface")
+        initial = shapes[0]
+        if flat_z and isinstance(initial, NurbsCurve) and initial.dimension == 3:
+            initial = NurbsCurve(initial.control_points[:, :2], initial.degree, initial.knots,
+                                 initial.weights)
     stop = StopToken()
     previous = signal.signal(signal.SIGINT, lambda *_: stop.stop())
     try:
-        result = fit(target, config, stop=stop, parameters=parameters,
+        result = fit(target, config, stop=stop, parameters=parameters, initial=initial,
                      on_snapshot=_Progress(config.iterations, args.quiet))
     finally:
         signal.signal(signal.SIGINT, previous)

@@ -36,6 +36,8 @@ from nurbs_core.geometry import geometry_from_numpy
 EXPLOSION_FACTOR = 1e3
 #: Give up (status "diverged") after this many roll-backs in one fit.
 MAX_ROLLBACKS = 60
+#: Iterations of the learning-rate warm-up for starts that are already fits.
+WARMUP_ITERATIONS = 30
 #: L-BFGS iterations per engine iteration (each with its own strong-Wolfe line search).
 LBFGS_INNER = 5
 
@@ -83,6 +85,7 @@ class _Run:
         self.pending_message: str | None = None
         self.stages_done = 0
         self.loss_scale: float | None = None
+        self.warm_up = False
 
     # ---------------------------------------------------------------------------------------
     def _setup(self, geometry):
@@ -126,6 +129,9 @@ class _Run:
                 else:
                     self.paired_eval = SurfaceEvaluator(*knots, *self.model.degrees,
                                                         params[:, 0], params[:, 1])
+        self.stage_step = 0
+        self.plateau_factor, self.plateau_best, self.plateau_wait = 1.0, math.inf, 0
+        self.warm_up = self.warm_up or self.from_initial or self.config.init == "least_squares"
         self._make_optimizer()
 
     def _make_optimizer(self):
@@ -147,14 +153,39 @@ class _Run:
             self.optimizer = torch.optim.LBFGS(leaves, lr=lr, max_iter=LBFGS_INNER, history_size=20,
                                                line_search_fn="strong_wolfe",
                                                tolerance_grad=0.0, tolerance_change=0.0)
-        self.scheduler = None
-        if name != "lbfgs" and config.lr_schedule == "plateau":
-            self.scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(
-                self.optimizer, factor=0.5, patience=25, threshold=1e-4, min_lr=lr * 1e-4)
-        elif name != "lbfgs" and config.lr_schedule == "cosine":
+        self.warm_step = 0
+
+    def _apply_learning_rate(self):
+        """Set this iteration's step size: base (halved by roll-backs) x plateau decay x cosine x
+        warm-up. The warm-up (geometric, from 1e-3 x over WARMUP_ITERATIONS) applies when the
+        start is already a fit (initial geometry, least squares, a refined stage, a roll-back):
+        Adam's first steps have the full learning rate's size whatever the gradient, which would
+        throw such a start away."""
+        config = self.config
+        if config.optimizer == "lbfgs":
+            return
+        lr = self.learning_rate * self.plateau_factor
+        if config.lr_schedule == "cosine":
             length = max(self.stage_length, 1)
-            self.scheduler = torch.optim.lr_scheduler.LambdaLR(
-                self.optimizer, lambda k: 0.5 * (1 + math.cos(math.pi * min(k, length) / length)))
+            lr *= 0.5 * (1 + math.cos(math.pi * min(self.stage_step, length) / length))
+        if self.warm_up:
+            lr *= 10.0 ** (-3.0 * max(0.0, 1.0 - self.warm_step / WARMUP_ITERATIONS))
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
+        self.warm_step += 1
+        self.stage_step += 1
+
+    def _update_plateau(self, total: float):
+        """Halve the step when the loss has not improved by 1e-4 (relative) for 25 iterations."""
+        if self.config.lr_schedule != "plateau":
+            return
+        if total < self.plateau_best * (1 - 1e-4):
+            self.plateau_best, self.plateau_wait = total, 0
+            return
+        self.plateau_wait += 1
+        if self.plateau_wait > 25:
+            self.plateau_factor = max(self.plateau_factor * 0.5, 1e-4)
+            self.plateau_wait = 0
 
     # ---------------------------------------------------------------------------------------
     def _batch(self) -> torch.Tensor | None:
@@ -254,6 +285,7 @@ class _Run:
     def _halve_learning_rate(self, iteration: int, reason: str):
         self.rollbacks += 1
         self.learning_rate *= 0.5
+        self.warm_up = True
         self._make_optimizer()
         self.pending_message = (f"iteration {iteration}: {reason}; rolled back to the last good "
                                 f"state and halved the learning rate to {self.learning_rate:.3g}")
@@ -325,6 +357,7 @@ class _Run:
                     total.backward()
                     return total
 
+                self._apply_learning_rate()
                 if config.optimizer == "lbfgs":
                     self.optimizer.step(closure)
                 else:
@@ -354,11 +387,11 @@ class _Run:
                 record = {"iteration": iteration, "total": total_value}
                 record.update({k: float(v) for k, v in terms_holder["terms"].items()})
                 records.append(record)
-                if self.scheduler is not None:
-                    if config.lr_schedule == "plateau":
-                        self.scheduler.step(total_value)
-                    else:
-                        self.scheduler.step()
+                self._update_plateau(total_value)
+                if (config.optimizer == "lbfgs" and self.loss_scale is not None
+                        and total_value < 1e-4 * self.loss_scale):
+                    # rescale (a fresh L-BFGS memory) before y.s sinks under its 1e-10 floor again
+                    self._make_optimizer()
                 converged = False
                 if previous_total is not None:
                     change = abs(previous_total - total_value)
@@ -398,6 +431,7 @@ class _Run:
             params = self.problem.parameters.double().numpy()
         refined = refine(geometry.to(dtype=torch.float64), self.problem.points.double().numpy(),
                          params).to(dtype=self.problem.dtype)
+        self.warm_up = True
         self._setup(refined)
         self.pending_message = (f"iteration {iteration}: refined by knot insertion to "
                                 f"{self._count_text()} control points")

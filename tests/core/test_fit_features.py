@@ -186,7 +186,7 @@ def test_unordered_2d_curve_fit():
     x = gen.uniform(0, 2 * np.pi, 800)
     points = np.column_stack([x, np.sin(x) + 2 * np.sin(2 * x) + np.sin(4 * x)])
     config = FitConfig(kind="curve", control_points_u=24, loss="chamfer+0.001*length",
-                       samples_u=400, iterations=300, init="least_squares", learning_rate=0.005)
+                       samples_u=400, iterations=400, init="least_squares", learning_rate=0.005)
     result = fit(points, config)
     assert isinstance(result.geometry, NurbsCurve) and result.geometry.dimension == 2
     assert result.statistics["mean"] < 0.05
