@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 
 import app  # noqa: F401 - sets QT_API before pyvistaqt is imported
@@ -34,8 +35,22 @@ def parse_arguments(argv: list[str] | None = None) -> argparse.Namespace:
     return arguments
 
 
+def missing_display() -> str | None:
+    """A message when no display is reachable (Qt would abort the process), else None."""
+    if not sys.platform.startswith("linux") or os.environ.get("QT_QPA_PLATFORM"):
+        return None
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        return None
+    return ("nurbs-studio: no display found (DISPLAY and WAYLAND_DISPLAY are unset). Run it in "
+            "a desktop session, or headless with: xvfb-run -a nurbs-studio ...")
+
+
 def main(argv: list[str] | None = None) -> int:
     arguments = parse_arguments(argv)
+    problem = missing_display()
+    if problem:
+        print(problem, file=sys.stderr)
+        return 1
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     from PySide6.QtWidgets import QApplication
 
