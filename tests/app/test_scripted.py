@@ -29,8 +29,9 @@ def test_scripted_fit_writes_a_screenshot_and_exits_zero(ply_cloud, tmp_path):
     assert "Traceback" not in result.stderr
     image = QImage(str(out))
     assert not image.isNull() and image.width() > 800 and image.height() > 500
-    pixels = np.asarray(image.convertToFormat(QImage.Format.Format_RGB888).constBits()).reshape(
-        image.height(), -1)[:, : image.width() * 3]
+    rgb = image.convertToFormat(QImage.Format.Format_RGB888)  # keep it alive: pixels view it
+    pixels = np.frombuffer(rgb.constBits(), dtype=np.uint8, count=rgb.sizeInBytes()).reshape(
+        rgb.height(), rgb.bytesPerLine())[:, : rgb.width() * 3].copy()
     assert pixels.std() > 10  # not a blank image
 
 
