@@ -29,6 +29,7 @@ class LossPlot(QWidget):
         self.plot.setLabel("bottom", "iteration")
         self.plot.setLabel("left", "loss (normalised units)")
         self.plot.addLegend(offset=(-10, 10))
+        self._empty_view()
         layout.addWidget(self.plot)
         self._x: list[float] = []
         self._values: dict[str, list[float]] = {}
@@ -41,6 +42,12 @@ class LossPlot(QWidget):
         self._redraw_timer.setInterval(REDRAW_INTERVAL_MS)
         self._redraw_timer.timeout.connect(self._redraw)
 
+    def _empty_view(self):
+        # a readable empty plot: decades 1e-4 .. 10 (log10 units in log mode), 100 iterations
+        self.plot.setXRange(0, 100, padding=0)
+        self.plot.setYRange(-4, 1, padding=0)
+        self.plot.enableAutoRange()
+
     def clear(self):
         self._redraw_timer.stop()
         self._x, self._values, self._offset, self._last_iteration = [], {}, 0, -1
@@ -50,6 +57,7 @@ class LossPlot(QWidget):
         if legend is not None:
             legend.clear()
         self._curves = {}
+        self._empty_view()
 
     def append(self, rows: list[dict]):
         """Rows ``{"iteration", "total", <term>: value}``; a restart (iteration drops) continues
