@@ -33,13 +33,14 @@ from PySide6.QtWidgets import (
 from app import loading
 from app.controller import FitController
 from app.demo import ICON_FILE, demo_path
+from app.offsets import OffsetController
 from app.panels.document_tree import DocumentTree
 from app.panels.fit_panel import POLICY_TEXT, FitSettingsPanel
 from app.panels.knot_panel import KnotPanel
 from app.panels.log_panel import LogPanel
 from app.panels.loss_plot import LossPlot
 from app.panels.offset_panel import OffsetPanel
-from app.state import Document, FitSettings, OffsetDisplay
+from app.state import Document, FitSettings
 from app.viewport.scene import SceneView
 from app.workers.fit_worker import DisplaySnapshot, deviation_stats
 from app.workers.jobs import JobRunner
@@ -92,8 +93,6 @@ class MainWindow(QMainWindow):
         self._store = settings_store or QSettings("NURBS Studio", "nurbs-studio")
         self._is_shut_down = False
         self._message_box: QMessageBox | None = None
-        self._offset_job_running = False
-        self._offset_dirty = False
         self.last_error = ""
 
         self.document = Document(self)
@@ -103,6 +102,10 @@ class MainWindow(QMainWindow):
         self.setCentralWidget(self._native_container(self.scene.widget))
 
         self._build_docks()
+        self.offsets = OffsetController(self.document, self.jobs, self.scene, self.offset_panel,
+                                        self.report, self)
+        self.offsets.offsets_updated.connect(self.offsets_updated)
+        self.offsets.offsets_updated.connect(lambda _ok: self._rebuild_tree())
         self._build_actions()
         self._build_menus()
         self._build_status_bar()
@@ -427,7 +430,7 @@ class MainWindow(QMainWindow):
             self.jobs.submit("tessellate", lambda: loading.tessellate(patches),
                              self._show_patches,
                              lambda exc: self.report(f"Cannot display the patches: {exc}", True))
-            self._request_offsets()
+            self.offsets.request()
         self.scene.reset_camera()
         self._rebuild_tree()
 
@@ -508,7 +511,7 @@ class MainWindow(QMainWindow):
                 self.statusBar().showMessage("Settings changed: they apply at the next Start",
                                              4000)
         if changed & OFFSET_FIELDS:
-            self._request_offsets()
+            self.offsets.request()
 
     # --- fit -------------------------------------------------------------------------------------
     def reset_fit(self):
@@ -560,64 +563,7 @@ class MainWindow(QMainWindow):
             text += f" ({snapshot.message})"
         self.report(text)
         if self.document.settings.show_offsets and not self.document.patches:
-            self._request_offsets()
-
-    # --- offsets ---------------------------------------------------------------------------------
-    def _offset_sources(self) -> list[dict]:
-        surfaces = [p for p in self.document.patches if p["kind"] == "surface"]
-        fitted = self.document.fitted
-        if not surfaces and fitted is not None and fitted["kind"] == "surface":
-            surfaces = [fitted]
-        return surfaces
-
-    def _request_offsets(self):
-        settings = self.document.settings
-        if not settings.show_offsets:
-            self.document.set_offsets(OffsetDisplay())
-            self.scene.set_group("offsets", [])
-            self.scene.set_note("")
-            self.offset_panel.show_result(OffsetDisplay())
-            self._rebuild_tree()
-            return
-        if self._offset_job_running:
-            self._offset_dirty = True  # recompute with the newest settings when this one ends
-            return
-        surfaces = self._offset_sources()
-        if not surfaces:
-            self.report("Offsets need surface patches (open NURBS files) or a fitted surface.")
-            return
-        distance, constrain = settings.offset_distance, settings.constrain_shared_edges
-        self._offset_job_running = True
-        self.offset_panel.show_result(OffsetDisplay(), busy=True)
-        self.jobs.submit("offsets",
-                         lambda: loading.compute_offsets(surfaces, distance, constrain),
-                         lambda result: self._offsets_done(result, distance, constrain),
-                         self._offsets_failed)
-
-    def _offsets_done(self, result, distance: float, constrain: bool):
-        self._offset_job_running = False
-        offsets, displays = result
-        self.document.set_offsets(offsets)
-        self.scene.set_group("offsets", displays, opacity=0.85)
-        note = f"Offset {distance:g}: {len(displays)} patch(es)"
-        if offsets.shared_edges:
-            note += (f", {offsets.shared_edges} shared edge(s), largest gap {offsets.max_gap:.3g}"
-                     f" ({'constrained' if constrain else 'unconstrained'})")
-        self.scene.set_note(note)
-        self.offset_panel.show_result(offsets)
-        self._rebuild_tree()
-        log.info(note)
-        self.offsets_updated.emit(True)
-        if self._offset_dirty:
-            self._offset_dirty = False
-            self._request_offsets()
-
-    def _offsets_failed(self, exc: Exception):
-        self._offset_job_running = False
-        self._offset_dirty = False
-        self.offset_panel.show_result(OffsetDisplay())
-        self.report(f"Offset failed: {exc}", error=True)
-        self.offsets_updated.emit(False)
+            self.offsets.request()
 
     # --- export and sessions ---------------------------------------------------------------------
     def _export_dialog(self, label: str, suffix: str):
