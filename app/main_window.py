@@ -68,6 +68,13 @@ def _changed_fields(old: FitSettings, new: FitSettings) -> set[str]:
     return {name for name in old.__dataclass_fields__ if getattr(old, name) != getattr(new, name)}
 
 
+def _names(names: list[str], shown: int = 3) -> str:
+    """"a, b, c and 24 more": file lists short enough for a status bar."""
+    if len(names) <= shown:
+        return ", ".join(names)
+    return f"{', '.join(names[:shown])} and {len(names) - shown} more"
+
+
 def _format_seconds(seconds: float) -> str:
     if not math.isfinite(seconds):
         return "-"
@@ -335,7 +342,7 @@ class MainWindow(QMainWindow):
         paths = [str(p) for p in paths]
         if not paths:
             return False
-        self.statusBar().showMessage(f"Reading {', '.join(Path(p).name for p in paths)}...")
+        self.statusBar().showMessage(f"Reading {_names([Path(p).name for p in paths])}...")
         return self.jobs.submit("load", lambda: loading.load_files(paths),
                                 lambda loaded: self._apply_loaded(paths, loaded),
                                 lambda exc: self._load_failed(paths, exc))
@@ -358,14 +365,16 @@ class MainWindow(QMainWindow):
         for path in paths:
             self._add_recent(path)
         counts = [f"{len(t.points)} points in {t.name}" for t in loaded.targets]
-        counts += [f"{name}" for name in loaded.patch_names]
+        if loaded.patch_names:
+            sources = sorted({Path(p).name for p in paths} - {t.name for t in loaded.targets})
+            counts.append(f"{len(loaded.patch_names)} NURBS shape(s) from {_names(sources)}")
         self.report(f"Opened {'; '.join(counts)}")
-        self.setWindowTitle(f"NURBS Studio - {', '.join(Path(p).name for p in paths)}")
+        self.setWindowTitle(f"NURBS Studio - {_names([Path(p).name for p in paths])}")
         self.files_loaded.emit(True)
 
     def _load_failed(self, paths: list[str], exc: Exception):
         hint = getattr(exc, "install", None)
-        message = f"Could not open {', '.join(Path(p).name for p in paths)}:\n{exc}"
+        message = f"Could not open {_names([Path(p).name for p in paths])}:\n{exc}"
         if hint:
             message += f"\nInstall the missing package with: {hint}"
         self.report(message + "\nThe document was left unchanged.", error=True)
