@@ -190,7 +190,9 @@ class FitWorker(QObject):
             now = time.monotonic()
             dev = None
             if snapshot.done or now - last_deviation >= DEVIATION_INTERVAL:
-                limit = FINAL_DEVIATION_POINTS if snapshot.done else LIVE_DEVIATION_POINTS
+                # a stopped run (Stop, a restart, closing the window) must end quickly
+                final = snapshot.done and snapshot.status != "stopped"
+                limit = FINAL_DEVIATION_POINTS if final else LIVE_DEVIATION_POINTS
                 dev = sampled_deviation(deviation, _rebuild(snapshot.geometry), request.target,
                                         limit)
                 last_deviation = time.monotonic()
