@@ -80,6 +80,19 @@ def _fit_knot_grad(grad: torch.Tensor, knots_shape: torch.Size) -> torch.Tensor:
     return grad.reshape(knots_shape)
 
 
+class SparseProduct(torch.autograd.Function):
+    """``plan.matmul(dense)`` with the block-sparse transpose product as its backward."""
+
+    @staticmethod
+    def forward(ctx, dense, plan):
+        ctx.plan = plan
+        return plan.matmul(dense)
+
+    @staticmethod
+    def backward(ctx, grad):
+        return ctx.plan.transpose_matmul(grad.contiguous()), None
+
+
 class CurvePoints(torch.autograd.Function):
     """Curves at arbitrary parameters. ``plan`` (optional) is a precomputed
     :class:`~nurbs_core.sparse.SparseBasisMatrix` for this batch size (fixed knots and parameters)."""

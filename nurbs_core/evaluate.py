@@ -156,27 +156,29 @@ def curve_derivatives(control_points, weights, knots, degree, u, order=1):
 
 
 def surface_derivatives(control_points, weights, knots_u, knots_v, degree_u, degree_v, u, v):
-    """Points and first partial derivatives at paired parameters: (S, S_u, S_v), each (*B, M, 3)."""
+    """Points and first partial derivatives at paired parameters: (S, S_u, S_v), each (*B, M, 3).
+
+    The homogeneous point and its two partials are ``A Pw``, ``A_u Pw``, ``A_v Pw`` with the three
+    block-sparse basis matrices of :mod:`nurbs_core.sparse` (same columns, values ``N_u N_v``,
+    ``N_u' N_v``, ``N_u N_v'``). Differentiable with respect to control points and weights.
+    """
     batch_shape = control_points.shape[:-3]
-    control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 3)
-    batch, n, m, _ = control_w.shape
-    ku = _flatten_batch(knots_u, batch_shape, 1).detach()
-    kv = _flatten_batch(knots_v, batch_shape, 1).detach()
-    fu = _flatten_batch(u.to(control_points.dtype), batch_shape, 1).detach()
-    fv = _flatten_batch(v.to(control_points.dtype), batch_shape, 1).detach()
+    n, m = control_points.shape[-3], control_points.shape[-2]
+    weights = weights.expand(control_points.shape[:-1])
+    control_w = homogeneous(control_points, weights).reshape(-1, 4)
+    batch = control_w.shape[0] // (n * m)
+    ku, kv, fu, fv = _directions(batch_shape, control_points.dtype, (knots_u, knots_v, u, v))
     with torch.no_grad():
+        ku, kv, fu, fv = ku.detach(), kv.detach(), fu.detach(), fv.detach()
         span_u = find_span(ku, degree_u, fu)
         span_v = find_span(kv, degree_v, fv)
-        du = basis_derivatives(ku, degree_u, fu, span_u, 1)  # (2, B, M, p+1)
+        du = basis_derivatives(ku, degree_u, fu, span_u, 1)  # (2, Bb, M, p+1)
         dv = basis_derivatives(kv, degree_v, fv, span_v, 1)
-    index_u = span_u.unsqueeze(-1) - degree_u + torch.arange(degree_u + 1, device=fu.device)
-    index_v = span_v.unsqueeze(-1) - degree_v + torch.arange(degree_v + 1, device=fu.device)
-    flat = index_u.unsqueeze(-1) * m + index_v.unsqueeze(-2)
-    flat = flat + torch.arange(batch, device=fu.device).view(-1, 1, 1, 1) * (n * m)
-    gathered = control_w.reshape(-1, 4)[flat.reshape(-1)].view(*flat.shape, 4)
-    h = torch.einsum("bmr,bms,bmrsc->bmc", du[0], dv[0], gathered)
-    h_u = torch.einsum("bmr,bms,bmrsc->bmc", du[1], dv[0], gathered)
-    h_v = torch.einsum("bmr,bms,bmrsc->bmc", du[0], dv[1], gathered)
+    results = []
+    for bu, bv in ((du[0], dv[0]), (du[1], dv[0]), (du[0], dv[1])):
+        plan = surface_sparse_basis(bu, bv, span_u, span_v, degree_u, degree_v, n, m, batch)
+        results.append(_fn.SparseProduct.apply(control_w, plan).view(batch, -1, 4))
+    h, h_u, h_v = results
     w, w_u, w_v = h[..., 3:], h_u[..., 3:], h_v[..., 3:]
     s = h[..., :3] / w
     s_u = (h_u[..., :3] - w_u * s) / w
