@@ -131,7 +131,8 @@ class _Run:
                                                         params[:, 0], params[:, 1])
         self.stage_step = 0
         self.plateau_factor, self.plateau_best, self.plateau_wait = 1.0, math.inf, 0
-        self.warm_up = self.warm_up or self.from_initial or self.config.init == "least_squares"
+        self.warm_up = (self.warm_up or self.from_initial or self.config.init == "least_squares"
+                        or self.problem.start_is_fit)
         self._make_optimizer()
 
     def _make_optimizer(self):
@@ -310,7 +311,7 @@ class _Run:
         self.stage_length = max(1, math.ceil(config.iterations / stages))
         self._setup(self.geometry0)
         if (self.params is not None and not problem.known
-                and (self.from_initial or config.init != "pca")):
+                and (self.from_initial or config.init != "pca" or problem.start_is_fit)):
             # foot points of the starting geometry (the PCA plane's are exact already)
             params, _ = project(self.model.geometry().detach(), problem.points.double().numpy())
             self.params = torch.as_tensor(params, dtype=problem.dtype)

@@ -14,6 +14,7 @@ from nurbs_core.fitting.least_squares import (
     pca_parameters,
     principal_axes,
 )
+from nurbs_core.fitting.ordering import path_parameters
 from nurbs_core.geometry import NurbsCurve, NurbsSurface, geometry_from_numpy
 from nurbs_core.knots import clamped_uniform, greville
 
@@ -35,6 +36,14 @@ class Problem:
     dtype: torch.dtype
     #: (u (Mu,), v (Mv,)) when the known surface parameters are the u-major grid u x v
     grid: tuple[torch.Tensor, torch.Tensor] | None = None
+    #: (N,) chord-length parameters along the cloud's backbone (unordered curves; set by
+    #: initial_geometry when the start is a least-squares fit to them)
+    path_parameters: np.ndarray | None = None
+
+    @property
+    def start_is_fit(self) -> bool:
+        """True when the starting geometry is already a fit (least squares), not a plane."""
+        return self.path_parameters is not None
 
     @property
     def known(self) -> bool:
@@ -169,9 +178,12 @@ def _random_geometry(problem: Problem, config: FitConfig, knots):
 
 
 def start_parameters(problem: Problem) -> np.ndarray:
-    """Initial per-point parameters: the known ones, else the PCA projection in [0, 1]."""
+    """Initial per-point parameters: the known ones, the backbone chord-length parameters of an
+    unordered curve cloud, else the PCA projection in [0, 1]."""
     if problem.known:
         return problem.parameters.double().numpy()
+    if problem.path_parameters is not None:
+        return problem.path_parameters
     dims = len(problem.domains)
     params, _ = pca_parameters(problem.points.double().numpy(), dims)
     return params[:, 0] if dims == 1 else params
@@ -182,10 +194,14 @@ def initial_geometry(problem: Problem, config: FitConfig, initial=None):
     if initial is not None:
         return _from_initial(problem, config, initial)
     knots = _uniform_knots(problem, config)
-    if config.init == "pca":
-        return _plane_geometry(problem, config, knots)
     if config.init == "random":
         return _random_geometry(problem, config, knots)
+    if config.kind == "curve" and not problem.known:
+        # a line along the principal axis is a poor start for a curve that turns back on itself:
+        # order the cloud along its backbone and solve least squares with chord-length parameters
+        problem.path_parameters = path_parameters(problem.points.double().numpy(), config.seed)
+    if config.init == "pca" and problem.path_parameters is None:
+        return _plane_geometry(problem, config, knots)
     params = start_parameters(problem)
     smoothing = 0.0 if problem.known else 1e-4
     kind_kw = dict(kind="curve") if config.kind == "curve" else {}
