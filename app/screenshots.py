@@ -21,10 +21,11 @@ PAPER_DATA = Path(os.environ.get("NURBS_STUDIO_DATA", "/work/shared/data")) / "n
 
 
 def curve_cloud(path: Path) -> Path:
-    """A 2D curve target, y = 1.5 sin x on [0, 2 pi], sampled unordered with slight noise."""
+    """The paper's 2D curve target y = sin x + 2 sin 2x + sin 4x on [0, 2 pi], sampled unordered
+    with slight noise."""
     rng = np.random.default_rng(5)
     x = rng.uniform(0.0, 2.0 * np.pi, 600)
-    y = 1.5 * np.sin(x) + rng.normal(0.0, 0.02, x.size)
+    y = np.sin(x) + 2.0 * np.sin(2.0 * x) + np.sin(4.0 * x) + rng.normal(0.0, 0.02, x.size)
     np.savetxt(path, np.column_stack([x, y, np.zeros_like(x)]), fmt="%.6f")
     return path
 
@@ -123,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
         window.fit_dock.raise_()
 
         def loaded(ok):
-            window.document.edit_settings("Curve", control_points_u=8, iterations=400)
+            window.document.edit_settings("Curve", control_points_u=30, iterations=400)
             window.set_layer_visible("control_net", True)
             once(window.controller.fit_finished, lambda snapshot: later(lambda: (
                 shot("05_curve_fit.png"), next_step())))
