@@ -12,12 +12,20 @@ deviation. The implementation lives in :mod:`nurbs_core.fitting`:
 
 from __future__ import annotations
 
-from nurbs_core.fitting.config import FitConfig, FitResult, FitSnapshot, StopToken
+from nurbs_core.fitting.config import (
+    DEFAULT_LOSS,
+    PAPER_POINT_CLOUD_LOSS,
+    FitConfig,
+    FitResult,
+    FitSnapshot,
+    StopToken,
+)
 from nurbs_core.fitting.engine import fit, iter_fit, statistics
 from nurbs_core.fitting.least_squares import least_squares_fit
 from nurbs_core.fitting.problem import conform
 from nurbs_core.fitting.projection import deviation, project
 from nurbs_core.fitting.refine import refine
 
-__all__ = ["FitConfig", "FitResult", "FitSnapshot", "StopToken", "conform", "deviation", "fit",
-           "iter_fit", "least_squares_fit", "project", "refine", "statistics"]
+__all__ = ["DEFAULT_LOSS", "PAPER_POINT_CLOUD_LOSS", "FitConfig", "FitResult", "FitSnapshot",
+           "StopToken", "conform", "deviation", "fit", "iter_fit", "least_squares_fit", "project",
+           "refine", "statistics"]

@@ -14,6 +14,15 @@ KINDS = ("surface", "curve")
 LR_SCHEDULES = ("plateau", "cosine", "none")
 STATUSES = ("running", "paused", "converged", "stopped", "budget", "diverged", "failed")
 
+#: The NURBS-Diff paper's best loss for point clouds (CD + 0.1 Lap + 10 HD). With an unordered
+#: cloud and parameter correction the fitter adds the foot-point term p2s to it.
+PAPER_POINT_CLOUD_LOSS = "chamfer+0.1*laplacian+10*hausdorff"
+#: The default loss: mean squared foot-point distance (p2s) for accuracy, plus a small two-sided
+#: Chamfer that keeps the surface on the cloud (p2s alone lets the parts of the surface that no
+#: point projects onto drift far past the cloud's edge). Measured against the paper's composite,
+#: p2s alone and p2s + Laplacian on real clouds: ``python benchmarks/bench_fit.py --defaults``.
+DEFAULT_LOSS = "p2s+0.001*chamfer"
+
 
 @dataclass
 class FitConfig:
@@ -26,7 +35,15 @@ class FitConfig:
     initial trial step of its strong-Wolfe line search (1.0 is the usual choice).
 
     kind "curve" uses ``degree_u`` and ``control_points_u`` and accepts 2-D or 3-D points.
-    ``loss`` is parsed by :func:`nurbs_core.losses.parse_loss`. For unordered clouds the pointwise
+    ``loss`` is parsed by :func:`nurbs_core.losses.parse_loss`; the default is ``DEFAULT_LOSS``
+    (``"p2s+0.001*chamfer"``), the paper's composite is ``PAPER_POINT_CLOUD_LOSS``
+    (``"chamfer+0.1*laplacian+10*hausdorff"``). With known parameters ``p2s`` equals ``mse``.
+    ``init``: "pca" starts surfaces from the cloud's principal plane; for an unordered curve cloud
+    it orders the points along the cloud's backbone (minimum spanning tree, see
+    :mod:`nurbs_core.fitting.ordering`) and starts from least squares with those chord-length
+    parameters (the principal line only when no ordering exists); "least_squares" does the same
+    for curves and uses PCA parameters for surfaces; "random" is the paper's Gaussian start.
+    For unordered clouds the pointwise
     terms (l1, l2, mse, p2s) use per-point foot-point parameters; with ``parameter_correction`` they
     are refined by Gauss-Newton steps every ``correction_interval`` iterations, and a ``p2s`` term
     (mean squared point-to-surface distance, weight 1) is added when the expression has no
@@ -48,7 +65,7 @@ class FitConfig:
     degree_v: int = 3
     control_points_u: int = 12
     control_points_v: int = 12
-    loss: str = "chamfer+0.1*laplacian+10*hausdorff"
+    loss: str = DEFAULT_LOSS
     optimizer: str = "adam"
     learning_rate: float = 0.01
     iterations: int = 500

@@ -34,7 +34,8 @@ def grid_axes(parameters: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     if u.size * v.size != parameters.shape[0] or u.size < 2 or v.size < 2:
         return None
     uu, vv = np.meshgrid(u, v, indexing="ij")
-    if np.array_equal(uu.ravel(), parameters[:, 0]) and np.array_equal(vv.ravel(), parameters[:, 1]):
+    if (np.array_equal(uu.ravel(), parameters[:, 0])
+            and np.array_equal(vv.ravel(), parameters[:, 1])):
         return u, v
     return None
 

@@ -7,7 +7,15 @@ import pytest
 import torch
 
 from nurbs_core import NurbsCurve, NurbsSurface
-from nurbs_core.fit import FitConfig, deviation, fit, iter_fit, least_squares_fit, refine
+from nurbs_core.fit import (
+    PAPER_POINT_CLOUD_LOSS,
+    FitConfig,
+    deviation,
+    fit,
+    iter_fit,
+    least_squares_fit,
+    refine,
+)
 
 
 @pytest.fixture(autouse=True)
@@ -179,7 +187,14 @@ def test_unordered_default_loss_fits_a_shuffled_scan():
     assert result.status == "budget"
     diagonal = np.linalg.norm(points.max(0) - points.min(0))
     assert result.statistics["mean"] < 0.01 * diagonal
-    record = result.history[-1]
+    assert set(result.history[-1]) == {"iteration", "total", "chamfer", "p2s"}
+
+
+def test_paper_composite_gets_the_foot_point_term_on_unordered_clouds():
+    points, _ = _sine_grid(12)
+    config = FitConfig(loss=PAPER_POINT_CLOUD_LOSS, control_points_u=5, control_points_v=5,
+                       iterations=3)
+    record = fit(points, config).history[-1]
     assert {"chamfer", "laplacian", "hausdorff", "p2s"} <= set(record)
 
 

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from nurbs_core import NurbsSurface, geometry_from_numpy
-from nurbs_core.fit import FitConfig, FitSnapshot, StopToken, fit, iter_fit
+from nurbs_core.fit import PAPER_POINT_CLOUD_LOSS, FitConfig, FitSnapshot, StopToken, fit, iter_fit
 
 
 def _grid(count=20):
@@ -29,7 +29,7 @@ def _small(**kw):
 
 def test_snapshots_hold_numpy_copies_and_every_iteration():
     points, _ = _grid()
-    snapshots = list(iter_fit(points, _small(iterations=12)))
+    snapshots = list(iter_fit(points, _small(iterations=12, loss=PAPER_POINT_CLOUD_LOSS)))
     assert all(isinstance(s, FitSnapshot) for s in snapshots)
     assert snapshots[-1].done and snapshots[-1].status == "budget"
     assert not any(s.done for s in snapshots[:-1])
