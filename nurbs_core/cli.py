@@ -129,15 +129,20 @@ def _grid_parameters(count_u: int, count_v: int, points: int) -> np.ndarray:
 class _Progress:
     def __init__(self, total: int, quiet: bool):
         self.total, self.quiet, self.last = total, quiet, -math.inf
+        self.record: dict | None = None
 
     def __call__(self, snapshot):
-        if self.quiet or not snapshot.losses:
+        if snapshot.losses:
+            self.record = snapshot.losses[-1]
+        # the final snapshot has no records when the previous one already carried the last
+        # iteration: still print the last iteration's line
+        if self.quiet or self.record is None or not (snapshot.losses or snapshot.done):
             return
         now = time.perf_counter()
         if now - self.last < PROGRESS_INTERVAL and not snapshot.done:
             return
         self.last = now
-        record = snapshot.losses[-1]
+        record = self.record
         terms = ", ".join(f"{k} {v:.3g}" for k, v in record.items()
                           if k not in ("iteration", "total"))
         line = (f"iteration {snapshot.iteration}/{self.total}  loss {record['total']:.4g} "

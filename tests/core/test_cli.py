@@ -13,6 +13,7 @@ import torch
 import trimesh
 
 from nurbs_core.cli import main
+from nurbs_core.fit import DEFAULT_LOSS
 
 
 @pytest.fixture(autouse=True)
@@ -37,6 +38,7 @@ def test_fit_xyz_to_3dm_and_json(tmp_path, capsys):
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert "iteration 60/60" in captured.err  # progress, with the last iteration always shown
+    assert f"loss {DEFAULT_LOSS}" in captured.err  # the library's default loss
     assert "point-to-surface distance: mean" in captured.out and "chamfer distance" in captured.out
     model = rhino3dm.File3dm.Read(str(out_3dm))  # openNURBS reads it back
     surfaces = [obj.Geometry for obj in model.Objects]
@@ -177,3 +179,16 @@ def test_console_script_entry_point(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "nurbs_core.cli", str(tmp_path / "x.xyz"), "-o",
                           str(tmp_path / "o.json")], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 1 and "Traceback" not in bad.stderr
+
+
+def test_progress_shows_the_last_iteration_when_the_final_snapshot_has_no_records(capsys):
+    # the throttled engine may yield the last iteration in a "running" snapshot, leaving the final
+    # (done) snapshot without records; the progress must still end on the last iteration
+    from nurbs_core.cli import _Progress
+    from nurbs_core.fit import FitSnapshot
+
+    progress = _Progress(60, quiet=False)
+    progress(FitSnapshot(1, {}, [{"iteration": 1, "total": 1.0}], 0.1, False, "running"))
+    progress(FitSnapshot(60, {}, [{"iteration": 60, "total": 0.5}], 0.2, False, "running"))
+    progress(FitSnapshot(60, {}, [], 0.2, True, "budget"))
+    assert capsys.readouterr().err.splitlines()[-1].startswith("iteration 60/60  loss 0.5")
