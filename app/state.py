@@ -22,7 +22,8 @@ SESSION_FORMAT = "nurbs-studio-session-v1"
 
 #: Loss terms the settings panel offers, in display order (names of ``nurbs_core.losses``).
 #: l1 / l2 / mse pair the i-th sample with the i-th point: meaningful only for ordered targets.
-LOSS_TERMS = ("chamfer", "hausdorff", "laplacian", "length", "l1", "l2", "mse")
+#: Kept equal to ``nurbs_core.losses.TERMS`` (a test checks it).
+LOSS_TERMS = ("p2s", "chamfer", "hausdorff", "laplacian", "length", "l1", "l2", "mse")
 OPTIMIZERS = ("adam", "sgd", "momentum", "adagrad", "lbfgs")
 INITIALIZATIONS = ("pca", "least_squares", "random")
 
@@ -60,8 +61,8 @@ class FitSettings:
     degree_v: int = 3
     control_points_u: int = 12
     control_points_v: int = 12
-    loss: tuple[tuple[str, float], ...] = (("chamfer", 1.0), ("laplacian", 0.1),
-                                           ("hausdorff", 10.0))
+    #: ``nurbs_core.fit.DEFAULT_LOSS`` (a test checks they agree)
+    loss: tuple[tuple[str, float], ...] = (("p2s", 1.0), ("chamfer", 0.001))
     optimizer: str = "adam"
     learning_rate: float = 0.01
     iterations: int = 500

@@ -30,6 +30,7 @@ POLICY_TEXT = ("Changes restart a running or paused fit from the current shape. 
                "(Reset starts afresh).")
 
 TERM_HELP = {
+    "p2s": "mean squared distance to the shape, foot points refined as it moves",
     "chamfer": "mean nearest-neighbour distance, both ways",
     "hausdorff": "largest nearest-neighbour distance (pulls outliers in)",
     "laplacian": "smoothness of the control net",

@@ -89,3 +89,13 @@ def test_worker_side_code_never_imports_widgets_or_vtk():
                      else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
             for name in names:
                 assert not name.startswith(forbidden), f"{path.name} imports {name}"
+
+
+def test_settings_offer_every_engine_loss_term_and_share_its_default():
+    """The panel's loss editor and default must not drift from the engine's."""
+    from app.state import LOSS_TERMS, FitSettings, parse_loss
+    from nurbs_core.fit import DEFAULT_LOSS
+    from nurbs_core.losses import TERMS
+
+    assert set(LOSS_TERMS) == set(TERMS)
+    assert FitSettings().loss == parse_loss(DEFAULT_LOSS)
