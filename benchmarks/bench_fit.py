@@ -193,6 +193,8 @@ def default_losses(threads: int, iterations: int):
     print("mean / rms / max: foot-point deviation; CD: two-sided Chamfer (means, 100 x 100 "
           "surface grid); excess p95: 95th percentile of surface -> cloud distance; all x 1e-3 of "
           "the bbox diagonal. covered: share of points within 1% of the diagonal of the surface.")
+    # warm-up: first-call costs (lazy imports, allocator) are not part of any row
+    fit(synthetic_cloud(2000, seed=1), FitConfig(iterations=5, threads=threads))
     header = (f"{'case':<31} | {'loss':<36} | {'time s':>6} | {'mean':>6} | {'rms':>6} | "
               f"{'max':>6} | {'CD':>6} | {'excess p95':>10} | {'covered':>7}")
     print(header)
