@@ -28,6 +28,8 @@ class LossPlot(QWidget):
         self.plot.setClipToView(True)
         self.plot.setLabel("bottom", "iteration")
         self.plot.setLabel("left", "loss (normalised units)")
+        # no "(x0.001)" SI rescaling of the log axis: the tick labels already carry the decades
+        self.plot.getAxis("left").enableAutoSIPrefix(False)
         self.plot.addLegend(offset=(-10, 10))
         self._empty_view()
         layout.addWidget(self.plot)
