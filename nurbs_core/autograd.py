@@ -200,53 +200,55 @@ class SurfaceGridPoints(torch.autograd.Function):
     @staticmethod
     def forward(ctx, control_points, weights, knots_u, knots_v, dense_u, dense_v, d_basis_u,
                 d_basis_v, span_u, span_v, degree_u, degree_v):
-        # homogeneous control points built column-major (B, m, n, 4): the layout stage 1 wants
-        by_column, batch_shape = _homogeneous(control_points.transpose(-3, -2),
-                                              weights.transpose(-2, -1), 2)
-        batch, m, n, _ = by_column.shape
+        batch_shape = control_points.shape[:-3]
+        n, m = control_points.shape[-3], control_points.shape[-2]
+        weighted = (control_points * weights.unsqueeze(-1)).reshape(-1, n, m, 3)  # w P
+        plane_w = weights.reshape(-1, n, m, 1)
+        batch = weighted.shape[0]
         size_u, size_v = dense_u.shape[1], dense_v.shape[1]
-        # stage 1 (small): Q[i, b, c] = sum_j Pw[i, j, c] N_v[b, j], split into xyz and w
-        partial = torch.matmul(dense_v, by_column.view(batch, m, n * 4))  # (B, Mv, n*4)
-        partial = partial.view(batch, size_v, n, 4).transpose(1, 2)  # (B, n, Mv, 4)
-        partial_xyz = partial[..., :3].reshape(batch, n, size_v * 3)
-        partial_w = partial[..., 3].reshape(batch, n, size_v)
-        # stage 2 (large): H[a, b, c] = sum_i N_u[a, i] Q[i, b, c]; the xyz part comes out
-        # contiguous in its final (Mu, Mv, 3) layout, the weights as their own (Mu, Mv) plane
+        # stage 1 (small), row by row: Q[i] = N_v Pw[i], for the xyz part and the weight plane
+        basis_v = dense_v.unsqueeze(1)  # (Bb, 1, Mv, m)
+        partial_xyz = torch.matmul(basis_v, weighted).view(batch, n, size_v * 3)
+        partial_w = torch.matmul(basis_v, plane_w).view(batch, n, size_v)
+        # stage 2 (large): H = N_u Q; xyz comes out contiguous in its final (Mu, Mv, 3) layout
         inv_w = torch.matmul(dense_u, partial_w).reciprocal_()  # (B, Mu, Mv)
         points = torch.matmul(dense_u, partial_xyz).view(batch, size_u, size_v, 3)
         points.mul_(inv_w.unsqueeze(-1))
-        ctx.save_for_backward(control_points, weights, by_column, dense_u, dense_v, d_basis_u,
-                              d_basis_v, span_u, span_v, points, inv_w, partial_xyz, partial_w)
+        ctx.save_for_backward(control_points, weights, weighted, plane_w, dense_u, dense_v,
+                              d_basis_u, d_basis_v, span_u, span_v, points, inv_w, partial_xyz,
+                              partial_w)
         ctx.degrees = (degree_u, degree_v)
         ctx.knot_shapes = (knots_u.shape, knots_v.shape)
         return points.view(*batch_shape, size_u, size_v, 3)
 
     @staticmethod
     def backward(ctx, grad_points):
-        (control_points, weights, by_column, dense_u, dense_v, d_basis_u, d_basis_v, span_u,
-         span_v, points, inv_w, partial_xyz, partial_w) = ctx.saved_tensors
+        (control_points, weights, weighted, plane_w, dense_u, dense_v, d_basis_u, d_basis_v,
+         span_u, span_v, points, inv_w, partial_xyz, partial_w) = ctx.saved_tensors
         degree_u, degree_v = ctx.degrees
-        batch, m, n, _ = by_column.shape
+        batch, n, m, _ = weighted.shape
         size_u, size_v = dense_u.shape[1], dense_v.shape[1]
         # through the division: dL/dH_xyz = g / w, dL/dH_w = -(g . S) / w
         grad_xyz = grad_points.reshape(points.shape) * inv_w.unsqueeze(-1)
         grad_w = torch.mv((grad_xyz * points).view(-1, 3), points.new_ones(3)).neg_()
         grad_xyz = grad_xyz.view(batch, size_u, size_v * 3)
         grad_w = grad_w.view(batch, size_u, size_v)
-        grad_cp = grad_w_out = grad_ku = grad_kv = None
+        grad_cp = grad_weights = grad_ku = grad_kv = None
         need_control = ctx.needs_input_grad[0] or ctx.needs_input_grad[1]
         need_v = ctx.needs_input_grad[3] and d_basis_v is not None
         if need_control or need_v:
-            # dL/dQ = N_u^T dL/dH, reassembled as (B, Mv, n*4) for the product with N_v
+            # dL/dQ = N_u^T dL/dH, per row i: (Mv, 3) and (Mv, 1)
             dense_ut = dense_u.transpose(-1, -2)
-            grad_q = torch.cat([torch.matmul(dense_ut, grad_xyz).view(batch, n, size_v, 3),
-                                torch.matmul(dense_ut, grad_w).unsqueeze(-1)], dim=-1)
-            by_row = grad_q.transpose(1, 2).reshape(batch, size_v, n * 4)
+            grad_q_xyz = torch.matmul(dense_ut, grad_xyz).view(batch, n, size_v, 3)
+            grad_q_w = torch.matmul(dense_ut, grad_w).view(batch, n, size_v, 1)
         if need_control:
-            grad_cw = torch.matmul(dense_v.transpose(-1, -2), by_row)  # (B, m, n*4)
-            grad_cp, grad_w_out = _split_homogeneous_grad(
-                grad_cw, control_points.transpose(-3, -2), weights.transpose(-2, -1))
-            grad_cp, grad_w_out = grad_cp.transpose(-3, -2), grad_w_out.transpose(-2, -1)
+            # dL/dPw[i] = N_v^T dL/dQ[i], then through Pw = (w P, w)
+            basis_vt = dense_v.transpose(-1, -2).unsqueeze(1)  # (Bb, 1, m, Mv)
+            grad_weighted = torch.matmul(basis_vt, grad_q_xyz)  # (B, n, m, 3)
+            grad_plane = torch.matmul(basis_vt, grad_q_w).view(batch, n, m)
+            grad_cp = (grad_weighted * plane_w).view(control_points.shape)
+            grad_weights = (grad_plane + (grad_weighted * control_points.reshape(batch, n, m, 3))
+                            .sum(-1)).view(weights.shape)
         shared = dense_u.shape[0] == 1 and batch > 1
         if ctx.needs_input_grad[2] and d_basis_u is not None:
             # dL/dN_u[a, i] = sum_{b, c} dL/dH[a, b, c] Q[i, b, c]; keep the p + 1 local entries
@@ -259,11 +261,12 @@ class SurfaceGridPoints(torch.autograd.Function):
             grad_ku = _fit_knot_grad(grad_ku, ctx.knot_shapes[0])
         if need_v:
             # dL/dN_v[b, j] = sum_{i, c} dL/dQ[i, b, c] Pw[i, j, c]
-            grad_dense_v = torch.matmul(by_row, by_column.view(batch, m, n * 4).transpose(-1, -2))
+            grad_dense_v = (torch.matmul(grad_q_xyz, weighted.transpose(-1, -2))
+                            + torch.matmul(grad_q_w, plane_w.transpose(-1, -2))).sum(1)
             grad_dense_v = grad_dense_v.sum(0, keepdim=True) if shared else grad_dense_v
             grad_bv = torch.gather(grad_dense_v, 2, _local_index(span_v, degree_v))
             grad_kv = _scatter_knot_grad(grad_bv, d_basis_v, span_v, degree_v,
                                          ctx.knot_shapes[1][-1])
             grad_kv = _fit_knot_grad(grad_kv, ctx.knot_shapes[1])
-        return (grad_cp, grad_w_out, grad_ku, grad_kv, None, None, None, None, None, None, None,
+        return (grad_cp, grad_weights, grad_ku, grad_kv, None, None, None, None, None, None, None,
                 None)
