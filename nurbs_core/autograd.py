@@ -73,6 +73,16 @@ def _scatter_knot_grad(grad_basis, d_basis, span, degree, n_knots):
     return out
 
 
+def _knot_gradient(grad_basis, d_basis, span, degree, knots_shape, shared: bool):
+    """dL/dknots shaped like the knot tensor, from dL/d(non-zero basis values) (Bb, M, p+1).
+
+    ``shared``: one basis serves the whole batch, so the batch's contributions are summed first."""
+    if shared:
+        grad_basis = grad_basis.sum(0, keepdim=True)
+    grad = _scatter_knot_grad(grad_basis, d_basis, span, degree, knots_shape[-1])
+    return _fit_knot_grad(grad, knots_shape)
+
+
 def _fit_knot_grad(grad: torch.Tensor, knots_shape: torch.Size) -> torch.Tensor:
     """Reduce a (Bb, K) knot gradient to the knot tensor's own shape (shared or batched)."""
     if len(knots_shape) == 1:
@@ -123,11 +133,8 @@ class CurvePoints(torch.autograd.Function):
         if ctx.needs_input_grad[2] and d_basis is not None:
             gathered = control_w.reshape(-1, dim + 1)[ctx.plan.columns].view(batch, size, -1, dim + 1)
             grad_basis = torch.einsum("bmc,bmrc->bmr", grad_h, gathered)
-            if basis.shape[0] == 1 and batch > 1:
-                grad_basis = grad_basis.sum(0, keepdim=True)
-            n_knots = ctx.knots_shape[-1]
-            grad_knots = _scatter_knot_grad(grad_basis, d_basis, span, ctx.degree, n_knots)
-            grad_knots = _fit_knot_grad(grad_knots, ctx.knots_shape)
+            grad_knots = _knot_gradient(grad_basis, d_basis, span, ctx.degree, ctx.knots_shape,
+                                        shared=basis.shape[0] == 1 and batch > 1)
         return grad_cp, grad_w, grad_knots, None, None, None, None, None
 
 
@@ -171,16 +178,12 @@ class SurfacePoints(torch.autograd.Function):
             shared = basis_u.shape[0] == 1 and batch > 1
             if ctx.needs_input_grad[2] and d_basis_u is not None:
                 grad_bu = torch.einsum("bmrs,bms->bmr", per_point, bv)
-                grad_bu = grad_bu.sum(0, keepdim=True) if shared else grad_bu
-                grad_ku = _scatter_knot_grad(grad_bu, d_basis_u, span_u, degree_u,
-                                             ctx.knot_shapes[0][-1])
-                grad_ku = _fit_knot_grad(grad_ku, ctx.knot_shapes[0])
+                grad_ku = _knot_gradient(grad_bu, d_basis_u, span_u, degree_u,
+                                         ctx.knot_shapes[0], shared)
             if ctx.needs_input_grad[3] and d_basis_v is not None:
                 grad_bv = torch.einsum("bmrs,bmr->bms", per_point, bu)
-                grad_bv = grad_bv.sum(0, keepdim=True) if shared else grad_bv
-                grad_kv = _scatter_knot_grad(grad_bv, d_basis_v, span_v, degree_v,
-                                             ctx.knot_shapes[1][-1])
-                grad_kv = _fit_knot_grad(grad_kv, ctx.knot_shapes[1])
+                grad_kv = _knot_gradient(grad_bv, d_basis_v, span_v, degree_v,
+                                         ctx.knot_shapes[1], shared)
         return (grad_cp, grad_w, grad_ku, grad_kv, None, None, None, None, None, None, None, None,
                 None)
 
@@ -254,19 +257,17 @@ class SurfaceGridPoints(torch.autograd.Function):
             # dL/dN_u[a, i] = sum_{b, c} dL/dH[a, b, c] Q[i, b, c]; keep the p + 1 local entries
             grad_dense_u = (torch.matmul(grad_xyz, partial_xyz.transpose(-1, -2))
                             + torch.matmul(grad_w, partial_w.transpose(-1, -2)))  # (B, Mu, n)
-            grad_dense_u = grad_dense_u.sum(0, keepdim=True) if shared else grad_dense_u
-            grad_bu = torch.gather(grad_dense_u, 2, _local_index(span_u, degree_u))
-            grad_ku = _scatter_knot_grad(grad_bu, d_basis_u, span_u, degree_u,
-                                         ctx.knot_shapes[0][-1])
-            grad_ku = _fit_knot_grad(grad_ku, ctx.knot_shapes[0])
+            grad_bu = torch.gather(grad_dense_u, 2,
+                                   _local_index(span_u, degree_u).expand(batch, -1, -1))
+            grad_ku = _knot_gradient(grad_bu, d_basis_u, span_u, degree_u, ctx.knot_shapes[0],
+                                     shared)
         if need_v:
             # dL/dN_v[b, j] = sum_{i, c} dL/dQ[i, b, c] Pw[i, j, c]
             grad_dense_v = (torch.matmul(grad_q_xyz, weighted.transpose(-1, -2))
                             + torch.matmul(grad_q_w, plane_w.transpose(-1, -2))).sum(1)
-            grad_dense_v = grad_dense_v.sum(0, keepdim=True) if shared else grad_dense_v
-            grad_bv = torch.gather(grad_dense_v, 2, _local_index(span_v, degree_v))
-            grad_kv = _scatter_knot_grad(grad_bv, d_basis_v, span_v, degree_v,
-                                         ctx.knot_shapes[1][-1])
-            grad_kv = _fit_knot_grad(grad_kv, ctx.knot_shapes[1])
+            grad_bv = torch.gather(grad_dense_v, 2,
+                                   _local_index(span_v, degree_v).expand(batch, -1, -1))
+            grad_kv = _knot_gradient(grad_bv, d_basis_v, span_v, degree_v, ctx.knot_shapes[1],
+                                     shared)
         return (grad_cp, grad_weights, grad_ku, grad_kv, None, None, None, None, None, None, None,
                 None)

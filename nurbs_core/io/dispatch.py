@@ -2,24 +2,13 @@
 
 from __future__ import annotations
 
-import os
-
 from nurbs_core.io.errors import FileFormatError
-from nurbs_core.io.points import POINT_CLOUD_SUFFIXES, load_points, suffix_of
+from nurbs_core.io.points import POINT_CLOUD_SUFFIXES, _check_file, load_points, suffix_of
 
 CAD_SUFFIXES = (".step", ".stp", ".iges", ".igs")
 NURBS_SUFFIXES = (".3dm", ".json", ".dat", ".smesh", *CAD_SUFFIXES)
 EXPORT_SUFFIXES = (".3dm", ".step", ".stp", ".iges", ".igs", ".json", ".obj", ".stl", ".ply",
                    ".glb", ".csv", ".dat")
-
-
-def _check_file(path) -> None:
-    if not os.path.exists(path):
-        raise FileNotFoundError(f"{os.fspath(path)}: no such file")
-    if os.path.isdir(path):
-        raise FileFormatError(path, "is a directory, not a file")
-    if os.path.getsize(path) == 0:
-        raise FileFormatError(path, "the file is empty")
 
 
 def _load_json(path) -> list:
