@@ -14,13 +14,7 @@ from nurbs_core.fitting.ordering import backbone_path, path_parameters
 from nurbs_core.images import boundary_points, chord_length_parameters
 from nurbs_core.losses import chamfer_distance
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    saved = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(saved)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _sine():

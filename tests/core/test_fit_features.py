@@ -18,13 +18,7 @@ from nurbs_core.fit import (
 )
 from nurbs_core.losses import nearest_distances
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    saved = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(saved)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _sine_grid(count):

@@ -11,14 +11,7 @@ from nurbs_core import NurbsSurface
 from nurbs_core.fit import FitConfig, fit, least_squares_fit
 from nurbs_core.knots import clamped_uniform
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    # small fits run fastest on one intra-op thread (and the test machine is shared)
-    saved = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(saved)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _paired_errors(geometry, points, params):

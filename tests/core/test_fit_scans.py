@@ -9,13 +9,7 @@ import torch
 from nurbs_core.fit import FitConfig, deviation, fit, iter_fit
 from nurbs_core.losses import chamfer_distance
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    saved = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(saved)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _chamfer(surface, points):

@@ -96,14 +96,7 @@ def _fit_and_baseline(base, distance, samples=(20, 20)):
     return fitted, baseline
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _one_torch_thread():
-    """These problems are tiny: with two OpenMP threads on a busy 2-core machine each small
-    matmul waits for the other thread (2 ms instead of 0.05 ms)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")
