@@ -122,15 +122,17 @@ def _away_from_knots(knots, degree, count, seed):
     return t[keep]
 
 
-def test_knot_gradients_surface_paired_and_grid():
-    control, weights = random_net((), 6, 5, seed=20)
+@pytest.mark.parametrize("batch", [(), (3,)], ids=["single", "batch sharing the knots"])
+def test_knot_gradients_surface_paired_and_grid(batch):
+    """Batched nets sharing one knot vector: the knot gradient sums the batch's contributions."""
+    control, weights = random_net(batch, 6, 5, seed=20)
     control, weights = control.detach(), weights.detach()
     u = _away_from_knots(KNOTS_U, 3, 30, 21)
     v = _away_from_knots(KNOTS_V, 2, 30, 22)[: len(u)]
     u = u[: len(v)]
     g = torch.Generator().manual_seed(23)
-    w_paired = torch.randn(len(u), 3, dtype=F64, generator=g)
-    w_grid = torch.randn(len(u), len(v), 3, dtype=F64, generator=g)
+    w_paired = torch.randn(*batch, len(u), 3, dtype=F64, generator=g)
+    w_grid = torch.randn(*batch, len(u), len(v), 3, dtype=F64, generator=g)
     _check_knot_gradient(
         lambda k: (surface_points(control, weights, k, KNOTS_V, 3, 2, u, v) * w_paired).sum(),
         KNOTS_U, 3)
@@ -205,23 +207,3 @@ def test_device_and_dtype_follow_inputs():
     assert out.dtype == torch.float32 and out.device == c32.device
     assert np.isfinite(out.numpy()).all()
 
-
-def test_knot_gradients_with_a_batch_sharing_one_knot_vector():
-    """A batch of nets sharing the knots: the knot gradient sums the batch's contributions."""
-    control, weights = random_net((3,), 6, 5, seed=60)
-    control, weights = control.detach(), weights.detach()
-    u = _away_from_knots(KNOTS_U, 3, 12, 61)
-    v = _away_from_knots(KNOTS_V, 2, 12, 62)
-    g = torch.Generator().manual_seed(63)
-    w_grid = torch.randn(3, len(u), len(v), 3, dtype=F64, generator=g)
-    w_paired = torch.randn(3, min(len(u), len(v)), 3, dtype=F64, generator=g)
-    k = min(len(u), len(v))
-    _check_knot_gradient(
-        lambda kk: (surface_grid_points(control, weights, kk, KNOTS_V, 3, 2, u, v) * w_grid).sum(),
-        KNOTS_U, 3)
-    _check_knot_gradient(
-        lambda kk: (surface_grid_points(control, weights, KNOTS_U, kk, 3, 2, u, v) * w_grid).sum(),
-        KNOTS_V, 2)
-    _check_knot_gradient(
-        lambda kk: (surface_points(control, weights, kk, KNOTS_V, 3, 2, u[:k], v[:k])
-                    * w_paired).sum(), KNOTS_U, 3)
