@@ -629,13 +629,14 @@ class MainWindow(QMainWindow):
         return True
 
     def open_session(self, path: str) -> bool:
-        self.controller.reset()
-        self.loss_plot.clear()
-        try:
-            self.document.load_session(path)
+        try:  # read and check first: a bad file must not stop or discard the current fit
+            session = self.document.read_session(path)
         except ValueError as exc:
             self.report(f"{exc}\nThe document was left unchanged.", error=True)
             return False
+        self.controller.reset()
+        self.loss_plot.clear()
+        self.document.apply_session(session)
         self.report(f"Session opened from {path}")
         return True
 

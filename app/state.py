@@ -242,7 +242,13 @@ class Document(QObject):
         Path(path).write_text(json.dumps(self.to_session()))
 
     def load_session(self, path: str | Path):
-        """Read a session file; raises ValueError naming the problem (document untouched)."""
+        """Read a session file and apply it; raises ValueError naming the problem (document
+        untouched)."""
+        self.apply_session(self.read_session(path))
+
+    @staticmethod
+    def read_session(path: str | Path) -> dict[str, Any]:
+        """Parse and check a session file without touching any document; raises ValueError."""
         path = Path(path)
         try:
             data = json.loads(path.read_text())
@@ -264,10 +270,15 @@ class Document(QObject):
             fitted = None if fitted is None else _geometry_from_json(fitted)
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"{path}: damaged session ({exc})") from None
-        self.replace_content(targets, patches, names)
+        return {"settings": settings, "targets": targets, "patches": patches, "names": names,
+                "fitted": fitted}
+
+    def apply_session(self, session: dict[str, Any]):
+        """Replace the document with a session from :meth:`read_session`."""
+        self.replace_content(session["targets"], session["patches"], session["names"])
         self.undo_stack.clear()
-        self._apply_settings(settings)
-        self.set_fitted(fitted)
+        self._apply_settings(session["settings"])
+        self.set_fitted(session["fitted"])
 
 
 def _geometry_to_json(geometry: dict[str, Any]) -> dict[str, Any]:

@@ -45,10 +45,11 @@ def test_session_round_trip(qtbot, window, ply_cloud, tmp_path):
     # a damaged session changes nothing
     broken = tmp_path / "broken.json"
     broken.write_text('{"format": "nurbs-studio-session-v1", "targets": [{"name": 1}]}')
-    targets = window.document.targets
+    targets, fitted = window.document.targets, window.document.fitted
     assert not window.open_session(str(broken))
     assert "broken.json" in window.last_error
     assert window.document.targets is targets
+    assert window.document.fitted is fitted
 
 
 def test_planar_cloud_fits_a_2d_curve(qtbot, window, tmp_path):
