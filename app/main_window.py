@@ -40,7 +40,7 @@ from app.panels.knot_panel import KnotPanel
 from app.panels.log_panel import LogPanel
 from app.panels.loss_plot import LossPlot
 from app.panels.offset_panel import OffsetPanel
-from app.state import Document, FitSettings
+from app.state import Document, FitSettings, control_grid_for
 from app.viewport.scene import SceneView
 from app.workers.fit_worker import DisplaySnapshot, deviation_stats
 from app.workers.jobs import JobRunner
@@ -362,6 +362,12 @@ class MainWindow(QMainWindow):
                 "curve"):
             self.document.edit_settings("Kind (planar cloud)", kind="curve")
             self.report("The cloud is planar: switched to curve fitting (2D).")
+        grid = None if points is None else control_grid_for(len(points), self.document.settings)
+        if grid is not None:
+            self.document.edit_settings("Control grid (small cloud)", control_points_u=grid[0],
+                                        control_points_v=grid[1])
+            self.report(f"{len(points)} points are few for the control grid: reduced it to "
+                        f"{grid[0]} x {grid[1]} (Edit > Undo to keep the larger grid).")
         for path in paths:
             self._add_recent(path)
         counts = [f"{len(t.points)} points in {t.name}" for t in loaded.targets]

@@ -30,6 +30,25 @@ INITIALIZATIONS = ("pca", "least_squares", "random")
 _TERM = re.compile(r"^\s*(?:(?P<weight>[0-9.eE+-]+)\s*\*\s*)?(?P<name>[a-z_0-9]+)\s*$")
 
 
+#: A surface fit wants several points per control point; fewer leaves the net free to fold.
+POINTS_PER_CONTROL_POINT = 8
+
+
+def control_grid_for(point_count: int, settings: FitSettings) -> tuple[int, int] | None:
+    """A smaller (n_u, n_v) when the cloud is too small for the settings' control grid, else None.
+
+    Each direction gets at most sqrt(points / POINTS_PER_CONTROL_POINT) control points, never
+    fewer than degree + 1 (the grid is only ever reduced)."""
+    if settings.kind != "surface":
+        return None
+    limit = int((point_count / POINTS_PER_CONTROL_POINT) ** 0.5)
+    n_u = min(settings.control_points_u, max(settings.degree_u + 1, limit))
+    n_v = min(settings.control_points_v, max(settings.degree_v + 1, limit))
+    if (n_u, n_v) == (settings.control_points_u, settings.control_points_v):
+        return None
+    return n_u, n_v
+
+
 def parse_loss(text: str) -> tuple[tuple[str, float], ...]:
     """``"chamfer+0.1*laplacian"`` -> ``(("chamfer", 1.0), ("laplacian", 0.1))``."""
     terms = []

@@ -99,3 +99,13 @@ def test_settings_offer_every_engine_loss_term_and_share_its_default():
 
     assert set(LOSS_TERMS) == set(TERMS)
     assert FitSettings().loss == parse_loss(DEFAULT_LOSS)
+
+
+def test_small_clouds_get_a_smaller_control_grid():
+    from app.state import control_grid_for
+
+    settings = FitSettings()  # 12 x 12, degree 3
+    assert control_grid_for(4000, settings) is None  # 4000 / 144 points per control point: fine
+    assert control_grid_for(273, settings) == (5, 5)  # sqrt(273 / 8) = 5.8
+    assert control_grid_for(40, settings) == (4, 4)  # never below degree + 1
+    assert control_grid_for(40, with_changes(settings, kind="curve")) is None
