@@ -91,6 +91,15 @@ class FitSettings:
     init: str = "pca"
     samples_u: int = 64
     samples_v: int = 64
+    #: the least-squares core (``nurbs_core.fit.FitConfig``): final fairing weight, two-sided
+    #: distance tolerance (None: from the cloud's noise), how far the control grid may grow,
+    #: the solver, the parameterisation of unordered clouds, and forcing one patch
+    stiffness: float = 1e-3
+    tolerance: float | None = None
+    max_control_points: int = 40
+    solver: str = "auto"
+    parameterization: str = "auto"
+    single_patch: bool = False
     #: Custom knot vectors (full, clamped) or None for the clamped uniform preset.
     knots_u: tuple[float, ...] | None = None
     knots_v: tuple[float, ...] | None = None
@@ -119,7 +128,10 @@ class FitSettings:
                   "optimizer": self.optimizer, "learning_rate": self.learning_rate,
                   "iterations": self.iterations, "free_knots": self.free_knots,
                   "free_weights": self.free_weights, "pin_boundary": self.pin_boundary,
-                  "init": self.init, "samples_u": self.samples_u, "samples_v": self.samples_v}
+                  "init": self.init, "samples_u": self.samples_u, "samples_v": self.samples_v,
+                  "stiffness": self.stiffness, "tolerance": self.tolerance,
+                  "max_control_points": self.max_control_points, "solver": self.solver,
+                  "parameterization": self.parameterization, "single_patch": self.single_patch}
         declared = {f.name for f in dataclasses.fields(FitConfig)}
         return {key: value for key, value in wanted.items() if key in declared}
 

@@ -225,7 +225,7 @@ def _ducky_grid(size: int) -> tuple[np.ndarray, np.ndarray]:
 def _free_knot_fit(grid, parameters, count_u, count_v, iterations, seed):
     config = FitConfig(degree_u=3, degree_v=3, control_points_u=count_u,
                        control_points_v=count_v, loss="mse", optimizer="adam",
-                       learning_rate=0.01, iterations=iterations, tolerance=0.0, free_knots=True,
+                       learning_rate=0.01, iterations=iterations, loss_tolerance=0.0, free_knots=True,
                        init="least_squares", seed=seed, samples_u=64, samples_v=64)
     result = fit(grid.reshape(-1, 3), config, parameters=parameters)
     return result
@@ -234,7 +234,7 @@ def _free_knot_fit(grid, parameters, count_u, count_v, iterations, seed):
 def _fixed_knot_fit(grid, parameters, count_u, count_v, iterations, seed):
     config = FitConfig(degree_u=3, degree_v=3, control_points_u=count_u,
                        control_points_v=count_v, loss="mse", optimizer="lbfgs",
-                       learning_rate=1.0, iterations=iterations, tolerance=0.0, init="random",
+                       learning_rate=1.0, iterations=iterations, loss_tolerance=0.0, init="random",
                        seed=seed, samples_u=64, samples_v=64)
     return fit(grid.reshape(-1, 3), config, parameters=parameters)
 
@@ -335,7 +335,7 @@ def _fit_api_offset_row(name, patches, distance, iterations):
         config = FitConfig(degree_u=base.degree_u, degree_v=base.degree_v,
                            control_points_u=base.shape[0], control_points_v=base.shape[1],
                            loss="mse", optimizer="adam", learning_rate=0.01,
-                           iterations=iterations, tolerance=0.0)
+                           iterations=iterations, loss_tolerance=0.0)
         initial = offset_patches([base], distance, method="control_points").surfaces[0]
         result = fit(target, config, parameters=parameters, initial=initial)
         fitted = result.geometry.to(dtype=torch.float64).evaluate(parameters[:, 0],

@@ -57,8 +57,31 @@ def build_parser() -> argparse.ArgumentParser:
                         choices=["sgd", "momentum", "adam", "adagrad", "lbfgs"])
     parser.add_argument("--learning-rate", type=float, default=None,
                         help="step size (default 0.01; 1.0 for lbfgs)")
-    parser.add_argument("--tolerance", type=float, default=1e-7,
-                        help="relative loss change that counts as converged")
+    parser.add_argument("--tolerance", type=float, default=None, metavar="T",
+                        help="two-sided distance tolerance in the cloud's units: the fit stops "
+                             "refining when all but --outliers of the points and the surface's "
+                             "samples are within T (default: from the cloud's estimated noise)")
+    parser.add_argument("--outliers", type=float, default=0.01, metavar="F",
+                        help="fraction of the points allowed beyond --tolerance (default 0.01)")
+    parser.add_argument("--stiffness", type=float, default=None, metavar="S",
+                        help="final fairing weight (thin plate + membrane) of the least-squares "
+                             "core, relative to the data (default 1e-3; larger is smoother)")
+    parser.add_argument("--parameterization", default="auto", choices=["auto", "mesh", "plane"],
+                        help="(u, v) of an unordered surface cloud: 'mesh' maps the cloud's "
+                             "triangle mesh onto the unit square without folds (the default "
+                             "'auto'), 'plane' projects onto the principal plane")
+    parser.add_argument("--single-patch", action="store_true",
+                        help="fit one patch even to a closed or tube-like cloud (it will fold)")
+    parser.add_argument("--solver", default="auto", choices=["auto", "least_squares", "gradient"],
+                        help="'least_squares': fairing least squares with parameter correction; "
+                             "'gradient': the torch optimisation from that start; 'auto' adds "
+                             "the gradient fit only for a non-default loss or free knots/weights")
+    parser.add_argument("--max-control-points", type=int, default=None, metavar="N",
+                        help="largest control grid per direction the least-squares core may "
+                             "grow to while the tolerance is not met (default 40; 0 keeps the "
+                             "grid; with --control-points the grid is kept unless this is given)")
+    parser.add_argument("--loss-tolerance", type=float, default=1e-7,
+                        help="relative loss change that counts as converged (gradient fit)")
     parser.add_argument("--init", default="pca", choices=["pca", "random", "least_squares"])
     parser.add_argument("--free-knots", action="store_true", help="optimize the interior knots")
     parser.add_argument("--free-weights", action="store_true", help="optimize the weights")
@@ -107,11 +130,18 @@ def _config(args, dimensions: int) -> FitConfig:
     if learning_rate is None:
         learning_rate = 1.0 if args.optimizer == "lbfgs" else 0.01
     loss = args.loss or (CURVE_LOSS if args.curve else DEFAULT_LOSS)
-    return FitConfig(
+    max_counts = args.max_control_points
+    if max_counts is None:
+        max_counts = 0 if args.control_points else FitConfig.max_control_points
+    extra = {} if args.stiffness is None else {"stiffness": args.stiffness}
+    return FitConfig(**extra,
         kind="curve" if args.curve else "surface", degree_u=degrees[0],
         degree_v=degrees[-1], control_points_u=counts[0], control_points_v=counts[-1],
         loss=loss, optimizer=args.optimizer, learning_rate=learning_rate,
-        iterations=args.iterations, tolerance=args.tolerance, free_knots=args.free_knots,
+        iterations=args.iterations, tolerance=args.tolerance, outlier_fraction=args.outliers,
+        loss_tolerance=args.loss_tolerance, parameterization=args.parameterization,
+        single_patch=args.single_patch, solver=args.solver, max_control_points=max_counts,
+        free_knots=args.free_knots,
         free_weights=args.free_weights, pin_boundary=args.pin_boundary, init=args.init,
         samples_u=samples[0], samples_v=samples[-1],
         parameter_correction=not args.no_parameter_correction, seed=args.seed,
@@ -146,6 +176,8 @@ class _Progress:
         terms = ", ".join(f"{k} {v:.3g}" for k, v in record.items()
                           if k not in ("iteration", "total"))
         line = (f"iteration {snapshot.iteration}/{self.total}  loss {record['total']:.4g} "
+                if "fairing" not in record else
+                f"pass {snapshot.iteration}  loss {record['total']:.4g} "
                 f"({terms})  {snapshot.elapsed:.1f} s")
         if snapshot.message:
             line += f"  [{snapshot.message}]"
@@ -165,6 +197,25 @@ def _chamfer(geometry, points: np.ndarray, gen: np.random.Generator) -> float:
     if len(points) > 200_000:
         points = points[gen.choice(len(points), 200_000, replace=False)]
     return float(chamfer_distance(samples.double(), torch.as_tensor(points)))
+
+
+def _quality_text(stats: dict, diagonal: float) -> str:
+    """The quality block of the report: surface-to-cloud, orientation, overlap, area, fairness."""
+    lines = [
+        f"surface-to-cloud distance: 95th percentile {stats['s2c_p95']:.6g}, max "
+        f"{stats['s2c_max']:.6g}  (cloud spacing {stats['spacing']:.6g})",
+        f"flipped area: {stats['flipped_fraction']:.2%}; overlapping sheets over "
+        f"{stats['overlap_fraction']:.2%} of the cloud; coverage {stats['coverage']:.2%}",
+        f"area: {stats['area']:.6g} = {stats['area_ratio']:.4f} x the cloud mesh's "
+        f"{stats['reference_area']:.6g}",
+        f"fairness: bending energy {stats['bending_energy']:.4g}, max curvature "
+        f"{stats['max_curvature']:.4g} (x diagonal: {stats['max_curvature'] * diagonal:.4g})",
+    ]
+    if "tolerance" in stats:
+        lines.append(f"tolerance {stats['tolerance']:.6g} "
+                     f"({'met' if stats.get('tolerance_met') else 'not met'}); estimated noise "
+                     f"{stats['noise']:.6g}")
+    return "\n".join(lines)
 
 
 def _lift(curve: NurbsCurve, z: float) -> NurbsCurve:
@@ -233,6 +284,8 @@ def run(args) -> int:
         print(f"at the known parameters: mean {stats['paired_mean']:.6g}, "
               f"rms {stats['paired_rms']:.6g}, max {stats['paired_max']:.6g}")
     print(f"chamfer distance: {chamfer:.6g} ({chamfer / diagonal:.3%} of the diagonal)")
+    if "flipped_fraction" in stats:
+        print(_quality_text(stats, diagonal))
     if flat_z:
         geometry = _lift(geometry, float(points[0, 2]))
     offset = None

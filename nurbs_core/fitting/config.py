@@ -10,6 +10,8 @@ import numpy as np
 
 OPTIMIZERS = ("sgd", "momentum", "adam", "adagrad", "lbfgs")
 INITS = ("pca", "random", "least_squares")
+PARAMETERIZATIONS = ("auto", "mesh", "plane")
+SOLVERS = ("auto", "least_squares", "gradient")
 KINDS = ("surface", "curve")
 LR_SCHEDULES = ("plateau", "cosine", "none")
 STATUSES = ("running", "paused", "converged", "stopped", "budget", "diverged", "failed")
@@ -69,7 +71,34 @@ class FitConfig:
     optimizer: str = "adam"
     learning_rate: float = 0.01
     iterations: int = 500
-    tolerance: float = 1e-7
+    #: two-sided distance tolerance in the input's units: the least-squares core stops refining
+    #: when the cloud-to-surface distance (all but ``outlier_fraction`` of the points) and the
+    #: surface-to-cloud distance (95th percentile, beyond the cloud's own spacing) are within
+    #: it; None: automatic, from the cloud's estimated noise
+    tolerance: float | None = None
+    #: fraction of the points allowed beyond ``tolerance`` (outliers)
+    outlier_fraction: float = 0.01
+    #: relative loss change that counts as converged in the gradient fit
+    loss_tolerance: float = 1e-7
+    #: how an unordered surface cloud gets its (u, v): "mesh" maps a triangle mesh of the cloud
+    #: onto the unit square without folds (Floater's mean-value map); "plane" projects onto the
+    #: principal plane; "auto" is "mesh" for unordered surface clouds
+    parameterization: str = "auto"
+    #: final weight of the fairing energy (thin plate + membrane, integrated exactly over the
+    #: domain) relative to the mean squared distance, both in the cloud's normalised units; the
+    #: least-squares core starts stiffer and relaxes to this value
+    stiffness: float = 1e-3
+    #: fit a single patch even when the cloud looks closed or tube-like (otherwise a ValueError
+    #: says why one patch cannot hold it)
+    single_patch: bool = False
+    #: "least_squares": the fairing least-squares core with parameter correction; "gradient":
+    #: the torch optimisation (any loss, free knots, weights), started from the least-squares
+    #: solution for unordered surface clouds; "auto": least squares alone unless the loss is
+    #: not the default or knots / weights are free
+    solver: str = "auto"
+    #: largest control grid per direction the least-squares core may grow to while the
+    #: tolerance is not met (0: keep the configured grid)
+    max_control_points: int = 40
     free_knots: bool = False
     free_weights: bool = False
     pin_boundary: bool = False
@@ -106,6 +135,8 @@ class FitConfig:
         choice("optimizer", OPTIMIZERS)
         choice("init", INITS)
         choice("lr_schedule", LR_SCHEDULES)
+        choice("parameterization", PARAMETERIZATIONS)
+        choice("solver", SOLVERS)
         choice("dtype", ("float32", "float64"))
         directions = ("u",) if self.kind == "curve" else ("u", "v")
         for d in directions:
@@ -121,16 +152,26 @@ class FitConfig:
         integer("correction_interval", 1)
         integer("batch_size", 16)
         integer("refinements", 0)
+        integer("max_control_points", 0)
         if self.threads is not None:
             integer("threads", 1)
-        for name in ("learning_rate", "tolerance", "snapshot_interval", "momentum"):
+        numbers = ["learning_rate", "loss_tolerance", "snapshot_interval", "momentum", "stiffness",
+                   "outlier_fraction"] + (["tolerance"] if self.tolerance is not None else [])
+        for name in numbers:
             value = getattr(self, name)
-            if not isinstance(value, (int, float, np.floating)) or not np.isfinite(value):
+            if (isinstance(value, bool) or not isinstance(value, (int, float, np.floating))
+                    or not np.isfinite(value)):
                 raise ValueError(f"{name} must be a finite number, got {value!r}")
         if self.learning_rate <= 0:
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate}")
-        if self.tolerance < 0 or self.snapshot_interval < 0:
-            raise ValueError("tolerance and snapshot_interval must not be negative")
+        for name in ("loss_tolerance", "snapshot_interval", "stiffness"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must not be negative, got {getattr(self, name)}")
+        if self.tolerance is not None and not self.tolerance > 0:
+            raise ValueError(f"tolerance must be positive (or None: automatic), got "
+                             f"{self.tolerance}")
+        if not 0 <= self.outlier_fraction < 0.5:
+            raise ValueError(f"outlier_fraction must lie in [0, 0.5), got {self.outlier_fraction}")
         if not 0 <= self.momentum < 1:
             raise ValueError(f"momentum must lie in [0, 1), got {self.momentum}")
 
@@ -185,6 +226,9 @@ class FitSnapshot:
     done: bool
     status: str
     message: str | None = None
+    #: on the final snapshot of fits that measure themselves inside the run (the least-squares
+    #: core): what FitResult.statistics reports, so that the run's time covers it
+    statistics: dict[str, float] | None = None
 
 
 @dataclass

@@ -8,6 +8,7 @@ parameters, or for unordered clouds per-point foot-point parameters refined by G
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Iterator
@@ -30,7 +31,16 @@ from nurbs_core.fitting.model import TrainableGeometry
 from nurbs_core.fitting.problem import Problem, initial_geometry, prepare, start_parameters
 from nurbs_core.fitting.projection import curve_newton, project, surface_gauss_newton
 from nurbs_core.fitting.refine import refine
-from nurbs_core.geometry import geometry_from_numpy
+from nurbs_core.fitting.sheet import (
+    SheetStart,
+    core_geometry_numpy,
+    core_snapshots,
+    resolved_solver,
+    sheet_start,
+    surface_statistics,
+    uses_core,
+)
+from nurbs_core.geometry import NurbsSurface, geometry_from_numpy
 
 #: A loss above this multiple of the stage's best loss counts as diverging.
 EXPLOSION_FACTOR = 1e3
@@ -59,19 +69,74 @@ def iter_fit(target, config: FitConfig | None = None, *, stop: StopToken | None 
     snapshot message says so; the fit continues.
     """
     config = FitConfig() if config is None else config
+    started = time.perf_counter()
     problem = prepare(target, config, parameters)
-    geometry = initial_geometry(problem, config, initial)
     loss = _losses.parse_loss(config.loss)
     if config.kind == "surface" and "length" in loss.names:
         raise ValueError("the 'length' loss term applies to curves only")
     if not problem.known and config.parameter_correction and "pointwise" not in loss.kinds():
         loss = loss.with_term(1.0, "p2s")
-    return _Run(problem, config, geometry, loss, stop or StopToken(), initial is not None).run()
+    stop = stop or StopToken()
+    if uses_core(problem, config, initial):
+        # the fold-free start runs (and refuses shapes one patch cannot hold) before iterating
+        return _sheet_run(problem, config, sheet_start(problem, config), loss, stop, started)
+    geometry = initial_geometry(problem, config, initial)
+    return _Run(problem, config, geometry, loss, stop, initial is not None).run()
+
+
+def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss, stop: StopToken,
+               started: float) -> Iterator[FitSnapshot]:
+    """The least-squares core's passes, then (when the config asks for more than least squares)
+    the gradient fit from its result; the final snapshot carries the statistics."""
+    saved_threads = torch.get_num_threads()
+    if config.threads is not None:
+        torch.set_num_threads(config.threads)
+    try:
+        result: dict = {}
+        try:
+            yield from core_snapshots(problem, config, start, stop, started, result)
+        except Exception as exc:  # report to the app as a failed run instead of killing its thread
+            yield FitSnapshot(iteration=0, geometry={}, losses=[], done=True, status="failed",
+                              elapsed=time.perf_counter() - started,
+                              message=f"{type(exc).__name__}: {exc}")
+            return
+        if resolved_solver(config) == "gradient" and result["status"] != "stopped":
+            run = _Run(problem, config, result["geometry"].to(dtype=problem.dtype), loss, stop,
+                       True, start_params=result["parameters"], offset=result["iteration"])
+            run.started = started
+            final = None
+            for snapshot in run._loop(started):
+                if snapshot.done:
+                    final = snapshot
+                    break
+                yield snapshot
+            if final.status != "failed":
+                geometry = geometry_from_numpy(final.geometry, dtype=torch.float64)
+                stats = surface_statistics(geometry, problem.points_input, mesh=start.mesh,
+                                           scale=problem.scale)
+                final = dataclasses.replace(final, statistics=stats,
+                                            elapsed=time.perf_counter() - started)
+            yield final
+            return
+        geometry = result["geometry"]
+        snapshot_geometry = core_geometry_numpy(geometry, problem)
+        stats = surface_statistics(geometry_from_numpy(snapshot_geometry), problem.points_input,
+                                   mesh=start.mesh, scale=problem.scale,
+                                   distances=result["distances"] * problem.scale)
+        stats.update(tolerance=result["tolerance"], noise=result["noise"],
+                     tolerance_met=float(result["tolerance_met"]))
+        yield FitSnapshot(iteration=result["iteration"], geometry=snapshot_geometry,
+                          losses=result["records"], elapsed=time.perf_counter() - started,
+                          done=True, status=result["status"], message=result["message"],
+                          statistics=stats)
+    finally:
+        if config.threads is not None:
+            torch.set_num_threads(saved_threads)
 
 
 class _Run:
     def __init__(self, problem: Problem, config: FitConfig, geometry, loss, stop: StopToken,
-                 from_initial: bool):
+                 from_initial: bool, start_params: np.ndarray | None = None, offset: int = 0):
         self.problem, self.config, self.loss, self.stop = problem, config, loss, stop
         self.geometry0 = geometry
         self.from_initial = from_initial
@@ -86,6 +151,10 @@ class _Run:
         self.stages_done = 0
         self.loss_scale: float | None = None
         self.warm_up = False
+        #: foot-point parameters to start from (the least-squares core's), and the iterations
+        #: already done before this run (its records and snapshots count on from there)
+        self.start_params = start_params
+        self.offset = offset
 
     # ---------------------------------------------------------------------------------------
     def _setup(self, geometry):
@@ -279,7 +348,7 @@ class _Run:
         return data
 
     def _snapshot(self, iteration, records, status, done, message=None) -> FitSnapshot:
-        return FitSnapshot(iteration=iteration, geometry=self._geometry_numpy(),
+        return FitSnapshot(iteration=iteration + self.offset, geometry=self._geometry_numpy(),
                            losses=list(records), elapsed=time.perf_counter() - self.started,
                            done=done, status=status, message=message)
 
@@ -302,15 +371,16 @@ class _Run:
             if self.config.threads is not None:
                 torch.set_num_threads(saved_threads)
 
-    def _loop(self) -> Iterator[FitSnapshot]:
+    def _loop(self, started: float | None = None) -> Iterator[FitSnapshot]:
         config, problem = self.config, self.problem
-        self.started = time.perf_counter()
-        self.params = torch.as_tensor(start_parameters(problem), dtype=problem.dtype).clone() \
+        self.started = time.perf_counter() if started is None else started
+        start = start_parameters(problem) if self.start_params is None else self.start_params
+        self.params = torch.as_tensor(start, dtype=problem.dtype).clone() \
             if (self.needs_paired or problem.known) else None
         stages = config.refinements + 1
         self.stage_length = max(1, math.ceil(config.iterations / stages))
         self._setup(self.geometry0)
-        if (self.params is not None and not problem.known
+        if (self.params is not None and not problem.known and self.start_params is None
                 and (self.from_initial or config.init != "pca" or problem.start_is_fit)):
             # foot points of the starting geometry (the PCA plane's are exact already)
             params, _ = project(self.model.geometry().detach(), problem.points.double().numpy())
@@ -385,7 +455,7 @@ class _Run:
                     continue
                 if reference is None or total_value < reference:
                     reference, last_good = max(total_value, 1e-300), before
-                record = {"iteration": iteration, "total": total_value}
+                record = {"iteration": iteration + self.offset, "total": total_value}
                 record.update({k: float(v) for k, v in terms_holder["terms"].items()})
                 records.append(record)
                 self._update_plateau(total_value)
@@ -396,7 +466,7 @@ class _Run:
                 converged = False
                 if previous_total is not None:
                     change = abs(previous_total - total_value)
-                    quiet = quiet + 1 if change <= config.tolerance * abs(total_value) else 0
+                    quiet = quiet + 1 if change <= config.loss_tolerance * abs(total_value) else 0
                     converged = quiet >= 5
                 previous_total = total_value
                 stage_done = converged or (iteration - stage_start) >= self.stage_length
@@ -477,8 +547,17 @@ def fit(target, config: FitConfig | None = None, *, stop: StopToken | None = Non
         if on_snapshot is not None:
             on_snapshot(snapshot)
     dtype = torch.float32 if (config or FitConfig()).dtype == "float32" else torch.float64
+    if last.status == "failed" and not last.geometry:
+        return FitResult(geometry=None, history=history, status=last.status,
+                         message=last.message, statistics={}, iterations=last.iteration,
+                         elapsed=last.elapsed, snapshots=count)
     geometry = geometry_from_numpy(last.geometry, dtype=dtype)
-    stats = statistics(geometry, target, parameters)
+    if last.statistics is not None:
+        stats = dict(last.statistics)
+    elif isinstance(geometry, NurbsSurface) and parameters is None:
+        stats = surface_statistics(geometry, np.asarray(target, np.float64))
+    else:
+        stats = statistics(geometry, target, parameters)
     return FitResult(geometry=geometry, history=history, status=last.status, message=last.message,
                      statistics=stats, iterations=last.iteration, elapsed=last.elapsed,
                      snapshots=count)

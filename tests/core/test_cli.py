@@ -37,9 +37,13 @@ def test_fit_xyz_to_3dm_and_json(tmp_path, capsys):
                  "5", "--degree", "3", "2", "--iterations", "60", "--samples", "24"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
-    assert "iteration 60/60" in captured.err  # progress, with the last iteration always shown
+    # the default fit is the least-squares core: progress per pass, a converged status, and the
+    # quality report beside the distances
+    assert "pass 1  loss" in captured.err
     assert f"loss {DEFAULT_LOSS}" in captured.err  # the library's default loss
+    assert "status: converged" in captured.out
     assert "point-to-surface distance: mean" in captured.out and "chamfer distance" in captured.out
+    assert "flipped area: 0.00%" in captured.out and "surface-to-cloud distance" in captured.out
     model = rhino3dm.File3dm.Read(str(out_3dm))  # openNURBS reads it back
     surfaces = [obj.Geometry for obj in model.Objects]
     assert len(surfaces) == 1
@@ -106,7 +110,8 @@ def test_initial_option_continues_from_a_saved_fit(tmp_path, capsys):
     source = tmp_path / "sheet.xyz"
     np.savetxt(source, _sheet(600))
     first, second = tmp_path / "first.json", tmp_path / "second.json"
-    common = ["--control-points", "6", "6", "--samples", "24", "--loss", "p2s", "-q"]
+    common = ["--control-points", "6", "6", "--samples", "24", "--loss", "p2s", "-q",
+              "--solver", "gradient", "--parameterization", "plane"]
     assert main([str(source), "-o", str(first), "--iterations", "40", *common]) == 0
     first_out = capsys.readouterr().out
     assert main([str(source), "-o", str(second), "--iterations", "1", "--initial", str(first),
@@ -175,7 +180,7 @@ def test_console_script_entry_point(tmp_path):
                            str(tmp_path / "o.3dm"), "--control-points", "4", "4", "--iterations",
                            "5", "-q"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
-    assert (tmp_path / "o.3dm").exists() and "status: budget" in done.stdout
+    assert (tmp_path / "o.3dm").exists() and "status: converged" in done.stdout
     bad = subprocess.run([sys.executable, "-m", "nurbs_core.cli", str(tmp_path / "x.xyz"), "-o",
                           str(tmp_path / "o.json")], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 1 and "Traceback" not in bad.stderr

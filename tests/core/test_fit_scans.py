@@ -49,7 +49,8 @@ def test_a_million_points_iterate():
     gen = np.random.default_rng(0)
     xy = gen.uniform(-1, 1, (1_000_000, 2))
     points = np.column_stack([xy, 0.3 * np.sin(3 * xy[:, 0]) * np.cos(2 * xy[:, 1])])
-    snapshots = list(iter_fit(points, FitConfig(iterations=4, snapshot_interval=0.0)))
+    snapshots = list(iter_fit(points, FitConfig(iterations=4, snapshot_interval=0.0,
+                                                solver="gradient", parameterization="plane")))
     totals = [r["total"] for s in snapshots for r in s.losses]
     assert snapshots[-1].status == "budget" and len(totals) == 4
     assert totals[-1] < totals[0]

@@ -1,0 +1,223 @@
+"""The default fit of an unordered surface cloud: a fold-free start and the least-squares core.
+
+:func:`sheet_start` gives every point its (u, v): Floater's mean-value map of the cloud's mesh
+(``parameterization`` "mesh" / "auto") or the principal plane ("plane"), and refuses clouds one
+patch cannot hold unless ``single_patch`` is set. :func:`core_snapshots` runs the passes of
+:class:`~nurbs_core.surfacing.core.LeastSquaresCore` as live snapshots. The gradient fit
+(:mod:`nurbs_core.fitting.engine`) continues from the core's result when the config asks for more
+than least squares.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, FitSnapshot, StopToken
+from nurbs_core.fitting.least_squares import pca_parameters
+from nurbs_core.fitting.problem import Problem
+from nurbs_core.fitting.projection import surface_gauss_newton
+from nurbs_core.geometry import NurbsSurface
+from nurbs_core.surfacing.core import CorePass, LeastSquaresCore
+from nurbs_core.surfacing.mesh import CloudMesh
+from nurbs_core.surfacing.neighbours import estimate_noise
+from nurbs_core.surfacing.parameterize import NotADiskError, mesh_parameterization
+
+#: Clouds larger than this run the passes on a seeded random subset of this many points; every
+#: point is projected onto the final surface.
+PASS_POINTS = 100_000
+#: The automatic tolerance, in estimated noise standard deviations (99% of Gaussian noise lies
+#: within 2.6 of them), and its floor relative to the bounding-box diagonal.
+NOISE_TOLERANCE = 3.0
+MIN_TOLERANCE = 1e-5
+
+
+def uses_core(problem: Problem, config: FitConfig, initial) -> bool:
+    """Whether this fit starts with the least-squares core (unordered surface clouds)."""
+    if config.kind != "surface" or problem.known or initial is not None:
+        return False
+    return not (config.parameterization == "plane" and resolved_solver(config) == "gradient")
+
+
+def resolved_solver(config: FitConfig) -> str:
+    """"least_squares" or "gradient" (see FitConfig.solver)."""
+    if config.solver != "auto":
+        return config.solver
+    plain = (config.loss.replace(" ", "") == DEFAULT_LOSS and not config.free_knots
+             and not config.free_weights and not config.pin_boundary)
+    return "least_squares" if plain else "gradient"
+
+
+@dataclass
+class SheetStart:
+    """(u, v) (N, 2) of every normalised point, the mesh they came from (None for the plane),
+    and a note for the user (a forced single patch, say)."""
+
+    parameters: np.ndarray
+    mesh: CloudMesh | None
+    message: str | None = None
+
+
+def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
+    """The fold-free start (see the module docstring). Raises ValueError (with the reason and a
+    pointer to multi-patch surfacing) for closed shapes, tubes and handles unless
+    ``config.single_patch``."""
+    points = problem.points.double().numpy()
+    if config.parameterization == "plane":
+        return SheetStart(pca_parameters(points, 2)[0], None)
+    try:
+        param = mesh_parameterization(points)
+    except NotADiskError as exc:
+        plane = pca_parameters(points, 2)[0]
+        if exc.topology.kind != "closed" and is_height_field(points):
+            # the mesh of a sparse or unevenly sampled sheet can come out with spurious handles;
+            # a cloud that is a height field over its principal plane is a sheet all the same
+            return SheetStart(plane, None, "the cloud's mesh is not a clean disk "
+                              f"({exc.topology.kind}); it is a height field over its principal "
+                              "plane, so that plane parameterises it")
+        if not config.single_patch:
+            raise ValueError(f"{exc} (or force one patch: single_patch / --single-patch)") \
+                from None
+        return SheetStart(plane, None, "forced a single patch on a cloud that is not a sheet "
+                          f"({exc.topology.kind}): expect folds; see the quality report")
+    message = None
+    if param.flipped:
+        message = f"{param.flipped} triangles of the parameterisation flipped"
+    return SheetStart(param.parameters, param.mesh, message)
+
+
+def is_height_field(points: np.ndarray, agree: float = 0.98) -> bool:
+    """Whether the cloud is a height field over its principal plane: ``agree`` of its local
+    normals lie within 75 degrees of the plane's normal (no part turns back over itself)."""
+    from nurbs_core.fitting.least_squares import principal_axes
+    from nurbs_core.surfacing.neighbours import local_frames
+
+    if len(points) < 16:
+        return True
+    axis = principal_axes(points)[1][2]
+    normals = local_frames(points, k=12).normals
+    return bool((np.abs(normals @ axis) > np.cos(np.radians(75))).mean() >= agree)
+
+
+def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop: StopToken,
+                   started: float, result: dict) -> Iterator[FitSnapshot]:
+    """Run the least-squares passes, yielding a snapshot per pass (never ``done``). Fills
+    ``result`` with "geometry" (NurbsSurface, normalised), "parameters" (N, 2) and "distances"
+    (N,) for every point, "status" and "message"."""
+    points = problem.points.double().numpy()
+    count = len(points)
+    rng = np.random.default_rng(config.seed)
+    subset = np.sort(rng.choice(count, PASS_POINTS, replace=False)) if count > PASS_POINTS \
+        else None
+    pass_points = points if subset is None else points[subset]
+    pass_params = start.parameters if subset is None else start.parameters[subset]
+    noise = estimate_noise(pass_points, seed=config.seed)
+    if config.tolerance is not None:
+        tolerance = config.tolerance / problem.scale
+    else:
+        tolerance = max(NOISE_TOLERANCE * noise, MIN_TOLERANCE)
+    spacing = start.mesh.spacing if start.mesh is not None else _spacing(pass_points)
+    degrees = (config.degree_u, config.degree_v)
+    limit = max(int(math.sqrt(len(pass_points) / 8)), max(degrees) + 1)
+    grid = tuple(min(c, max(limit, d + 1)) for c, d in
+                 zip((config.control_points_u, config.control_points_v), degrees, strict=True))
+    if config.max_control_points:
+        max_grid = tuple(max(config.max_control_points, g) for g in grid)
+    else:
+        max_grid = grid
+    core = LeastSquaresCore(pass_points, pass_params, degrees, grid, config.stiffness,
+                            tolerance, config.outlier_fraction, spacing, max_grid)
+    last: CorePass | None = None
+    note = start.message
+    for report in core.passes(stop):
+        last = report
+        if report.done:
+            break
+        geometry = core_geometry_numpy(report.geometry, problem)
+        yield FitSnapshot(iteration=report.index, geometry=geometry, losses=[_record(report)],
+                          elapsed=time.perf_counter() - started, done=False, status="running",
+                          message=note)
+        note = None
+        if stop.paused and not stop.stopped:
+            # between passes: report the pause once, then wait without spinning
+            yield FitSnapshot(iteration=report.index, geometry=geometry, losses=[],
+                              elapsed=time.perf_counter() - started, done=False,
+                              status="paused", message="paused")
+            while stop.paused and not stop.stopped:
+                stop.wait_while_paused(0.1)
+    result["records"] = [_record(last)]
+    surface = last.geometry
+    if subset is None:
+        parameters, distances = last.parameters, last.distances
+    else:
+        parameters, distances = _project_all(surface, points, subset, last.parameters)
+    stopped = last.message == "stopped"
+    result.update(geometry=surface, parameters=parameters, distances=distances,
+                  iteration=last.index, status="stopped" if stopped else "converged",
+                  message=last.message if not start.message else f"{start.message}; {last.message}",
+                  tolerance=tolerance * problem.scale, noise=noise * problem.scale,
+                  tolerance_met=bool(last.met))
+
+
+def _record(report: CorePass) -> dict[str, float]:
+    return {"iteration": report.index, "total": report.rms ** 2, "p2s": report.rms ** 2,
+            "fairing": report.fairing * report.fairing_energy}
+
+
+def surface_statistics(surface: NurbsSurface, points: np.ndarray, *, mesh: CloudMesh | None = None,
+                       scale: float = 1.0, distances: np.ndarray | None = None) -> dict[str, float]:
+    """FitResult.statistics of a surface fit, in the points' units: the cloud-to-surface
+    distances (mean, rms, max; projected when ``distances`` is None) and every quality measure
+    of :func:`nurbs_core.quality.surface_quality`. mesh: the cloud's mesh in normalised units
+    (its area times ``scale**2`` is the reference area)."""
+    from nurbs_core.fitting.projection import project
+    from nurbs_core.quality import surface_quality
+
+    points = np.asarray(points, np.float64)
+    surface = surface.detach().to(dtype=torch.float64)
+    if distances is None:
+        _, distances = project(surface, points)
+    reference = None if mesh is None else mesh.area() * scale ** 2
+    stats = {"mean": float(distances.mean()), "rms": float(np.sqrt((distances ** 2).mean())),
+             "max": float(distances.max()), "points": int(distances.size)}
+    stats.update(surface_quality(surface, points, distances=distances, reference_area=reference))
+    return stats
+
+
+def core_geometry_numpy(surface: NurbsSurface, problem: Problem) -> dict:
+    """The normalised surface's numpy dict in the input's coordinates."""
+    data = surface.numpy()
+    data["control_points"] = data["control_points"] * problem.scale + problem.center
+    return data
+
+
+def _spacing(points: np.ndarray) -> float:
+    from scipy.spatial import cKDTree
+
+    distances, _ = cKDTree(points).query(points[: min(len(points), 5000)], k=2)
+    return float(np.median(distances[:, 1]))
+
+
+def _project_all(surface: NurbsSurface, points: np.ndarray, subset: np.ndarray,
+                 subset_params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Foot points of every point: start from the nearest pass point's parameters."""
+    from scipy.spatial import cKDTree
+
+    _, nearest = cKDTree(points[subset]).query(points, workers=-1)
+    params = subset_params[nearest]
+    out_params = np.empty_like(params)
+    distances = np.empty(len(points))
+    for begin in range(0, len(points), 131072):
+        chunk = slice(begin, begin + 131072)
+        q = torch.as_tensor(points[chunk])
+        u, v = surface_gauss_newton(surface, q, torch.as_tensor(params[chunk, 0]),
+                                    torch.as_tensor(params[chunk, 1]), steps=3)
+        foot = surface.evaluate(u, v).detach()
+        out_params[chunk] = torch.stack([u, v], -1).numpy()
+        distances[chunk] = (foot - q).norm(dim=-1).numpy()
+    return out_params, distances

@@ -1,0 +1,211 @@
+"""The least-squares core of a surface fit: fairing least squares plus parameter correction.
+
+Each pass solves, for fixed parameters (u_k, v_k) and fixed knots, the control points C of
+
+    (1 / N) sum_k |S(u_k, v_k) - Q_k|^2  +  lambda (E_thin_plate(C) + MEMBRANE_RATIO E_membrane(C))
+
+(sparse normal equations, exact energies from :mod:`nurbs_core.surfacing.fairing`), then moves
+every parameter to its foot point on the new surface (Gauss-Newton from where it was, so points
+keep their place in the fold-free start). lambda starts stiff and falls by FAIRING_DECAY per pass
+down to the user's stiffness (FreeCAD halves it); then the passes run until the parameters stop
+moving. When the two-sided tolerance is not met the control grid grows and the passes go on.
+Coordinates are the fit's normalised ones (bounding-box diagonal 1, parameters in [0, 1]^2).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.linalg
+import torch
+from scipy.spatial import cKDTree
+
+from nurbs_core.fitting.least_squares import collocation_matrix
+from nurbs_core.fitting.projection import surface_gauss_newton
+from nurbs_core.geometry import NurbsSurface
+from nurbs_core.knots import clamped_uniform
+from nurbs_core.surfacing.fairing import energy, fairing_matrices
+
+#: Relative weight of the membrane energy inside the fairing term.
+MEMBRANE_RATIO = 0.1
+#: The first pass's fairing weight, and its fall per pass.
+INITIAL_FAIRING = 1e-5
+FAIRING_DECAY = 0.25
+#: Parameters that move less than this (RMS, in the unit square) count as settled.
+SETTLED = 2e-4
+#: Passes at most (all grids together).
+MAX_PASSES = 40
+#: Growth factor of the control grid while the tolerance is not met.
+GRID_GROWTH = 1.4
+#: The grid grows to at most one control point per this many cloud points.
+POINTS_PER_CONTROL = 6
+#: A larger grid is kept only if it lowers the RMS distance by at least this fraction.
+MIN_GAIN = 0.03
+
+
+@dataclass
+class CorePass:
+    """One pass: geometry (NurbsSurface, normalised coordinates), parameters (N, 2) after
+    correction, distances (N,) to the surface, and the pass's measures (normalised units)."""
+
+    index: int
+    geometry: NurbsSurface
+    parameters: np.ndarray
+    distances: np.ndarray
+    rms: float
+    quantile: float
+    s2c: float
+    moved: float
+    fairing: float
+    fairing_energy: float
+    grid: tuple[int, int]
+    done: bool = False
+    met: bool = False
+    message: str | None = None
+
+
+class LeastSquaresCore:
+    """Passes of fairing least squares and parameter correction (see the module docstring).
+
+    points (N, 3) and parameters (N, 2) numpy float64 in normalised coordinates; grid: the
+    starting control grid (n, m); stiffness: the final fairing weight; tolerance: two-sided
+    distance tolerance (normalised; the cloud-to-surface ``1 - outlier_fraction`` quantile and
+    the surface-to-cloud 95th percentile beyond ``spacing``); max_grid: largest control count
+    per direction the grid may grow to."""
+
+    def __init__(self, points: np.ndarray, parameters: np.ndarray, degrees: tuple[int, int],
+                 grid: tuple[int, int], stiffness: float, tolerance: float,
+                 outlier_fraction: float, spacing: float, max_grid: tuple[int, int],
+                 max_controls: int | None = None):
+        self.points = np.asarray(points, np.float64)
+        self.parameters = np.clip(np.asarray(parameters, np.float64), 0.0, 1.0).copy()
+        self.degrees = degrees
+        self.grid = tuple(int(g) for g in grid)
+        self.stiffness = float(stiffness)
+        self.tolerance = float(tolerance)
+        self.outlier_fraction = float(outlier_fraction)
+        self.spacing = float(spacing)
+        self.max_grid = tuple(int(g) for g in max_grid)
+        #: at most one control point per POINTS_PER_CONTROL points
+        self.max_controls = int(max_controls if max_controls is not None
+                                else max(len(self.points) // POINTS_PER_CONTROL, 16))
+        self.tree = cKDTree(self.points)
+        self._setup_grid()
+
+    def _setup_grid(self):
+        (p, q), (n, m) = self.degrees, self.grid
+        self.knots = (clamped_uniform(n, p).numpy(), clamped_uniform(m, q).numpy())
+        thin_plate, membrane = fairing_matrices(self.knots[0], p, self.knots[1], q)
+        self.fairing_matrix = (thin_plate + MEMBRANE_RATIO * membrane).tocsc()
+
+    def solve(self, fairing: float) -> NurbsSurface:
+        """Control points for the current parameters and a fairing weight."""
+        (p, q), (n, m) = self.degrees, self.grid
+        matrix = collocation_matrix(self.knots[0], p, self.parameters[:, 0], self.knots[1], q,
+                                    self.parameters[:, 1])
+        count = len(self.points)
+        data = (matrix.T @ matrix) / count
+        # the weight is relative: the same stiffness means the same for any grid and cloud
+        scale = data.diagonal().sum() / max(self.fairing_matrix.diagonal().sum(), 1e-300)
+        normal = data + fairing * scale * self.fairing_matrix
+        # a whisper of ridge keeps control points with no data and no fairing well defined
+        normal = normal + 1e-12 * scipy.sparse.eye(n * m)
+        rhs = (matrix.T @ self.points) / count
+        control = scipy.sparse.linalg.splu(normal.tocsc()).solve(np.asarray(rhs))
+        return NurbsSurface(control.reshape(n, m, 3), p, q, *self.knots)
+
+    def correct(self, surface: NurbsSurface, steps: int = 2) -> np.ndarray:
+        """Move the parameters to their foot points; returns the distances (N,)."""
+        points = torch.as_tensor(self.points)
+        u = torch.as_tensor(self.parameters[:, 0])
+        v = torch.as_tensor(self.parameters[:, 1])
+        u, v = surface_gauss_newton(surface, points, u, v, steps=steps)
+        self.parameters = torch.stack([u, v], -1).numpy()
+        foot = surface.evaluate(u, v).detach().numpy()
+        return np.linalg.norm(foot - self.points, axis=1)
+
+    def surface_to_cloud(self, surface: NurbsSurface, samples: int = 48) -> float:
+        """95th percentile of the distance from a samples x samples grid on the surface to the
+        cloud, beyond twice the cloud's own spacing."""
+        t = torch.linspace(0, 1, samples, dtype=torch.float64)
+        grid = surface.evaluate_grid(t, t).detach().reshape(-1, 3).numpy()
+        distance, _ = self.tree.query(grid)
+        return float(max(np.quantile(distance, 0.95) - 2 * self.spacing, 0.0))
+
+    def passes(self, stop=None) -> Iterator[CorePass]:
+        """Run the passes; every pass is yielded (the last one with ``done``)."""
+        fairing = max(INITIAL_FAIRING, self.stiffness)
+        previous_rms, grid_rms = math.inf, math.inf
+        for index in range(1, MAX_PASSES + 1):
+            old = self.parameters.copy()
+            surface = self.solve(fairing)
+            distances = self.correct(surface)
+            moved = float(np.sqrt(((self.parameters - old) ** 2).sum(1).mean()))
+            rms = float(np.sqrt((distances ** 2).mean()))
+            quantile = float(np.quantile(distances, 1 - self.outlier_fraction))
+            s2c = self.surface_to_cloud(surface)
+            bending = energy(self.fairing_matrix, surface.control_points.numpy())
+            report = CorePass(index, surface, self.parameters.copy(), distances, rms, quantile,
+                              s2c, moved, fairing, bending, self.grid)
+            relaxed = fairing <= self.stiffness * (1 + 1e-12)
+            settled = relaxed and (moved < SETTLED or rms > previous_rms * (1 - 1e-3))
+            previous_rms = rms
+            stopped = stop is not None and stop.stopped
+            if stopped:
+                report.done, report.message = True, "stopped"
+                yield report
+                return
+            if not relaxed:
+                fairing = max(fairing * FAIRING_DECAY, self.stiffness)
+                yield report
+                continue
+            if not settled and index < MAX_PASSES:
+                yield report
+                continue
+            met = quantile <= self.tolerance and s2c <= self.tolerance
+            if met:
+                report.done, report.met = True, True
+                report.message = self._summary(report, "tolerance met")
+                yield report
+                return
+            gain = (grid_rms - rms) / grid_rms if math.isfinite(grid_rms) else 1.0
+            grown = self._grown()
+            if gain < MIN_GAIN or grown is None or index >= MAX_PASSES:
+                why = ("the largest control grid allowed is reached" if grown is None
+                       else "a larger control grid no longer helps" if gain < MIN_GAIN
+                       else "the pass budget is used up")
+                report.done = True
+                report.message = self._summary(report, f"tolerance not met: {why}")
+                yield report
+                return
+            yield report
+            grid_rms = rms
+            self.grid = grown
+            self._setup_grid()
+            previous_rms = math.inf
+        # unreachable: the loop returns on its last pass
+
+    def _grown(self) -> tuple[int, int] | None:
+        """A larger grid, shaped like the surface (control points per direction in proportion
+        to its mean length in that direction), within ``max_grid`` and ``max_controls``."""
+        t = torch.linspace(0, 1, 24, dtype=torch.float64)
+        surface = self.solve(self.stiffness)
+        grid = surface.evaluate_grid(t, t).detach().numpy()
+        length_u = np.linalg.norm(np.diff(grid, axis=0), axis=-1).sum(0).mean()
+        length_v = np.linalg.norm(np.diff(grid, axis=1), axis=-1).sum(1).mean()
+        aspect = float(np.clip(length_u / max(length_v, 1e-300), 1 / 8, 8))
+        total = min(self.grid[0] * self.grid[1] * GRID_GROWTH ** 2, self.max_controls)
+        wanted = (math.sqrt(total * aspect), math.sqrt(total / aspect))
+        grown = tuple(int(min(max(round(w), p + 1), cap)) for w, p, cap in
+                      zip(wanted, self.degrees, self.max_grid, strict=True))
+        if grown[0] * grown[1] <= self.grid[0] * self.grid[1] or grown == self.grid:
+            return None
+        return grown
+
+    def _summary(self, report: CorePass, what: str) -> str:
+        return (f"{what} after {report.index} least-squares passes on a "
+                f"{report.grid[0]} x {report.grid[1]} control grid")

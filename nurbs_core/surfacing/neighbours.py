@@ -1,0 +1,108 @@
+"""Neighbourhoods of a point cloud: k nearest neighbours, local frames and the noise level.
+
+Everything is numpy + scipy (cKDTree) and vectorised over points; no torch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+
+@dataclass
+class LocalFrames:
+    """Per-point neighbourhood and principal frame of a cloud.
+
+    neighbours (N, k) int: the k nearest other points, nearest first; distances (N, k);
+    normals (N, 3): unit normals (smallest principal axis of each neighbourhood, sign arbitrary);
+    tangents (N, 2, 3): the two larger principal axes; spacing: median nearest-neighbour
+    distance."""
+
+    neighbours: np.ndarray
+    distances: np.ndarray
+    normals: np.ndarray
+    tangents: np.ndarray
+    spacing: float
+
+
+def local_frames(points: np.ndarray, k: int = 12, tree: cKDTree | None = None) -> LocalFrames:
+    """k-nearest-neighbour frames of ``points`` (N, 3) (N > k): PCA of each point's neighbourhood
+    (the point itself included)."""
+    points = np.asarray(points, np.float64)
+    k = int(min(k, len(points) - 1))
+    if k < 3:
+        raise ValueError(f"{len(points)} points are too few to estimate local frames")
+    tree = cKDTree(points) if tree is None else tree
+    distances, index = tree.query(points, k=k + 1)
+    neighbours, distances = index[:, 1:], distances[:, 1:]
+    patch = points[index] - points[index].mean(axis=1, keepdims=True)   # (N, k+1, 3)
+    covariance = np.einsum("nki,nkj->nij", patch, patch)
+    _, vectors = np.linalg.eigh(covariance)                              # ascending eigenvalues
+    normals = vectors[:, :, 0]
+    tangents = np.stack([vectors[:, :, 2], vectors[:, :, 1]], axis=1)
+    spacing = float(np.median(distances[:, 0]))
+    return LocalFrames(neighbours, distances, normals, tangents, spacing)
+
+
+def _quadric_residuals(points: np.ndarray, centres: np.ndarray, k: int, tree: cKDTree):
+    """Fit ``h = a x^2 + b xy + c y^2 + d x + e y + f`` over each centre's k + 1 nearest points
+    in their principal frame. Returns (residuals (n, k+1), height of the fit at the centre's own
+    tangential position (n,), normal direction (n, 3), the centre's height (n,))."""
+    _, index = tree.query(centres, k=k + 1)
+    mean = points[index].mean(axis=1, keepdims=True)
+    patch = points[index] - mean
+    _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", patch, patch))
+    local = np.einsum("nki,nij->nkj", patch, vectors)      # columns: normal, t2, t1
+    h, y, x = local[..., 0], local[..., 1], local[..., 2]
+    scale = np.sqrt((x ** 2 + y ** 2).mean(axis=1, keepdims=True)) + 1e-300
+    x, y = x / scale, y / scale
+    design = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], axis=-1)  # (n, k+1, 6)
+    normal = np.einsum("nki,nkj->nij", design, design) + 1e-12 * np.eye(6)
+    rhs = np.einsum("nki,nk->ni", design, h)
+    coefficients = np.linalg.solve(normal, rhs[..., None])[..., 0]
+    residual = h - np.einsum("nki,ni->nk", design, coefficients)
+    own = np.einsum("ni,nij->nj", centres - mean[:, 0], vectors)
+    ox, oy = own[:, 2] / scale[:, 0], own[:, 1] / scale[:, 0]
+    fitted = (coefficients[:, 0] * ox * ox + coefficients[:, 1] * ox * oy
+              + coefficients[:, 2] * oy * oy + coefficients[:, 3] * ox + coefficients[:, 4] * oy
+              + coefficients[:, 5])
+    return residual, fitted, vectors[:, :, 0], own[:, 0]
+
+
+def estimate_noise(points: np.ndarray, k: int = 24, max_points: int = 4000,
+                   seed: int = 0) -> float:
+    """Robust estimate of the noise's standard deviation normal to the surface (points' units).
+
+    Fits a quadric height function in the principal frame of each point's k-neighbourhood (so
+    curvature does not count as noise) and returns the median of the residuals' RMS, corrected
+    for the 6 fitted coefficients. ``max_points`` neighbourhoods (a seeded random subset) are
+    enough."""
+    points = np.asarray(points, np.float64)
+    k = int(min(k, len(points) - 1))
+    if k < 8:
+        return 0.0
+    rng = np.random.default_rng(seed)
+    centres = points if len(points) <= max_points else points[
+        rng.choice(len(points), max_points, replace=False)]
+    residual, _, _, _ = _quadric_residuals(points, centres, k, cKDTree(points))
+    rms = np.sqrt((residual ** 2).sum(axis=1) / max(k + 1 - 6, 1))
+    return float(np.median(rms))
+
+
+def smooth_points(points: np.ndarray, k: int = 20, tree: cKDTree | None = None) -> np.ndarray:
+    """Each point moved along its local normal onto the quadric fitted to its k-neighbourhood
+    (one moving-least-squares-like projection): removes most of the normal noise, keeps the
+    tangential sampling. (N, 3) -> (N, 3)."""
+    points = np.asarray(points, np.float64)
+    k = int(min(k, len(points) - 1))
+    if k < 8:
+        return points.copy()
+    tree = cKDTree(points) if tree is None else tree
+    out = np.empty_like(points)
+    for start in range(0, len(points), 65536):
+        chunk = points[start:start + 65536]
+        _, fitted, normal, height = _quadric_residuals(points, chunk, k, tree)
+        out[start:start + 65536] = chunk + (fitted - height)[:, None] * normal
+    return out

@@ -1,0 +1,237 @@
+"""A fold-free parameterisation of a disk-like cloud over the unit square.
+
+The cloud's mesh (:mod:`nurbs_core.surfacing.mesh`) has one outer boundary loop; its four corners
+(:func:`~nurbs_core.surfacing.disk.choose_corners`) go to the corners of [0, 1]^2 and the sides in
+between are laid out by chord length. Inner holes are closed by a cone vertex. The interior solves
+Floater's mean-value map (2003): every vertex is the mean-value combination of its neighbours,
+whose weights are positive, so with a convex boundary no triangle can flip (Tutte / Floater). The
+map is checked anyway; every cloud point then takes its (u, v) by barycentric interpolation in
+the mesh triangle it lies over.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.linalg
+from scipy.spatial import cKDTree
+
+from nurbs_core.surfacing.disk import Topology, choose_corners, classify
+from nurbs_core.surfacing.mesh import CloudMesh, cloud_mesh
+
+_SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+
+
+@dataclass
+class Parameterization:
+    """(u, v) of every cloud point and the mesh map it came from.
+
+    parameters (N, 2) in [0, 1]^2 for the N cloud points; mesh: the cloud's mesh;
+    mesh_uv (M, 2) for its vertices; corners (4,): mesh vertex indices at the square's corners
+    (0, 0), (1, 0), (1, 1), (0, 1); flipped: triangles whose orientation disagrees with the
+    majority after the map (0 for a valid fold-free map; triangles whose three corners lie on
+    one side of the square collapse to zero area and do not count); topology: the mesh's topology."""
+
+    parameters: np.ndarray
+    mesh: CloudMesh
+    mesh_uv: np.ndarray
+    corners: np.ndarray
+    flipped: int
+    topology: Topology
+
+
+class NotADiskError(ValueError):
+    """The cloud is not an open sheet (closed, a tube, handles): one patch cannot hold it."""
+
+    def __init__(self, topology: Topology):
+        super().__init__(topology.message)
+        self.topology = topology
+
+
+def mesh_parameterization(points: np.ndarray, mesh: CloudMesh | None = None,
+                          corners: np.ndarray | None = None) -> Parameterization:
+    """Fold-free (u, v) in [0, 1]^2 for ``points`` (N, 3) (see the module docstring).
+
+    mesh: the cloud's mesh (built with :func:`cloud_mesh` when None; pass the file's own faces
+    as a CloudMesh when it has them). corners: four mesh vertex indices on the outer boundary
+    for the square's corners (chosen from the boundary's shape when None). Raises
+    :class:`NotADiskError` for closed shapes, tubes and shapes with handles."""
+    points = np.asarray(points, np.float64)
+    mesh = cloud_mesh(points) if mesh is None else mesh
+    topology = classify(mesh.vertices, mesh.faces)
+    if not mesh.orientable:
+        topology = Topology("complex", topology.loops, topology.euler,
+                            "the cloud's mesh cannot be oriented consistently (its layers are "
+                            "too close for its sampling): one patch cannot cover it without "
+                            "folding; split it into patches (multi-patch surfacing)")
+    if not topology.is_disk:
+        raise NotADiskError(topology)
+    outer = topology.loops[0]
+    if corners is None:
+        corner_positions = choose_corners(mesh.vertices, outer, mesh.faces)
+    else:
+        corners = np.asarray(corners)
+        where = {int(v): i for i, v in enumerate(outer.tolist())}
+        if len(corners) != 4 or any(int(c) not in where for c in corners):
+            raise ValueError("corners must be four vertices of the mesh's outer boundary")
+        corner_positions = np.sort([where[int(c)] for c in corners])
+    # start the loop at the first corner
+    outer = np.roll(outer, -int(corner_positions[0]))
+    corner_positions = corner_positions - corner_positions[0]
+    boundary_uv = _square_boundary(mesh.vertices[outer], corner_positions)
+    vertices, faces = mesh.vertices, mesh.faces
+    vertices, faces = _cone_fill(vertices, faces, topology.loops[1:])
+    uv = _mean_value_map(vertices, faces, outer, boundary_uv)
+    uv, faces_uv, flipped = _orient_map(uv, faces)
+    mesh_uv = uv[: len(mesh.vertices)]
+    parameters = _interpolate(points, mesh, mesh_uv)
+    corner_vertices = outer[corner_positions]
+    return Parameterization(parameters, mesh, mesh_uv, corner_vertices, flipped, topology)
+
+
+def _square_boundary(loop_points: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(L, 2) positions on the square's perimeter: corner k at _SQUARE[k], chord length between."""
+    n = len(loop_points)
+    segment = np.linalg.norm(np.roll(loop_points, -1, axis=0) - loop_points, axis=1)
+    uv = np.empty((n, 2))
+    ends = np.r_[corners, n]
+    for side in range(4):
+        start, stop = int(ends[side]), int(ends[side + 1])
+        lengths = segment[start:stop]
+        t = np.r_[0.0, np.cumsum(lengths)[:-1]] / max(lengths.sum(), 1e-300)
+        a, b = _SQUARE[side], _SQUARE[(side + 1) % 4]
+        uv[start:stop] = a + t[:, None] * (b - a)
+    return uv
+
+
+def _cone_fill(vertices: np.ndarray, faces: np.ndarray, holes) -> tuple[np.ndarray, np.ndarray]:
+    """Close each inner hole with a fan around a new vertex at the hole's centroid."""
+    if not holes:
+        return vertices, faces
+    new_vertices, new_faces = [vertices], [faces]
+    count = len(vertices)
+    for loop in holes:
+        centre = vertices[loop].mean(axis=0)
+        new_vertices.append(centre[None])
+        fan = np.stack([loop, np.roll(loop, -1), np.full(len(loop), count)], axis=1)
+        new_faces.append(fan)
+        count += 1
+    return np.concatenate(new_vertices), np.concatenate(new_faces)
+
+
+def mean_value_weights(vertices: np.ndarray, faces: np.ndarray) -> scipy.sparse.csr_matrix:
+    """Floater's mean-value weights W (M, M), W[i, j] = (tan(a/2) + tan(b/2)) / |x_j - x_i| with
+    a, b the angles at i of the two triangles at edge ij. Positive for any triangle shape."""
+    rows, cols, values = [], [], []
+    corners = [faces[:, k] for k in range(3)]
+    for k in range(3):
+        i, j, m = corners[k], corners[(k + 1) % 3], corners[(k + 2) % 3]
+        e1 = vertices[j] - vertices[i]
+        e2 = vertices[m] - vertices[i]
+        n1, n2 = np.linalg.norm(e1, axis=1), np.linalg.norm(e2, axis=1)
+        cosine = (e1 * e2).sum(1) / (n1 * n2 + 1e-300)
+        half = 0.5 * np.arccos(np.clip(cosine, -1.0, 1.0))
+        t = np.tan(half)
+        rows += [i, i]
+        cols += [j, m]
+        values += [t / (n1 + 1e-300), t / (n2 + 1e-300)]
+    count = len(vertices)
+    return scipy.sparse.coo_matrix((np.concatenate(values), (np.concatenate(rows),
+                                                              np.concatenate(cols))),
+                                   shape=(count, count)).tocsr()
+
+
+def _mean_value_map(vertices, faces, boundary, boundary_uv) -> np.ndarray:
+    count = len(vertices)
+    weights = mean_value_weights(vertices, faces)
+    laplacian = scipy.sparse.diags(np.asarray(weights.sum(axis=1)).ravel()) - weights
+    fixed = np.zeros(count, bool)
+    fixed[boundary] = True
+    used = np.zeros(count, bool)
+    used[faces.ravel()] = True
+    free = np.flatnonzero(~fixed & used)
+    uv = np.zeros((count, 2))
+    uv[boundary] = boundary_uv
+    if free.size:
+        system = laplacian[free][:, free].tocsc()
+        rhs = -(laplacian[free][:, boundary] @ boundary_uv)
+        solved = scipy.sparse.linalg.splu(system).solve(np.asarray(rhs))
+        uv[free] = solved
+    return uv
+
+
+def _orient_map(uv: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """Make the map orientation-preserving (swap u and v if the majority of triangles have
+    negative area) and count the triangles that disagree (flips) or collapse."""
+    area = signed_areas(uv, faces)
+    if (area < 0).sum() > (area > 0).sum():
+        uv = uv[:, ::-1].copy()
+        area = -area
+    return uv, faces, int((area < 0).sum())
+
+
+def signed_areas(uv: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) signed areas of the mesh's triangles in the (u, v) plane."""
+    a, b, c = (uv[faces[:, k]] for k in range(3))
+    return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+
+
+def _interpolate(points: np.ndarray, mesh: CloudMesh, mesh_uv: np.ndarray) -> np.ndarray:
+    """(N, 2): mesh vertices keep their own (u, v); every other point takes the barycentric
+    (u, v) of the triangle it lies over, among the triangles of its nearest vertex."""
+    params = np.empty((len(points), 2))
+    is_vertex = np.zeros(len(points), bool)
+    used = np.zeros(len(mesh.vertices), bool)
+    used[mesh.faces.ravel()] = True
+    is_vertex[mesh.source[used]] = True
+    params[mesh.source[used]] = mesh_uv[used]
+    rest = np.flatnonzero(~is_vertex)
+    if rest.size == 0:
+        return params
+    used_index = np.flatnonzero(used)
+    tree = cKDTree(mesh.vertices[used_index])
+    # faces around each vertex, padded
+    corner_vertex = mesh.faces.ravel()
+    corner_face = np.repeat(np.arange(len(mesh.faces)), 3)
+    order = np.argsort(corner_vertex, kind="stable")
+    valence = np.bincount(corner_vertex, minlength=len(mesh.vertices))
+    width = int(valence.max())
+    start = np.r_[0, np.cumsum(valence)[:-1]]
+    fan = np.full((len(mesh.vertices), width), -1)
+    slot = np.arange(len(order)) - start[corner_vertex[order]]
+    fan[corner_vertex[order], slot] = corner_face[order]
+    for begin in range(0, rest.size, 65536):
+        chunk = rest[begin:begin + 65536]
+        p = points[chunk]
+        _, nearest = tree.query(p)
+        nearest = used_index[nearest]
+        candidates = fan[nearest]                                  # (n, width)
+        valid = candidates >= 0
+        tri = mesh.faces[np.where(valid, candidates, 0)]           # (n, width, 3)
+        a, b, c = (mesh.vertices[tri[..., k]] for k in range(3))
+        lam = _barycentric(p[:, None, :], a, b, c)                 # (n, width, 3)
+        score = np.where(valid, lam.min(axis=-1), -np.inf)
+        best = np.argmax(score, axis=1)
+        rows = np.arange(len(chunk))
+        weights = np.clip(lam[rows, best], 0.0, None)
+        weights /= weights.sum(axis=1, keepdims=True) + 1e-300
+        corners_uv = mesh_uv[tri[rows, best]]                       # (n, 3, 2)
+        params[chunk] = np.einsum("nk,nkd->nd", weights, corners_uv)
+    return np.clip(params, 0.0, 1.0)
+
+
+def _barycentric(p, a, b, c):
+    """Barycentric coordinates (..., 3) of p projected onto the plane of triangle abc."""
+    v0, v1, v2 = b - a, c - a, p - a
+    d00 = (v0 * v0).sum(-1)
+    d01 = (v0 * v1).sum(-1)
+    d11 = (v1 * v1).sum(-1)
+    d20 = (v2 * v0).sum(-1)
+    d21 = (v2 * v1).sum(-1)
+    denom = d00 * d11 - d01 * d01
+    denom = np.where(np.abs(denom) > 0, denom, 1e-300)
+    v = (d11 * d20 - d01 * d21) / denom
+    w = (d00 * d21 - d01 * d20) / denom
+    return np.stack([1 - v - w, v, w], axis=-1)

@@ -1,0 +1,174 @@
+"""The fold-free single-patch route: mesh, topology, mean-value map, fairing, least-squares core.
+
+References are analytic (areas, energies, the linear precision of mean-value maps) or the
+generated shapes' own ground truth (nurbs_core.samples); nothing here is timed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from nurbs_core import samples
+from nurbs_core.fit import FitConfig, StopToken, fit, iter_fit
+from nurbs_core.fitting.least_squares import least_squares_fit
+from nurbs_core.knots import clamped_uniform
+from nurbs_core.surfacing.disk import classify
+from nurbs_core.surfacing.fairing import energy, fairing_matrices
+from nurbs_core.surfacing.mesh import cloud_mesh
+from nurbs_core.surfacing.parameterize import (
+    NotADiskError,
+    mean_value_weights,
+    mesh_parameterization,
+    signed_areas,
+)
+
+
+def _grid(nu=40, nv=30):
+    u, v = np.meshgrid(np.linspace(0, 2, nu), np.linspace(0, 1, nv), indexing="ij")
+    return np.stack([u.ravel(), v.ravel(), np.zeros(u.size)], -1)
+
+
+def test_a_gridded_scan_meshes_as_one_disk_of_its_exact_area():
+    points = _grid()
+    mesh = cloud_mesh(points)
+    topology = classify(mesh.vertices, mesh.faces)
+    assert topology.kind == "disk" and topology.euler == 1
+    assert len(mesh.faces) >= 2 * 39 * 29 - 4    # (nearly) every grid cell, two triangles
+    assert mesh.area() == pytest.approx(2.0, rel=1e-3)
+    assert mesh.orientable
+
+
+def test_closed_shapes_and_tubes_are_recognised():
+    assert classify(*_mesh(samples.sphere(2000))).kind == "closed"
+    assert classify(*_mesh(samples.torus(3000))).kind in ("closed", "complex")
+    assert classify(*_mesh(samples.tube(2000))).kind == "tube"
+    assert classify(*_mesh(samples.bowl(2000))).kind == "disk"
+
+
+def _mesh(shape):
+    mesh = cloud_mesh(shape.points)
+    return mesh.vertices, mesh.faces
+
+
+def test_mean_value_map_has_linear_precision_on_a_planar_mesh():
+    # a planar rectangle: the map onto the square is the affine map, exactly (Floater 2003)
+    points = _grid(25, 17)
+    param = mesh_parameterization(points)
+    assert param.flipped == 0
+    uv = param.parameters
+    expected = np.stack([points[:, 0] / 2, points[:, 1]], -1)
+    # the corners may be numbered from any of the rectangle's four corners: compare up to the
+    # square's symmetries
+    best = min(np.abs(_symmetry(uv, k) - expected).max() for k in range(8))
+    assert best < 1e-9
+
+
+def _symmetry(uv, k):
+    u, v = uv[:, 0], uv[:, 1]
+    if k & 4:
+        u, v = v, u
+    if k & 1:
+        u = 1 - u
+    if k & 2:
+        v = 1 - v
+    return np.stack([u, v], -1)
+
+
+def test_mean_value_weights_are_positive_for_bad_triangles():
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1e-3, 0], [0.5, -1, 0.2]], float)
+    faces = np.array([[0, 1, 2], [0, 3, 1]])
+    weights = mean_value_weights(vertices, faces)
+    assert (weights.data > 0).all()
+
+
+def test_a_curled_sheet_maps_without_a_single_flipped_triangle():
+    shape = samples.curled_sheet(3000)
+    param = mesh_parameterization(shape.points)
+    assert param.flipped == 0
+    assert (signed_areas(param.mesh_uv, param.mesh.faces) >= 0).all()
+    assert param.parameters.min() >= 0 and param.parameters.max() <= 1
+
+
+def test_closed_cloud_is_refused():
+    with pytest.raises(NotADiskError, match="multi-patch"):
+        mesh_parameterization(samples.sphere(2000).points)
+
+
+def test_thin_plate_and_membrane_energies_are_exact():
+    # z = x^2 + y^2 on [0, 1]^2 is a bicubic patch exactly: thin plate = int 4 + 4 = 8,
+    # membrane of (x, y, z) = int (1 + 4x^2) + (1 + 4y^2) = 2 + 8/3
+    u, v = np.meshgrid(np.linspace(0, 1, 20), np.linspace(0, 1, 20), indexing="ij")
+    params = np.stack([u.ravel(), v.ravel()], -1)
+    points = np.c_[params, (params ** 2).sum(1)]
+    surface = least_squares_fit(points, params, 3, 3, 6, 6)
+    knots = clamped_uniform(6, 3).numpy()
+    thin_plate, membrane = fairing_matrices(knots, 3, knots, 3)
+    control = surface.control_points.numpy()
+    assert energy(thin_plate, control) == pytest.approx(8.0, rel=1e-10)
+    assert energy(membrane, control) == pytest.approx(2 + 8 / 3, rel=1e-10)
+
+
+@pytest.mark.parametrize("make", [samples.curled_sheet, samples.height_field, samples.bowl,
+                                  samples.leaflet_like])
+def test_default_fit_of_open_sheets_is_fold_free_and_converged(make, one_torch_thread):
+    shape = make(3000)
+    result = fit(shape.points, FitConfig())
+    stats = result.statistics
+    assert result.status == "converged"
+    assert stats["flipped_fraction"] <= 0.01
+    assert stats["overlap_fraction"] <= 0.02
+    assert stats["coverage"] >= 0.97
+    assert stats["area"] == pytest.approx(shape.true_area, rel=0.05)
+
+
+def test_height_field_area_ratio_within_two_percent(one_torch_thread):
+    shape = samples.height_field(4000)
+    stats = fit(shape.points, FitConfig()).statistics
+    assert stats["area_ratio"] == pytest.approx(1.0, abs=0.02)
+    assert stats["area"] == pytest.approx(shape.true_area, rel=0.02)
+    diagonal = np.linalg.norm(np.ptp(shape.points, axis=0))
+    assert stats["mean"] < 1.1 * np.mean(np.abs(shape.points - shape.clean).sum(1) / np.sqrt(3)) \
+        or stats["mean"] < 2e-3 * diagonal
+
+
+def test_closed_shapes_fail_loudly_unless_forced(one_torch_thread):
+    points = samples.sphere(1500).points
+    with pytest.raises(ValueError, match="multi-patch"):
+        fit(points, FitConfig())
+    forced = fit(points, FitConfig(single_patch=True, control_points_u=6, control_points_v=6))
+    assert "forced a single patch" in forced.message
+    assert forced.statistics["flipped_fraction"] > 0.05   # and the report says it folded
+
+
+def test_stiffness_trades_closeness_for_fairness(one_torch_thread):
+    shape = samples.saddle(2500, noise=0.01)
+    soft = fit(shape.points, FitConfig(stiffness=1e-6, max_control_points=0)).statistics
+    stiff = fit(shape.points, FitConfig(stiffness=1e-1, max_control_points=0)).statistics
+    assert stiff["bending_energy"] < soft["bending_energy"]
+    assert stiff["rms"] > soft["rms"]
+
+
+def test_least_squares_passes_are_live_and_stoppable(one_torch_thread):
+    points = samples.height_field(2000).points
+    snapshots = list(iter_fit(points, FitConfig()))
+    assert all(not s.done for s in snapshots[:-1]) and snapshots[-1].done
+    assert [s.iteration for s in snapshots] == sorted(s.iteration for s in snapshots)
+    assert all(isinstance(s.geometry["control_points"], np.ndarray) for s in snapshots)
+    assert snapshots[-1].statistics is not None
+    stop = StopToken()
+    stop.stop()
+    last = list(iter_fit(points, FitConfig(), stop=stop))[-1]
+    assert last.status == "stopped" and last.iteration == 1
+
+
+def test_gradient_solver_continues_from_the_least_squares_core(one_torch_thread):
+    shape = samples.height_field(2000)
+    core = fit(shape.points, FitConfig())
+    more = fit(shape.points, FitConfig(solver="gradient", iterations=20))
+    assert more.iterations == core.iterations + 20 or more.status == "converged"
+    assert more.statistics["flipped_fraction"] <= 0.01
+    assert more.statistics["mean"] < 1.5 * core.statistics["mean"]
+    surface = more.geometry
+    assert torch.isfinite(surface.control_points).all()
