@@ -46,6 +46,8 @@ NORMAL_POINTS = 50_000
 PROBE_POINTS = 5000
 #: neighbours of the local frames (normals, area per point, smoothing of the multiplicity)
 NEIGHBOURS = 12
+#: cloud normals averaged to judge a surface sample's orientation
+FACING_NEIGHBOURS = 8
 #: at least this many Gauss-Legendre points per direction for area and bending energy
 QUADRATURE_POINTS = 64
 
@@ -235,8 +237,11 @@ def _measure(surface: NurbsSurface, points: np.ndarray, normals: np.ndarray | No
                                                        keepdims=True).clip(1e-300)
     facing = np.zeros(len(x))
     if near.any():
-        _, nearest = cKDTree(cloud).query(x[near])
-        facing[near] = np.einsum("ij,ij->i", unit[near], cloud_normals[nearest])
+        # the mean oriented normal of the nearest few cloud points: one noisy or mis-oriented
+        # normal must not flag a sample (a real fold covers many cloud points)
+        _, nearest = cKDTree(cloud).query(x[near], k=min(FACING_NEIGHBOURS, len(cloud)))
+        nearest = nearest.reshape(len(nearest), -1)
+        facing[near] = np.einsum("ij,ij->i", unit[near], cloud_normals[nearest].sum(1))
     with_area = float(weight[near & (facing > 0)].sum())
     against_area = float(weight[near & (facing < 0)].sum())
     flipped_fraction = min(with_area, against_area) / near_area if near_area > 0 else 0.0

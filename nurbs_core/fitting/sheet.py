@@ -21,16 +21,15 @@ import torch
 from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, FitSnapshot, StopToken
 from nurbs_core.fitting.least_squares import pca_parameters
 from nurbs_core.fitting.problem import Problem
-from nurbs_core.fitting.projection import surface_gauss_newton
 from nurbs_core.geometry import NurbsSurface
 from nurbs_core.surfacing.core import CorePass, LeastSquaresCore
-from nurbs_core.surfacing.mesh import CloudMesh
+from nurbs_core.surfacing.mesh import CloudMesh, voxel_subsample
 from nurbs_core.surfacing.neighbours import estimate_noise
 from nurbs_core.surfacing.parameterize import NotADiskError, mesh_parameterization
 
-#: Clouds larger than this run the passes on a seeded random subset of this many points; every
-#: point is projected onto the final surface.
-PASS_POINTS = 100_000
+#: Clouds larger than this are meshed, parameterised and fitted on a voxel subsample of about this
+#: many points (even density); every point is measured against the final surface.
+PASS_POINTS = 30_000
 #: The automatic tolerance, in estimated noise standard deviations (99% of Gaussian noise lies
 #: within 2.6 of them), and its floor relative to the bounding-box diagonal.
 NOISE_TOLERANCE = 3.0
@@ -55,12 +54,15 @@ def resolved_solver(config: FitConfig) -> str:
 
 @dataclass
 class SheetStart:
-    """(u, v) (N, 2) of every normalised point, the mesh they came from (None for the plane),
-    and a note for the user (a forced single patch, say)."""
+    """(u, v) (M, 2) of the fitted points (all N, or the voxel subsample ``subset`` (M,) of a large
+    cloud), the mesh they came from (None for the plane), and a note for the user."""
 
     parameters: np.ndarray
     mesh: CloudMesh | None
     message: str | None = None
+    subset: np.ndarray | None = None
+    #: (M, 3) the points the parameters belong to: the cloud, or its voxel centroids
+    points: np.ndarray | None = None
 
 
 def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
@@ -68,6 +70,15 @@ def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
     pointer to multi-patch surfacing) for closed shapes, tubes and handles unless
     ``config.single_patch``."""
     points = problem.points.double().numpy()
+    subset = None
+    if len(points) > PASS_POINTS:
+        subset, points = voxel_subsample(points, PASS_POINTS)   # fit the voxels' centroids
+    start = _sheet_start(points, config)
+    start.subset, start.points = subset, points
+    return start
+
+
+def _sheet_start(points: np.ndarray, config: FitConfig) -> SheetStart:
     if config.parameterization == "plane":
         return SheetStart(pca_parameters(points, 2)[0], None)
     try:
@@ -110,13 +121,13 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
     ``result`` with "geometry" (NurbsSurface, normalised), "parameters" (N, 2) and "distances"
     (N,) for every point, "status" and "message"."""
     points = problem.points.double().numpy()
-    count = len(points)
-    rng = np.random.default_rng(config.seed)
-    subset = np.sort(rng.choice(count, PASS_POINTS, replace=False)) if count > PASS_POINTS \
-        else None
-    pass_points = points if subset is None else points[subset]
-    pass_params = start.parameters if subset is None else start.parameters[subset]
-    noise = estimate_noise(pass_points, seed=config.seed)
+    subset = start.subset
+    pass_points = points if subset is None else start.points
+    pass_params = start.parameters
+    # the noise of the cloud itself (centroids of a large cloud's voxels are smoother)
+    noise = estimate_noise(points if len(points) <= 200_000 else points[
+        np.random.default_rng(config.seed).choice(len(points), 200_000, replace=False)],
+        seed=config.seed)
     if config.tolerance is not None:
         tolerance = config.tolerance / problem.scale
     else:
@@ -155,7 +166,7 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
     if subset is None:
         parameters, distances = last.parameters, last.distances
     else:
-        parameters, distances = _project_all(surface, points, subset, last.parameters)
+        parameters, distances = None, sampled_distances(surface, points)
     stopped = last.message == "stopped"
     result.update(geometry=surface, parameters=parameters, distances=distances,
                   iteration=last.index, status="stopped" if stopped else "converged",
@@ -203,21 +214,31 @@ def _spacing(points: np.ndarray) -> float:
     return float(np.median(distances[:, 1]))
 
 
-def _project_all(surface: NurbsSurface, points: np.ndarray, subset: np.ndarray,
-                 subset_params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Foot points of every point: start from the nearest pass point's parameters."""
+def sampled_distances(surface: NurbsSurface, points: np.ndarray, density: int = 256,
+                      chunk: int = 262144) -> np.ndarray:
+    """Distance (N,) of every point to the surface, from its nearest of ``density``^2 surface
+    samples: the offset along that sample's normal, plus whatever lies beyond the sample's cell
+    in the tangent plane (points past the surface's edge). The error is of second order in the
+    cell size times the curvature: far below the noise for dense samples, at a fraction of the
+    cost of foot-point projection for millions of points."""
     from scipy.spatial import cKDTree
 
-    _, nearest = cKDTree(points[subset]).query(points, workers=-1)
-    params = subset_params[nearest]
-    out_params = np.empty_like(params)
-    distances = np.empty(len(points))
-    for begin in range(0, len(points), 131072):
-        chunk = slice(begin, begin + 131072)
-        q = torch.as_tensor(points[chunk])
-        u, v = surface_gauss_newton(surface, q, torch.as_tensor(params[chunk, 0]),
-                                    torch.as_tensor(params[chunk, 1]), steps=3)
-        foot = surface.evaluate(u, v).detach()
-        out_params[chunk] = torch.stack([u, v], -1).numpy()
-        distances[chunk] = (foot - q).norm(dim=-1).numpy()
-    return out_params, distances
+    t = torch.linspace(0, 1, density, dtype=torch.float64)
+    grid = surface.evaluate_grid(t, t).detach().numpy()          # (d, d, 3)
+    d_u = np.gradient(grid, axis=0)
+    d_v = np.gradient(grid, axis=1)
+    normal = np.cross(d_u, d_v)
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True) + 1e-300
+    half = 0.5 * np.maximum(np.linalg.norm(d_u, axis=-1), np.linalg.norm(d_v, axis=-1))
+    samples, normal, half = grid.reshape(-1, 3), normal.reshape(-1, 3), half.reshape(-1)
+    tree = cKDTree(samples)
+    out = np.empty(len(points))
+    for begin in range(0, len(points), chunk):
+        p = points[begin:begin + chunk]
+        _, index = tree.query(p, workers=-1)
+        offset = p - samples[index]
+        along = (offset * normal[index]).sum(1)
+        tangential = np.linalg.norm(offset - along[:, None] * normal[index], axis=1)
+        beyond = np.maximum(tangential - half[index], 0.0)
+        out[begin:begin + chunk] = np.sqrt(along ** 2 + beyond ** 2)
+    return out

@@ -83,7 +83,7 @@ def cloud_mesh(points: np.ndarray, *, max_vertices: int = MAX_MESH_VERTICES,
     points = np.asarray(points, np.float64)
     if points.ndim != 2 or points.shape[1] != 3 or len(points) < 8:
         raise ValueError(f"a mesh needs at least 8 points of shape (N, 3), got {points.shape}")
-    source = _voxel_subsample(points, max_vertices) if len(points) > max_vertices else \
+    source = voxel_subsample(points, max_vertices)[0] if len(points) > max_vertices else \
         np.arange(len(points))
     vertices = points[source]
     # a tiny deterministic jitter breaks the co-circular ties of gridded scans the same way in
@@ -128,27 +128,33 @@ def _median_spacing(points: np.ndarray) -> float:
     return float(np.median(distances[:, 1])) or 1.0
 
 
-def _voxel_subsample(points: np.ndarray, target: int) -> np.ndarray:
-    """Indices of about ``target`` points: per occupied voxel, the point nearest its centroid."""
+def voxel_subsample(points: np.ndarray, target: int) -> tuple[np.ndarray, np.ndarray]:
+    """About ``target`` representatives of ``points`` (N, 3), one per occupied voxel: returns
+    (index (M,) sorted: the point nearest each voxel's centroid, centroids (M, 3) in the same
+    order). Centroids average the voxel's points (the noise falls with their number); both
+    give an even density whatever the scanner's overlaps."""
     lo, hi = points.min(axis=0), points.max(axis=0)
-    extent = np.maximum(hi - lo, 1e-12 * max(np.ptp(points), 1e-300))
+    extent = np.maximum(hi - lo, 1e-12 * max(float(np.ptp(points)), 1e-300))
     # the cloud is a surface: the occupied voxel count grows like (extent / size)^2
     size = float(np.sqrt(np.sort(extent)[1:].prod() / target)) if target > 0 else 1.0
     for _ in range(8):
-        keys = np.floor((points - lo) / size).astype(np.int64)
-        _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+        cells = np.floor((points - lo) / size).astype(np.int64)
+        dims = cells.max(axis=0) + 1
+        keys = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
+        _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
         if len(counts) <= 1.3 * target:
             break
         size *= np.sqrt(len(counts) / target)
     inverse = inverse.ravel()
-    centroid = np.zeros((len(counts), 3))
-    np.add.at(centroid, inverse, points)
+    centroid = np.stack([np.bincount(inverse, points[:, d], len(counts)) for d in range(3)], 1)
     centroid /= counts[:, None]
     offset = np.linalg.norm(points - centroid[inverse], axis=1)
     order = np.lexsort((offset, inverse))
     first = np.ones(len(order), bool)
     first[1:] = inverse[order][1:] != inverse[order][:-1]
-    return np.sort(order[first])
+    chosen = order[first]                       # one per voxel, in voxel order
+    by_index = np.argsort(chosen)
+    return chosen[by_index], centroid[inverse[chosen[by_index]]]
 
 
 def _umbrella_triangles(points: np.ndarray, frames) -> tuple[np.ndarray, np.ndarray]:

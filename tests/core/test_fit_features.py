@@ -167,7 +167,7 @@ def test_unordered_cloud_with_parameter_correction_beats_fixed_parameters():
     # parameters are a poor parameterisation that only foot-point correction can repair
     points = np.column_stack([np.cos(angle), np.sin(angle), height])
     common = dict(loss="p2s", control_points_u=6, control_points_v=6, iterations=150,
-                  learning_rate=0.02)
+                  learning_rate=0.02, solver="gradient", parameterization="plane")
     corrected = fit(points, FitConfig(parameter_correction=True, **common))
     fixed = fit(points, FitConfig(parameter_correction=False, **common))
     assert corrected.statistics["rms"] < 0.5 * fixed.statistics["rms"]
