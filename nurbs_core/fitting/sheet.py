@@ -128,6 +128,8 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
     noise = estimate_noise(points if len(points) <= 200_000 else points[
         np.random.default_rng(config.seed).choice(len(points), 200_000, replace=False)],
         seed=config.seed)
+    # the fitted points' own noise: the centroids of a large cloud's voxels are smoother
+    noise_pass = estimate_noise(pass_points, seed=config.seed) if subset is not None else noise
     if config.tolerance is not None:
         tolerance = config.tolerance / problem.scale
     else:
@@ -142,7 +144,8 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
     else:
         max_grid = grid
     core = LeastSquaresCore(pass_points, pass_params, degrees, grid, config.stiffness,
-                            tolerance, config.outlier_fraction, spacing, max_grid)
+                            tolerance, config.outlier_fraction, spacing, max_grid,
+                            noise=noise_pass, explicit_tolerance=config.tolerance is not None)
     last: CorePass | None = None
     note = start.message
     for report in core.passes(stop):

@@ -8,7 +8,8 @@ Each pass solves, for fixed parameters (u_k, v_k) and fixed knots, the control p
 every parameter to its foot point on the new surface (Gauss-Newton from where it was, so points
 keep their place in the fold-free start). lambda starts stiff and falls by FAIRING_DECAY per pass
 down to the user's stiffness (FreeCAD halves it); then the passes run until the parameters stop
-moving. When the two-sided tolerance is not met the control grid grows and the passes go on.
+moving. Then the control grid grows (shaped like the surface) while that pays: until a given
+two-sided tolerance is met, or, with the automatic tolerance, while Mallows' Cp falls.
 Coordinates are the fit's normalised ones (bounding-box diagonal 1, parameters in [0, 1]^2).
 """
 
@@ -66,6 +67,7 @@ class CorePass:
     done: bool = False
     met: bool = False
     message: str | None = None
+    cp: float = math.inf
 
 
 class LeastSquaresCore:
@@ -75,18 +77,23 @@ class LeastSquaresCore:
     starting control grid (n, m); stiffness: the final fairing weight; tolerance: two-sided
     distance tolerance (normalised; the cloud-to-surface ``1 - outlier_fraction`` quantile and
     the surface-to-cloud 95th percentile beyond ``spacing``); max_grid: largest control count
-    per direction the grid may grow to."""
+    per direction the grid may grow to; noise: the cloud's noise (normalised). With an
+    ``explicit_tolerance`` the passes stop as soon as it is met; otherwise the grid grows while
+    Mallows' Cp (residual + 2 noise^2 per control point) falls, and the best grid is kept."""
 
     def __init__(self, points: np.ndarray, parameters: np.ndarray, degrees: tuple[int, int],
                  grid: tuple[int, int], stiffness: float, tolerance: float,
                  outlier_fraction: float, spacing: float, max_grid: tuple[int, int],
-                 max_controls: int | None = None):
+                 max_controls: int | None = None, noise: float = 0.0,
+                 explicit_tolerance: bool = False):
         self.points = np.asarray(points, np.float64)
         self.parameters = np.clip(np.asarray(parameters, np.float64), 0.0, 1.0).copy()
         self.degrees = degrees
         self.grid = tuple(int(g) for g in grid)
         self.stiffness = float(stiffness)
         self.tolerance = float(tolerance)
+        self.noise = float(noise)
+        self.explicit_tolerance = bool(explicit_tolerance)
         self.outlier_fraction = float(outlier_fraction)
         self.spacing = float(spacing)
         self.max_grid = tuple(int(g) for g in max_grid)
@@ -140,6 +147,7 @@ class LeastSquaresCore:
         """Run the passes; every pass is yielded (the last one with ``done``)."""
         fairing = max(INITIAL_FAIRING, self.stiffness)
         previous_rms, grid_rms = math.inf, math.inf
+        best: CorePass | None = None
         for index in range(1, MAX_PASSES + 1):
             old = self.parameters.copy()
             surface = self.solve(fairing)
@@ -167,19 +175,38 @@ class LeastSquaresCore:
                 yield report
                 continue
             met = quantile <= self.tolerance and s2c <= self.tolerance
-            if met:
-                report.done, report.met = True, True
+            report.met = met
+            # Mallows' Cp: the residual plus twice the noise variance per control point (one
+            # degree of freedom each: the residuals are normal distances). A larger grid is
+            # worth it only when it lowers Cp: the automatic stop, which grows a grid as long as
+            # the data can tell a better surface from fitted noise.
+            report.cp = float((distances ** 2).sum() + 2 * self.noise ** 2 * self.grid[0]
+                              * self.grid[1])
+            if best is not None and report.cp >= best.cp:
+                final = best
+                final.index, final.done = index, True
+                final.message = self._summary(final, ("tolerance met" if final.met else
+                                                      "tolerance not met") + "; a larger grid "
+                                              "fits the noise, not the surface")
+                yield report
+                yield final
+                return
+            best = report
+            if met and self.explicit_tolerance:
+                report.done = True
                 report.message = self._summary(report, "tolerance met")
                 yield report
                 return
             gain = (grid_rms - rms) / grid_rms if math.isfinite(grid_rms) else 1.0
             grown = self._grown()
-            if gain < MIN_GAIN or grown is None or index >= MAX_PASSES:
+            if grown is None or index >= MAX_PASSES or (gain < MIN_GAIN and not met and
+                                                        self.explicit_tolerance):
                 why = ("the largest control grid allowed is reached" if grown is None
-                       else "a larger control grid no longer helps" if gain < MIN_GAIN
-                       else "the pass budget is used up")
+                       else "the pass budget is used up" if index >= MAX_PASSES
+                       else "a larger control grid no longer helps")
                 report.done = True
-                report.message = self._summary(report, f"tolerance not met: {why}")
+                report.message = self._summary(report, "tolerance met" if met
+                                               else f"tolerance not met: {why}")
                 yield report
                 return
             yield report
