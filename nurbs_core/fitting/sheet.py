@@ -25,11 +25,17 @@ from nurbs_core.geometry import NurbsSurface
 from nurbs_core.surfacing.core import CorePass, LeastSquaresCore
 from nurbs_core.surfacing.mesh import CloudMesh, voxel_subsample
 from nurbs_core.surfacing.neighbours import estimate_noise
-from nurbs_core.surfacing.parameterize import NotADiskError, mesh_parameterization
+from nurbs_core.surfacing.parameterize import (
+    NotADiskError,
+    interpolate_parameters,
+    mesh_parameterization,
+)
 
-#: Clouds larger than this are meshed, parameterised and fitted on a voxel subsample of about this
-#: many points (even density); every point is measured against the final surface.
+#: Clouds larger than this are fitted on a seeded random subset of this many points, and their
+#: parameterisation is the map of a mesh over about MESH_POINTS voxel centroids; every point is
+#: measured against the final surface.
 PASS_POINTS = 30_000
+MESH_POINTS = 20_000
 #: The automatic tolerance, in estimated noise standard deviations (99% of Gaussian noise lies
 #: within 2.6 of them), and its floor relative to the bounding-box diagonal.
 NOISE_TOLERANCE = 3.0
@@ -61,8 +67,8 @@ class SheetStart:
     mesh: CloudMesh | None
     message: str | None = None
     subset: np.ndarray | None = None
-    #: (M, 3) the points the parameters belong to: the cloud, or its voxel centroids
-    points: np.ndarray | None = None
+    #: (V, 2) the (u, v) of the mesh's vertices
+    mesh_uv: np.ndarray | None = None
 
 
 def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
@@ -70,11 +76,22 @@ def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
     pointer to multi-patch surfacing) for closed shapes, tubes and handles unless
     ``config.single_patch``."""
     points = problem.points.double().numpy()
-    subset = None
-    if len(points) > PASS_POINTS:
-        subset, points = voxel_subsample(points, PASS_POINTS)   # fit the voxels' centroids
-    start = _sheet_start(points, config)
-    start.subset, start.points = subset, points
+    if len(points) <= PASS_POINTS:
+        return _sheet_start(points, config)
+    # a large cloud: mesh and map the centroids of about MESH_POINTS voxels (even density, the
+    # noise averaged away; voxels the surface only grazes keep their noise and are left out),
+    # then fit a seeded random subset of PASS_POINTS of the points themselves, whose (u, v)
+    # come from the map's triangles
+    _, centroids, counts = voxel_subsample(points, MESH_POINTS)
+    centroids = centroids[counts >= 0.25 * np.median(counts)]
+    start = _sheet_start(centroids, config)
+    subset = np.sort(np.random.default_rng(config.seed).choice(len(points), PASS_POINTS,
+                                                               replace=False))
+    if start.mesh is not None:
+        start.parameters = interpolate_parameters(points[subset], start.mesh, start.mesh_uv)
+    else:
+        start.parameters = pca_parameters(points, 2)[0][subset]
+    start.subset = subset
     return start
 
 
@@ -99,7 +116,7 @@ def _sheet_start(points: np.ndarray, config: FitConfig) -> SheetStart:
     message = None
     if param.flipped:
         message = f"{param.flipped} triangles of the parameterisation flipped"
-    return SheetStart(param.parameters, param.mesh, message)
+    return SheetStart(param.parameters, param.mesh, message, mesh_uv=param.mesh_uv)
 
 
 def is_height_field(points: np.ndarray, agree: float = 0.98) -> bool:
@@ -122,14 +139,11 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
     (N,) for every point, "status" and "message"."""
     points = problem.points.double().numpy()
     subset = start.subset
-    pass_points = points if subset is None else start.points
+    pass_points = points if subset is None else points[subset]
     pass_params = start.parameters
-    # the noise of the cloud itself (centroids of a large cloud's voxels are smoother)
     noise = estimate_noise(points if len(points) <= 200_000 else points[
         np.random.default_rng(config.seed).choice(len(points), 200_000, replace=False)],
         seed=config.seed)
-    # the fitted points' own noise: the centroids of a large cloud's voxels are smoother
-    noise_pass = estimate_noise(pass_points, seed=config.seed) if subset is not None else noise
     if config.tolerance is not None:
         tolerance = config.tolerance / problem.scale
     else:
@@ -145,7 +159,7 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
         max_grid = grid
     core = LeastSquaresCore(pass_points, pass_params, degrees, grid, config.stiffness,
                             tolerance, config.outlier_fraction, spacing, max_grid,
-                            noise=noise_pass, explicit_tolerance=config.tolerance is not None)
+                            noise=noise, explicit_tolerance=config.tolerance is not None)
     last: CorePass | None = None
     note = start.message
     for report in core.passes(stop):

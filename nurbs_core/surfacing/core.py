@@ -37,7 +37,7 @@ MEMBRANE_RATIO = 0.1
 INITIAL_FAIRING = 1e-5
 FAIRING_DECAY = 0.25
 #: Parameters that move less than this (RMS, in the unit square) count as settled.
-SETTLED = 2e-4
+SETTLED = 5e-4
 #: Passes at most (all grids together).
 MAX_PASSES = 40
 #: Growth factor of the control grid while the tolerance is not met.
@@ -101,6 +101,7 @@ class LeastSquaresCore:
         self.max_controls = int(max_controls if max_controls is not None
                                 else max(len(self.points) // POINTS_PER_CONTROL, 16))
         self.tree = cKDTree(self.points)
+        self.fairing_scale: float | None = None
         self._setup_grid()
 
     def _setup_grid(self):
@@ -116,9 +117,12 @@ class LeastSquaresCore:
                                     self.parameters[:, 1])
         count = len(self.points)
         data = (matrix.T @ matrix) / count
-        # the weight is relative: the same stiffness means the same for any grid and cloud
-        scale = data.diagonal().sum() / max(self.fairing_matrix.diagonal().sum(), 1e-300)
-        normal = data + fairing * scale * self.fairing_matrix
+        if self.fairing_scale is None:
+            # the weight is relative to the data term on the starting grid, and stays fixed as
+            # the grid grows: the same stiffness means the same energy for any cloud and grid
+            self.fairing_scale = (data.diagonal().sum()
+                                  / max(self.fairing_matrix.diagonal().sum(), 1e-300))
+        normal = data + fairing * self.fairing_scale * self.fairing_matrix
         # a whisper of ridge keeps control points with no data and no fairing well defined
         normal = normal + 1e-12 * scipy.sparse.eye(n * m)
         rhs = (matrix.T @ self.points) / count
@@ -160,7 +164,7 @@ class LeastSquaresCore:
             report = CorePass(index, surface, self.parameters.copy(), distances, rms, quantile,
                               s2c, moved, fairing, bending, self.grid)
             relaxed = fairing <= self.stiffness * (1 + 1e-12)
-            settled = relaxed and (moved < SETTLED or rms > previous_rms * (1 - 1e-3))
+            settled = relaxed and (moved < SETTLED or rms > previous_rms * (1 - 2e-3))
             previous_rms = rms
             stopped = stop is not None and stop.stopped
             if stopped:

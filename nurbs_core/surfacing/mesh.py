@@ -128,16 +128,29 @@ def _median_spacing(points: np.ndarray) -> float:
     return float(np.median(distances[:, 1])) or 1.0
 
 
-def voxel_subsample(points: np.ndarray, target: int) -> tuple[np.ndarray, np.ndarray]:
+def voxel_subsample(points: np.ndarray,
+                    target: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """About ``target`` representatives of ``points`` (N, 3), one per occupied voxel: returns
-    (index (M,) sorted: the point nearest each voxel's centroid, centroids (M, 3) in the same
-    order). Centroids average the voxel's points (the noise falls with their number); both
-    give an even density whatever the scanner's overlaps."""
+    (index (M,) sorted: the point nearest each voxel's centroid, centroids (M, 3) and the
+    voxels' point counts (M,) in the same order). Centroids average the voxel's points (the
+    noise falls with their number); both give an even density whatever the scanner's
+    overlaps."""
     lo, hi = points.min(axis=0), points.max(axis=0)
     extent = np.maximum(hi - lo, 1e-12 * max(float(np.ptp(points)), 1e-300))
     # the cloud is a surface: the occupied voxel count grows like (extent / size)^2
     size = float(np.sqrt(np.sort(extent)[1:].prod() / target)) if target > 0 else 1.0
-    for _ in range(8):
+    # calibrate the voxel size on a random tenth of a large cloud (occupancy saturates)
+    rng = np.random.default_rng(0)
+    probe = points if len(points) < 10 * target else points[
+        rng.choice(len(points), 10 * target, replace=False)]
+    for _ in range(6):
+        cells = np.floor((probe - lo) / size).astype(np.int64)
+        occupied = len(np.unique((cells[:, 0] * (cells[:, 1].max() + 1) + cells[:, 1])
+                                 * (cells[:, 2].max() + 1) + cells[:, 2]))
+        if occupied <= 1.2 * target:
+            break
+        size *= np.sqrt(occupied / target)
+    for _ in range(3):
         cells = np.floor((points - lo) / size).astype(np.int64)
         dims = cells.max(axis=0) + 1
         keys = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
@@ -154,7 +167,8 @@ def voxel_subsample(points: np.ndarray, target: int) -> tuple[np.ndarray, np.nda
     first[1:] = inverse[order][1:] != inverse[order][:-1]
     chosen = order[first]                       # one per voxel, in voxel order
     by_index = np.argsort(chosen)
-    return chosen[by_index], centroid[inverse[chosen[by_index]]]
+    voxel = inverse[chosen[by_index]]
+    return chosen[by_index], centroid[voxel], counts[voxel]
 
 
 def _umbrella_triangles(points: np.ndarray, frames) -> tuple[np.ndarray, np.ndarray]:

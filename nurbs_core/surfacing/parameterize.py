@@ -178,15 +178,25 @@ def signed_areas(uv: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
 
 
-def _interpolate(points: np.ndarray, mesh: CloudMesh, mesh_uv: np.ndarray) -> np.ndarray:
-    """(N, 2): mesh vertices keep their own (u, v); every other point takes the barycentric
-    (u, v) of the triangle it lies over, among the triangles of its nearest vertex."""
+def interpolate_parameters(points: np.ndarray, mesh: CloudMesh,
+                           mesh_uv: np.ndarray) -> np.ndarray:
+    """(N, 2) (u, v) of any points (N, 3) near the mesh: the barycentric (u, v) of the triangle
+    each lies over, among the triangles of its nearest vertex."""
+    return _interpolate(points, mesh, mesh_uv, vertices_are_points=False)
+
+
+def _interpolate(points: np.ndarray, mesh: CloudMesh, mesh_uv: np.ndarray,
+                 vertices_are_points: bool = True) -> np.ndarray:
+    """(N, 2): mesh vertices keep their own (u, v) (when they are these points, at
+    ``mesh.source``); every other point takes the barycentric (u, v) of the triangle it lies
+    over, among the triangles of its nearest vertex."""
     params = np.empty((len(points), 2))
     is_vertex = np.zeros(len(points), bool)
     used = np.zeros(len(mesh.vertices), bool)
     used[mesh.faces.ravel()] = True
-    is_vertex[mesh.source[used]] = True
-    params[mesh.source[used]] = mesh_uv[used]
+    if vertices_are_points:
+        is_vertex[mesh.source[used]] = True
+        params[mesh.source[used]] = mesh_uv[used]
     rest = np.flatnonzero(~is_vertex)
     if rest.size == 0:
         return params
