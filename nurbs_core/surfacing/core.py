@@ -40,6 +40,11 @@ FAIRING_DECAY = 0.25
 SETTLED = 5e-4
 #: Passes at most (all grids together).
 MAX_PASSES = 40
+#: Mallows' Cp charges 2 noise variances per control point; a little more guards against a
+#: noise estimate on the low side (it falls short by up to 20% when the noise nears the spacing).
+CP_PENALTY = 3.0
+#: Points (each with its nearest neighbours) over which a parameter correction is averaged.
+CORRECTION_NEIGHBOURS = 12
 #: Growth factor of the control grid while the tolerance is not met.
 GRID_GROWTH = 1.4
 #: The grid grows to at most one control point per this many cloud points.
@@ -101,6 +106,8 @@ class LeastSquaresCore:
         self.max_controls = int(max_controls if max_controls is not None
                                 else max(len(self.points) // POINTS_PER_CONTROL, 16))
         self.tree = cKDTree(self.points)
+        self.neighbourhood = self.tree.query(self.points, k=min(CORRECTION_NEIGHBOURS,
+                                                              len(self.points)))[1]
         self.fairing_scale: float | None = None
         self._setup_grid()
 
@@ -135,7 +142,13 @@ class LeastSquaresCore:
         u = torch.as_tensor(self.parameters[:, 0])
         v = torch.as_tensor(self.parameters[:, 1])
         u, v = surface_gauss_newton(surface, points, u, v, steps=steps)
-        self.parameters = torch.stack([u, v], -1).numpy()
+        # the correction averaged over each point's neighbourhood: a real reparameterisation
+        # is smooth and survives, while the jitter that noise causes (a noisy point catching the
+        # nearest wiggle of the surface, which the next solve then deepens) averages out
+        delta = torch.stack([u, v], -1).numpy() - self.parameters
+        delta = delta[self.neighbourhood].mean(axis=1)
+        self.parameters = np.clip(self.parameters + delta, 0.0, 1.0)
+        u, v = torch.as_tensor(self.parameters[:, 0]), torch.as_tensor(self.parameters[:, 1])
         foot = surface.evaluate(u, v).detach().numpy()
         return np.linalg.norm(foot - self.points, axis=1)
 
@@ -180,11 +193,11 @@ class LeastSquaresCore:
                 continue
             met = quantile <= self.tolerance and s2c <= self.tolerance
             report.met = met
-            # Mallows' Cp: the residual plus twice the noise variance per control point (one
+            # Mallows' Cp: the residual plus CP_PENALTY noise variances per control point (one
             # degree of freedom each: the residuals are normal distances). A larger grid is
             # worth it only when it lowers Cp: the automatic stop, which grows a grid as long as
             # the data can tell a better surface from fitted noise.
-            report.cp = float((distances ** 2).sum() + 2 * self.noise ** 2 * self.grid[0]
+            report.cp = float((distances ** 2).sum() + CP_PENALTY * self.noise ** 2 * self.grid[0]
                               * self.grid[1])
             if best is not None and report.cp >= best.cp:
                 final = best

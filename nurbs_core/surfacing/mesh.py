@@ -24,7 +24,7 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components
 from scipy.spatial import cKDTree
 
 from nurbs_core.surfacing.disk import fill_small_holes
-from nurbs_core.surfacing.neighbours import local_frames, smooth_points
+from nurbs_core.surfacing.neighbours import estimate_noise, local_frames, smooth_points
 
 #: Neighbours considered for each point's Delaunay 1-ring.
 RING_CANDIDATES = 24
@@ -32,6 +32,8 @@ RING_CANDIDATES = 24
 MAX_UMBRELLA_ANGLE = 0.8 * np.pi
 #: Standard deviation of the tie-breaking jitter, in median spacings.
 JITTER = 0.05
+#: Noise above this fraction of the spacing gets a stronger smoothing before meshing.
+NOISY = 0.25
 #: Clouds larger than this are meshed on a voxel subsample of about this many points.
 MAX_MESH_VERTICES = 40_000
 
@@ -92,6 +94,9 @@ def cloud_mesh(points: np.ndarray, *, max_vertices: int = MAX_MESH_VERTICES,
     spacing0 = _median_spacing(vertices)
     # the umbrellas are built on denoised positions, so that neighbouring tangent planes agree
     smoothed = smooth_points(vertices)
+    if estimate_noise(vertices) > NOISY * spacing0:
+        # noise comparable to the spacing: a wider, repeated projection before the umbrellas
+        smoothed = smooth_points(smooth_points(vertices, k=40), k=40)
     jittered = smoothed + rng.normal(scale=JITTER * spacing0, size=vertices.shape)
     frames = local_frames(jittered, k=RING_CANDIDATES)
     triangles, votes = _umbrella_triangles(jittered, frames)
