@@ -197,3 +197,39 @@ def test_progress_shows_the_last_iteration_when_the_final_snapshot_has_no_record
     progress(FitSnapshot(60, {}, [{"iteration": 60, "total": 0.5}], 0.2, False, "running"))
     progress(FitSnapshot(60, {}, [], 0.2, True, "budget"))
     assert capsys.readouterr().err.splitlines()[-1].startswith("iteration 60/60  loss 0.5")
+
+
+def test_closed_cloud_is_refused_with_a_reason_unless_forced(tmp_path, capsys):
+    from nurbs_core import samples
+
+    source = tmp_path / "sphere.xyz"
+    np.savetxt(source, samples.sphere(1500).points)
+    out = tmp_path / "sphere.json"
+    assert main([str(source), "-o", str(out)]) == 1
+    error = _error_line(capsys)
+    assert "closed surface" in error and "multi-patch" in error and "--single-patch" in error
+    assert not out.exists()
+    assert main([str(source), "-o", str(out), "--single-patch", "--control-points", "6", "6",
+                 "-q"]) == 0
+    report = capsys.readouterr().out
+    flipped = float(report.split("flipped area: ")[1].split("%")[0])
+    assert flipped > 5                       # the forced sheet folds, and the report says so
+    assert out.exists()
+
+
+def test_surfacing_options_reach_the_fit(tmp_path):
+    from nurbs_core.cli import _config, build_parser
+
+    args = build_parser().parse_args(["in.xyz", "-o", "o.json", "--stiffness", "0.02",
+                                      "--tolerance", "0.5", "--parameterization", "plane",
+                                      "--single-patch", "--solver", "gradient",
+                                      "--max-control-points", "20", "--outliers", "0.05"])
+    config = _config(args, 3)
+    assert (config.stiffness, config.tolerance, config.parameterization) == (0.02, 0.5, "plane")
+    assert config.single_patch and config.solver == "gradient"
+    assert (config.max_control_points, config.outlier_fraction) == (20, 0.05)
+    default = _config(build_parser().parse_args(["in.xyz", "-o", "o.json"]), 3)
+    assert default.tolerance is None and default.max_control_points == 40
+    fixed = _config(build_parser().parse_args(["in.xyz", "-o", "o.json", "--control-points",
+                                               "8", "8"]), 3)
+    assert fixed.max_control_points == 0    # an explicit grid is kept
