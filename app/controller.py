@@ -135,6 +135,8 @@ class FitController(QObject):
 
     def reset(self):
         """Stop, then forget the fitted shape: the next Start initializes afresh."""
+        if self._worker is not None:
+            self._worker.hurry()  # the shape is dropped: no final measures
         self.stop()
         self._join()
         self._run_id += 1  # drop snapshots of the old run still queued for delivery
@@ -155,6 +157,7 @@ class FitController(QObject):
         if self._state in ("running", "paused"):
             self._restart_pending = True
             self._restart_paused = self._state == "paused"
+            self._worker.hurry()  # the next run is waiting: no final measures
             self._stop_token.stop()
 
     def shutdown(self):
@@ -170,6 +173,8 @@ class FitController(QObject):
     def _join(self):
         if self._thread is None:
             return
+        if self._worker is not None:
+            self._worker.hurry()
         if self._stop_token is not None:
             self._stop_token.stop()
         self._thread.quit()
@@ -191,13 +196,16 @@ class FitController(QObject):
                 self._rate_history[-1][0] - self._rate_history[0][0] > RATE_WINDOW_S):
             self._rate_history.popleft()
 
-    @Slot(int, str)
-    def _on_failed(self, run_id: int, message: str):
+    @Slot(int, str, str)
+    def _on_failed(self, run_id: int, message: str, detail: str):
+        """A run that could not start or broke. Refusals (the engine's checks) come without a
+        traceback: their message says what to change. Unexpected errors log theirs."""
         if run_id != self._run_id or self._is_shut_down:
             return
-        log.error("fit failed: %s", message)
+        if detail:
+            log.error("fit failed: %s\n%s", message, detail)
         self._restart_pending = False
-        self.fit_failed.emit(message.splitlines()[0] if message else "the fit failed")
+        self.fit_failed.emit(message or "the fit failed")
 
     @Slot(int)
     def _on_run_finished(self, run_id: int):

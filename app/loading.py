@@ -15,6 +15,7 @@ import numpy as np
 from app.state import OffsetDisplay, Target
 from app.workers.display import DisplayGeometry, display_geometry
 from app.workers.fit_worker import FINAL_DEVIATION_POINTS, sampled_deviation
+from app.workers.quality import measure_quality
 
 #: (menu label, suffix, needs the optional OCP package)
 EXPORT_FORMATS = (
@@ -78,19 +79,36 @@ def tessellate(geometries: list[dict[str, Any]]) -> list[DisplayGeometry]:
     return [display_geometry(g) for g in geometries]
 
 
-def fitted_display(geometry: dict[str, Any], points: np.ndarray | None):
-    """Display arrays and per-point deviation of a fitted shape (e.g. from a session)."""
+@dataclass
+class FittedDisplay:
+    """What the window shows of a fitted shape it did not see being fitted (a session, a
+    stopped run): display arrays, per-point deviation (N,) or None, and for surfaces the quality
+    statistics and quad categories of :func:`app.workers.quality.measure_quality` (or None)."""
+
+    display: DisplayGeometry
+    deviation: np.ndarray | None = None
+    statistics: dict[str, float] | None = None
+    quality_cells: np.ndarray | None = None
+
+
+def fitted_display(geometry: dict[str, Any], points: np.ndarray | None,
+                   statistics: dict[str, float] | None = None) -> FittedDisplay:
+    """Display arrays, per-point deviation and quality of a fitted shape (e.g. from a session).
+    statistics: the fit's own measures when it has them (only the quality map is computed)."""
     from nurbs_core import geometry_from_numpy
     from nurbs_core.fit import deviation
 
     display = display_geometry(geometry)
-    dev = None
+    result = FittedDisplay(display)
     if points is not None:
         target = points[:, :2] if (geometry["kind"] == "curve" and
                                    geometry["control_points"].shape[-1] == 2) else points
-        dev = sampled_deviation(deviation, geometry_from_numpy(geometry), target,
-                                FINAL_DEVIATION_POINTS)
-    return display, dev
+        result.deviation = sampled_deviation(deviation, geometry_from_numpy(geometry), target,
+                                             FINAL_DEVIATION_POINTS)
+        if display.kind == "surface":
+            result.statistics, result.quality_cells = measure_quality(
+                geometry, target, display.grid_u, display.grid_v, statistics, result.deviation)
+    return result
 
 
 def compute_offsets(surfaces: list[dict[str, Any]], distance: float, constrain_shared: bool):

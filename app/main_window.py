@@ -1,9 +1,9 @@
 """The main window: menus, docks, status bar and the wiring between them (no fitting logic).
 
 Layout: the VTK viewport in the centre; on the left the document tree; on the right the fit
-settings, knots and offsets; at the bottom the loss plot and the log. Long work (reading files,
-tessellating patches, offsets, export) runs in :class:`JobRunner` threads, the fit in the
-controller's worker thread; this module only touches widgets, on the GUI thread.
+settings, knots and offsets; at the bottom the loss plot, the fit's quality and the log. Long
+work (reading files, tessellating patches, offsets, export) runs in :class:`JobRunner` threads,
+the fit in the controller's worker thread; this module only touches widgets, on the GUI thread.
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ from app.panels.knot_panel import KnotPanel
 from app.panels.log_panel import LogPanel
 from app.panels.loss_plot import LossPlot
 from app.panels.offset_panel import OffsetPanel
+from app.panels.quality_panel import QualityPanel
 from app.state import Document, FitSettings, control_grid_for
 from app.viewport.scene import SceneView
 from app.workers.fit_worker import DisplaySnapshot, deviation_stats
@@ -101,6 +102,7 @@ class MainWindow(QMainWindow):
         self._is_shut_down = False
         self._message_box: QMessageBox | None = None
         self.last_error = ""
+        self._quality_run = 0  # the run whose snapshots the quality readout follows
 
         self.document = Document(self)
         self.controller = FitController(self.document, self)
@@ -162,6 +164,7 @@ class MainWindow(QMainWindow):
         self.knot_panel = KnotPanel(self.document.edit_settings, self.report)
         self.offset_panel = OffsetPanel(self.document.edit_settings)
         self.loss_plot = LossPlot()
+        self.quality_panel = QualityPanel()
         self.log_panel = LogPanel()
         logging.getLogger().addHandler(self.log_panel.handler)
         if logging.getLogger().level > logging.INFO or logging.getLogger().level == 0:
@@ -175,9 +178,13 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.knot_dock, self.offset_dock)
         self.fit_dock.raise_()
         self.loss_dock = self._dock("Loss", self.loss_plot, bottom, "loss_dock")
+        self.quality_dock = self._dock("Quality", self.quality_panel, bottom, "quality_dock", True)
         self.log_dock = self._dock("Log", self.log_panel, bottom, "log_dock")
-        self.splitDockWidget(self.loss_dock, self.log_dock, Qt.Orientation.Horizontal)
+        self.splitDockWidget(self.loss_dock, self.quality_dock, Qt.Orientation.Horizontal)
+        self.splitDockWidget(self.quality_dock, self.log_dock, Qt.Orientation.Horizontal)
         self.resizeDocks([self.tree_dock, self.fit_dock], [240, 330], Qt.Orientation.Horizontal)
+        self.resizeDocks([self.loss_dock, self.quality_dock, self.log_dock], [420, 560, 420],
+                         Qt.Orientation.Horizontal)
         self.resizeDocks([self.loss_dock], [210], Qt.Orientation.Vertical)
 
     def _action(self, text: str, slot, shortcut=None, icon=None, checkable=False, checked=False):
@@ -234,6 +241,10 @@ class MainWindow(QMainWindow):
         self.layer_actions["control_net"].setShortcut(QKeySequence("N"))
         self.deviation_action = self._action("&Deviation Map", self.set_deviation_visible, "D",
                                              checkable=True, checked=True)
+        self.quality_action = self._action("&Quality Map", self.set_quality_visible, "Q",
+                                           checkable=True, checked=False)
+        self.quality_action.setToolTip("Paint the fitted surface where it is flipped, overlaps "
+                                       "itself or hangs far from the cloud")
         self.camera_action = self._action("&Fit View", self.scene.reset_camera, "F")
 
     def _build_menus(self):
@@ -282,11 +293,12 @@ class MainWindow(QMainWindow):
         for action in self.layer_actions.values():
             view_menu.addAction(action)
         view_menu.addAction(self.deviation_action)
+        view_menu.addAction(self.quality_action)
         view_menu.addSeparator()
         view_menu.addAction(self.camera_action)
         view_menu.addSeparator()
         for dock in (self.tree_dock, self.fit_dock, self.knot_dock, self.offset_dock,
-                     self.loss_dock, self.log_dock):
+                     self.loss_dock, self.quality_dock, self.log_dock):
             view_menu.addAction(dock.toggleViewAction())
 
         toolbar = self.addToolBar("Fit")
@@ -460,27 +472,40 @@ class MainWindow(QMainWindow):
         if fitted is None:
             self.scene.show_fit(None)
             self.scene.set_deviation(None)
+            self.quality_panel.clear()
         else:
             points = self.document.target_points()
+            self.quality_panel.clear("Measuring the fitted shape...")
             self.jobs.submit("fitted", lambda: loading.fitted_display(fitted, points),
-                             self._show_fitted_display,
+                             lambda result: self._show_fitted_display(fitted, result),
                              lambda exc: self.report(f"Cannot display the fit: {exc}", True))
         self._rebuild_tree()
         self.knot_panel.show_state(self.document.settings, fitted)
 
-    def _show_fitted_display(self, result):
-        display, deviation = result
-        self.scene.show_fit(display)
-        if deviation is not None:
-            self.scene.set_deviation(deviation, deviation_stats(deviation))
+    def _show_fitted_display(self, fitted: dict, result: loading.FittedDisplay):
+        if self.document.fitted is not fitted:
+            return  # replaced meanwhile (a new fit, another session)
+        self.scene.show_fit(result.display)
+        if result.deviation is not None:
+            stats = deviation_stats(result.deviation)
+            self.scene.set_deviation(result.deviation, stats)
+            self.quality_panel.show_deviation(stats)
+        self.scene.set_quality(result.quality_cells, result.statistics)
+        self.quality_panel.show_result("measured", "the fitted shape against the cloud",
+                                       result.statistics, self.document.settings.tolerance is None,
+                                       result.display.kind)
         self._rebuild_tree()
 
     def _rebuild_tree(self):
-        self.tree.rebuild(self.document, self.scene.is_visible, self.deviation_action.isChecked())
+        self.tree.rebuild(self.document, self.scene.is_visible, self.deviation_action.isChecked(),
+                          self.quality_action.isChecked())
 
     def set_layer_visible(self, layer: str, visible: bool):
         if layer == "deviation":
             self.set_deviation_visible(visible)
+            return
+        if layer == "quality":
+            self.set_quality_visible(visible)
             return
         self.scene.set_visible(layer, visible)
         action = self.layer_actions.get(layer)
@@ -496,6 +521,15 @@ class MainWindow(QMainWindow):
             self.deviation_action.blockSignals(True)
             self.deviation_action.setChecked(visible)
             self.deviation_action.blockSignals(False)
+        self._rebuild_tree()
+
+    def set_quality_visible(self, visible: bool):
+        """Paint the fitted surface by its quality map (flipped, overlapping, far)."""
+        self.scene.set_quality_visible(visible)
+        if self.quality_action.isChecked() != visible:
+            self.quality_action.blockSignals(True)
+            self.quality_action.setChecked(visible)
+            self.quality_action.blockSignals(False)
         self._rebuild_tree()
 
     def set_target_visible(self, index: int, visible: bool):
@@ -547,9 +581,17 @@ class MainWindow(QMainWindow):
 
     @Slot(object)
     def _on_snapshot_shown(self, snapshot: DisplaySnapshot):
+        if not snapshot.done and snapshot.run_id != self._quality_run:
+            # the first picture of a run (a refused run has none: the readout stays as it was)
+            self._quality_run = snapshot.run_id
+            self.quality_panel.show_running()
         self.scene.show_fit(snapshot.display)
+        if snapshot.quality_cells is not None:
+            self.scene.set_quality(snapshot.quality_cells, snapshot.statistics)
         if snapshot.deviation is not None:
-            self.scene.set_deviation(snapshot.deviation, deviation_stats(snapshot.deviation))
+            stats = deviation_stats(snapshot.deviation)
+            self.scene.set_deviation(snapshot.deviation, stats)
+            self.quality_panel.show_deviation(stats)
         if not self.tree.shows_fit:  # the first snapshot of a fit: list it in the tree
             self._rebuild_tree()
 
@@ -577,6 +619,9 @@ class MainWindow(QMainWindow):
         if snapshot.message:
             text += f" ({snapshot.message})"
         self.report(text)
+        self.quality_panel.show_result(snapshot.status, snapshot.message, snapshot.statistics,
+                                       self.document.settings.tolerance is None,
+                                       snapshot.display.kind)
         if self.document.settings.show_offsets and not self.document.patches:
             self.offsets.request()
 
@@ -671,6 +716,7 @@ class MainWindow(QMainWindow):
         if self._is_shut_down:
             return
         self._is_shut_down = True
+        self.fit_panel.cancel_pending()
         self.controller.shutdown()
         self.jobs.shutdown()
         self.loss_plot.stop()

@@ -2,7 +2,8 @@
 
 Drives the real window through the main states a user sees: the demo just opened, a fit
 converging, the deviation map after the fit, multi-patch offsets (the paper's two-patch turbine
-blade, when its data is on this machine) and a 2D curve fit.
+blade, when its data is on this machine), a 2D curve fit, and the quality map of a sheet rolled
+1.5 turns: fitted cleanly by default, and folded when its (u, v) come from the principal plane.
 """
 
 from __future__ import annotations
@@ -27,6 +28,14 @@ def curve_cloud(path: Path) -> Path:
     x = rng.uniform(0.0, 2.0 * np.pi, 600)
     y = np.sin(x) + 2.0 * np.sin(2.0 * x) + np.sin(4.0 * x) + rng.normal(0.0, 0.02, x.size)
     np.savetxt(path, np.column_stack([x, y, np.zeros_like(x)]), fmt="%.6f")
+    return path
+
+
+def sheet_cloud(path: Path) -> Path:
+    """``nurbs_core.samples.curled_sheet()``: 4000 points of a sheet rolled 1.5 turns."""
+    from nurbs_core import samples
+
+    np.savetxt(path, samples.curled_sheet().points, fmt="%.6f")
     return path
 
 
@@ -80,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     # 2. a fit converging (screenshot mid-run), 3. the deviation map when it is done
     def converging():
         def on_snapshot(snapshot):
-            if snapshot.iteration >= 120:
+            if snapshot.iteration >= 4:  # a few least-squares passes in
                 window.controller.snapshot_shown.disconnect(on_snapshot)
                 shot("02_fit_converging.png")
         window.controller.snapshot_shown.connect(on_snapshot)
@@ -132,7 +141,37 @@ def main(argv: list[str] | None = None) -> int:
         once(window.files_loaded, loaded)
         window.open_files([str(curve_cloud(scratch / "sine_curve.xyz"))])
 
-    steps.extend([converging, offsets, curve])
+    # 6. the quality map of a clean fit of the rolled sheet, 7. of a folded one
+    def quality_clean():
+        def loaded(ok):
+            window.document.edit_settings("Surface", kind="surface", control_points_u=12,
+                                          control_points_v=12, iterations=500)
+            window.set_layer_visible("control_net", False)
+            once(window.controller.fit_finished, lambda snapshot: later(lambda: (
+                show_quality(), shot("06_quality_clean.png"), next_step())))
+            window.controller.start()
+        once(window.files_loaded, loaded)
+        window.open_files([str(sheet_cloud(scratch / "curled_sheet.xyz"))])
+
+    def quality_folded():
+        window.reset_fit()  # a fresh start: Start would otherwise continue from the clean fit
+        window.document.edit_settings("Parameterisation", parameterization="plane")
+        once(window.controller.fit_finished, lambda snapshot: later(lambda: (
+            show_quality(), shot("07_quality_folded.png"), next_step())))
+        window.controller.start()
+
+    def show_quality():
+        window.set_quality_visible(True)
+        window.set_deviation_visible(False)
+        window.quality_dock.raise_()
+        # frame the cloud: a folded fit's curtains reach far past it
+        window.set_layer_visible("knot_lines", False)
+        window.set_layer_visible("surface", False)
+        window.scene.reset_camera()
+        window.scene.plotter.camera.zoom(1.15)  # pyvista's zoom reframes what is visible
+        window.set_layer_visible("surface", True)
+
+    steps.extend([converging, offsets, curve, quality_clean, quality_folded])
     window.controller.fit_failed.connect(lambda message: failures.append(message))
     demo()
     qapp.exec()

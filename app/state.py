@@ -26,6 +26,12 @@ SESSION_FORMAT = "nurbs-studio-session-v1"
 LOSS_TERMS = ("p2s", "chamfer", "hausdorff", "laplacian", "length", "l1", "l2", "mse")
 OPTIMIZERS = ("adam", "sgd", "momentum", "adagrad", "lbfgs")
 INITIALIZATIONS = ("pca", "least_squares", "random")
+#: The engine's solvers and parameterisations of unordered surface clouds (FitConfig.solver,
+#: FitConfig.parameterization) in display order, with their labels (a test checks they agree).
+SOLVERS = (("auto", "auto"), ("least_squares", "least squares"), ("gradient", "gradient"))
+PARAMETERIZATIONS = (("auto", "auto"), ("mesh", "mesh"), ("plane", "plane"))
+TOLERANCE_HINT = ("Tolerance: a positive distance in the cloud's units (e.g. 0.01), or empty / "
+                  "\"auto\" to derive it from the cloud's noise")
 
 _TERM = re.compile(r"^\s*(?:(?P<weight>[0-9.eE+-]+)\s*\*\s*)?(?P<name>[a-z_0-9]+)\s*$")
 
@@ -59,6 +65,21 @@ def parse_loss(text: str) -> tuple[tuple[str, float], ...]:
                              "(expected e.g. 'chamfer+0.1*laplacian')")
         terms.append((match["name"], float(match["weight"] or 1.0)))
     return tuple(terms)
+
+
+def parse_tolerance(text: str) -> float | None:
+    """``""`` or ``"auto"`` -> None (automatic); ``"0.01"`` -> 0.01. Raises ValueError with
+    :data:`TOLERANCE_HINT` for anything else (zero, negative, not a number)."""
+    text = text.strip()
+    if text.lower() in ("", "auto"):
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{text!r} is not a number. {TOLERANCE_HINT}") from None
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"{text} is not a positive distance. {TOLERANCE_HINT}")
+    return value
 
 
 def format_loss(terms) -> str:

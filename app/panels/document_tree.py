@@ -33,7 +33,7 @@ class DocumentTree(QTreeWidget):
         return item
 
     def rebuild(self, document: Document, layer_visible: Callable[[str], bool],
-                deviation_visible: bool):
+                deviation_visible: bool, quality_visible: bool = False):
         self._updating = True
         try:
             self.clear()
@@ -53,6 +53,10 @@ class DocumentTree(QTreeWidget):
                 self._item(top, "Knot lines", ("layer", "knot_lines"), layer_visible("knot_lines"))
                 self._item(top, "Deviation map", ("layer", "deviation"), deviation_visible,
                            "colour the cloud by each point's distance to the fitted shape")
+                if kind == "surface":
+                    self._item(top, "Quality map", ("layer", "quality"), quality_visible,
+                               "paint the surface where it is flipped, overlaps itself or hangs "
+                               "far from the cloud")
             if document.patches:
                 patches = self._item(self, f"Patches ({len(document.patches)})",
                                      ("layer", "patches"), layer_visible("patches"))

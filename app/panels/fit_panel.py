@@ -1,4 +1,5 @@
-"""Fit settings: model, loss composition, optimizer, freedom of the fit.
+"""Fit settings: model, surfacing (the least-squares core), loss composition, optimizer, freedom
+of the fit.
 
 Every edit goes through ``edit(text, **changes)`` (the document's undoable ``edit_settings``);
 ``show_settings`` mirrors the document back without emitting edits (after undo/redo, sessions).
@@ -18,12 +19,23 @@ from PySide6.QtWidgets import (
     QGridLayout,
     QGroupBox,
     QLabel,
+    QLineEdit,
     QSpinBox,
     QVBoxLayout,
     QWidget,
 )
 
-from app.state import INITIALIZATIONS, LOSS_TERMS, OPTIMIZERS, FitSettings
+from app.panels.log_slider import LogSlider
+from app.state import (
+    INITIALIZATIONS,
+    LOSS_TERMS,
+    OPTIMIZERS,
+    PARAMETERIZATIONS,
+    SOLVERS,
+    TOLERANCE_HINT,
+    FitSettings,
+    parse_tolerance,
+)
 
 POLICY_TEXT = ("Changes restart a running or paused fit from the current shape. When idle they "
                "apply to the next Start, which also continues from the current shape "
@@ -38,6 +50,25 @@ TERM_HELP = {
     "l1": "pointwise |S(u_i) - p_i| at foot-point parameters",
     "l2": "pointwise distance at foot-point parameters",
     "mse": "mean squared point-to-shape distance",
+}
+
+
+SURFACING_HELP = {
+    "solver": "least squares: fairing least squares with parameter correction (fast, the "
+              "default for unordered surface clouds); gradient: the optimizer below, started from "
+              "the least-squares shape (any loss, free knots and weights); auto: least squares "
+              "unless the loss or the free parameters ask for the optimizer",
+    "parameterization": "how each point of an unordered cloud gets its (u, v): mesh maps a "
+                        "mesh of the cloud onto the square without folds; plane projects onto "
+                        "the principal plane (height fields only); auto: mesh",
+    "stiffness": "final fairing weight (thin plate + membrane): larger is smoother, smaller "
+                 "follows the points more closely",
+    "tolerance": "two-sided distance the fit must meet, in the cloud's units; empty: automatic "
+                 "(from the cloud's estimated noise)",
+    "max_control_points": "while the tolerance is not met, the least-squares core may add "
+                          "control points up to this many per direction (off: keep the grid)",
+    "single_patch": "fit one patch even to a closed cloud, a tube or a shape with handles "
+                    "(expect folds: the quality map shows them)",
 }
 
 
@@ -84,6 +115,7 @@ class FitSettingsPanel(QWidget):
         form.addRow("Control points u", self.control_points_u)
         form.addRow("Control points v", self.control_points_v)
         layout.addWidget(model)
+        layout.addWidget(self._surfacing_group())
 
         loss = QGroupBox("Loss (terms and weights)")
         grid = QGridLayout(loss)
@@ -152,6 +184,92 @@ class FitSettingsPanel(QWidget):
             lambda on: self._changed("Pin boundary", pin_boundary=bool(on)))
         self.show_settings(FitSettings())
 
+    def _surfacing_group(self) -> QGroupBox:
+        """The least-squares core: solver, parameterisation, stiffness, tolerance, grid growth,
+        forcing one patch."""
+        group = QGroupBox("Surfacing (unordered surface clouds)")
+        form = QFormLayout(group)
+        self.solver = QComboBox()
+        for value, label in SOLVERS:
+            self.solver.addItem(label, value)
+        self.parameterization = QComboBox()
+        for value, label in PARAMETERIZATIONS:
+            self.parameterization.addItem(label, value)
+        self.stiffness = LogSlider(-6, 0)
+        self.tolerance = QLineEdit()
+        self.tolerance.setPlaceholderText("auto")
+        self.tolerance_hint = QLabel(TOLERANCE_HINT)
+        self.tolerance_hint.setObjectName("tolerance_hint")
+        self.tolerance_hint.setWordWrap(True)
+        self.tolerance_hint.setStyleSheet("QLabel { color: #b00020; }")
+        self.tolerance_hint.setVisible(False)
+        # max_control_points: 0 keeps the grid (box unticked), else the largest grid allowed
+        self.grow_grid = QCheckBox("Grow grid to meet tolerance")
+        self.max_control_points = _spin(2, 200)
+        self.max_control_points.setSuffix(" per direction")
+        self.max_control_points.setValue(FitSettings().max_control_points or 40)
+        self.single_patch = QCheckBox("Force single patch")
+        widgets = {"solver": self.solver, "parameterization": self.parameterization,
+                   "stiffness": self.stiffness, "tolerance": self.tolerance,
+                   "max_control_points": self.max_control_points,
+                   "single_patch": self.single_patch}
+        widgets["grow_grid"] = self.grow_grid
+        for name, widget in widgets.items():
+            widget.setToolTip(SURFACING_HELP["max_control_points" if name == "grow_grid"
+                                             else name])
+        form.addRow("Solver", self.solver)
+        form.addRow("Parameterisation", self.parameterization)
+        form.addRow("Stiffness", self.stiffness)
+        form.addRow("Tolerance", self.tolerance)
+        form.addRow(self.tolerance_hint)
+        form.addRow(self.grow_grid)
+        form.addRow("Grow up to", self.max_control_points)
+        form.addRow(self.single_patch)
+
+        self.solver.currentIndexChanged.connect(
+            lambda: self._changed("Solver", solver=self.solver.currentData()))
+        self.parameterization.currentIndexChanged.connect(
+            lambda: self._changed("Parameterisation",
+                                  parameterization=self.parameterization.currentData()))
+        self.stiffness.value_committed.connect(
+            lambda value: self._changed("Stiffness", stiffness=float(value)))
+        self.tolerance.editingFinished.connect(self._tolerance_edited)
+        self.grow_grid.toggled.connect(self._grow_grid_edited)
+        self.max_control_points.valueChanged.connect(self._grow_grid_edited)
+        self.single_patch.toggled.connect(
+            lambda on: self._changed("Force single patch", single_patch=bool(on)))
+        return group
+
+    def _grow_grid_edited(self, *_):
+        on = self.grow_grid.isChecked()
+        self.max_control_points.setEnabled(on and self.grow_grid.isEnabled())
+        self._changed("Grow grid", max_control_points=self.max_control_points.value() if on else 0)
+
+    def _tolerance_edited(self):
+        """Empty or "auto": automatic; a positive number: that distance; anything else is
+        refused with a hint (the setting keeps its value)."""
+        if self._updating:
+            return
+        try:
+            value = parse_tolerance(self.tolerance.text())
+        except ValueError as exc:
+            self.tolerance_hint.setText(str(exc))
+            self.tolerance_hint.setVisible(True)
+            self.tolerance.setStyleSheet("QLineEdit { border: 1px solid #b00020; }")
+            return
+        self._clear_tolerance_hint()
+        self._changed("Tolerance", tolerance=value)
+        if value is None:
+            self.tolerance.clear()  # "auto" reads as the placeholder
+
+    def _clear_tolerance_hint(self):
+        self.tolerance_hint.setVisible(False)
+        self.tolerance.setStyleSheet("")
+
+    def cancel_pending(self):
+        """Drop a slider change still waiting to be committed (shutdown)."""
+        self.stiffness.cancel()
+
     def _changed(self, text: str, **changes):
         if not self._updating:
             self._edit(text, **changes)
@@ -195,5 +313,20 @@ class FitSettingsPanel(QWidget):
             self.init.setCurrentIndex(self.init.findData(settings.init))
             self.free_weights.setChecked(settings.free_weights)
             self.pin_boundary.setChecked(settings.pin_boundary)
+            self.solver.setCurrentIndex(self.solver.findData(settings.solver))
+            self.parameterization.setCurrentIndex(
+                self.parameterization.findData(settings.parameterization))
+            self.stiffness.set_value(settings.stiffness)
+            self.tolerance.setText("" if settings.tolerance is None else repr(settings.tolerance))
+            self._clear_tolerance_hint()
+            grows = settings.max_control_points > 0
+            self.grow_grid.setChecked(grows)
+            if grows:  # off keeps the last limit on show, for ticking the box again
+                self.max_control_points.setValue(settings.max_control_points)
+            self.single_patch.setChecked(settings.single_patch)
+            for widget in (self.solver, self.parameterization, self.stiffness, self.tolerance,
+                           self.grow_grid, self.single_patch):
+                widget.setEnabled(surface)
+            self.max_control_points.setEnabled(surface and grows)
         finally:
             self._updating = False

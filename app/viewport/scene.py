@@ -1,5 +1,5 @@
 """The 3D scene: point cloud, fitted surface or curve, control net, knot lines, deviation map,
-loaded patches and their offsets.
+quality map, loaded patches and their offsets.
 
 Meshes are created once per layer and then updated in place (``mesh.points = ...`` or
 ``copy_from`` when the topology changes), never re-added per frame. Rendering is explicit
@@ -18,6 +18,7 @@ from PySide6.QtWidgets import QWidget
 from pyvistaqt import QtInteractor
 
 from app.workers.display import DisplayGeometry
+from app.workers.quality import FAR, FINE, FLIPPED, OVERLAP
 
 RENDER_INTERVAL_MS = 33
 DEVIATION_COLORMAP = "viridis"  # perceptually uniform, readable in grey scale
@@ -33,12 +34,22 @@ COLORS = {
     "offset": "#f2a33a",
 }
 
-UPPER_RIGHT, LOWER_RIGHT = 3, 1  # vtkCornerAnnotation corner indices
+UPPER_LEFT, UPPER_RIGHT, LOWER_RIGHT = 2, 3, 1  # vtkCornerAnnotation corner indices
 VIEW_ELEVATION_DEG = 50.0  # camera height above the best-fit plane of what is shown
 
 #: neighbouring patches get different colours, so shared edges show
 PATCH_COLORS = ("#8fb3d9", "#b7c7a4", "#c9a9c9", "#d9c38f", "#9fc9c4")
 OFFSET_COLORS = ("#f2a33a", "#e8743b", "#f2c94c", "#d9822b")
+
+#: The quality map paints each quad of the fitted surface by its category (app.workers.quality):
+#: fine quads keep the surface's colour; the others get hues apart from it and from each other in
+#: hue and lightness (magenta, amber, grey), so they read for colour-blind eyes too.
+QUALITY_ARRAY = "Quality"
+QUALITY_COLORS = {FINE: COLORS["surface"], FAR: "#8a8a8a", OVERLAP: "#ffc107",
+                  FLIPPED: "#d81b60"}
+QUALITY_LABELS = {FLIPPED: "flipped (faces away from the cloud)", OVERLAP: "overlapping sheets",
+                  FAR: "far from the cloud (curtain)", FINE: "fine"}
+QUALITY_PENDING = "Quality map: shown when the fit ends"
 
 #: Layers the document tree and the View menu toggle.
 LAYERS = ("cloud", "surface", "curve", "control_net", "knot_lines", "patches", "offsets")
@@ -74,9 +85,18 @@ def grid_normals(grid: np.ndarray) -> np.ndarray:
 
 
 def surface_mesh(grid: np.ndarray) -> pv.PolyData:
+    """The quads of a sampled surface grid (Mu, Mv, 3) with normals and a quality category per
+    quad (all "fine" until :meth:`SceneView.set_quality` paints them)."""
     mesh = pv.PolyData(grid.reshape(-1, 3).copy(), quad_faces(grid.shape[0], grid.shape[1]))
     mesh.point_data["Normals"] = grid_normals(grid)
     mesh.point_data.active_normals_name = "Normals"
+    mesh.cell_data[QUALITY_ARRAY] = np.full(mesh.n_cells, FINE, np.uint8)
+    return mesh
+
+
+def empty_surface_mesh() -> pv.PolyData:
+    mesh = pv.PolyData()
+    mesh.cell_data[QUALITY_ARRAY] = np.zeros(0, np.uint8)
     return mesh
 
 
@@ -127,6 +147,9 @@ class SceneView(QObject):
         self._deviation_on = True
         self._has_deviation = False
         self._stats_text = ""
+        self._quality_on = False
+        self._quality_cells: np.ndarray | None = None
+        self._legend = None
         self._extra_meshes: dict[str, list] = {"patches": [], "offsets": []}
         self._corners = self.plotter.add_text(" ", position="upper_right", font_size=9,
                                               color="#222222", name="corner_texts")
@@ -228,21 +251,22 @@ class SceneView(QObject):
             return pv.PolyData()
 
         if display is None or display.kind == "surface":
-            surface = empty() if display is None else surface_mesh(display.surface_grid)
+            surface = (empty_surface_mesh() if display is None
+                       else surface_mesh(display.surface_grid))
             if "surface" in self._meshes and display is not None and (
                     self._meshes["surface"].n_points == surface.n_points):
                 mesh = self._meshes["surface"]
                 mesh.points = surface.points
                 mesh.point_data["Normals"] = surface.point_data["Normals"]
             else:
-                self._layer("surface", surface, color=COLORS["surface"], smooth_shading=False,
-                            specular=0.4, specular_power=20.0)
-                self._actors["surface"].prop.interpolation = "phong"
+                self._surface_layer(surface)
             self._layer("curve", empty(), color=COLORS["curve"], line_width=4.0)
         else:
             self._layer("curve", polylines_mesh([display.curve_points]), color=COLORS["curve"],
                         line_width=4.0)
-            self._layer("surface", empty(), color=COLORS["surface"])
+            self._surface_layer(empty_surface_mesh())
+        # a new shape: the quality map of the previous one no longer applies
+        self.set_quality(None)
         net = empty() if display is None else control_net_mesh(display.control_net)
         self._layer("control_net", net, color=COLORS["control_net"], line_width=1.5,
                     point_size=8.0, render_points_as_spheres=True)
@@ -256,6 +280,83 @@ class SceneView(QObject):
                     point_size=9.0, render_points_as_spheres=True)
         for name in ("surface", "curve", "control_net", "knot_lines"):
             self._apply_visibility(name)
+        self.request_render()
+
+    def _surface_layer(self, mesh: pv.PolyData):
+        """The fitted surface: its own colour, or its quality categories (per quad) when the
+        quality map is shown."""
+        created = "surface" not in self._meshes
+        self._layer("surface", mesh, color=COLORS["surface"], smooth_shading=False,
+                    specular=0.4, specular_power=20.0, scalars=QUALITY_ARRAY,
+                    preference="cell", cmap=[QUALITY_COLORS[k] for k in sorted(QUALITY_COLORS)],
+                    clim=(-0.5, len(QUALITY_COLORS) - 0.5), n_colors=len(QUALITY_COLORS),
+                    show_scalar_bar=False)
+        if created:
+            actor = self._actors["surface"]
+            actor.prop.interpolation = "phong"
+            actor.prop.color = COLORS["surface"]
+            actor.mapper.scalar_visibility = False
+
+    # --- quality map ---------------------------------------------------------------------------
+    def set_quality(self, cells: np.ndarray | None, stats: dict | None = None):
+        """Paint the fitted surface's quads by quality category: cells (Mu - 1, Mv - 1) from
+        :func:`app.workers.quality.measure_quality` for the surface now shown, or None (plain).
+        stats: the quality statistics, for the legend's percentages."""
+        mesh = self._meshes.get("surface")
+        valid = (cells is not None and mesh is not None and mesh.n_cells > 0
+                 and np.size(cells) == mesh.n_cells)
+        self._quality_cells = np.asarray(cells, np.uint8).copy() if valid else None
+        if mesh is not None and QUALITY_ARRAY in mesh.cell_data and mesh.n_cells:
+            values = self._quality_cells.ravel() if valid else FINE
+            mesh.cell_data[QUALITY_ARRAY][:] = values
+            mesh.cell_data[QUALITY_ARRAY] = mesh.cell_data[QUALITY_ARRAY]  # mark modified
+        if valid:
+            self._update_legend(stats or {})
+        self._apply_quality()
+
+    def set_quality_visible(self, on: bool):
+        self._quality_on = bool(on)
+        self._apply_quality()
+
+    def quality_shown(self) -> bool:
+        """The quality map is switched on and painted (a surface fit has ended)."""
+        return self._quality_on and self._quality_cells is not None
+
+    def quality_cells(self) -> np.ndarray | None:
+        return None if self._quality_cells is None else self._quality_cells.copy()
+
+    def quality_legend_box(self) -> tuple[float, float, float, float] | None:
+        """The legend's (left, bottom, right, top) in normalised viewport coordinates while it
+        is shown, else None."""
+        if self._legend is None or not self._legend.GetVisibility():
+            return None
+        (x, y), (w, h) = self._legend.GetPosition(), self._legend.GetPosition2()
+        return x, y, x + w, y + h
+
+    def _update_legend(self, stats: dict):
+        shares = {FLIPPED: stats.get("flipped_fraction"), OVERLAP: stats.get("overlap_fraction")}
+        labels = []
+        for category in (FLIPPED, OVERLAP, FAR, FINE):
+            text = QUALITY_LABELS[category]
+            if shares.get(category) is not None and np.isfinite(shares[category]):
+                text += f" {100 * shares[category]:.1f}%"
+            labels.append([text, QUALITY_COLORS[category]])
+        # entries are written in their own colours: a dark box keeps the light ones readable
+        self._legend = self.plotter.add_legend(labels, bcolor="#2b2f33", border=True,
+                                               size=(0.34, 0.16), loc="upper left",
+                                               face="rectangle", background_opacity=0.85,
+                                               name="quality_legend")
+        self._legend.SetVisibility(self.quality_shown())
+
+    def _apply_quality(self):
+        actor = self._actors.get("surface")
+        if actor is not None:
+            actor.mapper.scalar_visibility = self.quality_shown()
+        if self._legend is not None:
+            self._legend.SetVisibility(self.quality_shown() and self._visible["surface"])
+        pending = self._quality_on and self._quality_cells is None and (
+            self._meshes.get("surface") is not None and self._meshes["surface"].n_points > 0)
+        self._corner_text(UPPER_LEFT, QUALITY_PENDING if pending else "")
         self.request_render()
 
     def set_group(self, group: str, displays: list[DisplayGeometry], opacity: float = 1.0):
@@ -290,6 +391,8 @@ class SceneView(QObject):
                     actor.SetVisibility(self._visible[layer])
         else:
             self._apply_visibility(layer)
+        if layer == "surface":
+            self._apply_quality()
         self.request_render()
 
     def is_visible(self, layer: str) -> bool:
@@ -365,6 +468,9 @@ class SceneView(QObject):
         if self._closed:
             return
         started = time.perf_counter()
+        # shapes change between camera resets (a live fit, curtains of a folded one): keep
+        # every visible part between the near and far planes, as interaction would
+        self.plotter.renderer.ResetCameraClippingRange()
         self.plotter.render()
         spent_ms = (time.perf_counter() - started) * 1000.0
         # slow (software) OpenGL: keep the event loop free at least 60% of the time, so input,

@@ -25,9 +25,10 @@ KNOT_LINE_SAMPLES = 48
 class DisplayGeometry:
     """Arrays ready for the viewport.
 
-    surface_grid (Mu, Mv, 3) or None; curve_points (M, 3) or None; control_net (n_u, n_v, 3) for
-    surfaces, (n, 3) for curves; knot_lines: list of (K, 3) polylines (curves: one (k, 3) array of
-    the points at the distinct knots).
+    surface_grid (Mu, Mv, 3) or None, sampled at the parameters grid_u (Mu,) x grid_v (Mv,);
+    curve_points (M, 3) or None; control_net (n_u, n_v, 3) for surfaces, (n, 3) for curves;
+    knot_lines: list of (K, 3) polylines (curves: one (k, 3) array of the points at the distinct
+    knots).
     """
 
     kind: str
@@ -35,6 +36,8 @@ class DisplayGeometry:
     curve_points: np.ndarray | None = None
     control_net: np.ndarray | None = None
     knot_lines: list[np.ndarray] = field(default_factory=list)
+    grid_u: np.ndarray | None = None
+    grid_v: np.ndarray | None = None
 
 
 def lift_to_3d(points: np.ndarray) -> np.ndarray:
@@ -74,7 +77,8 @@ def display_geometry(geometry: dict[str, Any], surface_samples: int = SURFACE_SA
         along_u = shape.evaluate_grid(u_dense, torch.as_tensor(kv, dtype=shape.dtype)).numpy()
         lines = list(along_v) + list(np.swapaxes(along_u, 0, 1))
         return DisplayGeometry("surface", surface_grid=grid,
-                               control_net=shape.control_points.numpy().copy(), knot_lines=lines)
+                               control_net=shape.control_points.numpy().copy(), knot_lines=lines,
+                               grid_u=u.numpy().copy(), grid_v=v.numpy().copy())
 
 
 def _dense_basis(knots: torch.Tensor, degree: int, u: torch.Tensor) -> np.ndarray:

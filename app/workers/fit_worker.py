@@ -3,7 +3,8 @@
 It calls :func:`nurbs_core.fit.iter_fit` with a :class:`StopToken` and turns each (already
 throttled) engine snapshot into a :class:`DisplaySnapshot`: numpy arrays the GUI thread copies
 into its meshes (tessellated surface, control net, knot lines) and, at a lower rate, each target
-point's deviation from the fitted shape. Nothing here touches Qt widgets, VTK or pyvista.
+point's deviation from the fitted shape. The final snapshot of a surface fit also carries the
+fit's quality (:mod:`app.workers.quality`). Nothing here touches Qt widgets, VTK or pyvista.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from PySide6.QtCore import QObject, Signal, Slot
 
 from app.state import FitSettings
 from app.workers.display import DisplayGeometry, display_geometry, resample
+from app.workers.quality import measure_quality
 
 #: Deviation needs a closest-point projection of the whole cloud (~0.3 s for 4000 points here,
 #: about five fit iterations): do it at most this often (s), and always on the final snapshot.
@@ -40,7 +42,14 @@ class FitRequest:
 
 @dataclass
 class DisplaySnapshot:
-    """An engine snapshot plus display arrays. deviation (N,) per target point, or None."""
+    """An engine snapshot plus display arrays. deviation (N,) per target point, or None.
+
+    On the final snapshot of a surface fit: statistics, the fit's quality measures (a plain dict,
+    the engine's ``FitSnapshot.statistics`` or ``surface_quality``), and quality_cells
+    (Mu - 1, Mv - 1) uint8, the quality category of each quad of ``display.surface_grid``
+    (:mod:`app.workers.quality`; None when the run was stopped in a hurry: a restart, Reset,
+    closing the window).
+    """
 
     run_id: int
     iteration: int
@@ -53,6 +62,31 @@ class DisplaySnapshot:
     status: str = "running"
     message: str = ""
     deviation: np.ndarray | None = None
+    statistics: dict[str, float] | None = None
+    quality_cells: np.ndarray | None = None
+
+
+class FitProblem(Exception):
+    """A fit that cannot run or ended in failure, with a message that explains it all (the log
+    gets no traceback)."""
+
+
+def refusal_message(error: ValueError) -> str:
+    """What to tell the user when the engine refuses the input (ValueError before iterating).
+
+    The refusal of a shape one patch cannot hold (``NotADiskError`` behind the engine's
+    ValueError) gets the app's way out: the Force single patch option."""
+    from nurbs_core.surfacing.parameterize import NotADiskError
+
+    reason = error.__context__ if isinstance(error.__context__, NotADiskError) else None
+    if reason is None:
+        return f"Cannot fit this target: {error}"
+    text = str(reason)
+    if "multi-patch" not in text:
+        text += "; split it into patches (multi-patch surfacing)"
+    return (f"The fit was refused: {text}.\n"
+            "To fit one patch anyway, tick \"Force single patch\" in Fit settings (expect folds: "
+            "View > Quality Map shows them). The document was left unchanged.")
 
 
 #: Large clouds: measure the deviation of a fixed random sample (NaN elsewhere, drawn grey), so
@@ -152,12 +186,18 @@ class FitWorker(QObject):
     """Runs one fit. Signals carry plain Python/numpy payloads (queued to the GUI thread)."""
 
     snapshot_ready = Signal(object)  # DisplaySnapshot
-    run_failed = Signal(int, str)  # run id, message
+    run_failed = Signal(int, str, str)  # run id, message, traceback ("" when the message says all)
     run_finished = Signal(int)  # run id, always emitted last
 
     def __init__(self, request: FitRequest, stop_token):
         super().__init__()
         self._request, self._stop = request, stop_token
+        self._hurry = threading.Event()
+
+    def hurry(self):
+        """Skip the final measures of a stopped run (a restart, Reset or closing the window is
+        waiting for it); a plain Stop measures the shape it leaves. Any thread may call this."""
+        self._hurry.set()
 
     @Slot()
     def run(self):
@@ -169,9 +209,11 @@ class FitWorker(QObject):
             torch.set_num_threads(max(1, (os.cpu_count() or 2) - 1))
             lower_thread_priority()
             self._run(request)
+        except FitProblem as exc:
+            self.run_failed.emit(request.run_id, str(exc), "")
         except Exception as exc:  # noqa: BLE001 - reported to the user, never re-raised
-            detail = traceback.format_exc(limit=6)
-            self.run_failed.emit(request.run_id, f"{type(exc).__name__}: {exc}\n{detail}")
+            self.run_failed.emit(request.run_id, f"{type(exc).__name__}: {exc}",
+                                 traceback.format_exc(limit=6))
         finally:
             self.run_finished.emit(request.run_id)
 
@@ -184,24 +226,38 @@ class FitWorker(QObject):
 
         settings = request.settings
         config = FitConfig(**settings.fit_fields())
-        initial = starting_geometry(request)
         last_deviation = -np.inf
-        for snapshot in iter_fit(request.target, config, stop=self._stop, initial=initial):
+        try:  # the engine checks its input (and refuses shapes one patch cannot hold) here
+            initial = starting_geometry(request)
+            snapshots = iter_fit(request.target, config, stop=self._stop, initial=initial)
+        except ValueError as exc:
+            raise FitProblem(refusal_message(exc)) from None
+        for snapshot in snapshots:
+            if not snapshot.geometry:  # the engine caught a failure and says why
+                raise FitProblem(f"The fit failed: {snapshot.message or snapshot.status}")
             now = time.monotonic()
             dev = None
+            # a run stopped for a restart, Reset or closing the window must end quickly
+            final = snapshot.done and not (snapshot.status == "stopped" and self._hurry.is_set())
             if snapshot.done or now - last_deviation >= DEVIATION_INTERVAL:
-                # a stopped run (Stop, a restart, closing the window) must end quickly
-                final = snapshot.done and snapshot.status != "stopped"
                 limit = FINAL_DEVIATION_POINTS if final else LIVE_DEVIATION_POINTS
                 dev = sampled_deviation(deviation, _rebuild(snapshot.geometry), request.target,
                                         limit)
                 last_deviation = time.monotonic()
+            display = display_geometry(snapshot.geometry)
+            statistics = dict(snapshot.statistics) if snapshot.statistics else None
+            cells = None
+            if final and display.kind == "surface":
+                statistics, cells = measure_quality(snapshot.geometry, request.target,
+                                                    display.grid_u, display.grid_v,
+                                                    statistics, dev)
             self.snapshot_ready.emit(DisplaySnapshot(
                 run_id=request.run_id, iteration=int(snapshot.iteration),
                 iterations=settings.iterations, geometry=snapshot.geometry,
-                display=display_geometry(snapshot.geometry), losses=list(snapshot.losses),
+                display=display, losses=list(snapshot.losses),
                 elapsed=float(snapshot.elapsed), done=bool(snapshot.done),
-                status=str(snapshot.status), message=str(snapshot.message or ""), deviation=dev))
+                status=str(snapshot.status), message=str(snapshot.message or ""), deviation=dev,
+                statistics=statistics, quality_cells=cells))
 
 
 def _rebuild(geometry: dict[str, Any]):

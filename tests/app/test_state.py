@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -109,3 +111,84 @@ def test_small_clouds_get_a_smaller_control_grid():
     assert control_grid_for(273, settings) == (5, 5)  # sqrt(273 / 8) = 5.8
     assert control_grid_for(40, settings) == (4, 4)  # never below degree + 1
     assert control_grid_for(40, with_changes(settings, kind="curve")) is None
+
+
+def test_tolerance_text_reads_auto_or_a_positive_distance():
+    from app.state import parse_tolerance
+
+    assert parse_tolerance("") is None and parse_tolerance(" Auto ") is None
+    assert parse_tolerance("0.05") == 0.05 and parse_tolerance("1e-3") == 1e-3
+    for text in ("abc", "0", "-1", "nan", "inf", "1,5"):
+        with pytest.raises(ValueError, match="positive distance in the cloud's units"):
+            parse_tolerance(text)
+
+
+def test_surfacing_settings_round_trip_through_json_and_reach_the_fit_config():
+    from nurbs_core.fit import FitConfig
+
+    for tolerance in (None, 0.05):
+        settings = FitSettings(stiffness=2.5e-5, tolerance=tolerance, max_control_points=0,
+                               solver="least_squares", parameterization="plane",
+                               single_patch=True)
+        data = json.loads(json.dumps(settings.to_json()))
+        assert data["tolerance"] == tolerance
+        assert FitSettings.from_json(data) == settings
+        config = FitConfig(**settings.fit_fields())
+        config.validate()
+        assert (config.stiffness, config.tolerance, config.max_control_points, config.solver,
+                config.parameterization, config.single_patch) == (
+            2.5e-5, tolerance, 0, "least_squares", "plane", True)
+
+
+def test_solver_and_parameterisation_choices_are_the_engines():
+    from app.state import PARAMETERIZATIONS, SOLVERS
+    from nurbs_core.fitting import config
+
+    assert {value for value, _ in SOLVERS} == set(config.SOLVERS)
+    assert {value for value, _ in PARAMETERIZATIONS} == set(config.PARAMETERIZATIONS)
+    defaults = config.FitConfig()
+    assert (FitSettings().solver, FitSettings().parameterization, FitSettings().stiffness,
+            FitSettings().tolerance, FitSettings().max_control_points) == (
+        defaults.solver, defaults.parameterization, defaults.stiffness, defaults.tolerance,
+        defaults.max_control_points)
+
+
+def test_quality_cells_keep_the_worst_sample_of_each_display_quad():
+    from app.workers.quality import FAR, FINE, FLIPPED, OVERLAP, map_categories, quality_cells
+
+    g = 96
+    flipped, overlap, far = (np.zeros((g, g), bool) for _ in range(3))
+    flipped[40, 10] = True  # a single bad sample...
+    overlap[40:, :] = True  # ...inside an overlapping band
+    far[:, 90:] = True  # a curtain along one edge
+    categories = map_categories(flipped, overlap, far)
+    assert categories[40, 10] == FLIPPED and categories[50, 50] == OVERLAP
+    assert categories[0, 95] == FAR and categories[0, 0] == FINE
+    samples = np.linspace(0.0, 1.0, g)
+    display = np.linspace(0.0, 1.0, 48)
+    cells = quality_cells(categories, samples, samples, display, display)
+    assert cells.shape == (47, 47) and cells.dtype == np.uint8
+    # brute force: each quad the highest category of the samples it holds (ends included)
+    for i in range(47):
+        for j in range(47):
+            rows = (samples >= display[i]) & (samples <= display[i + 1])
+            columns = (samples >= display[j]) & (samples <= display[j + 1])
+            assert cells[i, j] == categories[np.ix_(rows, columns)].max(), (i, j)
+    assert (cells == FLIPPED).sum() >= 1  # the single flipped sample is not lost
+    # a map coarser than the display: every quad takes the nearest sample
+    coarse = quality_cells(categories[::19, ::19], samples[::19], samples[::19], display, display)
+    assert coarse.shape == (47, 47) and set(np.unique(coarse)) <= {FINE, FAR, OVERLAP, FLIPPED}
+
+
+def test_a_closed_cloud_refusal_points_to_multi_patch_and_force_single_patch():
+    from app.workers.fit_worker import refusal_message
+    from nurbs_core import samples
+    from nurbs_core.fit import FitConfig, iter_fit
+
+    with pytest.raises(ValueError) as caught:
+        iter_fit(samples.sphere(1500).points, FitConfig())
+    message = refusal_message(caught.value)
+    assert "closed" in message and "multi-patch" in message
+    assert "Force single patch" in message and "single_patch /" not in message
+    assert refusal_message(ValueError("points must have shape (N, 3)")) == (
+        "Cannot fit this target: points must have shape (N, 3)")
