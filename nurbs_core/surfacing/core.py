@@ -45,8 +45,12 @@ MAX_PASSES = 40
 CP_PENALTY = 3.0
 #: Points (each with its nearest neighbours) over which a parameter correction is averaged.
 CORRECTION_NEIGHBOURS = 12
+#: Noise above this fraction of the spacing gets neighbourhood-averaged corrections.
+NOISY_CORRECTION = 0.4
 #: Growth factor of the control grid while the tolerance is not met.
 GRID_GROWTH = 1.4
+#: Least growth of each direction when the grid grows.
+MIN_DIRECTION_GROWTH = 1.2
 #: The grid grows to at most one control point per this many cloud points.
 POINTS_PER_CONTROL = 6
 #: A larger grid is kept only if it lowers the RMS distance by at least this fraction.
@@ -73,6 +77,22 @@ class CorePass:
     met: bool = False
     message: str | None = None
     cp: float = math.inf
+
+
+def density_knots(parameters: np.ndarray, count: int, degree: int) -> np.ndarray:
+    """Clamped knots on [0, 1] for ``count`` control points whose interior knots follow the
+    parameters' density (about as many points in every span: a map that crowds the scan's rim
+    into a thin band near the square's sides gets as many spans there as it has data), halfway
+    to uniform so that no span becomes a sliver. (count + degree + 1,)"""
+    uniform = clamped_uniform(count, degree).numpy()
+    interior = count - degree - 1
+    if interior <= 0:
+        return uniform
+    levels = np.arange(1, interior + 1) / (interior + 1)
+    quantile = np.quantile(np.clip(parameters, 0.0, 1.0), levels)
+    knots = uniform.copy()
+    knots[degree + 1:count] = 0.5 * (uniform[degree + 1:count] + quantile)
+    return np.maximum.accumulate(knots)
 
 
 class LeastSquaresCore:
@@ -106,14 +126,19 @@ class LeastSquaresCore:
         self.max_controls = int(max_controls if max_controls is not None
                                 else max(len(self.points) // POINTS_PER_CONTROL, 16))
         self.tree = cKDTree(self.points)
-        self.neighbourhood = self.tree.query(self.points, k=min(CORRECTION_NEIGHBOURS,
-                                                              len(self.points)))[1]
+        # corrections are averaged over neighbourhoods only where noise rivals the spacing
+        # (the averaging costs accuracy where the raw foot points are trustworthy)
+        self.neighbourhood = None
+        if self.noise > NOISY_CORRECTION * self.spacing:
+            self.neighbourhood = self.tree.query(
+                self.points, k=min(CORRECTION_NEIGHBOURS, len(self.points)))[1]
         self.fairing_scale: float | None = None
         self._setup_grid()
 
     def _setup_grid(self):
         (p, q), (n, m) = self.degrees, self.grid
-        self.knots = (clamped_uniform(n, p).numpy(), clamped_uniform(m, q).numpy())
+        self.knots = (density_knots(self.parameters[:, 0], n, p),
+                      density_knots(self.parameters[:, 1], m, q))
         thin_plate, membrane = fairing_matrices(self.knots[0], p, self.knots[1], q)
         self.fairing_matrix = (thin_plate + MEMBRANE_RATIO * membrane).tocsc()
 
@@ -146,7 +171,8 @@ class LeastSquaresCore:
         # is smooth and survives, while the jitter that noise causes (a noisy point catching the
         # nearest wiggle of the surface, which the next solve then deepens) averages out
         delta = torch.stack([u, v], -1).numpy() - self.parameters
-        delta = delta[self.neighbourhood].mean(axis=1)
+        if self.neighbourhood is not None:
+            delta = delta[self.neighbourhood].mean(axis=1)
         self.parameters = np.clip(self.parameters + delta, 0.0, 1.0)
         u, v = torch.as_tensor(self.parameters[:, 0]), torch.as_tensor(self.parameters[:, 1])
         foot = surface.evaluate(u, v).detach().numpy()
@@ -244,8 +270,11 @@ class LeastSquaresCore:
         aspect = float(np.clip(length_u / max(length_v, 1e-300), 1 / 8, 8))
         total = min(self.grid[0] * self.grid[1] * GRID_GROWTH ** 2, self.max_controls)
         wanted = (math.sqrt(total * aspect), math.sqrt(total / aspect))
-        grown = tuple(int(min(max(round(w), p + 1), cap)) for w, p, cap in
-                      zip(wanted, self.degrees, self.max_grid, strict=True))
+        # every direction gains at least MIN_DIRECTION_GROWTH: the shape of the surface says
+        # where length is, not where detail is
+        grown = tuple(int(min(max(round(w), p + 1, math.ceil(g * MIN_DIRECTION_GROWTH)), cap))
+                      for w, p, g, cap in
+                      zip(wanted, self.degrees, self.grid, self.max_grid, strict=True))
         if grown[0] * grown[1] <= self.grid[0] * self.grid[1] or grown == self.grid:
             return None
         return grown
