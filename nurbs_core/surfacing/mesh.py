@@ -125,6 +125,18 @@ def cloud_mesh(points: np.ndarray, *, max_vertices: int = MAX_MESH_VERTICES,
     return mesh
 
 
+def without_faces(mesh: CloudMesh, drop: np.ndarray) -> CloudMesh:
+    """The mesh without the faces flagged in ``drop`` (F,) bool, cleaned again: vertex fans made
+    single, the largest component kept and oriented, small holes closed."""
+    count = len(mesh.vertices)
+    faces = _manifold_vertices(mesh.faces[~drop], count)
+    faces, orientable = _orient(faces, count)
+    if orientable:
+        faces = _manifold_vertices(fill_small_holes(mesh.vertices, faces), count)
+    return CloudMesh(mesh.vertices, faces, mesh.source, mesh.spacing, orientable,
+                     list(mesh.notes))
+
+
 # --------------------------------------------------------------------------------------------
 
 

@@ -19,7 +19,10 @@ import scipy.sparse.linalg
 from scipy.spatial import cKDTree
 
 from nurbs_core.surfacing.disk import Topology, choose_corners, classify
-from nurbs_core.surfacing.mesh import CloudMesh, cloud_mesh
+from nurbs_core.surfacing.mesh import CloudMesh, cloud_mesh, without_faces
+
+#: Rounds of removing folded triangles from the mesh when its map still flips some.
+MAX_REPAIRS = 3
 
 _SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 
@@ -60,6 +63,21 @@ def mesh_parameterization(points: np.ndarray, mesh: CloudMesh | None = None,
     :class:`NotADiskError` for closed shapes, tubes and shapes with handles."""
     points = np.asarray(points, np.float64)
     mesh = cloud_mesh(points) if mesh is None else mesh
+    for attempt in range(MAX_REPAIRS + 1):
+        result = _map(points, mesh, corners if attempt == 0 else None)
+        if result.flipped == 0 or attempt == MAX_REPAIRS:
+            return result
+        # a flipped triangle in a mean-value map is a triangle folded over its neighbours in
+        # the mesh (the map is an embedding for any proper disk): drop it and the triangles
+        # around it, and map again
+        bad = signed_areas(result.mesh_uv, mesh.faces) < 0
+        near = np.zeros(len(mesh.vertices), bool)
+        near[mesh.faces[bad].ravel()] = True
+        mesh = without_faces(mesh, near[mesh.faces].any(axis=1))
+    return result
+
+
+def _map(points: np.ndarray, mesh: CloudMesh, corners: np.ndarray | None) -> Parameterization:
     topology = classify(mesh.vertices, mesh.faces)
     if not mesh.orientable:
         topology = Topology("complex", topology.loops, topology.euler,
