@@ -88,39 +88,106 @@ def _map(points: np.ndarray, mesh: CloudMesh, corners: np.ndarray | None) -> Par
         raise NotADiskError(topology)
     outer = topology.loops[0]
     if corners is None:
-        corner_positions = choose_corners(mesh.vertices, outer, mesh.faces)
+        candidates = corner_candidates(mesh.vertices, outer, mesh.faces)
     else:
         corners = np.asarray(corners)
         where = {int(v): i for i, v in enumerate(outer.tolist())}
         if len(corners) != 4 or any(int(c) not in where for c in corners):
             raise ValueError("corners must be four vertices of the mesh's outer boundary")
-        corner_positions = np.sort([where[int(c)] for c in corners])
-    # start the loop at the first corner
-    outer = np.roll(outer, -int(corner_positions[0]))
-    corner_positions = corner_positions - corner_positions[0]
-    boundary_uv = _square_boundary(mesh.vertices[outer], corner_positions)
-    vertices, faces = mesh.vertices, mesh.faces
-    vertices, faces = _cone_fill(vertices, faces, topology.loops[1:])
-    uv = _mean_value_map(vertices, faces, outer, boundary_uv)
-    uv, faces_uv, flipped = _orient_map(uv, faces)
+        candidates = [np.sort([where[int(c)] for c in corners])]
+    vertices, faces = _cone_fill(mesh.vertices, mesh.faces, topology.loops[1:])
+    solve = _MeanValueSolver(vertices, faces, outer)
+    best = None
+    for corner_positions in candidates:
+        boundary_uv = _square_boundary(mesh.vertices, outer, corner_positions)
+        uv = solve(boundary_uv)
+        score = area_distortion(mesh.vertices, mesh.faces, uv[: len(mesh.vertices)])
+        if best is None or score < best[0]:
+            best = (score, uv, corner_positions)
+    _, uv, corner_positions = best
+    uv, _, flipped = _orient_map(uv, faces)
     mesh_uv = uv[: len(mesh.vertices)]
     parameters = _interpolate(points, mesh, mesh_uv)
-    corner_vertices = outer[corner_positions]
+    corner_vertices = outer[np.asarray(corner_positions)]
     return Parameterization(parameters, mesh, mesh_uv, corner_vertices, flipped, topology)
 
 
-def _square_boundary(loop_points: np.ndarray, corners: np.ndarray) -> np.ndarray:
-    """(L, 2) positions on the square's perimeter: corner k at _SQUARE[k], chord length between."""
-    n = len(loop_points)
-    segment = np.linalg.norm(np.roll(loop_points, -1, axis=0) - loop_points, axis=1)
+def corner_candidates(vertices: np.ndarray, loop: np.ndarray, faces: np.ndarray,
+                      rotations: int = 8) -> list[np.ndarray]:
+    """Candidate corner positions along ``loop`` (each (4,) sorted): the boundary's sharpest
+    turns (:func:`choose_corners`) and arc-length quarters at ``rotations`` offsets over a
+    quarter turn. The map keeps the candidate with the least area distortion."""
+    points = vertices[loop]
+    segment = np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1)
+    arc = np.r_[0.0, np.cumsum(segment)[:-1]] / max(segment.sum(), 1e-300)
+    candidates = [np.asarray(choose_corners(vertices, loop, faces))]
+    for k in range(rotations):
+        offset = 0.25 * k / rotations
+        quarter = [int(np.argmin(np.minimum(np.abs(arc - (offset + q) % 1.0),
+                                            1.0 - np.abs(arc - (offset + q) % 1.0))))
+                   for q in (0.0, 0.25, 0.5, 0.75)]
+        if len(set(quarter)) == 4:
+            candidates.append(np.sort(np.asarray(quarter)))
+    return candidates
+
+
+def area_distortion(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) -> float:
+    """Area-weighted standard deviation of log(uv area / 3-D area) over the triangles, after
+    the best global scale: 0 for a map that stretches every triangle alike (an affine map),
+    large when the map crowds part of the surface into a corner of the square."""
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    area3 = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    area2 = np.abs(signed_areas(uv, faces))
+    ok = (area3 > 0) & (area2 > 0)
+    if not ok.any():
+        return np.inf
+    ratio = np.log(area2[ok] / area3[ok])
+    weight = area3[ok] / area3[ok].sum()
+    mean = float((weight * ratio).sum())
+    return float(np.sqrt((weight * (ratio - mean) ** 2).sum()))
+
+
+class _MeanValueSolver:
+    """Floater's mean-value map with the outer loop fixed: the interior system is factorised
+    once and solved for any boundary positions."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, boundary: np.ndarray):
+        count = len(vertices)
+        weights = mean_value_weights(vertices, faces)
+        laplacian = scipy.sparse.diags(np.asarray(weights.sum(axis=1)).ravel()) - weights
+        fixed = np.zeros(count, bool)
+        fixed[boundary] = True
+        used = np.zeros(count, bool)
+        used[faces.ravel()] = True
+        self.count, self.boundary = count, boundary
+        self.free = np.flatnonzero(~fixed & used)
+        self.coupling = laplacian[self.free][:, boundary]
+        self.factor = (scipy.sparse.linalg.splu(laplacian[self.free][:, self.free].tocsc())
+                       if self.free.size else None)
+
+    def __call__(self, boundary_uv: np.ndarray) -> np.ndarray:
+        uv = np.zeros((self.count, 2))
+        uv[self.boundary] = boundary_uv
+        if self.factor is not None:
+            uv[self.free] = self.factor.solve(np.asarray(-(self.coupling @ boundary_uv)))
+        return uv
+
+
+def _square_boundary(vertices: np.ndarray, loop: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(L, 2) positions on the square's perimeter for the loop's vertices: the corner at loop
+    position corners[k] goes to _SQUARE[k], the vertices between by chord length."""
+    n = len(loop)
+    points = vertices[loop]
+    segment = np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1)
     uv = np.empty((n, 2))
-    ends = np.r_[corners, n]
+    corners = np.asarray(corners)
     for side in range(4):
-        start, stop = int(ends[side]), int(ends[side + 1])
-        lengths = segment[start:stop]
+        start, stop = int(corners[side]), int(corners[(side + 1) % 4])
+        index = np.arange(start, stop if stop > start else stop + n) % n
+        lengths = segment[index]
         t = np.r_[0.0, np.cumsum(lengths)[:-1]] / max(lengths.sum(), 1e-300)
         a, b = _SQUARE[side], _SQUARE[(side + 1) % 4]
-        uv[start:stop] = a + t[:, None] * (b - a)
+        uv[index] = a + t[:, None] * (b - a)
     return uv
 
 
@@ -159,25 +226,6 @@ def mean_value_weights(vertices: np.ndarray, faces: np.ndarray) -> scipy.sparse.
     return scipy.sparse.coo_matrix((np.concatenate(values), (np.concatenate(rows),
                                                               np.concatenate(cols))),
                                    shape=(count, count)).tocsr()
-
-
-def _mean_value_map(vertices, faces, boundary, boundary_uv) -> np.ndarray:
-    count = len(vertices)
-    weights = mean_value_weights(vertices, faces)
-    laplacian = scipy.sparse.diags(np.asarray(weights.sum(axis=1)).ravel()) - weights
-    fixed = np.zeros(count, bool)
-    fixed[boundary] = True
-    used = np.zeros(count, bool)
-    used[faces.ravel()] = True
-    free = np.flatnonzero(~fixed & used)
-    uv = np.zeros((count, 2))
-    uv[boundary] = boundary_uv
-    if free.size:
-        system = laplacian[free][:, free].tocsc()
-        rhs = -(laplacian[free][:, boundary] @ boundary_uv)
-        solved = scipy.sparse.linalg.splu(system).solve(np.asarray(rhs))
-        uv[free] = solved
-    return uv
 
 
 def _orient_map(uv: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
