@@ -376,3 +376,25 @@ def quality_maps(surface: NurbsSurface, points: np.ndarray, *, normals: np.ndarr
     :func:`surface_quality`."""
     surface = _check_surface(surface)
     return _measure(surface, _as_points(points), normals, samples, max_points, seed).maps
+
+
+#: Limits above which :func:`quality_warnings` speaks up (fractions of area / of the cloud).
+WARN_FLIPPED = 0.01
+WARN_OVERLAP = 0.01
+WARN_UNCOVERED = 0.10
+
+
+def quality_warnings(stats: dict) -> list[str]:
+    """Plain-language warnings for the measures of :func:`surface_quality` that say the surface
+    is not a clean sheet over the cloud (empty when it is)."""
+    warnings = []
+    if stats.get("flipped_fraction", 0.0) > WARN_FLIPPED:
+        warnings.append(f"{stats['flipped_fraction']:.1%} of the surface faces the wrong way "
+                        "(it folds)")
+    if stats.get("overlap_fraction", 0.0) > WARN_OVERLAP:
+        warnings.append(f"{stats['overlap_fraction']:.1%} of the cloud lies under more than one "
+                        "sheet")
+    if 1.0 - stats.get("coverage", 1.0) > WARN_UNCOVERED:
+        warnings.append(f"{1.0 - stats['coverage']:.1%} of the cloud is not covered")
+    return warnings
+

@@ -41,6 +41,7 @@ from nurbs_core.fitting.sheet import (
     uses_core,
 )
 from nurbs_core.geometry import NurbsSurface, geometry_from_numpy
+from nurbs_core.quality import quality_warnings
 
 #: A loss above this multiple of the stage's best loss counts as diverging.
 EXPLOSION_FACTOR = 1e3
@@ -115,7 +116,8 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss, sto
                 stats = surface_statistics(geometry, problem.points_input, mesh=start.mesh,
                                            scale=problem.scale)
                 final = dataclasses.replace(final, statistics=stats,
-                                            elapsed=time.perf_counter() - started)
+                                            elapsed=time.perf_counter() - started,
+                                            message=_with_warnings(final.message, stats))
             yield final
             return
         geometry = result["geometry"]
@@ -127,11 +129,20 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss, sto
                      tolerance_met=float(result["tolerance_met"]))
         yield FitSnapshot(iteration=result["iteration"], geometry=snapshot_geometry,
                           losses=result["records"], elapsed=time.perf_counter() - started,
-                          done=True, status=result["status"], message=result["message"],
-                          statistics=stats)
+                          done=True, status=result["status"],
+                          message=_with_warnings(result["message"], stats), statistics=stats)
     finally:
         if config.threads is not None:
             torch.set_num_threads(saved_threads)
+
+
+def _with_warnings(message: str | None, stats: dict) -> str | None:
+    """The run's message followed by what the quality measures warn about."""
+    warnings = quality_warnings(stats)
+    if not warnings:
+        return message
+    text = "warning: " + "; ".join(warnings) + " (see the quality report)"
+    return f"{message}; {text}" if message else text
 
 
 class _Run:
@@ -552,12 +563,14 @@ def fit(target, config: FitConfig | None = None, *, stop: StopToken | None = Non
                          message=last.message, statistics={}, iterations=last.iteration,
                          elapsed=last.elapsed, snapshots=count)
     geometry = geometry_from_numpy(last.geometry, dtype=dtype)
+    message = last.message
     if last.statistics is not None:
         stats = dict(last.statistics)
     elif isinstance(geometry, NurbsSurface) and parameters is None:
         stats = surface_statistics(geometry, np.asarray(target, np.float64))
+        message = _with_warnings(message, stats)
     else:
         stats = statistics(geometry, target, parameters)
-    return FitResult(geometry=geometry, history=history, status=last.status, message=last.message,
+    return FitResult(geometry=geometry, history=history, status=last.status, message=message,
                      statistics=stats, iterations=last.iteration, elapsed=last.elapsed,
                      snapshots=count)
