@@ -24,6 +24,7 @@ import numpy as np
 import torch
 
 from nurbs_core.fit import DEFAULT_LOSS, PAPER_POINT_CLOUD_LOSS, FitConfig, StopToken, fit
+from nurbs_core.fitting.sheet import resolved_solver
 from nurbs_core.geometry import NurbsCurve
 from nurbs_core.losses import chamfer_distance
 
@@ -248,10 +249,16 @@ def run(args) -> int:
     for path in outputs:
         if not path.parent.exists():
             raise ValueError(f"cannot write {path}: folder {path.parent} does not exist")
+    core = (not args.curve and parameters is None and args.initial is None
+            and resolved_solver(config) == "least_squares")
+    how = (f"by fairing least squares (stiffness {config.stiffness:g}"
+           + (f", grid growing to at most {config.max_control_points} per direction"
+              if config.max_control_points else "") + ")") if core else \
+        f"with {config.optimizer}, loss {config.loss}"
     print(f"{args.input}: {len(points)} points; fitting a {config.kind} "
           f"(degree {config.degree_u}" + ("" if args.curve else f"x{config.degree_v}")
           + f", {config.control_points_u}" + ("" if args.curve else f"x{config.control_points_v}")
-          + f" control points) with {config.optimizer}, loss {config.loss}", file=sys.stderr)
+          + f" control points) {how}", file=sys.stderr)
     initial = None
     if args.initial is not None:
         from nurbs_core.io import load

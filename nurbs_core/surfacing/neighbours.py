@@ -10,6 +10,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+#: Clouds denser than this are thinned to it to estimate their noise.
+NOISE_CLOUD = 20_000
+
 
 @dataclass
 class LocalFrames:
@@ -84,6 +87,10 @@ def estimate_noise(points: np.ndarray, k: int = 24, max_points: int = 4000,
     if k < 8:
         return 0.0
     rng = np.random.default_rng(seed)
+    if len(points) > NOISE_CLOUD:
+        # in a very dense cloud a k-neighbourhood is thinner than the noise, and a quadric
+        # through it fits the noise: estimate on a sparser random subset
+        points = points[rng.choice(len(points), NOISE_CLOUD, replace=False)]
     centres = points if len(points) <= max_points else points[
         rng.choice(len(points), max_points, replace=False)]
     residual, _, _, _ = _quadric_residuals(points, centres, k, cKDTree(points))

@@ -13,7 +13,6 @@ import torch
 import trimesh
 
 from nurbs_core.cli import main
-from nurbs_core.fit import DEFAULT_LOSS
 
 
 @pytest.fixture(autouse=True)
@@ -40,7 +39,7 @@ def test_fit_xyz_to_3dm_and_json(tmp_path, capsys):
     # the default fit is the least-squares core: progress per pass, a converged status, and the
     # quality report beside the distances
     assert "pass 1  loss" in captured.err
-    assert f"loss {DEFAULT_LOSS}" in captured.err  # the library's default loss
+    assert "by fairing least squares (stiffness 0.001)" in captured.err  # the default route
     assert "status: converged" in captured.out
     assert "point-to-surface distance: mean" in captured.out and "chamfer distance" in captured.out
     assert "flipped area: 0.00%" in captured.out and "surface-to-cloud distance" in captured.out
