@@ -23,7 +23,8 @@ SESSION_FORMAT = "nurbs-studio-session-v1"
 #: Loss terms the settings panel offers, in display order (names of ``nurbs_core.losses``).
 #: l1 / l2 / mse pair the i-th sample with the i-th point: meaningful only for ordered targets.
 #: Kept equal to ``nurbs_core.losses.TERMS`` (a test checks it).
-LOSS_TERMS = ("p2s", "chamfer", "hausdorff", "laplacian", "length", "l1", "l2", "mse")
+LOSS_TERMS = ("p2s", "chamfer", "hausdorff", "laplacian", "fairing", "length", "l1", "l2",
+              "mse")
 OPTIMIZERS = ("adam", "sgd", "momentum", "adagrad", "lbfgs")
 INITIALIZATIONS = ("pca", "least_squares", "random")
 #: The engine's solvers and parameterisations of unordered surface clouds (FitConfig.solver,

@@ -13,8 +13,10 @@ Every loss is a pure function of tensors and returns a scalar tensor. Reductions
   ``hausdorff_distance`` = max_a min_b |a - b| + max_b min_a |a - b| (two-sided, as in the paper).
   Nearest neighbours come from scipy's cKDTree on detached CPU copies (indices carry no gradient);
   the distances are recomputed in torch so gradients flow to both sets. No N x M matrix is formed.
-* regularisers: ``laplacian_loss`` (control net, mean squared umbrella Laplacian) and
-  ``curve_length`` (length of an ordered polyline of curve samples).
+* regularisers: ``laplacian_loss`` (control net, mean squared umbrella Laplacian),
+  ``curve_length`` (length of an ordered polyline of curve samples) and ``fairing_energy`` (the
+  surface's exact thin-plate + 0.1 membrane energy over its domain, a quadratic form of the
+  control points: :mod:`nurbs_core.surfacing.fairing`).
 
 ``parse_loss("chamfer+0.1*laplacian+10*hausdorff")`` returns a :class:`CompositeLoss` that evaluates
 the weighted sum and reports every term.
@@ -157,6 +159,16 @@ def laplacian_loss(control_points: torch.Tensor) -> torch.Tensor:
     return lap.pow(2).sum(-1).mean()
 
 
+def fairing_energy(control_points: torch.Tensor, matrix: torch.Tensor) -> torch.Tensor:
+    """``tr(C^T K C)`` for control points C (n_u, n_v, 3) and a fairing matrix K (n_u n_v,
+    n_u n_v) (u-major, from :func:`nurbs_core.surfacing.fairing.fairing_matrices`) -> scalar."""
+    flat = control_points.reshape(-1, control_points.shape[-1])
+    if matrix.shape != (flat.shape[0], flat.shape[0]):
+        raise ValueError(f"a fairing matrix for {flat.shape[0]} control points must be "
+                         f"{flat.shape[0]} x {flat.shape[0]}, got {tuple(matrix.shape)}")
+    return (flat * (matrix @ flat)).sum()
+
+
 def curve_length(samples: torch.Tensor) -> torch.Tensor:
     """Length of the polyline through ordered curve samples (M, d): ``sum |s_{k+1} - s_k|``."""
     if samples.dim() != 2 or samples.shape[0] < 2:
@@ -186,6 +198,8 @@ class LossInputs:
     paired_predicted: torch.Tensor | None = None
     paired_target: torch.Tensor | None = None
     control_points: torch.Tensor | None = None
+    #: (n_u n_v, n_u n_v) the surface's fairing quadratic form for the fairing term
+    fairing_matrix: torch.Tensor | None = None
 
     def set_distances(self, term: str) -> tuple[torch.Tensor, torch.Tensor]:
         """Nearest distances samples -> cloud (M,) and cloud (or cloud_query) -> samples (K,),
@@ -234,9 +248,12 @@ TERMS: dict[str, tuple[Callable[[LossInputs, str], torch.Tensor], str]] = {
     "laplacian": (lambda inputs, name: laplacian_loss(_need(inputs, "control_points", name)),
                   "regulariser"),
     "length": (lambda inputs, name: curve_length(_need(inputs, "samples", name)), "regulariser"),
+    "fairing": (lambda inputs, name: fairing_energy(_need(inputs, "control_points", name),
+                                                    _need(inputs, "fairing_matrix", name)),
+                "regulariser"),
 }
 ALIASES = {"cd": "chamfer", "hd": "hausdorff", "lap": "laplacian", "curve_length": "length",
-           "point_to_surface": "p2s"}
+           "point_to_surface": "p2s", "thin_plate": "fairing"}
 
 _TERM = re.compile(r"^\s*(?:(?P<weight>[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*\*\s*)?"
                    r"(?P<name>[A-Za-z_][A-Za-z0-9_]*)\s*$")
@@ -277,8 +294,9 @@ def parse_loss(expression: str) -> CompositeLoss:
     """Parse ``"chamfer+0.1*laplacian+10*hausdorff"``: terms joined by ``+``, each ``[w*]name``.
 
     Names: l1, l2, mse, p2s (point_to_surface; mse at foot points), chamfer (cd), hausdorff (hd),
-    laplacian (lap), length (curve_length). Weights must be non-negative numbers; a repeated term
-    has its weights added. Raises ValueError naming the offending part."""
+    laplacian (lap), length (curve_length), fairing (thin_plate; surfaces). Weights must be
+    non-negative numbers; a repeated term has its weights added. Raises ValueError naming the
+    offending part."""
     if not isinstance(expression, str) or not expression.strip():
         raise ValueError("the loss expression is empty; try 'chamfer+0.1*laplacian+10*hausdorff'")
     weights: dict[str, float] = {}

@@ -46,6 +46,7 @@ TERM_HELP = {
     "chamfer": "mean nearest-neighbour distance, both ways",
     "hausdorff": "largest nearest-neighbour distance (pulls outliers in)",
     "laplacian": "smoothness of the control net",
+    "fairing": "thin-plate + membrane energy of the surface (surfaces only)",
     "length": "curve length (curves only)",
     "l1": "pointwise |S(u_i) - p_i| at foot-point parameters",
     "l2": "pointwise distance at foot-point parameters",

@@ -42,6 +42,8 @@ from nurbs_core.fitting.sheet import (
 )
 from nurbs_core.geometry import NurbsSurface, geometry_from_numpy
 from nurbs_core.quality import quality_warnings
+from nurbs_core.surfacing.core import MEMBRANE_RATIO
+from nurbs_core.surfacing.fairing import fairing_matrices
 
 #: A loss above this multiple of the stage's best loss counts as diverging.
 EXPLOSION_FACTOR = 1e3
@@ -102,6 +104,9 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss, sto
                               message=f"{type(exc).__name__}: {exc}")
             return
         if resolved_solver(config) == "gradient" and result["status"] != "stopped":
+            if "fairing" not in loss.names and config.stiffness > 0:
+                # the same fairing as the least-squares core, at its final weight
+                loss = loss.with_term(config.stiffness * result["fairing_scale"], "fairing")
             run = _Run(problem, config, result["geometry"].to(dtype=problem.dtype), loss, stop,
                        True, start_params=result["parameters"], offset=result["iteration"])
             run.started = started
@@ -307,7 +312,8 @@ class _Run:
         model, problem = self.model, self.problem
         if self.variable_projection:
             self._solve_control_points()
-        inputs = _losses.LossInputs(control_points=model.control_points)
+        inputs = _losses.LossInputs(control_points=model.control_points,
+                                    fairing_matrix=self._fairing_matrix())
         weights = model.weights()
         knots = model.knot_tensors() if model.free_knots else [k.fixed for k in model.knots]
         if self.needs_samples:
@@ -341,6 +347,22 @@ class _Run:
             inputs.paired_predicted = predicted
             inputs.paired_target = problem.points if batch is None else problem.points[batch]
         return self.loss(inputs)
+
+    def _fairing_matrix(self) -> torch.Tensor | None:
+        """The fairing term's quadratic form for the current knots (kept while they are fixed)."""
+        if "fairing" not in self.loss.names:
+            return None
+        if self.model.is_curve:
+            raise ValueError("the 'fairing' loss term applies to surfaces only")
+        knots = [k.detach().double().cpu().numpy() for k in self.model.knot_tensors()]
+        key = tuple(tuple(k) for k in knots)
+        if getattr(self, "_fairing_key", None) != key:
+            thin_plate, membrane = fairing_matrices(knots[0], self.model.degrees[0], knots[1],
+                                                    self.model.degrees[1])
+            dense = (thin_plate + MEMBRANE_RATIO * membrane).toarray()
+            self._fairing_cache = torch.as_tensor(dense, dtype=self.problem.dtype)
+            self._fairing_key = key
+        return self._fairing_cache
 
     # ---------------------------------------------------------------------------------------
     def _geometry_numpy(self) -> dict:

@@ -189,6 +189,7 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
                   iteration=last.index, status="stopped" if stopped else "converged",
                   message=last.message if not start.message else f"{start.message}; {last.message}",
                   tolerance=tolerance * problem.scale, noise=noise * problem.scale,
+                  fairing_scale=core.fairing_scale or 1.0,
                   tolerance_met=bool(last.met))
 
 

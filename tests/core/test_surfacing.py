@@ -171,6 +171,7 @@ def test_gradient_solver_continues_from_the_least_squares_core(one_torch_thread)
     more = fit(shape.points, FitConfig(solver="gradient", iterations=20))
     assert more.iterations == core.iterations + 20 or more.status == "converged"
     assert more.statistics["flipped_fraction"] <= 0.01
+    assert "fairing" in more.history[-1]          # the gradient fit keeps the core's fairing
     assert more.statistics["mean"] < 1.5 * core.statistics["mean"]
     surface = more.geometry
     assert torch.isfinite(surface.control_points).all()
