@@ -71,6 +71,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="(u, v) of an unordered surface cloud: 'mesh' maps the cloud's "
                              "triangle mesh onto the unit square without folds (the default "
                              "'auto'), 'plane' projects onto the principal plane")
+    parser.add_argument("--corners", type=int, nargs=4, default=None, metavar="I",
+                        help="indices (0-based, in the file's order) of four points for the "
+                             "patch's corners; each moves to the nearest point of the scan's "
+                             "outline (default: chosen from the outline's shape)")
     parser.add_argument("--single-patch", action="store_true",
                         help="fit one patch even to a closed or tube-like cloud (it will fold)")
     parser.add_argument("--solver", default="auto", choices=["auto", "least_squares", "gradient"],
@@ -141,7 +145,8 @@ def _config(args, dimensions: int) -> FitConfig:
         loss=loss, optimizer=args.optimizer, learning_rate=learning_rate,
         iterations=args.iterations, tolerance=args.tolerance, outlier_fraction=args.outliers,
         loss_tolerance=args.loss_tolerance, parameterization=args.parameterization,
-        single_patch=args.single_patch, solver=args.solver, max_control_points=max_counts,
+        single_patch=args.single_patch, solver=args.solver,
+        corners=tuple(args.corners) if args.corners else None, max_control_points=max_counts,
         free_knots=args.free_knots,
         free_weights=args.free_weights, pin_boundary=args.pin_boundary, init=args.init,
         samples_u=samples[0], samples_v=samples[-1],

@@ -88,6 +88,9 @@ class FitConfig:
     #: domain) relative to the mean squared distance, both in the cloud's normalised units; the
     #: least-squares core starts stiffer and relaxes to this value
     stiffness: float = 1e-3
+    #: indices of four cloud points for the patch's corners (each moved to the nearest point of
+    #: the scan's outline); None: chosen from the outline's shape
+    corners: tuple[int, int, int, int] | None = None
     #: fit a single patch even when the cloud looks closed or tube-like (otherwise a ValueError
     #: says why one patch cannot hold it)
     single_patch: bool = False
@@ -170,6 +173,11 @@ class FitConfig:
         if self.tolerance is not None and not self.tolerance > 0:
             raise ValueError(f"tolerance must be positive (or None: automatic), got "
                              f"{self.tolerance}")
+        if self.corners is not None:
+            if (len(self.corners) != 4 or len(set(self.corners)) != 4
+                    or not all(isinstance(c, (int, np.integer)) and c >= 0 for c in self.corners)):
+                raise ValueError(f"corners must be four different point indices, got "
+                                 f"{self.corners!r}")
         if not 0 <= self.outlier_fraction < 0.5:
             raise ValueError(f"outlier_fraction must lie in [0, 0.5), got {self.outlier_fraction}")
         if not 0 <= self.momentum < 1:

@@ -76,15 +76,21 @@ def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
     pointer to multi-patch surfacing) for closed shapes, tubes and handles unless
     ``config.single_patch``."""
     points = problem.points.double().numpy()
+    corners = None
+    if config.corners is not None:
+        if max(config.corners) >= len(points):
+            raise ValueError(f"corner index {max(config.corners)} is out of range for "
+                             f"{len(points)} points")
+        corners = points[list(config.corners)]
     if len(points) <= PASS_POINTS:
-        return _sheet_start(points, config)
+        return _sheet_start(points, config, corners)
     # a large cloud: mesh and map the centroids of about MESH_POINTS voxels (even density, the
     # noise averaged away; voxels the surface only grazes keep their noise and are left out),
     # then fit a seeded random subset of PASS_POINTS of the points themselves, whose (u, v)
     # come from the map's triangles
     _, centroids, counts = voxel_subsample(points, MESH_POINTS)
     centroids = centroids[counts >= 0.25 * np.median(counts)]
-    start = _sheet_start(centroids, config)
+    start = _sheet_start(centroids, config, corners)
     subset = np.sort(np.random.default_rng(config.seed).choice(len(points), PASS_POINTS,
                                                                replace=False))
     if start.mesh is not None:
@@ -95,11 +101,12 @@ def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
     return start
 
 
-def _sheet_start(points: np.ndarray, config: FitConfig) -> SheetStart:
+def _sheet_start(points: np.ndarray, config: FitConfig,
+                 corners: np.ndarray | None = None) -> SheetStart:
     if config.parameterization == "plane":
         return SheetStart(pca_parameters(points, 2)[0], None)
     try:
-        param = mesh_parameterization(points)
+        param = mesh_parameterization(points, corners=corners)
     except NotADiskError as exc:
         plane = pca_parameters(points, 2)[0]
         if exc.topology.kind != "closed" and is_height_field(points):

@@ -58,8 +58,9 @@ def mesh_parameterization(points: np.ndarray, mesh: CloudMesh | None = None,
     """Fold-free (u, v) in [0, 1]^2 for ``points`` (N, 3) (see the module docstring).
 
     mesh: the cloud's mesh (built with :func:`cloud_mesh` when None; pass the file's own faces
-    as a CloudMesh when it has them). corners: four mesh vertex indices on the outer boundary
-    for the square's corners (chosen from the boundary's shape when None). Raises
+    as a CloudMesh when it has them). corners: (4, 3) positions for the square's corners, each
+    moved to the nearest vertex of the outline, in the order they take along it (chosen from
+    the boundary's shape when None). Raises
     :class:`NotADiskError` for closed shapes, tubes and shapes with handles."""
     points = np.asarray(points, np.float64)
     mesh = cloud_mesh(points) if mesh is None else mesh
@@ -90,11 +91,14 @@ def _map(points: np.ndarray, mesh: CloudMesh, corners: np.ndarray | None) -> Par
     if corners is None:
         candidates = corner_candidates(mesh.vertices, outer, mesh.faces)
     else:
-        corners = np.asarray(corners)
-        where = {int(v): i for i, v in enumerate(outer.tolist())}
-        if len(corners) != 4 or any(int(c) not in where for c in corners):
-            raise ValueError("corners must be four vertices of the mesh's outer boundary")
-        candidates = [np.sort([where[int(c)] for c in corners])]
+        # the user's corners, (4, 3) positions: each goes to the nearest outline vertex
+        corners = np.asarray(corners, np.float64).reshape(-1, 3)
+        distance = np.linalg.norm(mesh.vertices[outer][None, :, :] - corners[:, None, :], axis=-1)
+        positions = np.argmin(distance, axis=1)
+        if len(set(positions.tolist())) != 4:
+            raise ValueError("the four corners must lie near four different points of the "
+                             "scan's outline")
+        candidates = [np.sort(positions)]
     vertices, faces = _cone_fill(mesh.vertices, mesh.faces, topology.loops[1:])
     solve = _MeanValueSolver(vertices, faces, outer)
     best = None

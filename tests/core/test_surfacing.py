@@ -175,3 +175,21 @@ def test_gradient_solver_continues_from_the_least_squares_core(one_torch_thread)
     assert more.statistics["mean"] < 1.5 * core.statistics["mean"]
     surface = more.geometry
     assert torch.isfinite(surface.control_points).all()
+
+
+def test_user_corners_become_the_patch_corners(one_torch_thread):
+    # a flat 2 x 1 rectangle sampled on a grid: ask for the corners at a rotated position (the
+    # midpoints of the long sides and the two right-hand corners): the patch's corners follow
+    points = _grid(41, 21)
+    corners = [int(np.argmin(np.linalg.norm(points - target, axis=1))) for target in
+               ([1, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0])]
+    result = fit(points, FitConfig(corners=tuple(corners), control_points_u=6,
+                                   control_points_v=6, max_control_points=0))
+    t = torch.tensor([0.0, 1.0], dtype=torch.float64)
+    patch_corners = result.geometry.evaluate_grid(t, t).reshape(-1, 3).numpy()
+    # a least-squares patch passes near, not through, its corners (the default corners would be
+    # the rectangle's own, a whole unit from the requested midpoints)
+    for target in ([1, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0]):
+        assert np.linalg.norm(patch_corners - target, axis=1).min() < 0.15
+    with pytest.raises(ValueError, match="corners"):
+        FitConfig(corners=(1, 2, 3)).validate()
