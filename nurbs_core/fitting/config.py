@@ -91,8 +91,9 @@ class FitConfig:
     #: indices of four cloud points for the patch's corners (each moved to the nearest point of
     #: the scan's outline); None: chosen from the outline's shape
     corners: tuple[int, int, int, int] | None = None
-    #: fit a single patch even when the cloud looks closed or tube-like (otherwise a ValueError
-    #: says why one patch cannot hold it)
+    #: fit a single patch even when the cloud looks closed or has handles (otherwise a
+    #: ValueError says why one patch cannot hold it); a tube is always one patch, cut open along
+    #: its shortest seam and closed again there
     single_patch: bool = False
     #: "least_squares": the fairing least-squares core with parameter correction; "gradient":
     #: the torch optimisation (any loss, free knots, weights), started from the least-squares

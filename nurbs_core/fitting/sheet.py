@@ -69,6 +69,8 @@ class SheetStart:
     subset: np.ndarray | None = None
     #: (V, 2) the (u, v) of the mesh's vertices
     mesh_uv: np.ndarray | None = None
+    #: "u" / "v": the patch closes on itself in that direction (a tube)
+    closed: str | None = None
 
 
 def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
@@ -106,7 +108,7 @@ def _sheet_start(points: np.ndarray, config: FitConfig,
     if config.parameterization == "plane":
         return SheetStart(pca_parameters(points, 2)[0], None)
     try:
-        param = mesh_parameterization(points, corners=corners)
+        param = mesh_parameterization(points, corners=corners, allow_tube=True)
     except NotADiskError as exc:
         plane = pca_parameters(points, 2)[0]
         if exc.topology.kind != "closed" and is_height_field(points):
@@ -120,10 +122,14 @@ def _sheet_start(points: np.ndarray, config: FitConfig,
                 from None
         return SheetStart(plane, None, "forced a single patch on a cloud that is not a sheet "
                           f"({exc.topology.kind}): expect folds; see the quality report")
-    message = None
+    notes = []
+    if param.closed is not None:
+        notes.append(f"the cloud is a tube: one patch closed in {param.closed}, cut open along "
+                     "its shortest seam (tangent-continuous there)")
     if param.flipped:
-        message = f"{param.flipped} triangles of the parameterisation flipped"
-    return SheetStart(param.parameters, param.mesh, message, mesh_uv=param.mesh_uv)
+        notes.append(f"{param.flipped} triangles of the parameterisation flipped")
+    return SheetStart(param.parameters, param.mesh, "; ".join(notes) or None,
+                      mesh_uv=param.mesh_uv, closed=param.closed)
 
 
 def is_height_field(points: np.ndarray, agree: float = 0.98) -> bool:
@@ -166,7 +172,8 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
         max_grid = grid
     core = LeastSquaresCore(pass_points, pass_params, degrees, grid, config.stiffness,
                             tolerance, config.outlier_fraction, spacing, max_grid,
-                            noise=noise, explicit_tolerance=config.tolerance is not None)
+                            noise=noise, explicit_tolerance=config.tolerance is not None,
+                            closed=start.closed)
     last: CorePass | None = None
     note = start.message
     for report in core.passes(stop):

@@ -79,6 +79,24 @@ class CorePass:
     cp: float = math.inf
 
 
+def seam_matrix(n: int, m: int, closed: str) -> scipy.sparse.csr_matrix:
+    """(n m, free) map from the free control points to all of them for a patch closed in
+    ``closed``: the last row of control points repeats the first (G0) and the one before it is
+    2 P_0 - P_1 (with equal end spans: C1 across the seam)."""
+    count = n if closed == "u" else m
+    if count < 4:
+        raise ValueError("a closed direction needs at least 4 control points")
+    rows = scipy.sparse.lil_matrix((count, count - 2))
+    for i in range(count - 2):
+        rows[i, i] = 1.0
+    rows[count - 2, 0], rows[count - 2, 1] = 2.0, -1.0
+    rows[count - 1, 0] = 1.0
+    eye = scipy.sparse.eye(m if closed == "u" else n)
+    along = rows.tocsr()
+    return (scipy.sparse.kron(along, eye) if closed == "u"
+            else scipy.sparse.kron(eye, along)).tocsr()
+
+
 def density_knots(parameters: np.ndarray, count: int, degree: int) -> np.ndarray:
     """Clamped knots on [0, 1] for ``count`` control points whose interior knots follow the
     parameters' density (about as many points in every span: a map that crowds the scan's rim
@@ -110,7 +128,7 @@ class LeastSquaresCore:
                  grid: tuple[int, int], stiffness: float, tolerance: float,
                  outlier_fraction: float, spacing: float, max_grid: tuple[int, int],
                  max_controls: int | None = None, noise: float = 0.0,
-                 explicit_tolerance: bool = False):
+                 explicit_tolerance: bool = False, closed: str | None = None):
         self.points = np.asarray(points, np.float64)
         self.parameters = np.clip(np.asarray(parameters, np.float64), 0.0, 1.0).copy()
         self.degrees = degrees
@@ -118,6 +136,10 @@ class LeastSquaresCore:
         self.stiffness = float(stiffness)
         self.tolerance = float(tolerance)
         self.noise = float(noise)
+        if closed not in (None, "u", "v"):
+            raise ValueError(f"closed must be None, 'u' or 'v', got {closed!r}")
+        #: the direction in which the patch closes on itself (a tube cut open along a seam)
+        self.closed = closed
         self.explicit_tolerance = bool(explicit_tolerance)
         self.outlier_fraction = float(outlier_fraction)
         self.spacing = float(spacing)
@@ -137,8 +159,12 @@ class LeastSquaresCore:
 
     def _setup_grid(self):
         (p, q), (n, m) = self.degrees, self.grid
-        self.knots = (density_knots(self.parameters[:, 0], n, p),
-                      density_knots(self.parameters[:, 1], m, q))
+        # a closed direction keeps uniform knots: equal end spans make the seam's tangent
+        # continuity a linear constraint (P_1 - P_0 = P_{n-1} - P_{n-2})
+        self.knots = tuple(clamped_uniform(c, d).numpy() if self.closed == name
+                           else density_knots(self.parameters[:, k], c, d)
+                           for k, (name, c, d) in enumerate((("u", n, p), ("v", m, q))))
+        self.seam = None if self.closed is None else seam_matrix(n, m, self.closed)
         thin_plate, membrane = fairing_matrices(self.knots[0], p, self.knots[1], q)
         self.fairing_matrix = (thin_plate + MEMBRANE_RATIO * membrane).tocsc()
 
@@ -155,10 +181,16 @@ class LeastSquaresCore:
             self.fairing_scale = (data.diagonal().sum()
                                   / max(self.fairing_matrix.diagonal().sum(), 1e-300))
         normal = data + fairing * self.fairing_scale * self.fairing_matrix
-        # a whisper of ridge keeps control points with no data and no fairing well defined
-        normal = normal + 1e-12 * scipy.sparse.eye(n * m)
         rhs = (matrix.T @ self.points) / count
+        if self.seam is not None:
+            # the seam's control points as functions of the free ones: exact G0 and C1
+            normal = self.seam.T @ normal @ self.seam
+            rhs = self.seam.T @ rhs
+        # a whisper of ridge keeps control points with no data and no fairing well defined
+        normal = normal + 1e-12 * scipy.sparse.eye(normal.shape[0])
         control = scipy.sparse.linalg.splu(normal.tocsc()).solve(np.asarray(rhs))
+        if self.seam is not None:
+            control = self.seam @ control
         return NurbsSurface(control.reshape(n, m, 3), p, q, *self.knots)
 
     def correct(self, surface: NurbsSurface, steps: int = 2) -> np.ndarray:

@@ -18,8 +18,9 @@ import scipy.sparse
 import scipy.sparse.linalg
 from scipy.spatial import cKDTree
 
-from nurbs_core.surfacing.disk import Topology, choose_corners, classify
+from nurbs_core.surfacing.disk import Topology, choose_corners, classify, loop_length
 from nurbs_core.surfacing.mesh import CloudMesh, cloud_mesh, without_faces
+from nurbs_core.surfacing.tube import cut_open, shortest_seam
 
 #: Rounds of removing folded triangles from the mesh when its map still flips some.
 MAX_REPAIRS = 3
@@ -43,6 +44,9 @@ class Parameterization:
     corners: np.ndarray
     flipped: int
     topology: Topology
+    #: "u" or "v" when the cloud is a tube cut open along a seam: the patch's sides in that
+    #: direction meet again in space (it is closed in that direction); None for a sheet
+    closed: str | None = None
 
 
 class NotADiskError(ValueError):
@@ -54,41 +58,63 @@ class NotADiskError(ValueError):
 
 
 def mesh_parameterization(points: np.ndarray, mesh: CloudMesh | None = None,
-                          corners: np.ndarray | None = None) -> Parameterization:
+                          corners: np.ndarray | None = None,
+                          allow_tube: bool = False) -> Parameterization:
     """Fold-free (u, v) in [0, 1]^2 for ``points`` (N, 3) (see the module docstring).
 
     mesh: the cloud's mesh (built with :func:`cloud_mesh` when None; pass the file's own faces
     as a CloudMesh when it has them). corners: (4, 3) positions for the square's corners, each
     moved to the nearest vertex of the outline, in the order they take along it (chosen from
-    the boundary's shape when None). Raises
-    :class:`NotADiskError` for closed shapes, tubes and shapes with handles."""
+    the boundary's shape when None). allow_tube: cut a tube open along its shortest seam
+    (the result's ``closed`` names the direction that closes). Raises :class:`NotADiskError`
+    for closed shapes, tubes (unless allowed) and shapes with handles."""
     points = np.asarray(points, np.float64)
     mesh = cloud_mesh(points) if mesh is None else mesh
     for attempt in range(MAX_REPAIRS + 1):
-        result = _map(points, mesh, corners if attempt == 0 else None)
+        result = _map(points, mesh, corners if attempt == 0 else None, allow_tube)
         if result.flipped == 0 or attempt == MAX_REPAIRS:
             return result
         # a flipped triangle in a mean-value map is a triangle folded over its neighbours in
         # the mesh (the map is an embedding for any proper disk): drop it and the triangles
         # around it, and map again
-        bad = signed_areas(result.mesh_uv, mesh.faces) < 0
+        bad = signed_areas(result.mesh_uv, result.mesh.faces) < 0   # faces keep their order
         near = np.zeros(len(mesh.vertices), bool)
         near[mesh.faces[bad].ravel()] = True
         mesh = without_faces(mesh, near[mesh.faces].any(axis=1))
     return result
 
 
-def _map(points: np.ndarray, mesh: CloudMesh, corners: np.ndarray | None) -> Parameterization:
+def _map(points: np.ndarray, mesh: CloudMesh, corners: np.ndarray | None,
+         allow_tube: bool) -> Parameterization:
     topology = classify(mesh.vertices, mesh.faces)
     if not mesh.orientable:
         topology = Topology("complex", topology.loops, topology.euler,
                             "the cloud's mesh cannot be oriented consistently (its layers are "
                             "too close for its sampling): one patch cannot cover it without "
                             "folding; split it into patches (multi-patch surfacing)")
-    if not topology.is_disk:
+    closed = None
+    if topology.kind == "tube" and allow_tube:
+        # cut the tube open along its shortest seam: a disk whose corners are the seam's ends
+        lengths = [loop_length(mesh.vertices, loop) for loop in topology.loops]
+        ends = sorted(np.argsort(lengths)[-2:].tolist())
+        seam = shortest_seam(mesh.vertices, mesh.faces, topology.loops[ends[0]],
+                             topology.loops[ends[1]])
+        uncut_count = len(mesh.vertices)
+        mesh, corner_vertices = cut_open(mesh, seam)
+        cut = classify(mesh.vertices, mesh.faces)
+        if not cut.is_disk:
+            raise NotADiskError(topology)
+        topology = Topology("tube", cut.loops, cut.euler, None)
+        where = {int(v): i for i, v in enumerate(topology.loops[0].tolist())}
+        if any(int(c) not in where for c in corner_vertices):
+            raise NotADiskError(topology)
+        corners, closed = None, "seam"
+    if not topology.is_disk and closed is None:
         raise NotADiskError(topology)
     outer = topology.loops[0]
-    if corners is None:
+    if closed is not None:
+        candidates = [np.sort([where[int(c)] for c in corner_vertices])]
+    elif corners is None:
         candidates = corner_candidates(mesh.vertices, outer, mesh.faces)
     else:
         # the user's corners, (4, 3) positions: each goes to the nearest outline vertex
@@ -113,7 +139,14 @@ def _map(points: np.ndarray, mesh: CloudMesh, corners: np.ndarray | None) -> Par
     mesh_uv = uv[: len(mesh.vertices)]
     parameters = _interpolate(points, mesh, mesh_uv)
     corner_vertices = outer[np.asarray(corner_positions)]
-    return Parameterization(parameters, mesh, mesh_uv, corner_vertices, flipped, topology)
+    if closed is not None:
+        # a seam vertex and its copy sit on opposite sides of the square: the direction in
+        # which they differ by the whole side is the one that closes
+        middle = len(seam) // 2
+        step = np.abs(mesh_uv[uncut_count + middle] - mesh_uv[seam[middle]])
+        closed = "u" if step[0] > step[1] else "v"
+    return Parameterization(parameters, mesh, mesh_uv, corner_vertices, flipped, topology,
+                            closed)
 
 
 def corner_candidates(vertices: np.ndarray, loop: np.ndarray, faces: np.ndarray,
@@ -232,14 +265,16 @@ def mean_value_weights(vertices: np.ndarray, faces: np.ndarray) -> scipy.sparse.
                                    shape=(count, count)).tocsr()
 
 
-def _orient_map(uv: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+def _orient_map(uv: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, bool, int]:
     """Make the map orientation-preserving (swap u and v if the majority of triangles have
-    negative area) and count the triangles that disagree (flips) or collapse."""
+    negative area); returns (uv, whether u and v were swapped, the triangles that still
+    disagree: flips)."""
     area = signed_areas(uv, faces)
-    if (area < 0).sum() > (area > 0).sum():
+    swapped = bool((area < 0).sum() > (area > 0).sum())
+    if swapped:
         uv = uv[:, ::-1].copy()
         area = -area
-    return uv, faces, int((area < 0).sum())
+    return uv, swapped, int((area < 0).sum())
 
 
 def signed_areas(uv: np.ndarray, faces: np.ndarray) -> np.ndarray:

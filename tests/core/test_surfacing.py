@@ -193,3 +193,25 @@ def test_user_corners_become_the_patch_corners(one_torch_thread):
         assert np.linalg.norm(patch_corners - target, axis=1).min() < 0.15
     with pytest.raises(ValueError, match="corners"):
         FitConfig(corners=(1, 2, 3)).validate()
+
+
+def test_a_tube_becomes_one_patch_closed_along_a_tangent_continuous_seam(one_torch_thread):
+    shape = samples.tube(3000)
+    result = fit(shape.points, FitConfig())
+    assert result.status == "converged" and "tube" in result.message
+    stats = result.statistics
+    assert stats["flipped_fraction"] <= 0.01 and stats["overlap_fraction"] <= 0.02
+    assert stats["area"] == pytest.approx(shape.true_area, rel=0.05)
+    surface = result.geometry.to(dtype=torch.float64)
+    t = torch.linspace(0, 1, 41, dtype=torch.float64)
+    zero, one = torch.zeros_like(t), torch.ones_like(t)
+    gaps = {"u": (surface.evaluate(zero, t) - surface.evaluate(one, t)).norm(dim=-1).max(),
+            "v": (surface.evaluate(t, zero) - surface.evaluate(t, one)).norm(dim=-1).max()}
+    closed = min(gaps, key=lambda k: float(gaps[k]))
+    assert float(gaps[closed]) < 1e-9                       # G0: the seam closes exactly
+    # C1: the tangents across the seam agree (equal end spans, P1 - P0 = P_{n-1} - P_{n-2})
+    args = (zero, t) if closed == "u" else (t, zero)
+    back = (one, t) if closed == "u" else (t, one)
+    d0 = surface.derivatives(*args)[1 if closed == "u" else 2]
+    d1 = surface.derivatives(*back)[1 if closed == "u" else 2]
+    assert torch.allclose(d0, d1, atol=1e-9 * float(d0.norm(dim=-1).max()))
