@@ -134,15 +134,26 @@ def _sheet_start(points: np.ndarray, config: FitConfig,
 
 def is_height_field(points: np.ndarray, agree: float = 0.98) -> bool:
     """Whether the cloud is a height field over its principal plane: ``agree`` of its local
-    normals lie within 75 degrees of the plane's normal (no part turns back over itself)."""
+    normals lie within 75 degrees of the plane's normal (no part turns back over itself), and
+    as many of its points have no neighbour in the plane at another height (a single layer)."""
     from nurbs_core.fitting.least_squares import principal_axes
     from nurbs_core.surfacing.neighbours import local_frames
 
     if len(points) < 16:
         return True
     axis = principal_axes(points)[1][2]
-    normals = local_frames(points, k=12).normals
-    return bool((np.abs(normals @ axis) > np.cos(np.radians(75))).mean() >= agree)
+    frames = local_frames(points, k=12)
+    if (np.abs(frames.normals @ axis) > np.cos(np.radians(75))).mean() < agree:
+        return False
+    # one layer only: points that are neighbours in the plane must be neighbours in space too
+    # (the two skins of a thin wing face the same way but lie at two heights)
+    from scipy.spatial import cKDTree
+
+    height = points @ axis
+    flat = points - np.outer(height, axis)
+    _, index = cKDTree(flat).query(flat, k=min(7, len(points)))
+    jump = np.abs(height[index[:, 1:]] - height[:, None]).max(axis=1)
+    return bool((jump > 5 * frames.spacing).mean() <= 1 - agree)
 
 
 def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop: StopToken,
