@@ -249,7 +249,8 @@ class FitController(QObject):
         if snapshot.losses:
             self._last_loss = float(snapshot.losses[-1]["total"])
         loss = self._last_loss
-        remaining = (snapshot.iterations - snapshot.iteration) / rate if rate > 0 else float("nan")
+        remaining = ((snapshot.iterations - snapshot.iteration) / rate
+                     if rate > 0 and snapshot.iterations else float("nan"))
         return {"iteration": snapshot.iteration, "iterations": snapshot.iterations, "loss": loss,
                 "rate": rate, "remaining": 0.0 if snapshot.done else remaining,
                 "status": snapshot.status, "time": time.monotonic()}

@@ -598,7 +598,10 @@ class MainWindow(QMainWindow):
     @Slot(dict)
     def _on_progress(self, progress: dict):
         labels = self.status_labels
-        labels["iteration"].setText(f"Iteration {progress['iteration']}/{progress['iterations']}")
+        # the least-squares core's passes have no count fixed in advance (iterations 0)
+        labels["iteration"].setText(
+            f"Iteration {progress['iteration']}/{progress['iterations']}" if progress["iterations"]
+            else f"Least-squares pass {progress['iteration']}")
         loss = progress["loss"]
         labels["loss"].setText(f"Loss {loss:.4g}" if math.isfinite(loss) else "Loss -")
         labels["rate"].setText(f"{progress['rate']:.1f} it/s" if progress["rate"] else "- it/s")

@@ -253,7 +253,8 @@ class FitWorker(QObject):
                                                     statistics, dev)
             self.snapshot_ready.emit(DisplaySnapshot(
                 run_id=request.run_id, iteration=int(snapshot.iteration),
-                iterations=settings.iterations, geometry=snapshot.geometry,
+                iterations=0 if snapshot.stage == "least_squares" else settings.iterations,
+                geometry=snapshot.geometry,
                 display=display, losses=list(snapshot.losses),
                 elapsed=float(snapshot.elapsed), done=bool(snapshot.done),
                 status=str(snapshot.status), message=str(snapshot.message or ""), deviation=dev,

@@ -238,6 +238,9 @@ class FitSnapshot:
     #: on the final snapshot of fits that measure themselves inside the run (the least-squares
     #: core): what FitResult.statistics reports, so that the run's time covers it
     statistics: dict[str, float] | None = None
+    #: "least_squares" for the passes of the least-squares core (their number is not known in
+    #: advance), "gradient" for the iterations of the torch optimisation
+    stage: str = "gradient"
 
 
 @dataclass

@@ -135,7 +135,8 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss, sto
         yield FitSnapshot(iteration=result["iteration"], geometry=snapshot_geometry,
                           losses=result["records"], elapsed=time.perf_counter() - started,
                           done=True, status=result["status"],
-                          message=_with_warnings(result["message"], stats), statistics=stats)
+                          message=_with_warnings(result["message"], stats), statistics=stats,
+                          stage="least_squares")
     finally:
         if config.threads is not None:
             torch.set_num_threads(saved_threads)

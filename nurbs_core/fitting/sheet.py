@@ -194,13 +194,13 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
         geometry = core_geometry_numpy(report.geometry, problem)
         yield FitSnapshot(iteration=report.index, geometry=geometry, losses=[_record(report)],
                           elapsed=time.perf_counter() - started, done=False, status="running",
-                          message=note)
+                          message=note, stage="least_squares")
         note = None
         if stop.paused and not stop.stopped:
             # between passes: report the pause once, then wait without spinning
             yield FitSnapshot(iteration=report.index, geometry=geometry, losses=[],
                               elapsed=time.perf_counter() - started, done=False,
-                              status="paused", message="paused")
+                              status="paused", message="paused", stage="least_squares")
             while stop.paused and not stop.stopped:
                 stop.wait_while_paused(0.1)
     result["records"] = [_record(last)]
