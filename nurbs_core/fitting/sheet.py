@@ -31,11 +31,11 @@ from nurbs_core.surfacing.parameterize import (
     mesh_parameterization,
 )
 
-#: Clouds larger than this are fitted on a seeded random subset of this many points, and their
-#: parameterisation is the map of a mesh over about MESH_POINTS voxel centroids; every point is
-#: measured against the final surface.
+#: Clouds larger than MESH_POINTS are parameterised by the map of a mesh over about that many
+#: voxel centroids; clouds larger than PASS_POINTS are fitted on a seeded random subset of that
+#: many points. Every point is measured against the final surface.
 PASS_POINTS = 30_000
-MESH_POINTS = 20_000
+MESH_POINTS = 6_000
 #: The automatic tolerance, in estimated noise standard deviations (99% of Gaussian noise lies
 #: within 2.6 of them), and its floor relative to the bounding-box diagonal.
 NOISE_TOLERANCE = 3.0
@@ -84,21 +84,25 @@ def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
             raise ValueError(f"corner index {max(config.corners)} is out of range for "
                              f"{len(points)} points")
         corners = points[list(config.corners)]
-    if len(points) <= PASS_POINTS:
+    if len(points) <= MESH_POINTS:
         return _sheet_start(points, config, corners)
     # a large cloud: mesh and map the centroids of about MESH_POINTS voxels (even density, the
     # noise averaged away; voxels the surface only grazes keep their noise and are left out),
-    # then fit a seeded random subset of PASS_POINTS of the points themselves, whose (u, v)
-    # come from the map's triangles
+    # then fit the points themselves (a seeded random subset of PASS_POINTS of them when there
+    # are more), whose (u, v) come from the map's triangles
     _, centroids, counts = voxel_subsample(points, MESH_POINTS)
     centroids = centroids[counts >= 0.25 * np.median(counts)]
     start = _sheet_start(centroids, config, corners)
-    subset = np.sort(np.random.default_rng(config.seed).choice(len(points), PASS_POINTS,
-                                                               replace=False))
+    subset = None
+    if len(points) > PASS_POINTS:
+        subset = np.sort(np.random.default_rng(config.seed).choice(len(points), PASS_POINTS,
+                                                                   replace=False))
+    fitted = points if subset is None else points[subset]
     if start.mesh is not None:
-        start.parameters = interpolate_parameters(points[subset], start.mesh, start.mesh_uv)
+        start.parameters = interpolate_parameters(fitted, start.mesh, start.mesh_uv)
     else:
-        start.parameters = pca_parameters(points, 2)[0][subset]
+        start.parameters = pca_parameters(points, 2)[0] if subset is None else \
+            pca_parameters(points, 2)[0][subset]
     start.subset = subset
     return start
 
