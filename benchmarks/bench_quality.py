@@ -218,6 +218,8 @@ def case_builders(data: Path | None = None) -> dict[str, Callable[..., Case]]:
         "bowl_noisy": _generated(g.bowl, "bowl_noisy", noise=NOISY),
         "leaflet_like_noisy": _generated(g.leaflet_like, "leaflet_like_noisy", noise=NOISY),
         "sine_field": _generated(g.sine_field, "sine_field", count=20000, noise=0.01),
+        "sine_field_z": _generated(g.sine_field, "sine_field_z", count=20000, noise=0.01,
+                                   vertical=True),
         "sphere": _generated(g.sphere, "sphere"),
         "torus": _generated(g.torus, "torus"),
         "tube": _generated(g.tube, "tube"),

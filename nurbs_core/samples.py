@@ -468,16 +468,25 @@ def height_field(count: int = 4000, noise: float = 0.002, seed: int = 0, *,
 
 
 def sine_field(count: int = 20000, noise: float = 0.01, seed: int = 0, *, absolute: bool = True,
-               truth_count: int = TRUTH_COUNT) -> SampledShape:
+               vertical: bool = False, truth_count: int = TRUTH_COUNT) -> SampledShape:
     """z = sin x cos y over [0, 2 pi]^2 (the classical scattered-data test). ``noise`` is the
     ABSOLUTE standard deviation of the (isotropic) noise by default (0.01); ``absolute=False``
-    makes it relative to the diagonal like the other generators."""
+    makes it relative to the diagonal like the other generators; ``vertical`` puts all the
+    noise in z (the setting of scattered-data smoothing: exact x, y, noisy heights)."""
     def mapping(x, y):
         return np.stack([x, y, np.sin(x) * np.cos(y)], -1)
 
     shape = _Shape([_analytic_chart(mapping, (0.0, 2 * np.pi), (0.0, 2 * np.pi))])
-    return _make("sine_field", shape, count, noise, seed, closed=False, height_field=True,
-                 kind="height_field", truth_count=truth_count, absolute=absolute)
+    made = _make("sine_field", shape, count, 0.0 if vertical else noise, seed, closed=False,
+                 height_field=True, kind="height_field", truth_count=truth_count,
+                 absolute=absolute)
+    if vertical:
+        sigma = float(noise) if absolute else float(noise) * made.diagonal
+        made.points = made.clean.copy()
+        made.points[:, 2] += np.random.default_rng([seed, 2]).normal(scale=sigma,
+                                                                     size=len(made.points))
+        made.noise = sigma
+    return made
 
 
 def saddle(count: int = 4000, noise: float = 0.002, seed: int = 0, *,
