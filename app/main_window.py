@@ -83,6 +83,14 @@ def _format_seconds(seconds: float) -> str:
     return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.1f} min"
 
 
+def _set_checked_quietly(action, checked: bool):
+    """Tick or untick a checkable action without re-emitting its toggled signal."""
+    if action.isChecked() != checked:
+        action.blockSignals(True)
+        action.setChecked(checked)
+        action.blockSignals(False)
+
+
 class MainWindow(QMainWindow):
     """NURBS Studio's window. Public methods are what menus, drops, scripts and tests call."""
 
@@ -509,27 +517,19 @@ class MainWindow(QMainWindow):
             return
         self.scene.set_visible(layer, visible)
         action = self.layer_actions.get(layer)
-        if action is not None and action.isChecked() != visible:
-            action.blockSignals(True)
-            action.setChecked(visible)
-            action.blockSignals(False)
+        if action is not None:
+            _set_checked_quietly(action, visible)
         self._rebuild_tree()
 
     def set_deviation_visible(self, visible: bool):
         self.scene.set_deviation_visible(visible)
-        if self.deviation_action.isChecked() != visible:
-            self.deviation_action.blockSignals(True)
-            self.deviation_action.setChecked(visible)
-            self.deviation_action.blockSignals(False)
+        _set_checked_quietly(self.deviation_action, visible)
         self._rebuild_tree()
 
     def set_quality_visible(self, visible: bool):
         """Paint the fitted surface by its quality map (flipped, overlapping, far)."""
         self.scene.set_quality_visible(visible)
-        if self.quality_action.isChecked() != visible:
-            self.quality_action.blockSignals(True)
-            self.quality_action.setChecked(visible)
-            self.quality_action.blockSignals(False)
+        _set_checked_quietly(self.quality_action, visible)
         self._rebuild_tree()
 
     def set_target_visible(self, index: int, visible: bool):

@@ -113,7 +113,7 @@ class FitSettings:
     init: str = "pca"
     samples_u: int = 64
     samples_v: int = 64
-    #: the least-squares core (``nurbs_core.fit.FitConfig``): final fairing weight, two-sided
+    #: the least-squares core (``nurbs_core.fit.FitConfig``): fairing weight, two-sided
     #: distance tolerance (None: from the cloud's noise), how far the control grid may grow,
     #: the solver, the parameterisation of unordered clouds, and forcing one patch
     stiffness: float = 1e-3

@@ -65,7 +65,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--outliers", type=float, default=0.01, metavar="F",
                         help="fraction of the points allowed beyond --tolerance (default 0.01)")
     parser.add_argument("--stiffness", type=float, default=None, metavar="S",
-                        help="final fairing weight (thin plate + membrane) of the least-squares "
+                        help="fairing weight (thin plate + membrane) of the least-squares "
                              "core, relative to the data (default 1e-3; larger is smoother)")
     parser.add_argument("--parameterization", default="auto", choices=["auto", "mesh", "plane"],
                         help="(u, v) of an unordered surface cloud: 'mesh' maps the cloud's "

@@ -62,7 +62,7 @@ SURFACING_HELP = {
     "parameterization": "how each point of an unordered cloud gets its (u, v): mesh maps a "
                         "mesh of the cloud onto the square without folds; plane projects onto "
                         "the principal plane (height fields only); auto: mesh",
-    "stiffness": "final fairing weight (thin plate + membrane): larger is smoother, smaller "
+    "stiffness": "fairing weight (thin plate + membrane): larger is smoother, smaller "
                  "follows the points more closely",
     "tolerance": "two-sided distance the fit must meet, in the cloud's units; empty: automatic "
                  "(from the cloud's estimated noise)",

@@ -84,9 +84,9 @@ class FitConfig:
     #: onto the unit square without folds (Floater's mean-value map); "plane" projects onto the
     #: principal plane; "auto" is "mesh" for unordered surface clouds
     parameterization: str = "auto"
-    #: final weight of the fairing energy (thin plate + membrane, integrated exactly over the
-    #: domain) relative to the mean squared distance, both in the cloud's normalised units; the
-    #: least-squares core starts stiffer and relaxes to this value
+    #: weight of the fairing energy (thin plate + membrane, integrated exactly over the domain)
+    #: relative to the mean squared distance (scaled by the two forms' traces on the starting
+    #: grid, then kept as the grid grows); larger is smoother
     stiffness: float = 1e-3
     #: indices of four cloud points for the patch's corners (each moved to the nearest point of
     #: the scan's outline); None: chosen from the outline's shape

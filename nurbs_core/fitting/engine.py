@@ -109,7 +109,6 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss, sto
                 loss = loss.with_term(config.stiffness * result["fairing_scale"], "fairing")
             run = _Run(problem, config, result["geometry"].to(dtype=problem.dtype), loss, stop,
                        True, start_params=result["parameters"], offset=result["iteration"])
-            run.started = started
             final = None
             for snapshot in run._loop(started):
                 if snapshot.done:
@@ -172,6 +171,9 @@ class _Run:
         #: already done before this run (its records and snapshots count on from there)
         self.start_params = start_params
         self.offset = offset
+        #: the fairing term's quadratic form and the knots it was built for
+        self._fairing_key: tuple | None = None
+        self._fairing_cache: torch.Tensor | None = None
 
     # ---------------------------------------------------------------------------------------
     def _setup(self, geometry):
@@ -357,7 +359,7 @@ class _Run:
             raise ValueError("the 'fairing' loss term applies to surfaces only")
         knots = [k.detach().double().cpu().numpy() for k in self.model.knot_tensors()]
         key = tuple(tuple(k) for k in knots)
-        if getattr(self, "_fairing_key", None) != key:
+        if self._fairing_key != key:
             thin_plate, membrane = fairing_matrices(knots[0], self.model.degrees[0], knots[1],
                                                     self.model.degrees[1])
             dense = (thin_plate + MEMBRANE_RATIO * membrane).toarray()

@@ -17,14 +17,15 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from scipy.spatial import cKDTree
 
 from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, FitSnapshot, StopToken
-from nurbs_core.fitting.least_squares import pca_parameters
+from nurbs_core.fitting.least_squares import pca_parameters, principal_axes
 from nurbs_core.fitting.problem import Problem
 from nurbs_core.geometry import NurbsSurface
 from nurbs_core.surfacing.core import CorePass, LeastSquaresCore
-from nurbs_core.surfacing.mesh import CloudMesh, voxel_subsample
-from nurbs_core.surfacing.neighbours import estimate_noise
+from nurbs_core.surfacing.mesh import CloudMesh, median_spacing, voxel_subsample
+from nurbs_core.surfacing.neighbours import estimate_noise, local_frames
 from nurbs_core.surfacing.parameterize import (
     NotADiskError,
     interpolate_parameters,
@@ -60,8 +61,9 @@ def resolved_solver(config: FitConfig) -> str:
 
 @dataclass
 class SheetStart:
-    """(u, v) (M, 2) of the fitted points (all N, or the voxel subsample ``subset`` (M,) of a large
-    cloud), the mesh they came from (None for the plane), and a note for the user."""
+    """(u, v) (M, 2) of the fitted points (all N, or the random ``subset`` (M,) of a large
+    cloud), the mesh they came from (None for the plane; for a large cloud a mesh of voxel
+    centroids), and a note for the user."""
 
     parameters: np.ndarray
     mesh: CloudMesh | None
@@ -75,8 +77,9 @@ class SheetStart:
 
 def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
     """The fold-free start (see the module docstring). Raises ValueError (with the reason and a
-    pointer to multi-patch surfacing) for closed shapes, tubes and handles unless
-    ``config.single_patch``."""
+    pointer to multi-patch surfacing) for closed shapes and shapes with handles unless
+    ``config.single_patch``; a tube comes back cut open (``closed`` names its seam's
+    direction)."""
     points = problem.points.double().numpy()
     corners = None
     if config.corners is not None:
@@ -101,8 +104,7 @@ def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
     if start.mesh is not None:
         start.parameters = interpolate_parameters(fitted, start.mesh, start.mesh_uv)
     else:
-        start.parameters = pca_parameters(points, 2)[0] if subset is None else \
-            pca_parameters(points, 2)[0][subset]
+        start.parameters = pca_parameters(fitted, 2)[0]
     start.subset = subset
     return start
 
@@ -140,9 +142,6 @@ def is_height_field(points: np.ndarray, agree: float = 0.98) -> bool:
     """Whether the cloud is a height field over its principal plane: ``agree`` of its local
     normals lie within 75 degrees of the plane's normal (no part turns back over itself), and
     as many of its points have no neighbour in the plane at another height (a single layer)."""
-    from nurbs_core.fitting.least_squares import principal_axes
-    from nurbs_core.surfacing.neighbours import local_frames
-
     if len(points) < 16:
         return True
     axis = principal_axes(points)[1][2]
@@ -151,8 +150,6 @@ def is_height_field(points: np.ndarray, agree: float = 0.98) -> bool:
         return False
     # one layer only: points that are neighbours in the plane must be neighbours in space too
     # (the two skins of a thin wing face the same way but lie at two heights)
-    from scipy.spatial import cKDTree
-
     height = points @ axis
     flat = points - np.outer(height, axis)
     _, index = cKDTree(flat).query(flat, k=min(7, len(points)))
@@ -163,20 +160,20 @@ def is_height_field(points: np.ndarray, agree: float = 0.98) -> bool:
 def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop: StopToken,
                    started: float, result: dict) -> Iterator[FitSnapshot]:
     """Run the least-squares passes, yielding a snapshot per pass (never ``done``). Fills
-    ``result`` with "geometry" (NurbsSurface, normalised), "parameters" (N, 2) and "distances"
-    (N,) for every point, "status" and "message"."""
+    ``result`` with "geometry" (NurbsSurface, normalised), "parameters" ((N, 2) for every point,
+    None when a large cloud was fitted on a subset), "distances" (N,) for every point,
+    "iteration", "status", "message", "records", "tolerance" and "noise" (input units),
+    "fairing_scale" and "tolerance_met"."""
     points = problem.points.double().numpy()
     subset = start.subset
     pass_points = points if subset is None else points[subset]
     pass_params = start.parameters
-    noise = estimate_noise(points if len(points) <= 200_000 else points[
-        np.random.default_rng(config.seed).choice(len(points), 200_000, replace=False)],
-        seed=config.seed)
+    noise = estimate_noise(points, seed=config.seed)   # thins a dense cloud itself
     if config.tolerance is not None:
         tolerance = config.tolerance / problem.scale
     else:
         tolerance = max(NOISE_TOLERANCE * noise, MIN_TOLERANCE)
-    spacing = start.mesh.spacing if start.mesh is not None else _spacing(pass_points)
+    spacing = start.mesh.spacing if start.mesh is not None else median_spacing(pass_points)
     degrees = (config.degree_u, config.degree_v)
     limit = max(int(math.sqrt(len(pass_points) / 8)), max(degrees) + 1)
     grid = tuple(min(c, max(limit, d + 1)) for c, d in
@@ -213,7 +210,7 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
         parameters, distances = last.parameters, last.distances
     else:
         parameters, distances = None, sampled_distances(surface, points)
-    stopped = last.message == "stopped"
+    stopped = last.stopped
     result.update(geometry=surface, parameters=parameters, distances=distances,
                   iteration=last.index, status="stopped" if stopped else "converged",
                   message=last.message if not start.message else f"{start.message}; {last.message}",
@@ -254,13 +251,6 @@ def core_geometry_numpy(surface: NurbsSurface, problem: Problem) -> dict:
     return data
 
 
-def _spacing(points: np.ndarray) -> float:
-    from scipy.spatial import cKDTree
-
-    distances, _ = cKDTree(points).query(points[: min(len(points), 5000)], k=2)
-    return float(np.median(distances[:, 1]))
-
-
 def sampled_distances(surface: NurbsSurface, points: np.ndarray, density: int = 256,
                       chunk: int = 262144) -> np.ndarray:
     """Distance (N,) of every point to the surface, from its nearest of ``density``^2 surface
@@ -268,8 +258,6 @@ def sampled_distances(surface: NurbsSurface, points: np.ndarray, density: int = 
     in the tangent plane (points past the surface's edge). The error is of second order in the
     cell size times the curvature: far below the noise for dense samples, at a fraction of the
     cost of foot-point projection for millions of points."""
-    from scipy.spatial import cKDTree
-
     t = torch.linspace(0, 1, density, dtype=torch.float64)
     grid = surface.evaluate_grid(t, t).detach().numpy()          # (d, d, 3)
     d_u = np.gradient(grid, axis=0)

@@ -4,11 +4,11 @@ Each pass solves, for fixed parameters (u_k, v_k) and fixed knots, the control p
 
     (1 / N) sum_k |S(u_k, v_k) - Q_k|^2  +  lambda (E_thin_plate(C) + MEMBRANE_RATIO E_membrane(C))
 
-(sparse normal equations, exact energies from :mod:`nurbs_core.surfacing.fairing`), then moves
-every parameter to its foot point on the new surface (Gauss-Newton from where it was, so points
-keep their place in the fold-free start). lambda starts stiff and falls by FAIRING_DECAY per pass
-down to the user's stiffness (FreeCAD halves it); then the passes run until the parameters stop
-moving. Then the control grid grows (shaped like the surface) while that pays: until a given
+(sparse normal equations, exact energies from :mod:`nurbs_core.surfacing.fairing`; lambda is
+the user's stiffness relative to the data term on the starting grid), then moves every parameter
+to its foot point on the new surface (Gauss-Newton from where it was, so points keep their
+place in the fold-free start). The passes run until the parameters stop moving. Then the
+control grid grows (shaped like the surface) while that pays: until a given
 two-sided tolerance is met, or, with the automatic tolerance, while Mallows' Cp falls.
 Coordinates are the fit's normalised ones (bounding-box diagonal 1, parameters in [0, 1]^2).
 """
@@ -33,9 +33,6 @@ from nurbs_core.surfacing.fairing import energy, fairing_matrices
 
 #: Relative weight of the membrane energy inside the fairing term.
 MEMBRANE_RATIO = 0.1
-#: The first pass's fairing weight, and its fall per pass.
-INITIAL_FAIRING = 1e-5
-FAIRING_DECAY = 0.25
 #: Parameters that move less than this (RMS, in the unit square) count as settled.
 SETTLED = 5e-4
 #: Passes at most (all grids together).
@@ -77,6 +74,7 @@ class CorePass:
     met: bool = False
     message: str | None = None
     cp: float = math.inf
+    stopped: bool = False
 
 
 def seam_matrix(n: int, m: int, closed: str) -> scipy.sparse.csr_matrix:
@@ -117,7 +115,7 @@ class LeastSquaresCore:
     """Passes of fairing least squares and parameter correction (see the module docstring).
 
     points (N, 3) and parameters (N, 2) numpy float64 in normalised coordinates; grid: the
-    starting control grid (n, m); stiffness: the final fairing weight; tolerance: two-sided
+    starting control grid (n, m); stiffness: the fairing weight; tolerance: two-sided
     distance tolerance (normalised; the cloud-to-surface ``1 - outlier_fraction`` quantile and
     the surface-to-cloud 95th percentile beyond ``spacing``); max_grid: largest control count
     per direction the grid may grow to; noise: the cloud's noise (normalised). With an
@@ -220,7 +218,7 @@ class LeastSquaresCore:
 
     def passes(self, stop=None) -> Iterator[CorePass]:
         """Run the passes; every pass is yielded (the last one with ``done``)."""
-        fairing = max(INITIAL_FAIRING, self.stiffness)
+        fairing = self.stiffness
         previous_rms, grid_rms = math.inf, math.inf
         best: CorePass | None = None
         for index in range(1, MAX_PASSES + 1):
@@ -234,18 +232,13 @@ class LeastSquaresCore:
             bending = energy(self.fairing_matrix, surface.control_points.numpy())
             report = CorePass(index, surface, self.parameters.copy(), distances, rms, quantile,
                               s2c, moved, fairing, bending, self.grid)
-            relaxed = fairing <= self.stiffness * (1 + 1e-12)
-            settled = relaxed and (moved < SETTLED or rms > previous_rms * (1 - 2e-3))
+            settled = moved < SETTLED or rms > previous_rms * (1 - 2e-3)
             previous_rms = rms
             stopped = stop is not None and stop.stopped
             if stopped:
-                report.done, report.message = True, "stopped"
+                report.done, report.stopped, report.message = True, True, "stopped"
                 yield report
                 return
-            if not relaxed:
-                fairing = max(fairing * FAIRING_DECAY, self.stiffness)
-                yield report
-                continue
             if not settled and index < MAX_PASSES:
                 yield report
                 continue

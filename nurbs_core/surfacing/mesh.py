@@ -91,7 +91,7 @@ def cloud_mesh(points: np.ndarray, *, max_vertices: int = MAX_MESH_VERTICES,
     # a tiny deterministic jitter breaks the co-circular ties of gridded scans the same way in
     # every umbrella (ties would make neighbouring umbrellas pick different diagonals)
     rng = np.random.default_rng(seed)
-    spacing0 = _median_spacing(vertices)
+    spacing0 = median_spacing(vertices)
     # the umbrellas are built on denoised positions, so that neighbouring tangent planes agree
     smoothed = smooth_points(vertices)
     if estimate_noise(vertices) > NOISY * spacing0:
@@ -99,10 +99,9 @@ def cloud_mesh(points: np.ndarray, *, max_vertices: int = MAX_MESH_VERTICES,
         smoothed = smooth_points(smooth_points(vertices, k=40), k=40)
     jittered = smoothed + rng.normal(scale=JITTER * spacing0, size=vertices.shape)
     frames = local_frames(jittered, k=RING_CANDIDATES)
-    triangles, votes = _umbrella_triangles(jittered, frames)
-    faces = _vote(triangles, votes, len(vertices))
+    faces = _vote(_umbrella_triangles(jittered, frames))
     faces = faces[_largest_angle(faces, jittered) < MAX_UMBRELLA_ANGLE]
-    faces = _manifold_edges(faces, jittered)
+    faces = _manifold_edges(faces, len(vertices))
     faces = _manifold_vertices(faces, len(vertices))
     faces, orientable = _orient(faces, len(vertices))
     for _ in range(4):
@@ -140,7 +139,8 @@ def without_faces(mesh: CloudMesh, drop: np.ndarray) -> CloudMesh:
 # --------------------------------------------------------------------------------------------
 
 
-def _median_spacing(points: np.ndarray) -> float:
+def median_spacing(points: np.ndarray) -> float:
+    """Median nearest-neighbour distance of (up to 5,000 of) ``points`` (N, 3); 1 if zero."""
     distances, _ = cKDTree(points).query(points[: min(len(points), 5000)], k=2)
     return float(np.median(distances[:, 1])) or 1.0
 
@@ -188,8 +188,8 @@ def voxel_subsample(points: np.ndarray,
     return chosen[by_index], centroid[voxel], counts[voxel]
 
 
-def _umbrella_triangles(points: np.ndarray, frames) -> tuple[np.ndarray, np.ndarray]:
-    """Every point's umbrella: triangles (T, 3) as vertex indices, and the owning point (T,)."""
+def _umbrella_triangles(points: np.ndarray, frames) -> np.ndarray:
+    """Every point's umbrella: triangles (T, 3) as vertex indices, the owner first."""
     n, k = frames.neighbours.shape
     normal = frames.normals
     t1 = frames.tangents[:, 0]
@@ -218,8 +218,7 @@ def _umbrella_triangles(points: np.ndarray, frames) -> tuple[np.ndarray, np.ndar
     gap = np.mod(angle[rows, nxt] - angle, 2 * np.pi)
     emit = active & (nxt != positions) & (gap < MAX_UMBRELLA_ANGLE)
     owner, slot = np.nonzero(emit)
-    triangles = np.stack([owner, neighbours[owner, slot], neighbours[owner, nxt[owner, slot]]], 1)
-    return triangles, owner
+    return np.stack([owner, neighbours[owner, slot], neighbours[owner, nxt[owner, slot]]], 1)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -238,8 +237,9 @@ def _cyclic_neighbours(active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return prev, np.mod(nxt, k)
 
 
-def _vote(triangles: np.ndarray, owners: np.ndarray, count: int) -> np.ndarray:
-    """Triangles present in the umbrellas of at least two of their three vertices."""
+def _vote(triangles: np.ndarray) -> np.ndarray:
+    """Triangles present in the umbrellas of at least two of their three vertices, most voted
+    first."""
     keys = np.sort(triangles, axis=1)
     keys = keys[(keys[:, 0] != keys[:, 1]) & (keys[:, 1] != keys[:, 2])]
     unique, votes = np.unique(keys, axis=0, return_counts=True)
@@ -254,17 +254,15 @@ def _edges_of(faces: np.ndarray) -> np.ndarray:
     return np.sort(e, axis=1)
 
 
-def _manifold_edges(faces: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Drop triangles until no edge carries more than two; the first (most voted) win, then the
-    better shaped."""
+def _manifold_edges(faces: np.ndarray, count: int) -> np.ndarray:
+    """Drop triangles until no edge carries more than two; the first (most voted) win."""
     if len(faces) == 0:
         return faces
-    quality = _shape_quality(faces, points)
     for _ in range(6):
         edges = _edges_of(faces)
         face_of = np.repeat(np.arange(len(faces)), 3)
-        key = edges[:, 0].astype(np.int64) * (points.shape[0] + 1) + edges[:, 1]
-        order = np.lexsort((-quality[face_of], face_of, key))
+        key = edges[:, 0].astype(np.int64) * (count + 1) + edges[:, 1]
+        order = np.lexsort((face_of, key))
         # rank of each (edge, face) inside its edge group, in the order above
         sorted_key = key[order]
         start = np.r_[True, sorted_key[1:] != sorted_key[:-1]]
@@ -275,7 +273,7 @@ def _manifold_edges(faces: np.ndarray, points: np.ndarray) -> np.ndarray:
             break
         keep = np.ones(len(faces), bool)
         keep[drop_faces] = False
-        faces, quality = faces[keep], quality[keep]
+        faces = faces[keep]
     return faces
 
 
@@ -289,14 +287,6 @@ def _largest_angle(faces: np.ndarray, points: np.ndarray) -> np.ndarray:
                                      + 1e-300)
         angles.append(np.arccos(np.clip(cosine, -1, 1)))
     return np.max(angles, axis=0)
-
-
-def _shape_quality(faces: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Radius ratio-like quality in (0, 1]: 4 sqrt(3) area / sum of squared edge lengths."""
-    a, b, c = (points[faces[:, k]] for k in range(3))
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    squares = ((b - a) ** 2).sum(1) + ((c - b) ** 2).sum(1) + ((a - c) ** 2).sum(1)
-    return 4 * np.sqrt(3) * area / (squares + 1e-300)
 
 
 def _manifold_vertices(faces: np.ndarray, count: int) -> np.ndarray:
