@@ -193,7 +193,8 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
         if report.done:
             break
         geometry = core_geometry_numpy(report.geometry, problem)
-        yield FitSnapshot(iteration=report.index, geometry=geometry, losses=[_record(report)],
+        yield FitSnapshot(iteration=report.index, geometry=geometry,
+                          losses=[_record(report, core.fairing_scale)],
                           elapsed=time.perf_counter() - started, done=False, status="running",
                           message=note, stage="least_squares")
         note = None
@@ -204,7 +205,7 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
                               status="paused", message="paused", stage="least_squares")
             while stop.paused and not stop.stopped:
                 stop.wait_while_paused(0.1)
-    result["records"] = [_record(last)]
+    result["records"] = [_record(last, core.fairing_scale)]
     surface = last.geometry
     if subset is None:
         parameters, distances = last.parameters, last.distances
@@ -219,9 +220,12 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
                   tolerance_met=bool(last.met))
 
 
-def _record(report: CorePass) -> dict[str, float]:
-    return {"iteration": report.index, "total": report.rms ** 2, "p2s": report.rms ** 2,
-            "fairing": report.fairing * report.fairing_energy}
+def _record(report: CorePass, fairing_scale: float | None) -> dict[str, float]:
+    """A pass's loss record: the two terms of the objective the pass minimised (normalised
+    units) and their sum."""
+    fairing = float(report.fairing * (fairing_scale or 1.0) * report.fairing_energy)
+    return {"iteration": report.index, "total": report.rms ** 2 + fairing,
+            "p2s": report.rms ** 2, "fairing": fairing}
 
 
 def surface_statistics(surface: NurbsSurface, points: np.ndarray, *, mesh: CloudMesh | None = None,
