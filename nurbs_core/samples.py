@@ -627,6 +627,9 @@ def rounded_box(count: int = 4000, noise: float = 0.002, seed: int = 0, *,
     for axis in range(3):
         for sign in (-1.0, 1.0):
             def mapping(a, b, axis=axis, sign=sign):
+                # (a, b) swapped on the negative faces: every chart's S_a x S_b points outward
+                if sign < 0:
+                    a, b = b, a
                 d = np.empty((len(a), 3))
                 d[:, axis] = sign
                 d[:, (axis + 1) % 3] = a
@@ -637,6 +640,47 @@ def rounded_box(count: int = 4000, noise: float = 0.002, seed: int = 0, *,
     return _make("rounded_box", _Shape(charts), count, noise, seed, closed=True,
                  height_field=False, kind="closed", truth_count=truth_count,
                  info={"size": tuple(size), "exponent": exponent})
+
+
+def capsule(count: int = 4000, noise: float = 0.002, seed: int = 0, *, radius: float = 0.5,
+            length: float = 1.5, truth_count: int = TRUTH_COUNT) -> SampledShape:
+    """A closed capsule along z: a cylinder of radius ``radius`` and length ``length`` with
+    hemispherical caps (area 2 pi R L + 4 pi R^2); three charts, all with outward normals."""
+    half = length / 2
+
+    def side(phi, z):
+        return np.stack([radius * np.cos(phi), radius * np.sin(phi), z], -1)
+
+    def cap(theta, phi, centre):
+        return np.stack([radius * np.sin(theta) * np.cos(phi), radius * np.sin(theta) * np.sin(phi),
+                         centre + radius * np.cos(theta)], -1)
+
+    charts = [_analytic_chart(side, (0.0, 2 * np.pi), (-half, half), periodic=(True, False)),
+              _analytic_chart(lambda t, p: cap(t, p, half), (0.0, np.pi / 2), (0.0, 2 * np.pi),
+                              periodic=(False, True)),
+              _analytic_chart(lambda t, p: cap(t, p, -half), (np.pi / 2, np.pi), (0.0, 2 * np.pi),
+                              periodic=(False, True))]
+    return _make("capsule", _Shape(charts), count, noise, seed, closed=True, height_field=False,
+                 kind="closed", truth_count=truth_count, info={"radius": radius, "length": length})
+
+
+def blob(count: int = 4000, noise: float = 0.002, seed: int = 0, *, bumps: float = 0.25,
+         truth_count: int = TRUTH_COUNT) -> SampledShape:
+    """A closed organic blob: the star-shaped surface of radius
+    ``1 + bumps (sin^2(theta) cos(3 phi) + 0.6 cos(2 theta) + 0.3 sin(theta) sin(2 phi))``
+    in the direction (theta, phi); ``seed`` also turns the bumps (a family of shapes)."""
+    turn = 2 * np.pi * np.random.default_rng([seed, 3]).random()
+
+    def mapping(theta, phi):
+        r = 1.0 + bumps * (np.sin(theta) ** 2 * np.cos(3 * (phi + turn)) + 0.6 * np.cos(2 * theta)
+                           + 0.3 * np.sin(theta) * np.sin(2 * phi))
+        return r[:, None] * np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi),
+                                      np.cos(theta)], -1)
+
+    shape = _Shape([_analytic_chart(mapping, (0.0, np.pi), (0.0, 2 * np.pi),
+                                     periodic=(False, True))])
+    return _make("blob", shape, count, noise, seed, closed=True, height_field=False,
+                 kind="closed", truth_count=truth_count, info={"bumps": bumps, "turn": turn})
 
 
 # --- variants ----------------------------------------------------------------------------------
@@ -683,15 +727,17 @@ GENERATORS: dict[str, Callable[..., SampledShape]] = {
     "torus": torus,
     "tube": tube,
     "rounded_box": rounded_box,
+    "capsule": capsule,
+    "blob": blob,
 }
 #: generators one open patch can hold
 OPEN_SHAPES = ("height_field", "sine_field", "saddle", "curled_sheet", "bowl", "leaflet_like",
                "half_cylinder")
 #: generators one open patch cannot hold (a fit should refuse them unless forced)
-CLOSED_SHAPES = ("sphere", "torus", "tube", "rounded_box")
+CLOSED_SHAPES = ("sphere", "torus", "tube", "rounded_box", "capsule", "blob")
 
 __all__ = ["CLOSED_SHAPES", "GENERATORS", "OPEN_SHAPES", "TRUTH_COUNT", "SampledShape",
-           "area_uniform_samples", "bowl", "curled_sheet", "half_cylinder", "height_field",
+           "area_uniform_samples", "blob", "bowl", "capsule", "curled_sheet", "half_cylinder", "height_field",
            "leaflet_like", "patch_topology", "rounded_box", "saddle", "sample_surface",
            "sine_field", "sparse", "sphere", "surface_area", "surface_quadrature", "torus", "tube",
            "with_outliers"]

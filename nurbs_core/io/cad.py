@@ -131,8 +131,9 @@ def _compound(items):
     return compound
 
 
-def write_step(geometry_or_list, path) -> None:
-    """STEP (AP214) with every real written as %.16E (17 significant digits, exact for float64).
+def step_bytes(shape, path) -> bytes:
+    """The STEP (AP214, millimetres) text of an OCP shape, every real written as %.16E (17
+    significant digits, exact for float64); ``path`` names the file in errors (OSError).
 
     STEPControl_Writer's own Write keeps 13 significant digits (a few 1e-9 off at coordinates
     of 1e4), so the model is printed here with a finer FloatWriter.
@@ -144,10 +145,9 @@ def write_step(geometry_or_list, path) -> None:
     from OCP.STEPControl import STEPControl_StepModelType, STEPControl_Writer
     from OCP.StepData import StepData_StepWriter
 
-    items = as_geometry_list(geometry_or_list)
     writer = STEPControl_Writer()
     Interface_Static.SetCVal_s("write.step.unit", "MM")
-    status = writer.Transfer(_compound(items), STEPControl_StepModelType.STEPControl_AsIs)
+    status = writer.Transfer(shape, STEPControl_StepModelType.STEPControl_AsIs)
     if status != IFSelect_ReturnStatus.IFSelect_RetDone:
         raise OSError(f"{path}: OpenCASCADE could not translate the geometry to STEP ({status})")
     printer = StepData_StepWriter(writer.Model())
@@ -156,12 +156,14 @@ def write_step(geometry_or_list, path) -> None:
     stream = io.BytesIO()
     if not printer.Print(stream):
         raise OSError(f"{path}: OpenCASCADE could not print the STEP model")
-    with open(path, "wb") as handle:
-        handle.write(stream.getvalue())
+    return stream.getvalue()
 
 
-def write_iges(geometry_or_list, path) -> None:
-    """IGES with every real written as %.16E (17 significant digits, exact for float64).
+def iges_bytes(shape, path, brep: bool = False) -> bytes:
+    """The IGES (millimetres) text of an OCP shape, every real written as %.16E (17 significant
+    digits, exact for float64); ``path`` names the file in errors (OSError). Faces are trimmed
+    surfaces (entities 128 + 144), or with ``brep`` IGES 5.3 B-rep entities (shells 514 of faces
+    510, solids 186), which keep the shared-edge topology.
 
     IGESControl_Writer's own Write uses OpenCASCADE's default real format (10 significant
     digits, ~1e-10 relative error), so the model is printed here with a finer FloatWriter.
@@ -172,9 +174,8 @@ def write_iges(geometry_or_list, path) -> None:
     from OCP.IGESData import IGESData_IGESWriter
     from OCP.IGESSelect import IGESSelect_WorkLibrary
 
-    items = as_geometry_list(geometry_or_list)
-    writer = IGESControl_Writer("MM", 0)  # mode 0: faces as trimmed surfaces (entity 128 + 144)
-    if not writer.AddShape(_compound(items)):
+    writer = IGESControl_Writer("MM", 1 if brep else 0)
+    if not writer.AddShape(shape):
         raise OSError(f"{path}: OpenCASCADE could not translate the geometry to IGES")
     writer.ComputeModel()
     printer = IGESData_IGESWriter(writer.Model())
@@ -183,8 +184,23 @@ def write_iges(geometry_or_list, path) -> None:
     stream = io.BytesIO()
     if not printer.Print(stream):
         raise OSError(f"{path}: OpenCASCADE could not print the IGES model")
+    return stream.getvalue()
+
+
+def write_step(geometry_or_list, path) -> None:
+    """STEP (AP214): the geometry as one compound of faces and edges (see :func:`step_bytes`)."""
+    require_ocp("Writing STEP")
+    data = step_bytes(_compound(as_geometry_list(geometry_or_list)), path)
     with open(path, "wb") as handle:
-        handle.write(stream.getvalue())
+        handle.write(data)
+
+
+def write_iges(geometry_or_list, path) -> None:
+    """IGES: the geometry as trimmed surfaces and curves (see :func:`iges_bytes`)."""
+    require_ocp("Writing IGES")
+    data = iges_bytes(_compound(as_geometry_list(geometry_or_list)), path)
+    with open(path, "wb") as handle:
+        handle.write(data)
 
 
 READ_TIMEOUT_SECONDS = 600.0

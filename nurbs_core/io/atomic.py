@@ -1,0 +1,90 @@
+"""Atomic file writes: the target is replaced only by a complete, flushed file.
+
+Both helpers write a temporary file in the target's directory (so the final ``os.replace`` is an
+atomic rename on the same file system), fsync it, and replace the target only when the block
+ends without an exception. On any exception the temporary file is removed and an existing target
+is left byte-for-byte as it was. A symbolic link is followed (its target is replaced, the link
+kept); an existing target's permission bits are kept, a new file gets the usual umask ones.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import secrets
+from collections.abc import Iterator
+from pathlib import Path
+from typing import IO
+
+_WRITE_MODES = ("w", "wb", "wt")
+
+
+def _temporary_name(target: Path, suffix: str) -> Path:
+    return target.with_name(f".{target.name}.{secrets.token_hex(4)}.tmp{suffix}")
+
+
+def _create(target: Path, suffix: str) -> Path:
+    """Create (exclusively, mode 0666 minus umask) an empty temporary file next to target."""
+    for _ in range(100):
+        temporary = _temporary_name(target, suffix)
+        try:
+            os.close(os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        except FileExistsError:
+            continue
+        return temporary
+    raise FileExistsError(f"{target}: could not create a temporary file next to it")
+
+
+def _fsync_path(path: Path, directory: bool = False) -> None:
+    flags = os.O_RDONLY | (getattr(os, "O_DIRECTORY", 0) if directory else 0)
+    try:
+        descriptor = os.open(path, flags)
+    except OSError:
+        if directory:  # some platforms cannot open directories; the rename is still atomic
+            return
+        raise
+    try:
+        os.fsync(descriptor)
+    except OSError:
+        if not directory:
+            raise
+    finally:
+        os.close(descriptor)
+
+
+def _commit(temporary: Path, target: Path) -> None:
+    _fsync_path(temporary)
+    with contextlib.suppress(FileNotFoundError):
+        os.chmod(temporary, os.stat(target).st_mode & 0o7777)
+    os.replace(temporary, target)
+    _fsync_path(target.parent, directory=True)
+
+
+@contextlib.contextmanager
+def atomic_path(path, suffix: str | None = None) -> Iterator[Path]:
+    """Yield a temporary path next to ``path`` (ending in ``suffix``, default path's own, so
+    writers that pick the format from the name still work) for a writer that needs a file name;
+    the file written there replaces ``path`` when the block succeeds. The writer may create,
+    truncate or recreate the file; if it writes nothing, ``path`` is replaced by an empty file.
+    """
+    target = Path(os.path.realpath(os.fspath(path)))
+    temporary = _create(target, target.suffix if suffix is None else suffix)
+    try:
+        yield temporary
+        _commit(temporary, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(temporary)
+        raise
+
+
+@contextlib.contextmanager
+def atomic_write(path, mode: str = "wb", encoding: str | None = "utf-8") -> Iterator[IO]:
+    """Yield an open file handle (``mode`` "wb" or "w"; text uses ``encoding``, default UTF-8)
+    whose content replaces ``path`` once the block ends without an exception."""
+    if mode not in _WRITE_MODES:
+        raise ValueError(f"atomic_write needs a write mode ({', '.join(_WRITE_MODES)}), got {mode!r}")
+    with atomic_path(path) as temporary:
+        text = "b" not in mode
+        with open(temporary, mode, encoding=encoding if text else None) as handle:
+            yield handle

@@ -1,0 +1,131 @@
+"""Evaluating a patch network at (patch, u, v) and the sparse rows that do it.
+
+All patches share one clamped knot vector, so the basis at a parameter does not depend on the
+patch: ``S_p(u, v) = sum_ij N_i(u) N_j(v) C[index[p, i, j]]``. The rows are over the network's
+global control points (K,), so one sparse matrix evaluates points on any patches at once.
+numpy + scipy, float64.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse
+import torch
+
+from nurbs_core.basis import basis_derivatives, find_span
+from nurbs_core.patches.network import PatchNetwork
+
+
+@dataclass
+class Basis1D:
+    """Per parameter (M,): first control index (M,) and the p + 1 non-zero basis values with
+    their first derivatives, each (M, p + 1)."""
+
+    first: np.ndarray
+    values: np.ndarray
+    derivative: np.ndarray
+
+
+def basis_1d(knots: np.ndarray, degree: int, t: np.ndarray) -> Basis1D:
+    """The non-zero basis functions and first derivatives at t (M,) in [0, 1]."""
+    t = np.clip(np.asarray(t, np.float64), 0.0, 1.0)
+    U = torch.as_tensor(np.asarray(knots, np.float64)).unsqueeze(0)
+    tt = torch.as_tensor(t).unsqueeze(0)
+    span = find_span(U, degree, tt)
+    ders = basis_derivatives(U, degree, tt, span, 1)[:, 0].numpy()
+    return Basis1D(span[0].numpy() - degree, ders[0], ders[1])
+
+
+def rows(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.ndarray,
+         derivative: str | None = None) -> scipy.sparse.csr_matrix:
+    """(M, K) sparse rows: row k evaluates patch[k] at (u[k], v[k]), or its derivative along
+    ``derivative`` ("u" or "v"), as a combination of the global control points."""
+    knots, p = network.knots, network.degree
+    bu, bv = basis_1d(knots, p, u), basis_1d(knots, p, v)
+    wu = bu.derivative if derivative == "u" else bu.values
+    wv = bv.derivative if derivative == "v" else bv.values
+    offsets = np.arange(p + 1)
+    iu = bu.first[:, None] + offsets            # (M, p + 1)
+    iv = bv.first[:, None] + offsets
+    patch = np.asarray(patch, np.int64)
+    cols = network.index[patch[:, None, None], iu[:, :, None], iv[:, None, :]]   # (M, p+1, p+1)
+    vals = wu[:, :, None] * wv[:, None, :]
+    m = len(patch)
+    return scipy.sparse.csr_matrix(
+        (vals.ravel(), (np.repeat(np.arange(m), (p + 1) ** 2), cols.ravel())),
+        shape=(m, len(network.control_points)))
+
+
+def evaluate(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.ndarray,
+             control_points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points, S_u and S_v (each (M, 3)) of patch[k] at (u[k], v[k])."""
+    knots, p = network.knots, network.degree
+    c = network.control_points if control_points is None else control_points
+    bu, bv = basis_1d(knots, p, u), basis_1d(knots, p, v)
+    offsets = np.arange(p + 1)
+    iu = bu.first[:, None] + offsets
+    iv = bv.first[:, None] + offsets
+    nets = c[network.index[np.asarray(patch)[:, None, None], iu[:, :, None], iv[:, None, :]]]
+    s = np.einsum("ma,mb,mabc->mc", bu.values, bv.values, nets)
+    su = np.einsum("ma,mb,mabc->mc", bu.derivative, bv.values, nets)
+    sv = np.einsum("ma,mb,mabc->mc", bu.values, bv.derivative, nets)
+    return s, su, sv
+
+
+def unit(vectors: np.ndarray) -> np.ndarray:
+    """Rows scaled to unit length (zero rows stay zero)."""
+    norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    return vectors / np.where(norm > 0, norm, 1.0)
+
+
+def grid_samples(network: PatchNetwork, resolution: int) -> tuple[np.ndarray, np.ndarray]:
+    """A (resolution x resolution) grid on every patch: patch (P r^2,) and (u, v) (P r^2, 2)."""
+    t = np.linspace(0.0, 1.0, resolution)
+    uu, vv = np.meshgrid(t, t, indexing="ij")
+    uv = np.stack([uu.ravel(), vv.ravel()], -1)
+    patches = np.repeat(np.arange(network.patch_count), len(uv))
+    return patches, np.tile(uv, (network.patch_count, 1))
+
+
+def foot_points(network: PatchNetwork, points: np.ndarray, patch: np.ndarray | None = None,
+                uv: np.ndarray | None = None, *, resolution: int = 14,
+                steps: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Closest points of ``points`` (N, 3) on the network: (patch (N,), uv (N, 2), distance (N,)).
+
+    Starts from the nearest of a dense grid of samples (or from the given patch/uv), then damped
+    Gauss-Newton steps inside that patch, clamped to [0, 1]^2, each kept only if it brings the
+    point closer."""
+    from scipy.spatial import cKDTree
+
+    points = np.asarray(points, np.float64)
+    if patch is None or uv is None:
+        sp, suv = grid_samples(network, resolution)
+        s, _, _ = evaluate(network, sp, suv[:, 0], suv[:, 1])
+        nearest = cKDTree(s).query(points)[1]
+        patch, uv = sp[nearest], suv[nearest].copy()
+    else:
+        patch, uv = np.asarray(patch, np.int64), np.asarray(uv, np.float64).copy()
+    s, su, sv = evaluate(network, patch, uv[:, 0], uv[:, 1])
+    residual = s - points
+    dist2 = (residual ** 2).sum(axis=1)
+    for _ in range(steps):
+        a = (su * su).sum(1)
+        b = (su * sv).sum(1)
+        c = (sv * sv).sum(1)
+        gu = (su * residual).sum(1)
+        gv = (sv * residual).sum(1)
+        mu = 1e-9 * (a + c) + 1e-300
+        det = (a + mu) * (c + mu) - b * b
+        det = np.where(np.abs(det) > 0, det, 1e-300)
+        du = -((c + mu) * gu - b * gv) / det
+        dv = -((a + mu) * gv - b * gu) / det
+        trial = np.clip(uv + np.stack([du, dv], -1), 0.0, 1.0)
+        s2, su2, sv2 = evaluate(network, patch, trial[:, 0], trial[:, 1])
+        r2 = s2 - points
+        d2 = (r2 ** 2).sum(1)
+        better = d2 < dist2
+        uv[better], dist2[better], residual[better] = trial[better], d2[better], r2[better]
+        su[better], sv[better] = su2[better], sv2[better]
+    return patch, uv, np.sqrt(dist2)

@@ -1,0 +1,384 @@
+"""The joint fit of a whole patch network: least squares, fairing, tangent continuity, pass by pass.
+
+Unknowns are the network's global control points (K, 3), so every shared edge is one curve
+(exact G0). Each pass solves, for fixed foot-point parameters (patch_k, u_k, v_k),
+
+    (1 / N) sum_k |S(patch_k, u_k, v_k) - Q_k|^2  +  lambda sum_p E_fair(patch p)
+        + w_seam (1 / R) sum_r ((D_r C) . n_r / |D_r C|)^2
+
+* fairing: the exact thin-plate (+ 0.1 membrane) energy of every patch
+  (:mod:`nurbs_core.surfacing.fairing`), lambda = ``stiffness`` relative to the data term;
+* tangent continuity (G1), linearised: along every shared edge, both patches' cross-boundary
+  derivatives D_r C must lie in the tangent plane of normal n_r, the mean of the two patches'
+  normals at the previous pass (made orthogonal to the edge). At a layout vertex, every patch's
+  two corner derivatives must lie in the plane of the mean normal of all patches there, which
+  is G1 at corners where 3, 5 or more patches meet, without the collapse a C1 condition forces
+  there. Each row is scaled so its residual is about the sine of the angle it measures.
+
+It couples x, y and z, so the normal equations are one sparse (3K, 3K) system. Then every point
+moves to its foot point on the new network (Gauss-Newton from where it was, and the nearest of a
+dense grid of samples, so a point may change patch), and the normals are taken again.
+
+Before the cloud, a few *wrap* passes fit the network to the nearest points of the closed mesh
+from a grid on each patch (the layout's bilinear quads lie inside convex parts, so foot points
+from the cloud would pile up along its edges). After the passes settle, the control grid of
+every patch grows while Mallows' Cp falls (or until a tolerance is met). Coordinates are
+normalised (bounding-box diagonal 1, centred) inside; passes report the original units.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.linalg
+from scipy.spatial import cKDTree
+
+from nurbs_core.patches.evaluate import evaluate, foot_points, grid_samples, rows, unit
+from nurbs_core.patches.network import SIDES, PatchNetwork, build_network, side_parameters
+from nurbs_core.surfacing.fairing import fairing_matrices
+from nurbs_core.surfacing.neighbours import estimate_noise
+
+#: Relative weight of the membrane energy inside the fairing term.
+MEMBRANE_RATIO = 0.1
+#: Default fairing stiffness (relative to the data term) and seam weight.
+STIFFNESS = 1e-4
+SEAM_WEIGHT = 2.0
+#: Wrap passes (network to the closed mesh) before the cloud.
+WRAP_PASSES = 3
+#: Passes per control grid at most, and the relative RMS gain under which a grid has settled.
+PASSES_PER_GRID = 6
+SETTLED = 2e-3
+#: Polish passes at most on the chosen grid, and the seam angle (degrees) that ends them.
+POLISH_PASSES = 8
+POLISHED = 0.5
+#: Control points per patch side tried in turn (the grid grows while Cp falls).
+SIZES = (4, 5, 6, 8, 10, 12, 14, 16)
+#: The first size tried (a smaller one only when the cloud is too sparse for it).
+START_SIZE = 6
+#: Cp charges this many noise variances per control point (Mallows' 2: only the normal
+#: component of a residual is measured, so a control point counts once, not three times).
+CP_PENALTY = 2.0
+#: A grid has at most one control point per this many cloud points.
+POINTS_PER_CONTROL = 4
+#: Weight (relative to the in-plane rows) of holding an edge's cross derivatives to their
+#: previous values less the normal part.
+EDGE_HOLD = 0.2
+#: Seam samples per edge per control point of a side.
+SEAM_SAMPLES = 2
+#: Corner slots of a quad as (u, v).
+CORNER_UV = ((0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0))
+
+
+@dataclass
+class NetworkPass:
+    """One pass. network: the patches in the cloud's units; patch (N,), uv (N, 2): each point's
+    foot point; distances (N,) to the network; rms and mean distance (cloud units); seam: the
+    largest seam angle at the pass's samples (degrees, from the previous normals); stage: "wrap",
+    "fit" or "polish" (more passes on the chosen grid while the seams still straighten);
+    size: control points per patch side."""
+
+    index: int
+    stage: str
+    network: PatchNetwork
+    patch: np.ndarray | None
+    uv: np.ndarray | None
+    distances: np.ndarray | None
+    rms: float
+    mean: float
+    seam: float
+    size: int
+    done: bool = False
+    met: bool = False
+    message: str | None = None
+    cp: float = math.inf
+
+
+@dataclass
+class _Frame:
+    centre: np.ndarray
+    scale: float
+
+    def inward(self, x: np.ndarray) -> np.ndarray:
+        return (np.asarray(x, np.float64) - self.centre) / self.scale
+
+    def outward(self, network: PatchNetwork) -> PatchNetwork:
+        out = network.with_control_points(network.control_points * self.scale + self.centre)
+        out.vertices = network.vertices * self.scale + self.centre
+        return out
+
+
+def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
+                reference: np.ndarray, *, size: int | None = None, stiffness: float = STIFFNESS,
+                seam_weight: float = SEAM_WEIGHT, tolerance: float | None = None,
+                max_size: int = SIZES[-1], passes_per_grid: int = PASSES_PER_GRID,
+                noise: float | None = None) -> Iterator[NetworkPass]:
+    """Fit a network over the layout (``vertices`` (V, 3), ``quads`` (P, 4)) to ``points``
+    (N, 3), passes as they finish; the last has ``done``. ``reference`` (M, 3): points of the
+    closed mesh for the wrap passes. ``size``: control points per patch side (None: grow while
+    Cp falls, from 6); ``tolerance``: grow until the RMS distance is below it (cloud units)."""
+    points = np.asarray(points, np.float64)
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    frame = _Frame(0.5 * (lo + hi), float(np.linalg.norm(hi - lo)) or 1.0)
+    q = frame.inward(points)
+    ref = frame.inward(reference)
+    sigma = (estimate_noise(points) if noise is None else noise) / frame.scale
+    tol = None if tolerance is None else tolerance / frame.scale
+    quads = np.asarray(quads, np.int64)
+    if size is not None:
+        sizes = [size]
+    else:
+        budget = len(q) / POINTS_PER_CONTROL
+        fits = [s for s in SIZES if s <= max_size and control_count(quads, s) <= budget]
+        first = max([s for s in fits if s <= START_SIZE], default=SIZES[0])
+        sizes = [s for s in SIZES if first <= s <= max_size] or [first]
+    network = build_network(frame.inward(vertices), quads, size=sizes[0])
+    solver = _Solver(stiffness, seam_weight)
+    count = 0
+    ref_tree = cKDTree(ref)
+    for _ in range(WRAP_PASSES):
+        patches, uv = grid_samples(network, 2 * network.size)
+        s, _, _ = evaluate(network, patches, uv[:, 0], uv[:, 1])
+        targets = ref[ref_tree.query(s)[1]]
+        network, seam = solver.solve(network, patches, uv, targets)
+        yield NetworkPass(count, "wrap", frame.outward(network), None, None, None, math.nan,
+                          math.nan, seam, network.size)
+        count += 1
+    patch, uv, dist = foot_points(network, q)
+    best: tuple | None = None
+    for grid_number, grid_size in enumerate(sizes):
+        if grid_size != network.size:
+            network = _resized(network, grid_size)
+        previous = math.inf
+        for _ in range(passes_per_grid):
+            network, seam = solver.solve(network, patch, uv, q)
+            patch, uv, dist = _reassign(network, q, patch, uv)
+            rms = float(np.sqrt(np.mean(dist ** 2)))
+            settled = previous - rms < SETTLED * rms
+            previous = rms
+            yield NetworkPass(count, "fit", frame.outward(network), patch, uv * 1.0,
+                              dist * frame.scale, rms * frame.scale, float(dist.mean()) * frame.scale,
+                              seam, network.size)
+            count += 1
+            if settled:
+                break
+        rss = float((dist ** 2).sum())
+        cp = rss + CP_PENALTY * sigma ** 2 * len(network.control_points)
+        met = tol is not None and rms <= tol
+        current = (cp, network, patch, uv, dist, rms)
+        if best is None or (cp < best[0] if tol is None else True):
+            best = current
+        elif tol is None:
+            break
+        upcoming = sizes[grid_number + 1] if grid_number + 1 < len(sizes) else None
+        too_many = upcoming is None or control_count(quads, upcoming) > len(q) / POINTS_PER_CONTROL
+        if met or too_many:
+            break
+    cp, network, patch, uv, dist, rms = best
+    # polish: the linearised seam rows approach G1 over passes; go on while the seams still
+    # straighten (the data term has settled by now)
+    seam = math.inf
+    for _ in range(POLISH_PASSES):
+        network, measured = solver.solve(network, patch, uv, q)
+        patch, uv, dist = _reassign(network, q, patch, uv)
+        rms = float(np.sqrt(np.mean(dist ** 2)))
+        yield NetworkPass(count, "polish", frame.outward(network), patch, uv * 1.0,
+                          dist * frame.scale, rms * frame.scale, float(dist.mean()) * frame.scale,
+                          measured, network.size)
+        count += 1
+        if measured < POLISHED or measured > 0.9 * seam:
+            break
+        seam = measured
+    rss = float((dist ** 2).sum())
+    cp = rss + CP_PENALTY * sigma ** 2 * len(network.control_points)
+    message = None
+    if tol is not None and rms > tol:
+        message = (f"tolerance {tolerance:.3g} not met: RMS distance {rms * frame.scale:.3g} at "
+                   f"{network.size}x{network.size} control points per patch")
+    yield NetworkPass(count, "fit", frame.outward(network), patch, uv, dist * frame.scale,
+                      rms * frame.scale, float(dist.mean()) * frame.scale, solver.last_seam,
+                      network.size, done=True, met=tol is not None and rms <= tol, message=message,
+                      cp=cp)
+
+
+def control_count(quads: np.ndarray, size: int) -> int:
+    """Control points of a network over ``quads`` (P, 4) with ``size`` per patch side."""
+    edges = {tuple(sorted((int(q[k]), int(q[(k + 1) % 4])))) for q in quads for k in range(4)}
+    return len(np.unique(quads)) + len(edges) * (size - 2) + len(quads) * (size - 2) ** 2
+
+
+def _reassign(network, q, patch, uv):
+    """Foot points from the previous ones and from the nearest grid sample; the closer wins."""
+    p1, uv1, d1 = foot_points(network, q, patch, uv)
+    p2, uv2, d2 = foot_points(network, q)
+    better = d2 < d1
+    p1[better], uv1[better], d1[better] = p2[better], uv2[better], d2[better]
+    return p1, uv1, d1
+
+
+def _resized(network: PatchNetwork, size: int) -> PatchNetwork:
+    """The network with ``size`` control points per side, fitted to its present shape."""
+    bigger = build_network(network.vertices, network.quads, size=size, degree=network.degree)
+    patches, uv = grid_samples(bigger, 3 * size)
+    s, _, _ = evaluate(network, patches, uv[:, 0], uv[:, 1])
+    a = rows(bigger, patches, uv[:, 0], uv[:, 1])
+    normal = (a.T @ a).tocsc() + 1e-12 * scipy.sparse.identity(a.shape[1], format="csc")
+    control = scipy.sparse.linalg.splu(normal).solve(np.asarray(a.T @ s))
+    return bigger.with_control_points(control)
+
+
+class _Solver:
+    """The pass's sparse solve (see the module docstring); remembers the fairing matrix per
+    network size and the last seam angle it saw."""
+
+    def __init__(self, stiffness: float, seam_weight: float):
+        self.stiffness = stiffness
+        self.seam_weight = seam_weight
+        self._fairing: dict[tuple[int, int], scipy.sparse.csr_matrix] = {}
+        self.last_seam = math.nan
+
+    def fairing(self, network: PatchNetwork) -> scipy.sparse.csr_matrix:
+        key = (network.size, network.patch_count)
+        if key not in self._fairing:
+            knots = network.knots
+            thin, membrane = fairing_matrices(knots, network.degree, knots, network.degree)
+            local = (thin + MEMBRANE_RATIO * membrane).tocoo()
+            flat = network.index.reshape(network.patch_count, -1)
+            r = flat[:, local.row].ravel()
+            c = flat[:, local.col].ravel()
+            v = np.tile(local.data, network.patch_count)
+            k = len(network.control_points)
+            self._fairing[key] = scipy.sparse.csr_matrix((v, (r, c)), shape=(k, k))
+        return self._fairing[key]
+
+    def solve(self, network: PatchNetwork, patch: np.ndarray, uv: np.ndarray,
+              targets: np.ndarray) -> tuple[PatchNetwork, float]:
+        k = len(network.control_points)
+        a = rows(network, patch, uv[:, 0], uv[:, 1])
+        n = len(targets)
+        data = (a.T @ a) / n
+        rhs = np.asarray(a.T @ targets) / n
+        fair = self.fairing(network)
+        lam = self.stiffness * data.diagonal().sum() / max(fair.diagonal().sum(), 1e-300)
+        block = (data + lam * fair).tocsr()
+        g, h, seam = seam_rows(network)
+        self.last_seam = seam
+        system = scipy.sparse.block_diag([block, block, block], format="csr")
+        rhs = rhs.T.ravel()
+        if g.shape[0]:
+            # the rows are dimensionless (about the sine of an angle): a patch's squared size
+            # turns them into the data term's units, so the balance does not depend on scale
+            weight = self.seam_weight * _patch_area(network) / g.shape[0]
+            system = system + weight * (g.T @ g)
+            rhs = rhs + weight * (g.T @ h)
+        system = system + 1e-12 * scipy.sparse.identity(3 * k, format="csr")
+        solution = scipy.sparse.linalg.splu(system.tocsc()).solve(rhs)
+        return network.with_control_points(solution.reshape(3, k).T), seam
+
+
+def _patch_area(network: PatchNetwork) -> float:
+    """Mean area of a layout quad (its two triangles)."""
+    c = network.vertices[network.quads]
+    return float(0.5 * np.linalg.norm(np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1]), axis=1).mean())
+
+
+def _cross_direction(side: str) -> tuple[str, str]:
+    """(cross-boundary, along-boundary) derivative of a side."""
+    return ("v", "u") if side in ("v0", "v1") else ("u", "v")
+
+
+def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarray, float]:
+    """The linearised G1 rows (R, 3K) and their targets (R,) at the network's present shape
+    (see the module docstring), and the largest seam angle (degrees) at their edge samples."""
+    k = len(network.control_points)
+    m = SEAM_SAMPLES * network.size
+    t = (np.arange(m) + 0.5) / m
+    blocks, targets, worst = [], [], 0.0
+    if network.edges:
+        count = len(network.edges)
+        tt = np.tile(t, count)
+        pa = np.repeat([e.a for e in network.edges], m)
+        pb = np.repeat([e.b for e in network.edges], m)
+        flip = np.repeat([e.reversed for e in network.edges], m)
+        uva = _side_uv(np.repeat([e.side_a for e in network.edges], m), tt)
+        uvb = _side_uv(np.repeat([e.side_b for e in network.edges], m), np.where(flip, 1.0 - tt, tt))
+        _, sua, sva = evaluate(network, pa, uva[:, 0], uva[:, 1])
+        _, sub, svb = evaluate(network, pb, uvb[:, 0], uvb[:, 1])
+        na, nb = unit(np.cross(sua, sva)), unit(np.cross(sub, svb))
+        cross_u_a = np.repeat([e.side_a in ("u0", "u1") for e in network.edges], m)
+        cross_u_b = np.repeat([e.side_b in ("u0", "u1") for e in network.edges], m)
+        tangent = unit(np.where(cross_u_a[:, None], sva, sua))
+        normal = unit(na + nb)
+        normal = unit(normal - (normal * tangent).sum(1, keepdims=True) * tangent)
+        worst = float(np.degrees(np.arccos(np.clip((na * nb).sum(1), -1.0, 1.0))).max())
+        for patch, uv, cross_u, su, sv in ((pa, uva, cross_u_a, sua, sva),
+                                           (pb, uvb, cross_u_b, sub, svb)):
+            for is_u in (True, False):
+                pick = cross_u == is_u
+                if not pick.any():
+                    continue
+                direction = "u" if is_u else "v"
+                blocks.append(_plane_rows(network, patch[pick], uv[pick], direction, normal[pick]))
+                targets.append(np.zeros(int(pick.sum())))
+                # a weak hold on the present cross derivative (less its normal part): "in the
+                # plane" alone is also met by a derivative turned over the seam or shrunk away
+                g, h = _projection_rows(network, patch[pick], uv[pick], direction,
+                                        (su if is_u else sv)[pick], normal[pick])
+                blocks.append(EDGE_HOLD * g)
+                targets.append(EDGE_HOLD * h)
+    # corners: every patch's two corner derivatives to their projections on the plane of the
+    # vertex's mean normal (a full target, not only "in the plane": that one is also met by a
+    # derivative shrinking to nothing, which folds the corner)
+    patch_of, corner_of = np.divmod(np.arange(4 * network.patch_count), 4)
+    corner_uv = np.asarray(CORNER_UV)[corner_of]
+    _, su, sv = evaluate(network, patch_of, corner_uv[:, 0], corner_uv[:, 1])
+    vertex = network.quads.ravel()
+    vertex_normal = np.zeros((len(network.vertices), 3))
+    np.add.at(vertex_normal, vertex, unit(np.cross(su, sv)))
+    normal = unit(vertex_normal[vertex])
+    for direction, derivative in (("u", su), ("v", sv)):
+        g, h = _projection_rows(network, patch_of, corner_uv, direction, derivative, normal)
+        blocks.append(g)
+        targets.append(h)
+    values = np.concatenate(targets) if targets else np.zeros(0)
+    g = scipy.sparse.vstack(blocks, format="csr") if blocks else scipy.sparse.csr_matrix((0, 3 * k))
+    return g, values, worst
+
+
+def _projection_rows(network, patch, uv, direction, derivative, normal):
+    """Rows (3M, 3K) and targets (3M,): the derivative along ``direction`` at (patch, uv) equal
+    to its present value ``derivative`` (M, 3) without its ``normal`` component, both divided by
+    the present length."""
+    d = rows(network, patch, uv[:, 0], uv[:, 1], derivative=direction)
+    scale = 1.0 / np.maximum(np.linalg.norm(derivative, axis=1), 1e-9)
+    target = derivative - (derivative * normal).sum(1, keepdims=True) * normal
+    scaled = scipy.sparse.diags(scale) @ d
+    zero = scipy.sparse.csr_matrix(d.shape)
+    g = scipy.sparse.vstack([scipy.sparse.hstack([scaled if c == r else zero for c in range(3)])
+                             for r in range(3)], format="csr")
+    return g, (target * scale[:, None]).T.ravel()
+
+
+def _side_uv(sides: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(u, v) (M, 2) of side names (M,) at side parameters t (M,)."""
+    uv = np.empty((len(t), 2))
+    for side in ("v0", "u1", "v1", "u0"):
+        pick = sides == side
+        uv[pick] = side_parameters(side, t[pick])
+    return uv
+
+
+def _plane_rows(network, patch, uv, direction, normal) -> scipy.sparse.csr_matrix:
+    """Rows (M, 3K): the derivative along ``direction`` at (patch, uv), dotted with ``normal``
+    (M, 3), divided by the derivative's present length."""
+    d = rows(network, patch, uv[:, 0], uv[:, 1], derivative=direction)
+    length = np.linalg.norm(d @ network.control_points, axis=1)
+    scale = 1.0 / np.maximum(length, 1e-9)
+    blocks = [scipy.sparse.diags(normal[:, c] * scale) @ d for c in range(3)]
+    return scipy.sparse.hstack(blocks, format="csr")
+
+
+__all__ = ["NetworkPass", "fit_network", "seam_rows", "SIDES"]

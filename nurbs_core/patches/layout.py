@@ -1,0 +1,224 @@
+"""A quad layout of a triangle mesh: the coarse quads that become the patches of a network.
+
+Instant Meshes (Jakob et al. 2015, through ``pyinstantmeshes``, BSD-3) aligns a 4-RoSy
+orientation field and a 4-PoSy position field on the mesh and extracts a quad-dominant mesh,
+split once into pure quads. Its in-memory call returns triangles, so the layout goes through
+``remesh_file`` and the OBJ it writes (which keeps the quads). The raw layout is then cleaned:
+
+* a vertex of valence 2 (two quads folded onto each other along two edges) is removed and its
+  two quads merged into one;
+* the layout must be an oriented 2-manifold with the input's Euler characteristic (same genus,
+  nothing torn) and is oriented like the input mesh (outward on a closed, outward mesh).
+
+A layout that fails these checks is retried with other target counts; the error says what
+failed when none passes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import tempfile
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+#: Instant Meshes' pure-quad output has about this many quads per face of its target count.
+QUADS_PER_TARGET_FACE = 4.3
+#: Relative changes of the target count tried in turn when a layout fails its checks (Instant
+#: Meshes needs finer layouts where the shape is thin, a torus's tube say).
+RETRY_FACTORS = (1.0, 1.25, 0.8, 1.6, 2.0, 2.5, 3.2, 4.0, 5.0, 6.4)
+
+
+class LayoutError(ValueError):
+    """No valid quad layout could be built for the mesh."""
+
+
+@dataclass
+class QuadLayout:
+    """vertices (V, 3), quads (P, 4) consistently oriented (like the input mesh), valence (V,)
+    quads per vertex; target: the patch count asked for; attempts: failed tries and why."""
+
+    vertices: np.ndarray
+    quads: np.ndarray
+    valence: np.ndarray
+    target: int
+    attempts: list[str]
+
+    @property
+    def irregular(self) -> np.ndarray:
+        """Indices of the vertices where other than four quads meet."""
+        return np.flatnonzero(self.valence != 4)
+
+
+def euler_characteristic(faces) -> int:
+    """V - E + F of a polygon mesh (faces: a sequence of vertex-index sequences)."""
+    edges = {tuple(sorted((f[k], f[(k + 1) % len(f)]))) for f in faces for k in range(len(f))}
+    vertices = {v for f in faces for v in f}
+    return len(vertices) - len(edges) + len(faces)
+
+
+def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
+                seed_retries: bool = True) -> QuadLayout:
+    """A quad layout of about ``patches`` quads of the triangle mesh (vertices (N, 3), faces
+    (F, 3), consistently oriented). Raises :class:`LayoutError` when no valid layout results."""
+    import pyinstantmeshes
+
+    vertices = np.asarray(vertices, np.float64)
+    faces = np.asarray(faces, np.int64)
+    if patches < 4:
+        raise LayoutError(f"a quad layout needs at least 4 patches, got {patches}")
+    chi = euler_characteristic(faces.tolist())
+    normals = _face_normals(vertices, faces)
+    tree = cKDTree(vertices[faces].mean(axis=1))
+    attempts: list[str] = []
+    with tempfile.TemporaryDirectory(prefix="nurbs-layout-") as folder:
+        source = os.path.join(folder, "mesh.obj")
+        target = os.path.join(folder, "quads.obj")
+        _write_obj(source, vertices, faces)
+        for factor in RETRY_FACTORS if seed_retries else (1.0,):
+            count = max(2, int(round(patches * factor / QUADS_PER_TARGET_FACE)))
+            with _silenced_stdout():
+                pyinstantmeshes.remesh_file(source, target, target_face_count=count,
+                                            pure_quad=True, deterministic=True)
+            raw_vertices, raw_faces = _read_obj(target)
+            try:
+                quads_v, quads = _clean(raw_vertices, raw_faces)
+                _check_manifold(quads)
+                if euler_characteristic(quads.tolist()) != chi:
+                    raise LayoutError(f"Euler characteristic {euler_characteristic(quads.tolist())} "
+                                      f"differs from the mesh's {chi}")
+                quads = _orient_like(quads_v, quads, tree, normals)
+            except LayoutError as error:
+                attempts.append(f"target {count}: {error}")
+                continue
+            valence = np.bincount(quads.ravel(), minlength=len(quads_v))
+            return QuadLayout(quads_v, quads, valence, patches, attempts)
+    raise LayoutError("no valid quad layout: " + "; ".join(attempts))
+
+
+def _face_normals(vertices, faces) -> np.ndarray:
+    tri = vertices[faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+
+@contextlib.contextmanager
+def _silenced_stdout():
+    """Instant Meshes prints its progress on the C stdout: send it to /dev/null meanwhile."""
+    sys.stdout.flush()
+    try:
+        saved = os.dup(1)
+    except OSError:
+        yield
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(null)
+        os.close(saved)
+
+
+def _write_obj(path, vertices, faces) -> None:
+    with open(path, "w") as handle:
+        handle.write("".join(f"v {x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in vertices))
+        handle.write("".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces))
+
+
+def _read_obj(path) -> tuple[np.ndarray, list[list[int]]]:
+    vertices, faces = [], []
+    with open(path) as handle:
+        for line in handle:
+            fields = line.split()
+            if not fields:
+                continue
+            if fields[0] == "v":
+                vertices.append([float(x) for x in fields[1:4]])
+            elif fields[0] == "f":
+                faces.append([int(x.split("/")[0]) - 1 for x in fields[1:]])
+    return np.asarray(vertices, np.float64).reshape(-1, 3), faces
+
+
+def _clean(vertices: np.ndarray, faces: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
+    """Pure quads without valence-2 vertices, unused vertices dropped."""
+    if not faces or any(len(f) != 4 for f in faces):
+        raise LayoutError("the layout is not made of quads only")
+    faces = [list(f) for f in faces]
+    for _ in range(len(faces)):
+        uses = Counter(v for f in faces for v in f)
+        twos = [v for v, c in uses.items() if c == 2]
+        if not twos:
+            break
+        v = twos[0]
+        pair = [k for k, f in enumerate(faces) if v in f]
+        merged = _merge_at(faces[pair[0]], faces[pair[1]], v)
+        if merged is None:
+            raise LayoutError("a valence-2 vertex whose quads cannot be merged")
+        faces = [f for k, f in enumerate(faces) if k not in pair] + [merged]
+    quads = np.asarray(faces, np.int64)
+    used = np.unique(quads)
+    remap = np.full(len(vertices), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return vertices[used], remap[quads]
+
+
+def _merge_at(first: list[int], second: list[int], v: int) -> list[int] | None:
+    """The quad left when the two quads around the valence-2 vertex v are merged: first is
+    (v, a, x, b) from v, second must be (v, b, y, a); the union is (a, x, b, y)."""
+    k = first.index(v)
+    v_, a, x, b = first[k:] + first[:k]
+    k = second.index(v)
+    v2, b2, y, a2 = second[k:] + second[:k]
+    if (b2, a2) != (b, a) or len({a, x, b, y}) < 4:
+        return None
+    return [a, x, b, y]
+
+
+def _check_manifold(quads: np.ndarray) -> None:
+    directed = Counter()
+    for quad in quads.tolist():
+        for k in range(4):
+            directed[(quad[k], quad[(k + 1) % 4])] += 1
+    undirected = Counter()
+    for (a, b), count in directed.items():
+        if count > 1:
+            raise LayoutError("an edge is walked twice in one direction (inconsistent orientation "
+                              "or a non-manifold edge)")
+        undirected[(min(a, b), max(a, b))] += 1
+    if any(c > 2 for c in undirected.values()):
+        raise LayoutError("an edge is shared by more than two quads")
+    # every vertex's quads must form one fan (a disk or half-disk around it)
+    around: dict[int, list[tuple[int, int]]] = {}
+    for quad in quads.tolist():
+        for k in range(4):
+            around.setdefault(quad[k], []).append((quad[(k + 1) % 4], quad[(k + 3) % 4]))
+    for vertex, wedges in around.items():
+        nxt = dict(wedges)
+        if len(nxt) != len(wedges):
+            raise LayoutError(f"vertex {vertex} is not manifold")
+        start = wedges[0][0]
+        seen, current = 1, nxt.get(start)
+        while current is not None and current != start and seen <= len(wedges):
+            current = nxt.get(current)
+            seen += 1
+        if current == start and seen != len(wedges):
+            raise LayoutError(f"vertex {vertex} joins separate fans of quads")
+
+
+def _orient_like(vertices, quads, tree, normals) -> np.ndarray:
+    """Flip the (consistently oriented) layout when it faces the other way from the mesh."""
+    corners = vertices[quads]
+    n = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
+    agree = np.einsum("ij,ij->i", n, normals[tree.query(corners.mean(axis=1))[1]])
+    if (agree > 0).mean() < 0.5:
+        quads = quads[:, ::-1].copy()
+        agree = -agree
+    if (agree <= 0).any():
+        raise LayoutError(f"{int((agree <= 0).sum())} of {len(quads)} quads face away from the mesh")
+    return quads

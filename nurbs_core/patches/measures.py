@@ -1,0 +1,152 @@
+"""How good a patch network is: gaps, seam angles, orientation, area and distances.
+
+* **gap**: the largest distance between the two patches' points along each shared edge (the
+  same boundary curve evaluated from both sides; 0 up to rounding when control points are shared);
+* **seam angle**: the angle between the two patches' unit normals at samples along every shared
+  edge (corners excluded); **corner angle**: at each layout vertex, the largest angle between the
+  normals of the patches meeting there, reported apart for regular (4 patches) and irregular
+  (3, 5 or more) corners;
+* **flipped area**: the fraction of the area whose normal points against the reference's
+  oriented normals (outward on a closed object), at Gauss points of every patch;
+* **volume**: the signed volume the network encloses (positive: normals outward).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from nurbs_core.patches.evaluate import evaluate, foot_points, unit
+from nurbs_core.patches.fit import CORNER_UV
+from nurbs_core.patches.network import PatchNetwork, side_parameters
+
+#: Gauss points per patch direction for the area integrals.
+GAUSS_POINTS = 16
+
+
+@dataclass
+class SeamStatistics:
+    """Seam angles (degrees) along shared edges and at corners."""
+
+    median: float
+    p99: float
+    max: float
+    regular_corner_max: float
+    irregular_corner_max: float
+    irregular_corner_p90: float
+    gap: float
+
+
+@dataclass
+class NetworkQuality:
+    """Every measure of a network (lengths in the cloud's units, angles in degrees)."""
+
+    patches: int
+    size: int
+    seam: SeamStatistics
+    area: float
+    flipped_fraction: float
+    volume: float
+    c2s_mean: float
+    c2s_rms: float
+    c2s_p99: float
+    s2c_mean: float
+    s2c_p99: float
+    diagonal: float
+
+    @property
+    def gap_relative(self) -> float:
+        return self.seam.gap / self.diagonal if self.diagonal > 0 else 0.0
+
+    def as_dict(self) -> dict:
+        out = asdict(self)
+        out["gap_relative"] = self.gap_relative
+        return out
+
+
+def seam_statistics(network: PatchNetwork, samples: int = 48) -> SeamStatistics:
+    """Seam angles along every shared edge (``samples`` interior points each), corner angles and
+    the largest gap."""
+    t = (np.arange(samples) + 0.5) / samples
+    t_full = np.linspace(0.0, 1.0, samples + 1)
+    angles, gap = [], 0.0
+    for edge in network.edges:
+        for tt, measure_angle in ((t, True), (t_full, False)):
+            uva = side_parameters(edge.side_a, tt)
+            uvb = side_parameters(edge.side_b, 1.0 - tt if edge.reversed else tt)
+            sa, sua, sva = evaluate(network, np.full(len(tt), edge.a), uva[:, 0], uva[:, 1])
+            sb, sub, svb = evaluate(network, np.full(len(tt), edge.b), uvb[:, 0], uvb[:, 1])
+            if measure_angle:
+                cos = (unit(np.cross(sua, sva)) * unit(np.cross(sub, svb))).sum(1)
+                angles.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+            else:
+                gap = max(gap, float(np.linalg.norm(sa - sb, axis=1).max()))
+    along = np.concatenate(angles) if angles else np.zeros(1)
+    corners = corner_angles(network)
+    regular = corners[network.valence == 4]
+    irregular = corners[(network.valence != 4) & (network.valence > 0)]
+    return SeamStatistics(float(np.median(along)), float(np.percentile(along, 99)),
+                          float(along.max()), float(regular.max()) if regular.size else 0.0,
+                          float(irregular.max()) if irregular.size else 0.0,
+                          float(np.percentile(irregular, 90)) if irregular.size else 0.0, gap)
+
+
+def corner_angles(network: PatchNetwork) -> np.ndarray:
+    """(V,) the largest angle (degrees) between the normals of the patches at each vertex."""
+    patch_of, slot = np.divmod(np.arange(4 * network.patch_count), 4)
+    uv = np.asarray(CORNER_UV)[slot]
+    _, su, sv = evaluate(network, patch_of, uv[:, 0], uv[:, 1])
+    normals = unit(np.cross(su, sv))
+    vertex = network.quads.ravel()
+    out = np.zeros(len(network.vertices))
+    order = np.argsort(vertex, kind="stable")
+    bounds = np.searchsorted(vertex[order], np.arange(len(network.vertices) + 1))
+    for v in range(len(network.vertices)):
+        group = normals[order[bounds[v]:bounds[v + 1]]]
+        if len(group) > 1:
+            cos = np.clip(group @ group.T, -1.0, 1.0)
+            out[v] = float(np.degrees(np.arccos(cos.min())))
+    return out
+
+
+def surface_samples(network: PatchNetwork, count: int = GAUSS_POINTS
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gauss points of every patch: positions (M, 3), unit normals (M, 3), area weights (M,)."""
+    nodes, weights = np.polynomial.legendre.leggauss(count)
+    t, w = 0.5 * (nodes + 1.0), 0.5 * weights
+    uu, vv = np.meshgrid(t, t, indexing="ij")
+    ww = np.outer(w, w).ravel()
+    patches = np.repeat(np.arange(network.patch_count), count * count)
+    u = np.tile(uu.ravel(), network.patch_count)
+    v = np.tile(vv.ravel(), network.patch_count)
+    s, su, sv = evaluate(network, patches, u, v)
+    cross = np.cross(su, sv)
+    jac = np.linalg.norm(cross, axis=1)
+    return s, unit(cross), jac * np.tile(ww, network.patch_count)
+
+
+def network_quality(network: PatchNetwork, points: np.ndarray,
+                    reference: tuple[np.ndarray, np.ndarray] | None = None) -> NetworkQuality:
+    """All measures of ``network`` against the cloud ``points`` (N, 3); ``reference``:
+    (positions (M, 3), outward unit normals (M, 3)) for the flipped area (None: not measured,
+    reported as NaN)."""
+    points = np.asarray(points, np.float64)
+    seam = seam_statistics(network)
+    s, normals, area = surface_samples(network)
+    total = float(area.sum())
+    flipped = float("nan")
+    if reference is not None:
+        ref_points, ref_normals = reference
+        nearest = cKDTree(ref_points).query(s)[1]
+        against = (normals * ref_normals[nearest]).sum(1) < 0
+        flipped = float(area[against].sum() / total) if total > 0 else 0.0
+    volume = float((s * normals).sum(1) @ area / 3.0)
+    _, _, c2s = foot_points(network, points, resolution=24, steps=10)
+    s2c = cKDTree(points).query(s)[0]
+    diagonal = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    return NetworkQuality(network.patch_count, network.size, seam, total, flipped, volume,
+                          float(c2s.mean()), float(np.sqrt(np.mean(c2s ** 2))),
+                          float(np.percentile(c2s, 99)), float(np.average(s2c, weights=area)),
+                          float(np.percentile(s2c, 99)), diagonal)

@@ -1,0 +1,205 @@
+"""Cloud to patch network, step by step: closed mesh, quad layout, joint fit, quality.
+
+:func:`iter_patch_fit` yields an event per step, so a caller (the app's worker, the CLI) can
+show the mesh, the layout and every pass of the fit as they come; :func:`fit_patches` runs it
+to the end. With ``patches="auto"`` the layout is made finer until no two neighbouring layout
+quads turn by more than ``MAX_LAYOUT_TURN`` (a coarse quad over a strongly curved part makes a
+poor start), and the control grid of the patches then grows while that pays (Mallows' Cp) or
+until the tolerance is met.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from nurbs_core.patches.closed_mesh import ClosedMesh, closed_mesh
+from nurbs_core.patches.fit import SEAM_WEIGHT, STIFFNESS, NetworkPass, fit_network
+from nurbs_core.patches.layout import LayoutError, QuadLayout, quad_layout
+from nurbs_core.patches.measures import NetworkQuality, network_quality
+from nurbs_core.patches.network import PatchNetwork
+
+#: The first patch count ``auto`` tries, how much finer each retry is, and the most it goes to.
+AUTO_START = 24
+AUTO_GROWTH = 1.6
+AUTO_MAX = 400
+#: Largest angle (degrees) between the normals of two neighbouring layout quads for ``auto``.
+MAX_LAYOUT_TURN = 65.0
+#: ``auto`` makes at most one patch per this many cloud points.
+MIN_POINTS_PER_PATCH = 25
+#: Seam angle 99th percentile (degrees) and flipped area fraction above which a warning is given.
+WARN_SEAM = 2.0
+WARN_FLIPPED = 0.01
+
+
+@dataclass
+class PatchOptions:
+    """Settings of a network fit. patches: "auto" or a target patch count (>= 4); size: control
+    points per patch side (None: grow while Cp falls); degree: of every patch; stiffness:
+    fairing weight relative to the data term; seam_weight: of tangent continuity; tolerance: RMS
+    distance to reach (cloud units, None: automatic); max_size: largest control grid per side."""
+
+    patches: int | str = "auto"
+    size: int | None = None
+    degree: int = 3
+    stiffness: float = STIFFNESS
+    seam_weight: float = SEAM_WEIGHT
+    tolerance: float | None = None
+    max_size: int = 16
+
+    def validate(self) -> None:
+        if self.patches != "auto" and (isinstance(self.patches, bool)
+                                       or not isinstance(self.patches, (int, np.integer))
+                                       or self.patches < 4):
+            raise ValueError(f"patches must be 'auto' or an integer of at least 4, got "
+                             f"{self.patches!r}")
+        if self.degree != 3:
+            raise ValueError(f"patch networks are bicubic for now (degree 3), got {self.degree}")
+        if self.size is not None and not (isinstance(self.size, (int, np.integer))
+                                          and self.degree < self.size <= 40):
+            raise ValueError(f"size must be an integer from {self.degree + 1} to 40, got "
+                             f"{self.size!r}")
+        for name in ("stiffness", "seam_weight"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a finite non-negative number, got {value!r}")
+        if self.tolerance is not None and not (math.isfinite(self.tolerance)
+                                               and self.tolerance > 0):
+            raise ValueError(f"tolerance must be positive, got {self.tolerance!r}")
+
+
+@dataclass
+class PatchEvent:
+    """One step: kind "mesh" (mesh set), "layout" (layout set), "pass" (a fit pass) or
+    "done" (result set)."""
+
+    kind: str
+    mesh: ClosedMesh | None = None
+    layout: QuadLayout | None = None
+    fit_pass: NetworkPass | None = None
+    result: PatchResult | None = None
+
+
+@dataclass
+class PatchResult:
+    """The fitted network, its quality against the cloud, the layout and mesh it came from,
+    seconds per stage and the warnings a user should see."""
+
+    network: PatchNetwork
+    quality: NetworkQuality
+    layout: QuadLayout
+    mesh: ClosedMesh
+    timings: dict[str, float]
+    warnings: list[str] = field(default_factory=list)
+    passes: int = 0
+
+
+def layout_turn(layout: QuadLayout) -> float:
+    """The largest angle (degrees) between the normals of two layout quads sharing an edge."""
+    c = layout.vertices[layout.quads]
+    normals = np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    owner: dict[tuple[int, int], int] = {}
+    worst = 0.0
+    for p, quad in enumerate(layout.quads.tolist()):
+        for k in range(4):
+            key = (min(quad[k], quad[(k + 1) % 4]), max(quad[k], quad[(k + 1) % 4]))
+            if key in owner:
+                cos = float(np.clip(normals[owner[key]] @ normals[p], -1.0, 1.0))
+                worst = max(worst, math.degrees(math.acos(cos)))
+            else:
+                owner[key] = p
+    return worst
+
+
+def choose_layout(mesh: ClosedMesh, patches: int | str, points: int | None = None) -> QuadLayout:
+    """The layout for a target count; for "auto" the coarsest that turns by at most
+    ``MAX_LAYOUT_TURN`` between neighbours, or, when finer layouts stop turning less (a sharp
+    edge turns whatever the size), the one that turned least. ``points``: the cloud's size,
+    which bounds the patch count (each patch needs a few points per control point)."""
+    if patches != "auto":
+        return quad_layout(mesh.vertices, mesh.faces, int(patches))
+    most = AUTO_MAX if points is None else min(AUTO_MAX, max(AUTO_START, points // MIN_POINTS_PER_PATCH))
+    target, last_error = AUTO_START, None
+    best: tuple[float, QuadLayout] | None = None
+    stalled = 0
+    while target <= most:
+        try:
+            layout = quad_layout(mesh.vertices, mesh.faces, target)
+        except LayoutError as error:
+            last_error = error
+        else:
+            turn = layout_turn(layout)
+            if turn <= MAX_LAYOUT_TURN:
+                return layout
+            if best is None or turn < best[0] - 2.0:
+                best, stalled = (turn, layout), 0
+            else:
+                stalled += 1
+                if stalled >= 2:
+                    break
+        target = int(math.ceil(target * AUTO_GROWTH))
+    if best is not None:
+        return best[1]
+    raise LayoutError(f"no layout of up to {most} patches fits the shape: {last_error}")
+
+
+def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
+                   mesh: ClosedMesh | None = None) -> Iterator[PatchEvent]:
+    """The steps of fitting a patch network to a closed object's cloud (N, 3)."""
+    options = options or PatchOptions()
+    options.validate()
+    points = np.asarray(points, np.float64)
+    if points.ndim != 2 or points.shape[1] != 3 or len(points) < 100:
+        raise ValueError(f"a patch network needs at least 100 points of shape (N, 3), got "
+                         f"{points.shape}")
+    if not np.isfinite(points).all():
+        raise ValueError("the cloud has NaN or infinite coordinates")
+    timings: dict[str, float] = {}
+    start = time.perf_counter()
+    if mesh is None:
+        mesh = closed_mesh(points)
+    timings["mesh"] = time.perf_counter() - start
+    yield PatchEvent("mesh", mesh=mesh)
+    start = time.perf_counter()
+    layout = choose_layout(mesh, options.patches, len(points))
+    timings["layout"] = time.perf_counter() - start
+    yield PatchEvent("layout", mesh=mesh, layout=layout)
+    start = time.perf_counter()
+    last = None
+    for last in fit_network(points, layout.vertices, layout.quads, mesh.vertices,
+                            size=options.size, stiffness=options.stiffness,
+                            seam_weight=options.seam_weight, tolerance=options.tolerance,
+                            max_size=options.max_size):
+        yield PatchEvent("pass", layout=layout, fit_pass=last)
+    timings["fit"] = time.perf_counter() - start
+    start = time.perf_counter()
+    quality = network_quality(last.network, points, (mesh.vertices, _vertex_normals(mesh)))
+    timings["quality"] = time.perf_counter() - start
+    warnings = [last.message] if last.message else []
+    if quality.seam.p99 > WARN_SEAM:
+        warnings.append(f"seams are not tangent everywhere: 99th percentile angle "
+                        f"{quality.seam.p99:.1f} degrees")
+    if quality.flipped_fraction > WARN_FLIPPED:
+        warnings.append(f"{quality.flipped_fraction:.1%} of the area faces inward (folds)")
+    result = PatchResult(last.network, quality, layout, mesh, timings, warnings, last.index + 1)
+    yield PatchEvent("done", mesh=mesh, layout=layout, fit_pass=last, result=result)
+
+
+def fit_patches(points: np.ndarray, options: PatchOptions | None = None, **kwargs) -> PatchResult:
+    """:func:`iter_patch_fit` to the end: the :class:`PatchResult`."""
+    events = list(iter_patch_fit(points, options, **kwargs))
+    return events[-1].result
+
+
+def _vertex_normals(mesh: ClosedMesh) -> np.ndarray:
+    tri = mesh.vertices[mesh.faces]
+    face = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normals = np.zeros_like(mesh.vertices)
+    for k in range(3):
+        np.add.at(normals, mesh.faces[:, k], face)
+    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)

@@ -1,0 +1,170 @@
+"""Patch networks: shared control points, layouts, the joint fit on closed shapes, measured
+against each shape's exact truth (distances and outward normals from its analytic charts)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from geomdl import BSpline
+from scipy.spatial import cKDTree
+
+from nurbs_core import samples
+from nurbs_core.patches.closed_mesh import closed_mesh
+from nurbs_core.patches.evaluate import evaluate, unit
+from nurbs_core.patches.fit import fit_network
+from nurbs_core.patches.layout import LayoutError, euler_characteristic, quad_layout
+from nurbs_core.patches.measures import network_quality, seam_statistics, surface_samples
+from nurbs_core.patches.network import build_network, side_parameters
+from nurbs_core.patches.pipeline import PatchOptions, fit_patches, layout_turn
+
+CUBE_VERTICES = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+#: the cube's faces, counter-clockwise seen from outside
+CUBE_QUADS = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4],
+                       [1, 5, 7, 3]])
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def _cube_sphere(size=6):
+    network = build_network(CUBE_VERTICES, CUBE_QUADS, size=size)
+    c = network.control_points
+    return network.with_control_points(c / np.linalg.norm(c, axis=1, keepdims=True))
+
+
+def test_cube_network_shares_every_boundary_and_matches_geomdl():
+    network = _cube_sphere()
+    assert network.closed and len(network.edges) == 12 and (network.valence == 3).all()
+    # K = 8 corners + 12 edges x 4 + 6 faces x 16
+    assert len(network.control_points) == 8 + 12 * 4 + 6 * 16
+    t = np.linspace(0, 1, 9)
+    for edge in network.edges:
+        a = side_parameters(edge.side_a, t)
+        b = side_parameters(edge.side_b, t[::-1] if edge.reversed else t)
+        sa = evaluate(network, np.full(9, edge.a), a[:, 0], a[:, 1])[0]
+        sb = evaluate(network, np.full(9, edge.b), b[:, 0], b[:, 1])[0]
+        assert np.abs(sa - sb).max() < 1e-14
+    # every patch evaluates as geomdl's B-spline surface with the same net
+    uv = np.random.default_rng(0).random((20, 2))
+    for p, data in enumerate(network.surface_dicts()):
+        surface = BSpline.Surface()
+        surface.degree_u = surface.degree_v = 3
+        surface.ctrlpts2d = data["control_points"].tolist()
+        surface.knotvector_u = surface.knotvector_v = data["knots_u"].tolist()
+        ours = evaluate(network, np.full(20, p), uv[:, 0], uv[:, 1])[0]
+        assert np.allclose(ours, surface.evaluate_list(uv.tolist()), atol=1e-12)
+
+
+def test_cube_network_faces_outward():
+    network = _cube_sphere()
+    s, normals, area = surface_samples(network)
+    assert ((s * normals).sum(1) > 0).all()
+    assert 0 < (s * normals).sum(1) @ area / 3 < 4 / 3 * np.pi
+
+
+def test_build_network_rejects_bad_layouts():
+    with pytest.raises(ValueError, match="consistently oriented"):
+        build_network(CUBE_VERTICES, np.vstack([CUBE_QUADS[:5], CUBE_QUADS[5, ::-1]]))
+    with pytest.raises(ValueError, match="shared by 3"):
+        build_network(CUBE_VERTICES, np.vstack([CUBE_QUADS, [[0, 1, 3, 2]]]))
+    with pytest.raises(ValueError, match="degree 3 needs more than 3"):
+        build_network(CUBE_VERTICES, CUBE_QUADS, size=3)
+
+
+@pytest.mark.parametrize("name, genus", [("sphere", 0), ("torus", 1)])
+def test_closed_mesh_and_layout_keep_the_genus(name, genus):
+    shape = samples.GENERATORS[name](4000, noise=0.002, truth_count=20000)
+    mesh = closed_mesh(shape.points)
+    assert euler_characteristic(mesh.faces.tolist()) == 2 - 2 * genus
+    assert abs(mesh.area / shape.true_area - 1) < 0.05
+    layout = quad_layout(mesh.vertices, mesh.faces, 60)
+    assert euler_characteristic(layout.quads.tolist()) == 2 - 2 * genus
+    network = build_network(layout.vertices, layout.quads)
+    assert network.closed
+    # outward like the mesh: the bilinear start encloses a positive volume
+    s, normals, area = surface_samples(network)
+    assert (s * normals).sum(1) @ area > 0
+
+
+def test_layout_error_names_what_failed():
+    with pytest.raises(LayoutError, match="at least 4"):
+        quad_layout(CUBE_VERTICES, np.array([[0, 1, 2]]), 2)
+
+
+def _truth_measures(shape, result):
+    quality = network_quality(result.network, shape.points, (shape.truth, shape.truth_normals))
+    nearest = cKDTree(shape.truth).query(shape.points, k=4)[1]
+    truth_mean = shape.distance_to_truth(shape.points, nearest).mean()
+    return quality, truth_mean
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["sphere", "torus", "capsule"])
+def test_closed_shapes_fit_watertight_tangent_and_outward(name):
+    shape = samples.GENERATORS[name](4000, noise=0.002, truth_count=60000)
+    result = fit_patches(shape.points)
+    quality, truth_mean = _truth_measures(shape, result)
+    network = result.network
+    assert network.closed
+    assert quality.seam.gap <= 1e-9 * quality.diagonal
+    assert quality.seam.p99 <= 2.0
+    assert quality.seam.irregular_corner_max <= 10.0
+    assert quality.flipped_fraction <= 0.01
+    assert quality.volume > 0
+    assert abs(quality.area / shape.true_area - 1) <= 0.05
+    assert quality.c2s_mean <= 1.2 * truth_mean
+    # no poles: every layout vertex has 3 to 6 patches and no patch degenerates anywhere
+    assert 3 <= network.valence.min() and network.valence.max() <= 6
+    _, _, weights = surface_samples(network)
+    assert weights.min() > 1e-6 * quality.area / len(weights)
+    assert not result.warnings
+
+
+def test_genus_is_in_the_layout_of_a_torus_fit():
+    shape = samples.torus(3000, noise=0.002, truth_count=20000)
+    result = fit_patches(shape.points, PatchOptions(size=4))
+    assert euler_characteristic(result.layout.quads.tolist()) == 0
+    assert result.network.size == 4
+    # the layout is coarse for so few points, but the fit stays clean
+    assert layout_turn(result.layout) < 90
+    assert result.quality.flipped_fraction <= 0.01 and result.quality.volume > 0
+
+
+def test_seam_rows_are_what_makes_the_seams_tangent():
+    shape = samples.sphere(3000, noise=0.002, truth_count=20000)
+    mesh = closed_mesh(shape.points)
+    layout = quad_layout(mesh.vertices, mesh.faces, 24)
+
+    def final(weight):
+        passes = list(fit_network(shape.points, layout.vertices, layout.quads, mesh.vertices,
+                                  size=6, seam_weight=weight))
+        return seam_statistics(passes[-1].network)
+
+    free, joined = final(0.0), final(2.0)
+    assert joined.p99 < 2.0 < free.p99
+    assert joined.irregular_corner_max < free.irregular_corner_max
+
+
+def test_options_are_checked():
+    for bad in (dict(patches=2), dict(patches="many"), dict(degree=2), dict(size=3),
+                dict(stiffness=-1.0), dict(tolerance=0.0)):
+        with pytest.raises(ValueError):
+            PatchOptions(**bad).validate()
+    with pytest.raises(ValueError, match="NaN"):
+        fit_patches(np.full((200, 3), np.nan))
+
+
+def test_normals_of_a_fit_point_outward_on_a_blob():
+    shape = samples.blob(4000, noise=0.002, truth_count=40000)
+    result = fit_patches(shape.points)
+    s, normals, _ = surface_samples(result.network)
+    truth = cKDTree(shape.truth).query(s)[1]
+    agree = (normals * shape.truth_normals[truth]).sum(1)
+    assert (agree > 0).mean() > 0.99
+    assert (unit(normals) * unit(s - s.mean(0))).sum(1).mean() > 0.5
