@@ -7,6 +7,7 @@ Reads any point-cloud format :func:`nurbs_core.io.load_points` supports, shows p
 prints the final error statistics and writes every ``--output`` file with
 :func:`nurbs_core.io.save` (the suffix picks the format: .3dm, .json, .step, ...). ``--offset D``
 also writes the fitted surface offset by D along its normals (``<name>_offset<suffix>``).
+``--patches auto`` fits a closed object as a watertight network of patches instead.
 Errors print one line (``nurbs-fit: error: ...``) and exit with status 1; Ctrl-C stops the fit
 and still writes the result reached so far.
 """
@@ -77,6 +78,18 @@ def build_parser() -> argparse.ArgumentParser:
                              "outline (default: chosen from the outline's shape)")
     parser.add_argument("--single-patch", action="store_true",
                         help="fit one patch even to a closed or tube-like cloud (it will fold)")
+    parser.add_argument("--patches", default=None, metavar="auto|N",
+                        help="fit a closed object as a watertight network of bicubic patches "
+                             "with tangent-continuous seams: 'auto' chooses the count from the "
+                             "shape, N asks for about N patches (outputs: one joined B-rep in "
+                             ".3dm, one sewn solid in .step/.iges, the network with its adjacency "
+                             "in .json, a crack-free mesh in .obj/.stl/.ply)")
+    parser.add_argument("--patch-size", type=int, default=None, metavar="N",
+                        help="control points per patch side with --patches (default: grown "
+                             "while it pays, from 6)")
+    parser.add_argument("--seam-weight", type=float, default=None, metavar="W",
+                        help="weight of tangent continuity across seams with --patches "
+                             "(default 2)")
     parser.add_argument("--solver", default="auto", choices=["auto", "least_squares", "gradient"],
                         help="'least_squares': fairing least squares with parameter correction; "
                              "'gradient': the torch optimisation from that start; 'auto' adds "
@@ -235,11 +248,95 @@ def _offset_path(path: Path) -> Path:
     return path.with_name(f"{path.stem}_offset{path.suffix}")
 
 
+def _patch_options(args):
+    from nurbs_core.patches.pipeline import PatchOptions
+
+    if args.curve or args.single_patch or args.grid is not None or args.initial is not None:
+        raise ValueError("--patches fits a network of surface patches: it cannot be combined "
+                         "with --curve, --single-patch, --grid or --initial")
+    if args.patches == "auto":
+        target = "auto"
+    else:
+        try:
+            target = int(args.patches)
+        except ValueError:
+            raise ValueError(f"--patches takes 'auto' or a patch count, got {args.patches!r}") from None
+    extra = {}
+    if args.stiffness is not None:
+        extra["stiffness"] = args.stiffness
+    if args.seam_weight is not None:
+        extra["seam_weight"] = args.seam_weight
+    options = PatchOptions(patches=target, size=args.patch_size, tolerance=args.tolerance, **extra)
+    options.validate()
+    return options
+
+
+def _check_outputs(args) -> list[Path]:
+    outputs = [Path(p) for p in args.output]
+    source = Path(args.input).resolve()
+    for path in outputs:
+        if not path.parent.exists():
+            raise ValueError(f"cannot write {path}: folder {path.parent} does not exist")
+        if path.resolve() == source:
+            raise ValueError(f"the output {path} is the input file: writing it would destroy the "
+                             f"scan; choose another name")
+    return outputs
+
+
+def run_patches(args, points: np.ndarray, outputs: list[Path]) -> int:
+    """``--patches``: the network fit, its report and files."""
+    from nurbs_core.io import save
+    from nurbs_core.patches.pipeline import iter_patch_fit
+
+    options = _patch_options(args)
+    torch.set_num_threads(max(1, args.threads))
+    print(f"{args.input}: {len(points)} points; fitting a network of bicubic patches "
+          f"({options.patches} patches, stiffness {options.stiffness:g}, seam weight "
+          f"{options.seam_weight:g})", file=sys.stderr)
+    result = None
+    for event in iter_patch_fit(points, options):
+        if args.quiet:
+            pass
+        elif event.kind == "mesh":
+            print(f"closed mesh: {len(event.mesh.faces)} triangles", file=sys.stderr)
+        elif event.kind == "layout":
+            layout = event.layout
+            print(f"layout: {len(layout.quads)} patches, {len(layout.irregular)} irregular "
+                  f"corners", file=sys.stderr)
+        elif event.kind == "pass" and event.fit_pass.stage != "wrap":
+            p = event.fit_pass
+            print(f"{p.stage} pass {p.index}  {p.size}x{p.size} per patch  rms {p.rms:.4g}  "
+                  f"seam max {p.seam:.2f} deg", file=sys.stderr, flush=True)
+        result = event.result or result
+    quality = result.quality
+    seam = quality.seam
+    print(f"patches: {quality.patches} ({quality.size}x{quality.size} control points each, "
+          f"bicubic); {result.passes} passes in {sum(result.timings.values()):.2f} s "
+          f"({', '.join(f'{k} {v:.1f} s' for k, v in result.timings.items())})")
+    print(f"watertight: largest gap {seam.gap:.3g} ({quality.gap_relative:.2g} of the diagonal "
+          f"{quality.diagonal:.6g}); closed: {result.network.closed}")
+    print(f"seam angle: median {seam.median:.3f}, 99th percentile {seam.p99:.3f}, max "
+          f"{seam.max:.3f} degrees; corners: regular max {seam.regular_corner_max:.3f}, "
+          f"irregular max {seam.irregular_corner_max:.3f} degrees")
+    print(f"point-to-surface distance: mean {quality.c2s_mean:.6g}, rms {quality.c2s_rms:.6g}, "
+          f"99th percentile {quality.c2s_p99:.6g}; surface-to-cloud mean {quality.s2c_mean:.6g}")
+    print(f"flipped area: {quality.flipped_fraction:.2%}; area {quality.area:.6g}; "
+          f"enclosed volume {quality.volume:.6g}")
+    for warning in result.warnings:
+        print(f"warning: {warning}")
+    for path in outputs:
+        save(result.network, path)
+        print(f"wrote {path}")
+    return 0
+
+
 def run(args) -> int:
     from nurbs_core.io import load_points, save
 
     cloud = load_points(args.input)
     points = cloud.points
+    if args.patches is not None:
+        return run_patches(args, np.asarray(points, np.float64), _check_outputs(args))
     flat_z = args.curve and len(points) and np.ptp(points[:, 2]) == 0
     target = points[:, :2] if flat_z else points
     config = _config(args, target.shape[1])
@@ -250,10 +347,7 @@ def run(args) -> int:
         parameters = _grid_parameters(*args.grid, len(points))
     if args.offset is not None and args.curve:
         raise ValueError("--offset applies to surfaces only")
-    outputs = [Path(p) for p in args.output]
-    for path in outputs:
-        if not path.parent.exists():
-            raise ValueError(f"cannot write {path}: folder {path.parent} does not exist")
+    outputs = _check_outputs(args)
     core = (not args.curve and parameters is None and args.initial is None
             and resolved_solver(config) == "least_squares")
     how = (f"by fairing least squares (stiffness {config.stiffness:g}"

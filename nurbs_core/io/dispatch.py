@@ -75,8 +75,16 @@ def save(geometry_or_list, path, **options) -> None:
     lossless; option ``metadata`` for the document, ``indent``), .obj/.stl/.ply/.glb (surfaces
     tessellated on a uniform grid; option ``resolution``, int or (r_u, r_v), default 64), .csv
     (control points and weights), .dat (smesh, one surface). Batched geometry is split into
-    one item per batch entry.
+    one item per batch entry. A :class:`~nurbs_core.patches.network.PatchNetwork` is written
+    whole by :func:`nurbs_core.io.network_io.write_network` (one joined B-rep / sewn shell).
     """
+    from nurbs_core.patches.network import PatchNetwork
+
+    if isinstance(geometry_or_list, PatchNetwork):
+        from nurbs_core.io.network_io import write_network
+
+        write_network(geometry_or_list, path, **options)
+        return
     suffix = suffix_of(path)
     if suffix == ".3dm":
         from nurbs_core.io.rhino import write_3dm

@@ -118,16 +118,19 @@ def classify(vertices: np.ndarray, faces: np.ndarray) -> Topology:
     if not outline_ok:
         return Topology("closed", loops, euler,
                         "the cloud is a closed surface (no boundary): one patch cannot cover "
-                        "it without folding; split it into patches (multi-patch surfacing)")
+                        "it without folding; split it into patches "
+                        "(multi-patch surfacing: nurbs-fit --patches auto)")
     if len(long_loops) == 2 and handles == 0:
         return Topology("tube", loops, euler,
                         "the cloud is a tube (open at two ends): one patch cannot cover it "
-                        "without a seam; split it into patches (multi-patch surfacing)")
+                        "without a seam; split it into patches "
+                        "(multi-patch surfacing: nurbs-fit --patches auto)")
     if len(long_loops) > 2 or handles > 0:
         what = f"{handles} handle(s)" if handles else f"{len(long_loops)} open ends"
         return Topology("complex", loops, euler,
                         f"the cloud's mesh has {what}: one patch cannot cover it without "
-                        "folding; split it into patches (multi-patch surfacing)")
+                        "folding; split it into patches "
+                        "(multi-patch surfacing: nurbs-fit --patches auto)")
     return Topology("disk", loops, euler)
 
 

@@ -91,7 +91,8 @@ def _map(points: np.ndarray, mesh: CloudMesh, corners: np.ndarray | None,
         topology = Topology("complex", topology.loops, topology.euler,
                             "the cloud's mesh cannot be oriented consistently (its layers are "
                             "too close for its sampling): one patch cannot cover it without "
-                            "folding; split it into patches (multi-patch surfacing)")
+                            "folding; split it into patches "
+                            "(multi-patch surfacing: nurbs-fit --patches auto)")
     closed = None
     if topology.kind == "tube" and allow_tube:
         # cut the tube open along its shortest seam: a disk whose corners are the seam's ends

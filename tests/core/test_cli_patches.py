@@ -1,0 +1,85 @@
+"""``nurbs-fit --patches``: a closed cloud in, one watertight network out, read back by
+openNURBS (rhino3dm), OpenCASCADE and our JSON reader."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nurbs_core import samples
+from nurbs_core.cli import main
+from nurbs_core.io.network_io import read_network
+
+
+def _error_line(capsys) -> str:
+    return capsys.readouterr().err.strip().splitlines()[-1]
+
+
+@pytest.fixture(scope="module")
+def sphere_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cloud") / "sphere.xyz"
+    np.savetxt(path, samples.sphere(2500, truth_count=1000).points)
+    return path
+
+
+def test_patches_auto_writes_one_closed_solid_everywhere(sphere_file, tmp_path, capsys):
+    rhino3dm = pytest.importorskip("rhino3dm")
+    outputs = [tmp_path / f"net{s}" for s in (".json", ".3dm", ".obj")]
+    assert main([str(sphere_file), "-o", *map(str, outputs), "--patches", "auto", "-q"]) == 0
+    report = capsys.readouterr().out
+    assert "watertight: largest gap" in report and "seam angle" in report
+    assert "warning" not in report
+    network = read_network(outputs[0])
+    assert network.closed and network.patch_count >= 6
+    brep = rhino3dm.File3dm.Read(str(outputs[1])).Objects[0].Geometry
+    assert isinstance(brep, rhino3dm.Brep)
+    assert brep.IsSolid and brep.IsValid and len(brep.Faces) == network.patch_count
+    import trimesh
+
+    mesh = trimesh.load(outputs[2])
+    assert mesh.is_watertight and mesh.volume > 0
+    assert abs(mesh.volume / (4 / 3 * np.pi) - 1) < 0.05
+
+
+def test_patches_step_reads_back_as_one_valid_closed_shell(sphere_file, tmp_path):
+    pytest.importorskip("OCP")
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepCheck import BRepCheck_Analyzer
+    from OCP.STEPControl import STEPControl_Reader
+    from OCP.TopAbs import TopAbs_SHELL, TopAbs_SOLID
+    from OCP.TopExp import TopExp_Explorer
+
+    out = tmp_path / "net.step"
+    assert main([str(sphere_file), "-o", str(out), "--patches", "30", "--patch-size", "6",
+                 "-q"]) == 0
+    reader = STEPControl_Reader()
+    reader.ReadFile(str(out))
+    reader.TransferRoots()
+    shape = reader.OneShape()
+    shells = []
+    explorer = TopExp_Explorer(shape, TopAbs_SHELL)
+    while explorer.More():
+        shells.append(explorer.Current())
+        explorer.Next()
+    assert len(shells) == 1 and BRep_Tool.IsClosed_s(shells[0])
+    assert TopExp_Explorer(shape, TopAbs_SOLID).More()
+    assert BRepCheck_Analyzer(shape).IsValid()
+
+
+def test_patches_refuses_bad_requests_and_protects_the_input(sphere_file, tmp_path, capsys):
+    assert main([str(sphere_file), "-o", str(tmp_path / "a.json"), "--patches", "many"]) == 1
+    assert "--patches takes 'auto'" in _error_line(capsys)
+    assert main([str(sphere_file), "-o", str(tmp_path / "a.json"), "--patches", "2"]) == 1
+    assert "at least 4" in _error_line(capsys)
+    assert main([str(sphere_file), "-o", str(tmp_path / "a.json"), "--patches", "auto",
+                 "--single-patch"]) == 1
+    assert "cannot be combined" in _error_line(capsys)
+    before = sphere_file.read_bytes()
+    assert main([str(sphere_file), "-o", str(sphere_file), "--patches", "auto"]) == 1
+    assert "is the input file" in _error_line(capsys)
+    assert sphere_file.read_bytes() == before
+
+
+def test_single_patch_refusal_points_to_patches(sphere_file, tmp_path, capsys):
+    assert main([str(sphere_file), "-o", str(tmp_path / "one.json")]) == 1
+    assert "--patches auto" in _error_line(capsys)
