@@ -37,6 +37,10 @@ SMOOTHING = 1.0
 NEIGHBOURS = 8
 
 
+class NotClosedError(ValueError):
+    """The cloud does not sample a closed surface."""
+
+
 @dataclass
 class ClosedMesh:
     """vertices (V, 3), faces (F, 3) outward; normals (N, 3): the cloud's oriented normals;
@@ -102,13 +106,19 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None) -> Closed
     border = np.unique(np.concatenate([labels[[0, -1]].ravel(), labels[:, [0, -1]].ravel(),
                                        labels[:, :, [0, -1]].ravel()]))
     outside = np.isin(labels, border[border > 0])
+    if not (far & ~outside).any():
+        # every region away from the points reaches the border: nothing is enclosed (an open
+        # sheet or tube, or a closed one so thin or so sparsely sampled that it leaks)
+        raise NotClosedError("the cloud does not enclose a volume: it is an open surface (or its "
+                             "sampling leaves holes); a patch network needs a closed object, and "
+                             "an open sheet is fitted with one patch (without --patches)")
     volume = signed.reshape(shape)
     volume = np.where(far & outside, BAND * cell, volume)
     volume = np.where(far & ~outside, -BAND * cell, volume)
     # a one-cell blur closes the pin-holes and tiny handles that noisy normals leave in the band
     volume = scipy.ndimage.gaussian_filter(volume, SMOOTHING)
     if volume.min() >= 0 or volume.max() <= 0:
-        raise ValueError("the cloud encloses no volume: it is not a closed surface")
+        raise NotClosedError("the cloud encloses no volume: it is not a closed surface")
     verts, faces, _, _ = marching_cubes(volume, level=0.0, spacing=(cell, cell, cell))
     verts = verts + origin
     faces, pieces = _largest_piece(faces.astype(np.int64), len(verts))

@@ -168,3 +168,11 @@ def test_normals_of_a_fit_point_outward_on_a_blob():
     agree = (normals * shape.truth_normals[truth]).sum(1)
     assert (agree > 0).mean() > 0.99
     assert (unit(normals) * unit(s - s.mean(0))).sum(1).mean() > 0.5
+
+
+@pytest.mark.parametrize("name", ["saddle", "tube"])
+def test_open_clouds_are_refused_with_the_reason(name):
+    from nurbs_core.patches.closed_mesh import NotClosedError
+
+    with pytest.raises(NotClosedError, match="open surface"):
+        fit_patches(samples.GENERATORS[name](2000, truth_count=1000).points)
