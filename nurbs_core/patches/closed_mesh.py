@@ -33,6 +33,10 @@ MIN_CELL_SPACINGS = 1.4
 BAND = 2.5
 #: Gaussian blur of the sampled distance (cells).
 SMOOTHING = 1.0
+#: A closed cloud's surface passes through its points: at most MAX_AWAY of the marching-cubes
+#: vertices may lie farther than AWAY cells from every point.
+AWAY = 2.0
+MAX_AWAY = 0.1
 #: Neighbours in the tangent-plane average.
 NEIGHBOURS = 8
 
@@ -126,6 +130,13 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None) -> Closed
     remap = np.full(len(verts), -1, np.int64)
     remap[used] = np.arange(len(used))
     verts, faces = verts[used], remap[faces]
+    away = float((tree.query(verts)[0] > AWAY * cell).mean())
+    if away > MAX_AWAY:
+        # walls of the zero set far from every point: the far field's sign had to close an
+        # opening (an open tube or sheet whose rim the band sealed)
+        raise NotClosedError(f"the cloud is not a closed surface: {away:.0%} of the surface that "
+                             "would enclose it lies away from the points (an opening was sealed); "
+                             "a patch network needs a closed object")
     tri = verts[faces]
     enclosed = np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0
     if enclosed < 0:

@@ -174,5 +174,5 @@ def test_normals_of_a_fit_point_outward_on_a_blob():
 def test_open_clouds_are_refused_with_the_reason(name):
     from nurbs_core.patches.closed_mesh import NotClosedError
 
-    with pytest.raises(NotClosedError, match="open surface"):
+    with pytest.raises(NotClosedError, match="closed"):
         fit_patches(samples.GENERATORS[name](2000, truth_count=1000).points)
