@@ -106,7 +106,7 @@ def foot_points(network: PatchNetwork, points: np.ndarray, patch: np.ndarray | N
         nearest = cKDTree(s).query(points)[1]
         patch, uv = sp[nearest], suv[nearest].copy()
     else:
-        patch, uv = np.asarray(patch, np.int64), np.asarray(uv, np.float64).copy()
+        patch, uv = np.array(patch, np.int64), np.array(uv, np.float64)
     s, su, sv = evaluate(network, patch, uv[:, 0], uv[:, 1])
     residual = s - points
     dist2 = (residual ** 2).sum(axis=1)

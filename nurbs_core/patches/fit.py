@@ -141,8 +141,8 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
     ref_tree = cKDTree(ref)
     for _ in range(WRAP_PASSES):
         patches, uv = grid_samples(network, 2 * network.size)
-        s, _, _ = evaluate(network, patches, uv[:, 0], uv[:, 1])
-        targets = ref[ref_tree.query(s)[1]]
+        s, su, sv = evaluate(network, patches, uv[:, 0], uv[:, 1])
+        targets = _along_normals(ref, ref_tree, s, unit(np.cross(su, sv)))
         network, seam = solver.solve(network, patches, uv, targets)
         yield NetworkPass(count, "wrap", frame.outward(network), None, None, None, math.nan,
                           math.nan, seam, network.size)
@@ -182,9 +182,13 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
     # straighten (the data term has settled by now)
     seam = math.inf
     for _ in range(POLISH_PASSES):
+        before = (network, patch, uv, dist, rms)
         network, measured = solver.solve(network, patch, uv, q)
         patch, uv, dist = _reassign(network, q, patch, uv)
         rms = float(np.sqrt(np.mean(dist ** 2)))
+        if rms > 1.01 * before[-1]:
+            network, patch, uv, dist, rms = before     # polishing no longer helps the fit
+            break
         yield NetworkPass(count, "polish", frame.outward(network), patch, uv * 1.0,
                           dist * frame.scale, rms * frame.scale, float(dist.mean()) * frame.scale,
                           measured, network.size)
@@ -202,6 +206,20 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
                       rms * frame.scale, float(dist.mean()) * frame.scale, solver.last_seam,
                       network.size, done=True, met=tol is not None and rms <= tol, message=message,
                       cp=cp)
+
+
+def _along_normals(ref: np.ndarray, tree: cKDTree, s: np.ndarray, normals: np.ndarray,
+                   k: int = 24) -> np.ndarray:
+    """For each sample s (M, 3) with unit normal (M, 3), the reference point among its k nearest
+    that lies closest to the normal line through it (a local ray cast: the nearest point alone
+    piles samples up where the network is far inside a convex part, and folds it there)."""
+    k = min(k, len(ref))
+    _, nearest = tree.query(s, k=k)
+    offsets = ref[nearest] - s[:, None, :]                      # (M, k, 3)
+    along = np.einsum("mkc,mc->mk", offsets, normals)
+    across = np.linalg.norm(offsets - along[..., None] * normals[:, None, :], axis=2)
+    best = np.argmin(across + 0.1 * np.abs(along), axis=1)
+    return ref[nearest[np.arange(len(s)), best]]
 
 
 def control_count(quads: np.ndarray, size: int) -> int:

@@ -8,7 +8,8 @@ split once into pure quads. Its in-memory call returns triangles, so the layout 
 * a vertex of valence 2 (two quads folded onto each other along two edges) is removed and its
   two quads merged into one;
 * the layout must be an oriented 2-manifold with the input's Euler characteristic (same genus,
-  nothing torn) and is oriented like the input mesh (outward on a closed, outward mesh).
+  nothing torn), oriented like the input mesh (outward on a closed, outward mesh), with no
+  quad turned over and no reflex corner (a dart folds its patch).
 
 A layout that fails these checks is retried with other target counts; the error says what
 failed when none passes.
@@ -221,4 +222,12 @@ def _orient_like(vertices, quads, tree, normals) -> np.ndarray:
         agree = -agree
     if (agree <= 0).any():
         raise LayoutError(f"{int((agree <= 0).sum())} of {len(quads)} quads face away from the mesh")
+    # every corner of every quad turns the quad's way (no dart: a reflex corner folds the patch)
+    corners = vertices[quads]
+    n = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
+    turns = np.cross(np.roll(corners, -1, axis=1) - corners, np.roll(corners, 1, axis=1) - corners)
+    reflex = np.einsum("qkc,qc->qk", turns, n) <= 0
+    if reflex.any():
+        raise LayoutError(f"{int(reflex.any(axis=1).sum())} of {len(quads)} quads have a reflex "
+                          "corner")
     return quads

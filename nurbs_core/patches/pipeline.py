@@ -31,6 +31,9 @@ AUTO_MAX = 400
 MAX_LAYOUT_TURN = 65.0
 #: ``auto`` makes at most one patch per this many cloud points.
 MIN_POINTS_PER_PATCH = 25
+#: Points the fit passes use at most (a random subset of larger clouds), and the quality.
+PASS_POINTS = 20_000
+QUALITY_POINTS = 200_000
 #: Seam angle 99th percentile (degrees) and flipped area fraction above which a warning is given.
 WARN_SEAM = 2.0
 WARN_FLIPPED = 0.01
@@ -171,14 +174,21 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     yield PatchEvent("layout", mesh=mesh, layout=layout)
     start = time.perf_counter()
     last = None
-    for last in fit_network(points, layout.vertices, layout.quads, mesh.vertices,
+    # large scans: the passes run on a random subset (the noise averages out long before);
+    # the quality is measured on (up to QUALITY_POINTS of) all points
+    rng = np.random.default_rng(0)
+    fitted = points if len(points) <= PASS_POINTS else \
+        points[rng.choice(len(points), PASS_POINTS, replace=False)]
+    measured = points if len(points) <= QUALITY_POINTS else \
+        points[rng.choice(len(points), QUALITY_POINTS, replace=False)]
+    for last in fit_network(fitted, layout.vertices, layout.quads, mesh.vertices,
                             size=options.size, stiffness=options.stiffness,
                             seam_weight=options.seam_weight, tolerance=options.tolerance,
                             max_size=options.max_size):
         yield PatchEvent("pass", layout=layout, fit_pass=last)
     timings["fit"] = time.perf_counter() - start
     start = time.perf_counter()
-    quality = network_quality(last.network, points, (mesh.vertices, _vertex_normals(mesh)))
+    quality = network_quality(last.network, measured, (mesh.vertices, _vertex_normals(mesh)))
     timings["quality"] = time.perf_counter() - start
     warnings = [last.message] if last.message else []
     if quality.seam.p99 > WARN_SEAM:
