@@ -55,6 +55,8 @@ class FitController(QObject):
         self._rate_history: deque[tuple[float, int]] = deque()
         self._is_shut_down = False
         self.snapshots_shown = 0  # for tests and the status bar
+        #: the last failure was the refusal of a shape one patch cannot hold (offer patches)
+        self.failure_needs_patches = False
         self.latest_shown: DisplaySnapshot | None = None
         self._timer = QTimer(self)
         self._timer.setInterval(RENDER_INTERVAL_MS)
@@ -80,6 +82,7 @@ class FitController(QObject):
         """Start a run from the current shape (or a fresh initialization after Reset)."""
         if self._is_shut_down or self._thread is not None:
             return False
+        self.failure_needs_patches = False
         target = self._document.target_points()
         if target is None:
             self.fit_failed.emit("Nothing to fit: open or drop a point cloud first.")
@@ -196,8 +199,8 @@ class FitController(QObject):
                 self._rate_history[-1][0] - self._rate_history[0][0] > RATE_WINDOW_S):
             self._rate_history.popleft()
 
-    @Slot(int, str, str)
-    def _on_failed(self, run_id: int, message: str, detail: str):
+    @Slot(int, str, str, bool)
+    def _on_failed(self, run_id: int, message: str, detail: str, needs_patches: bool = False):
         """A run that could not start or broke. Refusals (the engine's checks) come without a
         traceback: their message says what to change. Unexpected errors log theirs."""
         if run_id != self._run_id or self._is_shut_down:
@@ -205,6 +208,7 @@ class FitController(QObject):
         if detail:
             log.error("fit failed: %s\n%s", message, detail)
         self._restart_pending = False
+        self.failure_needs_patches = bool(needs_patches)
         self.fit_failed.emit(message or "the fit failed")
 
     @Slot(int)

@@ -131,3 +131,13 @@ def export_geometry(geometries: list[dict[str, Any]], path: str) -> int:
     shapes = [geometry_from_numpy(g) for g in geometries]
     save(shapes, path)
     return len(shapes)
+
+
+def export_network(network, path: str) -> int:
+    """Write a patch network with ``nurbs_core.io.network_io.write_network`` (format from the
+    suffix; it names the formats it has when the suffix is none of them); returns the patch
+    count."""
+    from nurbs_core.io.network_io import write_network
+
+    write_network(network, path)
+    return network.patch_count

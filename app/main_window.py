@@ -1,9 +1,11 @@
 """The main window: menus, docks, status bar and the wiring between them (no fitting logic).
 
 Layout: the VTK viewport in the centre; on the left the document tree; on the right the fit
-settings, knots and offsets; at the bottom the loss plot, the fit's quality and the log. Long
-work (reading files, tessellating patches, offsets, export) runs in :class:`JobRunner` threads,
-the fit in the controller's worker thread; this module only touches widgets, on the GUI thread.
+settings, knots, offsets and the patch network settings; at the bottom the loss plot, the fit's
+quality (and the patch network's) and the log. Long work (reading files, tessellating patches,
+offsets, export) runs in :class:`JobRunner` threads, the fits in their controllers' worker
+threads; this module only touches widgets, on the GUI thread. The toolbar's Mode box picks which
+fit Start, Pause, Stop, Reset and Export work on: one patch or a patch network.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import numpy as np
 from PySide6.QtCore import QSettings, Qt, Signal, Slot
 from PySide6.QtGui import QAction, QIcon, QKeySequence
 from PySide6.QtWidgets import (
+    QAbstractButton,
     QApplication,
     QDockWidget,
     QFileDialog,
@@ -39,9 +42,20 @@ from app.panels.fit_panel import POLICY_TEXT, FitSettingsPanel
 from app.panels.knot_panel import KnotPanel
 from app.panels.log_panel import LogPanel
 from app.panels.loss_plot import LossPlot
+from app.panels.network_quality_panel import NetworkQualityPanel
 from app.panels.offset_panel import OffsetPanel
+from app.panels.patches_panel import ModeSelector, PatchesPanel
 from app.panels.quality_panel import QualityPanel
-from app.state import Document, FitSettings, control_grid_for
+from app.patch_controller import PatchController
+from app.patch_view import PatchView
+from app.state import (
+    FIT_MODES,
+    MODE_FIELDS,
+    PATCH_FIELDS,
+    Document,
+    FitSettings,
+    control_grid_for,
+)
 from app.viewport.scene import SceneView
 from app.workers.fit_worker import DisplaySnapshot, deviation_stats
 from app.workers.jobs import JobRunner
@@ -51,6 +65,7 @@ log = logging.getLogger("app")
 MAX_RECENT = 10
 OFFSET_FIELDS = {"offset_distance", "constrain_shared_edges", "show_offsets"}
 SESSION_FILTER = "NURBS Studio session (*.json)"
+FIT_AS_PATCHES = "Fit as patches"
 
 
 def freeze_long_lived_objects():
@@ -109,11 +124,13 @@ class MainWindow(QMainWindow):
         self._store = settings_store or QSettings("NURBS Studio", "nurbs-studio")
         self._is_shut_down = False
         self._message_box: QMessageBox | None = None
+        self.fit_as_patches_button: QAbstractButton | None = None
         self.last_error = ""
         self._quality_run = 0  # the run whose snapshots the quality readout follows
 
         self.document = Document(self)
         self.controller = FitController(self.document, self)
+        self.patch_controller = PatchController(self.document, self)
         self.jobs = JobRunner(self)
         self.scene = SceneView(self)
         self.setCentralWidget(self._native_container(self.scene.widget))
@@ -126,6 +143,8 @@ class MainWindow(QMainWindow):
         self._build_actions()
         self._build_menus()
         self._build_status_bar()
+        self.patch_view = PatchView(self.patch_controller, self.scene, self.network_quality_panel,
+                                    self.status_labels, self.report, self)
         self._connect()
         self._show_settings(self.document.settings)
         self._on_state_changed("idle")
@@ -171,6 +190,8 @@ class MainWindow(QMainWindow):
         self.fit_panel = FitSettingsPanel(self.document.edit_settings)
         self.knot_panel = KnotPanel(self.document.edit_settings, self.report)
         self.offset_panel = OffsetPanel(self.document.edit_settings)
+        self.patches_panel = PatchesPanel(self.document.edit_settings)
+        self.network_quality_panel = NetworkQualityPanel()
         self.loss_plot = LossPlot()
         self.quality_panel = QualityPanel()
         self.log_panel = LogPanel()
@@ -183,13 +204,19 @@ class MainWindow(QMainWindow):
         self.knot_dock = self._dock("Knots", self.knot_panel, right, "knot_dock")
         self.offset_dock = self._dock("Offsets", self.offset_panel, right, "offset_dock", True)
         self.tabifyDockWidget(self.fit_dock, self.knot_dock)
+        self.patches_dock = self._dock("Patches", self.patches_panel, right, "patches_dock", True)
         self.tabifyDockWidget(self.knot_dock, self.offset_dock)
+        self.tabifyDockWidget(self.offset_dock, self.patches_dock)
         self.fit_dock.raise_()
         self.loss_dock = self._dock("Loss", self.loss_plot, bottom, "loss_dock")
         self.quality_dock = self._dock("Quality", self.quality_panel, bottom, "quality_dock", True)
+        self.network_quality_dock = self._dock("Patch quality", self.network_quality_panel,
+                                               bottom, "network_quality_dock", True)
         self.log_dock = self._dock("Log", self.log_panel, bottom, "log_dock")
         self.splitDockWidget(self.loss_dock, self.quality_dock, Qt.Orientation.Horizontal)
         self.splitDockWidget(self.quality_dock, self.log_dock, Qt.Orientation.Horizontal)
+        self.tabifyDockWidget(self.quality_dock, self.network_quality_dock)
+        self.quality_dock.raise_()
         self.resizeDocks([self.tree_dock, self.fit_dock], [240, 330], Qt.Orientation.Horizontal)
         self.resizeDocks([self.loss_dock, self.quality_dock, self.log_dock], [420, 560, 420],
                          Qt.Orientation.Horizontal)
@@ -220,14 +247,13 @@ class MainWindow(QMainWindow):
                                                 pixmap.SP_DialogSaveButton)
         self.screenshot_action = self._action("Save Screens&hot...", self._screenshot_dialog)
         self.quit_action = self._action("&Quit", self.close, QKeySequence.StandardKey.Quit)
-        self.start_action = self._action("&Start", self.controller.start, "F5",
-                                         pixmap.SP_MediaPlay)
-        self.pause_action = self._action("&Pause", self.controller.pause, "F6",
+        self.start_action = self._action("&Start", self.start_fit, "F5", pixmap.SP_MediaPlay)
+        self.pause_action = self._action("&Pause", lambda *_: self.active_controller().pause(), "F6",
                                          pixmap.SP_MediaPause)
-        self.resume_action = self._action("Res&ume", self.controller.resume, "F7",
-                                          pixmap.SP_MediaSeekForward)
-        self.stop_action = self._action("S&top", self.controller.stop, "Shift+F5",
-                                        pixmap.SP_MediaStop)
+        self.resume_action = self._action("Res&ume", lambda *_: self.active_controller().resume(),
+                                          "F7", pixmap.SP_MediaSeekForward)
+        self.stop_action = self._action("S&top", lambda *_: self.active_controller().stop(),
+                                        "Shift+F5", pixmap.SP_MediaStop)
         self.reset_action = self._action("&Reset", self.reset_fit, "Ctrl+R",
                                          pixmap.SP_BrowserReload)
         for action, tip in ((self.start_action, "Start fitting (continues from the current shape)"),
@@ -242,7 +268,8 @@ class MainWindow(QMainWindow):
                                 ("curve", "Fitted Curve", True),
                                 ("control_net", "Control Net", False),
                                 ("knot_lines", "Knot Lines", True), ("patches", "Patches", True),
-                                ("offsets", "Offsets", True)):
+                                ("offsets", "Offsets", True), ("network", "Patch Network", True),
+                                ("layout", "Patch Layout", True)):
             self.layer_actions[layer] = self._action(
                 text, lambda checked, layer=layer: self.set_layer_visible(layer, checked),
                 checkable=True, checked=on)
@@ -253,6 +280,10 @@ class MainWindow(QMainWindow):
                                            checkable=True, checked=False)
         self.quality_action.setToolTip("Paint the fitted surface where it is flipped, overlaps "
                                        "itself or hangs far from the cloud")
+        self.seam_action = self._action("Seam &Angle Map", self.set_seam_visible, "A",
+                                        checkable=True, checked=False)
+        self.seam_action.setToolTip("Colour the patch network by the angle between neighbouring "
+                                    "patches along their seams")
         self.camera_action = self._action("&Fit View", self.scene.reset_camera, "F")
 
     def _build_menus(self):
@@ -302,11 +333,13 @@ class MainWindow(QMainWindow):
             view_menu.addAction(action)
         view_menu.addAction(self.deviation_action)
         view_menu.addAction(self.quality_action)
+        view_menu.addAction(self.seam_action)
         view_menu.addSeparator()
         view_menu.addAction(self.camera_action)
         view_menu.addSeparator()
         for dock in (self.tree_dock, self.fit_dock, self.knot_dock, self.offset_dock,
-                     self.loss_dock, self.quality_dock, self.log_dock):
+                     self.patches_dock, self.loss_dock, self.quality_dock,
+                     self.network_quality_dock, self.log_dock):
             view_menu.addAction(dock.toggleViewAction())
 
         toolbar = self.addToolBar("Fit")
@@ -314,6 +347,9 @@ class MainWindow(QMainWindow):
         toolbar.setToolButtonStyle(Qt.ToolButtonStyle.ToolButtonTextBesideIcon)
         toolbar.addAction(self.open_action)
         toolbar.addSeparator()
+        toolbar.addWidget(QLabel(" Mode "))
+        self.mode_selector = ModeSelector(self.document.edit_settings)
+        toolbar.addWidget(self.mode_selector)
         for action in (self.start_action, self.pause_action, self.resume_action,
                        self.stop_action, self.reset_action):
             toolbar.addAction(action)
@@ -336,15 +372,21 @@ class MainWindow(QMainWindow):
         doc.content_changed.connect(self._on_content_changed)
         doc.fitted_changed.connect(self._on_fitted_changed)
         ctl.state_changed.connect(self._on_state_changed)
+        self.patch_controller.state_changed.connect(self._on_state_changed)
+        self.patch_controller.snapshot_shown.connect(self._on_patch_snapshot)
+        self.patch_controller.losses_received.connect(self.loss_plot.append)
         ctl.snapshot_shown.connect(self._on_snapshot_shown)
         ctl.losses_received.connect(self.loss_plot.append)
         ctl.progress_changed.connect(self._on_progress)
         ctl.fit_finished.connect(self._on_fit_finished)
-        ctl.fit_failed.connect(lambda message: self.report(message, error=True))
+        ctl.fit_failed.connect(lambda message: self.report(
+            message, error=True, offer_patches=self.controller.failure_needs_patches))
 
     # --- messages --------------------------------------------------------------------------------
-    def report(self, message: str, error: bool = False):
-        """Tell the user: log dock, status bar, and a (non-blocking) dialog for errors."""
+    def report(self, message: str, error: bool = False, offer_patches: bool = False):
+        """Tell the user: log dock, status bar, and a (non-blocking) dialog for errors.
+        offer_patches: the dialog gets a "Fit as patches" button (switch to Patches mode and
+        start the patch fit)."""
         (log.error if error else log.info)(message)
         self.statusBar().showMessage(message, 8000)
         if error:
@@ -353,8 +395,19 @@ class MainWindow(QMainWindow):
                 self._message_box.close()
             self._message_box = QMessageBox(QMessageBox.Icon.Warning, "NURBS Studio", message,
                                             QMessageBox.StandardButton.Ok, self)
+            self.fit_as_patches_button = None
+            if offer_patches:
+                self.fit_as_patches_button = self._message_box.addButton(
+                    FIT_AS_PATCHES, QMessageBox.ButtonRole.AcceptRole)
+                self._message_box.setDefaultButton(self.fit_as_patches_button)
+                self._message_box.buttonClicked.connect(self._on_message_button)
             self._message_box.open()
             self.error_shown.emit(message)
+
+    @Slot(QAbstractButton)
+    def _on_message_button(self, button: QAbstractButton):
+        if button is not None and button is self.fit_as_patches_button:
+            self.fit_as_patches()
 
     # --- loading ---------------------------------------------------------------------------------
     def open_files(self, paths: list[str]) -> bool:
@@ -372,6 +425,7 @@ class MainWindow(QMainWindow):
 
     def _apply_loaded(self, paths: list[str], loaded: loading.LoadedFiles):
         self.controller.reset()
+        self._reset_patches()
         self.loss_plot.clear()
         for label in self.status_labels.values():
             label.setText("-")
@@ -506,7 +560,7 @@ class MainWindow(QMainWindow):
 
     def _rebuild_tree(self):
         self.tree.rebuild(self.document, self.scene.is_visible, self.deviation_action.isChecked(),
-                          self.quality_action.isChecked())
+                          self.quality_action.isChecked(), self.seam_action.isChecked())
 
     def set_layer_visible(self, layer: str, visible: bool):
         if layer == "deviation":
@@ -514,6 +568,9 @@ class MainWindow(QMainWindow):
             return
         if layer == "quality":
             self.set_quality_visible(visible)
+            return
+        if layer == "seam":
+            self.set_seam_visible(visible)
             return
         self.scene.set_visible(layer, visible)
         action = self.layer_actions.get(layer)
@@ -532,6 +589,12 @@ class MainWindow(QMainWindow):
         _set_checked_quietly(self.quality_action, visible)
         self._rebuild_tree()
 
+    def set_seam_visible(self, visible: bool):
+        """Colour the patch network by its seam angles (with a colour bar in degrees)."""
+        self.scene.network.set_seam_visible(visible)
+        _set_checked_quietly(self.seam_action, visible)
+        self._rebuild_tree()
+
     def set_target_visible(self, index: int, visible: bool):
         """Hide a cloud from the view and from the fit target (applies to the next run)."""
         self.document.targets[index].visible = visible
@@ -543,6 +606,9 @@ class MainWindow(QMainWindow):
 
     # --- settings --------------------------------------------------------------------------------
     def _show_settings(self, settings: FitSettings):
+        self.mode_selector.show_settings(settings)
+        self.patches_panel.show_settings(settings)
+        self.scene.set_mode(settings.fit_mode)
         self.fit_panel.show_settings(settings)
         self.offset_panel.show_settings(settings)
         self.knot_panel.show_state(settings, self.document.fitted)
@@ -551,26 +617,91 @@ class MainWindow(QMainWindow):
     def _on_settings_changed(self, old: FitSettings, new: FitSettings):
         self._show_settings(new)
         changed = _changed_fields(old, new)
-        if changed - OFFSET_FIELDS:
-            if self.controller.state in ("running", "paused", "stopping"):
-                self.controller.schedule_restart()
-                self.statusBar().showMessage("Settings changed: restarting the fit from the "
-                                             "current shape", 4000)
-            else:
-                self.statusBar().showMessage("Settings changed: they apply at the next Start",
-                                             4000)
+        if changed & MODE_FIELDS:
+            self._mode_changed(new.fit_mode)
+        if changed & PATCH_FIELDS:
+            self._restart_or_defer(self.patch_controller)
+        if changed - OFFSET_FIELDS - PATCH_FIELDS - MODE_FIELDS:
+            self._restart_or_defer(self.controller)
         if changed & OFFSET_FIELDS:
             self.offsets.request()
 
+    def _restart_or_defer(self, controller):
+        """The single-patch policy, for either fit: restart a running or paused run with the new
+        settings, else apply them at the next Start (a patch fit restarts from the cloud)."""
+        if controller.state in ("running", "paused", "stopping"):
+            controller.schedule_restart()
+            start = "the cloud" if controller is self.patch_controller else "the current shape"
+            self.statusBar().showMessage(f"Settings changed: restarting the fit from {start}",
+                                         4000)
+        else:
+            self.statusBar().showMessage("Settings changed: they apply at the next Start", 4000)
+
+    def _mode_changed(self, mode: str):
+        """The other fit stops (a run of the mode just left would draw where it is hidden)."""
+        other = self.controller if mode == "patches" else self.patch_controller
+        other.stop()
+        if mode == "patches":
+            self.patches_dock.raise_()
+            self.network_quality_dock.raise_()
+        else:
+            self.fit_dock.raise_()
+            self.quality_dock.raise_()
+        self._on_state_changed()
+        self._rebuild_tree()
+        self.scene.reset_camera()
+        what = "a patch network" if mode == "patches" else "one patch"
+        self.statusBar().showMessage(f"Mode: {dict(FIT_MODES)[mode]}: Start fits {what}.", 4000)
+
     # --- fit -------------------------------------------------------------------------------------
+    def active_controller(self) -> FitController | PatchController:
+        """The controller of the fit mode on show (what Start, Pause, Stop and Reset drive)."""
+        return self.patch_controller if self.document.settings.fit_mode == "patches" else (
+            self.controller)
+
+    def start_fit(self, *_args) -> bool:
+        """Start the fit of the current mode (not while the other mode's fit still runs)."""
+        if self.controller.is_busy() or self.patch_controller.is_busy():
+            return False
+        if self.active_controller() is self.patch_controller:
+            self.network_quality_dock.raise_()
+            self.loss_plot.clear()  # a network starts from the cloud: a new curve
+            return self.patch_controller.start()
+        return self.controller.start()
+
+    def fit_as_patches(self) -> bool:
+        """Switch to Patches mode (an undoable settings edit) and start the patch fit."""
+        if self._message_box is not None:
+            self._message_box.close()
+        self.document.edit_settings("Fit mode", fit_mode="patches")
+        return self.start_fit()
+
     def reset_fit(self):
+        if self.active_controller() is self.patch_controller:
+            self._reset_patches()
+            self.report("Reset: the patch network was discarded.")
+            return
         self.controller.reset()
         self.loss_plot.clear()
         self.report("Reset: the next Start initializes a new shape.")
 
+    def _reset_patches(self):
+        self.patch_controller.reset()
+        self.loss_plot.clear()
+        self.patch_view.clear()
+        self._rebuild_tree()
+
+    @Slot(object)
+    def _on_patch_snapshot(self, snapshot):
+        if snapshot.network is not None and not self.tree.shows_network:
+            self._rebuild_tree()  # the first network of a run: list it in the tree
+
     @Slot(str)
-    def _on_state_changed(self, state: str):
-        busy = state in ("running", "paused", "stopping")
+    def _on_state_changed(self, *_state):
+        """Either controller's state changed: the actions follow the active one's (Start waits
+        until neither runs)."""
+        state = self.active_controller().state
+        busy = self.controller.is_busy() or self.patch_controller.is_busy() or state != "idle"
         self.start_action.setEnabled(not busy)
         self.pause_action.setEnabled(state == "running")
         self.resume_action.setEnabled(state == "paused")
@@ -639,6 +770,10 @@ class MainWindow(QMainWindow):
             self.export_to(path)
 
     def export_to(self, path: str) -> bool:
+        """Write what the mode shows: the patch network in Patches mode, else the fitted shape,
+        loaded patches and offsets."""
+        if self.document.settings.fit_mode == "patches":
+            return self.export_network(path)
         geometries = self.document.all_geometry()
         if not geometries:
             self.report("Nothing to export yet: run a fit or open NURBS files first.", error=True)
@@ -649,8 +784,22 @@ class MainWindow(QMainWindow):
                          lambda exc: self._export_failed(path, exc))
         return True
 
-    def _exported(self, path: str, count: int):
-        self.report(f"Exported {count} shape(s) to {path}")
+    def export_network(self, path: str) -> bool:
+        """Write the patch network with ``nurbs_core.io.write_network`` (format from the suffix:
+        one joined B-rep in .3dm, a sewn solid in .step / .iges, our .json, a welded mesh)."""
+        network = self.document.network
+        if network is None:
+            self.report("No patch network to export yet: Start a fit in Patches mode first.",
+                        error=True)
+            self.export_finished.emit(path, False)
+            return False
+        self.jobs.submit("export", lambda: loading.export_network(network, path),
+                         lambda count: self._exported(path, count, "patch(es) of the network"),
+                         lambda exc: self._export_failed(path, exc))
+        return True
+
+    def _exported(self, path: str, count: int, what: str = "shape(s)"):
+        self.report(f"Exported {count} {what} to {path}")
         self.export_finished.emit(path, True)
 
     def _export_failed(self, path: str, exc: Exception):
@@ -689,6 +838,7 @@ class MainWindow(QMainWindow):
             self.report(f"{exc}\nThe document was left unchanged.", error=True)
             return False
         self.controller.reset()
+        self._reset_patches()
         self.loss_plot.clear()
         self.document.apply_session(session)
         self.report(f"Session opened from {path}")
@@ -711,7 +861,8 @@ class MainWindow(QMainWindow):
 
     # --- shutdown --------------------------------------------------------------------------------
     def live_timers(self) -> int:
-        return (self.controller.live_timers() + self.scene.live_timers()
+        return (self.controller.live_timers() + self.patch_controller.live_timers()
+                + self.scene.live_timers()
                 + self.loss_plot.live_timers())
 
     def shutdown(self):
@@ -720,7 +871,9 @@ class MainWindow(QMainWindow):
             return
         self._is_shut_down = True
         self.fit_panel.cancel_pending()
+        self.patches_panel.cancel_pending()
         self.controller.shutdown()
+        self.patch_controller.shutdown()  # joined before the render window goes
         self.jobs.shutdown()
         self.loss_plot.stop()
         logging.getLogger().removeHandler(self.log_panel.handler)

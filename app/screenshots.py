@@ -2,8 +2,10 @@
 
 Drives the real window through the main states a user sees: the demo just opened, a fit
 converging, the deviation map after the fit, multi-patch offsets (the paper's two-patch turbine
-blade, when its data is on this machine), a 2D curve fit, and the quality map of a sheet rolled
-1.5 turns: fitted cleanly by default, and folded when its (u, v) come from the principal plane.
+blade, when its data is on this machine), a 2D curve fit, the quality map of a sheet rolled
+1.5 turns: fitted cleanly by default, and folded when its (u, v) come from the principal plane,
+and Patches mode: a torus fitted with a patch network (its layout drawn on it), then its seam
+angles. ``--only single`` or ``--only patches`` makes one of the two sets.
 """
 
 from __future__ import annotations
@@ -39,9 +41,19 @@ def sheet_cloud(path: Path) -> Path:
     return path
 
 
+def torus_cloud(path: Path) -> Path:
+    """``nurbs_core.samples.torus(3000)``: a closed object of genus 1."""
+    from nurbs_core import samples
+
+    np.savetxt(path, samples.torus(3000).points, fmt="%.6f")
+    return path
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path)
+    parser.add_argument("--only", choices=("single", "patches"),
+                        help="make only the single-patch (01-07) or the Patches mode (08-09) set")
     arguments = parser.parse_args(argv)
     arguments.out.mkdir(parents=True, exist_ok=True)
 
@@ -80,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
             handler(*args)
         signal.connect(wrapper)
 
-    # 1. the demo, ready to fit
+    # 1. the demo, ready to fit (the other single-patch shots follow from it)
     def demo():
         once(window.files_loaded, lambda ok: later(lambda: (shot("01_demo_loaded.png"),
                                                              next_step())))
@@ -171,9 +183,34 @@ def main(argv: list[str] | None = None) -> int:
         window.scene.plotter.camera.zoom(1.15)  # pyvista's zoom reframes what is visible
         window.set_layer_visible("surface", True)
 
-    steps.extend([converging, offsets, curve, quality_clean, quality_folded])
+    # 8. Patches mode: a torus fitted with a patch network, 9. its seam angles
+    def patches_mode():
+        window.set_quality_visible(False)
+        window.set_deviation_visible(True)
+
+        def loaded(ok):
+            window.document.edit_settings("Fit mode", fit_mode="patches")
+            window.set_layer_visible("cloud", False)  # the points sit on the surface: clutter
+            once(window.patch_controller.fit_finished, lambda snapshot: later(lambda: (
+                frame(), shot("08_patches_mode.png"), next_step()), 600))
+            window.start_fit()
+        once(window.files_loaded, loaded)
+        window.open_files([str(torus_cloud(scratch / "torus.xyz"))])
+
+    def seam_map():
+        window.set_seam_visible(True)
+        later(lambda: (shot("09_seam_angles.png"), next_step()), 600)
+
+    def frame():
+        window.scene.reset_camera()
+        window.scene.plotter.camera.zoom(1.25)
+
+    single = [demo, converging, offsets, curve, quality_clean, quality_folded]
+    patches = [patches_mode, seam_map]
+    steps.extend({"single": single, "patches": patches}.get(arguments.only, single + patches))
     window.controller.fit_failed.connect(lambda message: failures.append(message))
-    demo()
+    window.patch_controller.fit_failed.connect(lambda message: failures.append(message))
+    next_step()
     qapp.exec()
     for message in failures:
         print(f"failed: {message}", file=sys.stderr)

@@ -31,6 +31,9 @@ INITIALIZATIONS = ("pca", "least_squares", "random")
 #: FitConfig.parameterization) in display order, with their labels (a test checks they agree).
 SOLVERS = (("auto", "auto"), ("least_squares", "least squares"), ("gradient", "gradient"))
 PARAMETERIZATIONS = (("auto", "auto"), ("mesh", "mesh"), ("plane", "plane"))
+#: How Start fits the cloud: one NURBS surface (or curve), or a network of patches over a quad
+#: layout (closed objects: ``nurbs_core.patches``).
+FIT_MODES = (("single", "Single patch"), ("patches", "Patches"))
 TOLERANCE_HINT = ("Tolerance: a positive distance in the cloud's units (e.g. 0.01), or empty / "
                   "\"auto\" to derive it from the cloud's noise")
 
@@ -128,6 +131,15 @@ class FitSettings:
     offset_distance: float = 0.1
     constrain_shared_edges: bool = True
     show_offsets: bool = False
+    #: "single" or "patches" (:data:`FIT_MODES`)
+    fit_mode: str = "single"
+    #: the patch network fit (``nurbs_core.patches.pipeline.PatchOptions``): target patch count
+    #: and control points per patch side (None: automatic), fairing stiffness and seam weight
+    #: (the engine's defaults: a test checks they agree)
+    patch_count: int | None = None
+    patch_size: int | None = None
+    patch_stiffness: float = 1e-4
+    seam_weight: float = 2.0
 
     @property
     def loss_text(self) -> str:
@@ -157,6 +169,14 @@ class FitSettings:
         declared = {f.name for f in dataclasses.fields(FitConfig)}
         return {key: value for key, value in wanted.items() if key in declared}
 
+    def patch_options(self):
+        """The engine's ``PatchOptions`` for these settings (not validated here)."""
+        from nurbs_core.patches.pipeline import PatchOptions  # lazy: no torch at import
+
+        return PatchOptions(patches="auto" if self.patch_count is None else self.patch_count,
+                            size=self.patch_size, stiffness=self.patch_stiffness,
+                            seam_weight=self.seam_weight)
+
     def to_json(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
         data["loss"] = self.loss_text
@@ -175,6 +195,12 @@ class FitSettings:
             if values.get(name) is not None:
                 values[name] = tuple(float(k) for k in values[name])
         return cls(**values)
+
+
+#: The settings of the patch network fit (a change restarts a running patch fit, not the
+#: single-patch one), and the mode switch.
+PATCH_FIELDS = frozenset({"patch_count", "patch_size", "patch_stiffness", "seam_weight"})
+MODE_FIELDS = frozenset({"fit_mode"})
 
 
 def with_changes(settings: FitSettings, **changes) -> FitSettings:
@@ -230,6 +256,8 @@ class Document(QObject):
         self.patches: list[dict[str, Any]] = []
         self.patch_names: list[str] = []
         self.fitted: dict[str, Any] | None = None
+        #: the fitted patch network (``nurbs_core.patches.network.PatchNetwork``) or None
+        self.network: Any = None
         self.offsets = OffsetDisplay()
         self.settings = FitSettings()
         self.undo_stack = QUndoStack(self)
@@ -253,6 +281,7 @@ class Document(QObject):
         """Swap in freshly loaded files (all already validated); drops the fit and offsets."""
         self.targets, self.patches, self.patch_names = targets, patches, patch_names
         self.fitted = None
+        self.network = None
         self.offsets = OffsetDisplay()
         self.content_changed.emit()
         self.fitted_changed.emit()
@@ -264,6 +293,10 @@ class Document(QObject):
         self.fitted = geometry
         if notify:
             self.fitted_changed.emit()
+
+    def set_network(self, network: Any):
+        """The patch network now shown (the newest of a live run, or None after Reset)."""
+        self.network = network
 
     def set_offsets(self, offsets: OffsetDisplay):
         self.offsets = offsets

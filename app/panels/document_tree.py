@@ -1,4 +1,5 @@
-"""The document tree: point clouds, fitted shape, patches, offsets; checkboxes set visibility."""
+"""The document tree: point clouds, fitted shape, patch network, patches, offsets; checkboxes set
+visibility."""
 
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ class DocumentTree(QTreeWidget):
         self._set_layer_visible, self._set_target_visible = set_layer_visible, set_target_visible
         self._updating = False
         self.shows_fit = False
+        self.shows_network = False
         self.setHeaderLabels(["Document"])
         self.itemChanged.connect(self._item_changed)
 
@@ -33,7 +35,8 @@ class DocumentTree(QTreeWidget):
         return item
 
     def rebuild(self, document: Document, layer_visible: Callable[[str], bool],
-                deviation_visible: bool, quality_visible: bool = False):
+                deviation_visible: bool, quality_visible: bool = False,
+                seam_visible: bool = False):
         self._updating = True
         try:
             self.clear()
@@ -57,6 +60,16 @@ class DocumentTree(QTreeWidget):
                     self._item(top, "Quality map", ("layer", "quality"), quality_visible,
                                "paint the surface where it is flipped, overlaps itself or hangs "
                                "far from the cloud")
+            network = document.network
+            self.shows_network = network is not None
+            if network is not None:
+                top = self._item(self, f"Patch network ({network.patch_count} patches)",
+                                 ("layer", "network"), layer_visible("network"),
+                                 "the fitted patch network (Patches mode)")
+                self._item(top, "Layout", ("layer", "layout"), layer_visible("layout"),
+                           "patch boundaries and irregular corners (3 or 5+ patches meet)")
+                self._item(top, "Seam angle map", ("layer", "seam"), seam_visible,
+                           "colour the network by the angle between neighbouring patches")
             if document.patches:
                 patches = self._item(self, f"Patches ({len(document.patches)})",
                                      ("layer", "patches"), layer_visible("patches"))

@@ -1,5 +1,10 @@
 """The 3D scene: point cloud, fitted surface or curve, control net, knot lines, deviation map,
-quality map, loaded patches and their offsets.
+quality map, loaded patches and their offsets, and the patch network
+(:mod:`app.viewport.network_layers`).
+
+The fit mode decides which fit is on show: in Patches mode the single fit's layers (surface,
+curve, control net, knot lines, deviation and quality maps) are hidden and the network's shown,
+and the other way round.
 
 Meshes are created once per layer and then updated in place (``mesh.points = ...`` or
 ``copy_from`` when the topology changes), never re-added per frame. Rendering is explicit
@@ -17,6 +22,7 @@ from PySide6.QtCore import QObject, QTimer
 from PySide6.QtWidgets import QWidget
 from pyvistaqt import QtInteractor
 
+from app.viewport.network_layers import NetworkLayers
 from app.workers.display import DisplayGeometry
 from app.workers.quality import FAR, FINE, FLIPPED, OVERLAP
 
@@ -53,6 +59,9 @@ QUALITY_PENDING = "Quality map: shown when the fit ends"
 
 #: Layers the document tree and the View menu toggle.
 LAYERS = ("cloud", "surface", "curve", "control_net", "knot_lines", "patches", "offsets")
+#: Layers of the single-patch fit (hidden in Patches mode) and of the network (shown only then).
+SINGLE_FIT_LAYERS = ("surface", "curve", "control_net", "knot_lines")
+NETWORK_LAYERS = ("network", "layout")
 
 
 def nice_ceiling(value: float) -> float:
@@ -151,6 +160,7 @@ class SceneView(QObject):
         self._quality_cells: np.ndarray | None = None
         self._legend = None
         self._extra_meshes: dict[str, list] = {"patches": [], "offsets": []}
+        self._mode = "single"
         self._corners = self.plotter.add_text(" ", position="upper_right", font_size=9,
                                               color="#222222", name="corner_texts")
         self._corners.SetText(UPPER_RIGHT, "")
@@ -160,6 +170,7 @@ class SceneView(QObject):
         self._render_timer.setSingleShot(True)
         self._render_timer.setInterval(RENDER_INTERVAL_MS)
         self._render_timer.timeout.connect(self.render_now)
+        self.network = NetworkLayers(self.plotter, self.request_render)
 
     @property
     def widget(self) -> QWidget:
@@ -182,6 +193,8 @@ class SceneView(QObject):
         if actor is None:
             return
         visible = self._visible.get(name, True) and self._meshes[name].n_points > 0
+        if name in SINGLE_FIT_LAYERS and self._mode != "single":
+            visible = False
         actor.SetVisibility(visible)
         if name == "cloud":
             self._update_scalar_bar()
@@ -234,7 +247,22 @@ class SceneView(QObject):
         self.request_render()
 
     def deviation_shown(self) -> bool:
-        return self._deviation_on and self._has_deviation
+        return self._deviation_on and self._has_deviation and self._mode == "single"
+
+    # --- fit mode --------------------------------------------------------------------------------
+    def set_mode(self, mode: str):
+        """"single" or "patches": which fit's layers are on show."""
+        self._mode = mode
+        self.network.set_enabled(mode == "patches")
+        for name in SINGLE_FIT_LAYERS:
+            self._apply_visibility(name)
+        self._update_scalar_bar()
+        self._corner_text(UPPER_RIGHT, self._stats_text if self.deviation_shown() else "")
+        self._apply_quality()
+
+    @property
+    def mode(self) -> str:
+        return self._mode
 
     def _update_scalar_bar(self):
         actor = self._actors.get("cloud")
@@ -320,7 +348,7 @@ class SceneView(QObject):
 
     def quality_shown(self) -> bool:
         """The quality map is switched on and painted (a surface fit has ended)."""
-        return self._quality_on and self._quality_cells is not None
+        return self._quality_on and self._quality_cells is not None and self._mode == "single"
 
     def quality_cells(self) -> np.ndarray | None:
         return None if self._quality_cells is None else self._quality_cells.copy()
@@ -354,8 +382,9 @@ class SceneView(QObject):
             actor.mapper.scalar_visibility = self.quality_shown()
         if self._legend is not None:
             self._legend.SetVisibility(self.quality_shown() and self._visible["surface"])
-        pending = self._quality_on and self._quality_cells is None and (
-            self._meshes.get("surface") is not None and self._meshes["surface"].n_points > 0)
+        surface = self._meshes.get("surface")
+        pending = (self._quality_on and self._quality_cells is None and self._mode == "single"
+                   and surface is not None and surface.n_points > 0)
         self._corner_text(UPPER_LEFT, QUALITY_PENDING if pending else "")
         self.request_render()
 
@@ -383,6 +412,9 @@ class SceneView(QObject):
         self.request_render()
 
     def set_visible(self, layer: str, visible: bool):
+        if layer in NETWORK_LAYERS:
+            self.network.set_visible(layer, visible)
+            return
         self._visible[layer] = bool(visible)
         if layer in self._extra_meshes:
             for name in self._extra_meshes[layer]:
@@ -396,7 +428,7 @@ class SceneView(QObject):
         self.request_render()
 
     def is_visible(self, layer: str) -> bool:
-        return self._visible[layer]
+        return self.network.is_visible(layer) if layer in NETWORK_LAYERS else self._visible[layer]
 
     def set_note(self, text: str):
         """A line of text in the lower-right corner (e.g. the offsets' largest gap)."""
@@ -452,7 +484,8 @@ class SceneView(QObject):
 
     def _visible_points(self) -> np.ndarray | None:
         parts = [mesh.points for name, mesh in self._meshes.items()
-                 if mesh.n_points and self._visible.get(name, True)]
+                 if mesh.n_points and self._actors[name].GetVisibility()]
+        parts += self.network.visible_points()
         for group in ("patches", "offsets"):
             for name in self._extra_meshes[group]:
                 actor = self.plotter.actors.get(name)

@@ -68,25 +68,37 @@ class DisplaySnapshot:
 
 class FitProblem(Exception):
     """A fit that cannot run or ended in failure, with a message that explains it all (the log
-    gets no traceback)."""
+    gets no traceback). needs_patches: the shape is one a single patch cannot hold (closed, a
+    tube, handles): the window offers the patch network fit."""
+
+    def __init__(self, message: str, needs_patches: bool = False):
+        super().__init__(message)
+        self.needs_patches = needs_patches
+
+
+def needs_patches(error: ValueError) -> bool:
+    """The engine refused a shape one patch cannot hold (``NotADiskError`` behind its
+    ValueError)."""
+    from nurbs_core.surfacing.parameterize import NotADiskError
+
+    return isinstance(error.__context__, NotADiskError)
 
 
 def refusal_message(error: ValueError) -> str:
     """What to tell the user when the engine refuses the input (ValueError before iterating).
 
-    The refusal of a shape one patch cannot hold (``NotADiskError`` behind the engine's
-    ValueError) gets the app's way out: the Force single patch option."""
-    from nurbs_core.surfacing.parameterize import NotADiskError
-
-    reason = error.__context__ if isinstance(error.__context__, NotADiskError) else None
-    if reason is None:
+    The refusal of a shape one patch cannot hold (:func:`needs_patches`) gets the app's ways
+    out: Patches mode (the window's "Fit as patches" button) and the Force single patch
+    option."""
+    if not needs_patches(error):
         return f"Cannot fit this target: {error}"
-    text = str(reason)
+    text = str(error.__context__)
     if "multi-patch" not in text:
         text += "; split it into patches (multi-patch surfacing)"
     return (f"The fit was refused: {text}.\n"
-            "To fit one patch anyway, tick \"Force single patch\" in Fit settings (expect folds: "
-            "View > Quality Map shows them). The document was left unchanged.")
+            "Fit as patches fits a network of patches to it (Patches mode). To fit one patch "
+            "anyway, tick \"Force single patch\" in Fit settings (expect folds: View > Quality "
+            "Map shows them). The document was left unchanged.")
 
 
 #: Large clouds: measure the deviation of a fixed random sample (NaN elsewhere, drawn grey), so
@@ -186,7 +198,8 @@ class FitWorker(QObject):
     """Runs one fit. Signals carry plain Python/numpy payloads (queued to the GUI thread)."""
 
     snapshot_ready = Signal(object)  # DisplaySnapshot
-    run_failed = Signal(int, str, str)  # run id, message, traceback ("" when the message says all)
+    #: run id, message, traceback ("" when the message says all), the shape needs patches
+    run_failed = Signal(int, str, str, bool)
     run_finished = Signal(int)  # run id, always emitted last
 
     def __init__(self, request: FitRequest, stop_token):
@@ -210,10 +223,10 @@ class FitWorker(QObject):
             lower_thread_priority()
             self._run(request)
         except FitProblem as exc:
-            self.run_failed.emit(request.run_id, str(exc), "")
+            self.run_failed.emit(request.run_id, str(exc), "", exc.needs_patches)
         except Exception as exc:  # noqa: BLE001 - reported to the user, never re-raised
             self.run_failed.emit(request.run_id, f"{type(exc).__name__}: {exc}",
-                                 traceback.format_exc(limit=6))
+                                 traceback.format_exc(limit=6), False)
         finally:
             self.run_finished.emit(request.run_id)
 
@@ -231,7 +244,7 @@ class FitWorker(QObject):
             initial = starting_geometry(request)
             snapshots = iter_fit(request.target, config, stop=self._stop, initial=initial)
         except ValueError as exc:
-            raise FitProblem(refusal_message(exc)) from None
+            raise FitProblem(refusal_message(exc), needs_patches(exc)) from None
         for snapshot in snapshots:
             if not snapshot.geometry:  # the engine caught a failure and says why
                 raise FitProblem(f"The fit failed: {snapshot.message or snapshot.status}")

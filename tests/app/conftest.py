@@ -38,4 +38,5 @@ def window(qtbot, tmp_path):
     yield win
     win.close()
     assert not win.controller.is_busy()
+    assert not win.patch_controller.is_busy()
     assert win.jobs.active_count() == 0

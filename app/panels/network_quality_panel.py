@@ -1,0 +1,107 @@
+"""The patch network's quality readout: patch count, gaps, seam and corner angles, flipped area,
+area, distance to the cloud, and the engine's warnings.
+
+It shows the measures of :func:`nurbs_core.patches.measures.network_quality` (a plain dict,
+``NetworkQuality.as_dict()``, carried by the final snapshot) and computes nothing.
+"""
+
+from __future__ import annotations
+
+import math
+
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QGridLayout, QLabel, QVBoxLayout, QWidget
+
+WARNING_COLOR = "#b00020"
+
+#: (key, label, tooltip) in reading order
+ROWS = (
+    ("patches", "Patches", "patches in the network and control points per patch side"),
+    ("gap", "Largest gap", "largest distance between two patches along a shared edge, and as a "
+                           "fraction of the cloud's bounding-box diagonal (0 up to rounding: the "
+                           "patches share their boundary control points)"),
+    ("seam", "Seam angle", "angle between the normals of the two patches along every shared "
+                           "edge (degrees): median, 99th percentile, largest"),
+    ("corners", "Corner angle", "largest angle between the normals of the patches meeting at a "
+                                "layout corner (degrees), at regular (4 patches) and irregular "
+                                "corners"),
+    ("flipped", "Flipped area", "share of the area whose normal points inward (folds)"),
+    ("area", "Area", "the network's surface area (cloud units squared)"),
+    ("c2s", "Cloud to surface", "mean, RMS and 99th percentile distance of the cloud's points "
+                                "to the network"),
+)
+
+
+def _number(value: float) -> str:
+    return f"{value:.4g}" if math.isfinite(value) else "-"
+
+
+def _degrees(value: float) -> str:
+    return f"{value:.2f}\N{DEGREE SIGN}" if math.isfinite(value) else "-"
+
+
+class NetworkQualityPanel(QWidget):
+    """``values[key]`` are the value labels (keys of :data:`ROWS`); ``status`` the headline and
+    ``warnings`` the engine's warnings."""
+
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(parent)
+        layout = QVBoxLayout(self)
+        self.status = QLabel()
+        self.status.setObjectName("network_quality_status")
+        self.status.setWordWrap(True)
+        layout.addWidget(self.status)
+        grid = QGridLayout()
+        grid.setHorizontalSpacing(10)
+        grid.setVerticalSpacing(2)
+        self.values: dict[str, QLabel] = {}
+        for row, (key, text, tip) in enumerate(ROWS):
+            name, value = QLabel(text), QLabel("-")
+            for label in (name, value):
+                label.setToolTip(tip)
+            value.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+            grid.addWidget(name, row, 0)
+            grid.addWidget(value, row, 1)
+            self.values[key] = value
+        grid.setColumnStretch(1, 1)
+        layout.addLayout(grid)
+        self.warnings = QLabel()
+        self.warnings.setObjectName("network_warnings")
+        self.warnings.setWordWrap(True)
+        self.warnings.setStyleSheet(f"QLabel {{ color: {WARNING_COLOR}; }}")
+        layout.addWidget(self.warnings)
+        layout.addStretch(1)
+        self.clear()
+
+    def clear(self, note: str = "No patch network yet: choose Mode > Patches and Start."):
+        self.status.setText(note)
+        for label in self.values.values():
+            label.setText("-")
+        self.warnings.setText("")
+
+    def show_running(self, text: str):
+        """A run's progress (the stage); the measures come when it ends."""
+        self.status.setText(f"{text}. The network is measured when the fit ends.")
+
+    def show_result(self, headline: str, quality: dict | None, warnings: list[str]):
+        self.status.setText(headline + ("" if quality else " (not measured)"))
+        self.warnings.setText("\n".join(f"Warning: {w}" for w in warnings))
+        if not quality:
+            return
+        seam = quality["seam"]
+        get = lambda key, where=quality: float(where.get(key, math.nan))  # noqa: E731
+        self.values["patches"].setText(f"{quality['patches']} ({quality['size']} x "
+                                       f"{quality['size']} control points each)")
+        self.values["gap"].setText(f"{_number(get('gap', seam))} "
+                                   f"({_number(get('gap_relative'))} of the diagonal)")
+        self.values["seam"].setText(f"median {_degrees(get('median', seam))}, p99 "
+                                    f"{_degrees(get('p99', seam))}, max {_degrees(get('max', seam))}")
+        self.values["corners"].setText(f"regular max {_degrees(get('regular_corner_max', seam))}, "
+                                       f"irregular max "
+                                       f"{_degrees(get('irregular_corner_max', seam))}")
+        flipped = get("flipped_fraction")
+        self.values["flipped"].setText(f"{100 * flipped:.2f}%" if math.isfinite(flipped) else
+                                       "- (not measured for a stopped fit)")
+        self.values["area"].setText(_number(get("area")))
+        self.values["c2s"].setText(f"mean {_number(get('c2s_mean'))}, RMS "
+                                   f"{_number(get('c2s_rms'))}, p99 {_number(get('c2s_p99'))}")

@@ -1,0 +1,193 @@
+"""The patch worker: a QObject in its own QThread that runs the patch network fit.
+
+It iterates :func:`nurbs_core.patches.pipeline.iter_patch_fit` (the engine yields after the
+mesh, the layout and every pass) and turns events into :class:`PatchSnapshot` values: numpy
+display arrays (:mod:`app.workers.network_display`), the pass statistics and, at the end, the
+engine's quality measures and warnings. Stop and pause are honoured between events; pass
+snapshots are throttled so building them never costs the fit more than a fraction of its time.
+Nothing here touches Qt widgets or VTK.
+"""
+
+from __future__ import annotations
+
+import gc
+import math
+import os
+import threading
+import time
+import traceback
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from PySide6.QtCore import QObject, Signal, Slot
+
+from app.workers.fit_worker import lower_thread_priority
+from app.workers.network_display import NetworkDisplay, mesh_display, network_display
+
+#: At least this long (s) between two pass snapshots, and at most this share of the worker's time
+#: spent building them (a stage change, a new grid size and the end are always sent).
+MIN_INTERVAL = 0.25
+DISPLAY_SHARE = 0.3
+#: The loss plot's name for the passes' RMS distance to the cloud (relative to the diagonal).
+RMS_TERM = "RMS / diagonal"
+
+
+@dataclass
+class PatchRequest:
+    """One run: the cloud (N, 3) and the engine's ``PatchOptions``."""
+
+    run_id: int
+    points: np.ndarray
+    options: Any
+
+
+@dataclass
+class PatchSnapshot:
+    """A step of the fit. event: "mesh", "layout", "pass", "done" (the engine's result) or
+    "stopped"; stage: "mesh", "layout", "wrap", "fit", "polish" or "final"; stage_pass: 1-based
+    pass count within its stage. network: the engine's PatchNetwork (None before the first pass);
+    quality: ``NetworkQuality.as_dict()`` (done; a stopped run's is measured without the mesh,
+    so its flipped fraction is NaN) or None. losses: a row per pass since the previous snapshot
+    (also those not drawn), ``{"iteration": pass index, RMS_TERM: RMS / bounding-box diagonal}``,
+    for the loss plot (wrap passes fit the mesh, not the cloud: no row)."""
+
+    run_id: int
+    event: str
+    display: NetworkDisplay
+    stage: str
+    network: Any = None
+    stage_pass: int = 0
+    pass_index: int = -1
+    size: int = 0
+    patch_count: int = 0
+    rms: float = math.nan
+    seam: float = math.nan
+    elapsed: float = 0.0
+    quality: dict | None = None
+    warnings: list[str] = field(default_factory=list)
+    done: bool = False
+    losses: list[dict] = field(default_factory=list)
+
+
+class PatchWorker(QObject):
+    """Runs one patch network fit. Signals carry plain Python/numpy payloads."""
+
+    snapshot_ready = Signal(object)  # PatchSnapshot
+    run_failed = Signal(int, str, str)  # run id, message, traceback ("" when the message says all)
+    run_finished = Signal(int)  # run id, always emitted last
+
+    def __init__(self, request: PatchRequest, stop_token):
+        super().__init__()
+        self._request, self._stop = request, stop_token
+        self._hurry = threading.Event()
+        self._rows: list[dict] = []  # loss rows not yet sent
+
+    def hurry(self):
+        """Skip measuring a stopped network (a restart, Reset or closing is waiting)."""
+        self._hurry.set()
+
+    @Slot()
+    def run(self):
+        request = self._request
+        try:
+            import torch
+
+            torch.set_num_threads(max(1, (os.cpu_count() or 2) - 1))
+            lower_thread_priority()
+            gc.freeze()
+            self._run(request)
+        except ValueError as exc:  # the engine's refusals (LayoutError too) explain themselves
+            self.run_failed.emit(request.run_id, f"Cannot fit patches: {exc}", "")
+        except Exception as exc:  # noqa: BLE001 - reported to the user, never re-raised
+            self.run_failed.emit(request.run_id, f"The patch fit failed: {type(exc).__name__}: "
+                                                 f"{exc}", traceback.format_exc(limit=6))
+        finally:
+            self.run_finished.emit(request.run_id)
+
+    def _run(self, request: PatchRequest):
+        from nurbs_core.patches.pipeline import iter_patch_fit
+
+        started = time.monotonic()
+        events = iter_patch_fit(request.points, request.options)
+        mesh, last_pass, last_sent, cost = None, None, -math.inf, 0.0
+        stages: Counter[str] = Counter()
+        points = np.asarray(request.points, np.float64)
+        diagonal = float(np.linalg.norm(np.ptp(points, axis=0))) if points.ndim == 2 and len(
+            points) else 1.0
+        self._rows: list[dict] = []
+        try:
+            for event in events:
+                if self._stop.stopped:
+                    break
+                elapsed = time.monotonic() - started
+                if event.kind == "mesh":
+                    mesh = event.mesh
+                    self._emit(PatchSnapshot(request.run_id, "mesh",
+                                             mesh_display(mesh.vertices, mesh.faces), "mesh",
+                                             elapsed=elapsed))
+                elif event.kind == "layout":
+                    layout = event.layout
+                    display = mesh_display(mesh.vertices, mesh.faces, layout.vertices,
+                                           layout.quads, layout.irregular)
+                    self._emit(PatchSnapshot(request.run_id, "layout", display, "layout",
+                                             patch_count=len(layout.quads), elapsed=elapsed))
+                elif event.kind == "pass":
+                    fit_pass = event.fit_pass
+                    stage = "final" if fit_pass.done else fit_pass.stage
+                    stages[stage] += 1
+                    if math.isfinite(fit_pass.rms) and diagonal > 0:
+                        self._rows.append({"iteration": int(fit_pass.index),
+                                           RMS_TERM: float(fit_pass.rms) / diagonal})
+                    previous, last_pass = last_pass, fit_pass
+                    now = time.monotonic()
+                    changed = previous is None or previous.stage != fit_pass.stage or (
+                        previous.size != fit_pass.size)
+                    if changed or fit_pass.done or now - last_sent >= max(
+                            MIN_INTERVAL, cost / DISPLAY_SHARE):
+                        self._emit(self._pass_snapshot(request.run_id, fit_pass, stage,
+                                                       stages[stage], elapsed))
+                        last_sent = time.monotonic()
+                        cost = last_sent - now
+                elif event.kind == "done":
+                    result = event.result
+                    self._emit(PatchSnapshot(
+                        request.run_id, "done", network_display(result.network), "final",
+                        network=result.network, pass_index=result.passes - 1,
+                        size=result.network.size, patch_count=result.network.patch_count,
+                        rms=float(event.fit_pass.rms), seam=float(event.fit_pass.seam),
+                        elapsed=time.monotonic() - started, quality=result.quality.as_dict(),
+                        warnings=list(result.warnings), done=True))
+                    return
+                self._wait_while_paused()
+        finally:
+            events.close()
+        if last_pass is not None and not self._hurry.is_set():
+            self._emit(self._stopped_snapshot(request, last_pass, time.monotonic() - started))
+
+    def _pass_snapshot(self, run_id: int, fit_pass, stage: str, stage_pass: int,
+                       elapsed: float) -> PatchSnapshot:
+        network = fit_pass.network
+        return PatchSnapshot(run_id, "pass", network_display(network), stage, network=network,
+                             stage_pass=stage_pass, pass_index=int(fit_pass.index),
+                             size=int(fit_pass.size), patch_count=network.patch_count,
+                             rms=float(fit_pass.rms), seam=float(fit_pass.seam), elapsed=elapsed)
+
+    def _stopped_snapshot(self, request: PatchRequest, fit_pass, elapsed: float) -> PatchSnapshot:
+        """The network a plain Stop left, measured (without the closed mesh's normals: no
+        flipped fraction)."""
+        from nurbs_core.patches.measures import network_quality
+
+        snapshot = self._pass_snapshot(request.run_id, fit_pass, fit_pass.stage, 0, elapsed)
+        snapshot.event, snapshot.done = "stopped", True
+        snapshot.quality = network_quality(fit_pass.network, request.points).as_dict()
+        return snapshot
+
+    def _wait_while_paused(self):
+        while self._stop.paused and not self._stop.stopped:
+            self._stop.wait_while_paused(0.1)
+
+    def _emit(self, snapshot: PatchSnapshot):
+        snapshot.losses, self._rows = self._rows, []
+        self.snapshot_ready.emit(snapshot)

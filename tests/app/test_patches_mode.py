@@ -1,0 +1,315 @@
+"""Patches mode in the real window: fit a network to a closed cloud, watch it, measure it, export
+it; pause, stop, close mid-fit; engine refusals; the single-patch refusal's way to patches."""
+
+from __future__ import annotations
+
+import importlib.util
+import time
+
+import numpy as np
+import pytest
+from app_helpers import open_by_drop, viewport_image
+from PySide6.QtCore import QTimer
+from PySide6.QtWidgets import QFileDialog
+
+FIT_TIMEOUT_MS = 180_000
+
+
+def _write_cloud(path, points):
+    np.savetxt(path, points, fmt="%.8f")
+    return path
+
+
+def _open_cloud(qtbot, window, tmp_path, name: str, points) -> None:
+    open_by_drop(qtbot, window, [_write_cloud(tmp_path / f"{name}.xyz", points)])
+
+
+def _patches_mode(window):
+    window.mode_selector.setCurrentIndex(window.mode_selector.findData("patches"))
+    assert window.document.settings.fit_mode == "patches"
+
+
+def _wait_for_pass(qtbot, window):
+    controller = window.patch_controller
+    qtbot.waitUntil(lambda: controller.latest_shown is not None
+                    and controller.latest_shown.event == "pass", timeout=FIT_TIMEOUT_MS)
+
+
+def _changed(before: np.ndarray, after: np.ndarray) -> float:
+    return float(np.mean(np.abs(after.astype(int) - before.astype(int)).max(axis=-1) > 40))
+
+
+def test_patch_fit_is_drawn_measured_and_exported(qtbot, window, tmp_path, monkeypatch):
+    import rhino3dm
+
+    from nurbs_core import samples
+    from nurbs_core.io.network_io import read_network
+
+    _open_cloud(qtbot, window, tmp_path, "sphere", samples.sphere(1500).points)
+    window.set_layer_visible("cloud", False)
+    background = viewport_image(window)  # nothing drawn: the background alone
+    window.set_layer_visible("cloud", True)
+    undo = window.document.undo_stack.index()
+    _patches_mode(window)
+    assert window.document.undo_stack.index() == undo + 1  # the mode is an undoable setting
+    stages = []
+    window.patch_controller.snapshot_shown.connect(
+        lambda _s: stages.append(window.status_labels["iteration"].text()))
+    with qtbot.waitSignal(window.patch_controller.fit_finished, timeout=FIT_TIMEOUT_MS) as done:
+        window.start_action.trigger()
+    snapshot = done.args[0]
+    assert snapshot.event == "done" and snapshot.quality is not None
+    assert window.patch_controller.state == "idle" and window.start_action.isEnabled()
+    assert window.patch_controller.snapshots_shown >= 2
+    assert any(" pass " in text for text in stages), stages  # "Joint fit pass 3 (5x5 ...)"
+    assert window.status_labels["iteration"].text().startswith(f"Done: {snapshot.patch_count} ")
+    # the loss plot has every fit pass's RMS (relative to the diagonal), drawn or not
+    from app.workers.patch_worker import RMS_TERM
+
+    rms = window.loss_plot.series(RMS_TERM)
+    assert len(rms) >= snapshot.pass_index - 3 and np.isfinite(rms).all() and (rms < 0.05).all()
+
+    # the network is drawn: its VTK dataset holds the welded tessellation, the layout lines
+    # (two per patch: a closed quad layout has 2 P edges) and the irregular corners
+    network = window.document.network
+    assert network is snapshot.network and network.patch_count == snapshot.quality["patches"]
+    layers = window.scene.network
+    surface = layers.actor("network")
+    assert surface.GetVisibility()
+    assert surface.mapper.dataset.n_points == len(snapshot.display.vertices)
+    assert surface.mapper.dataset.n_cells == len(snapshot.display.faces)
+    assert layers.mesh("layout").n_lines == 2 * network.patch_count
+    irregular = int(np.count_nonzero((network.valence != 4) & (network.valence > 0)))
+    assert layers.mesh("corners").n_points == irregular > 0
+    assert window.tree.shows_network
+
+    # the readout shows the engine's numbers
+    panel, quality = window.network_quality_panel, snapshot.quality
+    assert panel.values["patches"].text().startswith(f"{network.patch_count} (")
+    assert f"p99 {quality['seam']['p99']:.2f}" in panel.values["seam"].text()
+    assert f"{quality['gap_relative']:.4g} of the diagonal" in panel.values["gap"].text()
+    assert panel.values["flipped"].text() == f"{100 * quality['flipped_fraction']:.2f}%"
+    assert panel.values["area"].text() == f"{quality['area']:.4g}"
+    assert panel.values["c2s"].text().startswith(f"mean {quality['c2s_mean']:.4g}")
+    assert "irregular max" in panel.values["corners"].text()
+    assert panel.warnings.text() == "\n".join(f"Warning: {w}" for w in snapshot.warnings)
+
+    # pixels: the network covers a good part of the view; the seam map recolours it, with a bar
+    plain = viewport_image(window)
+    assert _changed(background, plain) > 0.05
+    assert not layers.scalar_bar.GetVisibility()
+    window.seam_action.trigger()
+    assert layers.seam_shown() and layers.scalar_bar.GetVisibility()
+    assert "degrees" in layers.scalar_bar.GetTitle()
+    assert _changed(plain, viewport_image(window)) > 0.05
+
+    # export: JSON read back exactly, .3dm one closed B-rep (rhino3dm), STEP through the menu
+    written = {}
+    for suffix in (".json", ".3dm"):
+        written[suffix] = tmp_path / f"sphere_network{suffix}"
+        with qtbot.waitSignal(window.export_finished, timeout=60000) as blocker:
+            window.export_to(str(written[suffix]))
+        assert blocker.args == [str(written[suffix]), True], window.last_error
+    back = read_network(written[".json"])
+    np.testing.assert_array_equal(back.control_points, network.control_points)
+    np.testing.assert_array_equal(back.quads, network.quads)
+    model = rhino3dm.File3dm.Read(str(written[".3dm"]))
+    breps = [o.Geometry for o in model.Objects if isinstance(o.Geometry, rhino3dm.Brep)]
+    assert len(breps) == 1 and len(breps[0].Faces) == network.patch_count
+    assert breps[0].IsValid and breps[0].IsSolid
+    if importlib.util.find_spec("OCP") is not None:  # the optional CAD extra
+        from nurbs_core.io import load
+
+        step = tmp_path / "sphere_network.step"
+        monkeypatch.setattr(QFileDialog, "getSaveFileName",
+                            staticmethod(lambda *a, **k: (str(step), "")))
+        with qtbot.waitSignal(window.export_finished, timeout=60000) as blocker:
+            window.export_actions[".step"].trigger()
+        assert blocker.args == [str(step), True], window.last_error
+        assert len(load(step)) == network.patch_count  # read by OpenCASCADE
+
+    # Reset drops the network and its drawing
+    window.reset_action.trigger()
+    assert window.document.network is None and layers.mesh("network").n_points == 0
+
+
+def test_pause_and_stop_mid_fit_keep_the_window_responsive(qtbot, window, tmp_path):
+    from nurbs_core import samples
+
+    _open_cloud(qtbot, window, tmp_path, "torus", samples.torus(3000).points)
+    _patches_mode(window)
+    controller = window.patch_controller
+    assert window.start_fit()
+    _wait_for_pass(qtbot, window)
+
+    # the event loop keeps answering while the worker fits (a 10 ms timer, 60 ticks)
+    gaps, last = [], [time.perf_counter()]
+
+    def probe():
+        now = time.perf_counter()
+        gaps.append(now - last[0])
+        last[0] = now
+
+    timer = QTimer()
+    timer.setInterval(10)
+    timer.timeout.connect(probe)
+    timer.start()
+    try:
+        qtbot.waitUntil(lambda: len(gaps) >= 60, timeout=20000)
+    finally:
+        timer.stop()
+    answers = np.asarray(gaps[1:])
+    report = (f"probe intervals during a patch fit: median {np.median(answers) * 1000:.0f} ms, "
+              f"max {answers.max() * 1000:.0f} ms")
+    print(report)
+    assert answers.max() < 0.25, report
+
+    # pause: nothing new is drawn; resume: it goes on
+    window.pause_action.trigger()
+    assert controller.state == "paused" and window.resume_action.isEnabled()
+    qtbot.wait(1500)  # the pass under way ends, then the worker waits
+    paused_at = controller.snapshots_shown
+    qtbot.wait(800)
+    assert controller.snapshots_shown == paused_at and controller.state == "paused"
+    window.resume_action.trigger()
+    if controller.state == "running":  # (the fit may have ended during the pass under way)
+        qtbot.waitUntil(lambda: controller.snapshots_shown > paused_at or not controller.is_busy(),
+                        timeout=FIT_TIMEOUT_MS)
+
+    # a settings change restarts a running patch fit (from the cloud: a new run)
+    if controller.is_busy():
+        run = controller.run_id
+        window.document.edit_settings("Patch stiffness", patch_stiffness=1e-3)
+        qtbot.waitUntil(lambda: controller.run_id > run and controller.latest_shown is not None
+                        and controller.latest_shown.run_id > run, timeout=FIT_TIMEOUT_MS)
+        assert controller.state == "running"
+        _wait_for_pass(qtbot, window)
+
+    # stop: the stopped network arrives, measured, and the window is idle again
+    if controller.is_busy():
+        with qtbot.waitSignal(controller.fit_finished, timeout=FIT_TIMEOUT_MS) as blocker:
+            window.stop_action.trigger()
+        snapshot = blocker.args[0]
+        assert snapshot.event == "stopped" and snapshot.quality is not None
+        assert window.network_quality_panel.status.text().startswith(
+            f"{snapshot.patch_count} patches stopped")
+        assert window.network_quality_panel.values["flipped"].text().startswith("-")
+    assert controller.state == "idle" and not controller.is_busy()
+    assert window.start_action.isEnabled() and not window.stop_action.isEnabled()
+    assert window.document.network is not None
+
+
+def test_closing_mid_fit_stops_the_worker_at_once(qtbot, window, tmp_path):
+    from nurbs_core import samples
+
+    _open_cloud(qtbot, window, tmp_path, "torus", samples.torus(3000).points)
+    _patches_mode(window)
+    assert window.start_fit()
+    _wait_for_pass(qtbot, window)
+    assert window.patch_controller.is_busy()
+    started = time.perf_counter()
+    window.close()
+    assert time.perf_counter() - started < 30.0
+    assert not window.patch_controller.is_busy() and window.live_timers() == 0
+
+
+@pytest.mark.parametrize("cloud", ["few points", "open sheet"])
+def test_engine_refusals_show_a_message_not_a_traceback(qtbot, window, tmp_path, cloud):
+    from nurbs_core import samples
+
+    points = samples.sphere(60).points if cloud == "few points" else samples.saddle(1500).points
+    _open_cloud(qtbot, window, tmp_path, "cloud", points)
+    _patches_mode(window)
+    shown = []
+    window.error_shown.connect(shown.append)
+    with qtbot.waitSignal(window.patch_controller.fit_failed, timeout=FIT_TIMEOUT_MS) as blocker:
+        assert window.start_fit()
+    message = blocker.args[0]
+    assert message.startswith("Cannot fit patches: ") and len(message) > 40  # the engine's why
+    if cloud == "few points":
+        assert "at least 100 points" in message
+    qtbot.waitUntil(lambda: not window.patch_controller.is_busy(), timeout=FIT_TIMEOUT_MS)
+    assert shown == [message] and window._message_box.isVisible()
+    assert window.fit_as_patches_button is None  # already patches: nothing more to offer
+    assert message in window.statusBar().currentMessage()
+    log = window.log_panel.toPlainText()
+    assert "Traceback" not in log and "File \"" not in log
+    assert window.document.network is None and window.patch_controller.state == "idle"
+    assert window.start_action.isEnabled()
+
+
+def test_the_closed_shape_refusal_offers_to_fit_patches(qtbot, window, tmp_path):
+    from nurbs_core import samples
+
+    _open_cloud(qtbot, window, tmp_path, "sphere", samples.sphere(1500).points)
+    assert window.document.settings.fit_mode == "single"
+    with qtbot.waitSignal(window.controller.fit_failed, timeout=FIT_TIMEOUT_MS):
+        window.start_action.trigger()
+    qtbot.waitUntil(lambda: not window.controller.is_busy(), timeout=FIT_TIMEOUT_MS)
+    button = window.fit_as_patches_button
+    assert button is not None and button.text() == "Fit as patches"
+    assert window._message_box.isVisible() and "Fit as patches" in window._message_box.text()
+    with qtbot.waitSignal(window.patch_controller.fit_finished, timeout=FIT_TIMEOUT_MS) as done:
+        button.click()
+    assert window.document.settings.fit_mode == "patches"
+    assert window.mode_selector.currentData() == "patches"
+    assert not window._message_box.isVisible()
+    assert done.args[0].event == "done" and window.document.network is not None
+    window.undo_action.trigger()  # back to one patch: the network's layers are hidden
+    assert window.document.settings.fit_mode == "single"
+    assert not window.scene.network.actor("network").GetVisibility()
+
+
+def test_patch_settings_are_undoable_and_reach_the_engine_options(qtbot, window):
+    from app.state import FitSettings
+    from nurbs_core.patches.pipeline import PatchOptions
+
+    assert FitSettings().patch_options() == PatchOptions()  # the engine's defaults, not a copy
+    panel, document = window.patches_panel, window.document
+    panel.patch_count.setValue(30)
+    panel.patch_size.setValue(8)
+    slider = panel.seam_weight.slider
+    slider.setSliderDown(True)
+    slider.setValue(10)  # 10 ** (10 / 10)
+    slider.setSliderDown(False)
+    options = document.settings.patch_options()
+    options.validate()
+    assert (options.patches, options.size, options.seam_weight) == (30, 8, 10.0)
+    assert document.undo_stack.undoText() == "Seam weight"
+    for _ in range(3):
+        window.undo_action.trigger()
+    assert document.settings == FitSettings()
+    assert panel.patch_count.text() == "auto" and panel.patch_size.text() == "auto"
+    assert panel.seam_weight.label.text() == "2"
+    panel.patch_count.setValue(panel.patch_count.minimum() + 1)  # the lowest count after auto
+    assert document.settings.patch_options().patches == 4
+
+
+def test_network_display_matches_the_engine_tessellation_and_seams():
+    from app.patch_view import stage_text
+    from app.workers.network_display import network_display
+    from app.workers.patch_worker import PatchSnapshot
+    from nurbs_core import samples
+    from nurbs_core.io.network_mesh import network_mesh_arrays
+    from nurbs_core.patches.measures import seam_statistics
+    from nurbs_core.patches.pipeline import fit_patches
+
+    network = fit_patches(samples.sphere(1500).points).network
+    display = network_display(network, resolution=12)
+    vertices, faces = network_mesh_arrays(network, 12)
+    np.testing.assert_array_equal(display.vertices, vertices)
+    np.testing.assert_array_equal(display.faces, faces)
+    assert display.seam.shape == (len(vertices),) and (display.seam >= 0).all()
+    # the seam map's largest value is the network's largest seam or corner angle
+    engine = seam_statistics(network)
+    assert display.seam.max() == pytest.approx(
+        max(engine.max, engine.regular_corner_max, engine.irregular_corner_max), rel=0.1)
+    assert (display.seam == 0).mean() > 0.1  # patch middles, away from every seam
+    np.testing.assert_allclose(np.linalg.norm(display.normals, axis=1), 1.0)
+    assert display.line_cells.size == 2 * network.patch_count * 13  # 12 points + count each
+    snapshot = PatchSnapshot(1, "pass", display, "fit", stage_pass=7, size=8)
+    assert stage_text(snapshot) == "Joint fit pass 7 (8x8 per patch)"
+    snapshot.stage, snapshot.stage_pass = "polish", 2
+    assert stage_text(snapshot) == "Polish pass 2"
+    assert stage_text(PatchSnapshot(1, "layout", display, "layout", patch_count=42)) == (
+        "Layout: 42 patches")
