@@ -115,7 +115,7 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None) -> Closed
         # sheet or tube, or a closed one so thin or so sparsely sampled that it leaks)
         raise NotClosedError("the cloud does not enclose a volume: it is an open surface (or its "
                              "sampling leaves holes); a patch network needs a closed object, and "
-                             "an open sheet is fitted with one patch (without --patches)")
+                             "an open sheet is fitted as one patch (the single-patch fit)")
     volume = signed.reshape(shape)
     volume = np.where(far & outside, BAND * cell, volume)
     volume = np.where(far & ~outside, -BAND * cell, volume)
