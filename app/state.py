@@ -18,6 +18,9 @@ import numpy as np
 from PySide6.QtCore import QObject, Signal
 from PySide6.QtGui import QUndoCommand, QUndoStack
 
+from nurbs_core.patches.defaults import SEAM_WEIGHT
+from nurbs_core.patches.defaults import STIFFNESS as PATCH_STIFFNESS
+
 SESSION_FORMAT = "nurbs-studio-session-v1"
 
 #: Loss terms the settings panel offers, in display order (names of ``nurbs_core.losses``).
@@ -135,11 +138,11 @@ class FitSettings:
     fit_mode: str = "single"
     #: the patch network fit (``nurbs_core.patches.pipeline.PatchOptions``): target patch count
     #: and control points per patch side (None: automatic), fairing stiffness and seam weight
-    #: (the engine's defaults: a test checks they agree)
+    #: (the engine's defaults)
     patch_count: int | None = None
     patch_size: int | None = None
-    patch_stiffness: float = 1e-4
-    seam_weight: float = 2.0
+    patch_stiffness: float = PATCH_STIFFNESS
+    seam_weight: float = SEAM_WEIGHT
 
     @property
     def loss_text(self) -> str:

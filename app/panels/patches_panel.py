@@ -82,7 +82,7 @@ class PatchesPanel(QWidget):
         self.patch_count = _auto_spin(AUTO_COUNT, MAX_COUNT)
         self.patch_size = _auto_spin(AUTO_SIZE, MAX_SIZE)
         self.patch_size.setSuffix(" per side")
-        self.patch_stiffness = LogSlider(-7, -1)
+        self.patch_stiffness = LogSlider(-3, 2)
         self.seam_weight = LogSlider(-2, 2)
         form.addRow("Target patches", self.patch_count)
         form.addRow("Control points", self.patch_size)

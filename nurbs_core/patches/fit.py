@@ -37,16 +37,16 @@ import scipy.sparse
 import scipy.sparse.linalg
 from scipy.spatial import cKDTree
 
+from nurbs_core.patches.defaults import SEAM_WEIGHT, STIFFNESS
 from nurbs_core.patches.evaluate import evaluate, foot_points, grid_samples, rows, unit
 from nurbs_core.patches.network import SIDES, PatchNetwork, build_network, side_parameters
 from nurbs_core.surfacing.fairing import fairing_matrices
 from nurbs_core.surfacing.neighbours import estimate_noise
 
+#: Control points per side beyond the degree at which a grid takes the full stiffness.
+FULL_FAIRING_SPAN = 5
 #: Relative weight of the membrane energy inside the fairing term.
 MEMBRANE_RATIO = 0.1
-#: Default fairing stiffness (relative to the data term) and seam weight.
-STIFFNESS = 1e-4
-SEAM_WEIGHT = 2.0
 #: Wrap passes (network to the closed mesh) before the cloud.
 WRAP_PASSES = 3
 #: Passes per control grid at most, and the relative RMS gain under which a grid has settled.
@@ -280,7 +280,8 @@ class _Solver:
         data = (a.T @ a) / n
         rhs = np.asarray(a.T @ targets) / n
         fair = self.fairing(network)
-        lam = self.stiffness * data.diagonal().sum() / max(fair.diagonal().sum(), 1e-300)
+        lam = (self.stiffness * _fairing_share(network) * data.diagonal().sum()
+               / max(fair.diagonal().sum(), 1e-300))
         block = (data + lam * fair).tocsr()
         g, h, seam = seam_rows(network)
         self.last_seam = seam
@@ -295,6 +296,13 @@ class _Solver:
         system = system + 1e-12 * scipy.sparse.identity(3 * k, format="csr")
         solution = scipy.sparse.linalg.splu(system.tocsc()).solve(rhs)
         return network.with_control_points(solution.reshape(3, k).T), seam
+
+
+def _fairing_share(network: PatchNetwork) -> float:
+    """How much of the stiffness a grid takes: fairing counters noise that free control points
+    would follow, and a patch of few control points has little freedom (and needs it for its
+    seams): ((size - degree) / FULL_FAIRING_SPAN)^2, at most 1."""
+    return min(1.0, ((network.size - network.degree) / FULL_FAIRING_SPAN) ** 2)
 
 
 def _patch_area(network: PatchNetwork) -> float:
