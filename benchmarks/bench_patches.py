@@ -64,6 +64,9 @@ from scipy.spatial import cKDTree
 
 from nurbs_core import samples
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_quality import find_data  # noqa: E402  (the same data lookup as the quality bench)
+
 ROOT = Path(__file__).resolve().parents[1]
 
 COUNT = 10_000
@@ -92,18 +95,6 @@ MODELS = {
 #: touches no other patch boundary (open or gapped)
 BOUNDARY_SAMPLES = 200
 BOUNDARY_TOLERANCE = 1e-3
-
-
-def find_data() -> Path | None:
-    """``shared/data/nurbsdiff_paper`` (NURBS_STUDIO_DATA overrides), as tests/conftest.py."""
-    env = os.environ.get("NURBS_STUDIO_DATA")
-    candidates = [Path(env)] if env else []
-    candidates += [parent / "shared" / "data" for parent in ROOT.parents]
-    candidates.append(Path("/work/shared/data"))
-    for candidate in candidates:
-        if (candidate / "nurbsdiff_paper").is_dir():
-            return candidate / "nurbsdiff_paper"
-    return None
 
 
 # --- cases -------------------------------------------------------------------------------------

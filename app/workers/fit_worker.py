@@ -194,6 +194,15 @@ def lower_thread_priority(niceness: int = 10):
         pass
 
 
+def enter_worker_thread() -> None:
+    """Set up the calling worker thread for engine work: torch on all cores but one (the event
+    loop must keep answering) and a lower priority than the GUI thread."""
+    import torch
+
+    torch.set_num_threads(max(1, (os.cpu_count() or 2) - 1))
+    lower_thread_priority()
+
+
 class FitWorker(QObject):
     """Runs one fit. Signals carry plain Python/numpy payloads (queued to the GUI thread)."""
 
@@ -216,11 +225,7 @@ class FitWorker(QObject):
     def run(self):
         request = self._request
         try:
-            import torch
-
-            # leave one core to the GUI thread: the event loop must keep answering
-            torch.set_num_threads(max(1, (os.cpu_count() or 2) - 1))
-            lower_thread_priority()
+            enter_worker_thread()
             self._run(request)
         except FitProblem as exc:
             self.run_failed.emit(request.run_id, str(exc), "", exc.needs_patches)

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import gc
 import math
-import os
 import threading
 import time
 import traceback
@@ -23,7 +22,7 @@ from typing import Any
 import numpy as np
 from PySide6.QtCore import QObject, Signal, Slot
 
-from app.workers.fit_worker import lower_thread_priority
+from app.workers.fit_worker import enter_worker_thread
 from app.workers.network_display import NetworkDisplay, mesh_display, network_display
 
 #: At least this long (s) between two pass snapshots, and at most this share of the worker's time
@@ -92,10 +91,7 @@ class PatchWorker(QObject):
     def run(self):
         request = self._request
         try:
-            import torch
-
-            torch.set_num_threads(max(1, (os.cpu_count() or 2) - 1))
-            lower_thread_priority()
+            enter_worker_thread()
             gc.freeze()
             self._run(request)
         except ValueError as exc:  # the engine's refusals (LayoutError too) explain themselves
