@@ -283,6 +283,32 @@ def _check_outputs(args) -> list[Path]:
     return outputs
 
 
+#: A closed mesh file with fewer vertices than this is fitted to this many points sampled
+#: uniformly over its area (its vertices alone are too few, or unevenly spread).
+FILE_MESH_SAMPLES = 10_000
+
+
+def _file_mesh(path, quiet: bool):
+    """The input file's own closed mesh for the layout, or None (a cloud, or a mesh that cannot
+    serve: then it is rebuilt from the points, and the reason is printed)."""
+    from nurbs_core.io.meshes import read_mesh_faces
+    from nurbs_core.io.points import suffix_of
+    from nurbs_core.patches.closed_mesh import mesh_from_faces
+
+    suffix = suffix_of(path)
+    if suffix not in (".obj", ".stl", ".off", ".ply", ".glb", ".gltf"):
+        return None
+    arrays = read_mesh_faces(path, suffix)
+    if arrays is None:
+        return None
+    mesh, why = mesh_from_faces(*arrays)
+    if not quiet:
+        print(f"using the file's closed mesh ({len(mesh.faces)} triangles) for the layout"
+              if mesh is not None else f"{why}: the closed mesh is rebuilt from its points",
+              file=sys.stderr)
+    return mesh
+
+
 def run_patches(args, points: np.ndarray, outputs: list[Path]) -> int:
     """``--patches``: the network fit, its report and files."""
     from nurbs_core.io import save
@@ -293,8 +319,13 @@ def run_patches(args, points: np.ndarray, outputs: list[Path]) -> int:
     print(f"{args.input}: {len(points)} points; fitting a network of bicubic patches "
           f"({options.patches} patches, stiffness {options.stiffness:g}, seam weight "
           f"{options.seam_weight:g})", file=sys.stderr)
+    mesh = _file_mesh(args.input, quiet=args.quiet)
+    if mesh is not None and len(points) < FILE_MESH_SAMPLES:
+        from nurbs_core.io import load_points
+
+        points = load_points(args.input, mesh_mode="sample", sample_count=FILE_MESH_SAMPLES).points
     result = None
-    for event in iter_patch_fit(points, options):
+    for event in iter_patch_fit(points, options, mesh=mesh):
         if args.quiet:
             pass
         elif event.kind == "mesh":

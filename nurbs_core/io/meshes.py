@@ -68,3 +68,16 @@ def read_mesh_points(path, suffix: str, mesh_mode: str = "vertices",
             attributes["colors"] = np.asarray(colors)
     check_points(path, vertices)
     return PointCloud(vertices, attributes, path)
+
+
+def read_mesh_faces(path, suffix: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """The file's triangle mesh as (vertices (V, 3) float64, faces (F, 3) int64), duplicate
+    vertices merged (STL), or None when the file has no faces."""
+    import trimesh
+
+    mesh = _load_trimesh(path, suffix)
+    faces = np.asarray(getattr(mesh, "faces", np.empty((0, 3))))
+    if not isinstance(mesh, trimesh.Trimesh) or len(faces) == 0:
+        return None
+    merged = trimesh.Trimesh(np.asarray(mesh.vertices, np.float64), faces, process=True)
+    return np.asarray(merged.vertices, np.float64), np.asarray(merged.faces, np.int64)

@@ -156,3 +156,39 @@ def _largest_piece(faces: np.ndarray, count: int) -> tuple[np.ndarray, int]:
     sizes = np.bincount(face_label, minlength=pieces)
     real = int((sizes > 0).sum())
     return faces[face_label == int(np.argmax(sizes))], real
+
+
+#: A file's own mesh is used for the layout up to this many vertices (Instant Meshes breaks on
+#: denser ones; those are rebuilt from their points like a cloud).
+MAX_FILE_MESH_VERTICES = 12_000
+#: Its long edges are split to about the diagonal / this (and at most a split into about
+#: MAX_FILE_MESH_VERTICES triangles of the area).
+FILE_MESH_EDGES = 48
+
+
+def mesh_from_faces(vertices: np.ndarray, faces: np.ndarray) -> tuple[ClosedMesh | None, str]:
+    """A file's own triangle mesh (V, 3), (F, 3) as the closed mesh of a network fit, oriented
+    outward, or None and why it cannot serve (not watertight, inconsistent winding, too dense)."""
+    import trimesh
+
+    mesh = trimesh.Trimesh(np.asarray(vertices, np.float64), np.asarray(faces, np.int64),
+                           process=True)
+    if not mesh.is_watertight:
+        return None, "the file's mesh is not watertight"
+    if not mesh.is_winding_consistent:
+        return None, "the file's mesh is not consistently oriented"
+    if len(mesh.vertices) > MAX_FILE_MESH_VERTICES:
+        return None, (f"the file's mesh has {len(mesh.vertices)} vertices (a layout takes at most "
+                      f"{MAX_FILE_MESH_VERTICES})")
+    # CAD and scanner meshes have long thin triangles: split them to about the size a
+    # reconstructed mesh would have (the layout and the wrap passes need even sampling)
+    edge = max(float(np.linalg.norm(mesh.extents)) / FILE_MESH_EDGES,
+               float(np.sqrt(mesh.area / MAX_FILE_MESH_VERTICES)))
+    split_vertices, split_faces = trimesh.remesh.subdivide_to_size(
+        mesh.vertices, mesh.faces, max_edge=edge, max_iter=20)
+    mesh = trimesh.Trimesh(split_vertices, split_faces, process=True)
+    faces = np.asarray(mesh.faces, np.int64)
+    if mesh.volume < 0:
+        faces = faces[:, ::-1].copy()
+    return ClosedMesh(np.asarray(mesh.vertices, np.float64), faces,
+                      np.asarray(mesh.vertex_normals, np.float64), 0.0, int(mesh.body_count)), ""

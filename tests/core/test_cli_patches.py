@@ -83,3 +83,30 @@ def test_patches_refuses_bad_requests_and_protects_the_input(sphere_file, tmp_pa
 def test_single_patch_refusal_points_to_patches(sphere_file, tmp_path, capsys):
     assert main([str(sphere_file), "-o", str(tmp_path / "one.json")]) == 1
     assert "--patches auto" in _error_line(capsys)
+
+
+def test_a_closed_mesh_file_lays_out_on_its_own_mesh(tmp_path, capsys):
+    import trimesh
+
+    source = tmp_path / "capsule.stl"
+    trimesh.creation.capsule(height=1.5, radius=0.5, count=[24, 24]).export(source)
+    out = tmp_path / "capsule.json"
+    assert main([str(source), "-o", str(out), "--patches", "auto"]) == 0
+    captured = capsys.readouterr()
+    assert "using the file's closed mesh" in captured.err
+    assert "flipped area: 0.00%" in captured.out and "warning" not in captured.out
+    network = read_network(out)
+    assert network.closed
+
+
+def test_a_mesh_file_with_a_small_hole_is_rebuilt_closed_from_its_points(tmp_path, capsys):
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(3)
+    holed = trimesh.Trimesh(sphere.vertices, sphere.faces[:-6])
+    source = tmp_path / "holed.obj"
+    holed.export(source)
+    out = tmp_path / "holed.json"
+    assert main([str(source), "-o", str(out), "--patches", "auto"]) == 0
+    assert "not watertight: the closed mesh is rebuilt" in capsys.readouterr().err
+    assert read_network(out).closed
