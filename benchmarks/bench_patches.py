@@ -330,15 +330,17 @@ def flipped_against(positions: np.ndarray, normals: np.ndarray, weights: np.ndar
     return float(weights[against].sum() / total) if total > 0 else float("nan")
 
 
-def run_network(case: Case, tree: cKDTree, truth_c2s: float) -> dict[str, Any]:
-    """``fit_patches`` on the case's cloud and every measure (see the module docstring)."""
+def run_network(case: Case, tree: cKDTree, truth_c2s: float,
+                options: Any = None) -> dict[str, Any]:
+    """``fit_patches`` on the case's cloud and every measure (see the module docstring);
+    ``options``: the PatchOptions (default: the engine's)."""
     from nurbs_core.patches.measures import surface_samples
     from nurbs_core.patches.pipeline import PatchOptions, fit_patches
 
     row: dict[str, Any] = {}
     start = time.perf_counter()
     try:
-        result = fit_patches(case.points, PatchOptions())
+        result = fit_patches(case.points, options or PatchOptions())
     except ValueError as exc:  # LayoutError is a ValueError
         row["status"] = f"refused ({type(exc).__name__})"
         row["message"] = " ".join(str(exc).split())
@@ -366,6 +368,10 @@ def run_network(case: Case, tree: cKDTree, truth_c2s: float) -> dict[str, Any]:
         "volume": q.volume,
         "c2s_fit": q.c2s_mean, "c2s_truth": truth_c2s,
         "c2s_ratio": q.c2s_mean / truth_c2s if truth_c2s > 0 else float("nan"),
+        # the fitted surface's own distance to the truth (area-weighted), in noise sigmas:
+        # how much of the noise the surface followed
+        "s2t_sigma": float(np.average(truth_distance(case, positions), weights=weights))
+        / case.shape.noise,
         "c2s_rms": q.c2s_rms, "c2s_p99": q.c2s_p99, "s2c_mean": q.s2c_mean, "s2c_p99": q.s2c_p99,
         "mesh_s": result.timings.get("mesh", float("nan")),
         "layout_s": result.timings.get("layout", float("nan")),
@@ -425,13 +431,13 @@ def targets(row: dict[str, Any]) -> dict[str, bool | None]:
             "time": row["total_s"] <= TARGET_TIME}
 
 
-def run_case(case: Case, single: bool = True) -> dict[str, Any]:
+def run_case(case: Case, single: bool = True, options: Any = None) -> dict[str, Any]:
     """One case: the network, the single-patch baseline and the target flags."""
     tree = cKDTree(case.shape.truth)
     start = time.perf_counter()
     truth_c2s = float(truth_distance(case, case.points).mean())
     truth_s = time.perf_counter() - start
-    network = run_network(case, tree, truth_c2s)
+    network = run_network(case, tree, truth_c2s, options)
     out = {"case": case.name, "points": len(case.points), "diagonal": case.diagonal,
            "noise": case.shape.noise, "true_area": case.shape.true_area, "source": case.source,
            "orientation": case.orientation, "boundary": case.boundary, "truth_c2s": truth_c2s,
@@ -479,7 +485,8 @@ NETWORK_COLUMNS = [
     ("seam_p99", "seam p99", "a"), ("seam_max", "seam max", "t"),
     ("corner_regular_max", "reg corner", "a"), ("corner_irregular_max", "irr corner", "a"),
     ("flipped", "flip %", "%"), ("area_ratio", "area/true", "g"), ("c2s_fit", "c2s fit", "g"),
-    ("c2s_truth", "c2s truth", "g"), ("c2s_ratio", "c2s ratio", "a"), ("mesh_s", "mesh s", "t"),
+    ("c2s_truth", "c2s truth", "g"), ("c2s_ratio", "c2s ratio", "a"),
+    ("s2t_sigma", "s2t/sigma", "a"), ("mesh_s", "mesh s", "t"),
     ("layout_s", "layout s", "t"), ("fit_s", "fit s", "t"), ("total_s", "total s", "t"),
 ]
 SINGLE_COLUMNS = [("flipped", "flip % (minority)", "%"), ("area_ratio", "area/true", "g"),
@@ -597,6 +604,8 @@ def main(argv=None) -> int:
     parser.add_argument("--points", type=int, help=f"points per cloud (default {COUNT}, "
                                                     f"--quick {QUICK_COUNT})")
     parser.add_argument("--no-single", action="store_true", help="skip the single-patch baseline")
+    parser.add_argument("--stiffness", type=float, default=None,
+                        help="fairing stiffness of the networks (default: the engine's)")
     parser.add_argument("--list", action="store_true", help="list the cases and exit")
     parser.add_argument("--json", metavar="PATH", help="also write every number as JSON")
     args = parser.parse_args(argv)
@@ -610,6 +619,9 @@ def main(argv=None) -> int:
         parser.error(f"unknown case(s) {', '.join(unknown)}; see --list")
     count = args.points or (QUICK_COUNT if args.quick else COUNT)
     truth_count = QUICK_TRUTH if args.quick else TRUTH_COUNT
+    from nurbs_core.patches.pipeline import PatchOptions
+
+    options = PatchOptions() if args.stiffness is None else PatchOptions(stiffness=args.stiffness)
     torch.set_num_threads(1)
     info = machine()
     command = " ".join(shlex.quote(a) for a in [Path(sys.executable).name, *sys.argv])
@@ -620,7 +632,8 @@ def main(argv=None) -> int:
           f"{info['torch']}, numpy {info['numpy']}, scipy {info['scipy']}; commit {info['commit']}")
     print(f"command: {command}")
     print(f"{len(names)} case(s), {count} points each, noise {NOISE:g} x diagonal, "
-          f"{truth_count} truth samples; data: {data}\n", flush=True)
+          f"{truth_count} truth samples; network stiffness {options.stiffness:g}; data: {data}\n",
+          flush=True)
     records = []
     started = time.perf_counter()
     for name in names:
@@ -630,7 +643,7 @@ def main(argv=None) -> int:
             print(f"- {name}: could not build the case: {type(exc).__name__}: {exc}", flush=True)
             records.append({"case": name, "error": f"{type(exc).__name__}: {exc}"})
             continue
-        record = run_case(case, single=not args.no_single)
+        record = run_case(case, single=not args.no_single, options=options)
         records.append(record)
         n = record["network"]
         print(f"- {name}: network {n['status']} in {n.get('total_s', float('nan')):.1f} s"

@@ -326,9 +326,10 @@ def run_patches(args, points: np.ndarray, outputs: list[Path]) -> int:
         points = load_points(args.input, mesh_mode="sample", sample_count=FILE_MESH_SAMPLES).points
     result = None
     for event in iter_patch_fit(points, options, mesh=mesh):
+        result = event.result or result
         if args.quiet:
-            pass
-        elif event.kind == "mesh":
+            continue
+        if event.kind == "mesh":
             print(f"closed mesh: {len(event.mesh.faces)} triangles", file=sys.stderr)
         elif event.kind == "layout":
             layout = event.layout
@@ -338,7 +339,6 @@ def run_patches(args, points: np.ndarray, outputs: list[Path]) -> int:
             p = event.fit_pass
             print(f"{p.stage} pass {p.index}  {p.size}x{p.size} per patch  rms {p.rms:.4g}  "
                   f"seam max {p.seam:.2f} deg", file=sys.stderr, flush=True)
-        result = event.result or result
     quality = result.quality
     seam = quality.seam
     print(f"patches: {quality.patches} ({quality.size}x{quality.size} control points each, "

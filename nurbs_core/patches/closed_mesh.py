@@ -21,7 +21,7 @@ import numpy as np
 import scipy.ndimage
 from scipy.spatial import cKDTree
 
-from nurbs_core.surfacing.mesh import cloud_mesh, median_spacing, voxel_subsample
+from nurbs_core.surfacing.mesh import cloud_mesh, median_spacing, vertex_normals, voxel_subsample
 
 #: Cells per bounding-box diagonal at most (Instant Meshes fails on layouts of much denser
 #: meshes: 21k vertices broke every torus layout, 5k none), and the largest grid (cells in all).
@@ -56,6 +56,10 @@ class ClosedMesh:
     cell: float
     pieces: int
 
+    def vertex_normals(self) -> np.ndarray:
+        """(V, 3) outward unit normals of the mesh's vertices."""
+        return vertex_normals(self.vertices, self.faces)
+
     @property
     def area(self) -> float:
         tri = self.vertices[self.faces]
@@ -63,14 +67,18 @@ class ClosedMesh:
                                           axis=1).sum())
 
 
+def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """The volume a triangle mesh (V, 3), (F, 3) encloses: positive when its faces point out."""
+    tri = vertices[faces]
+    return float(np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0)
+
+
 def oriented_normals(points: np.ndarray) -> np.ndarray:
     """Unit normals (N, 3) of the cloud, consistently oriented over its mesh and outward (the
     mesh's signed volume positive)."""
     mesh = cloud_mesh(points)
     normals = mesh.vertex_normals()
-    tri = mesh.vertices[mesh.faces]
-    volume = np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0
-    if volume < 0:
+    if signed_volume(mesh.vertices, mesh.faces) < 0:
         normals = -normals
     used = np.zeros(len(mesh.vertices), bool)
     used[mesh.faces.ravel()] = True
@@ -137,9 +145,7 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None) -> Closed
         raise NotClosedError(f"the cloud is not a closed surface: {away:.0%} of the surface that "
                              "would enclose it lies away from the points (an opening was sealed); "
                              "a patch network needs a closed object")
-    tri = verts[faces]
-    enclosed = np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0
-    if enclosed < 0:
+    if signed_volume(verts, faces) < 0:
         faces = faces[:, ::-1].copy()
     return ClosedMesh(verts, faces, normals, cell, pieces)
 

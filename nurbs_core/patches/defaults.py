@@ -1,11 +1,12 @@
 """Default settings of a patch-network fit (no heavy imports: the app's settings read them).
 
 Stiffness is the fairing weight relative to the data term (by the traces of the two forms;
-grids of few control points take a share of it, see ``fit._fairing_share``). 3 against 1e-4
-on 10,000-point clouds (``benchmarks/bench_patches.py`` cases, noise 0.2%): the surface's mean
-distance to the truth falls from 0.24 to 0.14 noise sigmas (sphere), 0.25 to 0.21 (torus),
-0.54 to 0.36 (rounded box), 0.25 to 0.16 (capsule); every seam of those stays within 2
-degrees. The seam weight scales the tangent-continuity rows.
+grids of few control points take a share of it, see ``fit._fairing_share``). 3 against 1e-4:
+the fitted surface's mean distance to the truth, in noise sigmas, is 0.15 / 0.23 / 0.23 / 0.42
+against 0.24 / 0.26 / 0.31 / 0.52 on the sphere, torus, capsule and rounded box of
+``python benchmarks/bench_patches.py --cases sphere torus capsule rounded_box --no-single
+[--stiffness 1e-4]`` (column ``s2t/sigma``); at 3 every seam there stays within 1.8 degrees.
+The seam weight scales the tangent-continuity rows.
 """
 
 STIFFNESS = 3.0

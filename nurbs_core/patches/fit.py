@@ -39,7 +39,7 @@ from scipy.spatial import cKDTree
 
 from nurbs_core.patches.defaults import SEAM_WEIGHT, STIFFNESS
 from nurbs_core.patches.evaluate import evaluate, foot_points, grid_samples, rows, unit
-from nurbs_core.patches.network import SIDES, PatchNetwork, build_network, side_parameters
+from nurbs_core.patches.network import SIDES, PatchNetwork, build_network
 from nurbs_core.surfacing.fairing import fairing_matrices
 from nurbs_core.surfacing.neighbours import estimate_noise
 
@@ -69,8 +69,6 @@ POINTS_PER_CONTROL = 4
 EDGE_HOLD = 0.2
 #: Seam samples per edge per control point of a side.
 SEAM_SAMPLES = 2
-#: Corner slots of a quad as (u, v).
-CORNER_UV = ((0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0))
 
 
 @dataclass
@@ -248,6 +246,19 @@ def _resized(network: PatchNetwork, size: int) -> PatchNetwork:
     return bigger.with_control_points(control)
 
 
+def network_fairing(network: PatchNetwork) -> scipy.sparse.csr_matrix:
+    """(K, K) the sum over patches of each one's thin plate + MEMBRANE_RATIO membrane form
+    (:func:`nurbs_core.surfacing.fairing.fairing_matrices`) on the global control points."""
+    knots = network.knots
+    thin, membrane = fairing_matrices(knots, network.degree, knots, network.degree)
+    local = (thin + MEMBRANE_RATIO * membrane).tocoo()
+    flat = network.index.reshape(network.patch_count, -1)
+    k = len(network.control_points)
+    return scipy.sparse.csr_matrix((np.tile(local.data, network.patch_count),
+                                    (flat[:, local.row].ravel(), flat[:, local.col].ravel())),
+                                   shape=(k, k))
+
+
 class _Solver:
     """The pass's sparse solve (see the module docstring); remembers the fairing matrix per
     network size and the last seam angle it saw."""
@@ -261,15 +272,7 @@ class _Solver:
     def fairing(self, network: PatchNetwork) -> scipy.sparse.csr_matrix:
         key = (network.size, network.patch_count)
         if key not in self._fairing:
-            knots = network.knots
-            thin, membrane = fairing_matrices(knots, network.degree, knots, network.degree)
-            local = (thin + MEMBRANE_RATIO * membrane).tocoo()
-            flat = network.index.reshape(network.patch_count, -1)
-            r = flat[:, local.row].ravel()
-            c = flat[:, local.col].ravel()
-            v = np.tile(local.data, network.patch_count)
-            k = len(network.control_points)
-            self._fairing[key] = scipy.sparse.csr_matrix((v, (r, c)), shape=(k, k))
+            self._fairing[key] = network_fairing(network)
         return self._fairing[key]
 
     def solve(self, network: PatchNetwork, patch: np.ndarray, uv: np.ndarray,
@@ -324,13 +327,7 @@ def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarra
     t = (np.arange(m) + 0.5) / m
     blocks, targets, worst = [], [], 0.0
     if network.edges:
-        count = len(network.edges)
-        tt = np.tile(t, count)
-        pa = np.repeat([e.a for e in network.edges], m)
-        pb = np.repeat([e.b for e in network.edges], m)
-        flip = np.repeat([e.reversed for e in network.edges], m)
-        uva = _side_uv(np.repeat([e.side_a for e in network.edges], m), tt)
-        uvb = _side_uv(np.repeat([e.side_b for e in network.edges], m), np.where(flip, 1.0 - tt, tt))
+        pa, uva, pb, uvb = network.seam_samples(t)
         _, sua, sva = evaluate(network, pa, uva[:, 0], uva[:, 1])
         _, sub, svb = evaluate(network, pb, uvb[:, 0], uvb[:, 1])
         na, nb = unit(np.cross(sua, sva)), unit(np.cross(sub, svb))
@@ -358,10 +355,8 @@ def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarra
     # corners: every patch's two corner derivatives to their projections on the plane of the
     # vertex's mean normal (a full target, not only "in the plane": that one is also met by a
     # derivative shrinking to nothing, which folds the corner)
-    patch_of, corner_of = np.divmod(np.arange(4 * network.patch_count), 4)
-    corner_uv = np.asarray(CORNER_UV)[corner_of]
+    patch_of, corner_uv, vertex = network.corner_samples()
     _, su, sv = evaluate(network, patch_of, corner_uv[:, 0], corner_uv[:, 1])
-    vertex = network.quads.ravel()
     vertex_normal = np.zeros((len(network.vertices), 3))
     np.add.at(vertex_normal, vertex, unit(np.cross(su, sv)))
     normal = unit(vertex_normal[vertex])
@@ -386,15 +381,6 @@ def _projection_rows(network, patch, uv, direction, derivative, normal):
     g = scipy.sparse.vstack([scipy.sparse.hstack([scaled if c == r else zero for c in range(3)])
                              for r in range(3)], format="csr")
     return g, (target * scale[:, None]).T.ravel()
-
-
-def _side_uv(sides: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """(u, v) (M, 2) of side names (M,) at side parameters t (M,)."""
-    uv = np.empty((len(t), 2))
-    for side in ("v0", "u1", "v1", "u0"):
-        pick = sides == side
-        uv[pick] = side_parameters(side, t[pick])
-    return uv
 
 
 def _plane_rows(network, patch, uv, direction, normal) -> scipy.sparse.csr_matrix:

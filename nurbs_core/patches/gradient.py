@@ -25,9 +25,8 @@ import scipy.sparse
 import torch
 
 from nurbs_core.patches.evaluate import foot_points, rows
-from nurbs_core.patches.fit import CORNER_UV, MEMBRANE_RATIO, _patch_area, _side_uv
+from nurbs_core.patches.fit import _Frame, _patch_area, network_fairing
 from nurbs_core.patches.network import PatchNetwork
-from nurbs_core.surfacing.fairing import fairing_matrices
 
 
 @dataclass
@@ -58,23 +57,16 @@ def seam_operators(network: PatchNetwork, samples_per_edge: int = 16) -> dict[st
     shared edge) and at every patch corner, grouped by the vertex they share: "ua", "va" and
     "ub", "vb" (R, K) for the edge pairs; "cu", "cv" (4P, K) and "corner_vertex" (4P,)."""
     t = (np.arange(samples_per_edge) + 0.5) / samples_per_edge
-    edges = network.edges
     ops: dict[str, torch.Tensor] = {}
-    if edges:
-        tt = np.tile(t, len(edges))
-        flip = np.repeat([e.reversed for e in edges], len(t))
-        pa = np.repeat([e.a for e in edges], len(t))
-        pb = np.repeat([e.b for e in edges], len(t))
-        uva = _side_uv(np.repeat([e.side_a for e in edges], len(t)), tt)
-        uvb = _side_uv(np.repeat([e.side_b for e in edges], len(t)), np.where(flip, 1 - tt, tt))
+    if network.edges:
+        pa, uva, pb, uvb = network.seam_samples(t)
         for key, patch, uv in (("a", pa, uva), ("b", pb, uvb)):
             ops["u" + key] = torch_sparse(rows(network, patch, uv[:, 0], uv[:, 1], "u"))
             ops["v" + key] = torch_sparse(rows(network, patch, uv[:, 0], uv[:, 1], "v"))
-    patch_of, slot = np.divmod(np.arange(4 * network.patch_count), 4)
-    uv = np.asarray(CORNER_UV)[slot]
-    ops["cu"] = torch_sparse(rows(network, patch_of, uv[:, 0], uv[:, 1], "u"))
-    ops["cv"] = torch_sparse(rows(network, patch_of, uv[:, 0], uv[:, 1], "v"))
-    ops["corner_vertex"] = torch.as_tensor(network.quads.ravel(), dtype=torch.long)
+    patch, uv, vertex = network.corner_samples()
+    ops["cu"] = torch_sparse(rows(network, patch, uv[:, 0], uv[:, 1], "u"))
+    ops["cv"] = torch_sparse(rows(network, patch, uv[:, 0], uv[:, 1], "v"))
+    ops["corner_vertex"] = torch.as_tensor(vertex, dtype=torch.long)
     return ops
 
 
@@ -110,18 +102,11 @@ def refine_network(network: PatchNetwork, points: np.ndarray, *, iterations: int
     ``points`` (N, 3) in the network's units; ``learning_rate`` relative to the diagonal."""
     points = np.asarray(points, np.float64)
     lo, hi = points.min(axis=0), points.max(axis=0)
-    centre, scale = 0.5 * (lo + hi), float(np.linalg.norm(hi - lo)) or 1.0
-    q = torch.as_tensor((points - centre) / scale)
-    net = network.with_control_points((network.control_points - centre) / scale)
-    net.vertices = (network.vertices - centre) / scale
-    knots = net.knots
-    thin, membrane = fairing_matrices(knots, net.degree, knots, net.degree)
-    local = (thin + MEMBRANE_RATIO * membrane).tocoo()
-    flat = net.index.reshape(net.patch_count, -1)
-    k = len(net.control_points)
-    fair = scipy.sparse.csr_matrix((np.tile(local.data, net.patch_count),
-                                    (flat[:, local.row].ravel(), flat[:, local.col].ravel())),
-                                   shape=(k, k))
+    frame = _Frame(0.5 * (lo + hi), float(np.linalg.norm(hi - lo)) or 1.0)
+    q = torch.as_tensor(frame.inward(points))
+    net = network.with_control_points(frame.inward(network.control_points))
+    net.vertices = frame.inward(network.vertices)
+    fair = network_fairing(net)
     fair_t = torch_sparse(fair)
     ops = seam_operators(net)
     seam_scale = seam_weight * _patch_area(net)
@@ -162,7 +147,6 @@ def refine_network(network: PatchNetwork, points: np.ndarray, *, iterations: int
         if iteration % correction_interval == 0:
             patch, uv, _ = foot_points(current, q.numpy(), patch, uv)
             a = torch_sparse(rows(current, patch, uv[:, 0], uv[:, 1]))
-        out = current.with_control_points(current.control_points * scale + centre)
-        out.vertices = network.vertices
+        out = frame.outward(current)
         yield GradientStep(iteration, out, float(data.detach()), float(fairing.detach()),
                            float(seam.detach()), float(total.detach()), float(worst), rate)

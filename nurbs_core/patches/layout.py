@@ -63,7 +63,7 @@ def euler_characteristic(faces) -> int:
 
 
 def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
-                seed_retries: bool = True) -> QuadLayout:
+                retry: bool = True) -> QuadLayout:
     """A quad layout of about ``patches`` quads of the triangle mesh (vertices (N, 3), faces
     (F, 3), consistently oriented). Raises :class:`LayoutError` when no valid layout results."""
     import pyinstantmeshes
@@ -80,7 +80,7 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
         source = os.path.join(folder, "mesh.obj")
         target = os.path.join(folder, "quads.obj")
         _write_obj(source, vertices, faces)
-        for factor in RETRY_FACTORS if seed_retries else (1.0,):
+        for factor in RETRY_FACTORS if retry else (1.0,):
             count = max(2, int(round(patches * factor / QUADS_PER_TARGET_FACE)))
             with _silenced_stdout():
                 pyinstantmeshes.remesh_file(source, target, target_face_count=count,

@@ -19,8 +19,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from nurbs_core.patches.evaluate import evaluate, foot_points, unit
-from nurbs_core.patches.fit import CORNER_UV
-from nurbs_core.patches.network import PatchNetwork, side_parameters
+from nurbs_core.patches.network import PatchNetwork
 
 #: Gauss points per patch direction for the area integrals.
 GAUSS_POINTS = 16
@@ -69,21 +68,18 @@ class NetworkQuality:
 def seam_statistics(network: PatchNetwork, samples: int = 48) -> SeamStatistics:
     """Seam angles along every shared edge (``samples`` interior points each), corner angles and
     the largest gap."""
-    t = (np.arange(samples) + 0.5) / samples
-    t_full = np.linspace(0.0, 1.0, samples + 1)
-    angles, gap = [], 0.0
-    for edge in network.edges:
-        for tt, measure_angle in ((t, True), (t_full, False)):
-            uva = side_parameters(edge.side_a, tt)
-            uvb = side_parameters(edge.side_b, 1.0 - tt if edge.reversed else tt)
-            sa, sua, sva = evaluate(network, np.full(len(tt), edge.a), uva[:, 0], uva[:, 1])
-            sb, sub, svb = evaluate(network, np.full(len(tt), edge.b), uvb[:, 0], uvb[:, 1])
-            if measure_angle:
-                cos = (unit(np.cross(sua, sva)) * unit(np.cross(sub, svb))).sum(1)
-                angles.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
-            else:
-                gap = max(gap, float(np.linalg.norm(sa - sb, axis=1).max()))
-    along = np.concatenate(angles) if angles else np.zeros(1)
+    along, gap = np.zeros(1), 0.0
+    if network.edges:
+        # interior samples for the angles (a corner's normals are the corners' business), the
+        # ends too for the gap
+        t = np.concatenate([(np.arange(samples) + 0.5) / samples, [0.0, 1.0]])
+        pa, uva, pb, uvb = network.seam_samples(t)
+        sa, sua, sva = evaluate(network, pa, uva[:, 0], uva[:, 1])
+        sb, sub, svb = evaluate(network, pb, uvb[:, 0], uvb[:, 1])
+        interior = np.tile(np.arange(len(t)) < samples, len(network.edges))
+        cos = (unit(np.cross(sua, sva)) * unit(np.cross(sub, svb))).sum(1)[interior]
+        along = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+        gap = float(np.linalg.norm(sa - sb, axis=1).max())
     corners = corner_angles(network)
     regular = corners[network.valence == 4]
     irregular = corners[(network.valence != 4) & (network.valence > 0)]
@@ -95,11 +91,9 @@ def seam_statistics(network: PatchNetwork, samples: int = 48) -> SeamStatistics:
 
 def corner_angles(network: PatchNetwork) -> np.ndarray:
     """(V,) the largest angle (degrees) between the normals of the patches at each vertex."""
-    patch_of, slot = np.divmod(np.arange(4 * network.patch_count), 4)
-    uv = np.asarray(CORNER_UV)[slot]
-    _, su, sv = evaluate(network, patch_of, uv[:, 0], uv[:, 1])
+    patch, uv, vertex = network.corner_samples()
+    _, su, sv = evaluate(network, patch, uv[:, 0], uv[:, 1])
     normals = unit(np.cross(su, sv))
-    vertex = network.quads.ravel()
     out = np.zeros(len(network.vertices))
     order = np.argsort(vertex, kind="stable")
     bounds = np.searchsorted(vertex[order], np.arange(len(network.vertices) + 1))

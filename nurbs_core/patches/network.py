@@ -36,6 +36,19 @@ def side_parameters(side: str, t: np.ndarray) -> np.ndarray:
     return np.stack({"v0": (t, zero), "u1": (one, t), "v1": (t, one), "u0": (zero, t)}[side], -1)
 
 
+def sides_parameters(sides: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(u, v) (M, 2) of side names (M,) at side parameters t (M,)."""
+    uv = np.empty((len(t), 2))
+    for side, _ in SIDES:
+        pick = sides == side
+        uv[pick] = side_parameters(side, t[pick])
+    return uv
+
+
+#: Corner slots of a quad (0, 1, 2, 3) as (u, v).
+CORNER_UV = ((0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0))
+
+
 def side_indices(grid: np.ndarray, side: str) -> np.ndarray:
     """The control-point row (size,) of a (size, size) index grid along ``side``, from its
     first corner; and, as a second row, the next row inwards."""
@@ -108,6 +121,26 @@ class PatchNetwork:
         """The shared edges as plain dictionaries (for files)."""
         return [{"patches": [e.a, e.b], "sides": [e.side_a, e.side_b], "reversed": e.reversed,
                  "vertices": list(e.vertices)} for e in self.edges]
+
+    def seam_samples(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The same points of every shared edge seen from both patches, at side parameters t
+        (T,) along side a: (patch a (E T,), uv on a (E T, 2), patch b (E T,), uv on b (E T, 2)),
+        edge-major."""
+        t = np.asarray(t, np.float64)
+        count = len(t)
+        tt = np.tile(t, len(self.edges))
+        flip = np.repeat([e.reversed for e in self.edges], count).astype(bool)
+        pa = np.repeat([e.a for e in self.edges], count).astype(np.int64)
+        pb = np.repeat([e.b for e in self.edges], count).astype(np.int64)
+        uva = sides_parameters(np.repeat([e.side_a for e in self.edges], count), tt)
+        uvb = sides_parameters(np.repeat([e.side_b for e in self.edges], count),
+                               np.where(flip, 1.0 - tt, tt))
+        return pa, uva, pb, uvb
+
+    def corner_samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every patch's four corners: (patch (4P,), uv (4P, 2), layout vertex (4P,))."""
+        patch, slot = np.divmod(np.arange(4 * self.patch_count), 4)
+        return patch, np.asarray(CORNER_UV)[slot], self.quads.ravel()
 
     def with_control_points(self, control_points: np.ndarray) -> PatchNetwork:
         c = np.asarray(control_points, np.float64).reshape(-1, 3)

@@ -18,7 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nurbs_core.patches.closed_mesh import ClosedMesh, closed_mesh
-from nurbs_core.patches.fit import SEAM_WEIGHT, STIFFNESS, NetworkPass, fit_network
+from nurbs_core.patches.defaults import SEAM_WEIGHT, STIFFNESS
+from nurbs_core.patches.fit import NetworkPass, fit_network
 from nurbs_core.patches.layout import LayoutError, QuadLayout, quad_layout
 from nurbs_core.patches.measures import NetworkQuality, network_quality
 from nurbs_core.patches.network import PatchNetwork
@@ -188,7 +189,7 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
         yield PatchEvent("pass", layout=layout, fit_pass=last)
     timings["fit"] = time.perf_counter() - start
     start = time.perf_counter()
-    quality = network_quality(last.network, measured, (mesh.vertices, _vertex_normals(mesh)))
+    quality = network_quality(last.network, measured, (mesh.vertices, mesh.vertex_normals()))
     timings["quality"] = time.perf_counter() - start
     warnings = [last.message] if last.message else []
     if quality.seam.p99 > WARN_SEAM:
@@ -204,12 +205,3 @@ def fit_patches(points: np.ndarray, options: PatchOptions | None = None, **kwarg
     """:func:`iter_patch_fit` to the end: the :class:`PatchResult`."""
     events = list(iter_patch_fit(points, options, **kwargs))
     return events[-1].result
-
-
-def _vertex_normals(mesh: ClosedMesh) -> np.ndarray:
-    tri = mesh.vertices[mesh.faces]
-    face = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normals = np.zeros_like(mesh.vertices)
-    for k in range(3):
-        np.add.at(normals, mesh.faces[:, k], face)
-    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)

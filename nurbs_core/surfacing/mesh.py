@@ -70,11 +70,17 @@ class CloudMesh:
 
     def vertex_normals(self) -> np.ndarray:
         """(M, 3) area-weighted unit normals (zero for vertices in no face)."""
-        weighted = self.face_normals(unit=False)
-        normals = np.zeros_like(self.vertices)
-        for k in range(3):
-            np.add.at(normals, self.faces[:, k], weighted)
-        return normals / (np.linalg.norm(normals, axis=1, keepdims=True) + 1e-300)
+        return vertex_normals(self.vertices, self.faces)
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(M, 3) area-weighted unit normals of a triangle mesh (zero for vertices in no face)."""
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    weighted = np.cross(b - a, c - a)
+    normals = np.zeros_like(vertices, dtype=np.float64)
+    for k in range(3):
+        np.add.at(normals, faces[:, k], weighted)
+    return normals / (np.linalg.norm(normals, axis=1, keepdims=True) + 1e-300)
 
 
 def cloud_mesh(points: np.ndarray, *, max_vertices: int = MAX_MESH_VERTICES,

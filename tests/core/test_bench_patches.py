@@ -3,18 +3,14 @@ seconds), every key of the row present and finite, and the report formats it."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import pytest
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_patches.py"
 
-NETWORK_KEYS = ("patches", "size", "gap", "gap_relative", "seam_median", "seam_p99", "seam_max",
+NETWORK_KEYS = ("patches", "size", "gap", "gap_relative", "seam_median", "seam_p99", "seam_max", "s2t_sigma",
                 "corner_regular_max", "corner_irregular_max", "flipped", "engine_flipped",
                 "area_ratio", "c2s_fit", "c2s_truth", "c2s_ratio", "mesh_s", "layout_s", "fit_s",
                 "total_s")
@@ -22,15 +18,9 @@ SINGLE_KEYS = ("flipped", "area_ratio", "c2s_fit", "c2s_ratio", "total_s")
 
 
 @pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("bench_patches", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up
-    try:
-        spec.loader.exec_module(module)
+def bench(load_bench):
+    with load_bench("bench_patches") as module:
         yield module
-    finally:
-        sys.modules.pop(spec.name, None)
 
 
 def test_cases_are_listed(bench):

@@ -3,10 +3,6 @@ fits, no timing)."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
@@ -16,19 +12,12 @@ from nurbs_core.geometry import NurbsSurface
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_quality.py"
 
 
 @pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("bench_quality", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up
-    try:
-        spec.loader.exec_module(module)
+def bench(load_bench):
+    with load_bench("bench_quality") as module:
         yield module
-    finally:
-        sys.modules.pop(spec.name, None)
 
 
 def test_case_builder_on_a_tiny_case(bench):
