@@ -19,9 +19,23 @@ paired: control (*B, n, m, 3), weights (*B, n, m); basis_u (Bb, M, p+1), basis_v
         -> (*B, M, 3)
 grid:   control (*B, n, m, 3), weights (*B, n, m); banded dense_u (Bb, Mu, n), dense_v (Bb, Mv, m)
         -> (*B, Mu, Mv, 3)
+
+Second derivatives
+------------------
+The backwards of :class:`CurvePoints`, :class:`SurfacePoints` and :class:`SurfaceGridPoints` use
+intermediates saved by the forward (the rational points, ``1 / w``, the homogeneous net), which
+carry no graph, so their double backward would be wrong. They are :func:`once_differentiable`: a
+second derivative through them (``create_graph=True`` then another grad, ``gradgradcheck``,
+``torch.autograd.functional.hessian``, Hessian-vector products) raises a ``RuntimeError`` that
+names the Function and points to ``higher_order=True`` in :mod:`nurbs_core.evaluate`, the
+native-autograd evaluation that is differentiable to any order with respect to control points and
+weights. :class:`SparseProduct` is linear in its input and its backward is itself a differentiable
+sparse product, so it stays differentiable to any order (used by ``surface_derivatives``).
 """
 
 from __future__ import annotations
+
+import functools
 
 import torch
 
@@ -90,8 +104,65 @@ def _fit_knot_grad(grad: torch.Tensor, knots_shape: torch.Size) -> torch.Tensor:
     return grad.reshape(knots_shape)
 
 
+class _NoSecondDerivative(torch.autograd.Function):
+    """Identity on ``value`` whose backward raises ``message``.
+
+    ``anchors`` are the tensors the true second derivative depends on (the incoming gradient and
+    the Function's saved inputs); taking them as inputs puts this node on every path from the
+    first-order gradient back to them, so any second derivative reaches it and raises."""
+
+    @staticmethod
+    def forward(ctx, message, value, *anchors):
+        ctx.message = message
+        return value.clone()
+
+    @staticmethod
+    def backward(ctx, *grads):
+        raise RuntimeError(ctx.message)
+
+
+def once_differentiable(backward):
+    """Mark a custom Function's ``backward`` as first-order only, with an error that says what to do.
+
+    ``torch.autograd.function.once_differentiable`` is not used: its error node hangs off fresh
+    leaves, so a second ``torch.autograd.grad`` with respect to the real inputs only reports "The
+    differentiated Tensor ... appears to not have been used in the graph",
+    ``torch.autograd.functional.hessian`` silently returns zeros and ``gradgradcheck`` returns
+    False (torch 2.13). Here the error node takes the incoming gradient and the saved inputs that
+    require grad as its inputs, so every second derivative reaches it and raises. Without
+    ``create_graph`` (grad mode off in the backward) the backward runs unchanged.
+    """
+    name = backward.__qualname__.split(".")[0]
+    message = (
+        f"nurbs_core: second derivatives through the block-sparse {name} backward are not "
+        "supported (it is once-differentiable; differentiating its gradient again would give "
+        "wrong numbers). For Hessians, Hessian-vector products, curvature losses or meta-learning "
+        "call curve_points / surface_points / surface_grid_points (or the evaluators) with "
+        "higher_order=True: a native-autograd evaluation differentiable to any order with "
+        "respect to control points and weights (not knots)."
+    )
+
+    @functools.wraps(backward)
+    def wrapper(ctx, *grads):
+        if not torch.is_grad_enabled():  # ordinary backward: no overhead
+            return backward(ctx, *grads)
+        with torch.no_grad():
+            outputs = backward(ctx, *grads)
+        anchors = [t for t in (*grads, *ctx.saved_tensors)
+                   if isinstance(t, torch.Tensor) and t.requires_grad]
+        if not anchors:
+            return outputs
+        return tuple(out if out is None else _NoSecondDerivative.apply(message, out, *anchors)
+                     for out in outputs)
+
+    return wrapper
+
+
 class SparseProduct(torch.autograd.Function):
-    """``plan.matmul(dense)`` with the block-sparse transpose product as its backward."""
+    """``plan.matmul(dense)`` with the block-sparse transpose product as its backward.
+
+    Not once-differentiable: the backward ``plan^T grad`` is a differentiable sparse product of the
+    incoming gradient and the product is linear, so double backward is exact (gradgradcheck)."""
 
     @staticmethod
     def forward(ctx, dense, plan):
@@ -117,13 +188,14 @@ class CurvePoints(torch.autograd.Function):
         inv_w = homogeneous[..., -1:].reciprocal()
         points = homogeneous[..., :-1] * inv_w
         ctx.save_for_backward(control_points, weights, control_w, basis, d_basis, span, points,
-                              inv_w)
+                              inv_w, knots)
         ctx.plan, ctx.degree, ctx.knots_shape = plan, degree, knots.shape
         return points.view(*batch_shape, *points.shape[1:])
 
     @staticmethod
+    @once_differentiable
     def backward(ctx, grad_points):
-        control_points, weights, control_w, basis, d_basis, span, points, inv_w = ctx.saved_tensors
+        control_points, weights, control_w, basis, d_basis, span, points, inv_w, _ = ctx.saved_tensors
         batch, size, dim = points.shape
         grad_h = _rational_backward(grad_points.reshape(points.shape), points, inv_w)
         grad_cp = grad_w = grad_knots = None
@@ -154,15 +226,16 @@ class SurfacePoints(torch.autograd.Function):
         inv_w = homogeneous[..., 3:].reciprocal()
         points = homogeneous[..., :3] * inv_w
         ctx.save_for_backward(control_points, weights, control_w, basis_u, basis_v, d_basis_u,
-                              d_basis_v, span_u, span_v, points, inv_w)
+                              d_basis_v, span_u, span_v, points, inv_w, knots_u, knots_v)
         ctx.plan, ctx.degrees = plan, (degree_u, degree_v)
         ctx.knot_shapes = (knots_u.shape, knots_v.shape)
         return points.view(*batch_shape, *points.shape[1:])
 
     @staticmethod
+    @once_differentiable
     def backward(ctx, grad_points):
         (control_points, weights, control_w, basis_u, basis_v, d_basis_u, d_basis_v, span_u,
-         span_v, points, inv_w) = ctx.saved_tensors
+         span_v, points, inv_w, _, _) = ctx.saved_tensors
         degree_u, degree_v = ctx.degrees
         batch, size = points.shape[:2]
         grad_h = _rational_backward(grad_points.reshape(points.shape), points, inv_w)  # (B, M, 4)
@@ -219,15 +292,16 @@ class SurfaceGridPoints(torch.autograd.Function):
         points.mul_(inv_w.unsqueeze(-1))
         ctx.save_for_backward(control_points, weights, weighted, plane_w, dense_u, dense_v,
                               d_basis_u, d_basis_v, span_u, span_v, points, inv_w, partial_xyz,
-                              partial_w)
+                              partial_w, knots_u, knots_v)
         ctx.degrees = (degree_u, degree_v)
         ctx.knot_shapes = (knots_u.shape, knots_v.shape)
         return points.view(*batch_shape, size_u, size_v, 3)
 
     @staticmethod
+    @once_differentiable
     def backward(ctx, grad_points):
         (control_points, weights, weighted, plane_w, dense_u, dense_v, d_basis_u, d_basis_v,
-         span_u, span_v, points, inv_w, partial_xyz, partial_w) = ctx.saved_tensors
+         span_u, span_v, points, inv_w, partial_xyz, partial_w, _, _) = ctx.saved_tensors
         degree_u, degree_v = ctx.degrees
         batch, n, m, _ = weighted.shape
         size_u, size_v = dense_u.shape[1], dense_v.shape[1]

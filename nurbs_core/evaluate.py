@@ -5,6 +5,12 @@ shared (1-D) or batched (``*B, K``); parameters are shared (``M``) or batched (`
 Gradients flow to control points, weights and knots through the custom Functions in
 :mod:`nurbs_core.autograd`. Knot gradients are computed only when a knot vector requires grad.
 
+Second derivatives: the custom Functions are once-differentiable (a second derivative through them
+raises). ``higher_order=True`` on :func:`curve_points`, :func:`surface_points`,
+:func:`surface_grid_points` and the evaluators switches to a native-autograd evaluation (constant
+basis values, gather or banded dense products, homogeneous sum, rational division) that is
+differentiable to any order with respect to control points and weights, but not knots.
+
 Fixed knots and fixed parameters (the paper's B-spline layer): :class:`CurveEvaluator`,
 :class:`SurfaceEvaluator` and :class:`SurfaceGridEvaluator` precompute the spans and basis once;
 each call then costs only the sparse products.
@@ -47,6 +53,16 @@ def _needs_knot_grad(knots: torch.Tensor) -> bool:
     return knots.requires_grad and torch.is_grad_enabled()
 
 
+def _reject_knot_grad(function: str, *knot_vectors) -> None:
+    """``higher_order=True`` treats the basis as a constant: refuse knots that want a gradient."""
+    if any(_needs_knot_grad(k) for k in knot_vectors):
+        raise ValueError(
+            f"{function}(higher_order=True): a knot vector requires grad, but this mode "
+            "differentiates only with respect to control points and weights (knot derivatives, "
+            "first or higher order, are not supported). Pass knots.detach(), or use "
+            "higher_order=False for first-order knot gradients.")
+
+
 def _basis(knots, degree, u, bandwidth, want_knot_grad):
     """Spans, compact basis and (optionally) knot derivatives on (Bb, K) knots, (Bb, M) params."""
     with torch.no_grad():
@@ -70,12 +86,26 @@ def _directions(batch_shape, dtype, knots_and_params):
     return out
 
 
-def curve_points(control_points, weights, knots, degree, u, knot_bandwidth=DEFAULT_KNOT_BANDWIDTH):
+def curve_points(control_points, weights, knots, degree, u, knot_bandwidth=DEFAULT_KNOT_BANDWIDTH,
+                 *, higher_order: bool = False):
     """Points of rational curves. control_points (*B, n, d); weights (*B, n); knots (K,) or (*B, K);
-    u (M,) or (*B, M). Returns (*B, M, d)."""
+    u (M,) or (*B, M). Returns (*B, M, d).
+
+    Default (``higher_order=False``): the block-sparse :class:`~nurbs_core.autograd.CurvePoints`,
+    first derivatives with respect to control points, weights and knots; it is once-differentiable,
+    so a second derivative (Hessian, ``create_graph=True`` then another grad) raises RuntimeError.
+    ``higher_order=True``: the same values from native autograd ops (the (*B, M, p+1) basis values
+    a constant, the p+1 homogeneous control points of each span gathered, summed and divided by
+    the weight), differentiable to any order with respect to control points and weights; slower.
+    Raises ValueError there if ``knots`` requires grad (no knot derivatives in that mode).
+    """
     batch_shape = control_points.shape[:-2]
     weights = weights.expand(control_points.shape[:-1])
     k, t = _directions(batch_shape, control_points.dtype, (knots, u))
+    if higher_order:
+        _reject_knot_grad("curve_points", knots)
+        span, basis, _ = _basis(k, degree, t, knot_bandwidth, False)
+        return _native_curve_points(control_points, weights, basis, span, degree)
     span, basis, d_basis = _basis(k, degree, t, knot_bandwidth, _needs_knot_grad(knots))
     return _fn.CurvePoints.apply(control_points, weights, knots, basis, d_basis, span, degree)
 
@@ -89,11 +119,26 @@ def _surface_basis(control_points, knots_u, knots_v, degree_u, degree_v, u, v, b
 
 
 def surface_points(control_points, weights, knots_u, knots_v, degree_u, degree_v, u, v,
-                   knot_bandwidth=DEFAULT_KNOT_BANDWIDTH):
+                   knot_bandwidth=DEFAULT_KNOT_BANDWIDTH, *, higher_order: bool = False):
     """Points of rational surfaces at paired parameters (u[k], v[k]).
 
-    control_points (*B, n, m, 3); weights (*B, n, m); u, v (M,) or (*B, M). Returns (*B, M, 3)."""
+    control_points (*B, n, m, 3); weights (*B, n, m); knots (K,) or (*B, K); u, v (M,) or (*B, M).
+    Returns (*B, M, 3).
+
+    Default: the block-sparse :class:`~nurbs_core.autograd.SurfacePoints` (first derivatives for
+    control points, weights and knots; a second derivative raises RuntimeError).
+    ``higher_order=True``: native autograd ops on the (p+1) x (q+1) homogeneous control points
+    of each point's span with constant basis values, differentiable to any order with respect to
+    control points and weights; raises ValueError if a knot vector requires grad.
+    """
     weights = weights.expand(control_points.shape[:-1])
+    if higher_order:
+        _reject_knot_grad("surface_points", knots_u, knots_v)
+        span_u, basis_u, _, span_v, basis_v, _ = _surface_basis(
+            control_points, knots_u.detach(), knots_v.detach(), degree_u, degree_v, u, v,
+            knot_bandwidth)
+        return _native_surface_points(control_points, weights, basis_u, basis_v, span_u, span_v,
+                                      degree_u, degree_v)
     span_u, basis_u, d_u, span_v, basis_v, d_v = _surface_basis(
         control_points, knots_u, knots_v, degree_u, degree_v, u, v, knot_bandwidth)
     return _fn.SurfacePoints.apply(control_points, weights, knots_u, knots_v, basis_u, basis_v,
@@ -101,16 +146,79 @@ def surface_points(control_points, weights, knots_u, knots_v, degree_u, degree_v
 
 
 def surface_grid_points(control_points, weights, knots_u, knots_v, degree_u, degree_v, u, v,
-                        knot_bandwidth=DEFAULT_KNOT_BANDWIDTH):
-    """Points on the tensor-product grid u x v. Returns (*B, len(u), len(v), 3)."""
+                        knot_bandwidth=DEFAULT_KNOT_BANDWIDTH, *, higher_order: bool = False):
+    """Points on the tensor-product grid u x v.
+
+    control_points (*B, n, m, 3); weights (*B, n, m); knots (K,) or (*B, K); u (Mu,) or (*B, Mu),
+    v (Mv,) or (*B, Mv). Returns (*B, Mu, Mv, 3).
+
+    Default: the Kronecker-structured :class:`~nurbs_core.autograd.SurfaceGridPoints` (first
+    derivatives for control points, weights and knots; a second derivative raises RuntimeError).
+    ``higher_order=True``: ``H = N_u (Pw N_v^T)`` with constant banded dense (*B, Mu, n) and
+    (*B, Mv, m) basis matrices and native autograd ops, differentiable to any order with respect to
+    control points and weights; raises ValueError if a knot vector requires grad.
+    """
     n, m = control_points.shape[-3], control_points.shape[-2]
     weights = weights.expand(control_points.shape[:-1])
+    if higher_order:
+        _reject_knot_grad("surface_grid_points", knots_u, knots_v)
+        knots_u, knots_v = knots_u.detach(), knots_v.detach()
     span_u, basis_u, d_u, span_v, basis_v, d_v = _surface_basis(
         control_points, knots_u, knots_v, degree_u, degree_v, u, v, knot_bandwidth)
     dense_u = dense_basis_matrix(basis_u, span_u, degree_u, n)
     dense_v = dense_basis_matrix(basis_v, span_v, degree_v, m)
+    if higher_order:
+        return _native_grid_points(control_points, weights, dense_u, dense_v)
     return _fn.SurfaceGridPoints.apply(control_points, weights, knots_u, knots_v, dense_u, dense_v,
                                        d_u, d_v, span_u, span_v, degree_u, degree_v)
+
+
+# --------------------------------------------------------------------------------------------
+# Native-autograd evaluation (``higher_order=True``): only differentiable torch ops on the control
+# points and weights, the basis a constant, so autograd differentiates it to any order.
+
+
+def _batched_net(control_points, weights, net_dims):
+    """(*B, <net>, d), (*B, <net>) -> (B, <net>, d+1) homogeneous points and the batch shape."""
+    batch_shape = control_points.shape[: control_points.dim() - net_dims - 1]
+    control_w = homogeneous(control_points, weights)
+    return control_w.reshape(-1, *control_w.shape[len(batch_shape):]), batch_shape
+
+
+def _rational(hom, batch_shape):
+    """(B, ..., d+1) homogeneous points -> (*B, ..., d) Euclidean points."""
+    points = hom[..., :-1] / hom[..., -1:]
+    return points.reshape(*batch_shape, *points.shape[1:])
+
+
+def _native_curve_points(control_points, weights, basis, span, degree):
+    """basis (Bb, M, p+1), span (Bb, M), Bb in {1, B} -> (*B, M, d)."""
+    control_w, batch_shape = _batched_net(control_points, weights, 1)
+    rows = torch.arange(control_w.shape[0], device=span.device).view(-1, 1, 1)
+    gathered = control_w[rows, _fn._local_index(span, degree)]  # (B, M, p+1, d+1)
+    return _rational((basis.unsqueeze(-1) * gathered).sum(-2), batch_shape)
+
+
+def _native_surface_points(control_points, weights, basis_u, basis_v, span_u, span_v, degree_u,
+                           degree_v):
+    """basis_u (Bb, M, p+1), basis_v (Bb, M, q+1), spans (Bb, M) -> (*B, M, 3)."""
+    control_w, batch_shape = _batched_net(control_points, weights, 2)
+    rows = torch.arange(control_w.shape[0], device=span_u.device).view(-1, 1, 1, 1)
+    index_u = _fn._local_index(span_u, degree_u).unsqueeze(-1)  # (Bb, M, p+1, 1)
+    index_v = _fn._local_index(span_v, degree_v).unsqueeze(-2)  # (Bb, M, 1, q+1)
+    gathered = control_w[rows, index_u, index_v]  # (B, M, p+1, q+1, 4)
+    products = (basis_u.unsqueeze(-1) * basis_v.unsqueeze(-2)).unsqueeze(-1)
+    return _rational((products * gathered).sum((-3, -2)), batch_shape)
+
+
+def _native_grid_points(control_points, weights, dense_u, dense_v):
+    """Banded dense_u (Bb, Mu, n), dense_v (Bb, Mv, m) -> (*B, Mu, Mv, 3)."""
+    control_w, batch_shape = _batched_net(control_points, weights, 2)
+    batch, n = control_w.shape[:2]
+    size_u, size_v = dense_u.shape[1], dense_v.shape[1]
+    partial = torch.matmul(dense_v.unsqueeze(1), control_w)  # (B, n, Mv, 4)
+    hom = torch.matmul(dense_u, partial.reshape(batch, n, size_v * 4))
+    return _rational(hom.view(batch, size_u, size_v, 4), batch_shape)
 
 
 # --------------------------------------------------------------------------------------------
@@ -203,7 +311,8 @@ class CurveEvaluator:
     """Evaluate curves with fixed knots at fixed parameters; spans and basis computed once.
 
     knots (K,), u (M,). ``evaluator(control_points (*B, n, d), weights (*B, n) | None)``
-    returns (*B, M, d).
+    returns (*B, M, d). ``evaluator(..., higher_order=True)``: the native-autograd evaluation of
+    :func:`curve_points`, differentiable to any order (the default is once-differentiable).
     """
 
     def __init__(self, knots, degree: int, u):
@@ -214,8 +323,11 @@ class CurveEvaluator:
 
         self._plans: dict[int, object] = {}
 
-    def __call__(self, control_points, weights=None):
+    def __call__(self, control_points, weights=None, *, higher_order: bool = False):
         weights = _default_weights(control_points, weights)
+        if higher_order:
+            return _native_curve_points(control_points, weights, self.basis, self.span,
+                                        self.degree)
         batch = math.prod(control_points.shape[:-2])
         plan = self._plans.get(batch)
         if plan is None:
@@ -244,10 +356,14 @@ class _FixedSurfaceBasis:
 
 
 class SurfaceEvaluator(_FixedSurfaceBasis):
-    """Fixed knots and fixed paired parameters (u[k], v[k]); returns (*B, M, 3)."""
+    """Fixed knots and fixed paired parameters (u[k], v[k]); returns (*B, M, 3).
+    ``higher_order=True`` as in :func:`surface_points`."""
 
-    def __call__(self, control_points, weights=None):
+    def __call__(self, control_points, weights=None, *, higher_order: bool = False):
         weights = _default_weights(control_points, weights)
+        if higher_order:
+            return _native_surface_points(control_points, weights, self.basis_u, self.basis_v,
+                                          self.span_u, self.span_v, *self.degrees)
         batch = math.prod(control_points.shape[:-3])
         plans = self.__dict__.setdefault("_plans", {})
         if batch not in plans:
@@ -260,7 +376,8 @@ class SurfaceEvaluator(_FixedSurfaceBasis):
 
 
 class SurfaceGridEvaluator(_FixedSurfaceBasis):
-    """Fixed knots, fixed grid u x v; returns (*B, len(u), len(v), 3)."""
+    """Fixed knots, fixed grid u x v; returns (*B, len(u), len(v), 3).
+    ``higher_order=True`` as in :func:`surface_grid_points`."""
 
     def __init__(self, knots_u, knots_v, degree_u, degree_v, u, v):
         super().__init__(knots_u, knots_v, degree_u, degree_v, u, v)
@@ -269,8 +386,10 @@ class SurfaceGridEvaluator(_FixedSurfaceBasis):
         self.dense_u = dense_basis_matrix(self.basis_u, self.span_u, degree_u, n_u)
         self.dense_v = dense_basis_matrix(self.basis_v, self.span_v, degree_v, n_v)
 
-    def __call__(self, control_points, weights=None):
+    def __call__(self, control_points, weights=None, *, higher_order: bool = False):
         weights = _default_weights(control_points, weights)
+        if higher_order:
+            return _native_grid_points(control_points, weights, self.dense_u, self.dense_v)
         return _fn.SurfaceGridPoints.apply(control_points, weights, self.knots_u, self.knots_v,
                                            self.dense_u, self.dense_v, None, None, self.span_u,
                                            self.span_v, *self.degrees)
