@@ -8,8 +8,11 @@ prints the final error statistics and writes every ``--output`` file with
 :func:`nurbs_core.io.save` (the suffix picks the format: .3dm, .json, .step, ...). ``--offset D``
 also writes the fitted surface offset by D along its normals (``<name>_offset<suffix>``).
 ``--patches auto`` fits a closed object as a watertight network of patches instead.
-Errors print one line (``nurbs-fit: error: ...``) and exit with status 1; Ctrl-C stops the fit
-and still writes the result reached so far.
+Every output is checked before any work (suffix, folder, never the input file) and the outputs
+are written all-or-nothing, each atomically. Errors print one line (``nurbs-fit: error: ...``;
+``--debug`` adds the traceback) and exit with status 1. The first Ctrl-C stops the fit and still
+writes the result reached so far; a second one, or one outside the fit, exits at once with status
+130 and leaves every output as it was.
 """
 
 from __future__ import annotations
@@ -19,15 +22,18 @@ import math
 import signal
 import sys
 import time
+import traceback
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-import torch
+if TYPE_CHECKING:
+    import numpy as np
 
-from nurbs_core.fit import DEFAULT_LOSS, PAPER_POINT_CLOUD_LOSS, FitConfig, StopToken, fit
-from nurbs_core.fitting.sheet import resolved_solver
-from nurbs_core.geometry import NurbsCurve
-from nurbs_core.losses import chamfer_distance
+# Nothing heavy at module level: numpy, the engine and torch load inside main(), where Ctrl-C
+# during start-up is caught (status 130, no traceback); --help and bad outputs never load torch.
+
+#: Exit status after Ctrl-C (128 + SIGINT), as shells report it.
+INTERRUPTED_STATUS = 130
 
 PROGRESS_INTERVAL = 0.5  # seconds between progress lines
 #: Default loss for curves: Chamfer weighted like the foot-point term fits outlines closer than
@@ -36,6 +42,8 @@ CURVE_LOSS = "chamfer+p2s"
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from nurbs_core.fitting.config import DEFAULT_LOSS, PAPER_POINT_CLOUD_LOSS
+
     parser = argparse.ArgumentParser(
         prog="nurbs-fit", description="Fit a NURBS surface (or curve) to a point cloud.",
         epilog="Learning rates are relative to the cloud's bounding-box diagonal (see FitConfig).")
@@ -124,6 +132,12 @@ def build_parser() -> argparse.ArgumentParser:
                         help="torch threads (default 1: fastest for typical fits)")
     parser.add_argument("--dtype", default="float64", choices=["float32", "float64"])
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress lines")
+    parser.add_argument("--max-decompressed", default=None, metavar="SIZE",
+                        help="largest size a compressed input (.npz, compressed .pcd) may "
+                             "inflate to, e.g. 16G (default: 64 MiB + 32 x the compressed size; "
+                             "also the environment variable NURBS_STUDIO_MAX_DECOMPRESSED)")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the full traceback of an error")
     return parser
 
 
@@ -136,7 +150,10 @@ def _pair(values: list[int], name: str, count: int) -> list[int]:
     return values
 
 
-def _config(args, dimensions: int) -> FitConfig:
+def _config(args, dimensions: int):
+    """The FitConfig the arguments describe."""
+    from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig
+
     directions = 1 if args.curve else 2
     degrees = _pair(args.degree, "--degree", directions)
     default_counts = [16] if args.curve else [12, 12]
@@ -168,6 +185,8 @@ def _config(args, dimensions: int) -> FitConfig:
 
 
 def _grid_parameters(count_u: int, count_v: int, points: int) -> np.ndarray:
+    import numpy as np
+
     if count_u * count_v != points:
         raise ValueError(f"--grid {count_u} {count_v} needs {count_u * count_v} points, the file "
                          f"has {points}")
@@ -205,6 +224,11 @@ class _Progress:
 
 def _chamfer(geometry, points: np.ndarray, gen: np.random.Generator) -> float:
     """Two-sided Chamfer between dense samples of the result and (up to 200k of) the points."""
+    import torch
+
+    from nurbs_core.geometry import NurbsCurve
+    from nurbs_core.losses import chamfer_distance
+
     with torch.no_grad():
         if isinstance(geometry, NurbsCurve):
             samples = geometry.sample(2000)
@@ -237,8 +261,12 @@ def _quality_text(stats: dict, diagonal: float) -> str:
     return "\n".join(lines)
 
 
-def _lift(curve: NurbsCurve, z: float) -> NurbsCurve:
-    """A 2-D curve fitted in the xy-plane back in 3-D at height z (for the file writers)."""
+def _lift(curve, z: float):
+    """A 2-D NurbsCurve fitted in the xy-plane back in 3-D at height z (for the file writers)."""
+    import torch
+
+    from nurbs_core.geometry import NurbsCurve
+
     control = curve.control_points
     lifted = torch.cat([control, torch.full_like(control[:, :1], z)], dim=-1)
     return NurbsCurve(lifted, curve.degree, curve.knots, curve.weights)
@@ -272,14 +300,15 @@ def _patch_options(args):
 
 
 def _check_outputs(args) -> list[Path]:
+    """Every output (and each ``--offset`` companion) checked before any work: a known suffix for
+    what is written, an existing writable folder, never the input or ``--initial`` file."""
+    from nurbs_core.io.dispatch import EXPORT_SUFFIXES, NETWORK_SUFFIXES
+    from nurbs_core.io.outputs import check_output_paths
+
+    suffixes = NETWORK_SUFFIXES if args.patches is not None else EXPORT_SUFFIXES
     outputs = [Path(p) for p in args.output]
-    source = Path(args.input).resolve()
-    for path in outputs:
-        if not path.parent.exists():
-            raise ValueError(f"cannot write {path}: folder {path.parent} does not exist")
-        if path.resolve() == source:
-            raise ValueError(f"the output {path} is the input file: writing it would destroy the "
-                             f"scan; choose another name")
+    named = outputs + ([_offset_path(p) for p in outputs] if args.offset is not None else [])
+    check_output_paths(named, [args.input, args.initial], suffixes=suffixes)
     return outputs
 
 
@@ -311,7 +340,9 @@ def _file_mesh(path, quiet: bool):
 
 def run_patches(args, points: np.ndarray, outputs: list[Path]) -> int:
     """``--patches``: the network fit, its report and files."""
-    from nurbs_core.io import save
+    import torch
+
+    from nurbs_core.io.dispatch import save_all
     from nurbs_core.patches.pipeline import iter_patch_fit
 
     options = _patch_options(args)
@@ -355,19 +386,46 @@ def run_patches(args, points: np.ndarray, outputs: list[Path]) -> int:
           f"enclosed volume {quality.volume:.6g}")
     for warning in result.warnings:
         print(f"warning: {warning}")
+    save_all([(result.network, path, {}) for path in outputs])
     for path in outputs:
-        save(result.network, path)
         print(f"wrote {path}")
     return 0
 
 
-def run(args) -> int:
-    from nurbs_core.io import load_points, save
+def _interrupt_handler(stop):
+    """SIGINT during the fit: the first stops it (the result so far is still written), the
+    second aborts (KeyboardInterrupt: status 130, the outputs untouched)."""
+    def handler(*_):
+        if stop.stopped:
+            raise KeyboardInterrupt
+        stop.stop()
+        print("nurbs-fit: stopping after this iteration (Ctrl-C again to quit without writing)",
+              file=sys.stderr, flush=True)
+    return handler
 
+
+def run(args) -> int:
+    import numpy as np
+
+    from nurbs_core.io import load_points
+    from nurbs_core.io.limits import set_decompression_limit
+
+    if args.max_decompressed is not None:
+        set_decompression_limit(args.max_decompressed)
+    outputs = _check_outputs(args)
+    if args.patches is not None:
+        _patch_options(args)  # a bad option fails before the cloud is read
     cloud = load_points(args.input)
     points = cloud.points
     if args.patches is not None:
-        return run_patches(args, np.asarray(points, np.float64), _check_outputs(args))
+        return run_patches(args, np.asarray(points, np.float64), outputs)
+    import torch
+
+    from nurbs_core.fit import StopToken, fit
+    from nurbs_core.fitting.sheet import resolved_solver
+    from nurbs_core.geometry import NurbsCurve
+    from nurbs_core.io.dispatch import save_all
+
     flat_z = args.curve and len(points) and np.ptp(points[:, 2]) == 0
     target = points[:, :2] if flat_z else points
     config = _config(args, target.shape[1])
@@ -378,7 +436,6 @@ def run(args) -> int:
         parameters = _grid_parameters(*args.grid, len(points))
     if args.offset is not None and args.curve:
         raise ValueError("--offset applies to surfaces only")
-    outputs = _check_outputs(args)
     core = (not args.curve and parameters is None and args.initial is None
             and resolved_solver(config) == "least_squares")
     how = (f"by fairing least squares (stiffness {config.stiffness:g}"
@@ -401,7 +458,7 @@ def run(args) -> int:
             initial = NurbsCurve(initial.control_points[:, :2], initial.degree, initial.knots,
                                  initial.weights)
     stop = StopToken()
-    previous = signal.signal(signal.SIGINT, lambda *_: stop.stop())
+    previous = signal.signal(signal.SIGINT, _interrupt_handler(stop))
     try:
         result = fit(target, config, stop=stop, parameters=parameters, initial=initial,
                      on_snapshot=_Progress(config.iterations, args.quiet))
@@ -430,24 +487,44 @@ def run(args) -> int:
         from nurbs_core.offset import offset_surface
 
         offset = offset_surface(geometry, args.offset)
-    for path in outputs:
-        save(geometry, path)
+    jobs = [(geometry, path, {}) for path in outputs]
+    if offset is not None:
+        jobs += [(offset, _offset_path(path), {}) for path in outputs]
+    save_all(jobs)  # all or nothing: no output is replaced unless every one was written
+    for _, path, _ in jobs:
         print(f"wrote {path}")
-        if offset is not None:
-            save(offset, _offset_path(path))
-            print(f"wrote {_offset_path(path)}")
     return 0
 
 
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
 def main(argv=None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    """The console entry point: 0 on success, 1 on an error (one line on stderr), 2 for bad
+    arguments (argparse), 130 after Ctrl-C."""
     try:
-        return run(args)
-    except (ValueError, OSError, ImportError, RuntimeError) as exc:
-        message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        print(f"nurbs-fit: error: {message}", file=sys.stderr)
-        return 1
+        args = build_parser().parse_args(argv)
+        try:
+            return run(args)
+        except (ValueError, OSError, ImportError, RuntimeError, MemoryError) as exc:
+            if args.debug:
+                traceback.print_exc()
+            message = _one_line(exc)
+            if isinstance(exc, MemoryError):
+                message = f"out of memory{': ' + message if message != 'MemoryError' else ''}"
+            print(f"nurbs-fit: error: {message}", file=sys.stderr)
+            return 1
+        except Exception as exc:  # a bug: still one line, the traceback with --debug
+            if args.debug:
+                traceback.print_exc()
+            print(f"nurbs-fit: error: internal error ({type(exc).__name__}: {_one_line(exc)}); "
+                  f"run with --debug for the traceback", file=sys.stderr)
+            return 1
+    except KeyboardInterrupt:
+        print("nurbs-fit: interrupted", file=sys.stderr)
+        return INTERRUPTED_STATUS
 
 
 if __name__ == "__main__":

@@ -42,29 +42,32 @@ def averaged(parameters, n_control_points: int, degree: int) -> np.ndarray:
 
 
 def check_knots(knots: torch.Tensor, degree: int, n_control_points: int, name: str = "knots"):
-    """Raise ValueError unless ``knots`` is a valid full knot vector for n control points."""
+    """Raise ValueError unless ``knots`` (..., n + p + 1) is a valid full knot vector (or batch of
+    them) for n control points of degree p: finite, non-decreasing, a non-empty domain
+    [U[p], U[n]], no knot of multiplicity above p + 1. Checked in numpy in one transfer (a few
+    microseconds for one curve; readers build thousands of items)."""
     if knots.shape[-1] != n_control_points + degree + 1:
         raise ValueError(
             f"{name} has {knots.shape[-1]} entries (shape {tuple(knots.shape)}), but "
             f"{n_control_points} control points of degree {degree} need n + p + 1 = "
             f"{n_control_points + degree + 1}")
-    if not torch.isfinite(knots).all():
+    flat = knots.detach().reshape(-1, knots.shape[-1]).cpu().numpy()
+    if not np.isfinite(flat).all():
         raise ValueError(f"{name} contains NaN or inf (shape {tuple(knots.shape)})")
-    diffs = knots[..., 1:] - knots[..., :-1]
+    diffs = np.diff(flat, axis=-1)
     if (diffs < 0).any():
-        where = torch.nonzero(diffs < 0)[0].tolist()
-        raise ValueError(f"{name} must be non-decreasing; it decreases at index {where[-1] + 1} "
+        index = int(np.argwhere(diffs < 0)[0][-1]) + 1
+        raise ValueError(f"{name} must be non-decreasing; it decreases at index {index} "
                          f"(shape {tuple(knots.shape)})")
-    lo, hi = knots[..., degree], knots[..., n_control_points]
-    if (hi <= lo).any():
+    if (flat[:, n_control_points] <= flat[:, degree]).any():
         raise ValueError(f"{name} has an empty domain [U[p], U[n]] (shape {tuple(knots.shape)})")
-    # multiplicity of interior knots at most p + 1 (a knot with multiplicity > p + 1 breaks the basis)
-    flat = knots.reshape(-1, knots.shape[-1]).detach().cpu().numpy()
-    for row in flat:
+    # sorted rows: a knot has multiplicity > p + 1 exactly when U[i] == U[i + p + 1] somewhere
+    repeated = flat[:, degree + 1:] == flat[:, : flat.shape[1] - degree - 1]
+    if repeated.any():
+        row = flat[int(np.argwhere(repeated)[0][0])]
         _, counts = np.unique(row, return_counts=True)
-        if counts.max() > degree + 1:
-            raise ValueError(f"{name} has a knot of multiplicity {counts.max()} > degree + 1 = "
-                             f"{degree + 1}")
+        raise ValueError(f"{name} has a knot of multiplicity {counts.max()} > degree + 1 = "
+                         f"{degree + 1}")
 
 
 # ----------------------------------------------------------------------------------------------

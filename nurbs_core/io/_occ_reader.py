@@ -1,12 +1,19 @@
-"""OpenCASCADE STEP/IGES reading in a separate worker process (run as a script, not imported).
+"""STEP/IGES (OpenCASCADE) and .3dm (openNURBS through rhino3dm) reading in a separate worker
+process (run as a script, not imported).
 
-OpenCASCADE can crash the whole process (segmentation fault) on damaged STEP or IGES files, so
-:mod:`nurbs_core.io.cad` reads them in this long-lived child process and turns a crash into a
-FileFormatError. The script imports only OCP and numpy. Protocol: one JSON request per line on
-stdin ``{"path", "kind", "output"}``; one JSON reply per line on the original stdout
-``{"ok": true, "count": k}`` or ``{"ok": false, "error": "..."}``. The B-spline data goes to
-``output`` as an .npz: ``kind_<k>`` ("surface" | "curve"), ``control_<k>`` (n_u, n_v, 3) or
-(n, 3), ``weights_<k>``, ``knots_u_<k>``/``knots_v_<k>`` or ``knots_<k>``, ``degrees_<k>``.
+Both libraries can crash the whole process (segmentation fault), loop forever or allocate many
+gigabytes on damaged files (a .3dm of 11 KB with a few bytes changed makes openNURBS allocate
+4 GiB; another keeps it busy for good), so :mod:`nurbs_core.io.cad` reads them in this
+long-lived child process, under a memory cap (RLIMIT_AS) and a time limit, and turns a crash or
+a timeout into a FileFormatError. The script imports only numpy at start (OCP and rhino3dm when a
+file needs them). Protocol: one ``{"ready": true}`` line once started; then one JSON request per
+line on stdin ``{"path", "kind" ("step" | "iges" | "3dm"), "output", "memory" (bytes or
+null)}``; on the original stdout, ``{"reading": true}`` once the library is imported (the time
+limit starts then), then the reply ``{"ok": true, "count": k, "objects": m}`` or ``{"ok": false,
+"error": "..."}``. The B-spline data goes to ``output`` as an .npz:
+``kind_<k>`` ("surface" | "curve"), ``control_<k>`` (n_u, n_v, 3) or (n, d), ``weights_<k>``,
+``knots_u_<k>``/``knots_v_<k>`` or ``knots_<k>``, ``degrees_<k>``, and for .3dm items
+``label_<k>`` (which object) and ``name_<k>`` (its name).
 """
 
 from __future__ import annotations
@@ -127,27 +134,208 @@ def read_items(path: str, kind: str) -> list[dict]:
     return items
 
 
+# --- .3dm through rhino3dm (openNURBS) -------------------------------------------------------
+
+#: The fewest bytes a control point takes in a .3dm file (openNURBS writes doubles): a count
+#: past file size / this is a damaged file (and would keep the loops below busy for hours).
+_BYTES_PER_POINT = 24
+
+
+def _check_point_count(count: int, available: int, what: str) -> None:
+    if count < 0 or count * _BYTES_PER_POINT > available:
+        raise ReadError(f"{what}: {count} control points cannot fit in a file of {available} "
+                        "bytes (damaged)")
+
+
+def _rhino_knots(knots) -> np.ndarray:
+    """openNURBS keeps n + p - 1 knots: the full vector repeats the first and last one."""
+    inner = np.asarray(knots.ToList(), dtype=np.float64).reshape(-1)
+    if inner.size == 0:
+        raise ReadError("an empty knot vector")
+    return np.concatenate([inner[:1], inner, inner[-1:]])
+
+
+def _euclidean(homogeneous: np.ndarray, what: str):
+    weights = homogeneous[..., 3]
+    if not (weights > 0).all():
+        raise ReadError(f"{what}: non-positive or NaN weights")
+    return homogeneous[..., :3] / weights[..., None], weights
+
+
+def _rhino_surface(surface, what: str, available: int) -> dict:
+    import rhino3dm
+
+    if surface is None:
+        raise ReadError(f"{what}: has no underlying surface")
+    nurbs = surface if isinstance(surface, rhino3dm.NurbsSurface) else surface.ToNurbsSurface()
+    if nurbs is None:
+        raise ReadError(f"{what}: could not be converted to a NURBS surface")
+    points = nurbs.Points
+    n_u, n_v = int(points.CountU), int(points.CountV)
+    if n_u < 2 or n_v < 2:
+        raise ReadError(f"{what}: a {n_u} x {n_v} control net is not a surface")
+    _check_point_count(n_u * n_v, available, what)
+    homogeneous = np.empty((n_u, n_v, 4))
+    for i in range(n_u):
+        for j in range(n_v):
+            p = points[i, j]
+            homogeneous[i, j] = (p.X, p.Y, p.Z, p.W)
+    control, weights = _euclidean(homogeneous, what)
+    return {"kind": np.array("surface"), "control": control, "weights": weights,
+            "knots_u": _rhino_knots(nurbs.KnotsU), "knots_v": _rhino_knots(nurbs.KnotsV),
+            "degrees": np.array([nurbs.OrderU - 1, nurbs.OrderV - 1])}
+
+
+def _rhino_curve(curve, what: str, available: int) -> dict:
+    import rhino3dm
+
+    nurbs = curve if isinstance(curve, rhino3dm.NurbsCurve) else curve.ToNurbsCurve()
+    if nurbs is None:
+        raise ReadError(f"{what}: could not be converted to a NURBS curve")
+    points = nurbs.Points
+    count = len(points)
+    _check_point_count(count, available, what)
+    homogeneous = np.array([(points[k].X, points[k].Y, points[k].Z, points[k].W)
+                            for k in range(count)], dtype=np.float64).reshape(-1, 4)
+    control, weights = _euclidean(homogeneous, what)
+    if nurbs.Dimension == 2:
+        control = control[:, :2]
+    return {"kind": np.array("curve"), "control": control, "weights": weights,
+            "knots": _rhino_knots(nurbs.Knots), "degrees": np.array([nurbs.Order - 1])}
+
+
+def _rhino_object(obj, index: int, available: int) -> list[dict]:
+    """The surfaces and curves of one model object (none for meshes, points, annotations...)."""
+    import rhino3dm
+
+    geometry = obj.Geometry
+    name = obj.Attributes.Name if obj.Attributes is not None else ""
+    what = f"object {index}" + (f" ({name!r})" if name else "")
+    if isinstance(geometry, rhino3dm.Extrusion) and geometry.CapCount > 0:
+        geometry = geometry.ToBrep(False)  # the caps are faces of its B-rep form only
+        if geometry is None:
+            raise ReadError(f"{what}: the capped extrusion has no B-rep form")
+    items = []
+    if isinstance(geometry, rhino3dm.Brep):
+        for face_index in range(len(geometry.Faces)):
+            label = f"{what} face {face_index}"
+            face = geometry.Faces[face_index]
+            items.append((label, _rhino_surface(face.UnderlyingSurface(), label, available)))
+    elif isinstance(geometry, rhino3dm.Surface):  # NurbsSurface, Extrusion, Rev/Sum/Plane
+        items.append((what, _rhino_surface(geometry, what, available)))
+    elif isinstance(geometry, rhino3dm.Curve):
+        items.append((what, _rhino_curve(geometry, what, available)))
+    for label, item in items:
+        item["label"], item["name"] = np.array(label), np.array(name or "")
+    return [item for _, item in items]
+
+
+def read_3dm_items(path: str) -> tuple[list[dict], int]:
+    """(every surface and curve of a .3dm file, its number of objects)."""
+    import rhino3dm
+
+    available = os.path.getsize(path)
+    model = rhino3dm.File3dm.Read(path)
+    if model is None:
+        raise ReadError("not a readable .3dm file (openNURBS could not open it)")
+    objects = model.Objects
+    count = len(objects)
+    items = []
+    for index in range(count):
+        try:
+            items += _rhino_object(objects[index], index, available)
+        except ReadError:
+            raise
+        except Exception as exc:  # the binding's RuntimeError/TypeError, a None where expected
+            raise ReadError(f"object {index}: rhino3dm could not read it ({type(exc).__name__}: "
+                            f"{str(exc)[:160]})") from None
+    return items, count
+
+
+# --- the worker loop ---------------------------------------------------------------------------
+
+
+def _cap_memory(budget):
+    """Lower the soft address-space limit to the current size + ``budget`` bytes; returns the
+    limits to restore (None where RLIMIT_AS or /proc is not available, or without a budget)."""
+    if not budget:
+        return None
+    try:
+        import resource
+
+        with open("/proc/self/statm") as handle:
+            current = int(handle.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+        previous = resource.getrlimit(resource.RLIMIT_AS)
+        hard = previous[1]
+        limit = current + int(budget)
+        if hard != resource.RLIM_INFINITY:
+            limit = min(limit, hard)
+        resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+        return previous
+    except (ImportError, OSError, ValueError):
+        return None
+
+
+def _restore_memory(previous) -> None:
+    if previous is not None:
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_AS, previous)
+
+
+_QUIET = []
+
+
+def _quiet_occ() -> None:
+    if not _QUIET:
+        from OCP.Message import Message, Message_PrinterOStream
+
+        Message.DefaultMessenger_s().RemovePrinters(
+            Message_PrinterOStream.get_type_descriptor_s())
+        _QUIET.append(True)
+
+
+def _handle(request: dict, replies) -> dict:
+    kind = request["kind"]
+    library = "openNURBS" if kind == "3dm" else "OpenCASCADE"
+    try:  # imported before the memory cap: they map large libraries
+        if kind == "3dm":
+            import rhino3dm  # noqa: F401
+        else:
+            _quiet_occ()
+    except ImportError as exc:
+        return {"ok": False, "error": f"{library} is not installed for the reader process: {exc}"}
+    replies.write(json.dumps({"reading": True}) + "\n")  # the read's time limit starts now
+    previous = _cap_memory(request.get("memory"))
+    try:
+        if kind == "3dm":
+            items, objects = read_3dm_items(request["path"])
+        else:
+            items = read_items(request["path"], kind)
+            objects = len(items)
+        arrays = {f"{key}_{k}": value for k, item in enumerate(items)
+                  for key, value in item.items()}
+        np.savez(request["output"], **arrays)
+        return {"ok": True, "count": len(items), "objects": objects}
+    except ReadError as exc:
+        return {"ok": False, "error": str(exc)}
+    except MemoryError:
+        return {"ok": False, "error": f"{library} ran out of the memory allowed for reading this "
+                                      "file (damaged, or claims more data than it has?)"}
+    except Exception as exc:  # an OpenCASCADE / rhino3dm exception: the file is the problem
+        return {"ok": False, "error": f"{library} failed: {type(exc).__name__}: {str(exc)[:200]}"}
+    finally:
+        _restore_memory(previous)
+
+
 def serve() -> None:
     # OpenCASCADE prints to C++ std::cout (fd 1): keep fd 1 for that (sent to stderr) and talk
     # to the parent on a private copy of the original stdout.
     replies = os.fdopen(os.dup(1), "w", buffering=1)
     os.dup2(2, 1)
-    from OCP.Message import Message, Message_PrinterOStream
-
-    Message.DefaultMessenger_s().RemovePrinters(Message_PrinterOStream.get_type_descriptor_s())
+    replies.write(json.dumps({"ready": True}) + "\n")
     for line in sys.stdin:
-        request = json.loads(line)
-        try:
-            items = read_items(request["path"], request["kind"])
-            arrays = {f"{key}_{k}": value for k, item in enumerate(items)
-                      for key, value in item.items()}
-            np.savez(request["output"], **arrays)
-            reply = {"ok": True, "count": len(items)}
-        except ReadError as exc:
-            reply = {"ok": False, "error": str(exc)}
-        except Exception as exc:  # an OpenCASCADE exception: the file is the problem
-            reply = {"ok": False, "error": f"OpenCASCADE failed: {type(exc).__name__}: {exc}"}
-        replies.write(json.dumps(reply) + "\n")
+        replies.write(json.dumps(_handle(json.loads(line), replies)) + "\n")
 
 
 if __name__ == "__main__":

@@ -88,3 +88,31 @@ def atomic_write(path, mode: str = "wb", encoding: str | None = "utf-8") -> Iter
         text = "b" not in mode
         with open(temporary, mode, encoding=encoding if text else None) as handle:
             yield handle
+
+
+@contextlib.contextmanager
+def atomic_paths(paths) -> Iterator[list[Path]]:
+    """Temporary paths (one per target, each with its target's suffix) for writing several files
+    all-or-nothing: the targets are replaced only after every file was written and flushed; if
+    any write fails, no target changes and no temporary file is left behind."""
+    targets = [Path(os.path.realpath(os.fspath(path))) for path in paths]
+    if len(set(targets)) != len(targets):
+        raise ValueError("the same file is named twice among the outputs")
+    temporaries: list[Path] = []
+    try:
+        for target in targets:
+            temporaries.append(_create(target, target.suffix))
+        yield list(temporaries)
+        for temporary in temporaries:
+            _fsync_path(temporary)
+        for temporary, target in zip(temporaries, targets, strict=True):
+            with contextlib.suppress(FileNotFoundError):
+                os.chmod(temporary, os.stat(target).st_mode & 0o7777)
+            os.replace(temporary, target)
+        for directory in {target.parent for target in targets}:
+            _fsync_path(directory, directory=True)
+    except BaseException:
+        for temporary in temporaries:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(temporary)
+        raise

@@ -12,6 +12,7 @@ Reals are written with 17 significant digits, so float64 geometry round-trips ex
 from __future__ import annotations
 
 import atexit
+import importlib
 import io
 import json
 import os
@@ -20,12 +21,13 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
 
 from nurbs_core.io.errors import FileFormatError, require_ocp
-from nurbs_core.io.geometry_io import as_geometry_list, make_curve, make_surface, numpy_of
+from nurbs_core.io.limits import parse_size
 
 STEP_SUFFIXES = (".step", ".stp")
 IGES_SUFFIXES = (".iges", ".igs")
@@ -118,6 +120,8 @@ def _compound(items):
     compound = TopoDS_Compound()
     builder.MakeCompound(compound)
     for index, item in enumerate(items):
+        from nurbs_core.io.geometry_io import numpy_of
+
         data = numpy_of(item)
         try:
             if data["kind"] == "surface":
@@ -190,6 +194,8 @@ def iges_bytes(shape, path, brep: bool = False) -> bytes:
 def write_step(geometry_or_list, path) -> None:
     """STEP (AP214): the geometry as one compound of faces and edges (see :func:`step_bytes`)."""
     require_ocp("Writing STEP")
+    from nurbs_core.io.geometry_io import as_geometry_list
+
     data = step_bytes(_compound(as_geometry_list(geometry_or_list)), path)
     with open(path, "wb") as handle:
         handle.write(data)
@@ -198,54 +204,145 @@ def write_step(geometry_or_list, path) -> None:
 def write_iges(geometry_or_list, path) -> None:
     """IGES: the geometry as trimmed surfaces and curves (see :func:`iges_bytes`)."""
     require_ocp("Writing IGES")
+    from nurbs_core.io.geometry_io import as_geometry_list
+
     data = iges_bytes(_compound(as_geometry_list(geometry_or_list)), path)
     with open(path, "wb") as handle:
         handle.write(data)
 
 
+#: The longest a read in the worker may take (in CPU seconds where Linux tells them, else wall
+#: seconds): ``READ_BASE_SECONDS`` plus ``READ_SECONDS_PER_MIB`` per MiB of file, at most
+#: ``READ_TIMEOUT_SECONDS`` (a damaged file can keep OpenCASCADE or openNURBS busy for good).
 READ_TIMEOUT_SECONDS = 600.0
+READ_BASE_SECONDS = 2.0
+READ_SECONDS_PER_MIB = 4.0
+#: How long the worker may take to start (import numpy) or to import OCP / rhino3dm before it
+#: counts as broken (not part of the read's time limit).
+START_TIMEOUT_SECONDS = 120.0
+#: The memory a read in the worker may allocate: twice the file's size plus this, or the size
+#: given by the environment variable (bytes, or with a K/M/G/T suffix: ``8G``).
+READER_MEMORY_SLACK = 512 * 2**20
+READER_MEMORY_ENV = "NURBS_STUDIO_MAX_READER_MEMORY"
+
+
+def read_timeout(size: int) -> float:
+    """Seconds a worker read of a file of ``size`` bytes may take."""
+    return min(READ_TIMEOUT_SECONDS, READ_BASE_SECONDS + READ_SECONDS_PER_MIB * size / 2**20)
+
+
+def reader_memory(size: int) -> int:
+    """Bytes a worker read of a file of ``size`` bytes may allocate (see READER_MEMORY_ENV)."""
+    configured = os.environ.get(READER_MEMORY_ENV)
+    if configured:
+        try:
+            return parse_size(configured)
+        except ValueError as exc:
+            raise ValueError(f"{READER_MEMORY_ENV}: {exc}") from None
+    return 2 * int(size) + READER_MEMORY_SLACK
+
+
+#: A read stopped by its time limit in CPU seconds still ends after this many times the limit in
+#: wall-clock seconds (a child blocked without using the CPU).
+WALL_TIME_FACTOR = 2.0
+
+
+def _cpu_seconds(pid: int) -> float | None:
+    """User + system CPU seconds of a running process (Linux /proc), None where unknown."""
+    try:
+        with open(f"/proc/{pid}/stat") as handle:
+            fields = handle.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 class _ReaderProcess:
-    """The long-lived child running ``_occ_reader.py`` (OpenCASCADE may segfault on damaged
-    files: a crash ends the child, not the program, and the next read starts a new one)."""
+    """The long-lived child running ``_occ_reader.py`` (OpenCASCADE and openNURBS may segfault,
+    hang or allocate without bound on damaged files: a crash or a timeout ends the child, not the
+    program, and the next read starts a new one)."""
 
     def __init__(self):
         self._process: subprocess.Popen | None = None
         self._lock = threading.Lock()
+        self._pending: dict[int, bytes] = {}  # bytes read past the last line, per child
 
     def _start(self) -> subprocess.Popen:
         script = Path(__file__).with_name("_occ_reader.py")
+        # few malloc arenas: each reserves address space, which the child's memory cap counts
+        environment = {**os.environ, "MALLOC_ARENA_MAX": "2"}
         # -I: the child sees neither this folder nor PYTHONPATH, only the installed packages
         return subprocess.Popen([sys.executable, "-I", str(script)], stdin=subprocess.PIPE,
                                 stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                                bufsize=1)
+                                bufsize=1, env=environment)
 
-    def request(self, path: str, kind: str, output: str, timeout: float) -> dict:
+    def _kill(self, process) -> None:
+        process.kill()
+        process.wait()
+        self._process = None
+
+    def _reply(self, process, timeout: float, cpu: bool = False):
+        """The child's next line as a dict; None when it died, "timeout" when it took too long:
+        ``timeout`` seconds, of the child's CPU time with ``cpu`` (where /proc tells it: a
+        library looping burns CPU, a busy machine only stretches the wall time; the wall time
+        is still capped at WALL_TIME_FACTOR x timeout)."""
+        start, used_before = time.monotonic(), _cpu_seconds(process.pid) if cpu else None
+        pending = self._pending.setdefault(process.pid, b"")
+        descriptor = process.stdout.fileno()  # read unbuffered: select() sees only the pipe
+        while b"\n" not in pending:
+            elapsed = time.monotonic() - start
+            used = elapsed if used_before is None else \
+                (_cpu_seconds(process.pid) or used_before) - used_before
+            if used > timeout or elapsed > WALL_TIME_FACTOR * timeout:
+                return "timeout"
+            wait = timeout - used if used_before is None else 0.25
+            ready, _, _ = select.select([descriptor], [], [], max(0.01, wait))
+            if ready:
+                data = os.read(descriptor, 1 << 16)
+                if not data:
+                    return None
+                pending += data
+        line, pending = pending.split(b"\n", 1)
+        self._pending[process.pid] = pending
+        try:
+            return json.loads(line)
+        except ValueError:
+            return None
+
+    def request(self, path: str, kind: str, output: str, timeout: float,
+                memory: int | None = None) -> dict:
         with self._lock:
             if self._process is None or self._process.poll() is not None:
+                self._pending.clear()
                 self._process = self._start()
+                started = self._reply(self._process, START_TIMEOUT_SECONDS)
+                if not isinstance(started, dict) or not started.get("ready"):
+                    process = self._process
+                    self._kill(process)
+                    if started == "timeout":
+                        return {"ok": False, "error": "the reader process did not start within "
+                                                      f"{START_TIMEOUT_SECONDS:g} s"}
+                    return {"ok": False, "crashed": process.returncode}
             process = self._process
             try:
-                process.stdin.write(json.dumps({"path": path, "kind": kind,
-                                                "output": output}) + "\n")
+                process.stdin.write(json.dumps({"path": path, "kind": kind, "output": output,
+                                                "memory": memory}) + "\n")
                 process.stdin.flush()
             except BrokenPipeError:
                 process.wait()
                 self._process = None
                 return {"ok": False, "crashed": process.returncode}
-            ready, _, _ = select.select([process.stdout], [], [], timeout)
-            if not ready:
-                process.kill()
-                process.wait()
-                self._process = None
-                return {"ok": False, "error": f"reading took longer than {timeout:g} s"}
-            line = process.stdout.readline()
-            if not line:  # the child died while reading this file
+            reply = self._reply(process, START_TIMEOUT_SECONDS)  # importing the library
+            if isinstance(reply, dict) and reply.get("reading"):
+                reply = self._reply(process, timeout, cpu=True)
+            if reply == "timeout":
+                self._kill(process)
+                return {"ok": False, "timeout": timeout}
+            if not isinstance(reply, dict):  # the child died while reading this file
                 process.wait()
                 self._process = None
                 return {"ok": False, "crashed": process.returncode}
-            return json.loads(line)
+            return reply
 
     def close(self) -> None:
         with self._lock:
@@ -262,36 +359,70 @@ class _ReaderProcess:
 _READER = _ReaderProcess()
 atexit.register(_READER.close)
 
+_LIBRARIES = {"step": ("OpenCASCADE", "STEP"), "iges": ("OpenCASCADE", "IGES"),
+              "3dm": ("openNURBS (rhino3dm)", ".3dm")}
 
-def read_cad(path, kind: str, timeout: float = READ_TIMEOUT_SECONDS) -> list:
-    """All surfaces (untrimmed) of a STEP or IGES file; its curves when it has no faces.
 
-    OpenCASCADE runs in a child process (see ``_occ_reader.py``), so a file that crashes it
-    gives a FileFormatError here.
-    """
-    require_ocp(f"Reading {kind.upper()}")
+def read_in_worker(path, kind: str, timeout: float | None = None) -> list:
+    """Every surface and curve the worker process reads from ``path`` (``kind`` "step", "iges" or
+    "3dm"), as validated geometry with ``.metadata``; a crash, a timeout (``timeout`` seconds,
+    by default :func:`read_timeout` of the file's size), running out of the memory cap
+    (:func:`reader_memory`) or bad data: FileFormatError naming the file."""
+    library, label = _LIBRARIES[kind]
     with open(path, "rb") as handle:
         if not handle.read(1):
             raise FileFormatError(path, "the file is empty")
+    size = os.path.getsize(path)
+    timeout = read_timeout(size) if timeout is None else timeout
+    # the result is built as torch geometry: import torch here while the worker starts and reads
+    # (in parallel on two cores, a cold start costs the larger of the two instead of their sum)
+    warm = threading.Thread(target=importlib.import_module, args=("nurbs_core.io.geometry_io",),
+                            daemon=True)
+    warm.start()
     with tempfile.TemporaryDirectory(prefix="nurbs_io_") as folder:
         output = os.path.join(folder, "items.npz")
-        reply = _READER.request(os.path.abspath(path), kind, output, timeout)
+        reply = _READER.request(os.path.abspath(path), kind, output, timeout, reader_memory(size))
         if "crashed" in reply:
-            raise FileFormatError(path, f"OpenCASCADE crashed reading this {kind.upper()} file "
+            raise FileFormatError(path, f"{library} crashed reading this {label} file "
                                         f"(exit status {reply['crashed']}): it is damaged or "
-                                        "uses something OpenCASCADE cannot handle")
+                                        f"uses something {library} cannot handle")
+        if "timeout" in reply:
+            raise FileFormatError(path, f"{library} was still reading this {label} file after "
+                                        f"{reply['timeout']:.1f} s: stopped (a damaged file?)")
         if not reply["ok"]:
             raise FileFormatError(path, reply["error"])
         with np.load(output, allow_pickle=False) as data:
             arrays = {key: data[key] for key in data.files}
+    warm.join()
+    from nurbs_core.io.geometry_io import make_curve, make_surface
+
     result = []
     for k in range(reply["count"]):
         degrees = arrays[f"degrees_{k}"]
+        default = f"face {k}" if str(arrays[f"kind_{k}"]) == "surface" else f"edge {k}"
+        what = str(arrays[f"label_{k}"]) if f"label_{k}" in arrays else default
         if str(arrays[f"kind_{k}"]) == "surface":
-            result.append(make_surface(path, arrays[f"control_{k}"], arrays[f"weights_{k}"],
-                                       arrays[f"knots_u_{k}"], arrays[f"knots_v_{k}"],
-                                       int(degrees[0]), int(degrees[1]), what=f"face {k}"))
+            item = make_surface(path, arrays[f"control_{k}"], arrays[f"weights_{k}"],
+                                arrays[f"knots_u_{k}"], arrays[f"knots_v_{k}"],
+                                degrees[0], degrees[1], what=what)
         else:
-            result.append(make_curve(path, arrays[f"control_{k}"], arrays[f"weights_{k}"],
-                                     arrays[f"knots_{k}"], int(degrees[0]), what=f"edge {k}"))
+            item = make_curve(path, arrays[f"control_{k}"], arrays[f"weights_{k}"],
+                              arrays[f"knots_{k}"], degrees[0], what=what)
+        name = str(arrays[f"name_{k}"]) if f"name_{k}" in arrays else ""
+        item.metadata = {"name": name} if name else {}
+        result.append(item)
+    if not result:
+        raise FileFormatError(path, f"the {label} file has no surfaces or curves "
+                                    f"({reply.get('objects', 0)} object(s) of other kinds)")
     return result
+
+
+def read_cad(path, kind: str, timeout: float | None = None) -> list:
+    """All surfaces (untrimmed) of a STEP or IGES file; its curves when it has no faces.
+
+    OpenCASCADE runs in a child process (see ``_occ_reader.py``), so a file that crashes it,
+    hangs it (``timeout`` seconds; by default :func:`read_timeout` of the file's size) or makes
+    it allocate more than :func:`reader_memory` gives a FileFormatError here.
+    """
+    require_ocp(f"Reading {kind.upper()}")
+    return read_in_worker(path, kind, timeout)

@@ -7,6 +7,9 @@ from nurbs_core.io.points import POINT_CLOUD_SUFFIXES, _check_file, load_points,
 
 CAD_SUFFIXES = (".step", ".stp", ".iges", ".igs")
 NURBS_SUFFIXES = (".3dm", ".json", ".dat", ".smesh", *CAD_SUFFIXES)
+#: What a patch network can be saved as (:func:`nurbs_core.io.network_io.write_network`).
+NETWORK_SUFFIXES = (".json", ".3dm", ".step", ".stp", ".iges", ".igs", ".obj", ".ply", ".stl",
+                    ".glb")
 EXPORT_SUFFIXES = (".3dm", ".step", ".stp", ".iges", ".igs", ".json", ".obj", ".stl", ".ply",
                    ".glb", ".csv", ".dat")
 
@@ -22,7 +25,9 @@ def _load_json(path) -> list:
             return json_format.read_shared_json(path, document)
         if geomdl_json.is_geomdl_document(document):
             return geomdl_json.read_geomdl_json(path, document)
-    raise FileFormatError(path, "unrecognised JSON: expected a nurbs-studio document "
+    found = "" if isinstance(document, dict) else \
+        f" (the file holds {json_format.json_kind(document)}, not an object)"
+    raise FileFormatError(path, f"unrecognised JSON{found}: expected a nurbs-studio document "
                                 "(\"format\": \"nurbs-studio\"), a nurbs-surface-json-v1 surface "
                                 "or a geomdl export ({\"shape\": {\"data\": ...}})")
 
@@ -77,16 +82,58 @@ def save(geometry_or_list, path, **options) -> None:
     (control points and weights), .dat (smesh, one surface). Batched geometry is split into
     one item per batch entry. A :class:`~nurbs_core.patches.network.PatchNetwork` is written
     whole by :func:`nurbs_core.io.network_io.write_network` (one joined B-rep / sewn shell).
+
+    The write is atomic: the file is written next to ``path`` and replaces it only once complete
+    and flushed, so a failed save (full disk, an exception, Ctrl-C) leaves an existing file as
+    it was.
     """
+    save_all([(geometry_or_list, path, options)])
+
+
+def save_all(jobs) -> None:
+    """Write several files all-or-nothing: ``jobs`` is a sequence of (geometry, path, options
+    dict). Every suffix is checked first; the files are written to temporaries and replace
+    their targets only when all of them were written (:func:`nurbs_core.io.atomic.atomic_paths`).
+    """
+    from nurbs_core.io.atomic import atomic_paths
+
+    jobs = [(geometry, path, dict(options or {})) for geometry, path, options in jobs]
+    for geometry, path, _ in jobs:
+        check_save_suffix(geometry, path)
+    with atomic_paths([path for _, path, _ in jobs]) as temporaries:
+        for (geometry, path, options), temporary in zip(jobs, temporaries, strict=True):
+            try:
+                _write(geometry, temporary, suffix_of(path), **options)
+            except FileFormatError as exc:  # name the target, not the temporary file
+                raise FileFormatError(path, exc.problem, exc.line) from None
+
+
+def is_network(geometry) -> bool:
     from nurbs_core.patches.network import PatchNetwork
 
-    if isinstance(geometry_or_list, PatchNetwork):
+    return isinstance(geometry, PatchNetwork)
+
+
+def check_save_suffix(geometry, path) -> None:
+    """FileFormatError unless ``save`` can write ``geometry`` (geometry, or a patch network) in
+    the format of ``path``'s suffix."""
+    suffix = suffix_of(path)
+    if geometry is not None and is_network(geometry):
+        if suffix not in NETWORK_SUFFIXES:
+            raise FileFormatError(path, f"cannot save a patch network as {suffix!r}; supported: "
+                                        f"{', '.join(NETWORK_SUFFIXES)}")
+    elif suffix not in EXPORT_SUFFIXES:
+        raise FileFormatError(path, f"cannot save geometry as {suffix!r}; supported: "
+                                    f"{', '.join(EXPORT_SUFFIXES)}")
+
+
+def _write(geometry_or_list, path, suffix: str, **options) -> None:
+    """Write to ``path`` (a temporary file) in the format of ``suffix``."""
+    if is_network(geometry_or_list):
         from nurbs_core.io.network_io import write_network
 
         write_network(geometry_or_list, path, **options)
-        return
-    suffix = suffix_of(path)
-    if suffix == ".3dm":
+    elif suffix == ".3dm":
         from nurbs_core.io.rhino import write_3dm
 
         write_3dm(geometry_or_list, path, **options)
@@ -114,6 +161,5 @@ def save(geometry_or_list, path, **options) -> None:
         from nurbs_core.io.smesh import write_smesh
 
         write_smesh(geometry_or_list, path, **options)
-    else:
-        raise FileFormatError(path, f"cannot save geometry as {suffix!r}; supported: "
-                                    f"{', '.join(EXPORT_SUFFIXES)}")
+    else:  # check_save_suffix ran first
+        raise FileFormatError(path, f"cannot save geometry as {suffix!r}")

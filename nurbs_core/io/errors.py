@@ -38,3 +38,13 @@ def require_ocp(what: str):
         import OCP  # noqa: F401
     except ImportError:
         raise MissingDependencyError(what, CAD_INSTALL_HINT) from None
+
+
+class OutputPathError(ValueError):
+    """An output cannot be written where it was asked for (unknown suffix, missing or read-only
+    folder, a directory, the same file as an input); raised before any work starts."""
+
+    def __init__(self, path, message: str):
+        self.path = os.fspath(path)
+        self.problem = message
+        super().__init__(f"cannot write {self.path}: {message}")

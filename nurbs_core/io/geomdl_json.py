@@ -11,11 +11,13 @@ are ignored: the untrimmed surfaces are returned.
 
 from __future__ import annotations
 
-import numpy as np
-
 from nurbs_core.io.errors import FileFormatError
-from nurbs_core.io.geometry_io import make_curve, make_surface
-from nurbs_core.io.json_format import read_json_file
+from nurbs_core.io.geometry_io import file_array, file_integer, make_curve, make_surface
+from nurbs_core.io.json_format import json_key, json_object, read_json_file
+
+#: The most control points a geomdl surface may claim in one direction (checked before anything
+#: is reshaped; the real count must also match the points the file lists).
+MAX_SIZE = 10**7
 
 
 def is_geomdl_document(document) -> bool:
@@ -23,19 +25,29 @@ def is_geomdl_document(document) -> bool:
         "data" in document["shape"]
 
 
+def _net(path, entry: dict, what: str):
+    """(points list, weights or None) from ``control_points: {"points": ..., "weights": ...}``."""
+    control = json_object(path, json_key(path, entry, "control_points", what),
+                          f"{what} control_points")
+    return json_key(path, control, "points", f"{what} control_points"), control.get("weights")
+
+
+def _metadata(entry: dict) -> dict:
+    return {k: entry[k] for k in ("name", "id") if k in entry}
+
+
 def _surface(path, entry: dict, what: str):
-    try:
-        size_u, size_v = int(entry["size_u"]), int(entry["size_v"])
-        points = np.asarray(entry["control_points"]["points"], dtype=np.float64)
-        weights = entry["control_points"].get("weights")
-        knots_u, knots_v = entry["knotvector_u"], entry["knotvector_v"]
-        degree_u, degree_v = entry["degree_u"], entry["degree_v"]
-    except KeyError as exc:
-        raise FileFormatError(path, f"{what} lacks the key {exc.args[0]!r}") from None
-    except (TypeError, ValueError) as exc:
-        raise FileFormatError(path, f"{what} has non-numeric control points: {exc}") from None
+    size_u = file_integer(path, json_key(path, entry, "size_u", what), "size_u", what,
+                          maximum=MAX_SIZE)
+    size_v = file_integer(path, json_key(path, entry, "size_v", what), "size_v", what,
+                          maximum=MAX_SIZE)
+    points, weights = _net(path, entry, what)
+    knots_u, knots_v = json_key(path, entry, "knotvector_u", what), json_key(path, entry, "knotvector_v",
+                                                                     what)
+    degree_u, degree_v = json_key(path, entry, "degree_u", what), json_key(path, entry, "degree_v", what)
+    points = file_array(path, points, "control points", what)
     count = size_u * size_v
-    if points.ndim == 3:
+    if points.ndim == 3:  # the nested variant: size_u x size_v x 3
         if points.shape[:2] != (size_u, size_v):
             raise FileFormatError(path, f"{what}: control net is {points.shape[:2]}, size_u x "
                                         f"size_v says {(size_u, size_v)}")
@@ -46,26 +58,21 @@ def _surface(path, entry: dict, what: str):
                                     f"{points.shape}")
     net = points.reshape(size_u, size_v, 3)  # v fastest in the flat list
     if weights is not None:
-        try:
-            weights = np.asarray(weights, dtype=np.float64).reshape(size_u, size_v)
-        except ValueError:
-            raise FileFormatError(path, f"{what}: weights do not match the {size_u} x {size_v} "
-                                        "net") from None
+        weights = file_array(path, weights, "weights", what)
+        if weights.size != count:
+            raise FileFormatError(path, f"{what}: {weights.size} weights for the {size_u} x "
+                                        f"{size_v} net")
+        weights = weights.reshape(size_u, size_v)
     surface = make_surface(path, net, weights, knots_u, knots_v, degree_u, degree_v, what=what)
-    surface.metadata = {k: entry[k] for k in ("name", "id") if k in entry}
+    surface.metadata = _metadata(entry)
     return surface
 
 
 def _curve(path, entry: dict, what: str):
-    try:
-        points = np.asarray(entry["control_points"]["points"], dtype=np.float64)
-        weights = entry["control_points"].get("weights")
-        curve = make_curve(path, points, weights, entry["knotvector"], entry["degree"], what=what)
-    except KeyError as exc:
-        raise FileFormatError(path, f"{what} lacks the key {exc.args[0]!r}") from None
-    except (TypeError, ValueError) as exc:
-        raise FileFormatError(path, f"{what}: {exc}") from None
-    curve.metadata = {k: entry[k] for k in ("name", "id") if k in entry}
+    points, weights = _net(path, entry, what)
+    curve = make_curve(path, points, weights, json_key(path, entry, "knotvector", what),
+                       json_key(path, entry, "degree", what), what=what)
+    curve.metadata = _metadata(entry)
     return curve
 
 
@@ -77,14 +84,13 @@ def read_geomdl_json(path, document=None) -> list:
     entries = shape["data"] if isinstance(shape["data"], list) else [shape["data"]]
     kind = shape.get("type", "surface")
     if kind not in ("surface", "curve"):
-        raise FileFormatError(path, f"geomdl shape type {kind!r} is not supported (surface or "
-                                    "curve)")
+        raise FileFormatError(path, f"geomdl shape type {str(repr(kind))[:40]} is not supported "
+                                    "(surface or curve)")
     if not entries:
         raise FileFormatError(path, "the geomdl document holds no shapes")
     reader = _surface if kind == "surface" else _curve
     result = []
     for index, entry in enumerate(entries):
-        if not isinstance(entry, dict):
-            raise FileFormatError(path, f"shape.data[{index}] is not an object")
-        result.append(reader(path, entry, f"shape.data[{index}] ({kind})"))
+        what = f"shape.data[{index}] ({kind})"
+        result.append(reader(path, json_object(path, entry, f"shape.data[{index}]"), what))
     return result

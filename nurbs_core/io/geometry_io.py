@@ -8,30 +8,112 @@ import numpy as np
 from nurbs_core.geometry import NurbsCurve, NurbsSurface
 from nurbs_core.io.errors import FileFormatError
 
+#: What building geometry from bad file data can raise (torch raises RuntimeError, numpy
+#: OverflowError for numbers past float64 and IndexError for arrays of the wrong rank).
+DATA_ERRORS = (ValueError, TypeError, OverflowError, IndexError, RuntimeError)
+
+
+def _short(value, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def file_array(path, value, name: str, what: str, ndim: int | None = None,
+               line=None) -> np.ndarray:
+    """``value`` (nested lists from JSON, or an array) as float64, or FileFormatError: null, text,
+    ragged or wrongly nested lists, objects, numbers past float64, the wrong rank."""
+    if value is None:
+        raise FileFormatError(path, f"{what}: {name} is missing (null)", line=line)
+    if isinstance(value, (str, bytes, dict)):
+        raise FileFormatError(path, f"{what}: {name} must be an array of numbers, got "
+                                    f"{type(value).__name__} {_short(value)}", line=line)
+    try:
+        array = np.asarray(value)
+        if array.dtype.kind in "USV":
+            raise FileFormatError(path, f"{what}: {name} holds text, not numbers", line=line)
+        array = array.astype(np.float64, copy=False)  # object arrays: None, dicts, huge ints
+    except FileFormatError:
+        raise
+    except MemoryError:
+        raise FileFormatError(path, f"{what}: {name} is too large to load", line=line) from None
+    except DATA_ERRORS as exc:
+        raise FileFormatError(path, f"{what}: {name} is not a regular array of numbers "
+                                    f"({_short(str(exc), 120)})", line=line) from None
+    if ndim is not None and array.ndim != ndim:
+        raise FileFormatError(path, f"{what}: {name} must be a {ndim}-D array, got shape "
+                                    f"{array.shape}", line=line)
+    return array
+
+
+def file_integer(path, value, name: str, what: str, minimum: int = 1, maximum: int | None = None,
+                 line=None) -> int:
+    """An integer from file data (an int, or a float with an integer value), at least
+    ``minimum`` and at most ``maximum``; strings, booleans, fractions, NaN: FileFormatError."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(
+            value, (int, np.integer, float, np.floating)):
+        raise FileFormatError(path, f"{what}: {name} must be an integer, got "
+                                    f"{type(value).__name__} {_short(value)}", line=line)
+    if isinstance(value, (float, np.floating)) and not (np.isfinite(value) and
+                                                         float(value).is_integer()):
+        raise FileFormatError(path, f"{what}: {name} must be an integer, got {_short(value)}",
+                              line=line)
+    number = int(value)
+    if number < minimum or (maximum is not None and number > maximum):
+        bound = f"at least {minimum}" if maximum is None else f"between {minimum} and {maximum}"
+        raise FileFormatError(path, f"{what}: {name} must be {bound}, got {_short(number)}",
+                              line=line)
+    return number
+
+
+def _build(path, cls, arguments, what: str, line):
+    try:
+        return cls(*arguments)
+    except MemoryError:
+        raise FileFormatError(path, f"invalid {what}: too large to load", line=line) from None
+    except DATA_ERRORS as exc:
+        raise FileFormatError(path, f"invalid {what}: {exc}", line=line) from None
+
 
 def make_surface(path, control_points, weights, knots_u, knots_v, degree_u, degree_v,
                  line=None, what="surface") -> NurbsSurface:
     """Validated float64 NurbsSurface from file data; any problem becomes a FileFormatError.
 
     control_points (n_u, n_v, 3) Euclidean, weights (n_u, n_v) or None, full knot vectors.
+    Degrees must be integers (strings, booleans and fractions are refused, not converted).
     """
-    try:
-        return NurbsSurface(np.asarray(control_points, dtype=np.float64), int(degree_u),
-                            int(degree_v), np.asarray(knots_u, dtype=np.float64),
-                            np.asarray(knots_v, dtype=np.float64),
-                            None if weights is None else np.asarray(weights, dtype=np.float64))
-    except (ValueError, TypeError) as exc:
-        raise FileFormatError(path, f"invalid {what}: {exc}", line=line) from None
+    control = file_array(path, control_points, "control points", what, 3, line)
+    if control.shape[-1] != 3:
+        raise FileFormatError(path, f"{what}: control points must be n_u x n_v x 3, got shape "
+                                    f"{control.shape}", line=line)
+    n_u, n_v = control.shape[:2]
+    degree_u = file_integer(path, degree_u, "degree_u", what, line=line)
+    degree_v = file_integer(path, degree_v, "degree_v", what, line=line)
+    for name, degree, count in (("degree_u", degree_u, n_u), ("degree_v", degree_v, n_v)):
+        if degree >= count:
+            raise FileFormatError(path, f"{what}: {name}={_short(degree)} is too high for {count} "
+                                        f"control points (at most {count - 1})", line=line)
+    ku = file_array(path, knots_u, "knots_u", what, 1, line)
+    kv = file_array(path, knots_v, "knots_v", what, 1, line)
+    w = None if weights is None else file_array(path, weights, "weights", what, 2, line)
+    return _build(path, NurbsSurface, (control, degree_u, degree_v, ku, kv, w), what, line)
 
 
 def make_curve(path, control_points, weights, knots, degree, line=None,
                what="curve") -> NurbsCurve:
-    try:
-        return NurbsCurve(np.asarray(control_points, dtype=np.float64), int(degree),
-                          np.asarray(knots, dtype=np.float64),
-                          None if weights is None else np.asarray(weights, dtype=np.float64))
-    except (ValueError, TypeError) as exc:
-        raise FileFormatError(path, f"invalid {what}: {exc}", line=line) from None
+    """Validated float64 NurbsCurve from file data (control points (n, 2) or (n, 3)); any
+    problem becomes a FileFormatError."""
+    control = file_array(path, control_points, "control points", what, 2, line)
+    if control.shape[-1] not in (2, 3):
+        raise FileFormatError(path, f"{what}: control points must be n x 2 or n x 3, got shape "
+                                    f"{control.shape}", line=line)
+    degree = file_integer(path, degree, "degree", what, line=line)
+    if degree >= len(control):
+        raise FileFormatError(path, f"{what}: degree={_short(degree)} is too high for "
+                                    f"{len(control)} control points (at most "
+                                    f"{len(control) - 1})", line=line)
+    k = file_array(path, knots, "knots", what, 1, line)
+    w = None if weights is None else file_array(path, weights, "weights", what, 1, line)
+    return _build(path, NurbsCurve, (control, degree, k, w), what, line)
 
 
 def as_geometry_list(geometry_or_list) -> list:

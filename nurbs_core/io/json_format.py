@@ -17,6 +17,7 @@ bit-exactly. Knot vectors are written in full, exactly as the geometry holds the
 from __future__ import annotations
 
 import json
+import sys
 
 from nurbs_core.io.errors import FileFormatError
 from nurbs_core.io.geometry_io import (
@@ -26,24 +27,79 @@ from nurbs_core.io.geometry_io import (
     metadata_of,
     numpy_of,
 )
+from nurbs_core.io.limits import format_size, sniff_text
 
 FORMAT_NAME = "nurbs-studio"
 FORMAT_VERSION = 1
 SHARED_FORMAT_NAME = "nurbs-surface-json-v1"
 
 
+#: Bytes of memory a parsed JSON value (list slot + float, or key + value) takes at most, roughly.
+_BYTES_PER_VALUE = 40
+#: Memory allowed for the parsed document beyond the file's own size.
+JSON_MEMORY_SLACK = 512 * 2**20
+
+
 def read_json_file(path):
+    """The parsed JSON document, or FileFormatError: binary data, not UTF-8, invalid JSON,
+    nesting deeper than Python's recursion limit, an integer of more than 4300 digits, or more
+    values than fit in memory (estimated from the separators before parsing)."""
+    sniff_text(path, "a JSON file")
     with open(path, "rb") as handle:
         raw = handle.read()
     if not raw.strip():
         raise FileFormatError(path, "the file is empty")
+    values = raw.count(b",") + raw.count(b":")
+    needed = values * _BYTES_PER_VALUE
+    if needed > len(raw) + JSON_MEMORY_SLACK:
+        raise FileFormatError(path, f"the JSON holds about {values} values: reading it would "
+                                    f"need about {format_size(needed)} of memory (too large for "
+                                    f"JSON; use .3dm or .dat for large geometry)")
     try:
-        return json.loads(raw.decode("utf-8-sig"))
-    except UnicodeDecodeError:
-        raise FileFormatError(path, "not JSON: the file is not UTF-8 text (binary data?)") from None
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise FileFormatError(path, "not JSON: the file is not UTF-8 text (binary data?)",
+                              line=line) from None
+    del raw
+    try:
+        return json.loads(text)
     except json.JSONDecodeError as exc:
         raise FileFormatError(path, f"not valid JSON: {exc.msg} (column {exc.colno})",
                               line=exc.lineno) from None
+    except RecursionError:
+        raise FileFormatError(path, "the JSON is nested too deeply to read (more than about "
+                                    f"{sys.getrecursionlimit()} levels)") from None
+    except ValueError as exc:  # e.g. an integer of more than 4300 digits
+        raise FileFormatError(path, f"not readable JSON: {str(exc)[:160]}") from None
+    except MemoryError:
+        raise FileFormatError(path, "the JSON is too large to read into memory") from None
+
+
+def json_object(path, value, what: str) -> dict:
+    """``value`` if it is a JSON object (a dict); FileFormatError naming ``what`` otherwise."""
+    if not isinstance(value, dict):
+        raise FileFormatError(path, f"{what} must be a JSON object, got {json_kind(value)}")
+    return value
+
+
+def metadata_object(path, value, what: str) -> dict:
+    """A metadata entry: an object (copied) or null/absent (empty); anything else is refused."""
+    if value is None:
+        return {}
+    return dict(json_object(path, value, f"{what} metadata"))
+
+
+def json_kind(value) -> str:
+    names = {dict: "an object", list: "a list", str: "a string", bool: "a boolean",
+             type(None): "null", int: "a number", float: "a number"}
+    return names.get(type(value), type(value).__name__)
+
+
+def json_key(path, entry: dict, key: str, what: str):
+    if key not in entry:
+        raise FileFormatError(path, f"{what} lacks the key {key!r}")
+    return entry[key]
 
 
 def _item_to_dict(item) -> dict:
@@ -77,44 +133,47 @@ def read_document(path, document=None):
         raise FileFormatError(path, f"not a {FORMAT_NAME} JSON document (no \"format\": "
                                     f"\"{FORMAT_NAME}\")")
     version = document.get("version")
-    if version != FORMAT_VERSION:
-        raise FileFormatError(path, f"unsupported {FORMAT_NAME} JSON version {version!r} (this "
-                                    f"program reads version {FORMAT_VERSION})")
+    if type(version) is not int or version != FORMAT_VERSION:
+        raise FileFormatError(path, f"unsupported {FORMAT_NAME} JSON version "
+                                    f"{str(repr(version))[:40]} (this program reads version "
+                                    f"{FORMAT_VERSION})")
+    metadata = metadata_object(path, document.get("metadata"), "the document's")
     items = document.get("geometry")
     if not isinstance(items, list) or not items:
         raise FileFormatError(path, "the document has no \"geometry\" list (or it is empty)")
     geometry = []
     for index, entry in enumerate(items):
         what = f"geometry[{index}]"
-        if not isinstance(entry, dict):
-            raise FileFormatError(path, f"{what} is not an object")
-        try:
-            if entry.get("kind") == "surface":
-                item = make_surface(path, entry["control_points"], entry.get("weights"),
-                                    entry["knots_u"], entry["knots_v"], entry["degree_u"],
-                                    entry["degree_v"], what=f"{what} (surface)")
-            elif entry.get("kind") == "curve":
-                item = make_curve(path, entry["control_points"], entry.get("weights"),
-                                  entry["knots"], entry["degree"], what=f"{what} (curve)")
-            else:
-                raise FileFormatError(path, f"{what} has unknown kind {entry.get('kind')!r}")
-        except KeyError as exc:
-            raise FileFormatError(path, f"{what} lacks the key {exc.args[0]!r}") from None
-        item.metadata = dict(entry.get("metadata") or {})
+        entry = json_object(path, entry, what)
+        kind = entry.get("kind")
+        if kind == "surface":
+            item = make_surface(path, json_key(path, entry, "control_points", what),
+                                entry.get("weights"), json_key(path, entry, "knots_u", what),
+                                json_key(path, entry, "knots_v", what),
+                                json_key(path, entry, "degree_u", what),
+                                json_key(path, entry, "degree_v", what), what=f"{what} (surface)")
+        elif kind == "curve":
+            item = make_curve(path, json_key(path, entry, "control_points", what),
+                              entry.get("weights"), json_key(path, entry, "knots", what),
+                              json_key(path, entry, "degree", what), what=f"{what} (curve)")
+        else:
+            raise FileFormatError(path, f"{what} has unknown kind {str(repr(kind))[:40]} "
+                                        "(\"surface\" or \"curve\")")
+        item.metadata = metadata_object(path, entry.get("metadata"), what)
         geometry.append(item)
-    return geometry, dict(document.get("metadata") or {})
+    return geometry, metadata
 
 
 def read_shared_json(path, document=None):
     """The shared data's ``nurbs-surface-json-v1``: one surface, key ``ctrlpts`` (Euclidean,
     u index first), ``weights`` nested or null, full knot vectors."""
     document = read_json_file(path) if document is None else document
-    try:
-        surface = make_surface(path, document["ctrlpts"], document.get("weights"),
-                               document["knots_u"], document["knots_v"], document["degree_u"],
-                               document["degree_v"])
-    except KeyError as exc:
-        raise FileFormatError(path, f"{SHARED_FORMAT_NAME} surface lacks the key "
-                                    f"{exc.args[0]!r}") from None
+    what = f"{SHARED_FORMAT_NAME} surface"
+    json_object(path, document, f"a {what}")
+    surface = make_surface(path, json_key(path, document, "ctrlpts", what), document.get("weights"),
+                           json_key(path, document, "knots_u", what),
+                           json_key(path, document, "knots_v", what),
+                           json_key(path, document, "degree_u", what),
+                           json_key(path, document, "degree_v", what), what=what)
     surface.metadata = {k: document[k] for k in ("source", "note") if k in document}
     return [surface]

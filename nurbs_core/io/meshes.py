@@ -5,36 +5,409 @@
 area-weighted triangle sampling) with the face normal of each sample as ``normals`` and the
 face each came from as ``face_index``. A file with no faces (a point cloud stored as OBJ or PLY)
 gives its vertices in either mode.
+
+trimesh trusts the counts and lengths a file announces, so they are checked here first, against
+the file size: the triangle count of a binary STL, the counts line of an OFF file, the element
+counts and list lengths of a PLY file, and every buffer, buffer view and accessor of a glTF /
+GLB document (zero-filled accessors and instanced meshes against the decompression limit;
+external buffers only as regular files in the glTF's folder, read up to their declared
+length). Materials and textures are never loaded. Whatever trimesh raises becomes a
+FileFormatError naming the file.
 """
 
 from __future__ import annotations
+
+import contextlib
+import functools
+import json
+import logging
+import os
+import re
+import stat
+import struct
+import urllib.parse
 
 import numpy as np
 
 from nurbs_core.io.cloud import PointCloud, check_points
 from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.limits import check_claimed_size, check_decompressed_size, format_size
 
 MESH_MODES = ("vertices", "sample")
+
+_GLB_MAGIC = b"glTF"
+_GLB_JSON, _GLB_BIN = 0x4E4F534A, 0x004E4942
+_GLTF_COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+_GLTF_TYPE_SIZE = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+#: OFF and STL headers are looked for in the first bytes of the file.
+_HEAD_BYTES = 1 << 16
+#: trimesh merges a glTF scene one placed primitive at a time (about half a millisecond each)
+#: and walks every node: beyond these a file cannot be read in seconds.
+_MAX_GLTF_PLACEMENTS = 10_000
+_MAX_GLTF_NODES = 200_000
+
+
+def _natural(path, value, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise FileFormatError(path, f"{what} must be a non-negative integer, got {value!r}"[:300])
+    return value
+
+
+def _index(path, value, length: int, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < length:
+        raise FileFormatError(path, f"{what} must be an index below {length}, got {value!r}"[:300])
+    return value
+
+
+def _objects(path, document: dict, key: str) -> list:
+    value = document.get(key, [])
+    if not isinstance(value, list) or not all(isinstance(item, dict) for item in value):
+        raise FileFormatError(path, f"glTF '{key}' must be a list of objects, got "
+                                    f"{type(value).__name__}")
+    return value
+
+
+def _external_buffer(path, uri: str, length: int, what: str) -> bytes:
+    """The first ``length`` bytes of a buffer file next to the glTF: a relative path inside its
+    folder to a regular file (no URL, no device, no file elsewhere on the system)."""
+    parsed = urllib.parse.urlparse(uri)
+    relative = urllib.parse.unquote(parsed.path)
+    if parsed.scheme or parsed.netloc or os.path.isabs(relative):
+        raise FileFormatError(path, f"{what}: only embedded data: URIs and files next to the "
+                                    f"glTF are read, not {uri[:200]!r}")
+    folder = os.path.realpath(os.path.dirname(os.path.abspath(os.fspath(path))))
+    target = os.path.realpath(os.path.join(folder, relative))
+    if os.path.commonpath([folder, target]) != folder:
+        raise FileFormatError(path, f"{what}: {uri[:200]!r} points outside the glTF's folder")
+    try:
+        info = os.stat(target)
+    except OSError:
+        raise FileFormatError(path, f"{what}: the buffer file {uri[:200]!r} does not exist") \
+            from None
+    if not stat.S_ISREG(info.st_mode):
+        raise FileFormatError(path, f"{what}: {uri[:200]!r} is not a regular file")
+    if info.st_size < length:
+        raise FileFormatError(path, f"{what} declares {length} bytes, but {uri[:200]!r} has "
+                                    f"only {info.st_size}")
+    with open(target, "rb") as handle:
+        return handle.read(length)
+
+
+def _data_uri_bytes(uri: str) -> int:
+    """The bytes a data: URI holds (exact for valid base64)."""
+    comma = uri.find(",")
+    payload = uri[comma + 1:]
+    if ";base64" in uri[:comma]:
+        return len(payload.rstrip("=")) * 3 // 4
+    return len(urllib.parse.unquote(payload))
+
+
+def _check_gltf(path, document, chunks: list[int]) -> dict[str, bytes]:
+    """Check a glTF document's layout against the data present; return the external buffers
+    (uri -> bytes, read up to their declared length) for trimesh's resolver."""
+    if not isinstance(document, dict):
+        raise FileFormatError(path, "the glTF JSON is not an object")
+    file_size = os.path.getsize(path)
+    buffers, views, accessors = (_objects(path, document, key)
+                                 for key in ("buffers", "bufferViews", "accessors"))
+    meshes, nodes = _objects(path, document, "meshes"), _objects(path, document, "nodes")
+    sizes, external, unnamed = [], {}, iter(chunks)
+    for k, buffer in enumerate(buffers):
+        length = _natural(path, buffer.get("byteLength"), f"buffer {k}: byteLength")
+        uri = buffer.get("uri")
+        if uri is None:
+            present = next(unnamed, None)
+            if present is None:
+                raise FileFormatError(path, f"buffer {k} has no uri and no binary chunk holds "
+                                            "its data")
+        elif not isinstance(uri, str):
+            raise FileFormatError(path, f"buffer {k}: uri must be a string")
+        elif uri.startswith("data:"):
+            present = _data_uri_bytes(uri)
+        else:
+            external[uri] = _external_buffer(path, uri, length, f"buffer {k}")
+            present = length
+        if length > present:
+            raise FileFormatError(path, f"buffer {k} declares {length} bytes, but its data has "
+                                        f"only {present}")
+        sizes.append(length)
+    view_sizes = []
+    for k, view in enumerate(views):
+        buffer = _index(path, view.get("buffer"), len(buffers), f"buffer view {k}: buffer")
+        offset = _natural(path, view.get("byteOffset", 0), f"buffer view {k}: byteOffset")
+        length = _natural(path, view.get("byteLength"), f"buffer view {k}: byteLength")
+        if offset + length > sizes[buffer]:
+            raise FileFormatError(path, f"buffer view {k} (bytes {offset} to {offset + length}) "
+                                        f"runs past the end of buffer {buffer} "
+                                        f"({sizes[buffer]} bytes)")
+        if view.get("byteStride") is not None and \
+                _natural(path, view["byteStride"], f"buffer view {k}: byteStride") == 0:
+            raise FileFormatError(path, f"buffer view {k}: byteStride must be positive")
+        view_sizes.append(length)
+    zeros = 0
+    for k, accessor in enumerate(accessors):
+        count = _natural(path, accessor.get("count"), f"accessor {k}: count")
+        component = accessor.get("componentType")
+        kind = accessor.get("type")
+        if component not in _GLTF_COMPONENT_BYTES or kind not in _GLTF_TYPE_SIZE:
+            raise FileFormatError(path, f"accessor {k}: unknown componentType {component!r} or "
+                                        f"type {kind!r}"[:300])
+        element = _GLTF_COMPONENT_BYTES[component] * _GLTF_TYPE_SIZE[kind]
+        offset = _natural(path, accessor.get("byteOffset", 0), f"accessor {k}: byteOffset")
+        if "bufferView" in accessor:
+            view = _index(path, accessor["bufferView"], len(views), f"accessor {k}: bufferView")
+            stride = views[view].get("byteStride") or element
+            needed = offset + (count - 1) * stride + element if count else offset
+            if needed > view_sizes[view]:
+                raise FileFormatError(path, f"accessor {k} claims {count} items "
+                                            f"({format_size(needed)}), but buffer view {view} "
+                                            f"has only {format_size(view_sizes[view])}")
+        else:
+            zeros += count * element
+        sparse = accessor.get("sparse")
+        if sparse is not None:
+            _check_sparse(path, k, sparse, count, element, views, view_sizes)
+    check_decompressed_size(path, zeros, file_size, what="the accessors without data (zeros)")
+    _check_scene(path, document, accessors, meshes, nodes, file_size)
+    return external
+
+
+def _check_sparse(path, k: int, sparse, count: int, element: int, views, view_sizes) -> None:
+    if not isinstance(sparse, dict):
+        raise FileFormatError(path, f"accessor {k}: sparse must be an object")
+    changed = _natural(path, sparse.get("count"), f"accessor {k}: sparse count")
+    if changed > count:
+        raise FileFormatError(path, f"accessor {k}: sparse count {changed} is more than its "
+                                    f"{count} items")
+    for part, size in (("indices", None), ("values", element)):
+        block = sparse.get(part)
+        if not isinstance(block, dict):
+            raise FileFormatError(path, f"accessor {k}: sparse {part} must be an object")
+        view = _index(path, block.get("bufferView"), len(views),
+                      f"accessor {k}: sparse {part} bufferView")
+        if size is None:
+            size = _GLTF_COMPONENT_BYTES.get(block.get("componentType"), 0)
+            if size == 0:
+                raise FileFormatError(path, f"accessor {k}: unknown sparse index type")
+        offset = _natural(path, block.get("byteOffset", 0), f"accessor {k}: sparse byteOffset")
+        if offset + changed * size > view_sizes[view]:
+            raise FileFormatError(path, f"accessor {k}: sparse {part} run past the end of buffer "
+                                        f"view {view}")
+
+
+def _check_scene(path, document, accessors, meshes, nodes, file_size: int) -> None:
+    """References between meshes, nodes and scenes; the nodes must form a forest (no cycles,
+    one parent each) and the mesh data they instantiate must stay within the decompression
+    limit (one mesh placed by many nodes is copied once per node)."""
+    if len(nodes) > _MAX_GLTF_NODES:
+        raise FileFormatError(path, f"the glTF scene has {len(nodes)} nodes, more than the "
+                                    f"{_MAX_GLTF_NODES} that can be read in time")
+    weights, parts = [], []
+    for k, mesh in enumerate(meshes):
+        primitives = mesh.get("primitives", [])
+        if not isinstance(primitives, list) or not all(isinstance(p, dict) for p in primitives):
+            raise FileFormatError(path, f"mesh {k}: primitives must be a list of objects")
+        weight = 0
+        for primitive in primitives:
+            attributes = primitive.get("attributes", {})
+            if not isinstance(attributes, dict):
+                raise FileFormatError(path, f"mesh {k}: attributes must be an object")
+            for name, accessor in attributes.items():
+                _index(path, accessor, len(accessors), f"mesh {k}: attribute {name}")
+            if "POSITION" in attributes:
+                weight += 24 * accessors[attributes["POSITION"]]["count"]
+            if primitive.get("indices") is not None:
+                index = _index(path, primitive["indices"], len(accessors), f"mesh {k}: indices")
+                weight += 8 * accessors[index]["count"]
+        weights.append(weight)
+        parts.append(len(primitives))
+    parent: dict[int, int] = {}
+    instanced = placed = 0
+    for k, node in enumerate(nodes):
+        children = node.get("children", [])
+        if not isinstance(children, list):
+            raise FileFormatError(path, f"node {k}: children must be a list")
+        for child in children:
+            _index(path, child, len(nodes), f"node {k}: child")
+            if child == k or child in parent:
+                raise FileFormatError(path, f"node {child} has two parents or is its own child: "
+                                            "the node hierarchy is not a tree")
+            parent[child] = k
+        if node.get("mesh") is not None:
+            mesh = _index(path, node["mesh"], len(meshes), f"node {k}: mesh")
+            instanced += weights[mesh]
+            placed += parts[mesh]
+    settled: set[int] = set()
+    for k in range(len(nodes)):  # with one parent each, a loop is the only way to fail a tree
+        chain, node = set(), k
+        while node in parent and node not in settled:
+            if node in chain:
+                raise FileFormatError(path, f"node {node} is its own ancestor: the node "
+                                            "hierarchy has a cycle")
+            chain.add(node)
+            node = parent[node]
+        settled |= chain
+    scenes = _objects(path, document, "scenes")
+    for k, scene in enumerate(scenes):
+        roots = scene.get("nodes", [])
+        if not isinstance(roots, list):
+            raise FileFormatError(path, f"scene {k}: nodes must be a list")
+        for root in roots:
+            _index(path, root, len(nodes), f"scene {k}: node")
+    placed = placed if nodes else sum(parts)
+    if placed > _MAX_GLTF_PLACEMENTS:
+        raise FileFormatError(path, f"the glTF scene places {placed} mesh primitives, more than "
+                                    f"the {_MAX_GLTF_PLACEMENTS} that can be merged in time "
+                                    "(split the file)")
+    check_decompressed_size(path, instanced if nodes else sum(weights), file_size,
+                            what="the meshes the glTF scene places")
+
+
+def _check_glb(path) -> dict[str, bytes]:
+    size = os.path.getsize(path)
+    with open(path, "rb") as handle:
+        head = handle.read(20)
+        if len(head) < 20 or head[:4] != _GLB_MAGIC:
+            raise FileFormatError(path, "not a GLB file (no glTF magic at the start)")
+        version, total, json_length, json_type = struct.unpack_from("<IIII", head, 4)
+        if version != 2:
+            raise FileFormatError(path, f"GLB version {version}: only glTF 2 is supported")
+        if json_type != _GLB_JSON:
+            raise FileFormatError(path, "the first GLB chunk is not the JSON document")
+        check_claimed_size(path, json_length, 1, size - 20, what="bytes of JSON")
+        text = handle.read(json_length)
+        chunks, position = [], 20 + json_length
+        end = min(size, position + total)  # trimesh reads chunks for `total` bytes after the JSON
+        while position + 8 <= end:
+            handle.seek(position)
+            length, kind = struct.unpack("<II", handle.read(8))
+            check_claimed_size(path, length, 1, size - position - 8, what="bytes in a GLB chunk")
+            if kind == _GLB_BIN:
+                chunks.append(length)
+            position += 8 + length
+    return _check_gltf(path, _parse_json(path, text), chunks)
+
+
+def _parse_json(path, text: bytes):
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
+        raise FileFormatError(path, f"the glTF JSON cannot be parsed: {type(exc).__name__}: "
+                                    f"{str(exc)[:200]}") from None
+
+
+def _check_stl(path) -> None:
+    """A binary STL's triangle count must match its size exactly (84 + 50 per triangle);
+    otherwise the file must be ASCII text starting with ``solid``."""
+    size = os.path.getsize(path)
+    with open(path, "rb") as handle:
+        head = handle.read(_HEAD_BYTES)
+    if size >= 84 and 84 + 50 * struct.unpack_from("<I", head, 80)[0] == size:
+        return
+    control = sum(1 for byte in head if byte < 32 and byte not in (9, 10, 12, 13))
+    if head.lstrip().lower().startswith(b"solid") and control <= len(head) // 100:
+        return  # ASCII STL
+    if size < 84:
+        raise FileFormatError(path, f"not an STL file: {size} bytes, neither ASCII (solid ...) "
+                                    "nor a binary STL (84-byte header)")
+    count = struct.unpack_from("<I", head, 80)[0]
+    raise FileFormatError(path, f"the binary STL header claims {count} triangles "
+                                f"({format_size(84 + 50 * count)}), but the file has "
+                                f"{format_size(size)} (truncated, or a lying header)")
+
+
+def _check_off(path) -> None:
+    """The vertex and face counts of an OFF file against its size."""
+    size = os.path.getsize(path)
+    with open(path, "rb") as handle:
+        head = handle.read(_HEAD_BYTES).decode("utf-8", errors="replace")
+    text = re.sub(r"#[^\n]*", "", head)
+    found = re.search(r"(COFF|OFF)", text)
+    lines = [line.split() for line in text[found.end():].splitlines()] if found else []
+    counts = next((words for words in lines if words), None)
+    if counts is None:
+        raise FileFormatError(path, "not an OFF file: no OFF keyword followed by a vertex/face "
+                                    f"count line in the first {format_size(_HEAD_BYTES)}")
+    if len(counts) < 2 or not all(re.fullmatch(r"[+-]?\d{1,19}", w) for w in counts[:2]):
+        raise FileFormatError(path, f"the OFF count line {' '.join(counts)[:100]!r} does not "
+                                    "start with two whole numbers")
+    vertices, faces = int(counts[0]), int(counts[1])
+    check_claimed_size(path, vertices, 6, size, what="vertices")  # a line "0 0 0\n" each
+    check_claimed_size(path, faces, 2, size - 6 * vertices, what="faces")
+
+
+def _check_before_trimesh(path, suffix: str) -> dict | None:
+    """The count checks for ``suffix``; for glTF / GLB, the external buffers to resolve."""
+    if suffix == ".stl":
+        _check_stl(path)
+    elif suffix == ".off":
+        _check_off(path)
+    elif suffix == ".ply":
+        from nurbs_core.io import ply
+
+        ply.walk_list_elements(path, ply.read_header(path))
+    elif suffix == ".glb":
+        return _check_glb(path)
+    elif suffix == ".gltf":
+        with open(path, "rb") as handle:
+            return _check_gltf(path, _parse_json(path, handle.read()), [])
+    return None
+
+
+@contextlib.contextmanager
+def _quiet_trimesh():
+    """trimesh logs recoverable parse problems as warnings with a full traceback (printed on
+    stderr when the application has no logging set up); a reader reports problems as its own
+    FileFormatError instead, so those warnings are held back while a file is read."""
+    logger = logging.getLogger("trimesh")
+    previous = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        logger.setLevel(previous)
+
+
+def _quietly(reader):
+    @functools.wraps(reader)
+    def wrapper(*args, **kwargs):
+        with _quiet_trimesh():
+            return reader(*args, **kwargs)
+    return wrapper
 
 
 def _load_trimesh(path, suffix: str):
     import trimesh
 
-    kwargs = {"process": False}
+    external = _check_before_trimesh(path, suffix)
+    kwargs = {"process": False, "skip_materials": True}
     if suffix == ".obj":
         kwargs["maintain_order"] = True  # keep the file's vertex order
+    if external is not None:  # only the buffers checked above, never other files
+        kwargs["resolver"] = trimesh.resolvers.ZipResolver(external)
     try:
-        loaded = trimesh.load(str(path), **kwargs)
-        if isinstance(loaded, trimesh.Scene):  # GLB/GLTF: every node with its transform applied
-            loaded = loaded.to_mesh() if len(loaded.geometry) else None
+        with np.errstate(invalid="ignore", over="ignore"):  # NaN / inf are refused below
+            loaded = trimesh.load(str(path), **kwargs)
+            if isinstance(loaded, trimesh.Scene):  # GLB/GLTF: every node with its transform
+                loaded = loaded.to_mesh() if len(loaded.geometry) else None
+    except MemoryError:
+        raise FileFormatError(path, "not enough memory to read this mesh") from None
     except Exception as exc:  # trimesh raises many different types for unreadable files
         raise FileFormatError(path, f"not a readable {suffix.lstrip('.').upper()} mesh: "
-                                    f"{type(exc).__name__}: {exc}") from None
+                                    f"{type(exc).__name__}: {str(exc)[:300]}") from None
     if loaded is None:
         raise FileFormatError(path, "the file contains no geometry")
     return loaded
 
 
+def _check_faces(path, faces: np.ndarray, vertex_count: int) -> None:
+    if faces.size and (faces.min() < 0 or faces.max() >= vertex_count):
+        bad = int(faces.max() if faces.max() >= vertex_count else faces.min())
+        raise FileFormatError(path, f"a face refers to vertex {bad}, but the mesh has "
+                                    f"{vertex_count} vertices")
+
+
+@_quietly
 def read_mesh_points(path, suffix: str, mesh_mode: str = "vertices",
                      sample_count: int = 100_000, seed: int = 0) -> PointCloud:
     import trimesh
@@ -49,12 +422,21 @@ def read_mesh_points(path, suffix: str, mesh_mode: str = "vertices",
     attributes: dict[str, np.ndarray] = {}
     if mesh_mode == "sample" and isinstance(mesh, trimesh.Trimesh) and len(faces) > 0:
         check_points(path, vertices)
-        if not mesh.area > 0:
-            raise FileFormatError(path, "the mesh has zero area, so it cannot be sampled")
+        _check_faces(path, faces, len(vertices))
         if sample_count < 1:
             raise ValueError(f"sample_count must be positive, got {sample_count}")
-        points, face_index = trimesh.sample.sample_surface(mesh, int(sample_count), seed=seed)
-        attributes["normals"] = np.asarray(mesh.face_normals[face_index], dtype=np.float64)
+        try:
+            area = mesh.area
+            if not area > 0:
+                raise FileFormatError(path, "the mesh has zero area, so it cannot be sampled")
+            points, face_index = trimesh.sample.sample_surface(mesh, int(sample_count), seed=seed)
+            normals = np.asarray(mesh.face_normals[face_index], dtype=np.float64)
+        except FileFormatError:
+            raise
+        except Exception as exc:  # degenerate data trimesh cannot sample
+            raise FileFormatError(path, f"the mesh cannot be sampled: {type(exc).__name__}: "
+                                        f"{str(exc)[:300]}") from None
+        attributes["normals"] = normals
         attributes["face_index"] = np.asarray(face_index)
         return PointCloud(check_points(path, np.asarray(points, dtype=np.float64)), attributes,
                           path)
@@ -70,6 +452,7 @@ def read_mesh_points(path, suffix: str, mesh_mode: str = "vertices",
     return PointCloud(vertices, attributes, path)
 
 
+@_quietly
 def read_mesh_faces(path, suffix: str) -> tuple[np.ndarray, np.ndarray] | None:
     """The file's triangle mesh as (vertices (V, 3) float64, faces (F, 3) int64), duplicate
     vertices merged (STL), or None when the file has no faces."""
@@ -79,5 +462,11 @@ def read_mesh_faces(path, suffix: str) -> tuple[np.ndarray, np.ndarray] | None:
     faces = np.asarray(getattr(mesh, "faces", np.empty((0, 3))))
     if not isinstance(mesh, trimesh.Trimesh) or len(faces) == 0:
         return None
-    merged = trimesh.Trimesh(np.asarray(mesh.vertices, np.float64), faces, process=True)
+    vertices = np.asarray(mesh.vertices, np.float64)
+    _check_faces(path, faces, len(vertices))
+    try:
+        merged = trimesh.Trimesh(vertices, faces, process=True)
+    except Exception as exc:  # degenerate data trimesh cannot process
+        raise FileFormatError(path, f"the mesh cannot be processed: {type(exc).__name__}: "
+                                    f"{str(exc)[:300]}") from None
     return np.asarray(merged.vertices, np.float64), np.asarray(merged.faces, np.int64)

@@ -36,13 +36,12 @@ from collections.abc import Iterator
 import numpy as np
 
 from nurbs_core.io.atomic import atomic_write
+from nurbs_core.io.dispatch import NETWORK_SUFFIXES
 from nurbs_core.io.errors import FileFormatError
 from nurbs_core.io.json_format import read_json_file
 from nurbs_core.io.points import suffix_of
 
 NETWORK_FORMAT = "nurbs-studio-network-v1"
-NETWORK_SUFFIXES = (".json", ".3dm", ".step", ".stp", ".iges", ".igs", ".obj", ".ply", ".stl",
-                    ".glb")
 
 
 def _plain(value):

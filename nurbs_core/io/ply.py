@@ -2,20 +2,28 @@
 
 Binary vertex data is read in chunks with ``np.fromfile`` and a structured dtype straight into
 the float64 output, so peak memory is the output arrays plus one chunk, and a 10-million-point
-file loads in about a second (see ``benchmarks/bench_io_ply.py``). ASCII files are parsed by
-numpy as one block. Faces and other elements are skipped here; sampling a PLY mesh over its area
-goes through trimesh (:mod:`nurbs_core.io.meshes`).
+file loads in about a second (see ``benchmarks/bench_io_ply.py``). ASCII vertex lines are parsed
+by numpy a block at a time. Faces and other elements are skipped here (rows with lists by a
+vectorised walk); sampling a PLY mesh over its area goes through trimesh
+(:mod:`nurbs_core.io.meshes`).
+
+Every element count of the header is checked against the file size when the header is read,
+before anything is allocated: binary rows take at least their fixed bytes (the list counts
+included), ASCII rows at least two bytes a property. A list longer than the rest of the file
+is refused where it is met.
 """
 
 from __future__ import annotations
 
+import os
+import struct
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from nurbs_core.io.cloud import NAMED_COLUMNS, PointCloud, check_points
+from nurbs_core.io.cloud import NAMED_COLUMNS, PointCloud, check_points, read_text_rows
 from nurbs_core.io.errors import FileFormatError
-from nurbs_core.io.text_points import parse_table
+from nurbs_core.io.limits import check_claimed_size, format_size
 
 _TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
@@ -26,6 +34,11 @@ _TYPES = {
 _FORMATS = {"ascii": None, "binary_little_endian": "<", "binary_big_endian": ">"}
 _MAX_HEADER_BYTES = 1 << 20
 _CHUNK_ROWS = 1 << 20
+#: Bytes read at a time when walking rows with lists.
+_WALK_CHUNK = 1 << 22
+#: Rows with lists of changing lengths walked one at a time before the reader gives up (an
+#: element of irregular lists before the vertices; uniform lists are walked vectorised).
+_MAX_IRREGULAR_ROWS = 2_000_000
 
 
 @dataclass
@@ -47,12 +60,23 @@ class PlyHeader:
     elements: list[PlyElement]
     data_offset: int
     endian: str | None
+    file_size: int = 0
+    first_data_line: int = 1
 
     def element(self, name: str) -> PlyElement | None:
         return next((e for e in self.elements if e.name == name), None)
 
     def fixed_dtype(self, element: PlyElement) -> np.dtype:
         return np.dtype([(name, self.endian + kind) for name, kind in element.properties])
+
+    def min_row_bytes(self, element: PlyElement) -> int:
+        """The fewest bytes a row of ``element`` can take: binary, its scalars and the list
+        counts (empty lists); ASCII, a line (a number and its line break; a line break for a
+        row without properties: the vertex lines are bounded again when they are read)."""
+        if self.endian is None:
+            return 2 if element.properties else 1
+        return sum(np.dtype(kind[0] if isinstance(kind, tuple) else kind).itemsize
+                   for _, kind in element.properties)
 
 
 def read_header(path) -> PlyHeader:
@@ -64,6 +88,10 @@ def read_header(path) -> PlyHeader:
         raise FileFormatError(path, "not a PLY file: the first line must be 'ply'", line=1)
     end = head.find(b"end_header")
     if end < 0:
+        if len(head) >= _MAX_HEADER_BYTES:
+            raise FileFormatError(path, f"no 'end_header' line in the first "
+                                        f"{format_size(_MAX_HEADER_BYTES)}: the PLY header is "
+                                        "too long (or not a PLY file)")
         raise FileFormatError(path, "the PLY header has no 'end_header' line (truncated or not "
                                     "a PLY file)")
     newline = head.find(b"\n", end)
@@ -86,7 +114,11 @@ def read_header(path) -> PlyHeader:
             fmt = words[1]
         elif keyword == "element":
             if len(words) != 3 or not words[2].isdigit():
-                raise FileFormatError(path, f"bad element line {raw.strip()!r}", line=number)
+                raise FileFormatError(path, f"bad element line {raw.strip()[:200]!r}",
+                                      line=number)
+            if len(words[2]) > 19:  # more than 10^19 rows: no file holds that many
+                raise FileFormatError(path, f"element {words[1][:100]!r} claims a count of "
+                                            f"{len(words[2])} digits", line=number)
             elements.append(PlyElement(words[1], int(words[2]), number))
         elif keyword == "property":
             if not elements:
@@ -95,6 +127,9 @@ def read_header(path) -> PlyHeader:
                 if words[2] not in _TYPES or words[3] not in _TYPES:
                     raise FileFormatError(path, f"unknown list type in {raw.strip()!r}",
                                           line=number)
+                if _TYPES[words[2]][0] == "f":
+                    raise FileFormatError(path, f"the length of a list must be an integer type, "
+                                                f"not {words[2]}", line=number)
                 elements[-1].properties.append((words[4], (_TYPES[words[2]], _TYPES[words[3]])))
             elif len(words) == 3 and words[1] in _TYPES:
                 elements[-1].properties.append((words[2], _TYPES[words[1]]))
@@ -104,7 +139,24 @@ def read_header(path) -> PlyHeader:
             raise FileFormatError(path, f"unexpected header line {raw.strip()!r}", line=number)
     if fmt is None:
         raise FileFormatError(path, "the PLY header has no 'format' line")
-    return PlyHeader(fmt, elements, newline + 1, _FORMATS[fmt])
+    header = PlyHeader(fmt, elements, newline + 1, _FORMATS[fmt], os.path.getsize(path),
+                       head[: newline + 1].count(b"\n") + 1)
+    _check_counts(path, header)
+    return header
+
+
+def _check_counts(path, header: PlyHeader) -> None:
+    """Every element count against the bytes that follow the header, before any allocation."""
+    available = header.file_size - header.data_offset
+    if header.endian is None:
+        available += 1  # the last ASCII line may lack its line break
+    for element in header.elements:
+        row = header.min_row_bytes(element)
+        if header.endian is not None and row == 0:
+            continue  # rows without properties take no bytes
+        check_claimed_size(path, element.count, row, available,
+                           what=f"'{element.name}' elements", line=element.line)
+        available -= element.count * row
 
 
 def _vertex_plan(path, header: PlyHeader, vertex: PlyElement):
@@ -162,35 +214,122 @@ def _scatter(plan, arrays, block, start: int):
             arrays[attribute][start:stop, column] = block[name]
 
 
-def _skip_list_element(handle, header: PlyHeader, element: PlyElement, path) -> None:
-    """Walk past an element with list properties (each row has its own length)."""
-    for _ in range(element.count):
+class _RowWalker:
+    """Walks the rows of a binary element with list properties. Where the rows that follow have
+    the same list lengths as the current one, a whole run of them is checked at once (a strided
+    view of their count fields) and skipped; in stretches of changing lengths rows are walked
+    one at a time, at most ``_MAX_IRREGULAR_ROWS`` of them. Every list is checked against the
+    bytes left in the file."""
+
+    def __init__(self, path, handle, header: PlyHeader, element: PlyElement):
+        self.path, self.handle, self.element = path, handle, element
+        self.end = header.file_size
+        self.parts = []  # (None, fixed bytes) or (count dtype, struct format, item bytes)
         for _name, kind in element.properties:
             if isinstance(kind, tuple):
                 count_type = np.dtype(header.endian + kind[0])
-                raw = handle.read(count_type.itemsize)
-                if len(raw) < count_type.itemsize:
-                    raise FileFormatError(path, f"truncated inside element {element.name!r}")
-                length = int(np.frombuffer(raw, count_type)[0])
-                handle.seek(length * np.dtype(kind[1]).itemsize, 1)
+                self.parts.append((count_type, header.endian + count_type.char,
+                                   np.dtype(kind[1]).itemsize))
             else:
-                handle.seek(np.dtype(kind).itemsize, 1)
+                self.parts.append((None, None, np.dtype(kind).itemsize))
+        self.buffer, self.buffer_at = b"", 0
+
+    def _bytes(self, position: int, count: int) -> tuple[bytes, int]:
+        """The buffer holding ``[position, position + count)`` (or up to the end of the file)
+        and the offset of ``position`` in it."""
+        if position < self.buffer_at or position + count > self.buffer_at + len(self.buffer):
+            self.handle.seek(position)
+            self.buffer, self.buffer_at = self.handle.read(max(count, _WALK_CHUNK)), position
+        return self.buffer, position - self.buffer_at
+
+    def _row(self, position: int, row: int):
+        """(length, [(offset, count dtype, count)]) of the row at ``position``."""
+        offset, counts = 0, []
+        for count_type, code, size in self.parts:
+            if count_type is None:
+                offset += size
+                continue
+            buffer, at = self._bytes(position + offset, count_type.itemsize)
+            if at + count_type.itemsize > len(buffer):
+                raise FileFormatError(self.path, f"truncated inside element "
+                                                 f"{self.element.name!r} (row {row})")
+            count = struct.unpack_from(code, buffer, at)[0]
+            if count < 0:
+                raise FileFormatError(self.path, f"row {row} of element {self.element.name!r} "
+                                                 f"has a list of negative length {count}")
+            counts.append((offset, count_type, count))
+            offset += count_type.itemsize + count * size
+            if position + offset > self.end:
+                raise FileFormatError(
+                    self.path, f"row {row} of element {self.element.name!r} has a list of "
+                               f"{count} items ({format_size(count * size)}), more than the "
+                               f"{format_size(max(self.end - position, 0))} left in the file")
+        return offset, counts
+
+    def _uniform(self, position: int, length: int, counts, rows: int) -> int:
+        """How many rows from ``position`` (at least 1) have the lengths of the first."""
+        want = min(rows, _WALK_CHUNK // length)
+        if want < 2:
+            return 1
+        buffer, at = self._bytes(position, want * length)
+        fits = min(want, (len(buffer) - at) // length)
+        same = np.ones(fits, dtype=bool)
+        for offset, count_type, count in counts:
+            same &= np.ndarray((fits,), count_type, buffer, at + offset, (length,)) == count
+        return max(1, fits if same.all() else int(np.argmin(same)))
+
+    def skip(self, position: int) -> int:
+        """Walk every row from ``position``; return the position after the element."""
+        row, total, walked, single, misses = 0, self.element.count, 0, 0, 0
+        while row < total:
+            length, counts = self._row(position, row)
+            if single:  # a stretch of changing lengths: row by row
+                run, single, walked = 1, single - 1, walked + 1
+                if walked > _MAX_IRREGULAR_ROWS:
+                    raise FileFormatError(
+                        self.path, f"element {self.element.name!r} ({total} rows) has lists of "
+                                   f"changing lengths before the vertices: more than "
+                                   f"{_MAX_IRREGULAR_ROWS} such rows cannot be walked in time")
+            else:
+                run = self._uniform(position, length, counts, total - row) if counts else 1
+                if run < 4:
+                    misses += 1
+                    single = 16 << min(misses, 8)
+                else:
+                    misses = 0
+            position += run * length
+            row += run
+        return position
+
+
+def walk_list_elements(path, header: PlyHeader | None = None) -> None:
+    """Check every row of every binary element with lists (lengths against the file) without
+    reading the data: before a PLY file goes to a library that would trust the lists."""
+    header = header or read_header(path)
+    if header.endian is None:
+        return
+    with open(path, "rb") as handle:
+        position = header.data_offset
+        for element in header.elements:
+            if element.has_lists:
+                position = _RowWalker(path, handle, header, element).skip(position)
+            else:
+                position += element.count * header.fixed_dtype(element).itemsize
 
 
 def _read_binary(path, header: PlyHeader, vertex: PlyElement, plan) -> dict[str, np.ndarray]:
     dtype = header.fixed_dtype(vertex)
+    size = header.file_size
     with open(path, "rb") as handle:
-        handle.seek(0, 2)
-        size = handle.tell()
-        handle.seek(header.data_offset)
+        start = header.data_offset
         for element in header.elements:
             if element is vertex:
                 break
             if element.has_lists:
-                _skip_list_element(handle, header, element, path)
+                start = _RowWalker(path, handle, header, element).skip(start)
             else:
-                handle.seek(element.count * header.fixed_dtype(element).itemsize, 1)
-        start = handle.tell()
+                start += element.count * header.fixed_dtype(element).itemsize
+        handle.seek(start)
         needed = vertex.count * dtype.itemsize
         if start + needed > size:
             raise FileFormatError(
@@ -208,35 +347,22 @@ def _read_binary(path, header: PlyHeader, vertex: PlyElement, plan) -> dict[str,
 
 
 def _read_ascii(path, header: PlyHeader, vertex: PlyElement, plan) -> tuple[dict, int]:
-    with open(path, "rb") as handle:
-        handle.seek(header.data_offset)
-        raw = handle.read()
-    try:
-        text = raw.decode("ascii")
-    except UnicodeDecodeError:
-        raise FileFormatError(path, "ASCII PLY data contains non-ASCII bytes") from None
-    with open(path, "rb") as handle:
-        first_data_line = handle.read(header.data_offset).count(b"\n") + 1
-    lines = text.splitlines()
     skip = 0
-    for element in header.elements:
+    for element in header.elements:  # one line per row of the elements before the vertices
         if element is vertex:
             break
         skip += element.count
-    vertex_lines = lines[skip: skip + vertex.count]
-    if len(vertex_lines) < vertex.count:
-        raise FileFormatError(path, f"truncated: the header declares {vertex.count} vertices, "
-                                    f"the file has {len(vertex_lines)} vertex lines",
-                              line=first_data_line + skip + len(vertex_lines))
-    table = parse_table(path, vertex_lines, len(vertex.properties),
-                        lambda k: first_data_line + skip + k)
+    table = read_text_rows(path, header.data_offset, header.first_data_line, vertex.count,
+                           len(vertex.properties), skip=skip, what="vertices",
+                           header_line=vertex.line)
     dtype = np.dtype([(name, "<" + kind) for name, kind in vertex.properties])
     block = np.empty(vertex.count, dtype=dtype)
     for j, (name, _) in enumerate(vertex.properties):
         block[name] = table[:, j]
+    del table
     arrays = _allocate(plan, dtype, vertex.count)
     _scatter(plan, arrays, block, 0)
-    return arrays, first_data_line + skip
+    return arrays, header.first_data_line + skip
 
 
 def read_ply_points(path) -> PointCloud:

@@ -11,96 +11,25 @@ B-rep faces and extrusions, other surfaces via ``ToNurbsSurface``, and curves vi
 
 from __future__ import annotations
 
-import numpy as np
+import importlib.util
 
-from nurbs_core.io.errors import FileFormatError
-from nurbs_core.io.geometry_io import (
-    as_geometry_list,
-    make_curve,
-    make_surface,
-    metadata_of,
-    numpy_of,
-)
-
-
-def _full_knots(rhino_knots) -> np.ndarray:
-    inner = np.asarray(rhino_knots.ToList(), dtype=np.float64)
-    return np.concatenate([inner[:1], inner, inner[-1:]])
-
-
-def _surface_from_rhino(path, surface, what: str):
-    import rhino3dm
-
-    nurbs = surface if isinstance(surface, rhino3dm.NurbsSurface) else surface.ToNurbsSurface()
-    if nurbs is None:
-        raise FileFormatError(path, f"{what}: could not be converted to a NURBS surface")
-    points = nurbs.Points
-    n_u, n_v = points.CountU, points.CountV
-    homogeneous = np.empty((n_u, n_v, 4))
-    for i in range(n_u):
-        for j in range(n_v):
-            p = points[i, j]
-            homogeneous[i, j] = (p.X, p.Y, p.Z, p.W)
-    weights = homogeneous[..., 3]
-    if (weights <= 0).any():
-        raise FileFormatError(path, f"{what}: non-positive weights")
-    return make_surface(path, homogeneous[..., :3] / weights[..., None], weights,
-                        _full_knots(nurbs.KnotsU), _full_knots(nurbs.KnotsV),
-                        nurbs.OrderU - 1, nurbs.OrderV - 1, what=what)
-
-
-def _curve_from_rhino(path, curve, what: str):
-    import rhino3dm
-
-    nurbs = curve if isinstance(curve, rhino3dm.NurbsCurve) else curve.ToNurbsCurve()
-    if nurbs is None:
-        raise FileFormatError(path, f"{what}: could not be converted to a NURBS curve")
-    points = nurbs.Points
-    homogeneous = np.array([(points[k].X, points[k].Y, points[k].Z, points[k].W)
-                            for k in range(len(points))], dtype=np.float64)
-    weights = homogeneous[:, 3]
-    if (weights <= 0).any():
-        raise FileFormatError(path, f"{what}: non-positive weights")
-    cartesian = homogeneous[:, :3] / weights[:, None]
-    if nurbs.Dimension == 2:
-        cartesian = cartesian[:, :2]
-    return make_curve(path, cartesian, weights, _full_knots(nurbs.Knots), nurbs.Order - 1,
-                      what=what)
+from nurbs_core.io.errors import MissingDependencyError
 
 
 def read_3dm(path) -> list:
-    import rhino3dm
+    """Every NURBS surface, B-rep face (untrimmed), extrusion and curve of a .3dm file; each
+    item's ``.metadata`` holds the object's name.
 
-    try:
-        model = rhino3dm.File3dm.Read(str(path))
-    except Exception as exc:  # the binding raises plain RuntimeError/TypeError variants
-        raise FileFormatError(path, f"not a readable .3dm file: {exc}") from None
-    if model is None:
-        raise FileFormatError(path, "not a readable .3dm file (openNURBS could not open it)")
-    result = []
-    for index, obj in enumerate(model.Objects):
-        geometry = obj.Geometry
-        name = obj.Attributes.Name if obj.Attributes is not None else ""
-        what = f"object {index}" + (f" ({name!r})" if name else "")
-        items = []
-        if isinstance(geometry, rhino3dm.Extrusion) and geometry.CapCount > 0:
-            geometry = geometry.ToBrep(False)  # the caps are faces of its B-rep form only
-        if isinstance(geometry, rhino3dm.Brep):
-            for face_index in range(len(geometry.Faces)):
-                face = geometry.Faces[face_index]
-                items.append(_surface_from_rhino(path, face.UnderlyingSurface(),
-                                                 f"{what} face {face_index}"))
-        elif isinstance(geometry, rhino3dm.Surface):  # NurbsSurface, Extrusion, Rev/Sum/Plane
-            items.append(_surface_from_rhino(path, geometry, what))
-        elif isinstance(geometry, rhino3dm.Curve):
-            items.append(_curve_from_rhino(path, geometry, what))
-        for item in items:
-            item.metadata = {"name": name} if name else {}
-        result.extend(items)
-    if not result:
-        raise FileFormatError(path, f"the .3dm file has no surfaces or curves "
-                                    f"({len(model.Objects)} object(s) of other kinds)")
-    return result
+    openNURBS runs in the reader process of :mod:`nurbs_core.io.cad` (``_occ_reader.py``):
+    damaged .3dm files can make it allocate gigabytes or never return (an 11 KB file with a few
+    bytes changed does either), and a crash, a timeout, the memory cap or rhino3dm's errors
+    become a FileFormatError naming the file (and the object).
+    """
+    if importlib.util.find_spec("rhino3dm") is None:
+        raise MissingDependencyError("Reading .3dm", "pip install rhino3dm")
+    from nurbs_core.io.cad import read_in_worker
+
+    return read_in_worker(path, "3dm")
 
 
 def _surface_to_rhino(data: dict):
@@ -142,6 +71,8 @@ def write_3dm(geometry_or_list, path, version: int = 7) -> None:
     import rhino3dm
 
     model = rhino3dm.File3dm()
+    from nurbs_core.io.geometry_io import as_geometry_list, metadata_of, numpy_of
+
     for item in as_geometry_list(geometry_or_list):
         data = numpy_of(item)
         attributes = rhino3dm.ObjectAttributes()

@@ -17,6 +17,13 @@ import numpy as np
 
 from nurbs_core.io.errors import FileFormatError
 from nurbs_core.io.geometry_io import as_geometry_list, make_surface, numpy_of
+from nurbs_core.io.limits import MAX_LINE_BYTES, check_claimed_size, format_size, sniff_text
+from nurbs_core.io.text_points import parse_table
+
+#: Bytes a knot may take on a knot-vector line (a knot line may be longer than MAX_LINE_BYTES).
+_BYTES_PER_KNOT = 64
+#: The fewest bytes a control-point line "x y z w" can have ("0 0 0 1\n").
+_MIN_POINT_LINE = 8
 
 
 def _numbers(path, text: str, line: int, count: int | None, what: str, integer=False):
@@ -27,12 +34,22 @@ def _numbers(path, text: str, line: int, count: int | None, what: str, integer=F
     try:
         values = [int(t) for t in tokens] if integer else np.array(tokens, dtype=np.float64)
     except ValueError:
-        raise FileFormatError(path, f"{what}: {text.strip()!r} is not numeric",
+        raise FileFormatError(path, f"{what}: {text.strip()[:80]!r} is not numeric",
                               line=line) from None
     return values
 
 
+def _check_length(path, text: str, line: int, limit: int = MAX_LINE_BYTES) -> None:
+    if len(text) > limit:
+        raise FileFormatError(path, f"line of {format_size(len(text))} is longer than the "
+                                    f"{format_size(limit)} this line of an smesh file may have",
+                              line=line)
+
+
 def read_smesh(path) -> list:
+    """One surface from an smesh file. The header's counts and degrees are checked (against
+    each other and against the bytes the file has) before anything is allocated."""
+    sniff_text(path, "an smesh text file")
     with open(path, "rb") as handle:
         raw = handle.read()
     if not raw.strip():
@@ -42,37 +59,51 @@ def read_smesh(path) -> list:
     except UnicodeDecodeError as exc:
         line = raw[: exc.start].count(b"\n") + 1
         raise FileFormatError(path, "not an smesh text file (binary data)", line=line) from None
-    lines = text.splitlines()
+    del raw
+    lines = text.split("\n", 5)  # the five header lines and the rest
+    del text
     needed_header = 5
-    if len(lines) < needed_header:
+    present = len(lines) if len(lines) > needed_header or lines[-1].strip() else len(lines) - 1
+    if present < needed_header:
         raise FileFormatError(path, f"truncated: an smesh file starts with {needed_header} header "
-                                    f"lines, found {len(lines)}", line=len(lines))
+                                    f"lines, found {present}", line=max(1, present))
+    for k in range(3):
+        _check_length(path, lines[k], k + 1)
     (dimension,) = _numbers(path, lines[0], 1, 1, "dimension", integer=True)
     if dimension != 3:
         raise FileFormatError(path, f"dimension must be 3, got {dimension}", line=1)
     degree_u, degree_v = _numbers(path, lines[1], 2, 2, "degrees", integer=True)
+    if degree_u < 1 or degree_v < 1:
+        raise FileFormatError(path, f"degrees must be at least 1, got {degree_u} {degree_v}",
+                              line=2)
     n_u, n_v = _numbers(path, lines[2], 3, 2, "control-point counts", integer=True)
     if n_u < 1 or n_v < 1:
         raise FileFormatError(path, f"control-point counts must be positive, got {n_u} {n_v}",
                               line=3)
+    for name, degree, n in (("u", degree_u, n_u), ("v", degree_v, n_v)):
+        if degree >= n:
+            raise FileFormatError(path, f"degree {degree} in {name} is too high for {n} control "
+                                        f"points (at most {n - 1})", line=2)
+    rest = lines[5] if len(lines) > 5 else ""
+    count = n_u * n_v
+    check_claimed_size(path, count, _MIN_POINT_LINE, len(rest), "control points", line=3)
+    for k, n, degree in ((3, n_u, degree_u), (4, n_v, degree_v)):
+        _check_length(path, lines[k], k + 1, MAX_LINE_BYTES + _BYTES_PER_KNOT * (n + degree + 1))
     knots_u = _numbers(path, lines[3], 4, n_u + degree_u + 1, "u knot vector")
     knots_v = _numbers(path, lines[4], 5, n_v + degree_v + 1, "v knot vector")
-    count = n_u * n_v
-    rows = lines[5: 5 + count]
-    if len(rows) < count:
+    rows = rest.split("\n", count)[:count]
+    del rest, lines
+    if len(rows) < count or not rows[-1].strip():
+        found = len(rows) - (1 if rows and not rows[-1].strip() else 0)
         raise FileFormatError(path, f"truncated: {n_u} x {n_v} = {count} control points "
-                                    f"expected, found {len(rows)}", line=len(lines))
-    widths = [len(r.split()) for r in rows]
-    for k, width in enumerate(widths):
-        if width != 4:
-            raise FileFormatError(path, f"a control point line needs 4 values (x y z w), "
-                                        f"found {width}", line=6 + k)
-    try:
-        table = np.array(" ".join(rows).split(), dtype=np.float64).reshape(count, 4)
-    except ValueError:
-        for k, row in enumerate(rows):
-            _numbers(path, row, 6 + k, 4, "control point")
-        raise
+                                    f"expected, found {found}", line=5 + found)
+    lengths = np.fromiter(map(len, rows), dtype=np.int64, count=count)
+    if lengths.max() > MAX_LINE_BYTES:
+        first_long = int(np.argmax(lengths > MAX_LINE_BYTES))
+        _check_length(path, rows[first_long], 6 + first_long)
+    del lengths
+    table = parse_table(path, rows, 4, lambda k: 6 + k)
+    del rows
     bad = np.flatnonzero(~np.isfinite(table).all(axis=1))
     if bad.size:
         raise FileFormatError(path, "NaN or infinite control point", line=6 + int(bad[0]))
