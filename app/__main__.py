@@ -2,8 +2,10 @@
 
 With no file the built-in demo (z = sin(x) cos(y) as a point cloud) opens, ready to fit. The
 scripted options run the real window: open the files, fit, save a screenshot, quit; the exit
-status is 0 on success and 1 when a file cannot be read, the fit fails or the screenshot cannot
-be written.
+status is 0 on success and 1 when a file cannot be read (one line on stderr names it), the load
+takes longer than ``--load-timeout`` seconds (default 60), the fit fails or the screenshot cannot
+be written. Ctrl-C (SIGINT) or SIGTERM closes the window and exits quietly with status 130
+(143 for SIGTERM).
 """
 
 from __future__ import annotations
@@ -11,9 +13,13 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import signal
 import sys
 
 import app  # noqa: F401 - sets QT_API before pyvistaqt is imported
+
+#: how often the Qt event loop lets Python run, so a signal handler gets its turn (ms)
+SIGNAL_POLL_MS = 200
 
 
 def parse_arguments(argv: list[str] | None = None) -> argparse.Namespace:
@@ -29,9 +35,14 @@ def parse_arguments(argv: list[str] | None = None) -> argparse.Namespace:
                         help="save a screenshot of the window when done (after the fit with --fit)")
     parser.add_argument("--quit", action="store_true",
                         help="exit when done (status 0 on success, 1 on failure)")
+    parser.add_argument("--load-timeout", type=float, default=60.0, metavar="SECONDS",
+                        help="cancel and fail a scripted load that takes longer (default 60; "
+                             "0 waits forever)")
     arguments = parser.parse_args(argv)
     if arguments.iterations is not None and arguments.iterations < 1:
         parser.error("--iterations must be at least 1")
+    if arguments.load_timeout < 0:
+        parser.error("--load-timeout must be 0 (no limit) or positive")
     return arguments
 
 
@@ -45,29 +56,117 @@ def missing_display() -> str | None:
             "a desktop session, or headless with: xvfb-run -a nurbs-studio ...")
 
 
+class _NotReportedTwice(logging.Filter):
+    """Scripted runs print their failure as one ``nurbs-studio:`` line: the window's own error
+    report of it stays off the terminal (the log dock keeps it; a bug's traceback still shows)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not (getattr(record, "user_report", False) and record.exc_info is None)
+
+
+class _Interrupt:
+    """SIGINT / SIGTERM: close the window and leave the event loop (Qt would swallow Ctrl-C).
+
+    Python runs a signal handler only between bytecodes of the main thread, so a timer ticks
+    every :data:`SIGNAL_POLL_MS` to let it in while Qt's loop (C++) runs."""
+
+    def __init__(self, application, window):
+        from PySide6.QtCore import QTimer
+
+        self.signal_number: int | None = None
+        self._application, self._window = application, window
+        self._previous = {}
+        for number in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self._previous[number] = signal.signal(number, self._handle)
+            except (ValueError, OSError):  # not the main thread, or not on this platform
+                pass
+        self._timer = QTimer()
+        self._timer.timeout.connect(lambda: None)
+        self._timer.start(SIGNAL_POLL_MS)
+
+    def _handle(self, number, _frame):
+        from PySide6.QtCore import QTimer
+
+        if self.signal_number is None:
+            self.signal_number = number
+            QTimer.singleShot(0, self._quit)  # out of whatever slot was interrupted
+
+    def _quit(self):
+        self._window.close()
+        self._application.quit()
+
+    @property
+    def status(self) -> int | None:
+        return None if self.signal_number is None else 128 + int(self.signal_number)
+
+    def restore(self):
+        self._timer.stop()
+        for number, handler in self._previous.items():
+            signal.signal(number, handler)
+
+
+def _end_without_finalizing(status: int) -> None:
+    """Exit now, skipping interpreter finalization: used only when an abandoned load thread still
+    runs. Finalizing under a thread that is inside torch aborts the process ("terminate called
+    without an active exception", status 134, measured), so flush what the app wrote (settings
+    are synced by the window's shutdown; sessions, exports and screenshots were written and
+    replaced atomically before) and leave."""
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(status)
+
+
 def main(argv: list[str] | None = None) -> int:
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # Ctrl-C before the window's loop runs (while importing torch)
+        return 130
+
+
+def _main(argv: list[str] | None) -> int:
     arguments = parse_arguments(argv)
     problem = missing_display()
     if problem:
         print(problem, file=sys.stderr)
         return 1
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    if arguments.quit:
+        for handler in logging.getLogger().handlers:
+            handler.addFilter(_NotReportedTwice())
     from PySide6.QtWidgets import QApplication
 
     from app.main_window import MainWindow
     from app.scripted import ScriptedRun
+    from app.workers.jobs import abandoned_threads
 
     application = QApplication.instance() or QApplication(sys.argv[:1])
     application.setApplicationName("NURBS Studio")
     application.setOrganizationName("NURBS Studio")
     window = MainWindow()
+    interrupt = _Interrupt(application, window)
     window.show()
     run = ScriptedRun(window, arguments.files, fit=arguments.fit,
                       iterations=arguments.iterations, screenshot=arguments.screenshot,
-                      quit_when_done=arguments.quit)
+                      quit_when_done=arguments.quit, load_timeout=arguments.load_timeout)
     run.begin()
     status = application.exec()
-    return run.exit_status if arguments.quit else status
+    interrupt.restore()
+    window.shutdown()  # idempotent: stops the workers and syncs the settings
+    if interrupt.status is not None:
+        status = interrupt.status
+    elif arguments.quit:
+        status = run.exit_status
+        if not run.finished:  # the window was closed before the run got to its end
+            print("nurbs-studio: the window was closed before the run finished", file=sys.stderr)
+            status = 1
+    if abandoned_threads():
+        _end_without_finalizing(status)
+    return status
 
 
 if __name__ == "__main__":

@@ -9,7 +9,6 @@ file is missing it is regenerated (deterministically) on first use.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -34,13 +33,12 @@ def demo_points(count: int = DEMO_POINT_COUNT, noise: float = DEMO_NOISE,
 
 def write_demo(path: Path) -> Path:
     """Write the demo cloud as whitespace-separated ``x y z`` lines (atomically)."""
+    from nurbs_core.io.atomic import atomic_write
+
     path.parent.mkdir(parents=True, exist_ok=True)
     header = "NURBS Studio demo: z = sin(x) cos(y) on [-5, 5]^2, 4000 points, noise sigma 0.01"
-    fd, tmp = tempfile.mkstemp(suffix=".xyz", dir=path.parent)
-    with os.fdopen(fd, "w") as handle:
+    with atomic_write(path, "w") as handle:
         np.savetxt(handle, demo_points(), fmt="%.6f", header=header)
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, path)
     return path
 
 

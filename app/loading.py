@@ -1,11 +1,14 @@
 """Reading and writing files for the app (runs inside worker jobs; torch may run here).
 
 Loading is all-or-nothing: every file is read first, and only when all succeed does the window
-swap them into the document, so a bad file leaves the current document untouched.
+swap them into the document, so a bad file leaves the current document untouched. Loads run in
+an abandonable thread (:meth:`app.workers.jobs.JobRunner.submit_detached`): Cancel and closing
+the window drop them at once; :func:`load_files` stops at its next check of the cancel event.
 """
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -51,28 +54,54 @@ def _read(path: Path):
     return load_any(path)
 
 
-def load_files(paths: list[str]) -> LoadedFiles:
-    """Read every file; raise on the first failure (the exception names the file)."""
+class LoadCancelled(Exception):
+    """The load was cancelled (its outcome is dropped anyway; this only ends the work early)."""
+
+
+def _check(cancel: threading.Event | None):
+    if cancel is not None and cancel.is_set():
+        raise LoadCancelled("cancelled")
+
+
+def load_files(paths: list[str], cancel: threading.Event | None = None) -> LoadedFiles:
+    """Read every file; raise on the first failure. The exception gets a ``load_path``
+    attribute naming the file it came from (its message may not). ``cancel``: checked between
+    files and steps; when set, :class:`LoadCancelled` is raised."""
     loaded = LoadedFiles()
     for name in paths:
         path = Path(name)
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: no such file")
-        result = _read(path)
-        if isinstance(result, (list, tuple)):
-            if not result:
-                raise ValueError(f"{path}: contains no curves or surfaces")
-            for index, geometry in enumerate(result):
-                loaded.patches.append(geometry.numpy())
-                suffix = f" #{index + 1}" if len(result) > 1 else ""
-                loaded.patch_names.append(f"{path.name}{suffix}")
-        else:
-            points = np.asarray(result.points, dtype=np.float64)
-            if points.ndim != 2 or points.shape[1] != 3 or len(points) < 4:
-                raise ValueError(f"{path}: needs at least 4 points with x, y, z "
-                                 f"(got an array of shape {points.shape})")
-            loaded.targets.append(Target(path.name, points, str(path)))
+        try:
+            _load_one(path, loaded, cancel)
+        except Exception as exc:
+            try:
+                exc.load_path = str(path)
+            except (AttributeError, TypeError):  # an exception type without a __dict__
+                pass
+            raise
+    _check(cancel)
     return loaded
+
+
+def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
+    """Read one file into ``loaded`` (a failure leaves the caller to drop it all)."""
+    _check(cancel)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    result = _read(path)
+    _check(cancel)
+    if isinstance(result, (list, tuple)):
+        if not result:
+            raise ValueError(f"{path}: contains no curves or surfaces")
+        for index, geometry in enumerate(result):
+            loaded.patches.append(geometry.numpy())
+            suffix = f" #{index + 1}" if len(result) > 1 else ""
+            loaded.patch_names.append(f"{path.name}{suffix}")
+    else:
+        points = np.asarray(result.points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3 or len(points) < 4:
+            raise ValueError(f"{path}: needs at least 4 points with x, y, z "
+                             f"(got an array of shape {points.shape})")
+        loaded.targets.append(Target(path.name, points, str(path)))
 
 
 def tessellate(geometries: list[dict[str, Any]]) -> list[DisplayGeometry]:

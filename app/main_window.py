@@ -6,6 +6,11 @@ quality (and the patch network's) and the log. Long work (reading files, tessell
 offsets, export) runs in :class:`JobRunner` threads, the fits in their controllers' worker
 threads; this module only touches widgets, on the GUI thread. The toolbar's Mode box picks which
 fit Start, Pause, Stop, Reset and Export work on: one patch or a patch network.
+
+Reading files can take long (a huge scan) or never end (a reader stuck on a hostile file): a load
+runs in an abandonable thread, the status bar shows a Cancel button while it runs (Esc too), and
+closing the window abandons it instead of waiting. Files the app writes itself (sessions,
+screenshots) are written atomically: a failed write leaves the previous file as it was.
 """
 
 from __future__ import annotations
@@ -14,21 +19,26 @@ import gc
 import importlib.util
 import logging
 import math
+import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from PySide6.QtCore import QSettings, Qt, Signal, Slot
+from PySide6.QtCore import QSettings, Qt, QTimer, Signal, Slot
 from PySide6.QtGui import QAction, QIcon, QKeySequence
 from PySide6.QtWidgets import (
     QAbstractButton,
     QApplication,
     QDockWidget,
     QFileDialog,
+    QHBoxLayout,
     QLabel,
     QMainWindow,
     QMessageBox,
+    QProgressBar,
     QScrollArea,
     QStyle,
+    QToolButton,
     QVBoxLayout,
     QWidget,
 )
@@ -36,6 +46,7 @@ from PySide6.QtWidgets import (
 from app import loading
 from app.controller import FitController
 from app.demo import ICON_FILE, demo_path
+from app.errors import describe, is_expected, log_failure, one_line
 from app.offsets import OffsetController
 from app.panels.document_tree import DocumentTree
 from app.panels.fit_panel import POLICY_TEXT, FitSettingsPanel
@@ -66,6 +77,17 @@ MAX_RECENT = 10
 OFFSET_FIELDS = {"offset_distance", "constrain_shared_edges", "show_offsets"}
 SESSION_FILTER = "NURBS Studio session (*.json)"
 FIT_AS_PATCHES = "Fit as patches"
+#: a load that ends sooner shows no progress indicator (no flicker for small files)
+LOAD_INDICATOR_DELAY_MS = 300
+
+
+@dataclass
+class _Load:
+    """The load in progress: its detached job and what it reads."""
+
+    job_id: int
+    paths: list[str]
+    started: float
 
 
 def freeze_long_lived_objects():
@@ -122,10 +144,13 @@ class MainWindow(QMainWindow):
         self.resize(1400, 900)
         self.setAcceptDrops(True)
         self._store = settings_store or QSettings("NURBS Studio", "nurbs-studio")
+        self._store.setAtomicSyncRequired(True)  # Qt writes it through QSaveFile: all or nothing
         self._is_shut_down = False
         self._message_box: QMessageBox | None = None
         self.fit_as_patches_button: QAbstractButton | None = None
         self.last_error = ""
+        self.load_message = ""  # one line: how the latest load ended (opened, failed, cancelled)
+        self._load: _Load | None = None
         self._quality_run = 0  # the run whose snapshots the quality readout follows
 
         self.document = Document(self)
@@ -241,6 +266,12 @@ class MainWindow(QMainWindow):
         self.open_action = self._action("&Open...", self._open_dialog,
                                         QKeySequence.StandardKey.Open, pixmap.SP_DialogOpenButton)
         self.demo_action = self._action("Open &Demo", self.open_demo)
+        self.cancel_load_action = self._action("&Cancel Loading", self.cancel_load,
+                                               QKeySequence(Qt.Key.Key_Escape),
+                                               pixmap.SP_DialogCancelButton)
+        self.cancel_load_action.setToolTip("Stop reading the files (Esc); the document stays "
+                                           "as it was")
+        self.cancel_load_action.setEnabled(False)
         self.open_session_action = self._action("Open &Session...", self._open_session_dialog)
         self.save_session_action = self._action("&Save Session...", self._save_session_dialog,
                                                 QKeySequence.StandardKey.Save,
@@ -293,6 +324,7 @@ class MainWindow(QMainWindow):
         self.recent_menu = file_menu.addMenu("Open &Recent")
         self.recent_menu.aboutToShow.connect(self._fill_recent_menu)
         file_menu.addAction(self.demo_action)
+        file_menu.addAction(self.cancel_load_action)
         file_menu.addSeparator()
         file_menu.addAction(self.open_session_action)
         file_menu.addAction(self.save_session_action)
@@ -358,6 +390,27 @@ class MainWindow(QMainWindow):
         toolbar.addAction(self.redo_action)
 
     def _build_status_bar(self):
+        # while a load runs: a busy bar and Cancel, left of the fit's labels (hidden otherwise)
+        self.load_indicator = QWidget()
+        layout = QHBoxLayout(self.load_indicator)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.setSpacing(4)
+        self.load_progress = QProgressBar()  # busy (range 0-0) only while shown: no animation
+        self.load_progress.setTextVisible(False)
+        self.load_progress.setFixedSize(90, 12)
+        self.load_cancel_button = QToolButton()
+        self.load_cancel_button.setDefaultAction(self.cancel_load_action)
+        self.load_cancel_button.setText("Cancel")
+        self.load_cancel_button.setToolButtonStyle(Qt.ToolButtonStyle.ToolButtonTextBesideIcon)
+        self.load_cancel_button.setAutoRaise(True)
+        layout.addWidget(self.load_progress)
+        layout.addWidget(self.load_cancel_button)
+        self.statusBar().addPermanentWidget(self.load_indicator)
+        self.load_indicator.hide()
+        self._load_indicator_timer = QTimer(self)
+        self._load_indicator_timer.setSingleShot(True)
+        self._load_indicator_timer.setInterval(LOAD_INDICATOR_DELAY_MS)
+        self._load_indicator_timer.timeout.connect(self._show_load_indicator)
         self.status_labels = {}
         for name, width in (("state", 90), ("iteration", 130), ("loss", 140), ("rate", 100),
                             ("remaining", 120)):
@@ -383,12 +436,20 @@ class MainWindow(QMainWindow):
             message, error=True, offer_patches=self.controller.failure_needs_patches))
 
     # --- messages --------------------------------------------------------------------------------
-    def report(self, message: str, error: bool = False, offer_patches: bool = False):
+    def report(self, message: str, error: bool = False, offer_patches: bool = False,
+               exc: BaseException | None = None):
         """Tell the user: log dock, status bar, and a (non-blocking) dialog for errors.
-        offer_patches: the dialog gets a "Fit as patches" button (switch to Patches mode and
-        start the patch fit)."""
-        (log.error if error else log.info)(message)
-        self.statusBar().showMessage(message, 8000)
+
+        The log and the status bar get the message as one line; the dialog shows it as written.
+        exc: the exception behind an error; its traceback is logged only when it is a bug (not
+        bad input: :func:`app.errors.is_expected`). offer_patches: the dialog gets a "Fit as
+        patches" button (switch to Patches mode and start the patch fit)."""
+        line = one_line(message)
+        if error:
+            log_failure(log, line, exc, user_report=True)
+        else:
+            log.info("%s", line)
+        self.statusBar().showMessage(line, 8000)
         if error:
             self.last_error = message
             if self._message_box is not None:
@@ -411,14 +472,70 @@ class MainWindow(QMainWindow):
 
     # --- loading ---------------------------------------------------------------------------------
     def open_files(self, paths: list[str]) -> bool:
-        """Read the files in a worker; the document changes only if every file reads."""
+        """Read the files in an abandonable worker thread; the document changes only if every
+        file reads. A load still running is cancelled (the newest request wins). Every load
+        started here ends with one ``files_loaded``: True when applied, False when it failed or
+        was cancelled (none when the window closes first)."""
         paths = [str(p) for p in paths]
-        if not paths:
+        if not paths or self._is_shut_down:
             return False
-        self.statusBar().showMessage(f"Reading {_names([Path(p).name for p in paths])}...")
-        return self.jobs.submit("load", lambda: loading.load_files(paths),
-                                lambda loaded: self._apply_loaded(paths, loaded),
-                                lambda exc: self._load_failed(paths, exc))
+        if self._load is not None:
+            self.cancel_load()
+        job_id = self.jobs.submit_detached(
+            "load", lambda cancel: loading.load_files(paths, cancel),
+            lambda loaded: self._on_load_done(paths, loaded),
+            lambda exc: self._on_load_error(paths, exc))
+        if not job_id:
+            return False
+        self._load = _Load(job_id, paths, time.monotonic())
+        self.cancel_load_action.setEnabled(True)
+        self._load_indicator_timer.start()
+        self.statusBar().showMessage(f"Reading {_names([Path(p).name for p in paths])}... "
+                                     "(Esc cancels)")
+        return True
+
+    def is_loading(self) -> bool:
+        return self._load is not None
+
+    def cancel_load(self, *_args, quiet: bool = False) -> bool:
+        """Abandon the load in progress (Cancel, Esc): returns at once and loads nothing; the
+        reader thread is left to end on its own and its result is dropped. quiet: no report
+        (the caller tells the user). False when no load runs."""
+        load = self._load
+        if load is None:
+            return False
+        self.jobs.cancel(load.job_id)
+        self._load_ended()
+        seconds = time.monotonic() - load.started
+        after = f" after {_format_seconds(seconds)}" if seconds >= 1.0 else ""
+        self.load_message = (f"Cancelled opening {_names([Path(p).name for p in load.paths])}"
+                             f"{after}; the document was left unchanged.")
+        if not quiet:
+            self.report(self.load_message)
+        self.files_loaded.emit(False)
+        return True
+
+    def _load_ended(self):
+        """No load runs any more: its indicator and Cancel go."""
+        self._load = None
+        self._load_indicator_timer.stop()
+        self.load_indicator.hide()
+        self.load_progress.setRange(0, 1)  # stops the style's busy animation
+        self.cancel_load_action.setEnabled(False)
+
+    def _on_load_done(self, paths: list[str], loaded: loading.LoadedFiles):
+        self._load_ended()
+        self._apply_loaded(paths, loaded)
+
+    def _on_load_error(self, paths: list[str], exc: BaseException):
+        self._load_ended()
+        self._load_failed(paths, exc)
+
+    @Slot()
+    def _show_load_indicator(self):
+        if self._load is not None and not self._is_shut_down:
+            self.load_progress.setRange(0, 0)  # busy: readers do not report progress
+            self.load_indicator.show()
 
     def open_demo(self) -> bool:
         return self.open_files([str(demo_path())])
@@ -448,16 +565,30 @@ class MainWindow(QMainWindow):
         if loaded.patch_names:
             sources = sorted({Path(p).name for p in paths} - {t.name for t in loaded.targets})
             counts.append(f"{len(loaded.patch_names)} NURBS shape(s) from {_names(sources)}")
-        self.report(f"Opened {'; '.join(counts)}")
+        self.load_message = f"Opened {'; '.join(counts)}"
+        self.report(self.load_message)
         self.setWindowTitle(f"NURBS Studio - {_names([Path(p).name for p in paths])}")
         self.files_loaded.emit(True)
 
-    def _load_failed(self, paths: list[str], exc: Exception):
+    def _load_failed(self, paths: list[str], exc: BaseException):
+        """One line naming the file and the problem (the log gets a traceback only for a bug),
+        then what it means for the document."""
+        path = getattr(exc, "load_path", None) or (paths[0] if len(paths) == 1 else None)
+        problem = describe(exc)
+        if path is None:
+            headline = f"Could not open {_names([Path(p).name for p in paths])}: {problem}"
+        elif path in problem or Path(path).name in problem:
+            headline = f"Could not open {problem}"  # the reader's message names the file
+        else:
+            headline = f"Could not open {path}: {problem}"
+        if not is_expected(exc):
+            headline += " (an unexpected error: the log has the details)"
+        self.load_message = headline
+        message = headline
         hint = getattr(exc, "install", None)
-        message = f"Could not open {_names([Path(p).name for p in paths])}:\n{exc}"
-        if hint:
+        if hint and hint not in message:
             message += f"\nInstall the missing package with: {hint}"
-        self.report(message + "\nThe document was left unchanged.", error=True)
+        self.report(message + "\nThe document was left unchanged.", error=True, exc=exc)
         self.files_loaded.emit(False)
 
     def _open_dialog(self):
@@ -518,7 +649,8 @@ class MainWindow(QMainWindow):
         if patches:
             self.jobs.submit("tessellate", lambda: loading.tessellate(patches),
                              self._show_patches,
-                             lambda exc: self.report(f"Cannot display the patches: {exc}", True))
+                             lambda exc: self.report(
+                                 f"Cannot display the patches: {describe(exc)}", True, exc=exc))
             self.offsets.request()
         self.scene.reset_camera()
         self._rebuild_tree()
@@ -540,7 +672,8 @@ class MainWindow(QMainWindow):
             self.quality_panel.clear("Measuring the fitted shape...")
             self.jobs.submit("fitted", lambda: loading.fitted_display(fitted, points),
                              lambda result: self._show_fitted_display(fitted, result),
-                             lambda exc: self.report(f"Cannot display the fit: {exc}", True))
+                             lambda exc: self.report(
+                                 f"Cannot display the fit: {describe(exc)}", True, exc=exc))
         self._rebuild_tree()
         self.knot_panel.show_state(self.document.settings, fitted)
 
@@ -804,10 +937,12 @@ class MainWindow(QMainWindow):
 
     def _export_failed(self, path: str, exc: Exception):
         hint = getattr(exc, "install", None)
-        message = f"Export to {path} failed: {exc}"
+        message = f"Export to {path} failed: {describe(exc)}"
         if hint and hint not in message:
             message += f"\nInstall the missing package with: {hint}"
-        self.report(message, error=True)
+        if Path(path).exists():
+            message += "\nThe existing file was left as it was."
+        self.report(message, error=True, exc=exc)
         self.export_finished.emit(path, False)
 
     def _save_session_dialog(self):
@@ -823,10 +958,14 @@ class MainWindow(QMainWindow):
             self.open_session(path)
 
     def save_session(self, path: str) -> bool:
+        """Write the session atomically: on failure the user is told and an existing file at
+        ``path`` is left byte for byte as it was."""
         try:
             self.document.save_session(path)
-        except OSError as exc:
-            self.report(f"Cannot save the session: {exc}", error=True)
+        except Exception as exc:  # noqa: BLE001 - told to the user (a bug also logs its trace)
+            kept = "; the existing file was left as it was" if Path(path).exists() else ""
+            self.report(f"Cannot save the session to {path}: {describe(exc)}{kept}",
+                        error=True, exc=exc)
             return False
         self.report(f"Session saved to {path}")
         return True
@@ -834,8 +973,9 @@ class MainWindow(QMainWindow):
     def open_session(self, path: str) -> bool:
         try:  # read and check first: a bad file must not stop or discard the current fit
             session = self.document.read_session(path)
-        except ValueError as exc:
-            self.report(f"{exc}\nThe document was left unchanged.", error=True)
+        except Exception as exc:  # noqa: BLE001 - told to the user (a bug also logs its trace)
+            self.report(f"{describe(exc)}\nThe document was left unchanged.", error=True,
+                        exc=exc)
             return False
         self.controller.reset()
         self._reset_patches()
@@ -851,31 +991,48 @@ class MainWindow(QMainWindow):
             self.save_screenshot(path)
 
     def save_screenshot(self, path: str) -> bool:
-        """The whole window (viewport included) as a PNG."""
+        """The whole window (viewport included) as an image (PNG; the format follows the
+        suffix), written atomically: on failure an existing file is left as it was."""
+        from nurbs_core.io.atomic import atomic_path
+
         self.loss_plot.flush()
         self.scene.render_now()
-        ok = self.grab().save(path)
-        if not ok:
-            self.report(f"Cannot write the screenshot {path}", error=True)
-        return ok
+        image = self.grab()
+        try:
+            with atomic_path(path) as temporary:
+                if not image.save(str(temporary)):
+                    raise OSError("the image could not be encoded or written (is the suffix an "
+                                  "image format, such as .png?)")
+        except OSError as exc:
+            kept = "; the existing file was left as it was" if Path(path).exists() else ""
+            self.report(f"Cannot write the screenshot {path}: {describe(exc)}{kept}",
+                        error=True, exc=exc)
+            return False
+        return True
 
     # --- shutdown --------------------------------------------------------------------------------
     def live_timers(self) -> int:
         return (self.controller.live_timers() + self.patch_controller.live_timers()
                 + self.scene.live_timers()
-                + self.loss_plot.live_timers())
+                + self.loss_plot.live_timers() + int(self._load_indicator_timer.isActive()))
 
     def shutdown(self):
-        """Stop the worker, jobs and timers and release the render window; idempotent."""
+        """Stop the worker, jobs and timers and release the render window; idempotent.
+
+        A load in progress is abandoned, not waited for (its reader may never return); the fit
+        workers stop at their next iteration and are joined; short jobs (an export) complete."""
         if self._is_shut_down:
             return
         self._is_shut_down = True
+        self._load_indicator_timer.stop()
+        self._load = None
         self.fit_panel.cancel_pending()
         self.patches_panel.cancel_pending()
         self.controller.shutdown()
         self.patch_controller.shutdown()  # joined before the render window goes
-        self.jobs.shutdown()
+        self.jobs.shutdown()  # abandons the load at once, then waits for the short jobs
         self.loss_plot.stop()
+        self._store.sync()
         logging.getLogger().removeHandler(self.log_panel.handler)
         if self._message_box is not None:
             self._message_box.close()

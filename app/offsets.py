@@ -13,6 +13,7 @@ from collections.abc import Callable
 from PySide6.QtCore import QObject, Signal
 
 from app import loading
+from app.errors import describe
 from app.panels.offset_panel import OffsetPanel
 from app.state import Document, OffsetDisplay
 from app.viewport.scene import SceneView
@@ -84,5 +85,5 @@ class OffsetController(QObject):
         self._running = False
         self._dirty = False
         self._panel.show_result(OffsetDisplay())
-        self._report(f"Offset failed: {exc}", error=True)
+        self._report(f"Offset failed: {describe(exc)}", error=True, exc=exc)
         self.offsets_updated.emit(False)

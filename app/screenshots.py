@@ -20,6 +20,15 @@ import numpy as np
 
 import app  # noqa: F401 - sets QT_API
 
+
+def _write_points(path: Path, points: np.ndarray) -> Path:
+    """Scratch input clouds, written atomically like every file the app writes."""
+    from nurbs_core.io.atomic import atomic_write
+
+    with atomic_write(path, "w") as handle:
+        np.savetxt(handle, points, fmt="%.6f")
+    return path
+
 PAPER_DATA = Path(os.environ.get("NURBS_STUDIO_DATA", "/work/shared/data")) / "nurbsdiff_paper"
 
 
@@ -29,24 +38,21 @@ def curve_cloud(path: Path) -> Path:
     rng = np.random.default_rng(5)
     x = rng.uniform(0.0, 2.0 * np.pi, 600)
     y = np.sin(x) + 2.0 * np.sin(2.0 * x) + np.sin(4.0 * x) + rng.normal(0.0, 0.02, x.size)
-    np.savetxt(path, np.column_stack([x, y, np.zeros_like(x)]), fmt="%.6f")
-    return path
+    return _write_points(path, np.column_stack([x, y, np.zeros_like(x)]))
 
 
 def sheet_cloud(path: Path) -> Path:
     """``nurbs_core.samples.curled_sheet()``: 4000 points of a sheet rolled 1.5 turns."""
     from nurbs_core import samples
 
-    np.savetxt(path, samples.curled_sheet().points, fmt="%.6f")
-    return path
+    return _write_points(path, samples.curled_sheet().points)
 
 
 def torus_cloud(path: Path) -> Path:
     """``nurbs_core.samples.torus(3000)``: a closed object of genus 1."""
     from nurbs_core import samples
 
-    np.savetxt(path, samples.torus(3000).points, fmt="%.6f")
-    return path
+    return _write_points(path, samples.torus(3000).points)
 
 
 def main(argv: list[str] | None = None) -> int:

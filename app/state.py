@@ -328,7 +328,13 @@ class Document(QObject):
         }
 
     def save_session(self, path: str | Path):
-        Path(path).write_text(json.dumps(self.to_session()))
+        """Write the session atomically: ``path`` is replaced only by a complete file (a failed
+        write raises and leaves an existing file as it was)."""
+        from nurbs_core.io.atomic import atomic_write
+
+        text = json.dumps(self.to_session())  # before touching the disk: a failure writes nothing
+        with atomic_write(path, "w") as handle:
+            handle.write(text)
 
     def load_session(self, path: str | Path):
         """Read a session file and apply it; raises ValueError naming the problem (document

@@ -512,8 +512,13 @@ class SceneView(QObject):
         self.last_render_ms = spent_ms
 
     def screenshot(self, path: str):
+        """The viewport alone as an image file, written atomically (the suffix picks the
+        format)."""
+        from nurbs_core.io.atomic import atomic_path
+
         self.render_now()
-        self.plotter.screenshot(path)
+        with atomic_path(path) as temporary:
+            self.plotter.screenshot(str(temporary))
 
     def live_timers(self) -> int:
         return int(self._render_timer.isActive())

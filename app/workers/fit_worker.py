@@ -10,6 +10,7 @@ fit's quality (:mod:`app.workers.quality`). Nothing here touches Qt widgets, VTK
 from __future__ import annotations
 
 import gc
+import itertools
 import os
 import sys
 import threading
@@ -245,12 +246,17 @@ class FitWorker(QObject):
         settings = request.settings
         config = FitConfig(**settings.fit_fields())
         last_deviation = -np.inf
-        try:  # the engine checks its input (and refuses shapes one patch cannot hold) here
+        # the engine checks its input (and refuses shapes one patch cannot hold) before its
+        # first snapshot: a ValueError until then is a refusal, told in one line, no traceback
+        try:
             initial = starting_geometry(request)
-            snapshots = iter_fit(request.target, config, stop=self._stop, initial=initial)
+            snapshots = iter(iter_fit(request.target, config, stop=self._stop, initial=initial))
+            first = next(snapshots, None)
         except ValueError as exc:
             raise FitProblem(refusal_message(exc), needs_patches(exc)) from None
-        for snapshot in snapshots:
+        if first is None:
+            raise FitProblem("The fit failed: the engine returned no result")
+        for snapshot in itertools.chain([first], snapshots):
             if not snapshot.geometry:  # the engine caught a failure and says why
                 raise FitProblem(f"The fit failed: {snapshot.message or snapshot.status}")
             now = time.monotonic()

@@ -1,20 +1,84 @@
 """One-off background jobs (loading files, tessellating patches, offsets, export).
 
-Each job runs a plain callable in its own QThread and reports back through a QObject that lives in
-the GUI thread, so callbacks always run on the GUI thread. The runner tracks its threads so
-``shutdown()`` can wait for them: none outlives the window.
+Each job runs a plain callable off the GUI thread and reports back through a QObject that lives in
+the GUI thread, so callbacks always run on the GUI thread.
+
+Two kinds:
+
+* :meth:`JobRunner.submit`: short, bounded work (tessellation, offsets, export) in a QThread.
+  ``shutdown()`` waits for these: none outlives the window, and an export in progress completes.
+* :meth:`JobRunner.submit_detached`: work of unbounded length on untrusted input (reading files:
+  a huge scan, a reader stuck in C code). A Python thread cannot be killed, so such a job runs in
+  a *daemon* ``threading.Thread`` that can be *abandoned*: :meth:`JobRunner.cancel` and
+  ``shutdown()`` return at once, the job's cancel event is set (a cooperative job stops at its
+  next check), and whatever it returns later is dropped without touching Qt. A daemon thread does
+  not hold up interpreter exit; :func:`abandoned_threads` lists the ones still running, so the
+  program can end without finalizing the interpreter under them (``app.__main__``).
 """
 
 from __future__ import annotations
 
 import itertools
 import logging
+import threading
 from collections.abc import Callable
 from typing import Any
 
 from PySide6.QtCore import QObject, QThread, Signal, Slot
 
 log = logging.getLogger(__name__)
+
+_abandoned_lock = threading.Lock()
+_abandoned: list[threading.Thread] = []
+
+
+def abandoned_threads() -> list[threading.Thread]:
+    """Threads of cancelled detached jobs that are still running (all daemon threads)."""
+    with _abandoned_lock:
+        _abandoned[:] = [thread for thread in _abandoned if thread.is_alive()]
+        return list(_abandoned)
+
+
+class _DetachedBridge(QObject):
+    """Carries a detached job's outcome into the GUI thread (queued: emitted from another one)."""
+
+    finished = Signal(int, object, object)  # job id, result, exception (None on success)
+
+
+class _DetachedJob:
+    """One detached job: a daemon thread that hands its outcome over only if not abandoned."""
+
+    def __init__(self, job_id: int, name: str, function: Callable[[threading.Event], Any],
+                 bridge: _DetachedBridge):
+        self.job_id, self.name = job_id, name
+        self.cancel_event = threading.Event()
+        self._function, self._bridge = function, bridge
+        self._lock = threading.Lock()
+        self._abandoned = False
+        self.thread = threading.Thread(target=self._run, name=f"job-{name}", daemon=True)
+
+    def _run(self):
+        try:
+            result, error = self._function(self.cancel_event), None
+        except BaseException as exc:  # noqa: BLE001 - handed to the GUI thread's error callback
+            result, error = None, exc
+        self._function = None
+        with self._lock:  # abandon() cannot slip in between the check and the emit
+            if self._abandoned:
+                return
+            try:
+                self._bridge.finished.emit(self.job_id, result, error)
+            except RuntimeError:  # the runner is gone (the window was destroyed unclosed)
+                pass
+
+    def abandon(self):
+        """Drop the outcome (from the GUI thread); returns at once, the thread runs on."""
+        self.cancel_event.set()
+        with self._lock:
+            self._abandoned = True
+        if self.thread.is_alive():
+            with _abandoned_lock:
+                _abandoned.append(self.thread)
 
 
 class _Job(QObject):
@@ -46,6 +110,9 @@ class JobRunner(QObject):
         super().__init__(parent)
         self._ids = itertools.count(1)
         self._jobs: dict[int, tuple[QThread, _Job, str, Callable, Callable]] = {}
+        self._detached: dict[int, tuple[_DetachedJob, Callable, Callable]] = {}
+        self._bridge = _DetachedBridge(self)
+        self._bridge.finished.connect(self._on_detached_finished)
         self._closed = False
 
     def submit(self, name: str, function: Callable[[], Any], on_done: Callable[[Any], None],
@@ -64,8 +131,48 @@ class JobRunner(QObject):
         thread.start()
         return True
 
+    def submit_detached(self, name: str, function: Callable[[threading.Event], Any],
+                        on_done: Callable[[Any], None],
+                        on_error: Callable[[BaseException], None]) -> int:
+        """Run ``function(cancel_event)`` in an abandonable daemon thread; returns the job id for
+        :meth:`cancel` (0 when the runner is shut down). ``function`` may poll ``cancel_event``
+        to stop early; after :meth:`cancel` neither callback runs."""
+        if self._closed:
+            return 0
+        job_id = next(self._ids)
+        job = _DetachedJob(job_id, name, function, self._bridge)
+        self._detached[job_id] = (job, on_done, on_error)
+        job.thread.start()
+        return job_id
+
+    def cancel(self, job_id: int) -> bool:
+        """Abandon a detached job: returns at once; its callbacks will not run. False when the
+        job is not running (finished, cancelled, or not a detached job)."""
+        entry = self._detached.pop(job_id, None)
+        if entry is None:
+            return False
+        entry[0].abandon()
+        return True
+
     def active_count(self) -> int:
-        return len(self._jobs)
+        """Jobs whose callbacks are still to come (abandoned detached jobs do not count)."""
+        return len(self._jobs) + len(self._detached)
+
+    @Slot(int, object, object)
+    def _on_detached_finished(self, job_id: int, result: Any, error: BaseException | None):
+        entry = self._detached.pop(job_id, None)
+        if entry is None or self._closed:
+            return  # cancelled after the outcome was queued
+        job, on_done, on_error = entry
+        job.thread.join(1.0)  # it has emitted its last word: this returns at once
+        try:
+            if error is None:
+                on_done(result)
+            else:
+                on_error(error)
+        except Exception:  # noqa: BLE001 - a slot must never raise into Qt
+            log.exception("handling the outcome of %s failed", job.name)
+        self.job_finished.emit(job.name)
 
     def _finish(self, job_id: int) -> tuple[str, Callable, Callable] | None:
         entry = self._jobs.pop(job_id, None)
@@ -101,8 +208,10 @@ class JobRunner(QObject):
         self.job_finished.emit(name)
 
     def shutdown(self):
-        """Wait for running jobs (they are short and cannot be interrupted); idempotent."""
+        """Abandon detached jobs (no waiting), then wait for the short ones; idempotent."""
         self._closed = True
+        for job_id in list(self._detached):
+            self.cancel(job_id)
         for job_id in list(self._jobs):
             thread, *_ = self._jobs.pop(job_id)
             thread.quit()

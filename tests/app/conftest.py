@@ -40,3 +40,8 @@ def window(qtbot, tmp_path):
     assert not win.controller.is_busy()
     assert not win.patch_controller.is_busy()
     assert win.jobs.active_count() == 0
+    # a load abandoned by Cancel or by closing may still run (a Python thread cannot be killed;
+    # its result is dropped): it must be a daemon thread, which never holds up the exit
+    from app.workers.jobs import abandoned_threads
+
+    assert all(thread.daemon for thread in abandoned_threads())
