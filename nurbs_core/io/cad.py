@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from nurbs_core.io.errors import FileFormatError, require_ocp
-from nurbs_core.io.limits import parse_size
+from nurbs_core.io.limits import configured_size
 
 STEP_SUFFIXES = (".step", ".stp")
 IGES_SUFFIXES = (".iges", ".igs")
@@ -233,13 +233,8 @@ def read_timeout(size: int) -> float:
 
 def reader_memory(size: int) -> int:
     """Bytes a worker read of a file of ``size`` bytes may allocate (see READER_MEMORY_ENV)."""
-    configured = os.environ.get(READER_MEMORY_ENV)
-    if configured:
-        try:
-            return parse_size(configured)
-        except ValueError as exc:
-            raise ValueError(f"{READER_MEMORY_ENV}: {exc}") from None
-    return 2 * int(size) + READER_MEMORY_SLACK
+    configured = configured_size(READER_MEMORY_ENV)
+    return configured if configured is not None else 2 * int(size) + READER_MEMORY_SLACK
 
 
 #: A read stopped by its time limit in CPU seconds still ends after this many times the limit in

@@ -65,16 +65,25 @@ def set_decompression_limit(limit: int | str | None) -> None:
                                             else int(limit))
 
 
+def configured_size(variable: str) -> int | None:
+    """The size an environment variable sets (bytes, or with a K/M/G/T suffix), None if unset;
+    ValueError naming the variable when it is not a size."""
+    configured = os.environ.get(variable)
+    if not configured:
+        return None
+    try:
+        return parse_size(configured)
+    except ValueError as exc:
+        raise ValueError(f"{variable}: {exc}") from None
+
+
 def decompression_limit(compressed_size: int) -> int:
     """The most bytes a reader may inflate from ``compressed_size`` compressed bytes."""
     if _override is not None:
         return _override
-    configured = os.environ.get(MAX_DECOMPRESSED_ENV)
-    if configured:
-        try:
-            return parse_size(configured)
-        except ValueError as exc:
-            raise ValueError(f"{MAX_DECOMPRESSED_ENV}: {exc}") from None
+    configured = configured_size(MAX_DECOMPRESSED_ENV)
+    if configured is not None:
+        return configured
     return DECOMPRESSED_FLOOR + DECOMPRESSED_RATIO * max(0, int(compressed_size))
 
 
