@@ -85,9 +85,7 @@ def load_files(paths: list[str], cancel: threading.Event | None = None) -> Loade
 def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
     """Read one file into ``loaded`` (a failure leaves the caller to drop it all)."""
     _check(cancel)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
-    result = _read(path)
+    result = _read(path)  # the engine's reader checks the file (missing, link loop, folder...)
     _check(cancel)
     if isinstance(result, (list, tuple)):
         if not result:
