@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from nurbs_core.knot_vectors import averaged  # noqa: F401  (the torch-free half, re-exported)
+
 
 def clamped_uniform(n_control_points: int, degree: int, domain=(0.0, 1.0), *, dtype=torch.float64,
                     device=None) -> torch.Tensor:
@@ -22,23 +24,6 @@ def clamped_uniform(n_control_points: int, degree: int, domain=(0.0, 1.0), *, dt
         interior,
         torch.full((degree,), b, dtype=dtype, device=device),
     ])
-
-
-def averaged(parameters, n_control_points: int, degree: int) -> np.ndarray:
-    """Clamped knot vector by averaging sorted parameters (The NURBS Book, eq. 9.69 / 9.8)."""
-    t = np.sort(np.asarray(parameters, dtype=np.float64))
-    n, p = n_control_points, degree
-    m = t.size
-    a, b = float(t[0]), float(t[-1])
-    if m < n:
-        raise ValueError(f"{m} parameters cannot define {n} control points")
-    d = m / (n - p)
-    interior = []
-    for j in range(1, n - p):
-        i = int(j * d)
-        alpha = j * d - i
-        interior.append((1 - alpha) * t[max(i - 1, 0)] + alpha * t[min(i, m - 1)])
-    return np.concatenate([np.full(p + 1, a), np.asarray(interior), np.full(p + 1, b)])
 
 
 def check_knots(knots: torch.Tensor, degree: int, n_control_points: int, name: str = "knots"):

@@ -19,49 +19,10 @@ from PySide6.QtWidgets import (
 
 from app.state import FitSettings
 
-
-def uniform_knots(count: int, degree: int) -> np.ndarray:
-    """Clamped knot vector with uniform interior knots on [0, 1]: (count + degree + 1,)."""
-    interior = np.linspace(0.0, 1.0, count - degree + 1)
-    return np.concatenate([np.zeros(degree), interior, np.ones(degree)])
-
-
-def averaged_knots_for(points: np.ndarray, count_u: int, degree_u: int, count_v: int,
-                       degree_v: int) -> tuple[np.ndarray, np.ndarray]:
-    """Averaged knots (The NURBS Book eq. 9.8) from parameters of the cloud's PCA plane.
-
-    points (N, 3) -> (knots_u (count_u + degree_u + 1,), knots_v (...)), both on [0, 1].
-    The unordered cloud has no natural parameters: its projections on the two main axes,
-    scaled to [0, 1], stand in for them (the PCA initialization uses the same plane).
-    """
-    from nurbs_core.knots import averaged
-
-    centred = points - points.mean(axis=0)
-    _, _, axes = np.linalg.svd(centred, full_matrices=False)
-    result = []
-    for axis, count, degree in ((0, count_u, degree_u), (1, count_v, degree_v)):
-        t = centred @ axes[axis]
-        span = t.max() - t.min()
-        t = (t - t.min()) / (span if span > 0 else 1.0)
-        result.append(averaged(t, count, degree))
-    return result[0], result[1]
-
-
-def check_knot_vector(values: np.ndarray, degree: int, count: int) -> str | None:
-    """None if ``values`` is a clamped knot vector for count control points, else the problem."""
-    if values.size != count + degree + 1:
-        return f"needs {count + degree + 1} knots, has {values.size}"
-    if np.any(np.diff(values) < 0):
-        return "knots must not decrease"
-    if not (np.all(values[:degree + 1] == values[0]) and np.all(values[-degree - 1:] ==
-                                                                  values[-1])):
-        return f"the first and last {degree + 1} knots must be equal (clamped ends)"
-    if values[-1] <= values[0]:
-        return "the knot vector spans an empty interval"
-    _, multiplicity = np.unique(values[degree + 1:-degree - 1], return_counts=True)
-    if multiplicity.size and multiplicity.max() > degree:
-        return f"an interior knot repeats more than degree = {degree} times"
-    return None
+# the knot computations are the engine's torch-free ones (this panel runs on the GUI thread)
+from nurbs_core.knot_vectors import averaged_on_plane as averaged_knots_for
+from nurbs_core.knot_vectors import clamped_problem as check_knot_vector
+from nurbs_core.knot_vectors import uniform as uniform_knots
 
 
 class KnotPanel(QWidget):

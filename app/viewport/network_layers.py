@@ -14,7 +14,7 @@ from collections.abc import Callable
 import numpy as np
 import pyvista as pv
 
-from app.workers.network_display import NetworkDisplay
+from app.display_types import NetworkDisplay
 
 SEAM_ARRAY = "Seam angle"
 SEAM_TITLE = "Seam angle\n(degrees)"

@@ -22,9 +22,8 @@ from PySide6.QtCore import QObject, QTimer
 from PySide6.QtWidgets import QWidget
 from pyvistaqt import QtInteractor
 
+from app.display_types import FAR, FINE, FLIPPED, OVERLAP, DisplayGeometry
 from app.viewport.network_layers import NetworkLayers
-from app.workers.display import DisplayGeometry
-from app.workers.quality import FAR, FINE, FLIPPED, OVERLAP
 
 RENDER_INTERVAL_MS = 33
 DEVIATION_COLORMAP = "viridis"  # perceptually uniform, readable in grey scale

@@ -7,12 +7,12 @@ returns plain numpy arrays the GUI thread copies into its VTK meshes. Curves are
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import torch
 
+from app.display_types import DisplayGeometry
 from nurbs_core import CurveEvaluator, geometry_from_numpy
 from nurbs_core.basis import dense_basis_matrix
 
@@ -20,24 +20,7 @@ SURFACE_SAMPLES = 48  # tessellation per direction: smooth enough, cheap enough 
 CURVE_SAMPLES = 400
 KNOT_LINE_SAMPLES = 48
 
-
-@dataclass
-class DisplayGeometry:
-    """Arrays ready for the viewport.
-
-    surface_grid (Mu, Mv, 3) or None, sampled at the parameters grid_u (Mu,) x grid_v (Mv,);
-    curve_points (M, 3) or None; control_net (n_u, n_v, 3) for surfaces, (n, 3) for curves;
-    knot_lines: list of (K, 3) polylines (curves: one (k, 3) array of the points at the distinct
-    knots).
-    """
-
-    kind: str
-    surface_grid: np.ndarray | None = None
-    curve_points: np.ndarray | None = None
-    control_net: np.ndarray | None = None
-    knot_lines: list[np.ndarray] = field(default_factory=list)
-    grid_u: np.ndarray | None = None
-    grid_v: np.ndarray | None = None
+__all__ = ["DisplayGeometry", "display_geometry", "lift_to_3d", "resample"]
 
 
 def lift_to_3d(points: np.ndarray) -> np.ndarray:

@@ -12,9 +12,9 @@ still shows as a band), never more than the seam itself. Nothing here touches Qt
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
+
+from app.display_types import NetworkDisplay
 
 #: Surface samples per patch side: as many as the display can afford (about this many vertices
 #: in all), within these bounds.
@@ -27,28 +27,6 @@ LINE_LIFT = 0.002
 LAYOUT_EDGE_SAMPLES = 6
 #: The seam colour fades to 0 over this fraction of a patch's side.
 SEAM_BAND = 0.25
-
-
-@dataclass
-class NetworkDisplay:
-    """vertices (N, 3), faces (F, 3), normals (N, 3) unit; seam (N,) degrees or None (no
-    network yet); line_points (L, 3) and line_cells (VTK lines array) of the patch boundaries;
-    corners (M, 3) the irregular layout corners; topology: equal for two displays whose faces
-    are equal (the viewport then only moves the points)."""
-
-    vertices: np.ndarray
-    faces: np.ndarray
-    normals: np.ndarray
-    seam: np.ndarray | None
-    line_points: np.ndarray
-    line_cells: np.ndarray
-    corners: np.ndarray
-    topology: tuple
-
-    @property
-    def vtk_faces(self) -> np.ndarray:
-        return np.hstack([np.full((len(self.faces), 1), 3, np.int64),
-                          self.faces.astype(np.int64)]).ravel()
 
 
 def display_resolution(patch_count: int) -> int:

@@ -13,13 +13,12 @@ from typing import Any
 
 import numpy as np
 
+from app.display_types import CATEGORY_NAMES, FAR, FINE, FLIPPED, OVERLAP  # noqa: F401
+
 log = logging.getLogger(__name__)
 
-#: Categories of a display quad, ordered by precedence: a quad holding samples of several
-#: categories shows the highest (a fold's flipped middle layer wins over its overlap).
-FINE, FAR, OVERLAP, FLIPPED = 0, 1, 2, 3
-CATEGORY_NAMES = {FINE: "fine", FAR: "far from the cloud", OVERLAP: "overlapping sheets",
-                  FLIPPED: "flipped"}
+# The display-quad categories (FINE < FAR < OVERLAP < FLIPPED by precedence) are value types the
+# viewport paints: they live in app.display_types and are re-exported here.
 
 
 def map_categories(flipped: np.ndarray, overlap: np.ndarray, far: np.ndarray) -> np.ndarray:

@@ -1,0 +1,69 @@
+"""Knot vectors as plain numpy arrays: presets and checks that need no torch.
+
+The torch-free half of :mod:`nurbs_core.knots` (which re-exports :func:`averaged`): the app's
+knot panel runs these on the GUI thread, where torch is never imported.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def uniform(count: int, degree: int) -> np.ndarray:
+    """Clamped knot vector with uniform interior knots on [0, 1]: (count + degree + 1,)."""
+    interior = np.linspace(0.0, 1.0, count - degree + 1)
+    return np.concatenate([np.zeros(degree), interior, np.ones(degree)])
+
+
+def averaged(parameters, n_control_points: int, degree: int) -> np.ndarray:
+    """Clamped knot vector by averaging sorted parameters (The NURBS Book, eq. 9.69 / 9.8)."""
+    t = np.sort(np.asarray(parameters, dtype=np.float64))
+    n, p = n_control_points, degree
+    m = t.size
+    a, b = float(t[0]), float(t[-1])
+    if m < n:
+        raise ValueError(f"{m} parameters cannot define {n} control points")
+    d = m / (n - p)
+    interior = []
+    for j in range(1, n - p):
+        i = int(j * d)
+        alpha = j * d - i
+        interior.append((1 - alpha) * t[max(i - 1, 0)] + alpha * t[min(i, m - 1)])
+    return np.concatenate([np.full(p + 1, a), np.asarray(interior), np.full(p + 1, b)])
+
+
+def averaged_on_plane(points: np.ndarray, count_u: int, degree_u: int, count_v: int,
+                      degree_v: int) -> tuple[np.ndarray, np.ndarray]:
+    """Averaged knots (The NURBS Book eq. 9.8) from parameters of the cloud's PCA plane.
+
+    points (N, 3) -> (knots_u (count_u + degree_u + 1,), knots_v (...)), both on [0, 1].
+    The unordered cloud has no natural parameters: its projections on the two main axes,
+    scaled to [0, 1], stand in for them (the PCA initialization uses the same plane).
+    """
+    centred = points - points.mean(axis=0)
+    _, _, axes = np.linalg.svd(centred, full_matrices=False)
+    result = []
+    for axis, count, degree in ((0, count_u, degree_u), (1, count_v, degree_v)):
+        t = centred @ axes[axis]
+        span = t.max() - t.min()
+        t = (t - t.min()) / (span if span > 0 else 1.0)
+        result.append(averaged(t, count, degree))
+    return result[0], result[1]
+
+
+def clamped_problem(values: np.ndarray, degree: int, count: int) -> str | None:
+    """None if ``values`` is a clamped knot vector for count control points, else the problem
+    (a sentence for the user)."""
+    if values.size != count + degree + 1:
+        return f"needs {count + degree + 1} knots, has {values.size}"
+    if np.any(np.diff(values) < 0):
+        return "knots must not decrease"
+    if not (np.all(values[:degree + 1] == values[0]) and np.all(values[-degree - 1:] ==
+                                                                  values[-1])):
+        return f"the first and last {degree + 1} knots must be equal (clamped ends)"
+    if values[-1] <= values[0]:
+        return "the knot vector spans an empty interval"
+    _, multiplicity = np.unique(values[degree + 1:-degree - 1], return_counts=True)
+    if multiplicity.size and multiplicity.max() > degree:
+        return f"an interior knot repeats more than degree = {degree} times"
+    return None
