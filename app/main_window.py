@@ -453,7 +453,7 @@ class MainWindow(QMainWindow):
         if error:
             self.last_error = message
             if self._message_box is not None:
-                self._message_box.close()
+                self._message_box.reject()  # close() is ignored by a box without an Escape button
             self._message_box = QMessageBox(QMessageBox.Icon.Warning, "NURBS Studio", message,
                                             QMessageBox.StandardButton.Ok, self)
             self.fit_as_patches_button = None
@@ -805,7 +805,7 @@ class MainWindow(QMainWindow):
     def fit_as_patches(self) -> bool:
         """Switch to Patches mode (an undoable settings edit) and start the patch fit."""
         if self._message_box is not None:
-            self._message_box.close()
+            self._message_box.reject()
         self.document.edit_settings("Fit mode", fit_mode="patches")
         return self.start_fit()
 

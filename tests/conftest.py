@@ -1,8 +1,11 @@
-"""Shared fixtures: where the paper's test data lives."""
+"""Shared fixtures: where the paper's test data lives; the guard failing a test that leaves a
+thread running (the Qt part of the guard, timers, QThreads and windows, is in tests/app)."""
 
 from __future__ import annotations
 
 import os
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -30,3 +33,48 @@ def paper_data() -> Path:
     if SHARED_DATA is None:
         pytest.skip("the paper's test data (shared/data/nurbsdiff_paper) is not on this machine")
     return SHARED_DATA
+
+
+# --- leak guard: no test may leave a thread running ----------------------------------------------
+THREAD_JOIN_WAIT_S = 5.0  # threads already ending (a reader released at teardown) get this long
+
+
+def _ending_is_allowed(thread: threading.Thread) -> bool:
+    """Threads that may legitimately outlive a test, each for a stated reason.
+
+    * ``threading._DummyThread``: a thread started outside the ``threading`` module (a QThread
+      running Python code, an OpenMP worker calling back) is registered as a dummy the first time
+      it runs Python, and Python 3.11 never unregisters it, even once the thread has ended (its
+      ``is_alive()`` stays True). Such threads are not ours to join here: the QThreads are checked
+      through their ``QThread`` objects by the Qt leak guard in ``tests/app/conftest.py``.
+
+    Nothing else is allowed: the app's abandoned load threads (``app.workers.jobs``) end once the
+    test releases the reader it stuck (``stuck_reader`` in ``test_hostile_loads.py`` releases and
+    joins them), and the CAD reader's torch-warming thread (``nurbs_core.io.cad``) ends as soon as
+    its import does; both are given :data:`THREAD_JOIN_WAIT_S` to end, like any thread.
+    """
+    return isinstance(thread, threading._DummyThread)
+
+
+def leaked_threads(before: set[threading.Thread], wait: float = THREAD_JOIN_WAIT_S):
+    """Threads alive now that were not in ``before``, after giving each a share of ``wait`` to
+    end (a thread on its way out is not a leak)."""
+    deadline = time.monotonic() + wait
+    leaked = []
+    for thread in threading.enumerate():
+        if thread in before or thread is threading.current_thread() or _ending_is_allowed(thread):
+            continue
+        thread.join(max(0.0, deadline - time.monotonic()))
+        if thread.is_alive():
+            leaked.append(thread)
+    return leaked
+
+
+@pytest.fixture(autouse=True)
+def no_thread_left_behind():
+    """Fail any test that leaves a (Python) thread running after it ends."""
+    before = set(threading.enumerate())
+    yield
+    leaked = leaked_threads(before)
+    assert not leaked, ("threads left running by the test: "
+                        + ", ".join(f"{t.name} (daemon={t.daemon})" for t in leaked))

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 from app_helpers import QUICK, open_by_drop, viewport_image
@@ -14,6 +12,22 @@ from PySide6.QtWidgets import QFileDialog
 def _wait_snapshots(qtbot, window, count: int, timeout: int = 60000):
     start = window.controller.snapshots_shown
     qtbot.waitUntil(lambda: window.controller.snapshots_shown >= start + count, timeout=timeout)
+
+
+def _wait_render_ticks(qtbot, window, count: int):
+    """Wait for ``count`` ticks of the controller's render timer (each tick shows the snapshot
+    that arrived since the last one, if any; it runs while paused too)."""
+    ticks = []
+
+    def count_tick():
+        ticks.append(1)
+
+    timer = window.controller._timer
+    timer.timeout.connect(count_tick)  # runs after the controller's own tick slot
+    try:
+        qtbot.waitUntil(lambda: len(ticks) >= count, timeout=10000)
+    finally:
+        timer.timeout.disconnect(count_tick)
 
 
 def _changed_pixels(before: np.ndarray, after: np.ndarray) -> float:
@@ -58,7 +72,9 @@ def test_drop_fit_pause_edit_export_close(qtbot, window, ply_cloud, tmp_path, mo
                           check_params_cb=lambda s: s.status == "paused"):
         window.pause_action.trigger()
     paused_at = window.controller.snapshots_shown
-    qtbot.wait(300)  # a few render ticks: nothing new may arrive while paused
+    # a few render ticks (the controller's render timer fires every frame): nothing new may
+    # arrive while paused
+    _wait_render_ticks(qtbot, window, 10)
     assert window.controller.snapshots_shown == paused_at
     assert window.controller.state == "paused"
     assert not window.pause_action.isEnabled() and window.resume_action.isEnabled()
@@ -133,34 +149,26 @@ def test_drop_fit_pause_edit_export_close(qtbot, window, ply_cloud, tmp_path, mo
     assert window.live_timers() == 0
 
 
-def test_event_loop_answers_within_100ms_during_a_fit(qtbot, window, ply_cloud):
+def test_the_event_loop_keeps_processing_events_during_a_fit(qtbot, window, ply_cloud):
+    """A timer keeps ticking between the fit's draws: each tick records the snapshot count and
+    the fit's state it saw. (How quickly the loop answers: benchmarks/bench_responsiveness.py.)"""
     open_by_drop(qtbot, window, [ply_cloud[0]])
     window.document.edit_settings("quick", **QUICK)
     window.controller.start()
     _wait_snapshots(qtbot, window, 2)
-    gaps, last = [], [time.perf_counter()]
-
-    def probe():
-        now = time.perf_counter()
-        gaps.append(now - last[0])
-        last[0] = now
-
+    seen: list[tuple[int, str]] = []
     timer = QTimer()
     timer.setInterval(10)
-    timer.timeout.connect(probe)
+    timer.timeout.connect(lambda: seen.append((window.controller.snapshots_shown,
+                                               window.controller.state)))
     timer.start()
     try:
-        start_snapshots = window.controller.snapshots_shown
-        qtbot.waitUntil(lambda: len(gaps) >= 150, timeout=20000)
+        # ticks ran between at least 5 successive draws (not all before or after them)
+        qtbot.waitUntil(lambda: len({count for count, _state in seen}) >= 6, timeout=60000)
     finally:
         timer.stop()
-    assert window.controller.snapshots_shown > start_snapshots  # the fit kept drawing meanwhile
-    # the first gap includes the time before the probe ran; the rest is the event loop's answer
-    answers = np.asarray(gaps[1:])
-    report = (f"probe intervals: median {np.median(answers) * 1000:.0f} ms, 99th percentile "
-              f"{np.percentile(answers, 99) * 1000:.0f} ms, max {answers.max() * 1000:.0f} ms")
-    print(report)
-    assert answers.max() < 0.100, report
+    assert all(state == "running" for _count, state in seen)  # every tick ran during the fit
+    assert len(seen) >= 6
     window.controller.stop()
     qtbot.waitUntil(lambda: window.controller.state == "idle", timeout=20000)
 

@@ -25,3 +25,18 @@ def test_missing_file_and_folder(tmp_path):
     folder.mkdir()
     with pytest.raises(FileFormatError, match="is a directory"):
         load_files([str(folder)])
+
+
+def test_a_new_error_replaces_the_dialog_offering_patches(window):
+    """The refusal dialog has two accept buttons and so no Escape button, which makes Qt ignore
+    close(): a second error used to stack its dialog on top of the first."""
+    from PySide6.QtWidgets import QMessageBox
+
+    window.report("a closed cloud cannot be one patch", error=True, offer_patches=True)
+    first = window._message_box
+    assert first.isVisible()
+    window.report("another problem", error=True)
+    assert not first.isVisible()
+    boxes = [w for w in window.findChildren(QMessageBox) if w.isVisible()]
+    assert boxes == [window._message_box] and "another problem" in boxes[0].text()
+    window._message_box.reject()

@@ -4,11 +4,12 @@ it; pause, stop, close mid-fit; engine refusals; the single-patch refusal's way 
 from __future__ import annotations
 
 import importlib.util
-import time
+import threading
 
 import numpy as np
 import pytest
 from app_helpers import open_by_drop, viewport_image
+from hang_guard import hang_guard
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QFileDialog
 
@@ -33,6 +34,34 @@ def _wait_for_pass(qtbot, window):
     controller = window.patch_controller
     qtbot.waitUntil(lambda: controller.latest_shown is not None
                     and controller.latest_shown.event == "pass", timeout=FIT_TIMEOUT_MS)
+
+
+def _wait_render_ticks(qtbot, controller, count: int):
+    """Wait for ``count`` ticks of the patch controller's render timer (each shows the snapshot
+    that arrived since the previous tick, if any)."""
+    ticks = []
+
+    def count_tick():
+        ticks.append(1)
+
+    controller._timer.timeout.connect(count_tick)  # runs after the controller's own tick slot
+    try:
+        qtbot.waitUntil(lambda: len(ticks) >= count or not controller.is_busy(), timeout=10000)
+    finally:
+        controller._timer.timeout.disconnect(count_tick)
+
+
+def _watch_the_worker_wait(controller) -> threading.Event:
+    """An event set when the worker blocks in its pause (the pass under way has ended)."""
+    token, waiting = controller._stop_token, threading.Event()
+    wait_while_paused = token.wait_while_paused
+
+    def waiting_while_paused(*args, **kwargs):
+        waiting.set()
+        return wait_while_paused(*args, **kwargs)
+
+    token.wait_while_paused = waiting_while_paused
+    return waiting
 
 
 def _changed(before: np.ndarray, after: np.ndarray) -> float:
@@ -142,34 +171,29 @@ def test_pause_and_stop_mid_fit_keep_the_window_responsive(qtbot, window, tmp_pa
     assert window.start_fit()
     _wait_for_pass(qtbot, window)
 
-    # the event loop keeps answering while the worker fits (a 10 ms timer, 60 ticks)
-    gaps, last = [], [time.perf_counter()]
-
-    def probe():
-        now = time.perf_counter()
-        gaps.append(now - last[0])
-        last[0] = now
-
+    # the event loop keeps processing events while the worker fits: a 10 ms timer ticks 60
+    # times, all while the fit runs (how quickly: benchmarks/bench_responsiveness.py --patches)
+    states: list[str] = []
     timer = QTimer()
     timer.setInterval(10)
-    timer.timeout.connect(probe)
+    timer.timeout.connect(lambda: states.append(controller.state))
     timer.start()
     try:
-        qtbot.waitUntil(lambda: len(gaps) >= 60, timeout=20000)
+        qtbot.waitUntil(lambda: len(states) >= 60 or not controller.is_busy(),
+                        timeout=FIT_TIMEOUT_MS)
     finally:
         timer.stop()
-    answers = np.asarray(gaps[1:])
-    report = (f"probe intervals during a patch fit: median {np.median(answers) * 1000:.0f} ms, "
-              f"max {answers.max() * 1000:.0f} ms")
-    print(report)
-    assert answers.max() < 0.25, report
+    assert len(states) >= 60 and set(states) == {"running"}, states[-5:]
 
     # pause: nothing new is drawn; resume: it goes on
+    waiting = _watch_the_worker_wait(controller)
     window.pause_action.trigger()
     assert controller.state == "paused" and window.resume_action.isEnabled()
-    qtbot.wait(1500)  # the pass under way ends, then the worker waits
+    # the pass under way ends, then the worker waits (or the fit ended during that pass)
+    qtbot.waitUntil(lambda: waiting.is_set() or not controller.is_busy(), timeout=FIT_TIMEOUT_MS)
+    _wait_render_ticks(qtbot, controller, 3)  # the last pass's snapshot is drawn
     paused_at = controller.snapshots_shown
-    qtbot.wait(800)
+    _wait_render_ticks(qtbot, controller, 20)  # nothing new while paused
     assert controller.snapshots_shown == paused_at and controller.state == "paused"
     window.resume_action.trigger()
     if controller.state == "running":  # (the fit may have ended during the pass under way)
@@ -207,9 +231,8 @@ def test_closing_mid_fit_stops_the_worker_at_once(qtbot, window, tmp_path):
     assert window.start_fit()
     _wait_for_pass(qtbot, window)
     assert window.patch_controller.is_busy()
-    started = time.perf_counter()
-    window.close()
-    assert time.perf_counter() - started < 30.0
+    with hang_guard(30, "closing the window mid-fit"):  # a timeout, not a speed test
+        window.close()
     assert not window.patch_controller.is_busy() and window.live_timers() == 0
 
 

@@ -262,7 +262,10 @@ def test_a_closed_cloud_is_refused_clearly_and_can_be_forced(qtbot, window, tmp_
     assert window.document.fitted is None and window.document.settings == settings
     assert _undo_count(window) == undo
     assert window.quality_panel.values["flipped"].text() == "-"
-    window._message_box.close()
+    # (reject(), not close(): a QMessageBox without an escape button, here Ok and "Fit as
+    # patches", both accept-role buttons, ignores close() and stayed open after the test)
+    window._message_box.reject()
+    assert not window._message_box.isVisible()
 
     # forced, one patch covers the sphere by folding: the readout and the map say so
     window.fit_panel.single_patch.setChecked(True)

@@ -10,7 +10,8 @@ Worker::
 with ``nurbs_core.io.load_points``. Before each load the worker prints ``@@fuzz starting INDEX
 PATH`` (flushed), so a parent can tell which file hung or crashed the process; after it, one JSON
 line per file is appended (flushed) to ``OUT_JSONL``: ``outcome`` (ok / FileFormatError /
-MissingDependencyError / timeout / error), ``exception`` (the type name), ``message``,
+MissingDependencyError / timeout / error; ``timeout`` whenever the ``--timeout`` alarm went off
+during the load, ``alarm_fired``), ``exception`` (the type name), ``message``,
 ``path_in_message``, ``seconds``, ``peak_growth`` (bytes of resident memory above the level
 before the load; /proc's VmHWM is reset before each file; ``maxrss_growth`` is the coarser
 ru_maxrss difference), ``file_size``, ``traceback`` (for an unexpected exception), ``result``
@@ -150,7 +151,12 @@ def _markers(marker_dir: str | None) -> list[str]:
     return sorted(name for name in os.listdir(marker_dir) if name.endswith(".pickle-executed"))
 
 
+#: set by the alarm's handler: the load under way was still running after ``--timeout`` seconds
+_ALARM = {"fired": False}
+
+
 def _on_alarm(signum, frame):
+    _ALARM["fired"] = True
     raise LoadTimeout()
 
 
@@ -224,6 +230,7 @@ def _measure(index: int, path: str, mode: str | None, timeout: float, marker_dir
     with _CaptureStderr(capture) as captured:
         faulthandler.dump_traceback_later(timeout + 3, exit=False)
         start = time.perf_counter()
+        _ALARM["fired"] = False
         signal.setitimer(signal.ITIMER_REAL, timeout)
         try:
             result = _load(path, mode)
@@ -233,8 +240,14 @@ def _measure(index: int, path: str, mode: str | None, timeout: float, marker_dir
             exception = exc
         finally:
             signal.setitimer(signal.ITIMER_REAL, 0)
-        seconds = time.perf_counter() - start
+        seconds = time.perf_counter() - start  # reported, never compared: see alarm_fired
         faulthandler.cancel_dump_traceback_later()
+    alarm_fired = _ALARM["fired"]
+    if alarm_fired and not isinstance(exception, LoadTimeout):
+        # the reader caught the alarm's LoadTimeout (or returned after it): still a timeout
+        ended = f"raised {type(exception).__name__}" if exception is not None else "returned"
+        exception, result = LoadTimeout(f"the {timeout:g} s alarm went off during the load, "
+                                        f"which then {ended}"), None
     status = _proc_status()
     maxrss_after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     if exact and "VmHWM" in status:
@@ -244,6 +257,7 @@ def _measure(index: int, path: str, mode: str | None, timeout: float, marker_dir
     record.update(seconds=round(seconds, 4), peak_growth=peak_growth, rss_before=rss_before,
                   peak_method="VmHWM" if exact else "ru_maxrss",
                   maxrss_growth=max(0, maxrss_after - maxrss_before), stderr=captured.text[-3000:],
+                  alarm_fired=alarm_fired,
                   stderr_traceback="Traceback (most recent call last)" in captured.text)
     if exception is None:
         record.update(outcome="ok", exception=None, message="", path_in_message=None)

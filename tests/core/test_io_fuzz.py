@@ -88,9 +88,10 @@ def problems_of(case, record) -> list[str]:
         if case.expect == "load" and case.count is not None and record["mode"] == "vertices" \
                 and result.get("count") != case.count:
             found.append(f"read {result.get('count')} points/items, the file has {case.count}")
-    seconds = record.get("seconds")
-    if seconds is not None and seconds >= FILE_SECONDS and outcome != "timeout":
-        found.append(f"took {seconds:.1f} s")
+    # the 10 s criterion is the worker's alarm (a timeout outcome), not a measured duration: a
+    # load still running after FILE_SECONDS is "timeout" even if the reader swallowed the alarm
+    if record.get("alarm_fired") and outcome != "timeout":
+        found.append(f"the {FILE_SECONDS:g} s alarm went off, yet the outcome is {outcome}")
     growth = record.get("peak_growth")
     bound = 2 * record.get("file_size", 0) + MEMORY_SLACK
     if growth is not None and growth > bound:

@@ -1,12 +1,12 @@
-"""Damaged files of every format: each read either succeeds or raises FileFormatError, quickly."""
+"""Damaged files of every format: each read either succeeds or raises FileFormatError, and none
+hangs (each read runs under a 10 s timeout)."""
 
 from __future__ import annotations
-
-import time
 
 import numpy as np
 import pytest
 import trimesh
+from hang_guard import hang_guard
 
 from nurbs_core import NurbsSurface
 from nurbs_core.io import (
@@ -56,9 +56,9 @@ def _damaged_versions(data: bytes, seed: int):
 def _check_all(reader, path, data, seed):
     for damaged in _damaged_versions(data, seed):
         path.write_bytes(damaged)
-        start = time.perf_counter()
         try:
-            result = reader(path)
+            with hang_guard(10, f"reading a damaged {path.name}"):  # a timeout, not a speed test
+                result = reader(path)
         except (FileFormatError, MissingDependencyError) as exc:
             assert str(path) in str(exc)
         else:  # a damage that kept the file valid: the result must still be sound
@@ -66,7 +66,6 @@ def _check_all(reader, path, data, seed):
                 assert np.isfinite(result.points).all() and len(result.points)
             else:
                 assert result and all(hasattr(item, "control_points") for item in result)
-        assert time.perf_counter() - start < 10
 
 
 @pytest.mark.parametrize("kind", POINT_FORMATS)

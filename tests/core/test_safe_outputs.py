@@ -235,17 +235,22 @@ def _start_fit(tmp_path: Path, output: Path):
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
 
 
-def _wait_for_progress(process) -> list[str]:
+def _wait_for_line(process, *prefixes: str) -> list[str]:
+    """Read the process' stderr up to a line starting with one of ``prefixes``."""
     seen = []
-    deadline = time.monotonic() + 120
+    deadline = time.monotonic() + 120  # a hang guard (a timeout), not a speed test
     while time.monotonic() < deadline:
         line = process.stderr.readline()
         seen.append(line)
-        if line.startswith(("iteration ", "pass ")):
+        if line.startswith(prefixes):
             return seen
         if not line and process.poll() is not None:
             break
-    raise AssertionError(f"no progress line: {seen}")
+    raise AssertionError(f"no line starting with {prefixes}: {seen}")
+
+
+def _wait_for_progress(process) -> list[str]:
+    return _wait_for_line(process, "iteration ", "pass ")
 
 
 def test_ctrl_c_once_writes_the_result_reached_so_far(tmp_path):
@@ -267,7 +272,8 @@ def test_ctrl_c_twice_exits_130_and_writes_nothing(tmp_path):
     process = _start_fit(tmp_path, output)
     _wait_for_progress(process)
     process.send_signal(signal.SIGINT)
-    time.sleep(0.05)
+    # the second Ctrl-C once the first was handled (two signals pending at once are one)
+    _wait_for_line(process, "nurbs-fit: stopping")
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=120)
     if process.returncode == 0:  # the fit had already finished writing after the first Ctrl-C
@@ -284,7 +290,7 @@ def test_ctrl_c_during_start_up_is_quiet(tmp_path):
     process = subprocess.Popen([sys.executable, "-m", "nurbs_core.cli", str(source), "-o",
                                 str(tmp_path / "fit.json")], stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
-    time.sleep(0.8)  # importing torch and reading the cloud
+    time.sleep(0.8)  # part of the scenario: Ctrl-C while it imports torch and reads the cloud
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=120)
     if process.returncode != 0:  # (a very fast machine may have finished)
