@@ -95,10 +95,9 @@ def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
             suffix = f" #{index + 1}" if len(result) > 1 else ""
             loaded.patch_names.append(f"{path.name}{suffix}")
     else:
-        points = np.asarray(result.points, dtype=np.float64)
-        if points.ndim != 2 or points.shape[1] != 3 or len(points) < 4:
-            raise ValueError(f"{path}: needs at least 4 points with x, y, z "
-                             f"(got an array of shape {points.shape})")
+        points = result.points  # the engine's PointCloud checked it: (N, 3) float64
+        if len(points) < 4:
+            raise ValueError(f"{path}: needs at least 4 points, has {len(points)}")
         loaded.targets.append(Target(path.name, points, str(path)))
 
 

@@ -399,8 +399,7 @@ class MainWindow(QMainWindow):
         self.load_progress.setTextVisible(False)
         self.load_progress.setFixedSize(90, 12)
         self.load_cancel_button = QToolButton()
-        self.load_cancel_button.setDefaultAction(self.cancel_load_action)
-        self.load_cancel_button.setText("Cancel")
+        self.load_cancel_button.setDefaultAction(self.cancel_load_action)  # shows its text
         self.load_cancel_button.setToolButtonStyle(Qt.ToolButtonStyle.ToolButtonTextBesideIcon)
         self.load_cancel_button.setAutoRaise(True)
         layout.addWidget(self.load_progress)
@@ -577,14 +576,13 @@ class MainWindow(QMainWindow):
         problem = describe(exc)
         if path is None:
             headline = f"Could not open {_names([Path(p).name for p in paths])}: {problem}"
-        elif path in problem or Path(path).name in problem:
+        elif Path(path).name in problem:
             headline = f"Could not open {problem}"  # the reader's message names the file
         else:
             headline = f"Could not open {path}: {problem}"
         if not is_expected(exc):
             headline += " (an unexpected error: the log has the details)"
-        self.load_message = headline
-        message = headline
+        self.load_message = message = headline
         hint = getattr(exc, "install", None)
         if hint and hint not in message:
             message += f"\nInstall the missing package with: {hint}"

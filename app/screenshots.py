@@ -20,6 +20,8 @@ import numpy as np
 
 import app  # noqa: F401 - sets QT_API
 
+PAPER_DATA = Path(os.environ.get("NURBS_STUDIO_DATA", "/work/shared/data")) / "nurbsdiff_paper"
+
 
 def _write_points(path: Path, points: np.ndarray) -> Path:
     """Scratch input clouds, written atomically like every file the app writes."""
@@ -28,8 +30,6 @@ def _write_points(path: Path, points: np.ndarray) -> Path:
     with atomic_write(path, "w") as handle:
         np.savetxt(handle, points, fmt="%.6f")
     return path
-
-PAPER_DATA = Path(os.environ.get("NURBS_STUDIO_DATA", "/work/shared/data")) / "nurbsdiff_paper"
 
 
 def curve_cloud(path: Path) -> Path:

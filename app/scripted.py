@@ -64,8 +64,7 @@ class ScriptedRun(QObject):
         self._load_timer.stop()
         self.window.files_loaded.disconnect(self._on_loaded)
         if not ok:
-            self._finish(failed=self.window.load_message or self.window.last_error
-                         or "could not open the files")
+            self._finish(failed=self.window.load_message)  # set by every load that ends
             return
         if self.iterations is not None:
             self.window.document.edit_settings("Iterations", iterations=self.iterations)

@@ -42,6 +42,19 @@ def _wait(app, condition, timeout: float, what: str):
         time.sleep(0.005)
 
 
+def _open(app, window, path: Path):
+    """Open ``path`` in the window and wait until it is loaded (a failed load ends the run)."""
+    loaded = []
+    window.files_loaded.connect(loaded.append)
+    try:
+        window.open_files([str(path)])
+        _wait(app, lambda: loaded, 60, f"{path.name} to load")
+    finally:
+        window.files_loaded.disconnect(loaded.append)
+    if loaded != [True]:
+        raise SystemExit(f"bench_responsiveness: could not open {path.name}: {window.last_error}")
+
+
 def probe_gaps(app, ticks: int, interval_ms: int = 10) -> np.ndarray:
     """Seconds between consecutive ticks of an ``interval_ms`` timer, ``ticks`` of them."""
     from PySide6.QtCore import QEventLoop, QTimer
@@ -79,7 +92,7 @@ def main(argv=None) -> int:
     from PySide6.QtWidgets import QApplication
 
     from app.main_window import MainWindow
-    from nurbs_core import samples
+    from app.screenshots import torus_cloud
 
     app = QApplication.instance() or QApplication([])
     rows = []
@@ -93,10 +106,7 @@ def main(argv=None) -> int:
             xy = rng.uniform(-3.0, 3.0, size=(1500, 2))
             cloud = Path(folder) / "scan.xyz"
             np.savetxt(cloud, np.column_stack([xy, np.sin(xy[:, 0]) * np.cos(xy[:, 1])]))
-            loaded = []
-            window.files_loaded.connect(loaded.append)
-            window.open_files([str(cloud)])
-            _wait(app, lambda: loaded, 60, "the cloud to load")
+            _open(app, window, cloud)
             rows.append(_row("idle window (baseline)", probe_gaps(app, args.ticks)))
 
             window.document.edit_settings("quick", **QUICK)
@@ -108,11 +118,7 @@ def main(argv=None) -> int:
             _wait(app, lambda: controller.state == "idle", 60, "the fit to stop")
 
             if args.patches:
-                torus = Path(folder) / "torus.xyz"
-                np.savetxt(torus, samples.torus(3000).points)
-                loaded.clear()
-                window.open_files([str(torus)])
-                _wait(app, lambda: loaded, 60, "the torus to load")
+                _open(app, window, torus_cloud(Path(folder) / "torus.xyz"))
                 window.mode_selector.setCurrentIndex(window.mode_selector.findData("patches"))
                 rows.append(_row("idle, patches mode", probe_gaps(app, args.ticks)))
                 patches = window.patch_controller

@@ -317,44 +317,49 @@ def _check_outputs(args) -> list[Path]:
 FILE_MESH_SAMPLES = 10_000
 
 
-def _file_mesh(path, quiet: bool):
-    """The input file's own closed mesh for the layout, or None (a cloud, or a mesh that cannot
-    serve: then it is rebuilt from the points, and the reason is printed)."""
-    from nurbs_core.io.meshes import read_mesh_faces
-    from nurbs_core.io.points import suffix_of
-    from nurbs_core.patches.closed_mesh import mesh_from_faces
+def _patch_input(path, quiet: bool):
+    """The points to fit with ``--patches`` (N, 3) and the input file's own closed mesh for the
+    layout, or None (a cloud, or a mesh that cannot serve: then it is rebuilt from the points,
+    and the reason is printed). A mesh file is read once."""
+    from nurbs_core.io import load_points
+    from nurbs_core.io.cloud import check_points
+    from nurbs_core.io.meshes import read_mesh_faces, sample_mesh_points
+    from nurbs_core.io.points import MESH_SUFFIXES, suffix_of
 
     suffix = suffix_of(path)
-    if suffix not in (".obj", ".stl", ".off", ".ply", ".glb", ".gltf"):
-        return None
-    arrays = read_mesh_faces(path, suffix)
+    arrays = None
+    if suffix in MESH_SUFFIXES or suffix == ".ply":
+        from nurbs_core.io.ply import has_faces
+
+        if suffix != ".ply" or has_faces(path):  # (a PLY cloud is read by the fast PLY reader)
+            arrays = read_mesh_faces(path, suffix)
     if arrays is None:
-        return None
-    mesh, why = mesh_from_faces(*arrays)
+        return load_points(path).points, None
+    from nurbs_core.patches.closed_mesh import mesh_from_faces
+
+    vertices, faces = arrays
+    mesh, why = mesh_from_faces(vertices, faces)
     if not quiet:
         print(f"using the file's closed mesh ({len(mesh.faces)} triangles) for the layout"
               if mesh is not None else f"{why}: the closed mesh is rebuilt from its points",
               file=sys.stderr)
-    return mesh
+    if mesh is not None and len(vertices) < FILE_MESH_SAMPLES:
+        return sample_mesh_points(path, vertices, faces, FILE_MESH_SAMPLES).points, mesh
+    return check_points(path, vertices), mesh
 
 
-def run_patches(args, points: np.ndarray, outputs: list[Path]) -> int:
-    """``--patches``: the network fit, its report and files."""
+def run_patches(args, options, outputs: list[Path]) -> int:
+    """``--patches``: the network fit (``options``: its PatchOptions), its report and files."""
     import torch
 
     from nurbs_core.io.dispatch import save_all
     from nurbs_core.patches.pipeline import iter_patch_fit
 
-    options = _patch_options(args)
+    points, mesh = _patch_input(args.input, quiet=args.quiet)
     torch.set_num_threads(max(1, args.threads))
     print(f"{args.input}: {len(points)} points; fitting a network of bicubic patches "
           f"({options.patches} patches, stiffness {options.stiffness:g}, seam weight "
           f"{options.seam_weight:g})", file=sys.stderr)
-    mesh = _file_mesh(args.input, quiet=args.quiet)
-    if mesh is not None and len(points) < FILE_MESH_SAMPLES:
-        from nurbs_core.io import load_points
-
-        points = load_points(args.input, mesh_mode="sample", sample_count=FILE_MESH_SAMPLES).points
     result = None
     for event in iter_patch_fit(points, options, mesh=mesh):
         result = event.result or result
@@ -407,18 +412,17 @@ def _interrupt_handler(stop):
 def run(args) -> int:
     import numpy as np
 
+    from nurbs_core.failures import one_line
     from nurbs_core.io import load_points
     from nurbs_core.io.limits import set_decompression_limit
 
     if args.max_decompressed is not None:
         set_decompression_limit(args.max_decompressed)
     outputs = _check_outputs(args)
+    # a bad option fails before the cloud is read
     if args.patches is not None:
-        _patch_options(args)  # a bad option fails before the cloud is read
-    cloud = load_points(args.input)
-    points = cloud.points
-    if args.patches is not None:
-        return run_patches(args, np.asarray(points, np.float64), outputs)
+        return run_patches(args, _patch_options(args), outputs)
+    points = load_points(args.input).points
     import torch
 
     from nurbs_core.fit import StopToken, fit
@@ -465,7 +469,8 @@ def run(args) -> int:
     finally:
         signal.signal(signal.SIGINT, previous)
     if result.status == "failed":
-        raise RuntimeError(f"the fit failed: {result.message}")
+        print(f"nurbs-fit: error: the fit failed: {one_line(result.message)}", file=sys.stderr)
+        return 1
     geometry = result.geometry.to(dtype=torch.float64)
     diagonal = float(np.linalg.norm(np.ptp(target, axis=0)))
     chamfer = _chamfer(geometry, target, np.random.default_rng(args.seed))
@@ -496,35 +501,41 @@ def run(args) -> int:
     return 0
 
 
-def _one_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
-
-
 def main(argv=None) -> int:
     """The console entry point: 0 on success, 1 on an error (one line on stderr), 2 for bad
     arguments (argparse), 130 after Ctrl-C."""
+    interrupted = []
+
+    def on_interrupt(*_):
+        # remembered as well as raised: a KeyboardInterrupt inside a C extension's import (numpy
+        # at start-up) comes out as an ImportError, which must still count as Ctrl-C
+        interrupted.append(True)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, on_interrupt)
     try:
+        from nurbs_core.failures import describe, is_expected
+
         args = build_parser().parse_args(argv)
         try:
             return run(args)
-        except (ValueError, OSError, ImportError, RuntimeError, MemoryError) as exc:
+        except Exception as exc:
+            if interrupted:
+                raise KeyboardInterrupt from None
             if args.debug:
                 traceback.print_exc()
-            message = _one_line(exc)
-            if isinstance(exc, MemoryError):
-                message = f"out of memory{': ' + message if message != 'MemoryError' else ''}"
+            message = describe(exc)
+            if not is_expected(exc):  # a bug: still one line, the traceback with --debug
+                message = f"internal error ({message}); run with --debug for the traceback"
             print(f"nurbs-fit: error: {message}", file=sys.stderr)
             return 1
-        except Exception as exc:  # a bug: still one line, the traceback with --debug
-            if args.debug:
-                traceback.print_exc()
-            print(f"nurbs-fit: error: internal error ({type(exc).__name__}: {_one_line(exc)}); "
-                  f"run with --debug for the traceback", file=sys.stderr)
-            return 1
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, Exception) as exc:
+        if not (isinstance(exc, KeyboardInterrupt) or interrupted):
+            raise
         print("nurbs-fit: interrupted", file=sys.stderr)
         return INTERRUPTED_STATUS
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 if __name__ == "__main__":

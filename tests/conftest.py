@@ -70,11 +70,24 @@ def leaked_threads(before: set[threading.Thread], wait: float = THREAD_JOIN_WAIT
     return leaked
 
 
+def _check_no_thread_left(before: set[threading.Thread], by: str) -> None:
+    leaked = leaked_threads(before)
+    assert not leaked, (f"threads left running by {by}: "
+                        + ", ".join(f"{t.name} (daemon={t.daemon})" for t in leaked))
+
+
 @pytest.fixture(autouse=True)
 def no_thread_left_behind():
     """Fail any test that leaves a (Python) thread running after it ends."""
     before = set(threading.enumerate())
     yield
-    leaked = leaked_threads(before)
-    assert not leaked, ("threads left running by the test: "
-                        + ", ".join(f"{t.name} (daemon={t.daemon})" for t in leaked))
+    _check_no_thread_left(before, "the test")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def no_thread_left_behind_by_fixtures():
+    """The same for the whole run: a thread started by a module- or session-scoped fixture is
+    already running when each of its tests starts, so only this check sees it outlive them."""
+    before = set(threading.enumerate())
+    yield
+    _check_no_thread_left(before, "a module- or session-scoped fixture")

@@ -161,18 +161,22 @@ class JobRunner(QObject):
     @Slot(int, object, object)
     def _on_detached_finished(self, job_id: int, result: Any, error: BaseException | None):
         entry = self._detached.pop(job_id, None)
-        if entry is None or self._closed:
-            return  # cancelled after the outcome was queued
+        if entry is None:  # cancelled (shutdown cancels them all) after the outcome was queued
+            return
         job, on_done, on_error = entry
         job.thread.join(1.0)  # it has emitted its last word: this returns at once
+        if error is None:
+            self._deliver(job.name, on_done, result)
+        else:
+            self._deliver(job.name, on_error, error)
+
+    def _deliver(self, name: str, callback: Callable[[Any], None], value: Any):
+        """Run a job's callback on the GUI thread, then announce the job's end."""
         try:
-            if error is None:
-                on_done(result)
-            else:
-                on_error(error)
+            callback(value)
         except Exception:  # noqa: BLE001 - a slot must never raise into Qt
-            log.exception("handling the outcome of %s failed", job.name)
-        self.job_finished.emit(job.name)
+            log.exception("handling the outcome of %s failed", name)
+        self.job_finished.emit(name)
 
     def _finish(self, job_id: int) -> tuple[str, Callable, Callable] | None:
         entry = self._jobs.pop(job_id, None)
@@ -189,11 +193,7 @@ class JobRunner(QObject):
         if entry is None or self._closed:
             return
         name, on_done, _ = entry
-        try:
-            on_done(result)
-        except Exception:  # noqa: BLE001 - a slot must never raise into Qt
-            log.exception("handling the result of %s failed", name)
-        self.job_finished.emit(name)
+        self._deliver(name, on_done, result)
 
     @Slot(int, object)
     def _on_failed(self, job_id: int, error: Exception):
@@ -201,11 +201,7 @@ class JobRunner(QObject):
         if entry is None or self._closed:
             return
         name, _, on_error = entry
-        try:
-            on_error(error)
-        except Exception:  # noqa: BLE001
-            log.exception("reporting the failure of %s failed", name)
-        self.job_finished.emit(name)
+        self._deliver(name, on_error, error)
 
     def shutdown(self):
         """Abandon detached jobs (no waiting), then wait for the short ones; idempotent."""

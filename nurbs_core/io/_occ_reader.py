@@ -2,7 +2,7 @@
 process (run as a script, not imported).
 
 Both libraries can crash the whole process (segmentation fault), loop forever or allocate many
-gigabytes on damaged files (a .3dm of 11 KB with a few bytes changed makes openNURBS allocate
+gigabytes on damaged files (a .3dm of 10 KB with a few bytes changed makes openNURBS allocate
 4 GiB; another keeps it busy for good), so :mod:`nurbs_core.io.cad` reads them in this
 long-lived child process, under a memory cap (RLIMIT_AS) and a time limit, and turns a crash or
 a timeout into a FileFormatError. The script imports only numpy at start (OCP and rhino3dm when a
@@ -183,7 +183,7 @@ def _rhino_surface(surface, what: str, available: int) -> dict:
     control, weights = _euclidean(homogeneous, what)
     return {"kind": np.array("surface"), "control": control, "weights": weights,
             "knots_u": _rhino_knots(nurbs.KnotsU), "knots_v": _rhino_knots(nurbs.KnotsV),
-            "degrees": np.array([nurbs.OrderU - 1, nurbs.OrderV - 1])}
+            "degrees": np.array([nurbs.OrderU - 1, nurbs.OrderV - 1]), "label": np.array(what)}
 
 
 def _rhino_curve(curve, what: str, available: int) -> dict:
@@ -201,7 +201,8 @@ def _rhino_curve(curve, what: str, available: int) -> dict:
     if nurbs.Dimension == 2:
         control = control[:, :2]
     return {"kind": np.array("curve"), "control": control, "weights": weights,
-            "knots": _rhino_knots(nurbs.Knots), "degrees": np.array([nurbs.Order - 1])}
+            "knots": _rhino_knots(nurbs.Knots), "degrees": np.array([nurbs.Order - 1]),
+            "label": np.array(what)}
 
 
 def _rhino_object(obj, index: int, available: int) -> list[dict]:
@@ -218,16 +219,16 @@ def _rhino_object(obj, index: int, available: int) -> list[dict]:
     items = []
     if isinstance(geometry, rhino3dm.Brep):
         for face_index in range(len(geometry.Faces)):
-            label = f"{what} face {face_index}"
             face = geometry.Faces[face_index]
-            items.append((label, _rhino_surface(face.UnderlyingSurface(), label, available)))
+            items.append(_rhino_surface(face.UnderlyingSurface(), f"{what} face {face_index}",
+                                        available))
     elif isinstance(geometry, rhino3dm.Surface):  # NurbsSurface, Extrusion, Rev/Sum/Plane
-        items.append((what, _rhino_surface(geometry, what, available)))
+        items.append(_rhino_surface(geometry, what, available))
     elif isinstance(geometry, rhino3dm.Curve):
-        items.append((what, _rhino_curve(geometry, what, available)))
-    for label, item in items:
-        item["label"], item["name"] = np.array(label), np.array(name or "")
-    return [item for _, item in items]
+        items.append(_rhino_curve(geometry, what, available))
+    for item in items:
+        item["name"] = np.array(name or "")
+    return items
 
 
 def read_3dm_items(path: str) -> tuple[list[dict], int]:

@@ -1,6 +1,6 @@
 """Atomic file writes: the target is replaced only by a complete, flushed file.
 
-Both helpers write a temporary file in the target's directory (so the final ``os.replace`` is an
+Every helper writes a temporary file in the target's directory (so the final ``os.replace`` is an
 atomic rename on the same file system), fsync it, and replace the target only when the block
 ends without an exception. On any exception the temporary file is removed and an existing target
 is left byte-for-byte as it was. A symbolic link is followed (its target is replaced, the link
@@ -19,14 +19,14 @@ from typing import IO
 _WRITE_MODES = ("w", "wb", "wt")
 
 
-def _temporary_name(target: Path, suffix: str) -> Path:
-    return target.with_name(f".{target.name}.{secrets.token_hex(4)}.tmp{suffix}")
+def _temporary_name(target: Path) -> Path:
+    return target.with_name(f".{target.name}.{secrets.token_hex(4)}.tmp{target.suffix}")
 
 
-def _create(target: Path, suffix: str) -> Path:
+def _create(target: Path) -> Path:
     """Create (exclusively, mode 0666 minus umask) an empty temporary file next to target."""
     for _ in range(100):
-        temporary = _temporary_name(target, suffix)
+        temporary = _temporary_name(target)
         try:
             os.close(os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
         except FileExistsError:
@@ -52,30 +52,14 @@ def _fsync_path(path: Path, directory: bool = False) -> None:
         os.close(descriptor)
 
 
-def _commit(temporary: Path, target: Path) -> None:
-    _fsync_path(temporary)
-    with contextlib.suppress(FileNotFoundError):
-        os.chmod(temporary, os.stat(target).st_mode & 0o7777)
-    os.replace(temporary, target)
-    _fsync_path(target.parent, directory=True)
-
-
 @contextlib.contextmanager
-def atomic_path(path, suffix: str | None = None) -> Iterator[Path]:
-    """Yield a temporary path next to ``path`` (ending in ``suffix``, default path's own, so
-    writers that pick the format from the name still work) for a writer that needs a file name;
-    the file written there replaces ``path`` when the block succeeds. The writer may create,
-    truncate or recreate the file; if it writes nothing, ``path`` is replaced by an empty file.
-    """
-    target = Path(os.path.realpath(os.fspath(path)))
-    temporary = _create(target, target.suffix if suffix is None else suffix)
-    try:
+def atomic_path(path) -> Iterator[Path]:
+    """Yield a temporary path next to ``path`` (with its suffix, so writers that pick the format
+    from the name still work) for a writer that needs a file name; the file written there
+    replaces ``path`` when the block succeeds. The writer may create, truncate or recreate the
+    file; if it writes nothing, ``path`` is replaced by an empty file."""
+    with atomic_paths([path]) as (temporary,):
         yield temporary
-        _commit(temporary, target)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(temporary)
-        raise
 
 
 @contextlib.contextmanager
@@ -101,7 +85,7 @@ def atomic_paths(paths) -> Iterator[list[Path]]:
     temporaries: list[Path] = []
     try:
         for target in targets:
-            temporaries.append(_create(target, target.suffix))
+            temporaries.append(_create(target))
         yield list(temporaries)
         for temporary in temporaries:
             _fsync_path(temporary)

@@ -260,7 +260,7 @@ class _ReaderProcess:
     def __init__(self):
         self._process: subprocess.Popen | None = None
         self._lock = threading.Lock()
-        self._pending: dict[int, bytes] = {}  # bytes read past the last line, per child
+        self._pending = b""  # bytes the child wrote past its last complete line
 
     def _start(self) -> subprocess.Popen:
         script = Path(__file__).with_name("_occ_reader.py")
@@ -282,7 +282,7 @@ class _ReaderProcess:
         library looping burns CPU, a busy machine only stretches the wall time; the wall time
         is still capped at WALL_TIME_FACTOR x timeout)."""
         start, used_before = time.monotonic(), _cpu_seconds(process.pid) if cpu else None
-        pending = self._pending.setdefault(process.pid, b"")
+        pending = self._pending
         descriptor = process.stdout.fileno()  # read unbuffered: select() sees only the pipe
         while b"\n" not in pending:
             elapsed = time.monotonic() - start
@@ -298,7 +298,7 @@ class _ReaderProcess:
                     return None
                 pending += data
         line, pending = pending.split(b"\n", 1)
-        self._pending[process.pid] = pending
+        self._pending = pending
         try:
             return json.loads(line)
         except ValueError:
@@ -308,7 +308,7 @@ class _ReaderProcess:
                 memory: int | None = None) -> dict:
         with self._lock:
             if self._process is None or self._process.poll() is not None:
-                self._pending.clear()
+                self._pending = b""
                 self._process = self._start()
                 started = self._reply(self._process, START_TIMEOUT_SECONDS)
                 if not isinstance(started, dict) or not started.get("ready"):
@@ -394,9 +394,10 @@ def read_in_worker(path, kind: str, timeout: float | None = None) -> list:
     result = []
     for k in range(reply["count"]):
         degrees = arrays[f"degrees_{k}"]
-        default = f"face {k}" if str(arrays[f"kind_{k}"]) == "surface" else f"edge {k}"
+        surface = str(arrays[f"kind_{k}"]) == "surface"
+        default = f"face {k}" if surface else f"edge {k}"
         what = str(arrays[f"label_{k}"]) if f"label_{k}" in arrays else default
-        if str(arrays[f"kind_{k}"]) == "surface":
+        if surface:
             item = make_surface(path, arrays[f"control_{k}"], arrays[f"weights_{k}"],
                                 arrays[f"knots_u_{k}"], arrays[f"knots_v_{k}"],
                                 degrees[0], degrees[1], what=what)

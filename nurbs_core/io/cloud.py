@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.limits import MAX_LINE_BYTES, check_claimed_size, line_too_long
 
 
 @dataclass
@@ -167,14 +168,6 @@ def classify_extra_columns(extra: np.ndarray) -> dict[str, np.ndarray]:
 TEXT_CHUNK_BYTES = 1 << 20
 
 
-def _too_long(path, length: int, line: int) -> FileFormatError:
-    from nurbs_core.io.limits import MAX_LINE_BYTES, format_size
-
-    return FileFormatError(path, f"line of {format_size(length)} is longer than the "
-                                 f"{format_size(MAX_LINE_BYTES)} a text line may have (not a "
-                                 "point file, or its line breaks are missing)", line=line)
-
-
 def _skip_lines(path, handle, skip: int, line: int, what: str) -> tuple[bytes, int]:
     """Read past ``skip`` lines (counting line breaks a block at a time, never splitting them);
     return what follows the last skipped line break in the block and the next line number."""
@@ -203,7 +196,6 @@ def read_text_rows(path, offset: int, first_line: int, count: int, width: int, *
     lines at a time (never split whole), only the lines needed are read, and a line longer
     than ``limits.MAX_LINE_BYTES`` is refused.
     """
-    from nurbs_core.io.limits import MAX_LINE_BYTES, check_claimed_size
     from nurbs_core.io.text_points import parse_table
 
     available = os.path.getsize(path) - offset - skip + 1  # the last line may lack its break
@@ -227,27 +219,24 @@ def read_text_rows(path, offset: int, first_line: int, count: int, width: int, *
                 cut = data.rfind(b"\n")
                 if cut < 0:  # no line break in the block: keep reading, within bounds
                     if len(data) > MAX_LINE_BYTES:
-                        raise _too_long(path, len(data), line)
+                        raise line_too_long(path, len(data), line)
                     carry = data
                     continue
                 carry = data[cut + 1:]
                 if len(carry) > MAX_LINE_BYTES:
-                    raise _too_long(path, len(carry), line + data.count(b"\n", 0, cut) + 1)
+                    raise line_too_long(path, len(carry), line + data.count(b"\n", 0, cut) + 1)
             rows = data[:cut].decode("ascii", errors="replace").split("\n")[: count - filled]
-            if filled + len(rows) > len(table):  # cannot be valid rows: find the bad one
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", UserWarning)
-                    parse_table(path, rows, width, lambda k, start=line: start + k)
-                raise FileFormatError(path, f"the header declares {count} {what}, more than "
-                                            "the file can hold", line=line)
             lengths = [len(row) for row in rows]
             if max(lengths) > MAX_LINE_BYTES:
                 longest = int(np.argmax(lengths))
-                raise _too_long(path, lengths[longest], line + longest)
+                raise line_too_long(path, lengths[longest], line + longest)
             with warnings.catch_warnings():  # numpy warns about empty lines: they are errors
                 warnings.simplefilter("ignore", UserWarning)
-                table[filled: filled + len(rows)] = parse_table(path, rows, width,
-                                                                lambda k, start=line: start + k)
+                parsed = parse_table(path, rows, width, lambda k, start=line: start + k)
+            if filled + len(rows) > len(table):  # not once they parse: 2 * width bytes a row
+                raise FileFormatError(path, f"the header declares {count} {what}, more than "
+                                            "the file can hold", line=line)
+            table[filled: filled + len(rows)] = parsed
             filled += len(rows)
             line += len(rows)
     return table

@@ -130,9 +130,9 @@ def check_save_suffix(geometry, path) -> None:
 def _write(geometry_or_list, path, suffix: str, **options) -> None:
     """Write to ``path`` (a temporary file) in the format of ``suffix``."""
     if is_network(geometry_or_list):
-        from nurbs_core.io.network_io import write_network
+        from nurbs_core.io.network_io import write_network_file
 
-        write_network(geometry_or_list, path, **options)
+        write_network_file(geometry_or_list, path, suffix, **options)
     elif suffix == ".3dm":
         from nurbs_core.io.rhino import write_3dm
 

@@ -42,9 +42,10 @@ def _surface(path, entry: dict, what: str):
     size_v = file_integer(path, json_key(path, entry, "size_v", what), "size_v", what,
                           maximum=MAX_SIZE)
     points, weights = _net(path, entry, what)
-    knots_u, knots_v = json_key(path, entry, "knotvector_u", what), json_key(path, entry, "knotvector_v",
-                                                                     what)
-    degree_u, degree_v = json_key(path, entry, "degree_u", what), json_key(path, entry, "degree_v", what)
+    knots_u = json_key(path, entry, "knotvector_u", what)
+    knots_v = json_key(path, entry, "knotvector_v", what)
+    degree_u = json_key(path, entry, "degree_u", what)
+    degree_v = json_key(path, entry, "degree_v", what)
     points = file_array(path, points, "control points", what)
     count = size_u * size_v
     if points.ndim == 3:  # the nested variant: size_u x size_v x 3
@@ -52,7 +53,7 @@ def _surface(path, entry: dict, what: str):
             raise FileFormatError(path, f"{what}: control net is {points.shape[:2]}, size_u x "
                                         f"size_v says {(size_u, size_v)}")
         points = points.reshape(count, -1)
-    if points.ndim != 2 or points.shape != (count, 3):
+    if points.shape != (count, 3):
         raise FileFormatError(path, f"{what}: expected {count} = {size_u} x {size_v} control "
                                     f"points of dimension 3, got an array of shape "
                                     f"{points.shape}")
@@ -84,7 +85,7 @@ def read_geomdl_json(path, document=None) -> list:
     entries = shape["data"] if isinstance(shape["data"], list) else [shape["data"]]
     kind = shape.get("type", "surface")
     if kind not in ("surface", "curve"):
-        raise FileFormatError(path, f"geomdl shape type {str(repr(kind))[:40]} is not supported "
+        raise FileFormatError(path, f"geomdl shape type {repr(kind)[:40]} is not supported "
                                     "(surface or curve)")
     if not entries:
         raise FileFormatError(path, "the geomdl document holds no shapes")

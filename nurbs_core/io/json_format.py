@@ -135,7 +135,7 @@ def read_document(path, document=None):
     version = document.get("version")
     if type(version) is not int or version != FORMAT_VERSION:
         raise FileFormatError(path, f"unsupported {FORMAT_NAME} JSON version "
-                                    f"{str(repr(version))[:40]} (this program reads version "
+                                    f"{repr(version)[:40]} (this program reads version "
                                     f"{FORMAT_VERSION})")
     metadata = metadata_object(path, document.get("metadata"), "the document's")
     items = document.get("geometry")
@@ -157,7 +157,7 @@ def read_document(path, document=None):
                               entry.get("weights"), json_key(path, entry, "knots", what),
                               json_key(path, entry, "degree", what), what=f"{what} (curve)")
         else:
-            raise FileFormatError(path, f"{what} has unknown kind {str(repr(kind))[:40]} "
+            raise FileFormatError(path, f"{what} has unknown kind {repr(kind)[:40]} "
                                         "(\"surface\" or \"curve\")")
         item.metadata = metadata_object(path, entry.get("metadata"), what)
         geometry.append(item)

@@ -127,10 +127,24 @@ def sniff_text(path, what: str = "a text file") -> bytes:
     return head
 
 
-def check_line_lengths(path, raw: bytes, limit: int = MAX_LINE_BYTES) -> None:
-    """FileFormatError naming the first line of ``raw`` longer than ``limit`` bytes (one
-    vectorised pass over the line breaks)."""
+def line_too_long(path, length: int, line: int, limit: int = MAX_LINE_BYTES) -> FileFormatError:
+    """The error for a text line of ``length`` bytes, over ``limit``, at 1-based ``line``."""
+    return FileFormatError(path, f"line of {format_size(length)} is longer than the "
+                                 f"{format_size(limit)} a text line may have (not a point or "
+                                 f"geometry file, or its line breaks are missing)", line=line)
+
+
+def check_line_lengths(path, raw: bytes, limit: int = MAX_LINE_BYTES, first_line: int = 1) -> None:
+    """FileFormatError naming the first line of ``raw`` (a block whose first line is line
+    ``first_line`` of the file) longer than ``limit`` bytes.
+
+    A line longer than the limit covers a whole window of half the limit, so the exact check
+    (vectorised over the line breaks, memory-hungry for blocks of many short lines) runs only
+    when some window has no line break."""
     if len(raw) <= limit:
+        return
+    half = max(1, limit // 2)
+    if all(raw.find(b"\n", start, start + half) >= 0 for start in range(0, len(raw), half)):
         return
     breaks = np.flatnonzero(np.frombuffer(raw, dtype=np.uint8) == 10)
     ends = np.concatenate([breaks, [len(raw)]])
@@ -138,7 +152,4 @@ def check_line_lengths(path, raw: bytes, limit: int = MAX_LINE_BYTES) -> None:
     too_long = np.flatnonzero(lengths > limit)
     if too_long.size:
         number = int(too_long[0])
-        raise FileFormatError(path, f"line of {format_size(int(lengths[number]))} is longer than "
-                                    f"the {format_size(limit)} a text line may have (not a point "
-                                    f"or geometry file, or its line breaks are missing)",
-                              line=number + 1)
+        raise line_too_long(path, int(lengths[number]), first_line + number, limit)

@@ -18,7 +18,6 @@ FileFormatError naming the file.
 from __future__ import annotations
 
 import contextlib
-import functools
 import json
 import logging
 import os
@@ -57,6 +56,14 @@ def _index(path, value, length: int, what: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < length:
         raise FileFormatError(path, f"{what} must be an index below {length}, got {value!r}"[:300])
     return value
+
+
+def _indices(path, owner: dict, key: str, length: int, what: str, item: str) -> list[int]:
+    """``owner[key]`` (default empty): a list of indices below ``length``."""
+    values = owner.get(key, [])
+    if not isinstance(values, list):
+        raise FileFormatError(path, f"{what}: {key} must be a list")
+    return [_index(path, value, length, f"{what}: {item}") for value in values]
 
 
 def _objects(path, document: dict, key: str) -> list:
@@ -224,11 +231,7 @@ def _check_scene(path, document, accessors, meshes, nodes, file_size: int) -> No
     parent: dict[int, int] = {}
     instanced = placed = 0
     for k, node in enumerate(nodes):
-        children = node.get("children", [])
-        if not isinstance(children, list):
-            raise FileFormatError(path, f"node {k}: children must be a list")
-        for child in children:
-            _index(path, child, len(nodes), f"node {k}: child")
+        for child in _indices(path, node, "children", len(nodes), f"node {k}", "child"):
             if child == k or child in parent:
                 raise FileFormatError(path, f"node {child} has two parents or is its own child: "
                                             "the node hierarchy is not a tree")
@@ -247,13 +250,8 @@ def _check_scene(path, document, accessors, meshes, nodes, file_size: int) -> No
             chain.add(node)
             node = parent[node]
         settled |= chain
-    scenes = _objects(path, document, "scenes")
-    for k, scene in enumerate(scenes):
-        roots = scene.get("nodes", [])
-        if not isinstance(roots, list):
-            raise FileFormatError(path, f"scene {k}: nodes must be a list")
-        for root in roots:
-            _index(path, root, len(nodes), f"scene {k}: node")
+    for k, scene in enumerate(_objects(path, document, "scenes")):
+        _indices(path, scene, "nodes", len(nodes), f"scene {k}", "node")
     placed = placed if nodes else sum(parts)
     if placed > _MAX_GLTF_PLACEMENTS:
         raise FileFormatError(path, f"the glTF scene places {placed} mesh primitives, more than "
@@ -345,7 +343,7 @@ def _check_before_trimesh(path, suffix: str) -> dict | None:
     elif suffix == ".ply":
         from nurbs_core.io import ply
 
-        ply.walk_list_elements(path, ply.read_header(path))
+        ply.walk_list_elements(path)
     elif suffix == ".glb":
         return _check_glb(path)
     elif suffix == ".gltf":
@@ -358,7 +356,8 @@ def _check_before_trimesh(path, suffix: str) -> dict | None:
 def _quiet_trimesh():
     """trimesh logs recoverable parse problems as warnings with a full traceback (printed on
     stderr when the application has no logging set up); a reader reports problems as its own
-    FileFormatError instead, so those warnings are held back while a file is read."""
+    FileFormatError instead, so those warnings are held back while a file is read (used as a
+    decorator: a fresh context on every call)."""
     logger = logging.getLogger("trimesh")
     previous = logger.level
     logger.setLevel(logging.ERROR)
@@ -366,14 +365,6 @@ def _quiet_trimesh():
         yield
     finally:
         logger.setLevel(previous)
-
-
-def _quietly(reader):
-    @functools.wraps(reader)
-    def wrapper(*args, **kwargs):
-        with _quiet_trimesh():
-            return reader(*args, **kwargs)
-    return wrapper
 
 
 def _load_trimesh(path, suffix: str):
@@ -407,7 +398,42 @@ def _check_faces(path, faces: np.ndarray, vertex_count: int) -> None:
                                     f"{vertex_count} vertices")
 
 
-@_quietly
+def _sample(path, mesh, count: int, seed: int) -> PointCloud:
+    """``count`` points uniform over the area of a trimesh.Trimesh (trimesh's area-weighted
+    sampling) with their face normals and face indices."""
+    import trimesh
+
+    if count < 1:
+        raise ValueError(f"sample_count must be positive, got {count}")
+    try:
+        area = mesh.area
+        if not area > 0:
+            raise FileFormatError(path, "the mesh has zero area, so it cannot be sampled")
+        points, face_index = trimesh.sample.sample_surface(mesh, int(count), seed=seed)
+        normals = np.asarray(mesh.face_normals[face_index], dtype=np.float64)
+    except FileFormatError:
+        raise
+    except Exception as exc:  # degenerate data trimesh cannot sample
+        raise FileFormatError(path, f"the mesh cannot be sampled: {type(exc).__name__}: "
+                                    f"{str(exc)[:300]}") from None
+    attributes = {"normals": normals, "face_index": np.asarray(face_index)}
+    return PointCloud(check_points(path, np.asarray(points, dtype=np.float64)), attributes, path)
+
+
+@_quiet_trimesh()
+def sample_mesh_points(path, vertices: np.ndarray, faces: np.ndarray, count: int = 100_000,
+                       seed: int = 0) -> PointCloud:
+    """``count`` points uniform over the area of the triangle mesh (vertices (V, 3), faces
+    (F, 3)) read from ``path`` (by :func:`read_mesh_faces`), as ``load_points(path,
+    mesh_mode="sample")`` gives them, without reading the file again."""
+    import trimesh
+
+    check_points(path, vertices)
+    _check_faces(path, faces, len(vertices))
+    return _sample(path, trimesh.Trimesh(vertices, faces, process=False), count, seed)
+
+
+@_quiet_trimesh()
 def read_mesh_points(path, suffix: str, mesh_mode: str = "vertices",
                      sample_count: int = 100_000, seed: int = 0) -> PointCloud:
     import trimesh
@@ -423,23 +449,7 @@ def read_mesh_points(path, suffix: str, mesh_mode: str = "vertices",
     if mesh_mode == "sample" and isinstance(mesh, trimesh.Trimesh) and len(faces) > 0:
         check_points(path, vertices)
         _check_faces(path, faces, len(vertices))
-        if sample_count < 1:
-            raise ValueError(f"sample_count must be positive, got {sample_count}")
-        try:
-            area = mesh.area
-            if not area > 0:
-                raise FileFormatError(path, "the mesh has zero area, so it cannot be sampled")
-            points, face_index = trimesh.sample.sample_surface(mesh, int(sample_count), seed=seed)
-            normals = np.asarray(mesh.face_normals[face_index], dtype=np.float64)
-        except FileFormatError:
-            raise
-        except Exception as exc:  # degenerate data trimesh cannot sample
-            raise FileFormatError(path, f"the mesh cannot be sampled: {type(exc).__name__}: "
-                                        f"{str(exc)[:300]}") from None
-        attributes["normals"] = normals
-        attributes["face_index"] = np.asarray(face_index)
-        return PointCloud(check_points(path, np.asarray(points, dtype=np.float64)), attributes,
-                          path)
+        return _sample(path, mesh, sample_count, seed)
     if suffix == ".stl":  # STL repeats each vertex once per triangle
         vertices, first = np.unique(vertices, axis=0, return_index=True)
         vertices = vertices[np.argsort(first)]
@@ -452,7 +462,7 @@ def read_mesh_points(path, suffix: str, mesh_mode: str = "vertices",
     return PointCloud(vertices, attributes, path)
 
 
-@_quietly
+@_quiet_trimesh()
 def read_mesh_faces(path, suffix: str) -> tuple[np.ndarray, np.ndarray] | None:
     """The file's triangle mesh as (vertices (V, 3) float64, faces (F, 3) int64), duplicate
     vertices merged (STL), or None when the file has no faces."""

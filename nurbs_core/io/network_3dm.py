@@ -27,7 +27,6 @@ from nurbs_core.io._opennurbs_brep import (
     Trim,
     encode_brep,
 )
-from nurbs_core.io.atomic import atomic_path
 
 #: The outer loop of a patch, counter-clockwise in (u, v), side by side: (corner slots of the
 #: side in its own parameter direction, that side's control-point row of a (size, size, 3) net,
@@ -126,6 +125,5 @@ def write_network_3dm(network, path, metadata: dict | None = None, version: int 
         if key == "name":
             attributes.Name = text
     model.Objects.AddBrep(network_brep(network), attributes)
-    with atomic_path(path) as temporary:
-        if not model.Write(str(temporary), version):
-            raise OSError(f"{path}: rhino3dm could not write the file")
+    if not model.Write(str(path), version):
+        raise OSError(f"{path}: rhino3dm could not write the file")

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbs_core.io.atomic import atomic_write
 from nurbs_core.io.cad import iges_bytes, occ_surface, quiet_occ, step_bytes
 from nurbs_core.io.errors import require_ocp
 
@@ -111,7 +110,7 @@ def write_network_step(network, path) -> None:
     """STEP (AP214, 17 significant digits): a MANIFOLD_SOLID_BREP for a closed network, a
     SHELL_BASED_SURFACE_MODEL for an open one."""
     shape = network_shape(network)
-    with atomic_write(path) as handle:
+    with open(path, "wb") as handle:
         handle.write(step_bytes(shape, path))
 
 
@@ -119,5 +118,5 @@ def write_network_iges(network, path) -> None:
     """IGES (17 significant digits) in B-rep mode: one shell (entity 514; in a solid, 186, when
     the network is closed) of faces 510 sharing their edges."""
     shape = network_shape(network)
-    with atomic_write(path) as handle:
+    with open(path, "wb") as handle:
         handle.write(iges_bytes(shape, path, brep=True))

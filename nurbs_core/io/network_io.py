@@ -10,8 +10,9 @@
 * ``.obj/.ply/.stl/.glb``: one welded, crack-free triangle mesh (option ``resolution``,
   samples per patch side, default 32; :mod:`nurbs_core.io.network_mesh`).
 
-Every writer replaces the target atomically (:mod:`nurbs_core.io.atomic`): a failed write
-leaves an existing file untouched.
+``write_network`` (like :func:`nurbs_core.io.save`) replaces the target atomically
+(:mod:`nurbs_core.io.atomic`): a failed write leaves an existing file untouched. The per-format
+writers write to the path they are given.
 
 Our JSON (``"format": "nurbs-studio-network-v1"``)::
 
@@ -35,7 +36,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from nurbs_core.io.atomic import atomic_write
+from nurbs_core.io.atomic import atomic_path
 from nurbs_core.io.dispatch import NETWORK_SUFFIXES
 from nurbs_core.io.errors import FileFormatError
 from nurbs_core.io.json_format import read_json_file
@@ -85,16 +86,28 @@ def _json_chunks(document: dict) -> Iterator[str]:
 
 def write_network_json(network, path, metadata: dict | None = None) -> None:
     document = network_document(network, metadata)
-    with atomic_write(path, "w") as handle:
+    with open(path, "w", encoding="utf-8") as handle:
         for chunk in _json_chunks(document):
             handle.write(chunk)
 
 
 def write_network(network, path, *, metadata: dict | None = None, **options) -> None:
-    """Write ``network`` in the format of the suffix (see the module docstring). ``metadata``
-    (JSON-serialisable) goes into the JSON document, and into the .3dm object (name from
-    ``metadata['name']``, every entry as a user string); STEP, IGES and meshes ignore it."""
+    """Write ``network`` in the format of the suffix (see the module docstring), atomically.
+    ``metadata`` (JSON-serialisable) goes into the JSON document, and into the .3dm object
+    (name from ``metadata['name']``, every entry as a user string); STEP, IGES and meshes ignore
+    it."""
     suffix = suffix_of(path)
+    if suffix not in NETWORK_SUFFIXES:
+        raise FileFormatError(path, f"cannot save a patch network as {suffix!r}; supported: "
+                                    f"{', '.join(NETWORK_SUFFIXES)}")
+    with atomic_path(path) as temporary:
+        write_network_file(network, temporary, suffix, metadata=metadata, **options)
+
+
+def write_network_file(network, path, suffix: str, *, metadata: dict | None = None,
+                       **options) -> None:
+    """Write ``network`` to ``path`` as it stands (no temporary file: the caller makes the write
+    atomic) in the format of ``suffix``, one of NETWORK_SUFFIXES."""
     if suffix == ".json":
         write_network_json(network, path, metadata, **options)
     elif suffix == ".3dm":
@@ -114,8 +127,7 @@ def write_network(network, path, *, metadata: dict | None = None, **options) -> 
 
         write_network_mesh(network, path, **options)
     else:
-        raise FileFormatError(path, f"cannot save a patch network as {suffix!r}; supported: "
-                                    f"{', '.join(NETWORK_SUFFIXES)}")
+        raise FileFormatError(path, f"cannot save a patch network as {suffix!r}")
 
 
 # --- reading -------------------------------------------------------------------------------

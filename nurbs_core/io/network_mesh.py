@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbs_core.io.atomic import atomic_path
 from nurbs_core.io.tessellate import MESH_EXPORT_SUFFIXES, grid_faces, tessellate_surface
 
 NETWORK_MESH_SUFFIXES = MESH_EXPORT_SUFFIXES
@@ -58,5 +57,4 @@ def write_network_mesh(network, path, resolution: int = 32) -> None:
     if suffix not in NETWORK_MESH_SUFFIXES:
         raise ValueError(f"{path}: not a mesh suffix ({', '.join(NETWORK_MESH_SUFFIXES)})")
     mesh = network_mesh(network, resolution)
-    with atomic_path(path) as temporary:
-        mesh.export(str(temporary), file_type=suffix.lstrip("."))
+    mesh.export(str(path), file_type=suffix.lstrip("."))

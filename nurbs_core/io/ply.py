@@ -152,8 +152,8 @@ def _check_counts(path, header: PlyHeader) -> None:
         available += 1  # the last ASCII line may lack its line break
     for element in header.elements:
         row = header.min_row_bytes(element)
-        if header.endian is not None and row == 0:
-            continue  # rows without properties take no bytes
+        if row == 0:
+            continue  # binary rows without properties take no bytes
         check_claimed_size(path, element.count, row, available,
                            what=f"'{element.name}' elements", line=element.line)
         available -= element.count * row
@@ -302,33 +302,35 @@ class _RowWalker:
         return position
 
 
-def walk_list_elements(path, header: PlyHeader | None = None) -> None:
+def _skip_elements(path, handle, header: PlyHeader, stop: PlyElement | None = None) -> int:
+    """The position after the binary elements before ``stop`` (all of them if None), each row
+    with lists walked and checked against the file."""
+    position = header.data_offset
+    for element in header.elements:
+        if element is stop:
+            break
+        if element.has_lists:
+            position = _RowWalker(path, handle, header, element).skip(position)
+        else:
+            position += element.count * header.fixed_dtype(element).itemsize
+    return position
+
+
+def walk_list_elements(path) -> None:
     """Check every row of every binary element with lists (lengths against the file) without
     reading the data: before a PLY file goes to a library that would trust the lists."""
-    header = header or read_header(path)
+    header = read_header(path)
     if header.endian is None:
         return
     with open(path, "rb") as handle:
-        position = header.data_offset
-        for element in header.elements:
-            if element.has_lists:
-                position = _RowWalker(path, handle, header, element).skip(position)
-            else:
-                position += element.count * header.fixed_dtype(element).itemsize
+        _skip_elements(path, handle, header)
 
 
 def _read_binary(path, header: PlyHeader, vertex: PlyElement, plan) -> dict[str, np.ndarray]:
     dtype = header.fixed_dtype(vertex)
     size = header.file_size
     with open(path, "rb") as handle:
-        start = header.data_offset
-        for element in header.elements:
-            if element is vertex:
-                break
-            if element.has_lists:
-                start = _RowWalker(path, handle, header, element).skip(start)
-            else:
-                start += element.count * header.fixed_dtype(element).itemsize
+        start = _skip_elements(path, handle, header, vertex)
         handle.seek(start)
         needed = vertex.count * dtype.itemsize
         if start + needed > size:

@@ -21,7 +21,7 @@ def read_3dm(path) -> list:
     item's ``.metadata`` holds the object's name.
 
     openNURBS runs in the reader process of :mod:`nurbs_core.io.cad` (``_occ_reader.py``):
-    damaged .3dm files can make it allocate gigabytes or never return (an 11 KB file with a few
+    damaged .3dm files can make it allocate gigabytes or never return (a 10 KB file with a few
     bytes changed does either), and a crash, a timeout, the memory cap or rhino3dm's errors
     become a FileFormatError naming the file (and the object).
     """
@@ -70,9 +70,9 @@ def write_3dm(geometry_or_list, path, version: int = 7) -> None:
     """Write surfaces and curves as rational NURBS objects (names from ``.metadata['name']``)."""
     import rhino3dm
 
-    model = rhino3dm.File3dm()
     from nurbs_core.io.geometry_io import as_geometry_list, metadata_of, numpy_of
 
+    model = rhino3dm.File3dm()
     for item in as_geometry_list(geometry_or_list):
         data = numpy_of(item)
         attributes = rhino3dm.ObjectAttributes()

@@ -35,15 +35,15 @@ def check_las_header(path) -> None:
     header_size, offset, vlrs = struct.unpack_from("<HII", head, 94)
     point_format, record = head[104], struct.unpack_from("<H", head, 105)[0]
     count = struct.unpack_from("<I", head, 107)[0]
-    if not _LAS_HEADER_MIN <= header_size <= min(offset, size):
-        raise FileFormatError(path, f"the header size {header_size} is not between "
-                                    f"{_LAS_HEADER_MIN} and the point data offset {offset}")
     if offset > size:
         raise FileFormatError(path, f"the point data starts at byte {offset}, past the end of "
                                     f"the file ({size} bytes)")
+    if not _LAS_HEADER_MIN <= header_size <= offset:
+        raise FileFormatError(path, f"the header size {header_size} is not between "
+                                    f"{_LAS_HEADER_MIN} and the point data offset {offset}")
     check_claimed_size(path, vlrs, _LAS_VLR_HEADER, offset - header_size,
                        what="variable-length records (VLRs)")
-    if minor >= 4 and header_size >= 375 and len(head) >= 375:
+    if minor >= 4 and header_size >= 375:  # then the file, and head, hold the 375 bytes
         evlr_start, evlrs, wide_count = struct.unpack_from("<QIQ", head, 235)
         count = wide_count or count
         if evlrs:
@@ -103,6 +103,7 @@ def read_e57_points(path) -> PointCloud:
         raise MissingDependencyError("Reading E57", E57_INSTALL_HINT) from None
     try:
         e57 = pye57.E57(str(path))
+        size = os.path.getsize(path)
         scans = []
         for k in range(e57.scan_count):
             header = e57.get_header(k)
@@ -112,7 +113,7 @@ def read_e57_points(path) -> PointCloud:
                                             f"({count})")
             # pye57 allocates a float64 buffer per field and copies the coordinates
             check_decompressed_size(path, count * 8 * (len(header.point_fields) + 3),
-                                    os.path.getsize(path), what=f"scan {k} ({count} points)")
+                                    size, what=f"scan {k} ({count} points)")
             scans.append(e57.read_scan(k, ignore_missing_fields=True, intensity=True,
                                        colors=True, transform=True))
     except FileFormatError:

@@ -17,6 +17,7 @@ are sniffed for binary data first, a line longer than
 from __future__ import annotations
 
 import codecs
+import itertools
 import os
 import re
 
@@ -64,20 +65,6 @@ def _is_number(token: str) -> bool:
     return True
 
 
-def _check_lines(path, raw: bytes, first_line: int) -> None:
-    """check_line_lengths for a block whose first line is ``first_line`` of the file.
-
-    A line longer than the limit covers a whole window of half the limit: the exact (vectorised,
-    memory-hungry for blocks of many short lines) check runs only when a window has no break."""
-    half = MAX_LINE_BYTES // 2
-    if all(raw.find(b"\n", start, start + half) >= 0 for start in range(0, len(raw), half)):
-        return
-    try:
-        check_line_lengths(path, raw)
-    except FileFormatError as exc:
-        raise FileFormatError(path, exc.problem, line=(exc.line or 1) + first_line - 1) from None
-
-
 def _decode(raw: bytes) -> str:
     try:
         return raw.decode("utf-8")
@@ -104,9 +91,9 @@ def _text_blocks(path, head: bytes):
             else:
                 body, carry = chunk, b""
             if len(carry) > MAX_LINE_BYTES:  # a line still without its end: too long already
-                _check_lines(path, carry, number + body.count(b"\n"))
+                check_line_lengths(path, carry, first_line=number + body.count(b"\n"))
             if body:
-                _check_lines(path, body, number)
+                check_line_lengths(path, body, first_line=number)
                 if b"\x00" in body:
                     line = number + body[: body.index(b"\x00")].count(b"\n")
                     raise FileFormatError(path, "binary data (NUL bytes), not a text point list",
@@ -321,10 +308,9 @@ def read_text_points(path) -> PointCloud:
             previous_last = _last_line(raw)
             continue  # only comments and blank lines (found by regex, not a Python loop)
         found, block_before = _first_rows(_decode(raw), first_line, SAMPLE_ROWS - len(samples))
-        if found and not samples:
+        if not samples:  # found holds the first data rows
             before = block_before if block_before is not None else previous_last
-        if found or samples:
-            pending.append((first_line, raw))
+        pending.append((first_line, raw))
         samples += found
         previous_last = _last_line(raw)
         if len(samples) >= 2:
@@ -353,19 +339,14 @@ def read_text_points(path) -> PointCloud:
     _check_width(path, width, header_line or data_line)
     if names is None and skip == 0:
         names = _commented_header(before, width)
-        header_line = samples[0][0] - 1 if names is not None else None
+        header_line = line0 - 1 if names is not None else None
     if width < 3:
         raise FileFormatError(path, f"a point needs at least 3 columns (x y z), found {width}",
                               line=header_line or data_line)
     point_columns = _point_columns(path, names, header_line) if names is not None else [0, 1, 2]
     # 3. the data, block by block, into one buffer grown in place (realloc: no second copy)
     buffer, count = None, 0
-
-    def all_blocks():
-        yield from pending
-        yield from blocks
-
-    for first_line, raw in all_blocks():
+    for first_line, raw in itertools.chain(pending, blocks):
         block = _Block(_decode(raw.translate(bytes_table)), first_line, skip)
         skip -= block.skip
         if not block.rows:
@@ -383,7 +364,7 @@ def read_text_points(path) -> PointCloud:
     if buffer is None:
         raise FileFormatError(path, "the file has a header but no data lines", line=header_line)
     buffer.resize((count, width), refcheck=False)
-    table, buffer = buffer, None
+    table = buffer
     if names is not None:
         columns = {name: table[:, j] for j, name in enumerate(names)}
         try:

@@ -437,20 +437,22 @@ def test_a_failed_screenshot_leaves_the_previous_file_intact(qtbot, window, tmp_
 
 
 def test_a_failed_export_tells_the_user(qtbot, window, ply_cloud, tmp_path, monkeypatch):
-    from app import loading
-
     open_by_drop(qtbot, window, [ply_cloud[0]])
-    window.document.set_fitted({"kind": "curve"}, notify=False)  # something to export
+    curve = {"kind": "curve", "degree": 3, "weights": np.ones(4), "knots": np.repeat([0.0, 1.0], 4),
+             "control_points": np.array([[0.0, 0, 0], [1, 1, 0], [2, -1, 0], [3, 0, 0]])}
+    window.document.set_fitted(curve, notify=False)  # something to export
 
-    def failing(_geometries, path):
-        raise OSError(errno.EACCES, "Permission denied", path)
+    def replace_failing(source, destination):  # the export was written, then cannot land
+        raise OSError(errno.EACCES, "Permission denied", str(destination))
 
-    monkeypatch.setattr(loading, "export_geometry", failing)
+    monkeypatch.setattr(os, "replace", replace_failing)
     target = tmp_path / "out.json"
     target.write_text("old")
     with qtbot.waitSignal(window.export_finished, timeout=30000) as blocker:
         assert window.export_to(str(target))
+    monkeypatch.undo()
     assert blocker.args == [str(target), False]
     assert target.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temporary
     assert "Permission denied" in window.last_error and "left as it was" in window.last_error
     window._message_box.close()

@@ -28,16 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
+from nurbs_core.io import NURBS_SUFFIXES, POINT_CLOUD_SUFFIXES
+
 MARKER_SUFFIX = ".pickle-executed"
 
-#: Every suffix the corpus covers: points (``load_points``) and NURBS (``load``).
-POINT_SUFFIXES = ("ply", "xyz", "txt", "pts", "asc", "csv", "npy", "npz", "pcd", "las", "laz",
-                  "e57", "obj", "stl", "off", "glb", "gltf")
-NURBS_SUFFIXES = ("json", "3dm", "dat", "smesh", "step", "stp", "iges", "igs")
-FORMATS = POINT_SUFFIXES + NURBS_SUFFIXES
-#: Suffixes whose reader is an optional extra: MissingDependencyError is an acceptable answer
-#: even for their valid files.
-OPTIONAL_SUFFIXES = ("e57", "step", "stp", "iges", "igs")
+#: Every suffix the readers accept (``load_points`` and ``load``), without its dot: the corpus
+#: must cover each one, so a suffix added to the readers is a suffix the corpus lacks.
+FORMATS = tuple(suffix.lstrip(".") for suffix in POINT_CLOUD_SUFFIXES + NURBS_SUFFIXES)
 #: Suffixes read through trimesh as meshes (also loaded with ``mesh_mode="sample"``).
 MESH_SUFFIXES = ("ply", "obj", "stl", "off", "glb", "gltf")
 
@@ -146,7 +143,9 @@ def _ply_big_endian(points) -> bytes:
     return header + points.astype(">f8").tobytes()
 
 
-def _pcd_header(fields, sizes, types, count, mode, points=None, counts=None) -> bytes:
+def pcd_header(fields, sizes, types, count, mode, points=None, counts=None) -> bytes:
+    """A PCD v0.7 header for ``count`` points (WIDTH) of the given fields, SIZEs and TYPEs (lists
+    of strings); ``points`` overrides the POINTS line (a lying header), ``counts`` the COUNTs."""
     counts = counts or ["1"] * len(fields)
     points = count if points is None else points
     return (f"# .PCD v0.7\nVERSION 0.7\nFIELDS {' '.join(fields)}\nSIZE {' '.join(sizes)}\n"
@@ -200,9 +199,9 @@ def _pcd_files(rng, points, intensity) -> dict[str, bytes]:
     columns = b"".join(np.ascontiguousarray(table[name]).tobytes() for name in table.dtype.names)
     packed = lzf_literals(columns)
     return {
-        "ascii": _pcd_header(*PCD_FIELDS, n, "ascii") + ascii_rows.encode() + b"\n",
-        "binary": _pcd_header(*PCD_FIELDS, n, "binary") + table.tobytes(),
-        "compressed": _pcd_header(*PCD_FIELDS, n, "binary_compressed")
+        "ascii": pcd_header(*PCD_FIELDS, n, "ascii") + ascii_rows.encode() + b"\n",
+        "binary": pcd_header(*PCD_FIELDS, n, "binary") + table.tobytes(),
+        "compressed": pcd_header(*PCD_FIELDS, n, "binary_compressed")
         + struct.pack("<II", len(packed), len(columns)) + packed,
     }
 
@@ -430,12 +429,36 @@ def _pickled_array(marker: Path) -> np.ndarray:
     return table
 
 
-def _npy_to_bytes(array, allow_pickle=False) -> bytes:
+def _npy_to_bytes(array, allow_pickle=False, version=None) -> bytes:
     import io
 
     buffer = io.BytesIO()
-    np.save(buffer, array, allow_pickle=allow_pickle)
+    np.lib.format.write_array(buffer, np.asanyarray(array), version=version,
+                              allow_pickle=allow_pickle)
     return buffer.getvalue()
+
+
+def pickle_files(folder: Path) -> dict[str, tuple[bytes, str]]:
+    """{name: (bytes, note)} of the pickle-bearing files: each, if its pickle is ever loaded (or
+    its .npy header evaluated), creates ``folder / (name + MARKER_SUFFIX)``."""
+    files = {}
+    name = "npy_header_python_expression.npy"
+    expression = f"__import__('builtins').open({str(folder / (name + MARKER_SUFFIX))!r}, 'w')"
+    files[name] = (npy_bytes(f"{{'descr': {expression}, 'fortran_order': False, "
+                             f"'shape': (4, 3), }}", np.zeros((4, 3)).tobytes()),
+                   "the header dict is code, not a literal")
+    # an object array whose element, when unpickled, creates the marker file
+    for name, version in (("npy_pickle_payload.npy", None), ("npy_pickle_payload_v3.npy", (3, 0))):
+        files[name] = (_npy_to_bytes(_pickled_array(folder / (name + MARKER_SUFFIX)), True, version),
+                       "object array; unpickling creates the marker")
+    name = "pickle_raw_stream.npy"
+    files[name] = (pickle.dumps(_CreateMarker(str(folder / (name + MARKER_SUFFIX)))),
+                   "a bare pickle stream with a .npy suffix")
+    name = "npz_pickle_payload.npz"
+    member = _npy_to_bytes(_pickled_array(folder / (name + MARKER_SUFFIX)), allow_pickle=True)
+    files[name] = (zip_bytes([("points.npy", member, 0, zlib.crc32(member), len(member))]),
+                   "an .npz whose points member is an object array")
+    return files
 
 
 def _crc32_zeros(crc: int, count: int) -> int:
@@ -525,11 +548,8 @@ def _numpy_cases(w: _Writer):
     }
     for name, data in lying.items():
         w.add(name, data, "lying-header", "fail")
-    marker = w.path("npy_header_python_expression.npy" + MARKER_SUFFIX)
-    expression = f"__import__('builtins').open({str(marker)!r}, 'w')"
-    w.add("npy_header_python_expression.npy",
-          npy_bytes(f"{{'descr': {expression}, 'fortran_order': False, 'shape': (4, 3), }}",
-                    small), "pickle", "fail", note="the header dict is code, not a literal")
+    for name, (data, note) in pickle_files(w.folder).items():
+        w.add(name, data, "pickle", "fail", note=note)
     wrong = {
         "npy_shape_wrong_type.npy": npy_bytes(f"{{{f8}, 'shape': 'abc', }}", small),
         "npy_descr_wrong_type.npy": npy_bytes("{'descr': 12, 'fortran_order': False, "
@@ -558,21 +578,6 @@ def _numpy_cases(w: _Writer):
         np.arange(30.0).reshape(10, 3))), "valid", "load", count=10)
     w.add("npy_float32_extra_columns_valid.npy", _npy_to_bytes(
         np.arange(50.0, dtype=np.float32).reshape(10, 5)), "valid", "load", count=10)
-    # pickles: an object array whose element, when unpickled, creates the marker file
-    for name in ("npy_pickle_payload.npy", "npy_pickle_payload_v3.npy"):
-        marker = w.path(name + MARKER_SUFFIX)
-        data = _npy_to_bytes(_pickled_array(marker), allow_pickle=True)
-        if name.endswith("_v3.npy"):  # the same pickle behind a version-3 header
-            data = data[:6] + bytes([3, 0]) + struct.pack("<I", struct.unpack("<H", data[8:10])[0]
-                                                         - 2) + data[10:]
-        w.add(name, data, "pickle", "fail", note="object array; unpickling creates the marker")
-    marker = w.path("pickle_raw_stream.npy" + MARKER_SUFFIX)
-    w.add("pickle_raw_stream.npy", pickle.dumps(_CreateMarker(str(marker))), "pickle", "fail",
-          note="a bare pickle stream with a .npy suffix")
-    marker = w.path("npz_pickle_payload.npz" + MARKER_SUFFIX)
-    member = _npy_to_bytes(_pickled_array(marker), allow_pickle=True)
-    w.add("npz_pickle_payload.npz", zip_bytes([("points.npy", member, 0, zlib.crc32(member),
-                                                len(member))]), "pickle", "fail")
 
     # .npz archives
     w.add("npz_bomb_4gib.npz", npz_bomb(192 * 2**20), "bomb", "fail",
@@ -755,12 +760,12 @@ def _pcd_cases(w: _Writer, points, intensity):
     packed = lzf_literals(columns)
 
     def compressed(points_line, compressed_size, size, payload=packed):
-        return (_pcd_header(*PCD_FIELDS, n, "binary_compressed", points=points_line)
+        return (pcd_header(*PCD_FIELDS, n, "binary_compressed", points=points_line)
                 + struct.pack("<II", compressed_size, size) + payload)
 
     cases = {
         "pcd_compressed_lying_size.pcd": (
-            _pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 10**9, "binary_compressed")
+            pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 10**9, "binary_compressed")
             + struct.pack("<II", 11, 0xFFFFFFF0) + bytes([0, 0]) + bytes([0xE0, 255, 0]) * 3,
             "bomb", "LZF data announcing 4 GiB for 10^9 points"),
         "pcd_compressed_uncompressed_size_4gib.pcd": (compressed(n, len(packed), 0xFFFFFFF0),
@@ -771,33 +776,33 @@ def _pcd_cases(w: _Writer, points, intensity):
                                            "lying-header", ""),
         "pcd_compressed_bad_backref.pcd": (compressed(n, 3, len(columns), bytes([0x20, 0xFF, 0])),
                                            "bitflip", ""),
-        "pcd_binary_points_1e12.pcd": (_pcd_header(*PCD_FIELDS, n, "binary", points=10**12)
+        "pcd_binary_points_1e12.pcd": (pcd_header(*PCD_FIELDS, n, "binary", points=10**12)
                                        + table.tobytes(), "lying-header", ""),
-        "pcd_binary_points_1e9.pcd": (_pcd_header(*PCD_FIELDS, n, "binary", points=10**9)
+        "pcd_binary_points_1e9.pcd": (pcd_header(*PCD_FIELDS, n, "binary", points=10**9)
                                       + table.tobytes(), "lying-header", ""),
-        "pcd_negative_points.pcd": (_pcd_header(*PCD_FIELDS, n, "binary", points=-5)
+        "pcd_negative_points.pcd": (pcd_header(*PCD_FIELDS, n, "binary", points=-5)
                                     + table.tobytes(), "lying-header", ""),
-        "pcd_ascii_points_1e12.pcd": (_pcd_header(*PCD_FIELDS, n, "ascii", points=10**12)
+        "pcd_ascii_points_1e12.pcd": (pcd_header(*PCD_FIELDS, n, "ascii", points=10**12)
                                       + b"1 2 3 4\n", "lying-header", ""),
-        "pcd_width_height_1e6.pcd": (_pcd_header(*PCD_FIELDS, n, "binary").replace(
+        "pcd_width_height_1e6.pcd": (pcd_header(*PCD_FIELDS, n, "binary").replace(
             f"WIDTH {n}\nHEIGHT 1".encode(), b"WIDTH 1000000\nHEIGHT 1000000").replace(
             f"POINTS {n}\n".encode(), b"") + table.tobytes(), "lying-header", ""),
-        "pcd_count_1e9.pcd": (_pcd_header(*PCD_FIELDS, n, "binary",
+        "pcd_count_1e9.pcd": (pcd_header(*PCD_FIELDS, n, "binary",
                                           counts=["1", "1", "1", "1000000000"]) + table.tobytes(),
                               "huge-count", ""),
-        "pcd_negative_count.pcd": (_pcd_header(*PCD_FIELDS, n, "binary", counts=["1", "1", "1", "-4"])
+        "pcd_negative_count.pcd": (pcd_header(*PCD_FIELDS, n, "binary", counts=["1", "1", "1", "-4"])
                                    + table.tobytes(), "lying-header", ""),
-        "pcd_size_zero.pcd": (_pcd_header(PCD_FIELDS[0], ["0"] * 4, PCD_FIELDS[2], n, "binary")
+        "pcd_size_zero.pcd": (pcd_header(PCD_FIELDS[0], ["0"] * 4, PCD_FIELDS[2], n, "binary")
                               + table.tobytes(), "wrong-type", ""),
-        "pcd_fields_mismatch.pcd": (_pcd_header(["x", "y", "z"], ["4"] * 4, ["F"] * 2, n, "binary")
+        "pcd_fields_mismatch.pcd": (pcd_header(["x", "y", "z"], ["4"] * 4, ["F"] * 2, n, "binary")
                                     + table.tobytes(), "wrong-type", ""),
-        "pcd_unknown_data_mode.pcd": (_pcd_header(*PCD_FIELDS, n, "zip") + table.tobytes(),
+        "pcd_unknown_data_mode.pcd": (pcd_header(*PCD_FIELDS, n, "zip") + table.tobytes(),
                                       "wrong-type", ""),
-        "pcd_points_not_a_number.pcd": (_pcd_header(*PCD_FIELDS, n, "binary", points="lots")
+        "pcd_points_not_a_number.pcd": (pcd_header(*PCD_FIELDS, n, "binary", points="lots")
                                         + table.tobytes(), "wrong-type", ""),
-        "pcd_no_xyz_fields.pcd": (_pcd_header(["a", "b", "c", "d"], *PCD_FIELDS[1:], n, "binary")
+        "pcd_no_xyz_fields.pcd": (pcd_header(["a", "b", "c", "d"], *PCD_FIELDS[1:], n, "binary")
                                   + table.tobytes(), "wrong-type", ""),
-        "pcd_100k_fields.pcd": (_pcd_header([f"f{k}" for k in range(100_000)], ["1"] * 100_000,
+        "pcd_100k_fields.pcd": (pcd_header([f"f{k}" for k in range(100_000)], ["1"] * 100_000,
                                             ["U"] * 100_000, 1, "binary") + bytes(100_000),
                                 "huge-count", ""),
     }
@@ -807,7 +812,7 @@ def _pcd_cases(w: _Writer, points, intensity):
     size = 192 * 2**20
     stream = lzf_zeros(size)
     w.add("pcd_compressed_real_bomb_192mib.pcd",
-          _pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, size // 12, "binary_compressed")
+          pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, size // 12, "binary_compressed")
           + struct.pack("<II", len(stream), size) + stream, "bomb", "fail",
           note="a valid LZF stream (88:1) of 16M points at the origin")
 

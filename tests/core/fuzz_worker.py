@@ -51,8 +51,9 @@ import time
 import traceback
 from pathlib import Path
 
+from fuzz_corpus import MARKER_SUFFIX
+
 PREFIX = "@@fuzz "
-NURBS_SUFFIXES = (".json", ".3dm", ".dat", ".smesh", ".step", ".stp", ".iges", ".igs")
 #: The optional libraries imported (and initialised) before the first measured load.
 PRELOAD = ("trimesh", "laspy", "rhino3dm", "pye57", "OCP")
 #: The longest an unmeasured warm-up load may take (restarting a reader's child process).
@@ -136,7 +137,7 @@ def _describe_result(result) -> dict:
 
 
 def _load(path: str, mode: str | None):
-    from nurbs_core.io import load, load_points
+    from nurbs_core.io import NURBS_SUFFIXES, load, load_points
 
     if Path(path).suffix.lower() in NURBS_SUFFIXES:
         return load(path)
@@ -148,7 +149,7 @@ def _load(path: str, mode: str | None):
 def _markers(marker_dir: str | None) -> list[str]:
     if not marker_dir:
         return []
-    return sorted(name for name in os.listdir(marker_dir) if name.endswith(".pickle-executed"))
+    return sorted(name for name in os.listdir(marker_dir) if name.endswith(MARKER_SUFFIX))
 
 
 #: set by the alarm's handler: the load under way was still running after ``--timeout`` seconds
@@ -234,8 +235,6 @@ def _measure(index: int, path: str, mode: str | None, timeout: float, marker_dir
         signal.setitimer(signal.ITIMER_REAL, timeout)
         try:
             result = _load(path, mode)
-        except LoadTimeout as exc:
-            exception = exc
         except BaseException as exc:  # noqa: BLE001 - everything is recorded, nothing re-raised
             exception = exc
         finally:
@@ -292,7 +291,7 @@ def _measure(index: int, path: str, mode: str | None, timeout: float, marker_dir
     return record
 
 
-def _warm(path: str, seconds: float = 60.0) -> None:
+def _warm(path: str, seconds: float = WARM_SECONDS) -> None:
     """Load a valid file, unmeasured, so that libraries (and reader child processes, e.g.
     OCP's) are initialised before a measured load: a file is charged its own cost only."""
     signal.setitimer(signal.ITIMER_REAL, seconds)
@@ -359,7 +358,7 @@ def worker_main(argv=None) -> int:
             warm = warm_files.get(Path(path).suffix.lower())
             if warm and record["outcome"] != "ok":  # a reader child may have died: restart it
                 print(f"{PREFIX}warming {warm}", flush=True)
-                _warm(warm, WARM_SECONDS)
+                _warm(warm)
     print(f"{PREFIX}done", flush=True)
     return 0
 
@@ -427,8 +426,10 @@ def _run_shard(entries, workdir: Path, shard: int, *, timeout: float, grace: flo
         records += done
         finished = {record["index"] for record in done}
         started = current["index"]
+        running = None if started is None or started in finished else remaining[started]
+        # what is left: every file without a record, but the one the worker died on
+        remaining = [entry for k, entry in enumerate(remaining) if k not in finished and k != started]
         if process.returncode == 0 and not killed:
-            remaining = [entry for k, entry in enumerate(remaining) if k not in finished]
             if remaining:  # cannot happen: the worker reads its whole list
                 raise RuntimeError(f"the fuzz worker skipped files: {remaining[:3]}")
             break
@@ -436,16 +437,14 @@ def _run_shard(entries, workdir: Path, shard: int, *, timeout: float, grace: flo
         if capture_file.exists():  # the running file's own output (faulthandler's dump)
             stderr_tail = capture_file.read_bytes()[-3000:].decode("utf-8", "replace") or \
                 stderr_tail
-        if started is None or started in finished:
-            if killed == "deadline":
+        if running is None:  # between files
+            # out of time (the loop's top records the rest), or stuck in an unmeasured warm-up
+            # after a file (each restart has made progress): go on with the files still to load
+            if killed:
                 continue
-            if killed and current["phase"] == "warm" and started is not None:
-                # stuck in an unmeasured warm-up between files: restart after the last file
-                remaining = remaining[started + 1:]
-                continue
-            raise RuntimeError(f"the fuzz worker failed before loading a file (exit "
+            raise RuntimeError(f"the fuzz worker failed outside a load (exit "
                                f"{process.returncode}):\n{stderr_tail}")
-        path, mode = remaining[started]
+        path, mode = running
         outcome = "hang" if killed == "hang" else ("not-run" if killed else "crash")
         returncode = process.returncode
         how = f"killed by signal {-returncode}" if returncode and returncode < 0 else \
@@ -457,7 +456,6 @@ def _run_shard(entries, workdir: Path, shard: int, *, timeout: float, grace: flo
                         "exception": None, "message": message, "path_in_message": None,
                         "seconds": time.monotonic() - current["since"],
                         "file_size": _file_size(path), "traceback": stderr_tail})
-        remaining = remaining[started + 1:]
     return records
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from gradient_cases import F64, KNOTS_U, KNOTS_V, params, random_net
 from torch.autograd import gradcheck
 
 from nurbs_core import (
@@ -17,26 +18,6 @@ from nurbs_core import (
     surface_grid_points,
     surface_points,
 )
-
-F64 = torch.float64
-KNOTS_U = torch.tensor([-1.0, -1.0, -1.0, -1.0, 0.2, 0.9, 2.0, 2.0, 2.0, 2.0], dtype=F64)  # p=3, n=6
-KNOTS_V = torch.tensor([3.0, 3.0, 3.0, 3.4, 3.5, 4.0, 4.0, 4.0], dtype=F64)  # q=2, m=5
-
-
-def random_net(batch, n, m, dim=3, seed=0):
-    g = torch.Generator().manual_seed(seed)
-    control = torch.randn(*batch, n, m, dim, dtype=F64, generator=g).requires_grad_()
-    weights = (torch.rand(*batch, n, m, dtype=F64, generator=g) + 0.5).requires_grad_()
-    return control, weights
-
-
-def params(knots, degree, count, seed):
-    g = torch.Generator().manual_seed(seed)
-    n = knots.shape[0] - degree - 1
-    a, b = float(knots[degree]), float(knots[n])
-    t = a + (b - a) * torch.rand(count, dtype=F64, generator=g)
-    t[0], t[-1] = a, b  # the ends of the domain
-    return t
 
 
 @pytest.mark.parametrize("batch", [(), (2,), (2, 2)])

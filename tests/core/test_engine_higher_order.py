@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import pytest
 import torch
+from gradient_cases import F64, KNOTS_U, KNOTS_V, params
 from torch.autograd import gradcheck, gradgradcheck
 
 from nurbs_core import (
@@ -19,21 +20,9 @@ from nurbs_core import (
     surface_points,
 )
 
-F64 = torch.float64
-KNOTS_U = torch.tensor([-1.0, -1.0, -1.0, -1.0, 0.2, 0.9, 2.0, 2.0, 2.0, 2.0], dtype=F64)  # p=3, n=6
-KNOTS_V = torch.tensor([3.0, 3.0, 3.0, 3.4, 3.5, 4.0, 4.0, 4.0], dtype=F64)  # q=2, m=5
 SECOND_ORDER_ERROR = r"second derivatives through the block-sparse .* higher_order=True"
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
-
-
-def params(knots, degree, count, seed):
-    g = torch.Generator().manual_seed(seed)
-    n = knots.shape[0] - degree - 1
-    a, b = float(knots[degree]), float(knots[n])
-    t = a + (b - a) * torch.rand(count, dtype=F64, generator=g)
-    t[0], t[-1] = a, b  # the ends of the domain
-    return t
 
 
 def make_case(kind, batch=(), seed=0):

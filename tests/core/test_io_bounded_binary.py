@@ -20,7 +20,9 @@ import zlib
 import numpy as np
 import pytest
 import trimesh
+from fuzz_corpus import lzf_literals, pcd_header
 from hang_guard import hang_guard
+from lzf_codec import lzf_compress, lzf_reference, random_lzf_stream
 
 from nurbs_core.io import FileFormatError, load_points
 from nurbs_core.io import ply as ply_module
@@ -73,7 +75,7 @@ def _npy_bytes(array, allow_pickle=False) -> bytes:
 # --- .npy ---------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("shape", [(10**11, 3), (10**9, 3), (2**32, 2**32, 3)])
+@pytest.mark.parametrize("shape", [(10**11, 3), (10**9, 3), (2**63, 3), (2**32, 2**32, 3)])
 def test_npy_lying_shape_is_refused_before_allocation(tmp_path, shape):
     path = tmp_path / "lying.npy"
     path.write_bytes(_npy_header(shape) + bytes(240))
@@ -258,20 +260,9 @@ def test_npz_members_that_cannot_be_attributes(tmp_path):
 
 
 def _pcd_header(n, mode, fields=("x", "y", "z"), sizes=None, types=None, counts=None) -> bytes:
-    sizes = sizes or ["4"] * len(fields)
-    types = types or ["F"] * len(fields)
-    counts = counts or ["1"] * len(fields)
-    return (f"# .PCD v0.7\nVERSION 0.7\nFIELDS {' '.join(fields)}\nSIZE {' '.join(sizes)}\n"
-            f"TYPE {' '.join(types)}\nCOUNT {' '.join(counts)}\nWIDTH {n}\nHEIGHT 1\n"
-            f"VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {mode}\n").encode()
-
-
-def _lzf_literals(data: bytes) -> bytes:
-    out = bytearray()
-    for start in range(0, len(data), 32):
-        out.append(len(data[start: start + 32]) - 1)
-        out += data[start: start + 32]
-    return bytes(out)
+    """:func:`fuzz_corpus.pcd_header` with float32 fields by default."""
+    return pcd_header(list(fields), sizes or ["4"] * len(fields), types or ["F"] * len(fields), n,
+                      mode, counts=counts)
 
 
 def _columns(points: np.ndarray) -> bytes:
@@ -280,7 +271,7 @@ def _columns(points: np.ndarray) -> bytes:
 
 def _compressed_pcd(points, compressed_size=None, size=None, n=None) -> bytes:
     raw = _columns(points)
-    payload = _lzf_literals(raw)
+    payload = lzf_literals(raw)
     sizes = np.array([len(payload) if compressed_size is None else compressed_size,
                       len(raw) if size is None else size], "<u4")
     return _pcd_header(len(points) if n is None else n, "binary_compressed") + sizes.tobytes() \
@@ -348,83 +339,6 @@ def test_pcd_fields_padding_and_counts(tmp_path):
 # --- LZF ----------------------------------------------------------------------------------------
 
 
-def _lzf_compress(data: bytes) -> bytes:
-    """A small greedy LZF compressor (liblzf's stream format: literal runs of up to 32 bytes,
-    back references of 3 to 264 bytes up to 8192 back)."""
-    out, table, i, literal = bytearray(), {}, 0, 0
-
-    def literals(stop):
-        for start in range(literal, stop, 32):
-            chunk = data[start: min(start + 32, stop)]
-            out.append(len(chunk) - 1)
-            out.extend(chunk)
-
-    while i < len(data) - 2:
-        key = data[i: i + 3]
-        reference = table.get(key)
-        table[key] = i
-        if reference is not None and i - reference <= 8192:
-            length, limit = 3, min(264, len(data) - i)
-            while length < limit and data[reference + length] == data[i + length]:
-                length += 1
-            literals(i)
-            distance = i - reference - 1
-            if length < 9:
-                out.append(((length - 2) << 5) | (distance >> 8))
-            else:
-                out += bytes([(7 << 5) | (distance >> 8), length - 9])
-            out.append(distance & 255)
-            i += length
-            literal = i
-        else:
-            i += 1
-    literals(len(data))
-    return bytes(out)
-
-
-def _lzf_reference(data: bytes, size: int) -> bytes:
-    """liblzf's decoder, byte by byte (for comparison)."""
-    out, position = bytearray(), 0
-    while position < len(data):
-        control = data[position]
-        position += 1
-        if control < 32:
-            out += data[position: position + control + 1]
-            position += control + 1
-            continue
-        length = control >> 5
-        if length == 7:
-            length += data[position]
-            position += 1
-        reference = len(out) - ((control & 31) << 8) - data[position] - 1
-        position += 1
-        for _ in range(length + 2):
-            out.append(out[reference])
-            reference += 1
-    assert len(out) == size
-    return bytes(out)
-
-
-def _random_lzf_stream(rng, tokens: int) -> tuple[bytes, int]:
-    out, size = bytearray(), 0
-    for _ in range(tokens):
-        if size == 0 or rng.random() < 0.3:
-            n = int(rng.integers(1, 33))
-            out.append(n - 1)
-            out += rng.integers(0, 4, n, dtype=np.uint8).tobytes()
-            size += n
-            continue
-        distance = int(rng.integers(1, min(size, 8192) + 1))
-        length = int(rng.integers(3, 265 if rng.random() < 0.5 else 9))
-        if length < 9:
-            out.append(((length - 2) << 5) | ((distance - 1) >> 8))
-        else:
-            out += bytes([(7 << 5) | ((distance - 1) >> 8), length - 9])
-        out.append((distance - 1) & 255)
-        size += length
-    return bytes(out), size
-
-
 def test_lzf_known_vectors_and_round_trips():
     assert lzf_decompress(bytes([2]) + b"abc" + bytes([7 << 5, 0, 2]), 12) == b"abcabcabcabc"
     assert lzf_decompress(bytes([5]) + b"abcdef" + bytes([1 << 5, 5]), 9) == b"abcdefabc"
@@ -433,10 +347,10 @@ def test_lzf_known_vectors_and_round_trips():
                bytes(70_000), b"abcdefgh" * 5000 + b"tail",
                np.round(rng.normal(size=20_000), 2).astype("<f4").tobytes()]
     for data in samples:
-        assert lzf_decompress(_lzf_compress(data), len(data)) == data
+        assert lzf_decompress(lzf_compress(data), len(data)) == data
     for _ in range(100):  # every token kind, overlapping and long references, segment edges
-        stream, size = _random_lzf_stream(rng, int(rng.integers(1, 500)))
-        assert lzf_decompress(stream, size) == _lzf_reference(stream, size)
+        stream, size = random_lzf_stream(rng, int(rng.integers(1, 500)))
+        assert lzf_decompress(stream, size) == lzf_reference(stream, size)
 
 
 @pytest.mark.parametrize("stream, size, fragment", [
@@ -454,15 +368,15 @@ def test_lzf_corrupt_streams(stream, size, fragment):
 
 def test_lzf_13_mib_pcd_decodes_fast(tmp_path):
     """A realistic scan (float32 columns of a smooth noisy surface, quantised intensities)
-    compressed once, the stream repeated to about 13 MB: decoding is vectorised, so it takes
-    about a second (the byte-by-byte decoder took minutes on 13 MB PCD files)."""
+    compressed once, the stream repeated to about 13 MB: the vectorised decoder reads it within
+    the hang guard (a byte-by-byte decoder does not)."""
     rng = np.random.default_rng(8)
     rows = 21845  # 21845 * 12 bytes: a whole number of points
     u = np.linspace(-1, 1, rows)
     depth = 2 + 0.3 * np.sin(3 * u) + rng.normal(0, 0.002, rows)
     chunk = np.concatenate([(u * depth).astype("<f4"), np.round(depth, 3).astype("<f4"),
                             np.round(rng.random(rows) * 50).astype("<f4")]).tobytes()
-    stream = _lzf_compress(chunk)
+    stream = lzf_compress(chunk)
     copies = 13_000_000 // len(stream)
     path = tmp_path / "scan.pcd"
     n = rows * copies
@@ -532,7 +446,7 @@ def test_ply_list_longer_than_the_file(tmp_path):
     _refused(path, "row 0 of element 'face' has a list of 255 items", mesh_mode="sample")
 
 
-def test_ply_faces_before_vertices(tmp_path):
+def test_ply_faces_before_vertices(tmp_path, monkeypatch):
     """Rows with lists before the vertices are walked vectorised when their lengths repeat, one
     at a time when they change, up to a bound."""
     vertices = np.arange(30, dtype="<f4").reshape(10, 3)
@@ -549,11 +463,8 @@ def test_ply_faces_before_vertices(tmp_path):
     path.write_bytes(_ply("binary_little_endian", [("face", 5000, FACE), ("vertex", 10, XYZ)],
                           mixed + vertices.tobytes()))
     np.testing.assert_array_equal(load_points(path).points, vertices)
-    ply_module._MAX_IRREGULAR_ROWS, saved = 1000, ply_module._MAX_IRREGULAR_ROWS
-    try:
-        _refused(path, "lists of changing lengths")
-    finally:
-        ply_module._MAX_IRREGULAR_ROWS = saved
+    monkeypatch.setattr(ply_module, "_MAX_IRREGULAR_ROWS", 1000)
+    _refused(path, "lists of changing lengths")
     ascii_path = tmp_path / "faces_first_ascii.ply"
     ascii_path.write_bytes(_ply("ascii", [("face", 2, FACE), ("vertex", 2, XYZ)],
                                 b"3 0 1 2\n4 0 1 2 3\n1 2 3\n4 5 6\n"))

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import fuzz_corpus
 import fuzz_worker
+import numpy as np
 import pytest
 
 FILE_SECONDS = 10.0
@@ -54,8 +55,7 @@ def fuzz_records(corpus, tmp_path_factory):
         entries.append((folder / case.name, None))
         if case.format in fuzz_corpus.MESH_SUFFIXES:
             entries.append((folder / case.name, "sample"))
-    warmup = [folder / name for name, case in cases.items()
-              if name.startswith("valid_") and case.format in fuzz_corpus.FORMATS]
+    warmup = [folder / name for name in cases if name.startswith("valid_")]
     records = fuzz_worker.run_files(entries, tmp_path_factory.mktemp("fuzz_work"),
                                     timeout=FILE_SECONDS, grace=15.0, total_timeout=480.0,
                                     shards=2, marker_dir=folder, warmup=warmup)
@@ -65,12 +65,16 @@ def fuzz_records(corpus, tmp_path_factory):
     return by_name
 
 
+def expected_modes(case) -> list[str]:
+    """The mesh modes ``case`` is loaded in, sorted: one record each."""
+    return ["sample", "vertices"] if case.format in fuzz_corpus.MESH_SUFFIXES else ["vertices"]
+
+
 def problems_of(case, record) -> list[str]:
     """Every criterion the load of ``case`` broke (empty when it passed)."""
     found = []
     outcome = record["outcome"]
-    optional = case.format in fuzz_corpus.OPTIONAL_SUFFIXES
-    if outcome in ("hang", "crash", "not-run"):
+    if outcome in ("hang", "crash", "not-run", "missing"):
         found.append(f"{outcome}: {record.get('message', '')}")
     elif outcome == "timeout":
         found.append(f"took more than {FILE_SECONDS:g} s (interrupted)")
@@ -79,7 +83,9 @@ def problems_of(case, record) -> list[str]:
     elif outcome in TYPED_ERRORS:
         if not record["path_in_message"]:
             found.append("the message does not name the file")
-        if case.expect == "load" and not (outcome == "MissingDependencyError" and optional):
+        # a valid file is in the corpus only if the library its reader needs wrote it: a
+        # MissingDependencyError for it is as wrong as a FileFormatError
+        if case.expect == "load":
             found.append("a valid file did not load")
     elif outcome == "ok":
         result = record.get("result") or {}
@@ -88,6 +94,8 @@ def problems_of(case, record) -> list[str]:
         if case.expect == "load" and case.count is not None and record["mode"] == "vertices" \
                 and result.get("count") != case.count:
             found.append(f"read {result.get('count')} points/items, the file has {case.count}")
+    else:
+        found.append(f"unknown outcome {outcome!r}")
     # the 10 s criterion is the worker's alarm (a timeout outcome), not a measured duration: a
     # load still running after FILE_SECONDS is "timeout" even if the reader swallowed the alarm
     if record.get("alarm_fired") and outcome != "timeout":
@@ -106,6 +114,8 @@ def problems_of(case, record) -> list[str]:
 def misreads_of(case, record) -> list[str]:
     """Stricter than issue 10: a file that cannot be valid (a lying header, a pickle, a bomb,
     ...) must be refused, and a decimal-comma CSV read right or refused, never misread."""
+    if record["outcome"] == "missing":
+        return ["no record: the file was never loaded"]
     if record["outcome"] != "ok":
         return []
     found = []
@@ -121,10 +131,15 @@ def misreads_of(case, record) -> list[str]:
 
 
 def _failures(cases, records, names, judge=problems_of) -> list[tuple]:
+    """(case, record, what broke) of every load of ``names`` that ``judge`` faults; a mode with
+    no record counts as a load with outcome "missing", so that no file passes unloaded."""
     rows = []
     for name in names:
         case = cases[name]
-        for record in records.get(name, []):
+        loaded = records.get(name, [])
+        missing = [{"path": name, "mode": mode, "outcome": "missing", "message": ""}
+                   for mode in expected_modes(case) if mode not in [r["mode"] for r in loaded]]
+        for record in loaded + missing:
             found = judge(case, record)
             if found:
                 rows.append((case, record, found))
@@ -177,9 +192,7 @@ def test_every_file_was_loaded(corpus, fuzz_records):
     missing = []
     for name, case in cases.items():
         modes = sorted(record["mode"] for record in fuzz_records.get(name, []))
-        expected = ["sample", "vertices"] if case.format in fuzz_corpus.MESH_SUFFIXES else \
-            ["vertices"]
-        if modes != expected:
+        if modes != expected_modes(case):
             missing.append(f"{name}: {modes}")
     assert not missing, "\n".join(missing)
 
@@ -198,6 +211,23 @@ def test_no_pickle_was_executed(corpus, fuzz_records):
     assert not sorted(folder.glob("*" + fuzz_corpus.MARKER_SUFFIX))
     assert not [name for name, records in fuzz_records.items()
                 if any(r.get("marker_created") for r in records)]
+
+
+def test_the_pickle_payloads_are_live(tmp_path):
+    """"No pickle executed" is only a check if the payloads work: loaded the unsafe way
+    (``np.load(allow_pickle=True)``, the .npy header evaluated), each creates its marker."""
+    for name, (data, _note) in fuzz_corpus.pickle_files(tmp_path).items():
+        path = tmp_path / name
+        path.write_bytes(data)
+        if name == "npy_header_python_expression.npy":
+            length = int.from_bytes(data[8:10], "little")
+            eval(data[10: 10 + length].decode("latin1"))  # what a reader must never do
+        elif name.endswith(".npz"):
+            with np.load(path, allow_pickle=True) as archive:
+                archive["points"]
+        else:
+            np.load(path, allow_pickle=True)
+        assert (tmp_path / (name + fuzz_corpus.MARKER_SUFFIX)).exists(), f"{name}: dead payload"
 
 
 def test_every_hostile_file(corpus, fuzz_records):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from fuzz_corpus import lzf_literals, pcd_header
 
 from nurbs_core.io import FileFormatError, PointCloud, load_points, save_points
 from nurbs_core.io.pcd import lzf_decompress
@@ -195,12 +196,6 @@ def test_numpy_inputs(tmp_path):
     np.testing.assert_array_equal(cloud.attributes["label"], np.arange(30))
 
 
-def _pcd_header(fields, sizes, types, n, data):
-    return (f"# .PCD v0.7\nVERSION 0.7\nFIELDS {' '.join(fields)}\nSIZE {' '.join(sizes)}\n"
-            f"TYPE {' '.join(types)}\nCOUNT {' '.join('1' for _ in fields)}\nWIDTH {n}\n"
-            f"HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {data}\n").encode()
-
-
 def _pcd_table(n=50):
     rng = np.random.default_rng(4)
     table = np.zeros(n, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("rgb", "<f4"),
@@ -218,11 +213,11 @@ def test_pcd_ascii_and_binary(tmp_path):
     table, colors = _pcd_table()
     fields, sizes, types = ["x", "y", "z", "rgb", "intensity"], ["4"] * 5, ["F"] * 5
     binary = tmp_path / "b.pcd"
-    binary.write_bytes(_pcd_header(fields, sizes, types, len(table), "binary") + table.tobytes())
+    binary.write_bytes(pcd_header(fields, sizes, types, len(table), "binary") + table.tobytes())
     ascii_path = tmp_path / "a.pcd"
     # ASCII PCD writes the packed colour as the float with the same bits
     ascii_rows = "\n".join(" ".join(repr(float(value)) for value in row) for row in table.tolist())
-    ascii_path.write_bytes(_pcd_header(fields, sizes, types, len(table), "ascii") +
+    ascii_path.write_bytes(pcd_header(fields, sizes, types, len(table), "ascii") +
                            ascii_rows.encode() + b"\n")
     expected = np.stack([table["x"], table["y"], table["z"]], axis=1).astype(np.float64)
     for path in (binary, ascii_path):
@@ -230,16 +225,6 @@ def test_pcd_ascii_and_binary(tmp_path):
         np.testing.assert_array_equal(cloud.points, expected)
         np.testing.assert_array_equal(cloud.attributes["colors"], colors)
         np.testing.assert_array_equal(cloud.attributes["intensity"], table["intensity"])
-
-
-def _lzf_literals(data: bytes) -> bytes:
-    """A valid LZF stream made of literal runs only (at most 32 bytes each)."""
-    out = bytearray()
-    for start in range(0, len(data), 32):
-        chunk = data[start: start + 32]
-        out.append(len(chunk) - 1)
-        out += chunk
-    return bytes(out)
 
 
 def test_lzf_back_references():
@@ -255,9 +240,9 @@ def test_lzf_back_references():
 def test_pcd_binary_compressed(tmp_path):
     table, colors = _pcd_table()
     columns = b"".join(np.ascontiguousarray(table[name]).tobytes() for name in table.dtype.names)
-    compressed = _lzf_literals(columns)
+    compressed = lzf_literals(columns)
     path = tmp_path / "c.pcd"
-    path.write_bytes(_pcd_header(["x", "y", "z", "rgb", "intensity"], ["4"] * 5, ["F"] * 5,
+    path.write_bytes(pcd_header(["x", "y", "z", "rgb", "intensity"], ["4"] * 5, ["F"] * 5,
                                  len(table), "binary_compressed")
                      + np.array([len(compressed), len(columns)], "<u4").tobytes() + compressed)
     cloud = load_points(path)
