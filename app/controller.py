@@ -91,7 +91,7 @@ class FitController(QObject):
         if settings.kind == "curve" and np.allclose(target[:, 2], target[0, 2]):
             target = target[:, :2]  # a planar cloud: fit a 2D curve
         try:
-            from nurbs_core.fit import FitConfig, StopToken
+            from nurbs_core.fitting import FitConfig, StopToken
 
             FitConfig(**settings.fit_fields()).validate()
         except (ImportError, ValueError, TypeError) as exc:

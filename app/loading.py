@@ -122,7 +122,7 @@ def fitted_display(geometry: dict[str, Any], points: np.ndarray | None,
     """Display arrays, per-point deviation and quality of a fitted shape (e.g. from a session).
     statistics: the fit's own measures when it has them (only the quality map is computed)."""
     from nurbs_core import geometry_from_numpy
-    from nurbs_core.fit import deviation
+    from nurbs_core.fitting import deviation
 
     display = display_geometry(geometry)
     result = FittedDisplay(display)

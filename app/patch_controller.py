@@ -78,7 +78,7 @@ class PatchController(QObject):
             self.fit_failed.emit("Nothing to fit: open or drop a point cloud first.")
             return False
         try:
-            from nurbs_core.fit import StopToken
+            from nurbs_core.fitting import StopToken
 
             options = self._document.settings.patch_options()
             options.validate()

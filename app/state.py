@@ -108,7 +108,7 @@ class FitSettings:
     degree_v: int = 3
     control_points_u: int = 12
     control_points_v: int = 12
-    #: ``nurbs_core.fit.DEFAULT_LOSS`` (a test checks they agree)
+    #: ``nurbs_core.fitting.DEFAULT_LOSS`` (a test checks they agree)
     loss: tuple[tuple[str, float], ...] = (("p2s", 1.0), ("chamfer", 0.001))
     optimizer: str = "adam"
     learning_rate: float = 0.01
@@ -119,7 +119,7 @@ class FitSettings:
     init: str = "pca"
     samples_u: int = 64
     samples_v: int = 64
-    #: the least-squares core (``nurbs_core.fit.FitConfig``): fairing weight, two-sided
+    #: the least-squares core (``nurbs_core.fitting.FitConfig``): fairing weight, two-sided
     #: distance tolerance (None: from the cloud's noise), how far the control grid may grow,
     #: the solver, the parameterisation of unordered clouds, and forcing one patch
     stiffness: float = 1e-3
@@ -156,8 +156,8 @@ class FitSettings:
                 self.control_points_v, self.knots_u, self.knots_v)
 
     def fit_fields(self) -> dict[str, Any]:
-        """Keyword arguments for ``nurbs_core.fit.FitConfig`` (only fields it declares)."""
-        from nurbs_core.fit import FitConfig  # lazy: keeps this module importable without torch
+        """Keyword arguments for ``nurbs_core.fitting.FitConfig`` (only fields it declares)."""
+        from nurbs_core.fitting import FitConfig  # lazy: keeps this module importable without torch
 
         wanted = {"kind": self.kind, "degree_u": self.degree_u, "degree_v": self.degree_v,
                   "control_points_u": self.control_points_u,

@@ -8,7 +8,7 @@ Default-loss table: ``python benchmarks/bench_fit.py --defaults [--iterations 30
 losses for unordered surface clouds on the app's demo cloud, a registered scan and heart-valve
 leaflets: deviation, two-sided Chamfer and coverage, time; see :func:`default_losses`).
 
-Ours: :func:`nurbs_core.fit.iter_fit` with the default loss (``DEFAULT_LOSS``: the foot-point
+Ours: :func:`nurbs_core.fitting.iter_fit` with the default loss (``DEFAULT_LOSS``: the foot-point
 term p2s with parameter correction + 0.001 chamfer), a 12 x 12 bicubic surface
 and a 64 x 64 evaluation grid. The KD-tree over the cloud is built once; at most ``batch_size``
 (32,768) cloud points enter each iteration's cloud -> surface terms.
@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from nurbs_core.evaluate import SurfaceGridEvaluator
-from nurbs_core.fit import FitConfig, fit, iter_fit, least_squares_fit
+from nurbs_core.fitting import FitConfig, fit, iter_fit, least_squares_fit
 from nurbs_core.fitting.config import PAPER_POINT_CLOUD_LOSS
 from nurbs_core.knots import clamped_uniform
 from nurbs_core.losses import nearest_distances
@@ -186,7 +186,7 @@ def surface_quality(surface, points: np.ndarray, deviation: np.ndarray) -> dict[
 
 def default_losses(threads: int, iterations: int):
     """Candidate default losses for unordered surface clouds, FitConfig defaults otherwise."""
-    from nurbs_core.fit import deviation
+    from nurbs_core.fitting import deviation
 
     print(f"torch {torch.__version__}, {threads} thread(s); FitConfig defaults (Adam 0.01, plateau "
           f"schedule, PCA start, parameter correction) except the loss; {iterations} iterations")

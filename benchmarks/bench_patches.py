@@ -386,7 +386,7 @@ def run_network(case: Case, tree: cKDTree, truth_c2s: float,
 
 def run_single(case: Case, tree: cKDTree, truth_c2s: float) -> dict[str, Any]:
     """The single-patch route forced on the same cloud (the baseline)."""
-    from nurbs_core.fit import FitConfig, fit
+    from nurbs_core.fitting import FitConfig, fit
 
     row: dict[str, Any] = {}
     start = time.perf_counter()

@@ -68,7 +68,7 @@ import torch
 from scipy.spatial import cKDTree
 
 from nurbs_core import samples
-from nurbs_core.fit import FitConfig, fit
+from nurbs_core.fitting import FitConfig, fit
 
 ROOT = Path(__file__).resolve().parents[1]
 

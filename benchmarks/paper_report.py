@@ -21,7 +21,7 @@ Conventions (stated because the paper leaves them implicit):
   evaluations of L-BFGS (100 steps of 5 inner iterations, learning rate 1, as in the lab's
   surface-fitting script) and, for comparison, 500 Adam steps (learning rate 0.01).
 * "LSQ optimum": the exact linear least-squares fit with the same knots and parameters
-  (nurbs_core.fit.least_squares_fit): no gradient method can go below it with fixed knots.
+  (nurbs_core.fitting.least_squares_fit): no gradient method can go below it with fixed knots.
 * Offsets: 20 x 20 samples for fitting and a 100 x 100 evaluation (25 times denser) for the
   normalised Chamfer distance of nurbs_core.offset.offset_chamfer (means instead of sums, divided
   by the smallest bounding-box edge of the base surface).
@@ -49,7 +49,7 @@ from scipy.spatial import cKDTree
 
 from nurbs_core import NurbsSurface
 from nurbs_core.evaluate import SurfaceGridEvaluator
-from nurbs_core.fit import FitConfig, fit, least_squares_fit
+from nurbs_core.fitting import FitConfig, fit, least_squares_fit
 from nurbs_core.images import boundary_points, chord_length_parameters, ordered_boundary
 from nurbs_core.io import load
 from nurbs_core.knots import clamped_uniform
@@ -261,7 +261,7 @@ def section_surface_fitting(args) -> None:
     _table("Tab:SurfaceFitting - B-spline (fixed uniform knots) vs NURBS (free knots), MSE",
            ["case", "paper B-spl", "paper NURBS", "gain", "LSQ fixed", "s",
             "fit() fixed", "/LSQ", "s", "fit() free knots", "s", "gain vs LSQ"], rows)
-    print("fit() fixed: nurbs_core.fit, L-BFGS 100 iterations from random control points; "
+    print("fit() fixed: nurbs_core.fitting, L-BFGS 100 iterations from random control points; "
           f"fit() free knots: Adam {iterations} iterations from the LSQ fit, interior knots "
           "trainable.")
 
@@ -324,7 +324,7 @@ def offset_cases() -> list[tuple[str, str, list[NurbsSurface], float]]:
 
 
 def _fit_api_offset_row(name, patches, distance, iterations):
-    """Refit each patch's offset targets with nurbs_core.fit (same knots and weights, known
+    """Refit each patch's offset targets with nurbs_core.fitting (same knots and weights, known
     parameters, MSE) and compare its residual with the exact least-squares optimum."""
     # Default sampling, max(20, 2 n) per direction: fit() refuses underdetermined problems.
     exact = offset_patches(patches, distance, constrain_shared=False)
@@ -393,7 +393,7 @@ def section_offset(args) -> None:
             mean, largest = offset_deviation(result, patches, samples=(100, 100))
             values += [f"{mean:.2e}", f"{largest:.2e}"]
         deviation_rows.append([name, *values])
-    _table("The paper's gradient fit through nurbs_core.fit, per patch (no shared-edge "
+    _table("The paper's gradient fit through nurbs_core.fitting, per patch (no shared-edge "
            "constraint, default sampling), Adam from the control-point offset, vs the "
            "unconstrained LSQ",
            ["case", "iterations", "LSQ rms", "fit() rms", "fit()/LSQ", "s"],

@@ -425,7 +425,7 @@ def run(args) -> int:
     points = load_points(args.input).points
     import torch
 
-    from nurbs_core.fit import StopToken, fit
+    from nurbs_core.fitting import StopToken, fit
     from nurbs_core.fitting.sheet import resolved_solver
     from nurbs_core.geometry import NurbsCurve
     from nurbs_core.io.dispatch import save_all

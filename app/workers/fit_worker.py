@@ -1,6 +1,6 @@
 """The fit worker: a QObject living in its own QThread, the only place the live fit runs.
 
-It calls :func:`nurbs_core.fit.iter_fit` with a :class:`StopToken` and turns each (already
+It calls :func:`nurbs_core.fitting.iter_fit` with a :class:`StopToken` and turns each (already
 throttled) engine snapshot into a :class:`DisplaySnapshot`: numpy arrays the GUI thread copies
 into its meshes (tessellated surface, control net, knot lines) and, at a lower rate, each target
 point's deviation from the fitted shape. The final snapshot of a surface fit also carries the
@@ -169,7 +169,7 @@ def starting_geometry(request: FitRequest) -> dict[str, Any] | None:
     if not custom:
         return initial
     if initial is None:
-        from nurbs_core.fit import FitConfig, iter_fit
+        from nurbs_core.fitting import FitConfig, iter_fit
 
         # zero iterations: the engine's initialization only (its final snapshot)
         config = FitConfig(**{**settings.fit_fields(), "iterations": 0})
@@ -237,7 +237,7 @@ class FitWorker(QObject):
             self.run_finished.emit(request.run_id)
 
     def _run(self, request: FitRequest):
-        from nurbs_core.fit import FitConfig, deviation, iter_fit
+        from nurbs_core.fitting import FitConfig, deviation, iter_fit
 
         # the engine's modules (imported above on the first run) are long-lived: keep the
         # garbage collector's full passes, which hold the GIL, from walking them again

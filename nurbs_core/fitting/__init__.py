@@ -1,1 +1,50 @@
-"""Fitting NURBS curves and surfaces to points; the public names live in :mod:`nurbs_core.fit`."""
+"""Fitting NURBS curves and surfaces to points: configuration, the steppable :func:`iter_fit`,
+:func:`fit`, least squares and deviation.
+
+* ``config``        FitConfig, LossTerms, StopToken, FitSnapshot, FitResult (numpy only)
+* ``problem``       input checks, normalisation, initialisation (PCA plane, random, least squares)
+* ``least_squares`` the exact fixed-knot least-squares fit (the accuracy yardstick)
+* ``model``         trainable control points, positive weights, strictly increasing free knots
+* ``projection``    foot points (parameter correction) and per-point deviation
+* ``refine``        knot insertion where the error is largest
+* ``engine``        the optimisation loop
+
+The names load on first use (PEP 562): ``from nurbs_core.fitting import FitConfig`` does not
+import torch; ``fit`` and ``iter_fit`` do.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_LAZY = {
+    "DEFAULT_LOSS": "config",
+    "PAPER_POINT_CLOUD_LOSS": "config",
+    "FitConfig": "config",
+    "FitResult": "config",
+    "FitSnapshot": "config",
+    "StopToken": "config",
+    "fit": "engine",
+    "iter_fit": "engine",
+    "statistics": "engine",
+    "least_squares_fit": "least_squares",
+    "conform": "problem",
+    "deviation": "projection",
+    "project": "projection",
+    "refine": "refine",
+}
+
+
+def __getattr__(name: str):
+    if name not in _LAZY:
+        raise AttributeError(f"module 'nurbs_core.fitting' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"nurbs_core.fitting.{_LAZY[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+__all__ = sorted(_LAZY)

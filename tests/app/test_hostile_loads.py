@@ -215,14 +215,14 @@ def test_a_refused_fit_is_one_line_without_traceback(qtbot, window, tmp_path, ca
 
 def test_an_engine_refusing_late_is_still_one_line(qtbot, window, ply_cloud, caplog, monkeypatch):
     """A refusal raised when the fit's iterator starts (not when it is made) is a refusal too."""
-    import nurbs_core.fit
+    import nurbs_core.fitting
 
     def refusing(*_args, **_kwargs):
         raise ValueError("all 1500 points coincide; a surface needs points that spread out")
         yield  # a generator: nothing runs until the first next()
 
     open_by_drop(qtbot, window, [ply_cloud[0]])
-    monkeypatch.setattr(nurbs_core.fit, "iter_fit", refusing)
+    monkeypatch.setattr(nurbs_core.fitting, "iter_fit", refusing)
     caplog.clear()
     with caplog.at_level(logging.INFO):
         with qtbot.waitSignal(window.controller.fit_failed, timeout=60000) as blocker:

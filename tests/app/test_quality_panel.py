@@ -23,7 +23,7 @@ def _undo_count(window) -> int:
 
 
 def _config(window):
-    from nurbs_core.fit import FitConfig
+    from nurbs_core.fitting import FitConfig
 
     config = FitConfig(**window.document.settings.fit_fields())
     config.validate()

@@ -96,7 +96,7 @@ def test_worker_side_code_never_imports_widgets_or_vtk():
 def test_settings_offer_every_engine_loss_term_and_share_its_default():
     """The panel's loss editor and default must not drift from the engine's."""
     from app.state import LOSS_TERMS, FitSettings, parse_loss
-    from nurbs_core.fit import DEFAULT_LOSS
+    from nurbs_core.fitting import DEFAULT_LOSS
     from nurbs_core.losses import TERMS
 
     assert set(LOSS_TERMS) == set(TERMS)
@@ -124,7 +124,7 @@ def test_tolerance_text_reads_auto_or_a_positive_distance():
 
 
 def test_surfacing_settings_round_trip_through_json_and_reach_the_fit_config():
-    from nurbs_core.fit import FitConfig
+    from nurbs_core.fitting import FitConfig
 
     for tolerance in (None, 0.05):
         settings = FitSettings(stiffness=2.5e-5, tolerance=tolerance, max_control_points=0,
@@ -183,7 +183,7 @@ def test_quality_cells_keep_the_worst_sample_of_each_display_quad():
 def test_a_closed_cloud_refusal_points_to_multi_patch_and_force_single_patch():
     from app.workers.fit_worker import refusal_message
     from nurbs_core import samples
-    from nurbs_core.fit import FitConfig, iter_fit
+    from nurbs_core.fitting import FitConfig, iter_fit
 
     with pytest.raises(ValueError) as caught:
         iter_fit(samples.sphere(1500).points, FitConfig())

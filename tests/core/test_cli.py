@@ -189,7 +189,7 @@ def test_progress_shows_the_last_iteration_when_the_final_snapshot_has_no_record
     # the throttled engine may yield the last iteration in a "running" snapshot, leaving the final
     # (done) snapshot without records; the progress must still end on the last iteration
     from nurbs_core.cli import _Progress
-    from nurbs_core.fit import FitSnapshot
+    from nurbs_core.fitting import FitSnapshot
 
     progress = _Progress(60, quiet=False)
     progress(FitSnapshot(1, {}, [{"iteration": 1, "total": 1.0}], 0.1, False, "running"))

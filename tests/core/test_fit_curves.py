@@ -9,7 +9,7 @@ import torch
 from scipy.spatial import cKDTree
 from scipy.stats import spearmanr
 
-from nurbs_core.fit import FitConfig, fit, least_squares_fit, statistics
+from nurbs_core.fitting import FitConfig, fit, least_squares_fit, statistics
 from nurbs_core.fitting.ordering import backbone_path, path_parameters
 from nurbs_core.images import boundary_points, chord_length_parameters
 from nurbs_core.losses import chamfer_distance

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from nurbs_core import NurbsCurve, NurbsSurface
-from nurbs_core.fit import (
+from nurbs_core.fitting import (
     PAPER_POINT_CLOUD_LOSS,
     FitConfig,
     deviation,

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from nurbs_core import NurbsCurve
-from nurbs_core.fit import FitConfig, deviation, fit, iter_fit, least_squares_fit
+from nurbs_core.fitting import FitConfig, deviation, fit, iter_fit, least_squares_fit
 
 
 def _sheet(count=200):

@@ -8,7 +8,7 @@ import torch
 from scipy.interpolate import LSQBivariateSpline, make_lsq_spline
 
 from nurbs_core import NurbsSurface
-from nurbs_core.fit import FitConfig, fit, least_squares_fit
+from nurbs_core.fitting import FitConfig, fit, least_squares_fit
 from nurbs_core.knots import clamped_uniform
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from nurbs_core.fit import FitConfig, deviation, fit, iter_fit
+from nurbs_core.fitting import FitConfig, deviation, fit, iter_fit
 from nurbs_core.losses import chamfer_distance
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from nurbs_core import NurbsSurface, geometry_from_numpy
-from nurbs_core.fit import PAPER_POINT_CLOUD_LOSS, FitConfig, FitSnapshot, StopToken, fit, iter_fit
+from nurbs_core.fitting import PAPER_POINT_CLOUD_LOSS, FitConfig, FitSnapshot, StopToken, fit, iter_fit
 
 
 def _grid(count=20):

@@ -176,7 +176,7 @@ def test_ordered_contour_supports_fitting_with_chord_length_parameters(paper_dat
     cubic through the closed contour stays within a pixel of every boundary pixel on average."""
     from scipy.spatial import cKDTree
 
-    from nurbs_core.fit import least_squares_fit
+    from nurbs_core.fitting import least_squares_fit
 
     path = paper_data / "skeletons" / f"{name}.png"
     contour = ordered_boundary(path)[0]

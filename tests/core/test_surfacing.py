@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from nurbs_core import samples
-from nurbs_core.fit import FitConfig, StopToken, fit, iter_fit
+from nurbs_core.fitting import FitConfig, StopToken, fit, iter_fit
 from nurbs_core.fitting.least_squares import least_squares_fit
 from nurbs_core.knots import clamped_uniform
 from nurbs_core.surfacing.disk import classify
