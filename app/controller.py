@@ -88,12 +88,12 @@ class FitController(QObject):
             self.fit_failed.emit("Nothing to fit: open or drop a point cloud first.")
             return False
         settings = self._document.settings
-        if settings.kind == "curve" and np.allclose(target[:, 2], target[0, 2]):
+        if settings.fit.kind == "curve" and np.allclose(target[:, 2], target[0, 2]):
             target = target[:, :2]  # a planar cloud: fit a 2D curve
         try:
-            from nurbs_core.fitting import FitConfig, StopToken
+            from nurbs_core.fitting import StopToken
 
-            FitConfig(**settings.fit_fields()).validate()
+            settings.fit.validate()
         except (ImportError, ValueError, TypeError) as exc:
             self.fit_failed.emit(f"Cannot start the fit: {exc}")
             return False

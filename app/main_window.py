@@ -59,14 +59,7 @@ from app.panels.patches_panel import ModeSelector, PatchesPanel
 from app.panels.quality_panel import QualityPanel
 from app.patch_controller import PatchController
 from app.patch_view import PatchView
-from app.state import (
-    FIT_MODES,
-    MODE_FIELDS,
-    PATCH_FIELDS,
-    Document,
-    FitSettings,
-    control_grid_for,
-)
+from app.state import FIT_MODES, Document, Settings, control_grid_for
 from app.viewport.scene import SceneView
 from app.workers.fit_worker import DisplaySnapshot, deviation_stats
 from app.workers.jobs import JobRunner
@@ -100,10 +93,6 @@ def freeze_long_lived_objects():
     """
     gc.collect()
     gc.freeze()
-
-
-def _changed_fields(old: FitSettings, new: FitSettings) -> set[str]:
-    return {name for name in old.__dataclass_fields__ if getattr(old, name) != getattr(new, name)}
 
 
 def _names(names: list[str], shown: int = 3) -> str:
@@ -215,7 +204,7 @@ class MainWindow(QMainWindow):
         self.fit_panel = FitSettingsPanel(self.document.edit_settings)
         self.knot_panel = KnotPanel(self.document.edit_settings, self.report)
         self.offset_panel = OffsetPanel(self.document.edit_settings)
-        self.patches_panel = PatchesPanel(self.document.edit_settings)
+        self.patches_panel = PatchesPanel(self.document.edit_patches)
         self.network_quality_panel = NetworkQualityPanel()
         self.loss_plot = LossPlot()
         self.quality_panel = QualityPanel()
@@ -548,11 +537,11 @@ class MainWindow(QMainWindow):
         self.status_labels["state"].setText("Idle")
         self.document.replace_content(loaded.targets, loaded.patches, loaded.patch_names)
         points = self.document.target_points()
-        if points is not None and np.ptp(points[:, 2]) == 0 and self.document.settings.kind != (
+        if points is not None and np.ptp(points[:, 2]) == 0 and self.document.settings.fit.kind != (
                 "curve"):
             self.document.edit_settings("Kind (planar cloud)", kind="curve")
             self.report("The cloud is planar: switched to curve fitting (2D).")
-        grid = None if points is None else control_grid_for(len(points), self.document.settings)
+        grid = None if points is None else control_grid_for(len(points), self.document.settings.fit)
         if grid is not None:
             self.document.edit_settings("Control grid (small cloud)", control_points_u=grid[0],
                                         control_points_v=grid[1])
@@ -673,7 +662,7 @@ class MainWindow(QMainWindow):
                              lambda exc: self.report(
                                  f"Cannot display the fit: {describe(exc)}", True, exc=exc))
         self._rebuild_tree()
-        self.knot_panel.show_state(self.document.settings, fitted)
+        self.knot_panel.show_state(self.document.settings.fit, fitted)
 
     def _show_fitted_display(self, fitted: dict, result: loading.FittedDisplay):
         if self.document.fitted is not fitted:
@@ -685,7 +674,7 @@ class MainWindow(QMainWindow):
             self.quality_panel.show_deviation(stats)
         self.scene.set_quality(result.quality_cells, result.statistics)
         self.quality_panel.show_result("measured", "the fitted shape against the cloud",
-                                       result.statistics, self.document.settings.tolerance is None,
+                                       result.statistics, self.document.settings.fit.tolerance is None,
                                        result.display.kind)
         self._rebuild_tree()
 
@@ -736,25 +725,24 @@ class MainWindow(QMainWindow):
                     "next Start.")
 
     # --- settings --------------------------------------------------------------------------------
-    def _show_settings(self, settings: FitSettings):
+    def _show_settings(self, settings: Settings):
         self.mode_selector.show_settings(settings)
-        self.patches_panel.show_settings(settings)
+        self.patches_panel.show_settings(settings.patches)
         self.scene.set_mode(settings.fit_mode)
-        self.fit_panel.show_settings(settings)
+        self.fit_panel.show_settings(settings.fit)
         self.offset_panel.show_settings(settings)
-        self.knot_panel.show_state(settings, self.document.fitted)
+        self.knot_panel.show_state(settings.fit, self.document.fitted)
 
     @Slot(object, object)
-    def _on_settings_changed(self, old: FitSettings, new: FitSettings):
+    def _on_settings_changed(self, old: Settings, new: Settings):
         self._show_settings(new)
-        changed = _changed_fields(old, new)
-        if changed & MODE_FIELDS:
+        if old.fit_mode != new.fit_mode:
             self._mode_changed(new.fit_mode)
-        if changed & PATCH_FIELDS:
+        if old.patches != new.patches:
             self._restart_or_defer(self.patch_controller)
-        if changed - OFFSET_FIELDS - PATCH_FIELDS - MODE_FIELDS:
+        if old.fit != new.fit:
             self._restart_or_defer(self.controller)
-        if changed & OFFSET_FIELDS:
+        if any(getattr(old, name) != getattr(new, name) for name in OFFSET_FIELDS):
             self.offsets.request()
 
     def _restart_or_defer(self, controller):
@@ -839,7 +827,7 @@ class MainWindow(QMainWindow):
         self.stop_action.setEnabled(state in ("running", "paused"))
         self.status_labels["state"].setText(state.capitalize())
         if state == "paused":
-            self.knot_panel.show_state(self.document.settings, self.document.fitted)
+            self.knot_panel.show_state(self.document.settings.fit, self.document.fitted)
 
     @Slot(object)
     def _on_snapshot_shown(self, snapshot: DisplaySnapshot):
@@ -875,7 +863,7 @@ class MainWindow(QMainWindow):
         # already on screen: store it without the re-tessellation a notifying change triggers
         self.document.set_fitted(snapshot.geometry, notify=False)
         self._rebuild_tree()
-        self.knot_panel.show_state(self.document.settings, snapshot.geometry)
+        self.knot_panel.show_state(self.document.settings.fit, snapshot.geometry)
         text = f"Fit {snapshot.status} after {snapshot.iteration} iterations"
         if snapshot.deviation is not None:
             stats = deviation_stats(snapshot.deviation)
@@ -885,7 +873,7 @@ class MainWindow(QMainWindow):
             text += f" ({snapshot.message})"
         self.report(text)
         self.quality_panel.show_result(snapshot.status, snapshot.message, snapshot.statistics,
-                                       self.document.settings.tolerance is None,
+                                       self.document.settings.fit.tolerance is None,
                                        snapshot.display.kind)
         if self.document.settings.show_offsets and not self.document.patches:
             self.offsets.request()

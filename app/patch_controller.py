@@ -80,7 +80,7 @@ class PatchController(QObject):
         try:
             from nurbs_core.fitting import StopToken
 
-            options = self._document.settings.patch_options()
+            options = self._document.settings.patches
             options.validate()
         except (ImportError, ValueError, TypeError) as exc:
             self.fit_failed.emit(f"Cannot start the patch fit: {exc}")

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -18,60 +17,48 @@ import numpy as np
 from PySide6.QtCore import QObject, Signal
 from PySide6.QtGui import QUndoCommand, QUndoStack
 
-from nurbs_core.patches.defaults import SEAM_WEIGHT
-from nurbs_core.patches.defaults import STIFFNESS as PATCH_STIFFNESS
+from nurbs_core.fitting.config import INITS, LOSS_TERMS, OPTIMIZERS, FitConfig
+from nurbs_core.fitting.config import PARAMETERIZATIONS as _PARAMETERIZATIONS
+from nurbs_core.fitting.config import SOLVERS as _SOLVERS
+from nurbs_core.patches.options import PatchOptions
 
-SESSION_FORMAT = "nurbs-studio-session-v1"
+SESSION_FORMAT = "nurbs-studio-session-v2"
+#: sessions of the first format (flat settings) are still read
+OLD_SESSION_FORMATS = ("nurbs-studio-session-v1",)
 
-#: Loss terms the settings panel offers, in display order (names of ``nurbs_core.losses``).
-#: l1 / l2 / mse pair the i-th sample with the i-th point: meaningful only for ordered targets.
-#: Kept equal to ``nurbs_core.losses.TERMS`` (a test checks it).
-LOSS_TERMS = ("p2s", "chamfer", "hausdorff", "laplacian", "fairing", "length", "l1", "l2",
-              "mse")
-OPTIMIZERS = ("adam", "sgd", "momentum", "adagrad", "lbfgs")
-INITIALIZATIONS = ("pca", "least_squares", "random")
-#: The engine's solvers and parameterisations of unordered surface clouds (FitConfig.solver,
-#: FitConfig.parameterization) in display order, with their labels (a test checks they agree).
-SOLVERS = (("auto", "auto"), ("least_squares", "least squares"), ("gradient", "gradient"))
-PARAMETERIZATIONS = (("auto", "auto"), ("mesh", "mesh"), ("plane", "plane"))
+#: The choices the panels offer, in display order: the engine's own lists (FitConfig validates
+#: against the same tuples). l1 / l2 / mse pair the i-th sample with the i-th point: meaningful
+#: only for ordered targets.
+__all__ = ["LOSS_TERMS", "OPTIMIZERS"]
+INITIALIZATIONS = INITS
+#: labels of the engine's solvers and parameterisations of unordered surface clouds
+SOLVER_LABELS = {"least_squares": "least squares"}
+SOLVERS = tuple((name, SOLVER_LABELS.get(name, name)) for name in _SOLVERS)
+PARAMETERIZATIONS = tuple((name, name) for name in _PARAMETERIZATIONS)
 #: How Start fits the cloud: one NURBS surface (or curve), or a network of patches over a quad
 #: layout (closed objects: ``nurbs_core.patches``).
 FIT_MODES = (("single", "Single patch"), ("patches", "Patches"))
 TOLERANCE_HINT = ("Tolerance: a positive distance in the cloud's units (e.g. 0.01), or empty / "
                   "\"auto\" to derive it from the cloud's noise")
 
-_TERM = re.compile(r"^\s*(?:(?P<weight>[0-9.eE+-]+)\s*\*\s*)?(?P<name>[a-z_0-9]+)\s*$")
-
 
 #: A surface fit wants several points per control point; fewer leaves the net free to fold.
 POINTS_PER_CONTROL_POINT = 8
 
 
-def control_grid_for(point_count: int, settings: FitSettings) -> tuple[int, int] | None:
-    """A smaller (n_u, n_v) when the cloud is too small for the settings' control grid, else None.
+def control_grid_for(point_count: int, fit: FitConfig) -> tuple[int, int] | None:
+    """A smaller (n_u, n_v) when the cloud is too small for the fit's control grid, else None.
 
     Each direction gets at most sqrt(points / POINTS_PER_CONTROL_POINT) control points, never
     fewer than degree + 1 (the grid is only ever reduced)."""
-    if settings.kind != "surface":
+    if fit.kind != "surface":
         return None
     limit = int((point_count / POINTS_PER_CONTROL_POINT) ** 0.5)
-    n_u = min(settings.control_points_u, max(settings.degree_u + 1, limit))
-    n_v = min(settings.control_points_v, max(settings.degree_v + 1, limit))
-    if (n_u, n_v) == (settings.control_points_u, settings.control_points_v):
+    n_u = min(fit.control_points_u, max(fit.degree_u + 1, limit))
+    n_v = min(fit.control_points_v, max(fit.degree_v + 1, limit))
+    if (n_u, n_v) == (fit.control_points_u, fit.control_points_v):
         return None
     return n_u, n_v
-
-
-def parse_loss(text: str) -> tuple[tuple[str, float], ...]:
-    """``"chamfer+0.1*laplacian"`` -> ``(("chamfer", 1.0), ("laplacian", 0.1))``."""
-    terms = []
-    for part in text.replace(" ", "").split("+"):
-        match = _TERM.match(part)
-        if not match:
-            raise ValueError(f"cannot read loss term {part!r} in {text!r} "
-                             "(expected e.g. 'chamfer+0.1*laplacian')")
-        terms.append((match["name"], float(match["weight"] or 1.0)))
-    return tuple(terms)
 
 
 def parse_tolerance(text: str) -> float | None:
@@ -89,131 +76,68 @@ def parse_tolerance(text: str) -> float | None:
     return value
 
 
-def format_loss(terms) -> str:
-    """Inverse of :func:`parse_loss`; terms with weight 0 are left out."""
-    # positional notation: the engine's parser splits on "+", so "1e+06" must never appear
-    parts = [name if weight == 1.0 else f"{np.format_float_positional(weight, trim='-')}*{name}"
-             for name, weight in terms if weight]
-    if not parts:
-        raise ValueError("the loss needs at least one term with a non-zero weight")
-    return "+".join(parts)
-
-
 @dataclass(frozen=True)
-class FitSettings:
-    """Everything the user can edit. Immutable: edits make a new object (undo keeps the old)."""
+class Settings:
+    """Everything the user can edit. Immutable: edits make a new object (undo keeps the old).
 
-    kind: str = "surface"
-    degree_u: int = 3
-    degree_v: int = 3
-    control_points_u: int = 12
-    control_points_v: int = 12
-    #: ``nurbs_core.fitting.DEFAULT_LOSS`` (a test checks they agree)
-    loss: tuple[tuple[str, float], ...] = (("p2s", 1.0), ("chamfer", 0.001))
-    optimizer: str = "adam"
-    learning_rate: float = 0.01
-    iterations: int = 500
-    free_knots: bool = False
-    free_weights: bool = False
-    pin_boundary: bool = False
-    init: str = "pca"
-    samples_u: int = 64
-    samples_v: int = 64
-    #: the least-squares core (``nurbs_core.fitting.FitConfig``): fairing weight, two-sided
-    #: distance tolerance (None: from the cloud's noise), how far the control grid may grow,
-    #: the solver, the parameterisation of unordered clouds, and forcing one patch
-    stiffness: float = 1e-3
-    tolerance: float | None = None
-    max_control_points: int = 40
-    solver: str = "auto"
-    parameterization: str = "auto"
-    single_patch: bool = False
-    #: Custom knot vectors (full, clamped) or None for the clamped uniform preset.
-    knots_u: tuple[float, ...] | None = None
-    knots_v: tuple[float, ...] | None = None
+    ``fit`` is the engine's own :class:`~nurbs_core.fitting.config.FitConfig` (the one
+    description of a single-patch fit, sent to the worker as it is) and ``patches`` its
+    :class:`~nurbs_core.patches.options.PatchOptions`; the rest is the window's own: which of
+    the two Start runs, and the offsets shown beside a loaded patch set."""
+
+    fit: FitConfig = field(default_factory=FitConfig)
+    patches: PatchOptions = field(default_factory=PatchOptions)
+    #: "single" or "patches" (:data:`FIT_MODES`)
+    fit_mode: str = "single"
     offset_distance: float = 0.1
     constrain_shared_edges: bool = True
     show_offsets: bool = False
-    #: "single" or "patches" (:data:`FIT_MODES`)
-    fit_mode: str = "single"
-    #: the patch network fit (``nurbs_core.patches.pipeline.PatchOptions``): target patch count
-    #: and control points per patch side (None: automatic), fairing stiffness and seam weight
-    #: (the engine's defaults)
-    patch_count: int | None = None
-    patch_size: int | None = None
-    patch_stiffness: float = PATCH_STIFFNESS
-    seam_weight: float = SEAM_WEIGHT
-
-    @property
-    def loss_text(self) -> str:
-        return format_loss(self.loss)
-
-    def structure(self) -> tuple:
-        """What fixes the shape of the control net (a change needs a resampled start)."""
-        if self.kind == "curve":
-            return (self.kind, self.degree_u, self.control_points_u, self.knots_u)
-        return (self.kind, self.degree_u, self.degree_v, self.control_points_u,
-                self.control_points_v, self.knots_u, self.knots_v)
-
-    def fit_fields(self) -> dict[str, Any]:
-        """Keyword arguments for ``nurbs_core.fitting.FitConfig`` (only fields it declares)."""
-        from nurbs_core.fitting import FitConfig  # lazy: keeps this module importable without torch
-
-        wanted = {"kind": self.kind, "degree_u": self.degree_u, "degree_v": self.degree_v,
-                  "control_points_u": self.control_points_u,
-                  "control_points_v": self.control_points_v, "loss": self.loss_text,
-                  "optimizer": self.optimizer, "learning_rate": self.learning_rate,
-                  "iterations": self.iterations, "free_knots": self.free_knots,
-                  "free_weights": self.free_weights, "pin_boundary": self.pin_boundary,
-                  "init": self.init, "samples_u": self.samples_u, "samples_v": self.samples_v,
-                  "stiffness": self.stiffness, "tolerance": self.tolerance,
-                  "max_control_points": self.max_control_points, "solver": self.solver,
-                  "parameterization": self.parameterization, "single_patch": self.single_patch}
-        declared = {f.name for f in dataclasses.fields(FitConfig)}
-        return {key: value for key, value in wanted.items() if key in declared}
-
-    def patch_options(self):
-        """The engine's ``PatchOptions`` for these settings (not validated here)."""
-        from nurbs_core.patches.pipeline import PatchOptions  # lazy: no torch at import
-
-        return PatchOptions(patches="auto" if self.patch_count is None else self.patch_count,
-                            size=self.patch_size, stiffness=self.patch_stiffness,
-                            seam_weight=self.seam_weight)
 
     def to_json(self) -> dict[str, Any]:
-        data = dataclasses.asdict(self)
-        data["loss"] = self.loss_text
-        return data
+        return {"fit": self.fit.to_json(), "patches": self.patches.to_json(),
+                **{name: getattr(self, name) for name in WINDOW_FIELDS}}
 
     @classmethod
-    def from_json(cls, data: dict[str, Any]) -> FitSettings:
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - known)
+    def from_json(cls, data: dict[str, Any]) -> Settings:
+        """Inverse of :meth:`to_json`; raises ValueError for unknown settings."""
+        unknown = sorted(set(data) - {"fit", "patches"} - WINDOW_FIELDS)
         if unknown:
             raise ValueError(f"unknown settings in session: {', '.join(unknown)}")
-        values = dict(data)
-        if "loss" in values:
-            values["loss"] = parse_loss(values["loss"])
-        for name in ("knots_u", "knots_v"):
-            if values.get(name) is not None:
-                values[name] = tuple(float(k) for k in values[name])
-        return cls(**values)
+        window = {name: data[name] for name in WINDOW_FIELDS if name in data}
+        return cls(fit=FitConfig.from_json(data.get("fit", {})),
+                   patches=PatchOptions.from_json(data.get("patches", {})), **window)
+
+    @classmethod
+    def from_flat_json(cls, data: dict[str, Any]) -> Settings:
+        """The settings of a first-format session (one flat dict)."""
+        data = dict(data)
+        renamed = {"patch_count": "patches", "patch_size": "size",
+                   "patch_stiffness": "stiffness", "seam_weight": "seam_weight"}
+        patches = {new: data.pop(old) for old, new in renamed.items() if old in data}
+        if patches.get("patches", "auto") is None:
+            patches["patches"] = "auto"
+        window = {name: data.pop(name) for name in WINDOW_FIELDS if name in data}
+        return cls(fit=FitConfig.from_json(data), patches=PatchOptions.from_json(patches),
+                   **window)
 
 
-#: The settings of the patch network fit (a change restarts a running patch fit, not the
-#: single-patch one), and the mode switch.
-PATCH_FIELDS = frozenset({"patch_count", "patch_size", "patch_stiffness", "seam_weight"})
-MODE_FIELDS = frozenset({"fit_mode"})
+#: The window's own settings (everything in Settings but the fit and the patch options).
+WINDOW_FIELDS = frozenset({"fit_mode", "offset_distance", "constrain_shared_edges",
+                           "show_offsets"})
+FIT_FIELDS = frozenset(f.name for f in dataclasses.fields(FitConfig))
 
 
-def with_changes(settings: FitSettings, **changes) -> FitSettings:
-    """``dataclasses.replace`` that also drops custom knots a degree/grid change invalidates."""
-    new = dataclasses.replace(settings, **changes)
-    counts = {"knots_u": new.control_points_u + new.degree_u + 1,
-              "knots_v": new.control_points_v + new.degree_v + 1}
-    drop = {name: None for name, count in counts.items()
-            if getattr(new, name) is not None and len(getattr(new, name)) != count}
-    return dataclasses.replace(new, **drop) if drop else new
+def with_changes(settings: Settings, **changes: Any) -> Settings:
+    """``settings`` with ``changes``: names of FitConfig fields edit the fit (custom knots a
+    degree or grid change invalidates are dropped), the window's names edit the window's
+    settings. Raises TypeError for any other name."""
+    unknown = sorted(set(changes) - FIT_FIELDS - WINDOW_FIELDS)
+    if unknown:
+        raise TypeError(f"no such setting: {', '.join(unknown)}")
+    fit = {name: value for name, value in changes.items() if name in FIT_FIELDS}
+    window = {name: value for name, value in changes.items() if name in WINDOW_FIELDS}
+    return dataclasses.replace(settings, fit=settings.fit.replace(**fit) if fit else settings.fit,
+                               **window)
 
 
 @dataclass
@@ -234,7 +158,7 @@ class OffsetDisplay:
 
 
 class _SettingsCommand(QUndoCommand):
-    def __init__(self, document: Document, old: FitSettings, new: FitSettings, text: str):
+    def __init__(self, document: Document, old: Settings, new: Settings, text: str):
         super().__init__(text)
         self._document, self._old, self._new = document, old, new
 
@@ -251,7 +175,7 @@ class Document(QObject):
     content_changed = Signal()  # targets and/or patches replaced
     fitted_changed = Signal()
     offsets_changed = Signal()
-    settings_changed = Signal(object, object)  # (old FitSettings, new FitSettings)
+    settings_changed = Signal(object, object)  # (old Settings, new Settings)
 
     def __init__(self, parent: QObject | None = None):
         super().__init__(parent)
@@ -262,19 +186,27 @@ class Document(QObject):
         #: the fitted patch network (``nurbs_core.patches.network.PatchNetwork``) or None
         self.network: Any = None
         self.offsets = OffsetDisplay()
-        self.settings = FitSettings()
+        self.settings = Settings()
         self.undo_stack = QUndoStack(self)
 
     # --- settings (undoable) -------------------------------------------------------------------
-    def edit_settings(self, text: str, **changes) -> bool:
-        """Push an undoable settings edit; returns False when nothing changes."""
-        new = with_changes(self.settings, **changes)
+    def edit_settings(self, text: str, **changes: Any) -> bool:
+        """Push an undoable edit of the fit's or the window's settings (see :func:`with_changes`);
+        returns False when nothing changes."""
+        return self._push(text, with_changes(self.settings, **changes))
+
+    def edit_patches(self, text: str, **changes: Any) -> bool:
+        """Push an undoable edit of the patch network's options (PatchOptions field names)."""
+        patches = dataclasses.replace(self.settings.patches, **changes)
+        return self._push(text, dataclasses.replace(self.settings, patches=patches))
+
+    def _push(self, text: str, new: Settings) -> bool:
         if new == self.settings:
             return False
         self.undo_stack.push(_SettingsCommand(self, self.settings, new, text))
         return True
 
-    def _apply_settings(self, new: FitSettings):
+    def _apply_settings(self, new: Settings):
         old, self.settings = self.settings, new
         self.settings_changed.emit(old, new)
 
@@ -349,11 +281,17 @@ class Document(QObject):
             data = json.loads(path.read_text())
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise ValueError(f"{path}: not a readable session file ({exc})") from None
-        if not isinstance(data, dict) or data.get("format") != SESSION_FORMAT:
+        if not isinstance(data, dict) or data.get("format") not in (SESSION_FORMAT,
+                                                                     *OLD_SESSION_FORMATS):
             raise ValueError(f"{path}: not a NURBS Studio session (expected format "
                              f"{SESSION_FORMAT!r})")
         try:
-            settings = FitSettings.from_json(data.get("settings", {}))
+            if data["format"] == SESSION_FORMAT:
+                settings = Settings.from_json(data.get("settings", {}))
+            else:
+                settings = Settings.from_flat_json(data.get("settings", {}))
+            settings.fit.validate()
+            settings.patches.validate()
             targets = []
             for item in data.get("targets", []):
                 points = np.asarray(item["points"], dtype=np.float64).reshape(-1, 3)

@@ -131,6 +131,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--threads", type=int, default=1,
                         help="torch threads (default 1: fastest for typical fits)")
     parser.add_argument("--dtype", default="float64", choices=["float32", "float64"])
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        dest="settings",
+                        help="set any FitConfig field, after the options above (repeatable; the "
+                             "value is JSON, else text), e.g. --set outlier_fraction=0.05 "
+                             "--set 'knots_u=[0,0,0,0,0.2,1,1,1,1]'")
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress lines")
     parser.add_argument("--max-decompressed", default=None, metavar="SIZE",
                         help="largest size a compressed input (.npz, compressed .pcd) may "
@@ -169,7 +174,7 @@ def _config(args, dimensions: int):
     if max_counts is None:
         max_counts = 0 if args.control_points else FitConfig.max_control_points
     extra = {} if args.stiffness is None else {"stiffness": args.stiffness}
-    return FitConfig(**extra,
+    config = FitConfig(**extra,
         kind="curve" if args.curve else "surface", degree_u=degrees[0],
         degree_v=degrees[-1], control_points_u=counts[0], control_points_v=counts[-1],
         loss=loss, optimizer=args.optimizer, learning_rate=learning_rate,
@@ -182,6 +187,35 @@ def _config(args, dimensions: int):
         samples_u=samples[0], samples_v=samples[-1],
         parameter_correction=not args.no_parameter_correction, seed=args.seed,
         snapshot_interval=0.1, dtype=args.dtype, refinements=args.refine, threads=args.threads)
+    if not args.settings:
+        return config
+    import dataclasses
+
+    # not FitConfig.replace: knots that do not fit are an error here, not silently dropped
+    return dataclasses.replace(config, **_field_settings(args.settings))
+
+
+def _field_settings(items: list[str]) -> dict:
+    """``--set FIELD=VALUE`` pairs as FitConfig keyword arguments (ValueError for an unknown
+    field or a missing ``=``)."""
+    import dataclasses
+    import json
+
+    from nurbs_core.fitting.config import FitConfig
+
+    known = {f.name for f in dataclasses.fields(FitConfig)}
+    values = {}
+    for item in items:
+        name, equals, text = item.partition("=")
+        name = name.strip()
+        if not equals or name not in known:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with a FitConfig field "
+                             f"({', '.join(sorted(known))})")
+        try:
+            values[name] = json.loads(text)
+        except json.JSONDecodeError:
+            values[name] = text
+    return values
 
 
 def _grid_parameters(count_u: int, count_v: int, points: int) -> np.ndarray:
@@ -420,6 +454,7 @@ def run(args) -> int:
         set_decompression_limit(args.max_decompressed)
     outputs = _check_outputs(args)
     # a bad option fails before the cloud is read
+    _field_settings(args.settings)
     if args.patches is not None:
         return run_patches(args, _patch_options(args), outputs)
     points = load_points(args.input).points

@@ -24,13 +24,14 @@ the weighted sum and reports every term.
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 from scipy.spatial import cKDTree
+
+from nurbs_core.fitting.config import LOSS_TERMS, Loss
 
 # --------------------------------------------------------------------------------------------
 # Pointwise losses
@@ -252,11 +253,8 @@ TERMS: dict[str, tuple[Callable[[LossInputs, str], torch.Tensor], str]] = {
                                                     _need(inputs, "fairing_matrix", name)),
                 "regulariser"),
 }
-ALIASES = {"cd": "chamfer", "hd": "hausdorff", "lap": "laplacian", "curve_length": "length",
-           "point_to_surface": "p2s", "thin_plate": "fairing"}
-
-_TERM = re.compile(r"^\s*(?:(?P<weight>[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*\*\s*)?"
-                   r"(?P<name>[A-Za-z_][A-Za-z0-9_]*)\s*$")
+if {name: kind for name, (_, kind) in TERMS.items()} != LOSS_TERMS:  # pragma: no cover
+    raise ImportError("nurbs_core.losses.TERMS and nurbs_core.fitting.config.LOSS_TERMS disagree")
 
 
 class CompositeLoss:
@@ -290,26 +288,10 @@ class CompositeLoss:
         return "CompositeLoss(" + " + ".join(f"{w:g}*{n}" for w, n in self.terms) + ")"
 
 
-def parse_loss(expression: str) -> CompositeLoss:
-    """Parse ``"chamfer+0.1*laplacian+10*hausdorff"``: terms joined by ``+``, each ``[w*]name``.
-
-    Names: l1, l2, mse, p2s (point_to_surface; mse at foot points), chamfer (cd), hausdorff (hd),
-    laplacian (lap), length (curve_length), fairing (thin_plate; surfaces). Weights must be
-    non-negative numbers; a repeated term has its weights added. Raises ValueError naming the
+def parse_loss(expression: Loss | str) -> CompositeLoss:
+    """The loss to evaluate for ``expression``: a :class:`~nurbs_core.fitting.config.Loss` or its
+    text form, e.g. ``"chamfer+0.1*laplacian+10*hausdorff"`` (see :meth:`Loss.parse`: names l1,
+    l2, mse, p2s (point_to_surface; mse at foot points), chamfer (cd), hausdorff (hd), laplacian
+    (lap), length (curve_length), fairing (thin_plate; surfaces)). Raises ValueError naming the
     offending part."""
-    if not isinstance(expression, str) or not expression.strip():
-        raise ValueError("the loss expression is empty; try 'chamfer+0.1*laplacian+10*hausdorff'")
-    weights: dict[str, float] = {}
-    for part in expression.split("+"):
-        match = _TERM.match(part)
-        if match is None:
-            raise ValueError(f"cannot parse loss term {part.strip()!r} in {expression!r}: expected "
-                             "'name' or 'weight*name', e.g. '0.1*laplacian'")
-        name = match.group("name").lower()
-        name = ALIASES.get(name, name)
-        if name not in TERMS:
-            raise ValueError(f"unknown loss term {match.group('name')!r} in {expression!r}; known: "
-                             f"{', '.join(sorted(TERMS))}")
-        weight = float(match.group("weight")) if match.group("weight") else 1.0
-        weights[name] = weights.get(name, 0.0) + weight
-    return CompositeLoss([(w, n) for n, w in weights.items()])
+    return CompositeLoss([(weight, name) for name, weight in Loss.of(expression).terms])

@@ -33,9 +33,9 @@ from app.state import (
     PARAMETERIZATIONS,
     SOLVERS,
     TOLERANCE_HINT,
-    FitSettings,
     parse_tolerance,
 )
+from nurbs_core.fitting.config import FitConfig, Loss
 
 POLICY_TEXT = ("Changes restart a running or paused fit from the current shape. When idle they "
                "apply to the next Start, which also continues from the current shape "
@@ -183,7 +183,7 @@ class FitSettingsPanel(QWidget):
             lambda on: self._changed("Free weights", free_weights=bool(on)))
         self.pin_boundary.toggled.connect(
             lambda on: self._changed("Pin boundary", pin_boundary=bool(on)))
-        self.show_settings(FitSettings())
+        self.show_settings(FitConfig())
 
     def _surfacing_group(self) -> QGroupBox:
         """The least-squares core: solver, parameterisation, stiffness, tolerance, grid growth,
@@ -208,7 +208,7 @@ class FitSettingsPanel(QWidget):
         self.grow_grid = QCheckBox("Grow grid to meet tolerance")
         self.max_control_points = _spin(2, 200)
         self.max_control_points.setSuffix(" per direction")
-        self.max_control_points.setValue(FitSettings().max_control_points or 40)
+        self.max_control_points.setValue(FitConfig().max_control_points or 40)
         self.single_patch = QCheckBox("Force single patch")
         widgets = {"solver": self.solver, "parameterization": self.parameterization,
                    "stiffness": self.stiffness, "tolerance": self.tolerance,
@@ -289,42 +289,43 @@ class FitSettingsPanel(QWidget):
                 self.sender().setChecked(True)
             self.sender().blockSignals(False)
             return
-        self._edit("Loss", loss=tuple(terms))
+        self._edit("Loss", loss=Loss(tuple(terms)))
 
-    def show_settings(self, settings: FitSettings):
+    def show_settings(self, fit: FitConfig):
+        """Show ``fit`` (the document's FitConfig) without emitting edits."""
         self._updating = True
         try:
-            self.kind.setCurrentIndex(self.kind.findData(settings.kind))
-            self.degree_u.setValue(settings.degree_u)
-            self.degree_v.setValue(settings.degree_v)
-            self.control_points_u.setValue(settings.control_points_u)
-            self.control_points_v.setValue(settings.control_points_v)
-            surface = settings.kind == "surface"
+            self.kind.setCurrentIndex(self.kind.findData(fit.kind))
+            self.degree_u.setValue(fit.degree_u)
+            self.degree_v.setValue(fit.degree_v)
+            self.control_points_u.setValue(fit.control_points_u)
+            self.control_points_v.setValue(fit.control_points_v)
+            surface = fit.kind == "surface"
             self.degree_v.setEnabled(surface)
             self.control_points_v.setEnabled(surface)
-            weights = dict(settings.loss)
+            weights = dict(fit.loss.terms)
             for name in LOSS_TERMS:
                 on = name in weights
                 self.term_checks[name].setChecked(on)
                 self.term_weights[name].setValue(weights.get(name, self._last_weights[name]))
-            self.loss_text.setText(f"loss = {settings.loss_text}")
-            self.optimizer.setCurrentIndex(self.optimizer.findData(settings.optimizer))
-            self.learning_rate.setValue(settings.learning_rate)
-            self.iterations.setValue(settings.iterations)
-            self.init.setCurrentIndex(self.init.findData(settings.init))
-            self.free_weights.setChecked(settings.free_weights)
-            self.pin_boundary.setChecked(settings.pin_boundary)
-            self.solver.setCurrentIndex(self.solver.findData(settings.solver))
+            self.loss_text.setText(f"loss = {fit.loss}")
+            self.optimizer.setCurrentIndex(self.optimizer.findData(fit.optimizer))
+            self.learning_rate.setValue(fit.learning_rate)
+            self.iterations.setValue(fit.iterations)
+            self.init.setCurrentIndex(self.init.findData(fit.init))
+            self.free_weights.setChecked(fit.free_weights)
+            self.pin_boundary.setChecked(fit.pin_boundary)
+            self.solver.setCurrentIndex(self.solver.findData(fit.solver))
             self.parameterization.setCurrentIndex(
-                self.parameterization.findData(settings.parameterization))
-            self.stiffness.set_value(settings.stiffness)
-            self.tolerance.setText("" if settings.tolerance is None else repr(settings.tolerance))
+                self.parameterization.findData(fit.parameterization))
+            self.stiffness.set_value(fit.stiffness)
+            self.tolerance.setText("" if fit.tolerance is None else repr(fit.tolerance))
             self._clear_tolerance_hint()
-            grows = settings.max_control_points > 0
+            grows = fit.max_control_points > 0
             self.grow_grid.setChecked(grows)
             if grows:  # off keeps the last limit on show, for ticking the box again
-                self.max_control_points.setValue(settings.max_control_points)
-            self.single_patch.setChecked(settings.single_patch)
+                self.max_control_points.setValue(fit.max_control_points)
+            self.single_patch.setChecked(fit.single_patch)
             for widget in (self.solver, self.parameterization, self.stiffness, self.tolerance,
                            self.grow_grid, self.single_patch):
                 widget.setEnabled(surface)

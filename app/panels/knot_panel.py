@@ -17,7 +17,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.state import FitSettings
+from nurbs_core.fitting.config import FitConfig
 
 # the knot computations are the engine's torch-free ones (this panel runs on the GUI thread)
 from nurbs_core.knot_vectors import averaged_on_plane as averaged_knots_for
@@ -30,7 +30,7 @@ class KnotPanel(QWidget):
                  parent: QWidget | None = None):
         super().__init__(parent)
         self._edit, self._report = edit, report
-        self._settings = FitSettings()
+        self._settings = FitConfig()
         self._fitted: dict | None = None
         self._points: np.ndarray | None = None
         self._updating = False
@@ -68,7 +68,7 @@ class KnotPanel(QWidget):
     def set_points(self, points: np.ndarray | None):
         self._points = points
 
-    def show_state(self, settings: FitSettings, fitted: dict | None):
+    def show_state(self, settings: FitConfig, fitted: dict | None):
         self._settings, self._fitted = settings, fitted
         self._updating = True
         try:

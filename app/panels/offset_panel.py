@@ -13,7 +13,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.state import FitSettings, OffsetDisplay
+from app.state import OffsetDisplay, Settings
 
 
 class OffsetPanel(QWidget):
@@ -52,7 +52,7 @@ class OffsetPanel(QWidget):
         if not self._updating:
             self._edit(text, **changes)
 
-    def show_settings(self, settings: FitSettings):
+    def show_settings(self, settings: Settings):
         self._updating = True
         try:
             self.show_offsets.setChecked(settings.show_offsets)

@@ -1,8 +1,9 @@
 """The fit mode selector (single patch or patches) and the patch network settings.
 
 Both edit the document's settings through ``edit(text, **changes)`` (undoable, like every fit
-setting) and mirror them back with ``show_settings`` without emitting edits. The values are the
-engine's ``PatchOptions`` (``FitSettings.patch_options``): nothing is decided here.
+setting: the mode through ``Document.edit_settings``, the network through
+``Document.edit_patches`` with the engine's ``PatchOptions`` field names) and mirror them back
+with ``show_settings`` without emitting edits: nothing is decided here.
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ from collections.abc import Callable
 from PySide6.QtWidgets import QComboBox, QFormLayout, QLabel, QSpinBox, QVBoxLayout, QWidget
 
 from app.panels.log_slider import LogSlider
-from app.state import FIT_MODES, FitSettings
+from app.state import FIT_MODES, Settings
+from nurbs_core.patches.options import PatchOptions
 
 #: The spin boxes' lowest value stands for "auto" (the engine's choice).
 AUTO_COUNT, AUTO_SIZE = 3, 3
@@ -60,7 +62,7 @@ class ModeSelector(QComboBox):
         if not self._updating:
             self._edit("Fit mode", fit_mode=self.currentData())
 
-    def show_settings(self, settings: FitSettings):
+    def show_settings(self, settings: Settings):
         self._updating = True
         try:
             self.setCurrentIndex(self.findData(settings.fit_mode))
@@ -94,15 +96,15 @@ class PatchesPanel(QWidget):
         layout.addStretch(1)
         self.patch_count.valueChanged.connect(
             lambda value: self._changed("Target patches",
-                                        patch_count=None if value == AUTO_COUNT else int(value)))
+                                        patches="auto" if value == AUTO_COUNT else int(value)))
         self.patch_size.valueChanged.connect(
             lambda value: self._changed("Control points per patch",
-                                        patch_size=None if value == AUTO_SIZE else int(value)))
+                                        size=None if value == AUTO_SIZE else int(value)))
         self.patch_stiffness.value_committed.connect(
-            lambda value: self._changed("Patch stiffness", patch_stiffness=float(value)))
+            lambda value: self._changed("Patch stiffness", stiffness=float(value)))
         self.seam_weight.value_committed.connect(
             lambda value: self._changed("Seam weight", seam_weight=float(value)))
-        self.show_settings(FitSettings())
+        self.show_settings(PatchOptions())
 
     def _changed(self, text: str, **changes):
         if not self._updating:
@@ -113,14 +115,14 @@ class PatchesPanel(QWidget):
         self.patch_stiffness.cancel()
         self.seam_weight.cancel()
 
-    def show_settings(self, settings: FitSettings):
+    def show_settings(self, options: PatchOptions):
+        """Show ``options`` (the document's PatchOptions) without emitting edits."""
         self._updating = True
         try:
-            self.patch_count.setValue(AUTO_COUNT if settings.patch_count is None
-                                      else settings.patch_count)
-            self.patch_size.setValue(AUTO_SIZE if settings.patch_size is None
-                                     else settings.patch_size)
-            self.patch_stiffness.set_value(settings.patch_stiffness)
-            self.seam_weight.set_value(settings.seam_weight)
+            self.patch_count.setValue(AUTO_COUNT if options.patches == "auto"
+                                      else options.patches)
+            self.patch_size.setValue(AUTO_SIZE if options.size is None else options.size)
+            self.patch_stiffness.set_value(options.stiffness)
+            self.seam_weight.set_value(options.seam_weight)
         finally:
             self._updating = False

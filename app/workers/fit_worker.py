@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 from PySide6.QtCore import QObject, Signal, Slot
 
-from app.state import FitSettings
-from app.workers.display import DisplayGeometry, display_geometry, resample
+from app.state import Settings
+from app.workers.display import DisplayGeometry, display_geometry
 from app.workers.quality import measure_quality
 
 #: Deviation needs a closest-point projection of the whole cloud (~0.3 s for 4000 points here,
@@ -37,7 +37,7 @@ class FitRequest:
 
     run_id: int
     target: np.ndarray
-    settings: FitSettings
+    settings: Settings
     initial: dict[str, Any] | None = None
 
 
@@ -133,52 +133,16 @@ def sampled_deviation(distance_function, geometry, target: np.ndarray, limit: in
     return result
 
 
-def matches_structure(geometry: dict[str, Any], settings: FitSettings) -> bool:
-    """True when ``geometry`` already has the degree, control grid and knots of ``settings``."""
-    if geometry.get("kind") != settings.kind:
-        return False
-    if settings.kind == "curve":
-        ok = (geometry["degree"] == settings.degree_u
-              and len(geometry["control_points"]) == settings.control_points_u)
-        return ok and (settings.knots_u is None
-                       or np.allclose(geometry["knots"], settings.knots_u))
-    shape = geometry["control_points"].shape
-    ok = (geometry["degree_u"], geometry["degree_v"], shape[0], shape[1]) == (
-        settings.degree_u, settings.degree_v, settings.control_points_u, settings.control_points_v)
-    for name in ("knots_u", "knots_v"):
-        custom = getattr(settings, name)
-        ok = ok and (custom is None or np.allclose(geometry[name], custom))
-    return ok
-
-
 def starting_geometry(request: FitRequest) -> dict[str, Any] | None:
-    """The run's initial geometry: the current one, or None for the engine's initialization.
-
-    The engine itself converts a different degree or control grid (exactly by degree elevation
-    when it can, else by least squares). Custom knots are the app's addition: when the settings
-    carry knots the current shape does not have, it is re-approximated on them here; with no
-    current shape, the engine's initialization is re-approximated on them.
-    """
-    settings, initial = request.settings, request.initial
-    if initial is not None and initial.get("kind") != settings.kind:
-        initial = None
-    if initial is not None and initial.get("kind") == "curve" and request.target.shape[1] != (
-            initial["control_points"].shape[-1]):
-        initial = None  # a 3D curve cannot continue on a 2D target (or the reverse)
-    custom = settings.knots_u is not None or settings.knots_v is not None
-    if not custom:
-        return initial
-    if initial is None:
-        from nurbs_core.fitting import FitConfig, iter_fit
-
-        # zero iterations: the engine's initialization only (its final snapshot)
-        config = FitConfig(**{**settings.fit_fields(), "iterations": 0})
-        for snapshot in iter_fit(request.target, config):
-            initial = snapshot.geometry
-    if matches_structure(initial, settings):
-        return initial
-    return resample(initial, settings.degree_u, settings.degree_v, settings.control_points_u,
-                    settings.control_points_v, settings.knots_u, settings.knots_v)
+    """The run's initial geometry: the current shape when the fit can continue from it (same
+    kind, same dimension for curves), else None for the engine's initialization. The engine
+    converts a different degree, control grid or custom knots itself (:func:`conform`)."""
+    fit, initial = request.settings.fit, request.initial
+    if initial is None or initial.get("kind") != fit.kind:
+        return None
+    if fit.kind == "curve" and request.target.shape[1] != initial["control_points"].shape[-1]:
+        return None  # a 3D curve cannot continue on a 2D target (or the reverse)
+    return initial
 
 
 def lower_thread_priority(niceness: int = 10):
@@ -237,14 +201,13 @@ class FitWorker(QObject):
             self.run_finished.emit(request.run_id)
 
     def _run(self, request: FitRequest):
-        from nurbs_core.fitting import FitConfig, deviation, iter_fit
+        from nurbs_core.fitting import deviation, iter_fit
 
         # the engine's modules (imported above on the first run) are long-lived: keep the
         # garbage collector's full passes, which hold the GIL, from walking them again
         gc.freeze()
 
-        settings = request.settings
-        config = FitConfig(**settings.fit_fields())
+        config = request.settings.fit
         last_deviation = -np.inf
         # the engine checks its input (and refuses shapes one patch cannot hold) before its
         # first snapshot: a ValueError until then is a refusal, told in one line, no traceback
@@ -277,7 +240,7 @@ class FitWorker(QObject):
                                                     statistics, dev)
             self.snapshot_ready.emit(DisplaySnapshot(
                 run_id=request.run_id, iteration=int(snapshot.iteration),
-                iterations=0 if snapshot.stage == "least_squares" else settings.iterations,
+                iterations=0 if snapshot.stage == "least_squares" else config.iterations,
                 geometry=snapshot.geometry,
                 display=display, losses=list(snapshot.losses),
                 elapsed=float(snapshot.elapsed), done=bool(snapshot.done),

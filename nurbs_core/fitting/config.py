@@ -1,15 +1,26 @@
-"""Configuration, stop token, snapshots and results of a fit (no torch state lives here)."""
+"""Configuration, stop token, snapshots and results of a fit (numpy only: no torch here).
+
+:class:`FitConfig` is the one description of a fit: the command line builds it from its flags, the
+Python API takes it, and the app keeps it in its document and edits it field by field. Its loss is
+a structured :class:`Loss` (terms and weights); the text form (``"p2s+0.001*chamfer"``) is only for
+the command line and files.
+"""
 
 from __future__ import annotations
 
+import dataclasses
+import re
 import threading
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-OPTIMIZERS = ("sgd", "momentum", "adam", "adagrad", "lbfgs")
-INITS = ("pca", "random", "least_squares")
+from nurbs_core.knot_vectors import clamped_problem
+
+OPTIMIZERS = ("adam", "sgd", "momentum", "adagrad", "lbfgs")
+INITS = ("pca", "least_squares", "random")
 PARAMETERIZATIONS = ("auto", "mesh", "plane")
 SOLVERS = ("auto", "least_squares", "gradient")
 KINDS = ("surface", "curve")
@@ -25,10 +36,103 @@ PAPER_POINT_CLOUD_LOSS = "chamfer+0.1*laplacian+10*hausdorff"
 #: p2s alone and p2s + Laplacian on real clouds: ``python benchmarks/bench_fit.py --defaults``.
 DEFAULT_LOSS = "p2s+0.001*chamfer"
 
+#: Loss term name -> kind. ``pointwise`` terms pair points (foot points for unordered clouds),
+#: ``set`` terms compare point sets, ``regulariser`` terms look at the geometry alone. The
+#: functions live in :mod:`nurbs_core.losses` (which checks it implements exactly these).
+LOSS_TERMS: dict[str, str] = {
+    "p2s": "pointwise", "chamfer": "set", "hausdorff": "set", "laplacian": "regulariser",
+    "fairing": "regulariser", "length": "regulariser", "l1": "pointwise", "l2": "pointwise",
+    "mse": "pointwise",
+}
+LOSS_ALIASES = {"cd": "chamfer", "hd": "hausdorff", "lap": "laplacian", "curve_length": "length",
+                "point_to_surface": "p2s", "thin_plate": "fairing"}
+_TERM = re.compile(r"^\s*(?:(?P<weight>[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*\*\s*)?"
+                   r"(?P<name>[A-Za-z_][A-Za-z0-9_]*)\s*$")
 
-@dataclass
+
+@dataclass(frozen=True)
+class Loss:
+    """A weighted sum of named loss terms: ``terms`` ((name, weight), ...), names from
+    :data:`LOSS_TERMS`, each at most once, weights finite and non-negative.
+
+    ``Loss.parse("chamfer+0.1*laplacian+10*hausdorff")`` reads the text form (aliases such as
+    ``cd``, ``hd``, ``lap`` allowed; a repeated term has its weights added) and ``str(loss)`` writes
+    it back (positional numbers, so ``1e+06`` never appears); ``Loss.of`` accepts either form."""
+
+    terms: tuple[tuple[str, float], ...]
+
+    def __post_init__(self) -> None:
+        terms = tuple((str(name), float(weight)) for name, weight in self.terms)
+        if not terms:
+            raise ValueError("a loss needs at least one term; try 'chamfer+0.1*laplacian'")
+        names = [name for name, _ in terms]
+        for name, weight in terms:
+            if name not in LOSS_TERMS:
+                raise ValueError(f"unknown loss term {name!r}; known: {', '.join(LOSS_TERMS)}")
+            if not (np.isfinite(weight) and weight >= 0):
+                raise ValueError(f"the weight of {name} must be a finite non-negative number, "
+                                 f"got {weight!r}")
+        if len(set(names)) != len(names):
+            raise ValueError(f"a loss names each term once, got {', '.join(names)}")
+        object.__setattr__(self, "terms", terms)
+
+    @classmethod
+    def parse(cls, text: str) -> Loss:
+        """The text form: terms joined by ``+``, each ``[weight*]name``. Raises ValueError naming
+        the offending part."""
+        if not isinstance(text, str) or not text.strip():
+            raise ValueError("the loss expression is empty; try 'chamfer+0.1*laplacian+10*hausdorff'")
+        weights: dict[str, float] = {}
+        for part in text.split("+"):
+            match = _TERM.match(part)
+            if match is None:
+                raise ValueError(f"cannot parse loss term {part.strip()!r} in {text!r}: expected "
+                                 "'name' or 'weight*name', e.g. '0.1*laplacian'")
+            name = match.group("name").lower()
+            name = LOSS_ALIASES.get(name, name)
+            if name not in LOSS_TERMS:
+                raise ValueError(f"unknown loss term {match.group('name')!r} in {text!r}; known: "
+                                 f"{', '.join(sorted(LOSS_TERMS))}")
+            weights[name] = weights.get(name, 0.0) + float(match.group("weight") or 1.0)
+        return cls(tuple(weights.items()))
+
+    @classmethod
+    def of(cls, value: Loss | str | Iterable[tuple[str, float]]) -> Loss:
+        """A Loss from a Loss, its text form, or (name, weight) pairs."""
+        if isinstance(value, Loss):
+            return value
+        if isinstance(value, str):
+            return cls.parse(value)
+        return cls(tuple(value))
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(name for name, _ in self.terms)
+
+    def weight(self, name: str) -> float:
+        """The weight of ``name`` (0 when the loss has no such term)."""
+        return dict(self.terms).get(name, 0.0)
+
+    def kinds(self) -> set[str]:
+        return {LOSS_TERMS[name] for name in self.names}
+
+    def __str__(self) -> str:
+        return "+".join(name if weight == 1.0
+                        else f"{np.format_float_positional(weight, trim='-')}*{name}"
+                        for name, weight in self.terms)
+
+
+def _knot_tuple(value: Any) -> tuple[float, ...] | None:
+    if value is None:
+        return None
+    return tuple(float(k) for k in np.asarray(value, dtype=np.float64).ravel())
+
+
+@dataclass(frozen=True)
 class FitConfig:
-    """Settings of a fit.
+    """Settings of a fit. Immutable: ``dataclasses.replace`` (or :meth:`replace`) makes an edited
+    copy. ``loss`` may be given as text or (name, weight) pairs; it is stored as a :class:`Loss`.
+    :meth:`to_json` / :meth:`from_json` are its file form (sessions, scripts).
 
     Coordinates are normalised before fitting: the cloud is centred on its bounding-box centre and
     divided by its bounding-box diagonal. ``learning_rate`` is therefore relative to the cloud's
@@ -37,7 +141,7 @@ class FitConfig:
     initial trial step of its strong-Wolfe line search (1.0 is the usual choice).
 
     kind "curve" uses ``degree_u`` and ``control_points_u`` and accepts 2-D or 3-D points.
-    ``loss`` is parsed by :func:`nurbs_core.losses.parse_loss`; the default is ``DEFAULT_LOSS``
+    ``loss`` is a :class:`Loss` (given as one, as text or as pairs); the default is ``DEFAULT_LOSS``
     (``"p2s+0.001*chamfer"``), the paper's composite is ``PAPER_POINT_CLOUD_LOSS``
     (``"chamfer+0.1*laplacian+10*hausdorff"``). With known parameters ``p2s`` equals ``mse``.
     ``init``: "pca" starts surfaces from the cloud's principal plane; for an unordered curve cloud
@@ -67,7 +171,7 @@ class FitConfig:
     degree_v: int = 3
     control_points_u: int = 12
     control_points_v: int = 12
-    loss: str = DEFAULT_LOSS
+    loss: Loss = field(default_factory=lambda: Loss.parse(DEFAULT_LOSS))
     optimizer: str = "adam"
     learning_rate: float = 0.01
     iterations: int = 500
@@ -120,6 +224,54 @@ class FitConfig:
     batch_size: int = 32768
     refinements: int = 0
     threads: int | None = None
+    #: custom knot vectors (full, clamped: control_points + degree + 1 values) or None for the
+    #: clamped uniform ones. Their spacing is kept and mapped linearly onto the fit's parameter
+    #: domain; a fit with custom knots keeps its control grid (no growth) and, for an unordered
+    #: surface cloud, continues from the least-squares start with the gradient fit on them.
+    knots_u: tuple[float, ...] | None = None
+    knots_v: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "loss", Loss.of(self.loss))
+        for name in ("knots_u", "knots_v"):
+            object.__setattr__(self, name, _knot_tuple(getattr(self, name)))
+        if self.corners is not None:
+            object.__setattr__(self, "corners", tuple(self.corners))
+
+    def replace(self, **changes: Any) -> FitConfig:
+        """A copy with ``changes``; custom knots that no longer fit the degree or the control
+        count are dropped (back to the uniform ones)."""
+        new = dataclasses.replace(self, **changes)
+        drop = {}
+        for d in ("u", "v"):
+            knots = getattr(new, f"knots_{d}")
+            count = getattr(new, f"control_points_{d}") + getattr(new, f"degree_{d}") + 1
+            if knots is not None and len(knots) != count:
+                drop[f"knots_{d}"] = None
+        return dataclasses.replace(new, **drop) if drop else new
+
+    @property
+    def custom_knots(self) -> bool:
+        return self.knots_u is not None or (self.kind == "surface" and self.knots_v is not None)
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict of every field (the loss as text, tuples as lists)."""
+        data = dataclasses.asdict(self)
+        data["loss"] = str(self.loss)
+        for name in ("knots_u", "knots_v", "corners"):
+            if data[name] is not None:
+                data[name] = list(data[name])
+        return data
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> FitConfig:
+        """Inverse of :meth:`to_json` (missing fields take their defaults). Raises ValueError for
+        fields FitConfig does not have."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"unknown fit settings: {', '.join(unknown)}")
+        return cls(**data)
 
     def validate(self) -> None:
         """Raise ValueError naming the first bad setting."""
@@ -183,6 +335,19 @@ class FitConfig:
             raise ValueError(f"outlier_fraction must lie in [0, 0.5), got {self.outlier_fraction}")
         if not 0 <= self.momentum < 1:
             raise ValueError(f"momentum must lie in [0, 1), got {self.momentum}")
+        for d in directions:
+            knots = getattr(self, f"knots_{d}")
+            if knots is None:
+                continue
+            values = np.asarray(knots)
+            problem = ("a knot is not finite" if not np.all(np.isfinite(values)) else
+                       clamped_problem(values, getattr(self, f"degree_{d}"),
+                                       getattr(self, f"control_points_{d}")))
+            if problem:
+                raise ValueError(f"knots_{d}: {problem}")
+        if self.custom_knots and self.solver == "least_squares":
+            raise ValueError("custom knots need solver 'gradient' or 'auto' (the least-squares "
+                             "core places its own knots)")
 
 
 class StopToken:

@@ -140,11 +140,35 @@ def prepare(target, config: FitConfig, parameters=None) -> Problem:
 # Starting geometry
 
 
-def _uniform_knots(problem: Problem, config: FitConfig):
+def _uniform_knots(problem: Problem, config: FitConfig) -> list[np.ndarray]:
+    """The start's knot vectors over the fit's domains: the config's custom knots (mapped onto
+    them) or clamped uniform ones."""
+    custom = custom_knots(config, problem.domains)
+    if custom is not None:
+        return custom
     counts = (config.control_points_u, config.control_points_v)
     degrees = (config.degree_u, config.degree_v)
     return [clamped_uniform(counts[k], degrees[k], problem.domains[k], dtype=torch.float64).numpy()
             for k in range(len(problem.domains))]
+
+
+def custom_knots(config: FitConfig, domains) -> list[np.ndarray] | None:
+    """The config's knot vectors mapped linearly onto ``domains`` ((lo, hi) per direction; a
+    direction without custom knots gets clamped uniform ones), or None when it has none."""
+    if not config.custom_knots:
+        return None
+    result = []
+    for k, (lo, hi) in enumerate(domains):
+        d = "uv"[k]
+        knots = getattr(config, f"knots_{d}")
+        if knots is None:
+            result.append(clamped_uniform(getattr(config, f"control_points_{d}"),
+                                          getattr(config, f"degree_{d}"), (lo, hi),
+                                          dtype=torch.float64).numpy())
+            continue
+        values = np.asarray(knots, dtype=np.float64)
+        result.append(lo + (values - values[0]) * ((hi - lo) / (values[-1] - values[0])))
+    return result
 
 
 def _plane_geometry(problem: Problem, config: FitConfig, knots):
@@ -248,39 +272,46 @@ def _from_initial(problem: Problem, config: FitConfig, initial):
 
 
 def conform(geometry, config: FitConfig):
-    """Bring ``geometry`` to the config's degrees and control counts: exactly when degree elevation
-    and knot insertion (midpoints of the widest spans) get there, otherwise by least squares on
-    dense samples of it (non-rational result)."""
+    """Bring ``geometry`` to the config's degrees, control counts and custom knots (if any):
+    exactly when degree elevation and knot insertion (midpoints of the widest spans) get there
+    without custom knots, otherwise by least squares on dense samples of it (non-rational
+    result, same domain)."""
     is_curve = isinstance(geometry, NurbsCurve)
     target_degrees = (config.degree_u,) if is_curve else (config.degree_u, config.degree_v)
     target_counts = ((config.control_points_u,) if is_curve
                      else (config.control_points_u, config.control_points_v))
     degrees = (geometry.degree,) if is_curve else (geometry.degree_u, geometry.degree_v)
     counts = (geometry.n_control_points,) if is_curve else tuple(geometry.shape)
+    domains = [geometry.domain] if is_curve else list(geometry.domain)
+    knots = custom_knots(config, domains)
     if degrees == target_degrees and counts == target_counts:
-        return geometry
+        current = [geometry.knots] if is_curve else [geometry.knots_u, geometry.knots_v]
+        if knots is None or all(np.allclose(c.detach().cpu().double().numpy(), k, atol=1e-12)
+                                for c, k in zip(current, knots, strict=True)):
+            return geometry
     raise_by = [t - d for t, d in zip(target_degrees, degrees, strict=True)]
-    if all(r >= 0 for r in raise_by):
+    if knots is None and all(r >= 0 for r in raise_by):
         elevated = (geometry.elevate_degree(raise_by[0]) if is_curve
                     else geometry.elevate_degree(*raise_by))
         new_counts = ((elevated.n_control_points,) if is_curve else tuple(elevated.shape))
         if all(n <= t for n, t in zip(new_counts, target_counts, strict=True)):
             return _insert_to_counts(elevated, target_counts)
     # least squares on samples of the initial geometry
+    knots = [None, None] if knots is None else knots + [None] * (2 - len(knots))
     density = [max(4 * c, 64) for c in target_counts]
     if is_curve:
         lo, hi = geometry.domain
         u = np.linspace(lo, hi, density[0])
         points = geometry.evaluate(torch.as_tensor(u)).detach().numpy()
         return least_squares_fit(points, u, config.degree_u, None, config.control_points_u, None,
-                                 kind="curve")
+                                 knots[0], kind="curve")
     (u0, u1), (v0, v1) = geometry.domain
     u, v = np.linspace(u0, u1, density[0]), np.linspace(v0, v1, density[1])
     points = geometry.evaluate_grid(torch.as_tensor(u), torch.as_tensor(v)).detach().numpy()
     uu, vv = np.meshgrid(u, v, indexing="ij")
     return least_squares_fit(points.reshape(-1, 3), np.stack([uu.ravel(), vv.ravel()], -1),
                              config.degree_u, config.degree_v, config.control_points_u,
-                             config.control_points_v)
+                             config.control_points_v, *knots)
 
 
 def _widest_span_midpoint(knots: torch.Tensor) -> float:

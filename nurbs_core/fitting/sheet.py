@@ -19,9 +19,9 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
-from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, FitSnapshot, StopToken
+from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, FitSnapshot, Loss, StopToken
 from nurbs_core.fitting.least_squares import pca_parameters, principal_axes
-from nurbs_core.fitting.problem import Problem
+from nurbs_core.fitting.problem import Problem, conform
 from nurbs_core.geometry import NurbsSurface
 from nurbs_core.surfacing.core import CorePass, LeastSquaresCore
 from nurbs_core.surfacing.mesh import CloudMesh, median_spacing, voxel_subsample
@@ -51,11 +51,12 @@ def uses_core(problem: Problem, config: FitConfig, initial) -> bool:
 
 
 def resolved_solver(config: FitConfig) -> str:
-    """"least_squares" or "gradient" (see FitConfig.solver)."""
+    """"least_squares" or "gradient" (see FitConfig.solver; custom knots need the gradient fit,
+    the core chooses its own knots)."""
     if config.solver != "auto":
         return config.solver
-    plain = (config.loss.replace(" ", "") == DEFAULT_LOSS and not config.free_knots
-             and not config.free_weights and not config.pin_boundary)
+    plain = (config.loss == Loss.parse(DEFAULT_LOSS) and not config.free_knots
+             and not config.free_weights and not config.pin_boundary and not config.custom_knots)
     return "least_squares" if plain else "gradient"
 
 
@@ -178,7 +179,7 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
     limit = max(int(math.sqrt(len(pass_points) / 8)), max(degrees) + 1)
     grid = tuple(min(c, max(limit, d + 1)) for c, d in
                  zip((config.control_points_u, config.control_points_v), degrees, strict=True))
-    if config.max_control_points:
+    if config.max_control_points and not config.custom_knots:
         max_grid = tuple(max(config.max_control_points, g) for g in grid)
     else:
         max_grid = grid
@@ -207,6 +208,8 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
                 stop.wait_while_paused(0.1)
     result["records"] = [_record(last, core.fairing_scale)]
     surface = last.geometry
+    if config.custom_knots:  # the start of the gradient fit on the user's knots
+        surface = conform(surface, config)
     if subset is None:
         parameters, distances = last.parameters, last.distances
     else:

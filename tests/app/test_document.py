@@ -27,14 +27,14 @@ def test_session_round_trip(qtbot, window, ply_cloud, tmp_path):
     session = tmp_path / "work.json"
     assert window.save_session(str(session))
     data = json.loads(session.read_text())
-    assert data["settings"]["optimizer"] == "sgd"
+    assert data["settings"]["fit"]["optimizer"] == "sgd"
 
     window.reset_fit()
     window.document.edit_settings("Optimizer", optimizer="adam")
     assert window.document.fitted is None
     with qtbot.waitSignal(window.jobs.job_finished, timeout=30000):  # re-tessellation of the fit
         assert window.open_session(str(session))
-    settings = window.document.settings
+    settings = window.document.settings.fit
     assert (settings.optimizer, settings.learning_rate, settings.control_points_u) == (
         "sgd", 0.02, 8)
     np.testing.assert_array_equal(window.document.fitted["control_points"],
@@ -58,7 +58,7 @@ def test_planar_cloud_fits_a_2d_curve(qtbot, window, tmp_path):
     path = tmp_path / "arc.csv"
     np.savetxt(path, points, delimiter=",", header="x,y,z", comments="")
     open_by_drop(qtbot, window, [path])
-    assert window.document.settings.kind == "curve"
+    assert window.document.settings.fit.kind == "curve"
     window.document.edit_settings("quick", control_points_u=8, iterations=100000)
     _fit_briefly(qtbot, window, snapshots=3)
     fitted = window.document.fitted
@@ -73,9 +73,9 @@ def test_helix_fits_a_3d_curve(qtbot, window, tmp_path):
     path = tmp_path / "helix.xyz"
     np.savetxt(path, points)
     open_by_drop(qtbot, window, [path])
-    assert window.document.settings.kind == "surface"  # not planar: the user picks a curve
+    assert window.document.settings.fit.kind == "surface"  # not planar: the user picks a curve
     window.fit_panel.kind.setCurrentIndex(window.fit_panel.kind.findData("curve"))
-    assert window.document.settings.kind == "curve"
+    assert window.document.settings.fit.kind == "curve"
     assert not window.fit_panel.degree_v.isEnabled()
     window.document.edit_settings("quick", control_points_u=12, iterations=100000)
     _fit_briefly(qtbot, window, snapshots=2)
@@ -135,23 +135,23 @@ def test_knot_table_edit_undo_and_validation(qtbot, window, ply_cloud):
     table = window.knot_panel.tables["u"]
     assert table.rowCount() == 8 + 3 + 1
     table.item(5, 0).setText("0.45")  # an interior knot moves
-    knots = window.document.settings.knots_u
+    knots = window.document.settings.fit.knots_u
     assert knots is not None and knots[5] == pytest.approx(0.45)
     table.item(5, 0).setText("2.0")  # breaks the order: refused, the table shows the old value
     assert "decrease" in window.statusBar().currentMessage()
-    assert window.document.settings.knots_u == knots
+    assert window.document.settings.fit.knots_u == knots
     assert float(table.item(5, 0).text()) == pytest.approx(0.45)
     window.document.undo_stack.undo()
-    assert window.document.settings.knots_u is None
+    assert window.document.settings.fit.knots_u is None
     window.knot_panel.averaged_button.click()
-    averaged = np.asarray(window.document.settings.knots_u)
+    averaged = np.asarray(window.document.settings.fit.knots_u)
     assert averaged[0] == 0.0 and averaged[-1] == 1.0 and np.all(np.diff(averaged) >= 0)
     # the fit starts on the custom knots
     _fit_briefly(qtbot, window)
     np.testing.assert_allclose(window.document.fitted["knots_u"], averaged, atol=1e-12)
     # a grid change drops knots that no longer fit
     window.fit_panel.control_points_u.setValue(9)
-    assert window.document.settings.knots_u is None
+    assert window.document.settings.fit.knots_u is None
 
 
 def test_step_export_reads_back_through_opencascade(qtbot, window, ply_cloud, tmp_path):

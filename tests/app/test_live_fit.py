@@ -81,7 +81,7 @@ def test_drop_fit_pause_edit_export_close(qtbot, window, ply_cloud, tmp_path, mo
 
     # change the degree while paused: the fit restarts (paused) from the current shape, degree 2
     window.fit_panel.degree_u.setValue(2)
-    assert window.document.settings.degree_u == 2
+    assert window.document.settings.fit.degree_u == 2
     qtbot.waitUntil(lambda: window.document.fitted["degree_u"] == 2, timeout=20000)
     assert window.controller.state == "paused"
     window.resume_action.trigger()
@@ -90,7 +90,7 @@ def test_drop_fit_pause_edit_export_close(qtbot, window, ply_cloud, tmp_path, mo
 
     # undo brings degree 3 back (and restarts again)
     window.undo_action.trigger()
-    assert window.document.settings.degree_u == 3
+    assert window.document.settings.fit.degree_u == 3
     qtbot.waitUntil(lambda: window.document.fitted["degree_u"] == 3, timeout=20000)
 
     with qtbot.waitSignal(window.controller.fit_finished, timeout=20000):

@@ -203,7 +203,7 @@ def test_pause_and_stop_mid_fit_keep_the_window_responsive(qtbot, window, tmp_pa
     # a settings change restarts a running patch fit (from the cloud: a new run)
     if controller.is_busy():
         run = controller.run_id
-        window.document.edit_settings("Patch stiffness", patch_stiffness=1e-3)
+        window.document.edit_patches("Patch stiffness", stiffness=1e-3)
         qtbot.waitUntil(lambda: controller.run_id > run and controller.latest_shown is not None
                         and controller.latest_shown.run_id > run, timeout=FIT_TIMEOUT_MS)
         assert controller.state == "running"
@@ -284,10 +284,10 @@ def test_the_closed_shape_refusal_offers_to_fit_patches(qtbot, window, tmp_path)
 
 
 def test_patch_settings_are_undoable_and_reach_the_engine_options(qtbot, window):
-    from app.state import FitSettings
-    from nurbs_core.patches.pipeline import PatchOptions
+    from app.state import Settings
+    from nurbs_core.patches.options import PatchOptions
 
-    assert FitSettings().patch_options() == PatchOptions()  # the engine's defaults, not a copy
+    assert Settings().patches == PatchOptions()  # the engine's own type and defaults
     panel, document = window.patches_panel, window.document
     panel.patch_count.setValue(30)
     panel.patch_size.setValue(8)
@@ -295,17 +295,17 @@ def test_patch_settings_are_undoable_and_reach_the_engine_options(qtbot, window)
     slider.setSliderDown(True)
     slider.setValue(10)  # 10 ** (10 / 10)
     slider.setSliderDown(False)
-    options = document.settings.patch_options()
+    options = document.settings.patches
     options.validate()
     assert (options.patches, options.size, options.seam_weight) == (30, 8, 10.0)
     assert document.undo_stack.undoText() == "Seam weight"
     for _ in range(3):
         window.undo_action.trigger()
-    assert document.settings == FitSettings()
+    assert document.settings == Settings()
     assert panel.patch_count.text() == "auto" and panel.patch_size.text() == "auto"
     assert panel.seam_weight.label.text() == "2"
     panel.patch_count.setValue(panel.patch_count.minimum() + 1)  # the lowest count after auto
-    assert document.settings.patch_options().patches == 4
+    assert document.settings.patches.patches == 4
 
 
 def test_network_display_matches_the_engine_tessellation_and_seams():

@@ -23,16 +23,15 @@ def _undo_count(window) -> int:
 
 
 def _config(window):
-    from nurbs_core.fitting import FitConfig
-
-    config = FitConfig(**window.document.settings.fit_fields())
+    """What the worker hands to the engine: the document's FitConfig itself."""
+    config = window.document.settings.fit
     config.validate()
     return config
 
 
 def test_surfacing_controls_edit_settings_undoably_and_reach_the_fit_config(qtbot, window,
                                                                             tmp_path):
-    from app.state import FitSettings
+    from app.state import Settings
 
     panel = window.fit_panel
     slider = panel.stiffness.slider
@@ -47,8 +46,8 @@ def test_surfacing_controls_edit_settings_undoably_and_reach_the_fit_config(qtbo
     panel.stiffness.flush()
     assert _undo_count(window) == count + 1
     assert window.document.undo_stack.undoText() == "Stiffness"
-    assert window.document.settings.stiffness == pytest.approx(10 ** -2.5, rel=0.02)
-    assert _config(window).stiffness == window.document.settings.stiffness
+    assert window.document.settings.fit.stiffness == pytest.approx(10 ** -2.5, rel=0.02)
+    assert _config(window).stiffness == window.document.settings.fit.stiffness
 
     # a drag commits once, on release, however far it moves
     slider.setSliderDown(True)
@@ -57,9 +56,9 @@ def test_surfacing_controls_edit_settings_undoably_and_reach_the_fit_config(qtbo
     assert _undo_count(window) == count + 1
     slider.setSliderDown(False)  # emits sliderReleased
     assert _undo_count(window) == count + 2
-    assert window.document.settings.stiffness == 0.1
+    assert window.document.settings.fit.stiffness == 0.1
     window.undo_action.trigger()
-    assert window.document.settings.stiffness == pytest.approx(10 ** -2.5, rel=0.02)
+    assert window.document.settings.fit.stiffness == pytest.approx(10 ** -2.5, rel=0.02)
     assert panel.stiffness.label.text() == "0.0032"
 
     # the tolerance: bad text is refused with a hint, a number is taken, empty is automatic
@@ -69,26 +68,26 @@ def test_surfacing_controls_edit_settings_undoably_and_reach_the_fit_config(qtbo
         qtbot.keyClicks(field, bad)
         qtbot.keyClick(field, Qt.Key.Key_Return)
         assert not hint.isHidden() and "positive distance" in hint.text()
-        assert window.document.settings.tolerance is None
+        assert window.document.settings.fit.tolerance is None
     count = _undo_count(window)
     field.clear()
     qtbot.keyClicks(field, "0.05")
     qtbot.keyClick(field, Qt.Key.Key_Return)
     assert hint.isHidden()
-    assert window.document.settings.tolerance == 0.05 and _config(window).tolerance == 0.05
+    assert window.document.settings.fit.tolerance == 0.05 and _config(window).tolerance == 0.05
     assert _undo_count(window) == count + 1
     field.clear()
     qtbot.keyClicks(field, "auto")
     qtbot.keyClick(field, Qt.Key.Key_Return)
-    assert window.document.settings.tolerance is None and field.text() == ""
+    assert window.document.settings.fit.tolerance is None and field.text() == ""
     window.undo_action.trigger()
-    assert window.document.settings.tolerance == 0.05 and field.text() == "0.05"
+    assert window.document.settings.fit.tolerance == 0.05 and field.text() == "0.05"
 
     # the choices, the grid growth and forcing one patch
     panel.solver.setCurrentIndex(panel.solver.findData("least_squares"))
     panel.parameterization.setCurrentIndex(panel.parameterization.findData("plane"))
     panel.grow_grid.setChecked(False)
-    assert window.document.settings.max_control_points == 0
+    assert window.document.settings.fit.max_control_points == 0
     assert not panel.max_control_points.isEnabled()
     panel.grow_grid.setChecked(True)
     panel.max_control_points.setValue(24)
@@ -101,10 +100,10 @@ def test_surfacing_controls_edit_settings_undoably_and_reach_the_fit_config(qtbo
     session = tmp_path / "surfacing.json"
     assert window.save_session(str(session))
     saved = window.document.settings
-    assert json.loads(session.read_text())["settings"]["tolerance"] == 0.05
+    assert json.loads(session.read_text())["settings"]["fit"]["tolerance"] == 0.05
     while window.document.undo_stack.canUndo():
         window.document.undo_stack.undo()
-    assert window.document.settings == FitSettings()
+    assert window.document.settings == Settings()
     assert panel.tolerance.text() == "" and panel.grow_grid.isChecked()
     assert not panel.single_patch.isChecked() and panel.stiffness.label.text() == "0.001"
     assert window.open_session(str(session))
@@ -172,9 +171,9 @@ def _saddle_sheet(x_path: np.ndarray) -> dict:
 
 
 def _session_with_fit(path, points, fitted):
-    from app.state import SESSION_FORMAT, FitSettings
+    from app.state import SESSION_FORMAT, Settings
 
-    data = {"format": SESSION_FORMAT, "settings": FitSettings().to_json(), "patches": [],
+    data = {"format": SESSION_FORMAT, "settings": Settings().to_json(), "patches": [],
             "targets": [{"name": "saddle", "path": "", "visible": True,
                          "points": points.tolist()}],
             "fitted": {k: v.tolist() if isinstance(v, np.ndarray) else v

@@ -1,4 +1,4 @@
-"""The document model without a window: loss strings, undo/redo, settings validation."""
+"""The document model without a window: the engine's settings types, undo/redo, sessions."""
 
 from __future__ import annotations
 
@@ -7,52 +7,102 @@ import json
 import numpy as np
 import pytest
 
-from app.state import Document, FitSettings, format_loss, parse_loss, with_changes
+from app.state import Document, Settings, with_changes
 
 
-def test_loss_text_round_trips_and_matches_the_engine_parser():
-    from nurbs_core.losses import parse_loss as engine_parse
+def test_the_document_holds_the_engines_fit_config_and_patch_options():
+    """One description of a fit: the document's settings are the engine's own types, edited by
+    field name; nothing is copied into a mirror."""
+    from nurbs_core.fitting.config import FitConfig, Loss
+    from nurbs_core.patches.options import PatchOptions
 
-    text = "chamfer+0.1*laplacian+10*hausdorff+0.00001*mse"
-    terms = parse_loss(text)
-    assert format_loss(terms) == text
-    engine = engine_parse(format_loss((name, 1e6) for name in ("chamfer",)))
-    assert engine is not None
-    with pytest.raises(ValueError, match="cannot read"):
-        parse_loss("chamfer+*")
-    with pytest.raises(ValueError, match="at least one term"):
-        format_loss((("chamfer", 0.0),))
+    document = Document()
+    assert type(document.settings.fit) is FitConfig and document.settings.fit == FitConfig()
+    assert type(document.settings.patches) is PatchOptions
+    assert document.settings.patches == PatchOptions()
+    # every FitConfig field is editable, including ones no panel shows (one place to add one)
+    assert document.edit_settings("Refinements", refinements=2, outlier_fraction=0.05)
+    assert (document.settings.fit.refinements, document.settings.fit.outlier_fraction) == (2, 0.05)
+    assert document.edit_settings("Loss", loss=Loss((("chamfer", 1.0), ("laplacian", 0.1))))
+    assert str(document.settings.fit.loss) == "chamfer+0.1*laplacian"
+    assert document.edit_patches("Patches", patches=30, seam_weight=1.0)
+    assert (document.settings.patches.patches, document.settings.patches.seam_weight) == (30, 1.0)
+    with pytest.raises(TypeError, match="no such setting: degree"):
+        document.edit_settings("Bad", degree=3)
+    with pytest.raises(TypeError):
+        document.edit_patches("Bad", patch_count=3)
+    document.undo_stack.undo()
+    assert document.settings.patches == PatchOptions()
 
 
 def test_settings_edits_undo_and_redo(qtbot):
     document = Document()
     seen = []
-    document.settings_changed.connect(lambda old, new: seen.append((old.degree_u, new.degree_u)))
+    document.settings_changed.connect(
+        lambda old, new: seen.append((old.fit.degree_u, new.fit.degree_u)))
     assert document.edit_settings("Degree u", degree_u=2)
     assert not document.edit_settings("Degree u", degree_u=2)  # no change, no undo step
-    assert document.settings.degree_u == 2
+    assert document.settings.fit.degree_u == 2
     document.undo_stack.undo()
-    assert document.settings.degree_u == 3
+    assert document.settings.fit.degree_u == 3
     document.undo_stack.redo()
-    assert document.settings.degree_u == 2
+    assert document.settings.fit.degree_u == 2
     assert seen == [(3, 2), (2, 3), (3, 2)]
     assert document.undo_stack.undoText() == "Degree u"
 
 
 def test_custom_knots_are_dropped_when_the_grid_changes():
     knots = tuple(np.r_[[0.0] * 4, [0.2, 0.5, 0.7], [1.0] * 4])
-    settings = with_changes(FitSettings(control_points_u=7), knots_u=knots)
-    assert settings.knots_u == knots
-    assert with_changes(settings, control_points_u=8).knots_u is None
-    assert with_changes(settings, learning_rate=0.5).knots_u == knots
+    settings = with_changes(with_changes(Settings(), control_points_u=7), knots_u=knots)
+    assert settings.fit.knots_u == knots
+    assert with_changes(settings, control_points_u=8).fit.knots_u is None
+    assert with_changes(settings, degree_u=2).fit.knots_u is None
+    assert with_changes(settings, learning_rate=0.5).fit.knots_u == knots
 
 
 def test_settings_json_round_trip_and_unknown_fields():
-    settings = FitSettings(optimizer="lbfgs", knots_u=(0, 0, 0, 0, 0.5, 1, 1, 1, 1),
-                           control_points_u=5)
-    assert FitSettings.from_json(settings.to_json()) == settings
+    settings = with_changes(Settings(), optimizer="lbfgs", control_points_u=5,
+                            knots_u=(0, 0, 0, 0, 0.5, 1, 1, 1, 1), fit_mode="patches",
+                            show_offsets=True)
+    data = json.loads(json.dumps(settings.to_json()))
+    assert data["fit"]["loss"] == "p2s+0.001*chamfer" and data["fit"]["knots_u"][4] == 0.5
+    assert Settings.from_json(data) == settings
     with pytest.raises(ValueError, match="unknown settings"):
-        FitSettings.from_json({"degree": 3})
+        Settings.from_json({"degree": 3})
+    with pytest.raises(ValueError, match="unknown fit settings: degree"):
+        Settings.from_json({"fit": {"degree": 3}})
+
+
+def test_first_format_sessions_are_still_read(tmp_path):
+    """A session saved before the settings were the engine's types (one flat dict) opens with
+    the same values."""
+    flat = {"kind": "surface", "degree_u": 2, "degree_v": 3, "control_points_u": 5,
+            "control_points_v": 12, "loss": "chamfer+0.1*laplacian", "optimizer": "sgd",
+            "learning_rate": 0.02, "iterations": 300, "free_knots": False, "free_weights": True,
+            "pin_boundary": False, "init": "pca", "samples_u": 64, "samples_v": 64,
+            "stiffness": 0.001, "tolerance": 0.05, "max_control_points": 40, "solver": "auto",
+            "parameterization": "plane", "single_patch": False,
+            "knots_u": [0, 0, 0, 0.3, 0.6, 1, 1, 1], "knots_v": None, "offset_distance": 0.3,
+            "constrain_shared_edges": False, "show_offsets": True, "fit_mode": "patches",
+            "patch_count": None, "patch_size": 8, "patch_stiffness": 1.5, "seam_weight": 2.0}
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps({"format": "nurbs-studio-session-v1", "settings": flat,
+                                "targets": [], "patches": [], "fitted": None}))
+    document = Document()
+    document.load_session(path)
+    fit, patches = document.settings.fit, document.settings.patches
+    assert (fit.degree_u, fit.control_points_u, str(fit.loss), fit.optimizer, fit.tolerance,
+            fit.parameterization, fit.free_weights) == (2, 5, "chamfer+0.1*laplacian", "sgd",
+                                                        0.05, "plane", True)
+    assert fit.knots_u == (0, 0, 0, 0.3, 0.6, 1, 1, 1) and fit.knots_v is None
+    assert (patches.patches, patches.size, patches.stiffness) == ("auto", 8, 1.5)
+    assert (document.settings.fit_mode, document.settings.offset_distance,
+            document.settings.show_offsets) == ("patches", 0.3, True)
+    bad = dict(flat, knots_u=[0, 1, 0.5])  # a damaged session is refused, the document kept
+    path.write_text(json.dumps({"format": "nurbs-studio-session-v1", "settings": bad}))
+    with pytest.raises(ValueError, match="damaged session.*knots_u"):
+        document.load_session(path)
+    assert document.settings.fit == fit
 
 
 def test_sampled_deviation_measures_a_subset_and_stats_skip_the_rest():
@@ -93,24 +143,23 @@ def test_worker_side_code_never_imports_widgets_or_vtk():
                 assert not name.startswith(forbidden), f"{path.name} imports {name}"
 
 
-def test_settings_offer_every_engine_loss_term_and_share_its_default():
-    """The panel's loss editor and default must not drift from the engine's."""
-    from app.state import LOSS_TERMS, FitSettings, parse_loss
-    from nurbs_core.fitting import DEFAULT_LOSS
+def test_settings_offer_every_engine_loss_term():
+    """The panel's loss editor lists the engine's terms (the ones nurbs_core.losses evaluates)."""
+    from app.state import LOSS_TERMS
     from nurbs_core.losses import TERMS
 
     assert set(LOSS_TERMS) == set(TERMS)
-    assert FitSettings().loss == parse_loss(DEFAULT_LOSS)
 
 
 def test_small_clouds_get_a_smaller_control_grid():
     from app.state import control_grid_for
+    from nurbs_core.fitting.config import FitConfig
 
-    settings = FitSettings()  # 12 x 12, degree 3
-    assert control_grid_for(4000, settings) is None  # 4000 / 144 points per control point: fine
-    assert control_grid_for(273, settings) == (5, 5)  # sqrt(273 / 8) = 5.8
-    assert control_grid_for(40, settings) == (4, 4)  # never below degree + 1
-    assert control_grid_for(40, with_changes(settings, kind="curve")) is None
+    fit = FitConfig()  # 12 x 12, degree 3
+    assert control_grid_for(4000, fit) is None  # 4000 / 144 points per control point: fine
+    assert control_grid_for(273, fit) == (5, 5)  # sqrt(273 / 8) = 5.8
+    assert control_grid_for(40, fit) == (4, 4)  # never below degree + 1
+    assert control_grid_for(40, fit.replace(kind="curve")) is None
 
 
 def test_tolerance_text_reads_auto_or_a_positive_distance():
@@ -123,34 +172,13 @@ def test_tolerance_text_reads_auto_or_a_positive_distance():
             parse_tolerance(text)
 
 
-def test_surfacing_settings_round_trip_through_json_and_reach_the_fit_config():
-    from nurbs_core.fitting import FitConfig
-
-    for tolerance in (None, 0.05):
-        settings = FitSettings(stiffness=2.5e-5, tolerance=tolerance, max_control_points=0,
-                               solver="least_squares", parameterization="plane",
-                               single_patch=True)
-        data = json.loads(json.dumps(settings.to_json()))
-        assert data["tolerance"] == tolerance
-        assert FitSettings.from_json(data) == settings
-        config = FitConfig(**settings.fit_fields())
-        config.validate()
-        assert (config.stiffness, config.tolerance, config.max_control_points, config.solver,
-                config.parameterization, config.single_patch) == (
-            2.5e-5, tolerance, 0, "least_squares", "plane", True)
-
-
 def test_solver_and_parameterisation_choices_are_the_engines():
-    from app.state import PARAMETERIZATIONS, SOLVERS
+    from app.state import INITIALIZATIONS, OPTIMIZERS, PARAMETERIZATIONS, SOLVERS
     from nurbs_core.fitting import config
 
-    assert {value for value, _ in SOLVERS} == set(config.SOLVERS)
-    assert {value for value, _ in PARAMETERIZATIONS} == set(config.PARAMETERIZATIONS)
-    defaults = config.FitConfig()
-    assert (FitSettings().solver, FitSettings().parameterization, FitSettings().stiffness,
-            FitSettings().tolerance, FitSettings().max_control_points) == (
-        defaults.solver, defaults.parameterization, defaults.stiffness, defaults.tolerance,
-        defaults.max_control_points)
+    assert tuple(value for value, _ in SOLVERS) == config.SOLVERS
+    assert tuple(value for value, _ in PARAMETERIZATIONS) == config.PARAMETERIZATIONS
+    assert (OPTIMIZERS, INITIALIZATIONS) == (config.OPTIMIZERS, config.INITS)
 
 
 def test_quality_cells_keep_the_worst_sample_of_each_display_quad():

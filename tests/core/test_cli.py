@@ -232,3 +232,25 @@ def test_surfacing_options_reach_the_fit(tmp_path):
     fixed = _config(build_parser().parse_args(["in.xyz", "-o", "o.json", "--control-points",
                                                "8", "8"]), 3)
     assert fixed.max_control_points == 0    # an explicit grid is kept
+
+
+def test_set_reaches_any_fit_config_field(tmp_path, capsys):
+    """--set FIELD=VALUE edits the FitConfig the command builds: every field is reachable from
+    the command line without a flag of its own; a bad field is refused before the cloud is
+    read."""
+    from nurbs_core.cli import _config, build_parser
+
+    args = build_parser().parse_args(["cloud.xyz", "-o", "out.json", "--set", "refinements=2",
+                                      "--set", "lr_schedule=cosine", "--set",
+                                      "knots_u=[0,0,0,0,0.5,1,1,1,1]"])
+    config = _config(args, 3)
+    assert (config.refinements, config.lr_schedule) == (2, "cosine")
+    with pytest.raises(ValueError, match="knots_u: needs 16 knots, has 9"):  # not dropped
+        config.validate()
+    args = build_parser().parse_args(["cloud.xyz", "-o", "out.json", "--set",
+                                      "knots_u=[0,0,0,0,0.1,0.2,0.3,0.4,0.5,0.6,0.7,0.8,1,1,1,1]"])
+    assert _config(args, 3).knots_u[4] == 0.1
+    missing = tmp_path / "missing.xyz"  # never read: the option is refused first
+    code = main([str(missing), "-o", str(tmp_path / "out.json"), "--set", "degree=3"])
+    assert code == 1
+    assert "--set 'degree=3': expected FIELD=VALUE with a FitConfig field" in capsys.readouterr().err

@@ -1,0 +1,64 @@
+"""The settings of a patch-network fit (:class:`PatchOptions`), free of numpy and torch: the
+command line, the Python API (:func:`nurbs_core.patches.pipeline.fit_patches`) and the app's
+document all hold this one type."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from nurbs_core.patches.defaults import SEAM_WEIGHT, STIFFNESS
+
+
+@dataclass(frozen=True)
+class PatchOptions:
+    """Settings of a network fit. patches: "auto" or a target patch count (>= 4); size: control
+    points per patch side (None: grow while Cp falls); degree: of every patch; stiffness:
+    fairing weight relative to the data term; seam_weight: of tangent continuity; tolerance: RMS
+    distance to reach (cloud units, None: automatic); max_size: largest control grid per side.
+    Immutable: ``dataclasses.replace`` makes an edited copy."""
+
+    patches: int | str = "auto"
+    size: int | None = None
+    degree: int = 3
+    stiffness: float = STIFFNESS
+    seam_weight: float = SEAM_WEIGHT
+    tolerance: float | None = None
+    max_size: int = 16
+
+    def validate(self) -> None:
+        """Raise ValueError naming the first bad setting."""
+        if self.patches != "auto" and (isinstance(self.patches, bool)
+                                       or not isinstance(self.patches, numbers.Integral)
+                                       or self.patches < 4):
+            raise ValueError(f"patches must be 'auto' or an integer of at least 4, got "
+                             f"{self.patches!r}")
+        if self.degree != 3:
+            raise ValueError(f"patch networks are bicubic for now (degree 3), got {self.degree}")
+        if self.size is not None and not (isinstance(self.size, numbers.Integral)
+                                          and self.degree < self.size <= 40):
+            raise ValueError(f"size must be an integer from {self.degree + 1} to 40, got "
+                             f"{self.size!r}")
+        for name in ("stiffness", "seam_weight"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a finite non-negative number, got {value!r}")
+        if self.tolerance is not None and not (math.isfinite(self.tolerance)
+                                               and self.tolerance > 0):
+            raise ValueError(f"tolerance must be positive, got {self.tolerance!r}")
+
+    def to_json(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> PatchOptions:
+        """Inverse of :meth:`to_json`; raises ValueError for fields PatchOptions does not have."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"unknown patch settings: {', '.join(unknown)}")
+        return cls(**data)
