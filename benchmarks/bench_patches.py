@@ -335,7 +335,8 @@ def run_network(case: Case, tree: cKDTree, truth_c2s: float,
     """``fit_patches`` on the case's cloud and every measure (see the module docstring);
     ``options``: the PatchOptions (default: the engine's)."""
     from nurbs_core.patches.measures import surface_samples
-    from nurbs_core.patches.pipeline import PatchOptions, fit_patches
+    from nurbs_core.patches.options import PatchOptions
+    from nurbs_core.patches.pipeline import fit_patches
 
     row: dict[str, Any] = {}
     start = time.perf_counter()
@@ -619,7 +620,7 @@ def main(argv=None) -> int:
         parser.error(f"unknown case(s) {', '.join(unknown)}; see --list")
     count = args.points or (QUICK_COUNT if args.quick else COUNT)
     truth_count = QUICK_TRUTH if args.quick else TRUTH_COUNT
-    from nurbs_core.patches.pipeline import PatchOptions
+    from nurbs_core.patches.options import PatchOptions
 
     options = PatchOptions() if args.stiffness is None else PatchOptions(stiffness=args.stiffness)
     torch.set_num_threads(1)

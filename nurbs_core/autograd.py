@@ -22,24 +22,34 @@ grid:   control (*B, n, m, 3), weights (*B, n, m); banded dense_u (Bb, Mu, n), d
 
 Second derivatives
 ------------------
-The backwards of :class:`CurvePoints`, :class:`SurfacePoints` and :class:`SurfaceGridPoints` use
-intermediates saved by the forward (the rational points, ``1 / w``, the homogeneous net), which
-carry no graph, so their double backward would be wrong. They are :func:`once_differentiable`: a
-second derivative through them (``create_graph=True`` then another grad, ``gradgradcheck``,
-``torch.autograd.functional.hessian``, Hessian-vector products) raises a ``RuntimeError`` that
-names the Function and points to ``higher_order=True`` in :mod:`nurbs_core.evaluate`, the
+The Functions are private: call them through :func:`~nurbs_core.evaluate.curve_points`,
+:func:`~nurbs_core.evaluate.surface_points`, :func:`~nurbs_core.evaluate.surface_grid_points`,
+:func:`~nurbs_core.evaluate.surface_derivatives` and the evaluators of :mod:`nurbs_core.evaluate`.
+
+The backwards of :class:`_CurvePoints`, :class:`_SurfacePoints` and :class:`_SurfaceGridPoints`
+use intermediates saved by the forward (the rational points, ``1 / w``, the homogeneous net),
+which carry no graph, so their double backward would be wrong. They are
+:func:`once_differentiable`: a second derivative through them (``create_graph=True`` then another
+grad, ``gradgradcheck``, ``torch.autograd.functional.hessian``, Hessian-vector products) raises a
+``RuntimeError`` that names the public function and its private Function and points to
+``higher_order=True`` in :mod:`nurbs_core.evaluate`, the
 native-autograd evaluation that is differentiable to any order with respect to control points and
-weights. :class:`SparseProduct` is linear in its input and its backward is itself a differentiable
+weights. :class:`_SparseProduct` is linear in its input and its backward is itself a differentiable
 sparse product, so it stays differentiable to any order (used by ``surface_derivatives``).
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
+from typing import Any, NoReturn
 
 import torch
 
-from nurbs_core.sparse import curve_sparse_basis, surface_sparse_basis
+from nurbs_core.sparse import SparseBasisMatrix, curve_sparse_basis, surface_sparse_basis
+
+#: a custom Function's backward: (ctx, *grad_outputs) -> one gradient (or None) per input
+_Backward = Callable[..., tuple[torch.Tensor | None, ...]]
 
 
 def _local_index(span: torch.Tensor, degree: int) -> torch.Tensor:
@@ -47,7 +57,8 @@ def _local_index(span: torch.Tensor, degree: int) -> torch.Tensor:
     return span.unsqueeze(-1) - degree + torch.arange(degree + 1, device=span.device)
 
 
-def _homogeneous(control_points, weights, net_dims):
+def _homogeneous(control_points: torch.Tensor, weights: torch.Tensor,
+                 net_dims: int) -> tuple[torch.Tensor, torch.Size]:
     """(*B, <net>, d), (*B, <net>) -> flattened (B, <net>, d+1) homogeneous points, batch shape."""
     batch_shape = control_points.shape[: control_points.dim() - net_dims - 1]
     w = weights.unsqueeze(-1)
@@ -55,7 +66,8 @@ def _homogeneous(control_points, weights, net_dims):
     return control_w.reshape(-1, *control_w.shape[len(batch_shape):]), batch_shape
 
 
-def _split_homogeneous_grad(grad_control_w, control_points, weights):
+def _split_homogeneous_grad(grad_control_w: torch.Tensor, control_points: torch.Tensor,
+                            weights: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Chain rule through ``Pw = (w P, w)``: returns (dL/dP, dL/dw) shaped like the inputs."""
     grad_control_w = grad_control_w.reshape(*control_points.shape[:-1], -1)
     grad_xyz = grad_control_w[..., :-1]
@@ -64,7 +76,7 @@ def _split_homogeneous_grad(grad_control_w, control_points, weights):
     return grad_points, grad_weights
 
 
-def _rational_backward(grad_points: torch.Tensor, points: torch.Tensor, inv_w: torch.Tensor):
+def _rational_backward(grad_points: torch.Tensor, points: torch.Tensor, inv_w: torch.Tensor) -> torch.Tensor:
     """dL/d(homogeneous sum) from dL/d(points), where ``points = h[:d] / h[d]``: (..., d+1)."""
     grad_xyz = grad_points * inv_w
     dim = points.shape[-1]
@@ -73,7 +85,8 @@ def _rational_backward(grad_points: torch.Tensor, points: torch.Tensor, inv_w: t
     return torch.cat([grad_xyz, grad_w.view(*points.shape[:-1], 1)], dim=-1)
 
 
-def _scatter_knot_grad(grad_basis, d_basis, span, degree, n_knots):
+def _scatter_knot_grad(grad_basis: torch.Tensor, d_basis: torch.Tensor, span: torch.Tensor, degree: int,
+                       n_knots: int) -> torch.Tensor:
     """Sum ``dL/dN * dN/dU`` over parameters into the knot vector: (Bb, K).
 
     grad_basis (Bb, M, p+1); d_basis (Bb, M, p+1, 2p) with the 2p local knots ``U[k-p+1 .. k+p]``.
@@ -87,7 +100,8 @@ def _scatter_knot_grad(grad_basis, d_basis, span, degree, n_knots):
     return out
 
 
-def _knot_gradient(grad_basis, d_basis, span, degree, knots_shape, shared: bool):
+def _knot_gradient(grad_basis: torch.Tensor, d_basis: torch.Tensor, span: torch.Tensor, degree: int,
+                   knots_shape: torch.Size, shared: bool) -> torch.Tensor:
     """dL/dknots shaped like the knot tensor, from dL/d(non-zero basis values) (Bb, M, p+1).
 
     ``shared``: one basis serves the whole batch, so the batch's contributions are summed first."""
@@ -112,16 +126,24 @@ class _NoSecondDerivative(torch.autograd.Function):
     first-order gradient back to them, so any second derivative reaches it and raises."""
 
     @staticmethod
-    def forward(ctx, message, value, *anchors):
+    def forward(ctx: Any, message: str, value: torch.Tensor, *anchors: torch.Tensor) -> torch.Tensor:
         ctx.message = message
         return value.clone()
 
     @staticmethod
-    def backward(ctx, *grads):
+    def backward(ctx: Any, *grads: torch.Tensor) -> NoReturn:
         raise RuntimeError(ctx.message)
 
 
-def once_differentiable(backward):
+#: the public functions behind which each once-differentiable Function is used (error messages)
+_PUBLIC_ENTRY_POINTS = {
+    "_CurvePoints": "curve_points / CurveEvaluator",
+    "_SurfacePoints": "surface_points / SurfaceEvaluator",
+    "_SurfaceGridPoints": "surface_grid_points / SurfaceGridEvaluator",
+}
+
+
+def once_differentiable(backward: _Backward) -> _Backward:
     """Mark a custom Function's ``backward`` as first-order only, with an error that says what to do.
 
     ``torch.autograd.function.once_differentiable`` is not used: its error node hangs off fresh
@@ -133,8 +155,10 @@ def once_differentiable(backward):
     ``create_graph`` (grad mode off in the backward) the backward runs unchanged.
     """
     name = backward.__qualname__.split(".")[0]
+    public = _PUBLIC_ENTRY_POINTS.get(name, name)
     message = (
-        f"nurbs_core: second derivatives through the block-sparse {name} backward are not "
+        f"nurbs_core: second derivatives through the block-sparse backward of {public} "
+        f"(the custom autograd Function nurbs_core.autograd.{name}) are not "
         "supported (it is once-differentiable; differentiating its gradient again would give "
         "wrong numbers). For Hessians, Hessian-vector products, curvature losses or meta-learning "
         "call curve_points / surface_points / surface_grid_points (or the evaluators) with "
@@ -143,7 +167,7 @@ def once_differentiable(backward):
     )
 
     @functools.wraps(backward)
-    def wrapper(ctx, *grads):
+    def wrapper(ctx: Any, *grads: torch.Tensor) -> tuple[torch.Tensor | None, ...]:
         if not torch.is_grad_enabled():  # ordinary backward: no overhead
             return backward(ctx, *grads)
         with torch.no_grad():
@@ -158,28 +182,30 @@ def once_differentiable(backward):
     return wrapper
 
 
-class SparseProduct(torch.autograd.Function):
+class _SparseProduct(torch.autograd.Function):
     """``plan.matmul(dense)`` with the block-sparse transpose product as its backward.
 
     Not once-differentiable: the backward ``plan^T grad`` is a differentiable sparse product of the
     incoming gradient and the product is linear, so double backward is exact (gradgradcheck)."""
 
     @staticmethod
-    def forward(ctx, dense, plan):
+    def forward(ctx: Any, dense: torch.Tensor, plan: SparseBasisMatrix) -> torch.Tensor:
         ctx.plan = plan
         return plan.matmul(dense)
 
     @staticmethod
-    def backward(ctx, grad):
+    def backward(ctx: Any, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
         return ctx.plan.transpose_matmul(grad.contiguous()), None
 
 
-class CurvePoints(torch.autograd.Function):
+class _CurvePoints(torch.autograd.Function):
     """Curves at arbitrary parameters. ``plan`` (optional) is a precomputed
     :class:`~nurbs_core.sparse.SparseBasisMatrix` for this batch size (fixed knots and parameters)."""
 
     @staticmethod
-    def forward(ctx, control_points, weights, knots, basis, d_basis, span, degree, plan=None):
+    def forward(ctx: Any, control_points: torch.Tensor, weights: torch.Tensor, knots: torch.Tensor,
+                basis: torch.Tensor, d_basis: torch.Tensor | None, span: torch.Tensor, degree: int,
+                plan: SparseBasisMatrix | None = None) -> torch.Tensor:
         control_w, batch_shape = _homogeneous(control_points, weights, 1)
         batch, n, dim1 = control_w.shape
         if plan is None:
@@ -194,7 +220,7 @@ class CurvePoints(torch.autograd.Function):
 
     @staticmethod
     @once_differentiable
-    def backward(ctx, grad_points):
+    def backward(ctx: Any, grad_points: torch.Tensor) -> tuple[torch.Tensor | None, ...]:
         control_points, weights, control_w, basis, d_basis, span, points, inv_w, _ = ctx.saved_tensors
         batch, size, dim = points.shape
         grad_h = _rational_backward(grad_points.reshape(points.shape), points, inv_w)
@@ -210,13 +236,16 @@ class CurvePoints(torch.autograd.Function):
         return grad_cp, grad_w, grad_knots, None, None, None, None, None
 
 
-class SurfacePoints(torch.autograd.Function):
+class _SurfacePoints(torch.autograd.Function):
     """Paired parameters (u_k, v_k): the paper's Algorithms 1 and 2 through the block-sparse basis
-    matrix (:mod:`nurbs_core.sparse`). ``plan`` as in :class:`CurvePoints`."""
+    matrix (:mod:`nurbs_core.sparse`). ``plan`` as in :class:`_CurvePoints`."""
 
     @staticmethod
-    def forward(ctx, control_points, weights, knots_u, knots_v, basis_u, basis_v, d_basis_u,
-                d_basis_v, span_u, span_v, degree_u, degree_v, plan=None):
+    def forward(ctx: Any, control_points: torch.Tensor, weights: torch.Tensor, knots_u: torch.Tensor,
+                knots_v: torch.Tensor, basis_u: torch.Tensor, basis_v: torch.Tensor,
+                d_basis_u: torch.Tensor | None, d_basis_v: torch.Tensor | None, span_u: torch.Tensor,
+                span_v: torch.Tensor, degree_u: int, degree_v: int,
+                plan: SparseBasisMatrix | None = None) -> torch.Tensor:
         control_w, batch_shape = _homogeneous(control_points, weights, 2)
         batch, n, m, _ = control_w.shape
         if plan is None:
@@ -233,7 +262,7 @@ class SurfacePoints(torch.autograd.Function):
 
     @staticmethod
     @once_differentiable
-    def backward(ctx, grad_points):
+    def backward(ctx: Any, grad_points: torch.Tensor) -> tuple[torch.Tensor | None, ...]:
         (control_points, weights, control_w, basis_u, basis_v, d_basis_u, d_basis_v, span_u,
          span_v, points, inv_w, _, _) = ctx.saved_tensors
         degree_u, degree_v = ctx.degrees
@@ -261,7 +290,7 @@ class SurfacePoints(torch.autograd.Function):
                 None)
 
 
-class SurfaceGridPoints(torch.autograd.Function):
+class _SurfaceGridPoints(torch.autograd.Function):
     """Tensor-product grid u x v through the Kronecker structure of the surface basis.
 
     The Jacobian of a grid evaluation is ``kron(N_u, N_v)``; each factor is banded (p + 1 non-zeros
@@ -274,8 +303,10 @@ class SurfaceGridPoints(torch.autograd.Function):
     """
 
     @staticmethod
-    def forward(ctx, control_points, weights, knots_u, knots_v, dense_u, dense_v, d_basis_u,
-                d_basis_v, span_u, span_v, degree_u, degree_v):
+    def forward(ctx: Any, control_points: torch.Tensor, weights: torch.Tensor, knots_u: torch.Tensor,
+                knots_v: torch.Tensor, dense_u: torch.Tensor, dense_v: torch.Tensor,
+                d_basis_u: torch.Tensor | None, d_basis_v: torch.Tensor | None, span_u: torch.Tensor,
+                span_v: torch.Tensor, degree_u: int, degree_v: int) -> torch.Tensor:
         batch_shape = control_points.shape[:-3]
         n, m = control_points.shape[-3], control_points.shape[-2]
         weighted = (control_points * weights.unsqueeze(-1)).reshape(-1, n, m, 3)  # w P
@@ -299,7 +330,7 @@ class SurfaceGridPoints(torch.autograd.Function):
 
     @staticmethod
     @once_differentiable
-    def backward(ctx, grad_points):
+    def backward(ctx: Any, grad_points: torch.Tensor) -> tuple[torch.Tensor | None, ...]:
         (control_points, weights, weighted, plane_w, dense_u, dense_v, d_basis_u, d_basis_v,
          span_u, span_v, points, inv_w, partial_xyz, partial_w, _, _) = ctx.saved_tensors
         degree_u, degree_v = ctx.degrees

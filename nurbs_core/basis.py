@@ -45,7 +45,9 @@ def basis_with_knot_derivatives(
     recursion differentiated with the product rule); the degree-0 indicator's derivative at the span
     ends is the NURBS-Diff paper's Gaussian-smoothed delta with standard deviation ``bandwidth``.
     """
-    return _basis_and_knot_derivatives(knots, degree, u, span, bandwidth)
+    values, d_values = _basis_and_knot_derivatives(knots, degree, u, span, bandwidth)
+    assert d_values is not None  # a bandwidth was given
+    return values, d_values
 
 
 def _gather_local_knots(knots: torch.Tensor, degree: int, span: torch.Tensor) -> torch.Tensor:
@@ -55,15 +57,17 @@ def _gather_local_knots(knots: torch.Tensor, degree: int, span: torch.Tensor) ->
     return torch.gather(knots, 1, index).reshape(*span.shape, 2 * degree)
 
 
-def _basis_and_knot_derivatives(knots, degree, u, span, bandwidth):
+def _basis_and_knot_derivatives(knots: torch.Tensor, degree: int, u: torch.Tensor, span: torch.Tensor,
+                                bandwidth: float | None) -> tuple[torch.Tensor, torch.Tensor | None]:
     p = degree
     local = _gather_local_knots(knots, p, span)  # t = 0..2p-1 <-> U[k-p+1+t]
     # left[j] = u - U[k+1-j] (t = p - j), right[j] = U[k+j] - u (t = p - 1 + j), j = 1..p
-    left = [None] + [u - local[..., p - j] for j in range(1, p + 1)]
-    right = [None] + [local[..., p - 1 + j] - u for j in range(1, p + 1)]
+    unused = u.new_empty(0)  # left[0], right[0]: never read
+    left = [unused] + [u - local[..., p - j] for j in range(1, p + 1)]
+    right = [unused] + [local[..., p - 1 + j] - u for j in range(1, p + 1)]
     values = [torch.ones_like(u)]
     with_knots = bandwidth is not None
-    if with_knots:
+    if bandwidth is not None:
         two_p = 2 * p
         zeros = u.new_zeros(*u.shape, two_p)
         d0 = zeros.clone()
@@ -119,10 +123,11 @@ def basis_derivatives(
     """
     p = degree
     local = _gather_local_knots(knots, p, span)
-    left = [None] + [u - local[..., p - j] for j in range(1, p + 1)]
-    right = [None] + [local[..., p - 1 + j] - u for j in range(1, p + 1)]
+    unused = u.new_empty(0)  # left[0], right[0]: never read; ndu's entries are set before use
+    left = [unused] + [u - local[..., p - j] for j in range(1, p + 1)]
+    right = [unused] + [local[..., p - 1 + j] - u for j in range(1, p + 1)]
     # ndu[j][r]: basis values (upper triangle, j >= r) and knot differences (lower triangle)
-    ndu = [[None] * (p + 1) for _ in range(p + 1)]
+    ndu = [[unused] * (p + 1) for _ in range(p + 1)]
     ndu[0][0] = torch.ones_like(u)
     for j in range(1, p + 1):
         saved = torch.zeros_like(u)

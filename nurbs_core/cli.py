@@ -311,7 +311,7 @@ def _offset_path(path: Path) -> Path:
 
 
 def _patch_options(args):
-    from nurbs_core.patches.pipeline import PatchOptions
+    from nurbs_core.patches.options import PatchOptions
 
     if args.curve or args.single_patch or args.grid is not None or args.initial is not None:
         raise ValueError("--patches fits a network of surface patches: it cannot be combined "

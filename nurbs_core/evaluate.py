@@ -19,8 +19,10 @@ each call then costs only the sparse products.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import torch
+from numpy.typing import ArrayLike
 
 from nurbs_core import autograd as _fn
 from nurbs_core.basis import (
@@ -43,7 +45,7 @@ def homogeneous(control_points: torch.Tensor, weights: torch.Tensor) -> torch.Te
     return torch.cat([control_points * w, w], dim=-1)
 
 
-def _flatten_batch(t: torch.Tensor, batch_shape, trailing: int) -> torch.Tensor:
+def _flatten_batch(t: torch.Tensor, batch_shape: Sequence[int], trailing: int) -> torch.Tensor:
     """Broadcast ``t`` to ``batch_shape + t.shape[-trailing:]`` and flatten the batch to one dim."""
     tail = t.shape[t.dim() - trailing:]
     return t.expand(*batch_shape, *tail).reshape(-1, *tail)
@@ -53,7 +55,7 @@ def _needs_knot_grad(knots: torch.Tensor) -> bool:
     return knots.requires_grad and torch.is_grad_enabled()
 
 
-def _reject_knot_grad(function: str, *knot_vectors) -> None:
+def _reject_knot_grad(function: str, *knot_vectors: torch.Tensor) -> None:
     """``higher_order=True`` treats the basis as a constant: refuse knots that want a gradient."""
     if any(_needs_knot_grad(k) for k in knot_vectors):
         raise ValueError(
@@ -63,7 +65,8 @@ def _reject_knot_grad(function: str, *knot_vectors) -> None:
             "higher_order=False for first-order knot gradients.")
 
 
-def _basis(knots, degree, u, bandwidth, want_knot_grad):
+def _basis(knots: torch.Tensor, degree: int, u: torch.Tensor, bandwidth: float,
+           want_knot_grad: bool) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
     """Spans, compact basis and (optionally) knot derivatives on (Bb, K) knots, (Bb, M) params."""
     with torch.no_grad():
         knots, u = knots.detach(), u.detach()
@@ -76,7 +79,8 @@ def _basis(knots, degree, u, bandwidth, want_knot_grad):
         return span, basis, d_basis
 
 
-def _directions(batch_shape, dtype, knots_and_params):
+def _directions(batch_shape: Sequence[int], dtype: torch.dtype,
+                knots_and_params: Sequence[torch.Tensor]) -> list[torch.Tensor]:
     """Shared (Bb = 1) when every knot vector and parameter array is 1-D, else batched (Bb = B)."""
     shared = all(t.dim() == 1 for t in knots_and_params)
     out = []
@@ -86,12 +90,13 @@ def _directions(batch_shape, dtype, knots_and_params):
     return out
 
 
-def curve_points(control_points, weights, knots, degree, u, knot_bandwidth=DEFAULT_KNOT_BANDWIDTH,
-                 *, higher_order: bool = False):
+def curve_points(control_points: torch.Tensor, weights: torch.Tensor, knots: torch.Tensor, degree: int,
+                 u: torch.Tensor, knot_bandwidth: float = DEFAULT_KNOT_BANDWIDTH, *,
+                 higher_order: bool = False) -> torch.Tensor:
     """Points of rational curves. control_points (*B, n, d); weights (*B, n); knots (K,) or (*B, K);
     u (M,) or (*B, M). Returns (*B, M, d).
 
-    Default (``higher_order=False``): the block-sparse :class:`~nurbs_core.autograd.CurvePoints`,
+    Default (``higher_order=False``): the block-sparse :class:`~nurbs_core.autograd._CurvePoints`,
     first derivatives with respect to control points, weights and knots; it is once-differentiable,
     so a second derivative (Hessian, ``create_graph=True`` then another grad) raises RuntimeError.
     ``higher_order=True``: the same values from native autograd ops (the (*B, M, p+1) basis values
@@ -107,10 +112,13 @@ def curve_points(control_points, weights, knots, degree, u, knot_bandwidth=DEFAU
         span, basis, _ = _basis(k, degree, t, knot_bandwidth, False)
         return _native_curve_points(control_points, weights, basis, span, degree)
     span, basis, d_basis = _basis(k, degree, t, knot_bandwidth, _needs_knot_grad(knots))
-    return _fn.CurvePoints.apply(control_points, weights, knots, basis, d_basis, span, degree)
+    return _fn._CurvePoints.apply(control_points, weights, knots, basis, d_basis, span, degree)
 
 
-def _surface_basis(control_points, knots_u, knots_v, degree_u, degree_v, u, v, bandwidth):
+def _surface_basis(control_points: torch.Tensor, knots_u: torch.Tensor, knots_v: torch.Tensor, degree_u: int,
+                   degree_v: int, u: torch.Tensor, v: torch.Tensor,
+                   bandwidth: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None,
+                                              torch.Tensor, torch.Tensor, torch.Tensor | None]:
     batch_shape = control_points.shape[:-3]
     ku, kv, fu, fv = _directions(batch_shape, control_points.dtype, (knots_u, knots_v, u, v))
     span_u, basis_u, d_u = _basis(ku, degree_u, fu, bandwidth, _needs_knot_grad(knots_u))
@@ -118,14 +126,16 @@ def _surface_basis(control_points, knots_u, knots_v, degree_u, degree_v, u, v, b
     return span_u, basis_u, d_u, span_v, basis_v, d_v
 
 
-def surface_points(control_points, weights, knots_u, knots_v, degree_u, degree_v, u, v,
-                   knot_bandwidth=DEFAULT_KNOT_BANDWIDTH, *, higher_order: bool = False):
+def surface_points(control_points: torch.Tensor, weights: torch.Tensor, knots_u: torch.Tensor,
+                   knots_v: torch.Tensor, degree_u: int, degree_v: int, u: torch.Tensor, v: torch.Tensor,
+                   knot_bandwidth: float = DEFAULT_KNOT_BANDWIDTH, *,
+                   higher_order: bool = False) -> torch.Tensor:
     """Points of rational surfaces at paired parameters (u[k], v[k]).
 
     control_points (*B, n, m, 3); weights (*B, n, m); knots (K,) or (*B, K); u, v (M,) or (*B, M).
     Returns (*B, M, 3).
 
-    Default: the block-sparse :class:`~nurbs_core.autograd.SurfacePoints` (first derivatives for
+    Default: the block-sparse :class:`~nurbs_core.autograd._SurfacePoints` (first derivatives for
     control points, weights and knots; a second derivative raises RuntimeError).
     ``higher_order=True``: native autograd ops on the (p+1) x (q+1) homogeneous control points
     of each point's span with constant basis values, differentiable to any order with respect to
@@ -141,18 +151,20 @@ def surface_points(control_points, weights, knots_u, knots_v, degree_u, degree_v
                                       degree_u, degree_v)
     span_u, basis_u, d_u, span_v, basis_v, d_v = _surface_basis(
         control_points, knots_u, knots_v, degree_u, degree_v, u, v, knot_bandwidth)
-    return _fn.SurfacePoints.apply(control_points, weights, knots_u, knots_v, basis_u, basis_v,
+    return _fn._SurfacePoints.apply(control_points, weights, knots_u, knots_v, basis_u, basis_v,
                                    d_u, d_v, span_u, span_v, degree_u, degree_v)
 
 
-def surface_grid_points(control_points, weights, knots_u, knots_v, degree_u, degree_v, u, v,
-                        knot_bandwidth=DEFAULT_KNOT_BANDWIDTH, *, higher_order: bool = False):
+def surface_grid_points(control_points: torch.Tensor, weights: torch.Tensor, knots_u: torch.Tensor,
+                        knots_v: torch.Tensor, degree_u: int, degree_v: int, u: torch.Tensor, v: torch.Tensor,
+                        knot_bandwidth: float = DEFAULT_KNOT_BANDWIDTH, *,
+                        higher_order: bool = False) -> torch.Tensor:
     """Points on the tensor-product grid u x v.
 
     control_points (*B, n, m, 3); weights (*B, n, m); knots (K,) or (*B, K); u (Mu,) or (*B, Mu),
     v (Mv,) or (*B, Mv). Returns (*B, Mu, Mv, 3).
 
-    Default: the Kronecker-structured :class:`~nurbs_core.autograd.SurfaceGridPoints` (first
+    Default: the Kronecker-structured :class:`~nurbs_core.autograd._SurfaceGridPoints` (first
     derivatives for control points, weights and knots; a second derivative raises RuntimeError).
     ``higher_order=True``: ``H = N_u (Pw N_v^T)`` with constant banded dense (*B, Mu, n) and
     (*B, Mv, m) basis matrices and native autograd ops, differentiable to any order with respect to
@@ -169,7 +181,7 @@ def surface_grid_points(control_points, weights, knots_u, knots_v, degree_u, deg
     dense_v = dense_basis_matrix(basis_v, span_v, degree_v, m)
     if higher_order:
         return _native_grid_points(control_points, weights, dense_u, dense_v)
-    return _fn.SurfaceGridPoints.apply(control_points, weights, knots_u, knots_v, dense_u, dense_v,
+    return _fn._SurfaceGridPoints.apply(control_points, weights, knots_u, knots_v, dense_u, dense_v,
                                        d_u, d_v, span_u, span_v, degree_u, degree_v)
 
 
@@ -178,20 +190,22 @@ def surface_grid_points(control_points, weights, knots_u, knots_v, degree_u, deg
 # points and weights, the basis a constant, so autograd differentiates it to any order.
 
 
-def _batched_net(control_points, weights, net_dims):
+def _batched_net(control_points: torch.Tensor, weights: torch.Tensor,
+                 net_dims: int) -> tuple[torch.Tensor, torch.Size]:
     """(*B, <net>, d), (*B, <net>) -> (B, <net>, d+1) homogeneous points and the batch shape."""
     batch_shape = control_points.shape[: control_points.dim() - net_dims - 1]
     control_w = homogeneous(control_points, weights)
     return control_w.reshape(-1, *control_w.shape[len(batch_shape):]), batch_shape
 
 
-def _rational(hom, batch_shape):
+def _rational(hom: torch.Tensor, batch_shape: Sequence[int]) -> torch.Tensor:
     """(B, ..., d+1) homogeneous points -> (*B, ..., d) Euclidean points."""
     points = hom[..., :-1] / hom[..., -1:]
     return points.reshape(*batch_shape, *points.shape[1:])
 
 
-def _native_curve_points(control_points, weights, basis, span, degree):
+def _native_curve_points(control_points: torch.Tensor, weights: torch.Tensor, basis: torch.Tensor,
+                         span: torch.Tensor, degree: int) -> torch.Tensor:
     """basis (Bb, M, p+1), span (Bb, M), Bb in {1, B} -> (*B, M, d)."""
     control_w, batch_shape = _batched_net(control_points, weights, 1)
     rows = torch.arange(control_w.shape[0], device=span.device).view(-1, 1, 1)
@@ -199,8 +213,9 @@ def _native_curve_points(control_points, weights, basis, span, degree):
     return _rational((basis.unsqueeze(-1) * gathered).sum(-2), batch_shape)
 
 
-def _native_surface_points(control_points, weights, basis_u, basis_v, span_u, span_v, degree_u,
-                           degree_v):
+def _native_surface_points(control_points: torch.Tensor, weights: torch.Tensor, basis_u: torch.Tensor,
+                           basis_v: torch.Tensor, span_u: torch.Tensor, span_v: torch.Tensor, degree_u: int,
+                           degree_v: int) -> torch.Tensor:
     """basis_u (Bb, M, p+1), basis_v (Bb, M, q+1), spans (Bb, M) -> (*B, M, 3)."""
     control_w, batch_shape = _batched_net(control_points, weights, 2)
     rows = torch.arange(control_w.shape[0], device=span_u.device).view(-1, 1, 1, 1)
@@ -211,7 +226,8 @@ def _native_surface_points(control_points, weights, basis_u, basis_v, span_u, sp
     return _rational((products * gathered).sum((-3, -2)), batch_shape)
 
 
-def _native_grid_points(control_points, weights, dense_u, dense_v):
+def _native_grid_points(control_points: torch.Tensor, weights: torch.Tensor, dense_u: torch.Tensor,
+                        dense_v: torch.Tensor) -> torch.Tensor:
     """Banded dense_u (Bb, Mu, n), dense_v (Bb, Mv, m) -> (*B, Mu, Mv, 3)."""
     control_w, batch_shape = _batched_net(control_points, weights, 2)
     batch, n = control_w.shape[:2]
@@ -226,7 +242,8 @@ def _native_grid_points(control_points, weights, dense_u, dense_v):
 # respect to control points and weights by ordinary autograd.
 
 
-def _homogeneous_curve_derivatives(control_w, knots, degree, u, order):
+def _homogeneous_curve_derivatives(control_w: torch.Tensor, knots: torch.Tensor, degree: int, u: torch.Tensor,
+                                   order: int) -> torch.Tensor:
     """(B, n, d+1), (B, K), (B, M) -> (order+1, B, M, d+1) derivatives of the homogeneous curve."""
     with torch.no_grad():
         span = find_span(knots.detach(), degree, u.detach())
@@ -238,12 +255,12 @@ def _homogeneous_curve_derivatives(control_w, knots, degree, u, order):
     return torch.einsum("kbmr,bmrc->kbmc", ders, gathered)
 
 
-def _rational_derivatives(hom):
+def _rational_derivatives(hom: torch.Tensor) -> torch.Tensor:
     """Homogeneous derivatives (order+1, ..., d+1) -> Euclidean derivatives (order+1, ..., d)."""
     from math import comb
 
     a, w = hom[..., :-1], hom[..., -1:]
-    out = []
+    out: list[torch.Tensor] = []
     for k in range(hom.shape[0]):
         value = a[k]
         for i in range(1, k + 1):
@@ -252,7 +269,8 @@ def _rational_derivatives(hom):
     return torch.stack(out, dim=0)
 
 
-def curve_derivatives(control_points, weights, knots, degree, u, order=1):
+def curve_derivatives(control_points: torch.Tensor, weights: torch.Tensor, knots: torch.Tensor, degree: int,
+                      u: torch.Tensor, order: int = 1) -> torch.Tensor:
     """Curve points and derivatives up to ``order``: (*B, order + 1, M, d)."""
     batch_shape = control_points.shape[:-2]
     control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 2)
@@ -263,7 +281,9 @@ def curve_derivatives(control_points, weights, knots, degree, u, order=1):
     return ders.reshape(*batch_shape, *ders.shape[1:])
 
 
-def surface_derivatives(control_points, weights, knots_u, knots_v, degree_u, degree_v, u, v):
+def surface_derivatives(control_points: torch.Tensor, weights: torch.Tensor, knots_u: torch.Tensor,
+                        knots_v: torch.Tensor, degree_u: int, degree_v: int, u: torch.Tensor,
+                        v: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Points and first partial derivatives at paired parameters: (S, S_u, S_v), each (*B, M, 3).
 
     The homogeneous point and its two partials are ``A Pw``, ``A_u Pw``, ``A_v Pw`` with the three
@@ -285,7 +305,7 @@ def surface_derivatives(control_points, weights, knots_u, knots_v, degree_u, deg
     results = []
     for bu, bv in ((du[0], dv[0]), (du[1], dv[0]), (du[0], dv[1])):
         plan = surface_sparse_basis(bu, bv, span_u, span_v, degree_u, degree_v, n, m, batch)
-        results.append(_fn.SparseProduct.apply(control_w, plan).view(batch, -1, 4))
+        results.append(_fn._SparseProduct.apply(control_w, plan).view(batch, -1, 4))
     h, h_u, h_v = results
     w, w_u, w_v = h[..., 3:], h_u[..., 3:], h_v[..., 3:]
     s = h[..., :3] / w
@@ -295,7 +315,9 @@ def surface_derivatives(control_points, weights, knots_u, knots_v, degree_u, deg
     return s.reshape(shape), s_u.reshape(shape), s_v.reshape(shape)
 
 
-def surface_normals(control_points, weights, knots_u, knots_v, degree_u, degree_v, u, v):
+def surface_normals(control_points: torch.Tensor, weights: torch.Tensor, knots_u: torch.Tensor,
+                    knots_v: torch.Tensor, degree_u: int, degree_v: int, u: torch.Tensor,
+                    v: torch.Tensor) -> torch.Tensor:
     """Unit normals ``S_u x S_v / |S_u x S_v|`` at paired parameters: (*B, M, 3)."""
     _, s_u, s_v = surface_derivatives(control_points, weights, knots_u, knots_v, degree_u,
                                       degree_v, u, v)
@@ -315,7 +337,7 @@ class CurveEvaluator:
     :func:`curve_points`, differentiable to any order (the default is once-differentiable).
     """
 
-    def __init__(self, knots, degree: int, u):
+    def __init__(self, knots: ArrayLike, degree: int, u: ArrayLike) -> None:
         self.knots = torch.as_tensor(knots).detach()
         u = torch.as_tensor(u, dtype=self.knots.dtype, device=self.knots.device).detach()
         self.degree = degree
@@ -323,7 +345,8 @@ class CurveEvaluator:
 
         self._plans: dict[int, object] = {}
 
-    def __call__(self, control_points, weights=None, *, higher_order: bool = False):
+    def __call__(self, control_points: torch.Tensor, weights: torch.Tensor | None = None, *,
+                 higher_order: bool = False) -> torch.Tensor:
         weights = _default_weights(control_points, weights)
         if higher_order:
             return _native_curve_points(control_points, weights, self.basis, self.span,
@@ -334,18 +357,19 @@ class CurveEvaluator:
             n = self.knots.shape[0] - self.degree - 1
             plan = self._plans[batch] = curve_sparse_basis(self.basis, self.span, self.degree, n,
                                                            batch)
-        return _fn.CurvePoints.apply(control_points, weights, self.knots, self.basis, None,
+        return _fn._CurvePoints.apply(control_points, weights, self.knots, self.basis, None,
                                      self.span, self.degree, plan)
 
 
-def _default_weights(control_points, weights):
+def _default_weights(control_points: torch.Tensor, weights: torch.Tensor | None) -> torch.Tensor:
     if weights is None:
         return control_points.new_ones(()).expand(control_points.shape[:-1])
     return weights.expand(control_points.shape[:-1])
 
 
 class _FixedSurfaceBasis:
-    def __init__(self, knots_u, knots_v, degree_u, degree_v, u, v):
+    def __init__(self, knots_u: ArrayLike, knots_v: ArrayLike, degree_u: int, degree_v: int, u: ArrayLike,
+                 v: ArrayLike) -> None:
         ku = torch.as_tensor(knots_u).detach()
         kv = torch.as_tensor(knots_v, dtype=ku.dtype, device=ku.device).detach()
         u = torch.as_tensor(u, dtype=ku.dtype, device=ku.device).detach().unsqueeze(0)
@@ -359,7 +383,8 @@ class SurfaceEvaluator(_FixedSurfaceBasis):
     """Fixed knots and fixed paired parameters (u[k], v[k]); returns (*B, M, 3).
     ``higher_order=True`` as in :func:`surface_points`."""
 
-    def __call__(self, control_points, weights=None, *, higher_order: bool = False):
+    def __call__(self, control_points: torch.Tensor, weights: torch.Tensor | None = None, *,
+                 higher_order: bool = False) -> torch.Tensor:
         weights = _default_weights(control_points, weights)
         if higher_order:
             return _native_surface_points(control_points, weights, self.basis_u, self.basis_v,
@@ -370,7 +395,7 @@ class SurfaceEvaluator(_FixedSurfaceBasis):
             n, m = control_points.shape[-3], control_points.shape[-2]
             plans[batch] = surface_sparse_basis(self.basis_u, self.basis_v, self.span_u,
                                                 self.span_v, *self.degrees, n, m, batch)
-        return _fn.SurfacePoints.apply(control_points, weights, self.knots_u, self.knots_v,
+        return _fn._SurfacePoints.apply(control_points, weights, self.knots_u, self.knots_v,
                                        self.basis_u, self.basis_v, None, None, self.span_u,
                                        self.span_v, *self.degrees, plans[batch])
 
@@ -379,17 +404,19 @@ class SurfaceGridEvaluator(_FixedSurfaceBasis):
     """Fixed knots, fixed grid u x v; returns (*B, len(u), len(v), 3).
     ``higher_order=True`` as in :func:`surface_grid_points`."""
 
-    def __init__(self, knots_u, knots_v, degree_u, degree_v, u, v):
+    def __init__(self, knots_u: ArrayLike, knots_v: ArrayLike, degree_u: int, degree_v: int, u: ArrayLike,
+                 v: ArrayLike) -> None:
         super().__init__(knots_u, knots_v, degree_u, degree_v, u, v)
         n_u = self.knots_u.shape[0] - degree_u - 1
         n_v = self.knots_v.shape[0] - degree_v - 1
         self.dense_u = dense_basis_matrix(self.basis_u, self.span_u, degree_u, n_u)
         self.dense_v = dense_basis_matrix(self.basis_v, self.span_v, degree_v, n_v)
 
-    def __call__(self, control_points, weights=None, *, higher_order: bool = False):
+    def __call__(self, control_points: torch.Tensor, weights: torch.Tensor | None = None, *,
+                 higher_order: bool = False) -> torch.Tensor:
         weights = _default_weights(control_points, weights)
         if higher_order:
             return _native_grid_points(control_points, weights, self.dense_u, self.dense_v)
-        return _fn.SurfaceGridPoints.apply(control_points, weights, self.knots_u, self.knots_v,
+        return _fn._SurfaceGridPoints.apply(control_points, weights, self.knots_u, self.knots_v,
                                            self.dense_u, self.dense_v, None, None, self.span_u,
                                            self.span_v, *self.degrees)

@@ -7,16 +7,19 @@ Leading batch dimensions are allowed. Inputs can be numpy arrays (converted to f
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 import torch
+from numpy.typing import ArrayLike
 
 from nurbs_core import evaluate as _ev
 from nurbs_core import knots as _knots
 
 
-def _as_tensor(value, dtype=None, device=None, name="value") -> torch.Tensor:
+def _as_tensor(value: ArrayLike, dtype: torch.dtype | None = None, device: torch.device | str | None = None,
+               name: str = "value") -> torch.Tensor:
     if isinstance(value, torch.Tensor):
         t = value
         if dtype is not None or device is not None:
@@ -32,7 +35,7 @@ def _as_tensor(value, dtype=None, device=None, name="value") -> torch.Tensor:
     return t
 
 
-def _host_values(t: torch.Tensor):
+def _host_values(t: torch.Tensor) -> np.ndarray | None:
     """A numpy view of a CPU tensor (checks on small tensors are ~10x cheaper in numpy than in
     torch, which matters when a file builds thousands of items), else None."""
     if t.device.type != "cpu" or t.dtype not in (torch.float32, torch.float64):
@@ -40,14 +43,14 @@ def _host_values(t: torch.Tensor):
     return t.detach().numpy()
 
 
-def _check_finite(t: torch.Tensor, name: str):
+def _check_finite(t: torch.Tensor, name: str) -> None:
     values = _host_values(t)
     finite = np.isfinite(values).all() if values is not None else torch.isfinite(t.detach()).all()
     if not finite:
         raise ValueError(f"{name} contains NaN or inf (shape {tuple(t.shape)})")
 
 
-def _check_weights(weights: torch.Tensor, expected_shape, name="weights"):
+def _check_weights(weights: torch.Tensor, expected_shape: Sequence[int], name: str = "weights") -> None:
     if tuple(weights.shape) != tuple(expected_shape):
         raise ValueError(f"{name} has shape {tuple(weights.shape)}, expected {tuple(expected_shape)} "
                          "(one weight per control point)")
@@ -58,7 +61,7 @@ def _check_weights(weights: torch.Tensor, expected_shape, name="weights"):
         raise ValueError(f"{name} must be positive; smallest is {smallest}")
 
 
-def _check_degree(degree, n: int, name: str):
+def _check_degree(degree: int, n: int, name: str) -> None:
     if not isinstance(degree, (int, np.integer)) or isinstance(degree, bool):
         raise ValueError(f"{name} must be an integer, got {degree!r}")
     if degree < 1:
@@ -68,7 +71,7 @@ def _check_degree(degree, n: int, name: str):
                          f"(at most {n - 1}; a degree p needs p + 1 control points)")
 
 
-def _parameters(t, like: torch.Tensor, name: str) -> torch.Tensor:
+def _parameters(t: ArrayLike, like: torch.Tensor, name: str) -> torch.Tensor:
     t = torch.as_tensor(t, dtype=like.dtype, device=like.device) if not isinstance(
         t, torch.Tensor) else t.to(dtype=like.dtype, device=like.device)
     if t.dim() == 0:
@@ -77,7 +80,7 @@ def _parameters(t, like: torch.Tensor, name: str) -> torch.Tensor:
     return t
 
 
-def _check_in_domain(t: torch.Tensor, knots: torch.Tensor, degree: int, name: str):
+def _check_in_domain(t: torch.Tensor, knots: torch.Tensor, degree: int, name: str) -> None:
     n = knots.shape[-1] - degree - 1
     lo, hi = knots[..., degree].detach(), knots[..., n].detach()
     tol = 1e-9 * (hi - lo).abs().max().clamp_min(1.0)
@@ -95,8 +98,10 @@ class NurbsCurve:
     or (n+p+1,) (default clamped uniform on [0, 1]); degree p >= 1.
     """
 
-    def __init__(self, control_points, degree: int, knots=None, weights=None, *, dtype=None,
-                 device=None, validate: bool = True, metadata: dict | None = None):
+    def __init__(self, control_points: ArrayLike, degree: int, knots: ArrayLike | None = None,
+                 weights: ArrayLike | None = None, *, dtype: torch.dtype | None = None,
+                 device: torch.device | str | None = None, validate: bool = True,
+                 metadata: dict | None = None) -> None:
         cp = _as_tensor(control_points, dtype, device, "control_points")
         if cp.dim() < 2 or cp.shape[-1] not in (2, 3):
             raise ValueError(f"control_points must have shape (..., n, 2) or (..., n, 3), got "
@@ -124,63 +129,71 @@ class NurbsCurve:
     # --- properties --------------------------------------------------------------------------
     @property
     def batch_shape(self) -> torch.Size:
+        """Leading batch shape ``*B`` of control_points (*B, n, d)."""
         return self.control_points.shape[:-2]
 
     @property
     def dimension(self) -> int:
+        """d: 2 or 3."""
         return self.control_points.shape[-1]
 
     @property
     def n_control_points(self) -> int:
+        """n, the number of control points per curve."""
         return self.control_points.shape[-2]
 
     @property
-    def dtype(self):
+    def dtype(self) -> torch.dtype:
+        """The floating dtype of every tensor."""
         return self.control_points.dtype
 
     @property
-    def device(self):
+    def device(self) -> torch.device:
+        """The device of every tensor."""
         return self.control_points.device
 
     @property
     def domain(self) -> tuple[float, float]:
+        """Parameter domain ``(U[p], U[n])`` (of the first curve of a batch)."""
         k = self.knots.detach().reshape(-1, self.knots.shape[-1])[0]
         return float(k[self.degree]), float(k[self.n_control_points])
 
     @property
     def is_rational(self) -> bool:
+        """Whether the weights differ (a non-rational curve has equal weights)."""
         w = self.weights.detach()
         return bool((w != w.reshape(-1)[0]).any())
 
     # --- evaluation --------------------------------------------------------------------------
-    def evaluate(self, u) -> torch.Tensor:
+    def evaluate(self, u: ArrayLike) -> torch.Tensor:
         """Points at parameters u (M,) or (*B, M): returns (*B, M, d)."""
         u = _parameters(u, self.control_points, "u")
         _check_in_domain(u, self.knots, self.degree, "u")
         return _ev.curve_points(self.control_points, self.weights, self.knots, self.degree, u)
 
-    def derivatives(self, u, order: int = 1) -> torch.Tensor:
+    def derivatives(self, u: ArrayLike, order: int = 1) -> torch.Tensor:
         """Points and derivatives up to ``order``: (*B, order + 1, M, d)."""
         u = _parameters(u, self.control_points, "u")
         _check_in_domain(u, self.knots, self.degree, "u")
         return _ev.curve_derivatives(self.control_points, self.weights, self.knots, self.degree, u,
                                      order)
 
-    def tangents(self, u) -> torch.Tensor:
+    def tangents(self, u: ArrayLike) -> torch.Tensor:
         """Unit tangents (*B, M, d)."""
         d = self.derivatives(u, 1)[..., 1, :, :]
         return d / d.norm(dim=-1, keepdim=True).clamp_min(torch.finfo(d.dtype).tiny)
 
     def sample(self, count: int) -> torch.Tensor:
+        """``count`` points at uniform parameters over the domain: (*B, count, d)."""
         a, b = self.domain
         return self.evaluate(torch.linspace(a, b, count, dtype=self.dtype, device=self.device))
 
     # --- editing -----------------------------------------------------------------------------
-    def _homogeneous_numpy(self):
+    def _homogeneous_numpy(self) -> np.ndarray:
         self._require_unbatched("this operation")
         return _ev.homogeneous(self.control_points, self.weights).detach().cpu().double().numpy()
 
-    def _from_homogeneous(self, cw, knots, degree):
+    def _from_homogeneous(self, cw: np.ndarray, knots: np.ndarray, degree: int) -> NurbsCurve:
         w = cw[..., -1]
         return NurbsCurve(torch.as_tensor(cw[..., :-1] / w[..., None]).to(self.dtype), degree,
                           torch.as_tensor(knots).to(self.dtype), torch.as_tensor(w).to(self.dtype),
@@ -198,36 +211,41 @@ class NurbsCurve:
                                                   self.degree, times)
         return self._from_homogeneous(cw, U, self.degree + times)
 
-    def _knots_numpy(self):
+    def _knots_numpy(self) -> np.ndarray:
         return self.knots.detach().cpu().double().numpy().reshape(-1, self.knots.shape[-1])[0]
 
-    def _require_unbatched(self, what):
+    def _require_unbatched(self, what: str) -> None:
         if len(self.batch_shape):
             raise ValueError(f"{what} needs a single curve, got batch shape {tuple(self.batch_shape)}")
 
     # --- conversion --------------------------------------------------------------------------
-    def to(self, dtype=None, device=None) -> NurbsCurve:
+    def to(self, dtype: torch.dtype | None = None, device: torch.device | str | None = None) -> NurbsCurve:
+        """A copy with every tensor converted (no validation)."""
         return NurbsCurve(self.control_points.to(dtype=dtype or self.dtype, device=device),
                           self.degree, self.knots.to(dtype=dtype or self.dtype, device=device),
                           self.weights.to(dtype=dtype or self.dtype, device=device), validate=False,
                           metadata=self.metadata)
 
     def detach(self) -> NurbsCurve:
+        """A copy detached from the autograd graph."""
         return NurbsCurve(self.control_points.detach(), self.degree, self.knots.detach(),
                           self.weights.detach(), validate=False, metadata=self.metadata)
 
     def numpy(self) -> dict[str, Any]:
+        """A dict of numpy copies (control_points (*B, n, d), weights (*B, n), knots) plus kind
+        and degree; the inverse of :meth:`from_numpy`."""
         return {"kind": "curve", "degree": self.degree,
                 "control_points": self.control_points.detach().cpu().numpy().copy(),
                 "weights": self.weights.detach().cpu().numpy().copy(),
                 "knots": self.knots.detach().cpu().numpy().copy()}
 
     @classmethod
-    def from_numpy(cls, data: dict[str, Any], **kwargs) -> NurbsCurve:
+    def from_numpy(cls, data: dict[str, Any], **kwargs: Any) -> NurbsCurve:
+        """Rebuild from :meth:`numpy`'s dict; ``kwargs`` go to the constructor."""
         return cls(data["control_points"], data["degree"], data.get("knots"), data.get("weights"),
                    **kwargs)
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return (f"NurbsCurve(degree={self.degree}, n_control_points={self.n_control_points}, "
                 f"dimension={self.dimension}, batch_shape={tuple(self.batch_shape)}, "
                 f"rational={self.is_rational}, dtype={self.dtype})")
@@ -240,9 +258,11 @@ class NurbsSurface:
     or shared (n_u+p+1,), knots_v likewise (default clamped uniform on [0, 1]).
     """
 
-    def __init__(self, control_points, degree_u: int, degree_v: int, knots_u=None, knots_v=None,
-                 weights=None, *, dtype=None, device=None, validate: bool = True,
-                 metadata: dict | None = None):
+    def __init__(self, control_points: ArrayLike, degree_u: int, degree_v: int,
+                 knots_u: ArrayLike | None = None, knots_v: ArrayLike | None = None,
+                 weights: ArrayLike | None = None, *, dtype: torch.dtype | None = None,
+                 device: torch.device | str | None = None, validate: bool = True,
+                 metadata: dict | None = None) -> None:
         cp = _as_tensor(control_points, dtype, device, "control_points")
         if cp.dim() < 3 or cp.shape[-1] != 3:
             raise ValueError(f"control_points must have shape (..., n_u, n_v, 3), got "
@@ -278,6 +298,7 @@ class NurbsSurface:
     # --- properties --------------------------------------------------------------------------
     @property
     def batch_shape(self) -> torch.Size:
+        """Leading batch shape ``*B`` of control_points (*B, n_u, n_v, 3)."""
         return self.control_points.shape[:-3]
 
     @property
@@ -286,15 +307,18 @@ class NurbsSurface:
         return self.control_points.shape[-3], self.control_points.shape[-2]
 
     @property
-    def dtype(self):
+    def dtype(self) -> torch.dtype:
+        """The floating dtype of every tensor."""
         return self.control_points.dtype
 
     @property
-    def device(self):
+    def device(self) -> torch.device:
+        """The device of every tensor."""
         return self.control_points.device
 
     @property
     def domain(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """((u0, u1), (v0, v1)) parameter domain (of the first surface of a batch)."""
         ku = self.knots_u.detach().reshape(-1, self.knots_u.shape[-1])[0]
         kv = self.knots_v.detach().reshape(-1, self.knots_v.shape[-1])[0]
         n_u, n_v = self.shape
@@ -303,14 +327,15 @@ class NurbsSurface:
 
     @property
     def is_rational(self) -> bool:
+        """Whether the weights differ (a non-rational surface has equal weights)."""
         w = self.weights.detach()
         return bool((w != w.reshape(-1)[0]).any())
 
-    def _args(self):
+    def _args(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, int, int]:
         return (self.control_points, self.weights, self.knots_u, self.knots_v, self.degree_u,
                 self.degree_v)
 
-    def _uv(self, u, v):
+    def _uv(self, u: ArrayLike, v: ArrayLike) -> tuple[torch.Tensor, torch.Tensor]:
         u = _parameters(u, self.control_points, "u")
         v = _parameters(v, self.control_points, "v")
         _check_in_domain(u, self.knots_u, self.degree_u, "u")
@@ -318,29 +343,29 @@ class NurbsSurface:
         return u, v
 
     # --- evaluation --------------------------------------------------------------------------
-    def evaluate(self, u, v) -> torch.Tensor:
+    def evaluate(self, u: ArrayLike, v: ArrayLike) -> torch.Tensor:
         """Points at paired parameters (u[k], v[k]); u, v (M,) or (*B, M). Returns (*B, M, 3)."""
         u, v = self._uv(u, v)
         if u.shape != v.shape:
             raise ValueError(f"u and v must pair up: shapes {tuple(u.shape)} and {tuple(v.shape)}")
         return _ev.surface_points(*self._args(), u, v)
 
-    def evaluate_grid(self, u, v) -> torch.Tensor:
+    def evaluate_grid(self, u: ArrayLike, v: ArrayLike) -> torch.Tensor:
         """Points on the grid u (Mu,) x v (Mv,). Returns (*B, Mu, Mv, 3)."""
         u, v = self._uv(u, v)
         return _ev.surface_grid_points(*self._args(), u, v)
 
-    def derivatives(self, u, v):
+    def derivatives(self, u: ArrayLike, v: ArrayLike) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """(S, S_u, S_v) at paired parameters, each (*B, M, 3)."""
         u, v = self._uv(u, v)
         return _ev.surface_derivatives(*self._args(), u, v)
 
-    def normals(self, u, v) -> torch.Tensor:
+    def normals(self, u: ArrayLike, v: ArrayLike) -> torch.Tensor:
         """Unit normals S_u x S_v at paired parameters: (*B, M, 3)."""
         u, v = self._uv(u, v)
         return _ev.surface_normals(*self._args(), u, v)
 
-    def grid_parameters(self, count_u: int, count_v: int | None = None):
+    def grid_parameters(self, count_u: int, count_v: int | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """Uniform parameters over the domain: (u (count_u,), v (count_v,))."""
         (a, b), (c, d) = self.domain
         count_v = count_u if count_v is None else count_v
@@ -348,16 +373,17 @@ class NurbsSurface:
                 torch.linspace(c, d, count_v, dtype=self.dtype, device=self.device))
 
     # --- editing -----------------------------------------------------------------------------
-    def _homogeneous_numpy(self):
+    def _homogeneous_numpy(self) -> np.ndarray:
         if len(self.batch_shape):
             raise ValueError(f"this operation needs a single surface, got batch shape "
                              f"{tuple(self.batch_shape)}")
         return _ev.homogeneous(self.control_points, self.weights).detach().cpu().double().numpy()
 
-    def _knot_numpy(self, knots):
+    def _knot_numpy(self, knots: torch.Tensor) -> np.ndarray:
         return knots.detach().cpu().double().numpy().reshape(-1, knots.shape[-1])[0]
 
-    def _rebuild(self, cw, ku, kv, degree_u, degree_v) -> NurbsSurface:
+    def _rebuild(self, cw: np.ndarray, ku: np.ndarray, kv: np.ndarray, degree_u: int,
+                 degree_v: int) -> NurbsSurface:
         w = cw[..., -1]
         return NurbsSurface(torch.as_tensor(cw[..., :-1] / w[..., None]).to(self.dtype), degree_u,
                             degree_v, torch.as_tensor(ku).to(self.dtype),
@@ -384,7 +410,8 @@ class NurbsSurface:
         return self._rebuild(cw, ku, kv, self.degree_u + times_u, self.degree_v + times_v)
 
     # --- conversion --------------------------------------------------------------------------
-    def to(self, dtype=None, device=None) -> NurbsSurface:
+    def to(self, dtype: torch.dtype | None = None, device: torch.device | str | None = None) -> NurbsSurface:
+        """A copy with every tensor converted (no validation)."""
         dt = dtype or self.dtype
         return NurbsSurface(self.control_points.to(dtype=dt, device=device), self.degree_u,
                             self.degree_v, self.knots_u.to(dtype=dt, device=device),
@@ -393,11 +420,14 @@ class NurbsSurface:
                             metadata=self.metadata)
 
     def detach(self) -> NurbsSurface:
+        """A copy detached from the autograd graph."""
         return NurbsSurface(self.control_points.detach(), self.degree_u, self.degree_v,
                             self.knots_u.detach(), self.knots_v.detach(), self.weights.detach(),
                             validate=False, metadata=self.metadata)
 
     def numpy(self) -> dict[str, Any]:
+        """A dict of numpy copies (control_points (*B, n_u, n_v, 3), weights (*B, n_u, n_v),
+        knots_u, knots_v) plus kind and degrees; the inverse of :meth:`from_numpy`."""
         return {"kind": "surface", "degree_u": self.degree_u, "degree_v": self.degree_v,
                 "control_points": self.control_points.detach().cpu().numpy().copy(),
                 "weights": self.weights.detach().cpu().numpy().copy(),
@@ -405,18 +435,19 @@ class NurbsSurface:
                 "knots_v": self.knots_v.detach().cpu().numpy().copy()}
 
     @classmethod
-    def from_numpy(cls, data: dict[str, Any], **kwargs) -> NurbsSurface:
+    def from_numpy(cls, data: dict[str, Any], **kwargs: Any) -> NurbsSurface:
+        """Rebuild from :meth:`numpy`'s dict; ``kwargs`` go to the constructor."""
         return cls(data["control_points"], data["degree_u"], data["degree_v"], data.get("knots_u"),
                    data.get("knots_v"), data.get("weights"), **kwargs)
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         n_u, n_v = self.shape
         return (f"NurbsSurface(degree=({self.degree_u}, {self.degree_v}), control_net=({n_u}, "
                 f"{n_v}), batch_shape={tuple(self.batch_shape)}, rational={self.is_rational}, "
                 f"dtype={self.dtype})")
 
 
-def geometry_from_numpy(data: dict[str, Any], **kwargs):
+def geometry_from_numpy(data: dict[str, Any], **kwargs: Any) -> NurbsCurve | NurbsSurface:
     """Rebuild a NurbsCurve or NurbsSurface from its ``.numpy()`` dict."""
     kind = data.get("kind")
     if kind == "curve":

@@ -19,6 +19,7 @@ from os import PathLike
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy import ndimage
 
 #: Clockwise 8-neighbourhood in array coordinates (row down, column right), starting north.
@@ -39,13 +40,14 @@ def load_image(path: str | PathLike) -> np.ndarray:
     try:
         with Image.open(path) as image:
             if image.mode not in ("1", "L", "I", "I;16", "F"):
-                image = image.convert("L")
+                return np.asarray(image.convert("L")).copy()
             return np.asarray(image).copy()
     except (UnidentifiedImageError, OSError) as exc:
         raise ValueError(f"{path}: not a readable image ({exc})") from None
 
 
-def foreground_mask(image, threshold: float | None = None, *, invert: bool = False) -> np.ndarray:
+def foreground_mask(image: str | PathLike | ArrayLike, threshold: float | None = None, *,
+                    invert: bool = False) -> np.ndarray:
     """Boolean (H, W) mask of foreground pixels.
 
     ``image``: a path, or an (H, W) array. Boolean arrays are used as they are. Otherwise a pixel
@@ -83,7 +85,8 @@ def boundary_mask(mask: np.ndarray) -> np.ndarray:
     return mask & ~eroded
 
 
-def boundary_points(image, threshold: float | None = None, *, invert: bool = False) -> np.ndarray:
+def boundary_points(image: str | PathLike | ArrayLike, threshold: float | None = None, *,
+                    invert: bool = False) -> np.ndarray:
     """The paper's boundary point cloud of a binary image: (N, 2) float64 rows (i + 0.5, j + 0.5).
 
     ``image`` is a path or an (H, W) array (see :func:`foreground_mask` for ``threshold`` and
@@ -133,8 +136,8 @@ def _trace_outer_contour(padded: np.ndarray, start: tuple[int, int]) -> list[tup
     raise RuntimeError("contour tracing did not close (this is a bug; please report the image)")
 
 
-def ordered_boundary(image, threshold: float | None = None, *, invert: bool = False,
-                     min_points: int = 1) -> list[np.ndarray]:
+def ordered_boundary(image: str | PathLike | ArrayLike, threshold: float | None = None, *,
+                     invert: bool = False, min_points: int = 1) -> list[np.ndarray]:
     """Outer contours of the foreground, ordered along the contour: a list of (N_k, 2) arrays.
 
     One closed contour per 8-connected foreground component, longest first; each row is
@@ -166,7 +169,7 @@ def ordered_boundary(image, threshold: float | None = None, *, invert: bool = Fa
     return contours
 
 
-def chord_length_parameters(points, *, closed: bool = False) -> np.ndarray:
+def chord_length_parameters(points: ArrayLike, *, closed: bool = False) -> np.ndarray:
     """Normalised cumulative chord length of an ordered polyline: (N,) in [0, 1] (or (N,) in
     [0, L/(L + closing)) for ``closed=True``, leaving room for the closing segment).
 

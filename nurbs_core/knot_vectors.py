@@ -7,6 +7,7 @@ knot panel runs these on the GUI thread, where torch is never imported.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 
 def uniform(count: int, degree: int) -> np.ndarray:
@@ -15,7 +16,7 @@ def uniform(count: int, degree: int) -> np.ndarray:
     return np.concatenate([np.zeros(degree), interior, np.ones(degree)])
 
 
-def averaged(parameters, n_control_points: int, degree: int) -> np.ndarray:
+def averaged(parameters: ArrayLike, n_control_points: int, degree: int) -> np.ndarray:
     """Clamped knot vector by averaging sorted parameters (The NURBS Book, eq. 9.69 / 9.8)."""
     t = np.sort(np.asarray(parameters, dtype=np.float64))
     n, p = n_control_points, degree

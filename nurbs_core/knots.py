@@ -8,8 +8,9 @@ import torch
 from nurbs_core.knot_vectors import averaged  # noqa: F401  (the torch-free half, re-exported)
 
 
-def clamped_uniform(n_control_points: int, degree: int, domain=(0.0, 1.0), *, dtype=torch.float64,
-                    device=None) -> torch.Tensor:
+def clamped_uniform(n_control_points: int, degree: int, domain: tuple[float, float] = (0.0, 1.0), *,
+                    dtype: torch.dtype = torch.float64,
+                    device: torch.device | str | None = None) -> torch.Tensor:
     """Clamped knot vector with uniformly spaced interior knots: (n + p + 1,)."""
     if degree < 1:
         raise ValueError(f"degree must be at least 1, got {degree}")
@@ -26,7 +27,7 @@ def clamped_uniform(n_control_points: int, degree: int, domain=(0.0, 1.0), *, dt
     ])
 
 
-def check_knots(knots: torch.Tensor, degree: int, n_control_points: int, name: str = "knots"):
+def check_knots(knots: torch.Tensor, degree: int, n_control_points: int, name: str = "knots") -> None:
     """Raise ValueError unless ``knots`` (..., n + p + 1) is a valid full knot vector (or batch of
     them) for n control points of degree p: finite, non-decreasing, a non-empty domain
     [U[p], U[n]], no knot of multiplicity above p + 1. Checked in numpy in one transfer (a few
@@ -60,7 +61,7 @@ def check_knots(knots: torch.Tensor, degree: int, n_control_points: int, name: s
 
 
 def insert_knot_homogeneous(control_w: np.ndarray, knots: np.ndarray, degree: int, value: float,
-                            times: int = 1, axis: int = 0):
+                            times: int = 1, axis: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Insert ``value`` ``times`` times. control_w (..., n, ..., d+1) with the control index on
     ``axis``; returns (new_control_w, new_knots). float64 numpy, exact up to rounding."""
     p = degree
@@ -104,19 +105,21 @@ def _basis_matrix(knots: np.ndarray, degree: int, params: np.ndarray) -> np.ndar
 
 
 def elevated_knots(knots: np.ndarray, degree: int, times: int) -> np.ndarray:
+    """Knots (K,) with every distinct knot's multiplicity raised by ``times``: (K + times * distinct,)."""
     U = np.asarray(knots, dtype=np.float64)
     values, counts = np.unique(U, return_counts=True)
     return np.repeat(values, counts + times)
 
 
 def greville(knots: np.ndarray, degree: int) -> np.ndarray:
+    """Greville abscissae of knots (n + p + 1,): (n,), the averages of p consecutive knots."""
     U = np.asarray(knots, dtype=np.float64)
     n = len(U) - degree - 1
     return np.array([U[i + 1: i + degree + 1].mean() for i in range(n)])
 
 
 def elevate_degree_homogeneous(control_w: np.ndarray, knots: np.ndarray, degree: int, times: int,
-                               axis: int = 0):
+                               axis: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Raise the degree by ``times`` along ``axis``; returns (new_control_w, new_knots)."""
     if times < 0:
         raise ValueError(f"cannot lower the degree (times={times})")
@@ -135,11 +138,11 @@ def elevate_degree_homogeneous(control_w: np.ndarray, knots: np.ndarray, degree:
     return np.moveaxis(new_cw, 0, axis), new_U
 
 
-def _clamp(cw: np.ndarray, U: np.ndarray, degree: int):
+def _clamp(cw: np.ndarray, U: np.ndarray, degree: int) -> tuple[np.ndarray, np.ndarray, int]:
     """Exact clamped representation on the domain [U[p], U[n]] (control index on axis 0)."""
     p = degree
     lo, hi = U[p], U[cw.shape[0]]
-    for end in (lo, hi):
+    for end in (float(lo), float(hi)):
         mult = int(np.sum(U == end))
         if mult < p:
             cw, U = insert_knot_homogeneous(cw, U, p, end, p - mult, axis=0)

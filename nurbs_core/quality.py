@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from nurbs_core.basis import basis_derivatives, dense_basis_matrix, find_span
@@ -83,7 +84,9 @@ def _dense_derivative_basis(knots: torch.Tensor, degree: int, t: np.ndarray) -> 
     return dense.numpy()
 
 
-def _grid_derivatives(surface: NurbsSurface, u: np.ndarray, v: np.ndarray):
+def _grid_derivatives(surface: NurbsSurface, u: np.ndarray,
+                      v: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """S, S_u, S_v, S_uu, S_uv, S_vv on the grid u (Gu,) x v (Gv,): each (Gu, Gv, 3).
 
     Homogeneous derivatives from the basis-function derivatives (A2.3), then the quotient rule
@@ -96,7 +99,7 @@ def _grid_derivatives(surface: NurbsSurface, u: np.ndarray, v: np.ndarray):
     n, m = pw.shape[:2]
     rows = (du.reshape(-1, n) @ pw.reshape(n, m * 4)).reshape(3, len(u), m, 4)
 
-    def h(a, b):                                        # (Gu, Gv, 4), as BLAS products
+    def h(a: int, b: int) -> np.ndarray:  # (Gu, Gv, 4), as BLAS products
         return np.matmul(dv[b][None], rows[a])
 
     h00, h10, h01, h20, h11, h02 = h(0, 0), h(1, 0), h(0, 1), h(2, 0), h(1, 1), h(0, 2)
@@ -110,7 +113,8 @@ def _grid_derivatives(surface: NurbsSurface, u: np.ndarray, v: np.ndarray):
     return s, s_u, s_v, s_uu, s_uv, s_vv
 
 
-def _curvature(s_u, s_v, s_uu, s_uv, s_vv):
+def _curvature(s_u: np.ndarray, s_v: np.ndarray, s_uu: np.ndarray, s_uv: np.ndarray, s_vv: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Area element |S_u x S_v|, unit normal, k1^2 + k2^2 and max(|k1|, |k2|) per sample.
 
     From the fundamental forms: H = (eG - 2fF + gE) / 2(EG - F^2), K = (eg - f^2) / (EG - F^2),
@@ -254,7 +258,7 @@ def _measure(surface: NurbsSurface, points: np.ndarray, normals: np.ndarray | No
     cell_normals = cloud_normals[:n_cells]
     k = cell_frames.neighbours.shape[1]
     own_area = np.pi * cell_frames.distances[:, -1] ** 2 / k                  # (n_cells,)
-    surface_area = np.zeros(n_cells)
+    surface_area: np.ndarray = np.zeros(n_cells)
     owner = np.full(len(x), -1)
     if near.any():
         _, nearest = cKDTree(cells).query(x[near])
@@ -294,7 +298,7 @@ def _measure(surface: NurbsSurface, points: np.ndarray, normals: np.ndarray | No
     return _Measures(stats, maps, sub, multiplicity)
 
 
-def _as_points(points) -> np.ndarray:
+def _as_points(points: ArrayLike) -> np.ndarray:
     array = np.asarray(points, np.float64)
     if array.ndim != 2 or array.shape[1] != 3:
         raise ValueError(f"points must have shape (N, 3), got {array.shape}")

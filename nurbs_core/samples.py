@@ -38,9 +38,14 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import torch
+
+    from nurbs_core.geometry import NurbsSurface
 
 #: default size of the dense truth sampling
 TRUTH_COUNT = 250_000
@@ -96,7 +101,7 @@ class SampledShape:
         move the foot point (clamped to the chart, wrapped where the chart is periodic); the
         smallest distance over the k starts is returned. Exact where the foot point is interior
         or on the boundary; a query nearest to a seam between charts (rounded box) needs k > 1."""
-        if self.model is None or self.truth_parameters is None:
+        if self.model is None or self.truth_parameters is None or self.truth_charts is None:
             raise ValueError("this shape carries no charts; distances need its truth samples")
         query = np.asarray(query, np.float64)
         nearest = np.asarray(nearest).reshape(len(query), -1)
@@ -107,7 +112,7 @@ class SampledShape:
             best = np.minimum(best, d)
         return best
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return (f"SampledShape({self.name!r}, kind={self.kind!r}, points={self.count}, "
                 f"truth={self.truth.shape[0]}, true_area={self.true_area:.6g}, "
                 f"noise={self.noise:.3g}, closed={self.closed})")
@@ -125,7 +130,7 @@ class _Chart:
 
     def __init__(self, frame: Callable, u: tuple[float, float], v: tuple[float, float],
                  breaks_u: np.ndarray | None = None, breaks_v: np.ndarray | None = None,
-                 cells: int = 48, periodic: tuple[bool, bool] = (False, False)):
+                 cells: int = 48, periodic: tuple[bool, bool] = (False, False)) -> None:
         self.frame = frame
         self.u = (float(u[0]), float(u[1]))
         self.v = (float(v[0]), float(v[1]))
@@ -137,25 +142,25 @@ class _Chart:
     def parameter_area(self) -> float:
         return (self.u[1] - self.u[0]) * (self.v[1] - self.v[0])
 
-    def cross(self, u, v):
+    def cross(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         s, s_u, s_v = self.frame(u, v)
         return s, np.cross(s_u, s_v)
 
-    def _keep_inside(self, t, bounds, periodic):
+    def _keep_inside(self, t: np.ndarray, bounds: tuple[float, float], periodic: bool) -> np.ndarray:
         lo, hi = bounds
         if periodic:
             return lo + np.mod(t - lo, hi - lo)
         return np.clip(t, lo, hi)
 
     @staticmethod
-    def _pinned(t, step, bounds, periodic):
+    def _pinned(t: np.ndarray, step: np.ndarray, bounds: tuple[float, float], periodic: bool) -> np.ndarray:
         if periodic:
             return np.zeros(t.shape, bool)
         lo, hi = bounds
         tol = 1e-12 * (hi - lo)
         return ((t <= lo + tol) & (step < 0)) | ((t >= hi - tol) & (step > 0))
 
-    def distance(self, query, u, v, steps: int = 8) -> np.ndarray:
+    def distance(self, query: np.ndarray, u: np.ndarray, v: np.ndarray, steps: int = 8) -> np.ndarray:
         """Distances of ``query`` to the chart by damped Gauss-Newton from parameters (u, v): a
         step is kept where it brings the foot point closer, otherwise retried at a quarter of
         its length (at most ``3 * steps`` evaluations per point)."""
@@ -209,13 +214,14 @@ class _Chart:
         return np.sqrt(dist2)
 
 
-def _analytic_chart(mapping: Callable[[np.ndarray, np.ndarray], np.ndarray], u, v,
-                    cells: int = 48, periodic: tuple[bool, bool] = (False, False)) -> _Chart:
+def _analytic_chart(mapping: Callable[[np.ndarray, np.ndarray], np.ndarray], u: tuple[float, float],
+                    v: tuple[float, float], cells: int = 48,
+                    periodic: tuple[bool, bool] = (False, False)) -> _Chart:
     """A chart from a vectorised map (u, v) -> (M, 3); derivatives by central differences."""
     hu = 1e-6 * (u[1] - u[0])
     hv = 1e-6 * (v[1] - v[0])
 
-    def frame(uu, vv):
+    def frame(uu: np.ndarray, vv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         s = mapping(uu, vv)
         s_u = (mapping(uu + hu, vv) - mapping(uu - hu, vv)) / (2 * hu)
         s_v = (mapping(uu, vv + hv) - mapping(uu, vv - hv)) / (2 * hv)
@@ -224,7 +230,7 @@ def _analytic_chart(mapping: Callable[[np.ndarray, np.ndarray], np.ndarray], u, 
     return _Chart(frame, u, v, cells=cells, periodic=periodic)
 
 
-def _nurbs_chart(surface, cells: int = 48) -> _Chart:
+def _nurbs_chart(surface: NurbsSurface, cells: int = 48) -> _Chart:
     """A chart of an (unbatched) NurbsSurface with the engine's exact derivatives."""
     import torch
 
@@ -234,7 +240,7 @@ def _nurbs_chart(surface, cells: int = 48) -> _Chart:
     surface = surface.detach().to(dtype=torch.float64)
     (u0, u1), (v0, v1) = surface.domain
 
-    def frame(uu, vv):
+    def frame(uu: np.ndarray, vv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         out = [np.empty((len(uu), 3)) for _ in range(3)]
         with torch.no_grad():
             for start in range(0, len(uu), _BLOCK):
@@ -243,9 +249,9 @@ def _nurbs_chart(surface, cells: int = 48) -> _Chart:
                 v = torch.as_tensor(np.clip(vv[start:stop], v0, v1))
                 for target, value in zip(out, surface.derivatives(u, v)):
                     target[start:stop] = value.numpy()
-        return tuple(out)
+        return out[0], out[1], out[2]
 
-    def breaks(knots, lo, hi, minimum=48):
+    def breaks(knots: torch.Tensor, lo: float, hi: float, minimum: int = 48) -> np.ndarray:
         k = knots.detach().cpu().double().numpy().reshape(-1)
         spans = np.unique(np.concatenate([[lo, hi], k[(k >= lo) & (k <= hi)]]))
         split = max(1, int(np.ceil(minimum / (len(spans) - 1))))
@@ -256,7 +262,7 @@ def _nurbs_chart(surface, cells: int = 48) -> _Chart:
                   breaks(surface.knots_v, v0, v1, cells))
 
 
-def _gauss_nodes(breaks: np.ndarray, order: int = _GAUSS_ORDER):
+def _gauss_nodes(breaks: np.ndarray, order: int = _GAUSS_ORDER) -> tuple[np.ndarray, np.ndarray]:
     x, w = np.polynomial.legendre.leggauss(order)
     a, b = breaks[:-1, None], breaks[1:, None]
     nodes = 0.5 * (a + b) + 0.5 * (b - a) * x[None, :]
@@ -264,7 +270,7 @@ def _gauss_nodes(breaks: np.ndarray, order: int = _GAUSS_ORDER):
     return nodes.reshape(-1), weights.reshape(-1)
 
 
-def _quadrature_nodes(chart: _Chart):
+def _quadrature_nodes(chart: _Chart) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(points, cross products, weights) at the chart's Gauss-Legendre nodes."""
     nu, wu = _gauss_nodes(chart.breaks_u)
     nv, wv = _gauss_nodes(chart.breaks_v)
@@ -276,7 +282,7 @@ def _quadrature_nodes(chart: _Chart):
 class _Shape:
     """Charts with their quadrature (area and rejection bound per chart)."""
 
-    def __init__(self, charts: list[_Chart]):
+    def __init__(self, charts: list[_Chart]) -> None:
         self.charts = charts
         areas, bounds = [], []
         for chart in charts:
@@ -288,7 +294,8 @@ class _Shape:
         self.bounds = np.array(bounds) * _BOUND_MARGIN + 1e-300
         self.area = float(self.areas.sum())
 
-    def sample(self, count: int, rng: np.random.Generator):
+    def sample(self, count: int,
+               rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``count`` area-uniform samples: (points (count, 3), unit normals (count, 3),
         parameters (count, 2), chart indices (count,))."""
         volumes = np.array([c.parameter_area for c in self.charts]) * self.bounds
@@ -319,7 +326,8 @@ class _Shape:
         return (np.concatenate(points)[order], np.concatenate(normals)[order],
                 np.concatenate(params)[order], np.concatenate(which_chart)[order])
 
-    def distance(self, query, charts, params, steps: int = 8) -> np.ndarray:
+    def distance(self, query: np.ndarray, charts: np.ndarray, params: np.ndarray,
+                 steps: int = 8) -> np.ndarray:
         out = np.empty(len(query))
         for index, chart in enumerate(self.charts):
             mask = charts == index
@@ -359,14 +367,14 @@ def _make(name: str, shape: _Shape, count: int, noise: float, seed: int, *, clos
 # --- NURBS patches -----------------------------------------------------------------------------
 
 
-def surface_area(surface) -> float:
+def surface_area(surface: NurbsSurface) -> float:
     """Area of a NurbsSurface by Gauss-Legendre quadrature of |S_u x S_v| over each knot span
     (split further so there are at least 48 cells per direction); folded or overlapping parts
     count as often as they are covered."""
     return _Shape([_nurbs_chart(surface)]).area
 
 
-def surface_quadrature(surface, cells: int = 48) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def surface_quadrature(surface: NurbsSurface, cells: int = 48) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Quadrature nodes of a NurbsSurface for area-weighted statistics: (points (M, 3), unit
     normals (M, 3), area weights (M,)) at 8 Gauss-Legendre nodes per direction in each cell
     (every knot span, split so that there are at least ``cells`` per direction); the weights sum
@@ -377,12 +385,12 @@ def surface_quadrature(surface, cells: int = 48) -> tuple[np.ndarray, np.ndarray
     return points, normals, jac * weights
 
 
-def area_uniform_samples(surface, count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def area_uniform_samples(surface: NurbsSurface, count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """``count`` samples of a NurbsSurface uniform by area: (points (count, 3), unit normals)."""
     return _Shape([_nurbs_chart(surface)]).sample(int(count), np.random.default_rng(seed))[:2]
 
 
-def sample_surface(surface, count: int, noise: float = 0.002, seed: int = 0,
+def sample_surface(surface: NurbsSurface, count: int, noise: float = 0.002, seed: int = 0,
                    name: str = "surface", *, truth_count: int = TRUTH_COUNT,
                    absolute: bool = False) -> SampledShape:
     """Sample a NURBS patch uniformly by area, add isotropic Gaussian noise of standard deviation
@@ -398,7 +406,7 @@ def sample_surface(surface, count: int, noise: float = 0.002, seed: int = 0,
                  info={"source": surface.metadata.get("path") or surface.metadata.get("name")})
 
 
-def patch_topology(surface, tolerance: float = 1e-5) -> str:
+def patch_topology(surface: NurbsSurface, tolerance: float = 1e-5) -> str:
     """What a NurbsSurface patch is as a point set: "sheet" (a disk), "tube" (opposite
     boundaries coincide in one direction) or "closed" (coincide in both directions, or in one
     with both other boundaries collapsed to points: a sphere-like patch). ``tolerance`` is
@@ -412,17 +420,17 @@ def patch_topology(surface, tolerance: float = 1e-5) -> str:
     t = np.linspace(0.0, 1.0, 201)
     us, vs = torch.as_tensor(u0 + (u1 - u0) * t), torch.as_tensor(v0 + (v1 - v0) * t)
 
-    def edge(u, v):
-        u, v = torch.broadcast_tensors(torch.as_tensor(u, dtype=torch.float64),
-                                       torch.as_tensor(v, dtype=torch.float64))
-        return surface.evaluate(u.contiguous(), v.contiguous()).numpy()
+    def edge(u: float | torch.Tensor, v: float | torch.Tensor) -> np.ndarray:
+        tu, tv = torch.broadcast_tensors(torch.as_tensor(u, dtype=torch.float64),
+                                         torch.as_tensor(v, dtype=torch.float64))
+        return surface.evaluate(tu.contiguous(), tv.contiguous()).numpy()
 
     u_lo, u_hi = edge(u0, vs), edge(u1, vs)      # the boundaries u = u0, u = u1 (along v)
     v_lo, v_hi = edge(us, v0), edge(us, v1)
     u_closed = np.linalg.norm(u_lo - u_hi, axis=1).max() < tol
     v_closed = np.linalg.norm(v_lo - v_hi, axis=1).max() < tol
 
-    def collapsed(curve):
+    def collapsed(curve: np.ndarray) -> bool:
         return _diagonal(curve) < tol
 
     if u_closed and v_closed:
@@ -437,7 +445,7 @@ def patch_topology(surface, tolerance: float = 1e-5) -> str:
 # --- open sheets -------------------------------------------------------------------------------
 
 
-def _terrain(x, y):
+def _terrain(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """A smooth sum of bumps (heights of about 0.4 over a footprint of radius about 1)."""
     bumps = ((0.35, 0.30, 0.20, 0.18), (-0.22, -0.40, -0.30, 0.10), (0.16, -0.10, 0.60, 0.05),
              (0.12, 0.55, -0.45, 0.08))
@@ -447,7 +455,7 @@ def _terrain(x, y):
     return z
 
 
-def _footprint_radius(theta):
+def _footprint_radius(theta: np.ndarray) -> np.ndarray:
     """A rounded, star-shaped but non-convex blob (three lobes, slightly skewed)."""
     return 1.0 + 0.25 * np.cos(3 * theta) + 0.10 * np.sin(2 * theta + 0.5)
 
@@ -456,7 +464,7 @@ def height_field(count: int = 4000, noise: float = 0.002, seed: int = 0, *,
                  truth_count: int = TRUTH_COUNT) -> SampledShape:
     """A terrain z = f(x, y) (a smooth sum of bumps and a tilt) over a rounded non-convex
     three-lobed footprint r(theta) = 1 + 0.25 cos 3 theta + 0.1 sin(2 theta + 0.5)."""
-    def mapping(s, theta):
+    def mapping(s: np.ndarray, theta: np.ndarray) -> np.ndarray:
         r = s * _footprint_radius(theta)
         x, y = r * np.cos(theta), r * np.sin(theta)
         return np.stack([x, y, _terrain(x, y)], -1)
@@ -473,7 +481,7 @@ def sine_field(count: int = 20000, noise: float = 0.01, seed: int = 0, *, absolu
     ABSOLUTE standard deviation of the (isotropic) noise by default (0.01); ``absolute=False``
     makes it relative to the diagonal like the other generators; ``vertical`` puts all the
     noise in z (the setting of scattered-data smoothing: exact x, y, noisy heights)."""
-    def mapping(x, y):
+    def mapping(x: np.ndarray, y: np.ndarray) -> np.ndarray:
         return np.stack([x, y, np.sin(x) * np.cos(y)], -1)
 
     shape = _Shape([_analytic_chart(mapping, (0.0, 2 * np.pi), (0.0, 2 * np.pi))])
@@ -492,7 +500,7 @@ def sine_field(count: int = 20000, noise: float = 0.01, seed: int = 0, *, absolu
 def saddle(count: int = 4000, noise: float = 0.002, seed: int = 0, *,
            truth_count: int = TRUTH_COUNT) -> SampledShape:
     """The hyperbolic paraboloid z = (x^2 - y^2) / 2 over [-1, 1]^2."""
-    def mapping(x, y):
+    def mapping(x: np.ndarray, y: np.ndarray) -> np.ndarray:
         return np.stack([x, y, 0.5 * (x ** 2 - y ** 2)], -1)
 
     shape = _Shape([_analytic_chart(mapping, (-1.0, 1.0), (-1.0, 1.0))])
@@ -506,7 +514,7 @@ def curled_sheet(count: int = 4000, noise: float = 0.002, seed: int = 0, *, r0: 
     """A sheet rolled 1.5 turns: the spiral r = r0 + pitch * theta, theta in [0, 3 pi],
     extruded along z over [0, height]. Where the turns overlap they are 2 pi pitch apart (0.94
     with the defaults, about 17 % of the diagonal, 85 noise sigmas at the default noise)."""
-    def mapping(theta, z):
+    def mapping(theta: np.ndarray, z: np.ndarray) -> np.ndarray:
         r = r0 + pitch * theta
         return np.stack([r * np.cos(theta), r * np.sin(theta), z], -1)
 
@@ -520,7 +528,7 @@ def bowl(count: int = 4000, noise: float = 0.002, seed: int = 0, *, radius: floa
          opening: float = 0.5 * np.pi, truth_count: int = TRUTH_COUNT) -> SampledShape:
     """An open spherical cap (a bowl opening upwards): polar angles up to ``opening`` from the
     bottom (pi / 2: a hemisphere, rim vertical). Area 2 pi R^2 (1 - cos opening)."""
-    def mapping(theta, phi):
+    def mapping(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
         return radius * np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi),
                                   -np.cos(theta)], -1)
 
@@ -538,7 +546,7 @@ def leaflet_like(count: int = 4000, noise: float = 0.002, seed: int = 0, *,
     bent into an arc (about 92 degrees) the same way (a cup) and slightly twisted."""
     length, half_width, curl, bend, twist = 1.6, 0.5, 2.2, 1.0, 0.35
 
-    def mapping(s, t):
+    def mapping(s: np.ndarray, t: np.ndarray) -> np.ndarray:
         x0 = length * (s - 0.5)
         y0 = t * half_width * (0.3 + 0.7 * np.sin(np.pi * s))
         # cross-section curled into an arc of curvature ``curl``
@@ -564,7 +572,7 @@ def half_cylinder(count: int = 4000, noise: float = 0.002, seed: int = 0, *,
                   truth_count: int = TRUTH_COUNT) -> SampledShape:
     """Half a cylinder (a 180-degree arc of radius ``radius`` extruded along x over
     ``length``; vertical at both long edges). Area pi R L."""
-    def mapping(phi, x):
+    def mapping(phi: np.ndarray, x: np.ndarray) -> np.ndarray:
         return np.stack([x, radius * np.cos(phi), radius * np.sin(phi)], -1)
 
     shape = _Shape([_analytic_chart(mapping, (0.0, np.pi), (-length / 2, length / 2))])
@@ -579,7 +587,7 @@ def half_cylinder(count: int = 4000, noise: float = 0.002, seed: int = 0, *,
 def sphere(count: int = 4000, noise: float = 0.002, seed: int = 0, *, radius: float = 1.0,
            truth_count: int = TRUTH_COUNT) -> SampledShape:
     """The sphere of radius ``radius`` (area 4 pi R^2)."""
-    def mapping(theta, phi):
+    def mapping(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
         return radius * np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi),
                                   np.cos(theta)], -1)
 
@@ -592,7 +600,7 @@ def sphere(count: int = 4000, noise: float = 0.002, seed: int = 0, *, radius: fl
 def torus(count: int = 4000, noise: float = 0.002, seed: int = 0, *, major: float = 1.0,
           minor: float = 0.35, truth_count: int = TRUTH_COUNT) -> SampledShape:
     """A ring torus (area 4 pi^2 R r)."""
-    def mapping(phi, psi):
+    def mapping(phi: np.ndarray, psi: np.ndarray) -> np.ndarray:
         ring = major + minor * np.cos(psi)
         return np.stack([ring * np.cos(phi), ring * np.sin(phi), minor * np.sin(psi)], -1)
 
@@ -605,7 +613,7 @@ def torus(count: int = 4000, noise: float = 0.002, seed: int = 0, *, major: floa
 def tube(count: int = 4000, noise: float = 0.002, seed: int = 0, *, radius: float = 0.5,
          length: float = 2.0, truth_count: int = TRUTH_COUNT) -> SampledShape:
     """An open cylinder along z, both ends open (area 2 pi R L): a tube, not a disk."""
-    def mapping(phi, z):
+    def mapping(phi: np.ndarray, z: np.ndarray) -> np.ndarray:
         return np.stack([radius * np.cos(phi), radius * np.sin(phi), z], -1)
 
     shape = _Shape([_analytic_chart(mapping, (0.0, 2 * np.pi), (-length / 2, length / 2),
@@ -626,7 +634,7 @@ def rounded_box(count: int = 4000, noise: float = 0.002, seed: int = 0, *,
     charts = []
     for axis in range(3):
         for sign in (-1.0, 1.0):
-            def mapping(a, b, axis=axis, sign=sign):
+            def mapping(a: np.ndarray, b: np.ndarray, axis: int = axis, sign: float = sign) -> np.ndarray:
                 # (a, b) swapped on the negative faces: every chart's S_a x S_b points outward
                 if sign < 0:
                     a, b = b, a
@@ -648,10 +656,10 @@ def capsule(count: int = 4000, noise: float = 0.002, seed: int = 0, *, radius: f
     hemispherical caps (area 2 pi R L + 4 pi R^2); three charts, all with outward normals."""
     half = length / 2
 
-    def side(phi, z):
+    def side(phi: np.ndarray, z: np.ndarray) -> np.ndarray:
         return np.stack([radius * np.cos(phi), radius * np.sin(phi), z], -1)
 
-    def cap(theta, phi, centre):
+    def cap(theta: np.ndarray, phi: np.ndarray, centre: float) -> np.ndarray:
         return np.stack([radius * np.sin(theta) * np.cos(phi), radius * np.sin(theta) * np.sin(phi),
                          centre + radius * np.cos(theta)], -1)
 
@@ -671,7 +679,7 @@ def blob(count: int = 4000, noise: float = 0.002, seed: int = 0, *, bumps: float
     in the direction (theta, phi); ``seed`` also turns the bumps (a family of shapes)."""
     turn = 2 * np.pi * np.random.default_rng([seed, 3]).random()
 
-    def mapping(theta, phi):
+    def mapping(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
         r = 1.0 + bumps * (np.sin(theta) ** 2 * np.cos(3 * (phi + turn)) + 0.6 * np.cos(2 * theta)
                            + 0.3 * np.sin(theta) * np.sin(2 * phi))
         return r[:, None] * np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi),
@@ -686,7 +694,7 @@ def blob(count: int = 4000, noise: float = 0.002, seed: int = 0, *, bumps: float
 # --- variants ----------------------------------------------------------------------------------
 
 
-def sparse(shape_fn: Callable[..., SampledShape], count: int = 500, **kwargs) -> SampledShape:
+def sparse(shape_fn: Callable[..., SampledShape], count: int = 500, **kwargs: Any) -> SampledShape:
     """A sparse variant of a generator (500 points by default); the name gets ``_sparse``."""
     shape = shape_fn(count=count, **kwargs)
     shape.name = f"{shape.name}_sparse"

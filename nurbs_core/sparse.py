@@ -22,7 +22,7 @@ import warnings
 import torch
 
 
-def _csr(crow, col, values, size):
+def _csr(crow: torch.Tensor, col: torch.Tensor, values: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # "sparse CSR support is in beta"
         return torch.sparse_csr_tensor(crow, col, values, size=size)
@@ -35,7 +35,7 @@ class SparseBasisMatrix:
     """
 
     def __init__(self, base: torch.Tensor, offsets: torch.Tensor, values: torch.Tensor,
-                 n_cols: int):
+                 n_cols: int) -> None:
         rows, k = values.shape
         self.base, self.offsets, self.values, self.n_cols = base, offsets, values, n_cols
         crow = torch.arange(0, rows * k + 1, k, device=values.device)
@@ -51,10 +51,10 @@ class SparseBasisMatrix:
         """A^T @ dense: (rows, C) -> (n_cols, C)."""
         if self._transposed is None:
             self._transposed = self._build_transposed()
-        out = None
-        for part in self._transposed:
-            term = part @ dense
-            out = term if out is None else out.add_(term)
+        first, *rest = self._transposed
+        out = first @ dense
+        for part in rest:
+            out.add_(part @ dense)
         return out
 
     def _build_transposed(self) -> list[torch.Tensor]:
@@ -83,8 +83,9 @@ def curve_sparse_basis(basis: torch.Tensor, span: torch.Tensor, degree: int, n: 
     return SparseBasisMatrix(base.reshape(-1), offsets, basis.reshape(-1, degree + 1), batch * n)
 
 
-def surface_sparse_basis(basis_u, basis_v, span_u, span_v, degree_u, degree_v, n, m,
-                         batch) -> SparseBasisMatrix:
+def surface_sparse_basis(basis_u: torch.Tensor, basis_v: torch.Tensor, span_u: torch.Tensor,
+                         span_v: torch.Tensor, degree_u: int, degree_v: int, n: int, m: int,
+                         batch: int) -> SparseBasisMatrix:
     """Block-diagonal tensor-product basis: rows (batch * M), columns (batch * n * m).
 
     basis_u (Bb, M, p+1), basis_v (Bb, M, q+1), spans (Bb, M), Bb in {1, batch}."""

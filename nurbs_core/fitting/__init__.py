@@ -1,13 +1,14 @@
 """Fitting NURBS curves and surfaces to points: configuration, the steppable :func:`iter_fit`,
 :func:`fit`, least squares and deviation.
 
-* ``config``        FitConfig, LossTerms, StopToken, FitSnapshot, FitResult (numpy only)
+* ``config``        FitConfig, Loss, StopToken, FitSnapshot, FitResult (numpy only)
 * ``problem``       input checks, normalisation, initialisation (PCA plane, random, least squares)
 * ``least_squares`` the exact fixed-knot least-squares fit (the accuracy yardstick)
 * ``model``         trainable control points, positive weights, strictly increasing free knots
 * ``projection``    foot points (parameter correction) and per-point deviation
-* ``refine``        knot insertion where the error is largest
-* ``engine``        the optimisation loop
+* ``refinement``    knot insertion where the error is largest (``refine``)
+* ``engine``        the optimisation loop (``iter_fit``, ``fit``), with its learning-rate
+                    ``schedule``, divergence ``guard`` and loss ``evaluation``
 
 The names load on first use (PEP 562): ``from nurbs_core.fitting import FitConfig`` does not
 import torch; ``fit`` and ``iter_fit`` do.
@@ -21,6 +22,7 @@ _LAZY = {
     "DEFAULT_LOSS": "config",
     "PAPER_POINT_CLOUD_LOSS": "config",
     "FitConfig": "config",
+    "Loss": "config",
     "FitResult": "config",
     "FitSnapshot": "config",
     "StopToken": "config",
@@ -31,7 +33,7 @@ _LAZY = {
     "conform": "problem",
     "deviation": "projection",
     "project": "projection",
-    "refine": "refine",
+    "refine": "refinement",
 }
 
 

@@ -175,6 +175,7 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
         too_many = upcoming is None or control_count(quads, upcoming) > len(q) / POINTS_PER_CONTROL
         if met or too_many:
             break
+    assert best is not None, "sizes holds at least one grid"
     cp, network, patch, uv, dist, rms = best
     # polish: the linearised seam rows approach G1 over passes; go on while the seams still
     # straighten (the data term has settled by now)
@@ -226,7 +227,8 @@ def control_count(quads: np.ndarray, size: int) -> int:
     return len(np.unique(quads)) + len(edges) * (size - 2) + len(quads) * (size - 2) ** 2
 
 
-def _reassign(network, q, patch, uv):
+def _reassign(network: PatchNetwork, q: np.ndarray, patch: np.ndarray,
+              uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Foot points from the previous ones and from the nearest grid sample; the closer wins."""
     p1, uv1, d1 = foot_points(network, q, patch, uv)
     p2, uv2, d2 = foot_points(network, q)
@@ -263,7 +265,7 @@ class _Solver:
     """The pass's sparse solve (see the module docstring); remembers the fairing matrix per
     network size and the last seam angle it saw."""
 
-    def __init__(self, stiffness: float, seam_weight: float):
+    def __init__(self, stiffness: float, seam_weight: float) -> None:
         self.stiffness = stiffness
         self.seam_weight = seam_weight
         self._fairing: dict[tuple[int, int], scipy.sparse.csr_matrix] = {}
@@ -369,7 +371,9 @@ def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarra
     return g, values, worst
 
 
-def _projection_rows(network, patch, uv, direction, derivative, normal):
+def _projection_rows(network: PatchNetwork, patch: np.ndarray, uv: np.ndarray, direction: str | None,
+                     derivative: np.ndarray,
+                     normal: np.ndarray) -> tuple[scipy.sparse.csr_matrix, np.ndarray]:
     """Rows (3M, 3K) and targets (3M,): the derivative along ``direction`` at (patch, uv) equal
     to its present value ``derivative`` (M, 3) without its ``normal`` component, both divided by
     the present length."""
@@ -383,7 +387,8 @@ def _projection_rows(network, patch, uv, direction, derivative, normal):
     return g, (target * scale[:, None]).T.ravel()
 
 
-def _plane_rows(network, patch, uv, direction, normal) -> scipy.sparse.csr_matrix:
+def _plane_rows(network: PatchNetwork, patch: np.ndarray, uv: np.ndarray, direction: str | None,
+                normal: np.ndarray) -> scipy.sparse.csr_matrix:
     """Rows (M, 3K): the derivative along ``direction`` at (patch, uv), dotted with ``normal``
     (M, 3), divided by the derivative's present length."""
     d = rows(network, patch, uv[:, 0], uv[:, 1], derivative=direction)

@@ -44,7 +44,7 @@ class GradientStep:
     learning_rate: float
 
 
-def torch_sparse(matrix: scipy.sparse.spmatrix, dtype=torch.float64) -> torch.Tensor:
+def torch_sparse(matrix: scipy.sparse.spmatrix, dtype: torch.dtype = torch.float64) -> torch.Tensor:
     """A scipy sparse matrix as a torch sparse COO tensor."""
     coo = matrix.tocoo()
     index = torch.as_tensor(np.vstack([coo.row, coo.col]), dtype=torch.long)
@@ -114,10 +114,10 @@ def refine_network(network: PatchNetwork, points: np.ndarray, *, iterations: int
     optimizer = torch.optim.Adam([control], lr=learning_rate)
     patch, uv, _ = foot_points(net, q.numpy())
     a = torch_sparse(rows(net, patch, uv[:, 0], uv[:, 1]))
-    lam = None
+    lam: float | None = None
     best_total, rate = math.inf, learning_rate
 
-    def objective():
+    def objective() -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         nonlocal lam
         residual = a @ control - q
         data = residual.pow(2).sum(-1).mean()

@@ -22,6 +22,7 @@ import os
 import sys
 import tempfile
 from collections import Counter
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,7 +56,7 @@ class QuadLayout:
         return np.flatnonzero(self.valence != 4)
 
 
-def euler_characteristic(faces) -> int:
+def euler_characteristic(faces: Sequence[Sequence[int]]) -> int:
     """V - E + F of a polygon mesh (faces: a sequence of vertex-index sequences)."""
     edges = {tuple(sorted((f[k], f[(k + 1) % len(f)]))) for f in faces for k in range(len(f))}
     vertices = {v for f in faces for v in f}
@@ -101,14 +102,14 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
     raise LayoutError("no valid quad layout: " + "; ".join(attempts))
 
 
-def _face_normals(vertices, faces) -> np.ndarray:
+def _face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     tri = vertices[faces]
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
 
 @contextlib.contextmanager
-def _silenced_stdout():
+def _silenced_stdout() -> Iterator[None]:
     """Instant Meshes prints its progress on the C stdout: send it to /dev/null meanwhile."""
     sys.stdout.flush()
     try:
@@ -126,13 +127,13 @@ def _silenced_stdout():
         os.close(saved)
 
 
-def _write_obj(path, vertices, faces) -> None:
+def _write_obj(path: str | os.PathLike[str], vertices: np.ndarray, faces: np.ndarray) -> None:
     with open(path, "w") as handle:
         handle.write("".join(f"v {x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in vertices))
         handle.write("".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces))
 
 
-def _read_obj(path) -> tuple[np.ndarray, list[list[int]]]:
+def _read_obj(path: str | os.PathLike[str]) -> tuple[np.ndarray, list[list[int]]]:
     vertices, faces = [], []
     with open(path) as handle:
         for line in handle:
@@ -182,11 +183,11 @@ def _merge_at(first: list[int], second: list[int], v: int) -> list[int] | None:
 
 
 def _check_manifold(quads: np.ndarray) -> None:
-    directed = Counter()
+    directed: Counter[tuple[int, int]] = Counter()
     for quad in quads.tolist():
         for k in range(4):
             directed[(quad[k], quad[(k + 1) % 4])] += 1
-    undirected = Counter()
+    undirected: Counter[tuple[int, int]] = Counter()
     for (a, b), count in directed.items():
         if count > 1:
             raise LayoutError("an edge is walked twice in one direction (inconsistent orientation "
@@ -212,7 +213,7 @@ def _check_manifold(quads: np.ndarray) -> None:
             raise LayoutError(f"vertex {vertex} joins separate fans of quads")
 
 
-def _orient_like(vertices, quads, tree, normals) -> np.ndarray:
+def _orient_like(vertices: np.ndarray, quads: np.ndarray, tree: cKDTree, normals: np.ndarray) -> np.ndarray:
     """Flip the (consistently oriented) layout when it faces the other way from the mesh."""
     corners = vertices[quads]
     n = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])

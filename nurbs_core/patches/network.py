@@ -19,8 +19,12 @@ is what the fit adds (:mod:`nurbs_core.patches.fit`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import torch
 
 from nurbs_core.knots import clamped_uniform
 
@@ -95,6 +99,7 @@ class PatchNetwork:
 
     @property
     def knots(self) -> np.ndarray:
+        """The clamped uniform knot vector (size + degree + 1,) shared by every patch and direction."""
         return clamped_uniform(self.size, self.degree).numpy()
 
     def patch_control_points(self, control_points: np.ndarray | None = None) -> np.ndarray:
@@ -102,7 +107,7 @@ class PatchNetwork:
         c = self.control_points if control_points is None else np.asarray(control_points)
         return c[self.index]
 
-    def surfaces(self, dtype=None) -> list:
+    def surfaces(self, dtype: torch.dtype | None = None) -> list:
         """One :class:`~nurbs_core.geometry.NurbsSurface` per patch."""
         from nurbs_core.geometry import NurbsSurface
 
@@ -143,6 +148,7 @@ class PatchNetwork:
         return patch, np.asarray(CORNER_UV)[slot], self.quads.ravel()
 
     def with_control_points(self, control_points: np.ndarray) -> PatchNetwork:
+        """The same network with new global control points (K, 3)."""
         c = np.asarray(control_points, np.float64).reshape(-1, 3)
         if c.shape != self.control_points.shape:
             raise ValueError(f"expected control points {self.control_points.shape}, got {c.shape}")
@@ -232,7 +238,8 @@ def _check_orientation(quads: np.ndarray, uses: dict) -> None:
                              "layout is not consistently oriented")
 
 
-def _bilinear_start(vertices, quads, index, size, count) -> np.ndarray:
+def _bilinear_start(vertices: np.ndarray, quads: np.ndarray, index: np.ndarray, size: int,
+                    count: int) -> np.ndarray:
     s = np.linspace(0.0, 1.0, size)
     su, sv = np.meshgrid(s, s, indexing="ij")
     control = np.zeros((count, 3))

@@ -14,15 +14,16 @@ import math
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from nurbs_core.patches.closed_mesh import ClosedMesh, closed_mesh
-from nurbs_core.patches.defaults import SEAM_WEIGHT, STIFFNESS
 from nurbs_core.patches.fit import NetworkPass, fit_network
 from nurbs_core.patches.layout import LayoutError, QuadLayout, quad_layout
 from nurbs_core.patches.measures import NetworkQuality, network_quality
 from nurbs_core.patches.network import PatchNetwork
+from nurbs_core.patches.options import PatchOptions
 
 #: The first patch count ``auto`` tries, how much finer each retry is, and the most it goes to.
 AUTO_START = 24
@@ -38,42 +39,6 @@ QUALITY_POINTS = 200_000
 #: Seam angle 99th percentile (degrees) and flipped area fraction above which a warning is given.
 WARN_SEAM = 2.0
 WARN_FLIPPED = 0.01
-
-
-@dataclass
-class PatchOptions:
-    """Settings of a network fit. patches: "auto" or a target patch count (>= 4); size: control
-    points per patch side (None: grow while Cp falls); degree: of every patch; stiffness:
-    fairing weight relative to the data term; seam_weight: of tangent continuity; tolerance: RMS
-    distance to reach (cloud units, None: automatic); max_size: largest control grid per side."""
-
-    patches: int | str = "auto"
-    size: int | None = None
-    degree: int = 3
-    stiffness: float = STIFFNESS
-    seam_weight: float = SEAM_WEIGHT
-    tolerance: float | None = None
-    max_size: int = 16
-
-    def validate(self) -> None:
-        if self.patches != "auto" and (isinstance(self.patches, bool)
-                                       or not isinstance(self.patches, (int, np.integer))
-                                       or self.patches < 4):
-            raise ValueError(f"patches must be 'auto' or an integer of at least 4, got "
-                             f"{self.patches!r}")
-        if self.degree != 3:
-            raise ValueError(f"patch networks are bicubic for now (degree 3), got {self.degree}")
-        if self.size is not None and not (isinstance(self.size, (int, np.integer))
-                                          and self.degree < self.size <= 40):
-            raise ValueError(f"size must be an integer from {self.degree + 1} to 40, got "
-                             f"{self.size!r}")
-        for name in ("stiffness", "seam_weight"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a finite non-negative number, got {value!r}")
-        if self.tolerance is not None and not (math.isfinite(self.tolerance)
-                                               and self.tolerance > 0):
-            raise ValueError(f"tolerance must be positive, got {self.tolerance!r}")
 
 
 @dataclass
@@ -174,7 +139,7 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     timings["layout"] = time.perf_counter() - start
     yield PatchEvent("layout", mesh=mesh, layout=layout)
     start = time.perf_counter()
-    last = None
+    last: NetworkPass | None = None
     # large scans: the passes run on a random subset (the noise averages out long before);
     # the quality is measured on (up to QUALITY_POINTS of) all points
     rng = np.random.default_rng(0)
@@ -188,6 +153,7 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
                             max_size=options.max_size):
         yield PatchEvent("pass", layout=layout, fit_pass=last)
     timings["fit"] = time.perf_counter() - start
+    assert last is not None, "fit_network yields at least one pass"
     start = time.perf_counter()
     quality = network_quality(last.network, measured, (mesh.vertices, mesh.vertex_normals()))
     timings["quality"] = time.perf_counter() - start
@@ -201,7 +167,9 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     yield PatchEvent("done", mesh=mesh, layout=layout, fit_pass=last, result=result)
 
 
-def fit_patches(points: np.ndarray, options: PatchOptions | None = None, **kwargs) -> PatchResult:
+def fit_patches(points: np.ndarray, options: PatchOptions | None = None, **kwargs: Any) -> PatchResult:
     """:func:`iter_patch_fit` to the end: the :class:`PatchResult`."""
     events = list(iter_patch_fit(points, options, **kwargs))
-    return events[-1].result
+    result = events[-1].result
+    assert result is not None, "the last event is 'done'"
+    return result

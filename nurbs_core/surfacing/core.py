@@ -25,6 +25,7 @@ import scipy.sparse.linalg
 import torch
 from scipy.spatial import cKDTree
 
+from nurbs_core.fitting.config import StopToken
 from nurbs_core.fitting.least_squares import collocation_matrix
 from nurbs_core.fitting.projection import surface_gauss_newton
 from nurbs_core.geometry import NurbsSurface
@@ -126,11 +127,11 @@ class LeastSquaresCore:
                  grid: tuple[int, int], stiffness: float, tolerance: float,
                  outlier_fraction: float, spacing: float, max_grid: tuple[int, int],
                  max_controls: int | None = None, noise: float = 0.0,
-                 explicit_tolerance: bool = False, closed: str | None = None):
+                 explicit_tolerance: bool = False, closed: str | None = None) -> None:
         self.points = np.asarray(points, np.float64)
         self.parameters = np.clip(np.asarray(parameters, np.float64), 0.0, 1.0).copy()
         self.degrees = degrees
-        self.grid = tuple(int(g) for g in grid)
+        self.grid = (int(grid[0]), int(grid[1]))
         self.stiffness = float(stiffness)
         self.tolerance = float(tolerance)
         self.noise = float(noise)
@@ -155,7 +156,7 @@ class LeastSquaresCore:
         self.fairing_scale: float | None = None
         self._setup_grid()
 
-    def _setup_grid(self):
+    def _setup_grid(self) -> None:
         (p, q), (n, m) = self.degrees, self.grid
         # a closed direction keeps uniform knots: equal end spans make the seam's tangent
         # continuity a linear constraint (P_1 - P_0 = P_{n-1} - P_{n-2})
@@ -216,7 +217,7 @@ class LeastSquaresCore:
         distance, _ = self.tree.query(grid)
         return float(max(np.quantile(distance, 0.95) - 2 * self.spacing, 0.0))
 
-    def passes(self, stop=None) -> Iterator[CorePass]:
+    def passes(self, stop: StopToken | None = None) -> Iterator[CorePass]:
         """Run the passes; every pass is yielded (the last one with ``done``)."""
         fairing = self.stiffness
         previous_rms, grid_rms = math.inf, math.inf
@@ -297,9 +298,10 @@ class LeastSquaresCore:
         wanted = (math.sqrt(total * aspect), math.sqrt(total / aspect))
         # every direction gains at least MIN_DIRECTION_GROWTH: the shape of the surface says
         # where length is, not where detail is
-        grown = tuple(int(min(max(round(w), p + 1, math.ceil(g * MIN_DIRECTION_GROWTH)), cap))
-                      for w, p, g, cap in
-                      zip(wanted, self.degrees, self.grid, self.max_grid, strict=True))
+        grown_u, grown_v = (int(min(max(round(w), p + 1, math.ceil(g * MIN_DIRECTION_GROWTH)), cap))
+                            for w, p, g, cap in
+                            zip(wanted, self.degrees, self.grid, self.max_grid, strict=True))
+        grown = (grown_u, grown_v)
         if grown[0] * grown[1] <= self.grid[0] * self.grid[1] or grown == self.grid:
             return None
         return grown

@@ -46,6 +46,7 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
 
 
 def loop_length(vertices: np.ndarray, loop: np.ndarray) -> float:
+    """Length of the closed polygon ``vertices[loop]``; vertices (V, 3), loop (L,) indices."""
     closed = vertices[np.r_[loop, loop[:1]]]
     return float(np.linalg.norm(np.diff(closed, axis=0), axis=1).sum())
 
@@ -181,7 +182,7 @@ def _tip(points: np.ndarray, arc: np.ndarray, total: float, centre: int, window:
     closed_arc = np.r_[arc, total]
     closed = np.r_[points, points[:1]]
 
-    def at(s):
+    def at(s: np.ndarray) -> np.ndarray:
         s = np.mod(s, total)
         return np.stack([np.interp(s, closed_arc, closed[:, d]) for d in range(points.shape[1])],
                         -1)

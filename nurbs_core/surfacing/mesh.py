@@ -24,7 +24,7 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components
 from scipy.spatial import cKDTree
 
 from nurbs_core.surfacing.disk import fill_small_holes
-from nurbs_core.surfacing.neighbours import estimate_noise, local_frames, smooth_points
+from nurbs_core.surfacing.neighbours import LocalFrames, estimate_noise, local_frames, smooth_points
 
 #: Neighbours considered for each point's Delaunay 1-ring.
 RING_CANDIDATES = 24
@@ -63,9 +63,11 @@ class CloudMesh:
         return normals
 
     def face_areas(self) -> np.ndarray:
+        """Triangle areas (F,)."""
         return 0.5 * np.linalg.norm(self.face_normals(unit=False), axis=1)
 
     def area(self) -> float:
+        """Total area of the mesh."""
         return float(self.face_areas().sum())
 
     def vertex_normals(self) -> np.ndarray:
@@ -182,7 +184,8 @@ def voxel_subsample(points: np.ndarray,
             break
         size *= np.sqrt(len(counts) / target)
     inverse = inverse.ravel()
-    centroid = np.stack([np.bincount(inverse, points[:, d], len(counts)) for d in range(3)], 1)
+    centroid: np.ndarray = np.stack([np.bincount(inverse, points[:, d], len(counts))
+                                     for d in range(3)], 1)
     centroid /= counts[:, None]
     offset = np.linalg.norm(points - centroid[inverse], axis=1)
     order = np.lexsort((offset, inverse))
@@ -194,7 +197,7 @@ def voxel_subsample(points: np.ndarray,
     return chosen[by_index], centroid[voxel], counts[voxel]
 
 
-def _umbrella_triangles(points: np.ndarray, frames) -> np.ndarray:
+def _umbrella_triangles(points: np.ndarray, frames: LocalFrames) -> np.ndarray:
     """Every point's umbrella: triangles (T, 3) as vertex indices, the owner first."""
     n, k = frames.neighbours.shape
     normal = frames.normals

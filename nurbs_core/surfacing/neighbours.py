@@ -49,7 +49,8 @@ def local_frames(points: np.ndarray, k: int = 12, tree: cKDTree | None = None) -
     return LocalFrames(neighbours, distances, normals, tangents, spacing)
 
 
-def _quadric_residuals(points: np.ndarray, centres: np.ndarray, k: int, tree: cKDTree):
+def _quadric_residuals(points: np.ndarray, centres: np.ndarray, k: int,
+                       tree: cKDTree) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fit ``h = a x^2 + b xy + c y^2 + d x + e y + f`` over each centre's k + 1 nearest points
     in their principal frame. Returns (residuals (n, k+1), height of the fit at the centre's own
     tangential position (n,), normal direction (n, 3), the centre's height (n,))."""

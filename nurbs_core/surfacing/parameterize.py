@@ -11,6 +11,7 @@ the mesh triangle it lies over.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,7 +53,7 @@ class Parameterization:
 class NotADiskError(ValueError):
     """The cloud is not an open sheet (closed, a tube, handles): one patch cannot hold it."""
 
-    def __init__(self, topology: Topology):
+    def __init__(self, topology: Topology) -> None:
         super().__init__(topology.message)
         self.topology = topology
 
@@ -135,6 +136,7 @@ def _map(points: np.ndarray, mesh: CloudMesh, corners: np.ndarray | None,
         score = area_distortion(mesh.vertices, mesh.faces, uv[: len(mesh.vertices)])
         if best is None or score < best[0]:
             best = (score, uv, corner_positions)
+    assert best is not None, "there is at least one corner candidate"
     _, uv, corner_positions = best
     uv, _, flipped = _orient_map(uv, faces)
     mesh_uv = uv[: len(mesh.vertices)]
@@ -189,7 +191,7 @@ class _MeanValueSolver:
     """Floater's mean-value map with the outer loop fixed: the interior system is factorised
     once and solved for any boundary positions."""
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray, boundary: np.ndarray):
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, boundary: np.ndarray) -> None:
         count = len(vertices)
         weights = mean_value_weights(vertices, faces)
         laplacian = scipy.sparse.diags(np.asarray(weights.sum(axis=1)).ravel()) - weights
@@ -229,7 +231,8 @@ def _square_boundary(vertices: np.ndarray, loop: np.ndarray, corners: np.ndarray
     return uv
 
 
-def _cone_fill(vertices: np.ndarray, faces: np.ndarray, holes) -> tuple[np.ndarray, np.ndarray]:
+def _cone_fill(vertices: np.ndarray, faces: np.ndarray,
+               holes: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Close each inner hole with a fan around a new vertex at the hole's centroid."""
     if not holes:
         return vertices, faces
@@ -338,7 +341,7 @@ def _interpolate(points: np.ndarray, mesh: CloudMesh, mesh_uv: np.ndarray,
     return np.clip(params, 0.0, 1.0)
 
 
-def _barycentric(p, a, b, c):
+def _barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Barycentric coordinates (..., 3) of p projected onto the plane of triangle abc."""
     v0, v1, v2 = b - a, c - a, p - a
     d00 = (v0 * v0).sum(-1)

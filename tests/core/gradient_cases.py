@@ -10,7 +10,8 @@ KNOTS_U = torch.tensor([-1.0, -1.0, -1.0, -1.0, 0.2, 0.9, 2.0, 2.0, 2.0, 2.0], d
 KNOTS_V = torch.tensor([3.0, 3.0, 3.0, 3.4, 3.5, 4.0, 4.0, 4.0], dtype=F64)  # q=2, m=5
 
 
-def random_net(batch, n, m, dim=3, seed=0):
+def random_net(batch: tuple[int, ...], n: int, m: int, dim: int = 3,
+               seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
     """Control points (*batch, n, m, dim) and weights in [0.5, 1.5), both requiring grad."""
     g = torch.Generator().manual_seed(seed)
     control = torch.randn(*batch, n, m, dim, dtype=F64, generator=g).requires_grad_()
@@ -18,8 +19,8 @@ def random_net(batch, n, m, dim=3, seed=0):
     return control, weights
 
 
-def params(knots, degree, count, seed):
-    """``count`` random parameters in the knot vector's domain, its two ends included."""
+def params(knots: torch.Tensor, degree: int, count: int, seed: int) -> torch.Tensor:
+    """``count`` random parameters (count,) in the domain of knots (K,), its two ends included."""
     g = torch.Generator().manual_seed(seed)
     n = knots.shape[0] - degree - 1
     a, b = float(knots[degree]), float(knots[n])

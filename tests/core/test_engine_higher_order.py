@@ -125,8 +125,32 @@ def test_default_path_create_graph_first_order_unchanged(kind):
         torch.testing.assert_close(b.detach(), a, rtol=0, atol=0)
 
 
+PUBLIC_NAMES = {"curve": "curve_points", "paired": "surface_points", "grid": "surface_grid_points"}
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_second_derivative_error_names_the_public_function(kind):
+    """The Functions are private, so the error leads with the public function that was called."""
+    fn, x = one_input(*make_case(kind), "weights", higher_order=False)
+    (grad,) = torch.autograd.grad(fn(x).sum(), x, create_graph=True)
+    with pytest.raises(RuntimeError, match=rf"block-sparse backward of {PUBLIC_NAMES[kind]} .*"
+                                           r"higher_order=True"):
+        torch.autograd.grad(grad.sum(), x)
+
+
+def test_autograd_functions_are_private():
+    """nurbs_core.autograd exposes no torch.autograd.Function: they are used through evaluate."""
+    from nurbs_core import autograd
+
+    public = [name for name, value in vars(autograd).items()
+              if not name.startswith("_") and isinstance(value, type)
+              and issubclass(value, torch.autograd.Function)]
+    assert public == []
+    assert issubclass(autograd._CurvePoints, torch.autograd.Function)
+
+
 def test_surface_derivatives_stay_twice_differentiable():
-    """SparseProduct (linear, differentiable backward) is not once-differentiable."""
+    """_SparseProduct (linear, differentiable backward) is not once-differentiable."""
     control, weights, _ = make_case("paired")
     u, v = params(KNOTS_U, 3, 3, 3), params(KNOTS_V, 2, 3, 4)
     w = weights.clone().requires_grad_()

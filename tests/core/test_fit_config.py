@@ -124,3 +124,19 @@ def test_the_settings_types_import_without_torch():
             "print('torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_every_name_of_the_fitting_package_is_what_it_says():
+    """The package's lazy names resolve to their objects, not to a submodule of the same name
+    (importing a submodule sets an attribute on the package)."""
+    import importlib
+    import pkgutil
+    import types
+
+    import nurbs_core.fitting as fitting
+
+    for module in pkgutil.iter_modules(fitting.__path__):
+        importlib.import_module(f"nurbs_core.fitting.{module.name}")
+    for name in fitting.__all__:
+        assert not isinstance(getattr(fitting, name), types.ModuleType), name
+    assert fitting.Loss is Loss and callable(fitting.refine)

@@ -16,7 +16,8 @@ from nurbs_core.patches.fit import fit_network
 from nurbs_core.patches.layout import LayoutError, euler_characteristic, quad_layout
 from nurbs_core.patches.measures import network_quality, seam_statistics, surface_samples
 from nurbs_core.patches.network import build_network, side_parameters
-from nurbs_core.patches.pipeline import PatchOptions, fit_patches, layout_turn
+from nurbs_core.patches.options import PatchOptions
+from nurbs_core.patches.pipeline import fit_patches, layout_turn
 
 CUBE_VERTICES = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
 #: the cube's faces, counter-clockwise seen from outside

@@ -1,0 +1,113 @@
+"""The export policy: what File > Export (and Save Screenshot) write, and what the user is told.
+
+It decides: Export writes what the mode shows (the patch network in Patches mode, else the
+fitted shape, loaded patches and offsets) in a job, refuses with a message when there is nothing
+to write, names the missing package when a writer needs one and says that an existing file was
+left as it was after a failure; every export ends with one ``export_finished(path, ok)``. The
+formats and writers are :mod:`app.loading`'s (``nurbs_core.io``'s).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from PySide6.QtCore import QObject
+from PySide6.QtWidgets import QFileDialog
+
+from app import loading
+from app.errors import describe
+
+if TYPE_CHECKING:
+    from app.main_window import MainWindow
+
+
+class ExportPolicy(QObject):
+    """Writes the window's geometry, patch network or picture (see the module docstring)."""
+
+    def __init__(self, window: MainWindow):
+        super().__init__(window)
+        self._window = window
+
+    def dialog(self, label: str, suffix: str) -> None:
+        """Ask where to export in ``label`` format (the suffix is added when missing)."""
+        start = str(Path(self._window.recent.last_directory()) / f"nurbs_studio{suffix}")
+        path, _ = QFileDialog.getSaveFileName(self._window, f"Export {label}", start,
+                                              f"{label} (*{suffix})")
+        if path:
+            if not path.lower().endswith(suffix):
+                path += suffix
+            self._window.export_to(path)
+
+    def export_to(self, path: str) -> bool:
+        """Write what the mode shows: the patch network in Patches mode, else the fitted shape,
+        loaded patches and offsets."""
+        window = self._window
+        if window.document.settings.fit_mode == "patches":
+            return window.export_network(path)
+        geometries = window.document.all_geometry()
+        if not geometries:
+            window.report("Nothing to export yet: run a fit or open NURBS files first.", error=True)
+            window.export_finished.emit(path, False)
+            return False
+        window.jobs.submit("export", lambda: loading.export_geometry(geometries, path),
+                           lambda count: self._exported(path, count),
+                           lambda exc: self._failed(path, exc))
+        return True
+
+    def export_network(self, path: str) -> bool:
+        """Write the patch network with ``nurbs_core.io.write_network`` (format from the suffix:
+        one joined B-rep in .3dm, a sewn solid in .step / .iges, our .json, a welded mesh)."""
+        window = self._window
+        network = window.document.network
+        if network is None:
+            window.report("No patch network to export yet: Start a fit in Patches mode first.",
+                          error=True)
+            window.export_finished.emit(path, False)
+            return False
+        window.jobs.submit("export", lambda: loading.export_network(network, path),
+                           lambda count: self._exported(path, count, "patch(es) of the network"),
+                           lambda exc: self._failed(path, exc))
+        return True
+
+    def screenshot_dialog(self) -> None:
+        path, _ = QFileDialog.getSaveFileName(self._window, "Save screenshot",
+                                              self._window.recent.last_directory(),
+                                              "PNG image (*.png)")
+        if path:
+            self._window.save_screenshot(path)
+
+    def save_screenshot(self, path: str) -> bool:
+        """The whole window (viewport included) as an image (PNG; the format follows the
+        suffix), written atomically: on failure an existing file is left as it was."""
+        from nurbs_core.io.atomic import atomic_path
+
+        window = self._window
+        window.loss_plot.flush()
+        window.scene.render_now()
+        image = window.grab()
+        try:
+            with atomic_path(path) as temporary:
+                if not image.save(str(temporary)):
+                    raise OSError("the image could not be encoded or written (is the suffix an "
+                                  "image format, such as .png?)")
+        except OSError as exc:
+            kept = "; the existing file was left as it was" if Path(path).exists() else ""
+            window.report(f"Cannot write the screenshot {path}: {describe(exc)}{kept}",
+                          error=True, exc=exc)
+            return False
+        return True
+
+    def _exported(self, path: str, count: int, what: str = "shape(s)"):
+        self._window.report(f"Exported {count} {what} to {path}")
+        self._window.export_finished.emit(path, True)
+
+    def _failed(self, path: str, exc: Exception):
+        hint = getattr(exc, "install", None)
+        message = f"Export to {path} failed: {describe(exc)}"
+        if hint and hint not in message:
+            message += f"\nInstall the missing package with: {hint}"
+        if Path(path).exists():
+            message += "\nThe existing file was left as it was."
+        self._window.report(message, error=True, exc=exc)
+        self._window.export_finished.emit(path, False)

@@ -1,0 +1,153 @@
+"""The fit display: what the viewport, the quality readout, the status bar and the knot panel
+show of the document's shapes and of the single-patch fit while it runs and when it ends.
+
+It decides: a new cloud or new patches replace the view (patches tessellated in a job, offsets
+recomputed) and reframe the camera; each snapshot of a run is drawn with its deviation and
+quality maps, the readout says "running" from a run's first picture (a refused run leaves it as
+it was); the status bar shows iteration, loss, rate and time left; a finished fit is stored in
+the document without re-tessellation, reported in one line with its deviation, and its quality
+shown; a fitted shape replaced outside a run (reset, session) is measured again in a job and
+shown unless it was replaced meanwhile. The numbers come from the workers
+(:func:`app.workers.fit_worker.deviation_stats`); this module only presents them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from PySide6.QtCore import QObject, Slot
+
+from app import loading
+from app.errors import describe
+from app.window.text import format_seconds
+from app.workers.fit_worker import DisplaySnapshot, deviation_stats
+
+if TYPE_CHECKING:
+    from app.main_window import MainWindow
+
+
+class FitDisplay(QObject):
+    """Follows the document's and the fit controller's signals for the window (see the module
+    docstring)."""
+
+    def __init__(self, window: MainWindow):
+        super().__init__(window)
+        self._window = window
+        self._quality_run = 0  # the run whose snapshots the quality readout follows
+
+    @Slot()
+    def on_content_changed(self) -> None:
+        window = self._window
+        scene = window.scene
+        points = window.document.target_points()
+        scene.set_cloud(points)
+        window.knot_panel.set_points(points)
+        patches = list(window.document.patches)
+        scene.set_group("patches", [])
+        scene.set_group("offsets", [])
+        scene.set_note("")
+        if patches:
+            window.jobs.submit("tessellate", lambda: loading.tessellate(patches),
+                               self._show_patches,
+                               lambda exc: window.report(
+                                   f"Cannot display the patches: {describe(exc)}", True, exc=exc))
+            window.offsets.request()
+        scene.reset_camera()
+        window.rebuild_tree()
+
+    def _show_patches(self, displays):
+        self._window.scene.set_group("patches", displays)
+        self._window.scene.reset_camera()
+
+    @Slot()
+    def on_fitted_changed(self) -> None:
+        """The fitted shape was replaced outside a live run (reset, session): redisplay it."""
+        window = self._window
+        fitted = window.document.fitted
+        if fitted is None:
+            window.scene.show_fit(None)
+            window.scene.set_deviation(None)
+            window.quality_panel.clear()
+        else:
+            points = window.document.target_points()
+            window.quality_panel.clear("Measuring the fitted shape...")
+            window.jobs.submit("fitted", lambda: loading.fitted_display(fitted, points),
+                               lambda result: self._show_fitted_display(fitted, result),
+                               lambda exc: window.report(
+                                   f"Cannot display the fit: {describe(exc)}", True, exc=exc))
+        window.rebuild_tree()
+        window.knot_panel.show_state(window.document.settings.fit, fitted)
+
+    def _show_fitted_display(self, fitted: dict, result: loading.FittedDisplay):
+        window = self._window
+        if window.document.fitted is not fitted:
+            return  # replaced meanwhile (a new fit, another session)
+        window.scene.show_fit(result.display)
+        if result.deviation is not None:
+            stats = deviation_stats(result.deviation)
+            window.scene.set_deviation(result.deviation, stats)
+            window.quality_panel.show_deviation(stats)
+        window.scene.set_quality(result.quality_cells, result.statistics)
+        window.quality_panel.show_result("measured", "the fitted shape against the cloud",
+                                         result.statistics,
+                                         window.document.settings.fit.tolerance is None,
+                                         result.display.kind)
+        window.rebuild_tree()
+
+    @Slot(object)
+    def on_patch_snapshot(self, snapshot) -> None:
+        if snapshot.network is not None and not self._window.tree.shows_network:
+            self._window.rebuild_tree()  # the first network of a run: list it in the tree
+
+    @Slot(object)
+    def on_snapshot_shown(self, snapshot: DisplaySnapshot) -> None:
+        window = self._window
+        if not snapshot.done and snapshot.run_id != self._quality_run:
+            # the first picture of a run (a refused run has none: the readout stays as it was)
+            self._quality_run = snapshot.run_id
+            window.quality_panel.show_running()
+        window.scene.show_fit(snapshot.display)
+        if snapshot.quality_cells is not None:
+            window.scene.set_quality(snapshot.quality_cells, snapshot.statistics)
+        if snapshot.deviation is not None:
+            stats = deviation_stats(snapshot.deviation)
+            window.scene.set_deviation(snapshot.deviation, stats)
+            window.quality_panel.show_deviation(stats)
+        if not window.tree.shows_fit:  # the first snapshot of a fit: list it in the tree
+            window.rebuild_tree()
+
+    @Slot(dict)
+    def on_progress(self, progress: dict) -> None:
+        labels = self._window.status_labels
+        # the least-squares core's passes have no count fixed in advance (iterations 0)
+        labels["iteration"].setText(
+            f"Iteration {progress['iteration']}/{progress['iterations']}" if progress["iterations"]
+            else f"Least-squares pass {progress['iteration']}")
+        loss = progress["loss"]
+        labels["loss"].setText(f"Loss {loss:.4g}" if math.isfinite(loss) else "Loss -")
+        labels["rate"].setText(f"{progress['rate']:.1f} it/s" if progress["rate"] else "- it/s")
+        labels["remaining"].setText(f"Left {format_seconds(progress['remaining'])}")
+
+    @Slot(object)
+    def on_fit_finished(self, snapshot: DisplaySnapshot) -> None:
+        window = self._window
+        document = window.document
+        window.loss_plot.flush()
+        # already on screen: store it without the re-tessellation a notifying change triggers
+        document.set_fitted(snapshot.geometry, notify=False)
+        window.rebuild_tree()
+        window.knot_panel.show_state(document.settings.fit, snapshot.geometry)
+        text = f"Fit {snapshot.status} after {snapshot.iteration} iterations"
+        if snapshot.deviation is not None:
+            stats = deviation_stats(snapshot.deviation)
+            text += (f"; deviation mean {stats['mean']:.4g}, RMS {stats['rms']:.4g}, "
+                     f"max {stats['max']:.4g}")
+        if snapshot.message:
+            text += f" ({snapshot.message})"
+        window.report(text)
+        window.quality_panel.show_result(snapshot.status, snapshot.message, snapshot.statistics,
+                                         document.settings.fit.tolerance is None,
+                                         snapshot.display.kind)
+        if document.settings.show_offsets and not document.patches:
+            window.offsets.request()

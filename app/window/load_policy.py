@@ -1,0 +1,232 @@
+"""The load policy: how files are opened, and what a newly loaded cloud changes.
+
+It decides: a load runs in an abandonable thread and the newest request wins (a running load is
+cancelled); the progress indicator shows only when a load lasts longer than
+:data:`LOAD_INDICATOR_DELAY_MS`; the document changes only when every file reads; a load resets
+both fits; a planar cloud switches the fit to a curve and a small cloud gets the smaller control
+grid :func:`app.state.control_grid_for` asks for (both undoable settings edits); what the user is
+told when a load opens, fails or is cancelled; and which files the Open Recent menu lists.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from PySide6.QtCore import QObject, QSettings, QTimer, Slot
+from PySide6.QtWidgets import QFileDialog, QMenu
+
+from app import loading
+from app.demo import demo_path
+from app.errors import describe, is_expected
+from app.state import control_grid_for
+from app.window.text import format_seconds, names
+
+if TYPE_CHECKING:
+    from app.main_window import MainWindow
+
+MAX_RECENT = 10
+#: a load that ends sooner shows no progress indicator (no flicker for small files)
+LOAD_INDICATOR_DELAY_MS = 300
+
+
+@dataclass
+class _Load:
+    """The load in progress: its detached job and what it reads."""
+
+    job_id: int
+    paths: list[str]
+    started: float
+
+
+class RecentFiles:
+    """The Open Recent list, kept in the window's settings store (newest first, no demo file)."""
+
+    def __init__(self, store: QSettings):
+        self._store = store
+
+    def paths(self) -> list[str]:
+        value = self._store.value("recent_files", [])
+        if isinstance(value, str):
+            value = [value]
+        return [str(v) for v in (value or [])]
+
+    def add(self, path: str) -> None:
+        if Path(path).resolve() == Path(demo_path()).resolve():
+            return
+        recent = [p for p in self.paths() if p != path]
+        self._store.setValue("recent_files", [path, *recent][:MAX_RECENT])
+
+    def last_directory(self) -> str:
+        """Where file dialogs start: the folder of the newest recent file, else home."""
+        recent = self.paths()
+        return str(Path(recent[0]).parent) if recent else str(Path.home())
+
+    def fill_menu(self, menu: QMenu, open_files: Callable[[list[str]], bool]) -> None:
+        """List the recent files in ``menu``; choosing one calls ``open_files([path])``."""
+        menu.clear()
+        recent = self.paths()
+        if not recent:
+            menu.addAction("(none)").setEnabled(False)
+        for path in recent:
+            action = menu.addAction(path)
+            action.triggered.connect(lambda _=False, path=path: open_files([path]))
+
+
+class LoadPolicy(QObject):
+    """Opens files for the window: the load job, its indicator and Cancel, and what a load that
+    ends changes in the document, the settings and the window (see the module docstring)."""
+
+    def __init__(self, window: MainWindow, recent: RecentFiles):
+        super().__init__(window)
+        self._window = window
+        self.recent = recent
+        self.message = ""  # one line: how the latest load ended (opened, failed, cancelled)
+        self._load: _Load | None = None
+        self._closed = False
+        self._indicator_timer = QTimer(self)
+        self._indicator_timer.setSingleShot(True)
+        self._indicator_timer.setInterval(LOAD_INDICATOR_DELAY_MS)
+        self._indicator_timer.timeout.connect(self._show_indicator)
+
+    def open_files(self, paths: list[str]) -> bool:
+        """Read the files in an abandonable worker thread; the document changes only if every
+        file reads. A load still running is cancelled (the newest request wins). Every load
+        started here ends with one ``files_loaded``: True when applied, False when it failed or
+        was cancelled (none when the window closes first)."""
+        window = self._window
+        paths = [str(p) for p in paths]
+        if not paths or self._closed:
+            return False
+        if self._load is not None:
+            self.cancel()
+        job_id = window.jobs.submit_detached(
+            "load", lambda cancel: loading.load_files(paths, cancel),
+            lambda loaded: self._on_done(paths, loaded),
+            lambda exc: self._on_error(paths, exc))
+        if not job_id:
+            return False
+        self._load = _Load(job_id, paths, time.monotonic())
+        window.cancel_load_action.setEnabled(True)
+        self._indicator_timer.start()
+        window.statusBar().showMessage(f"Reading {names([Path(p).name for p in paths])}... "
+                                       "(Esc cancels)")
+        return True
+
+    def is_loading(self) -> bool:
+        return self._load is not None
+
+    def cancel(self, quiet: bool = False) -> bool:
+        """Abandon the load in progress (Cancel, Esc): returns at once and loads nothing; the
+        reader thread is left to end on its own and its result is dropped. quiet: no report
+        (the caller tells the user). False when no load runs."""
+        load = self._load
+        if load is None:
+            return False
+        window = self._window
+        window.jobs.cancel(load.job_id)
+        self._ended()
+        seconds = time.monotonic() - load.started
+        after = f" after {format_seconds(seconds)}" if seconds >= 1.0 else ""
+        self.message = (f"Cancelled opening {names([Path(p).name for p in load.paths])}"
+                        f"{after}; the document was left unchanged.")
+        if not quiet:
+            window.report(self.message)
+        window.files_loaded.emit(False)
+        return True
+
+    def open_dialog(self) -> None:
+        suffixes = " ".join(f"*{s}" for s in loading.open_suffixes())
+        paths, _ = QFileDialog.getOpenFileNames(
+            self._window, "Open point clouds or NURBS files", self.recent.last_directory(),
+            f"Supported files ({suffixes});;All files (*)")
+        if paths:
+            self._window.open_files(paths)
+
+    def live_timers(self) -> int:
+        return int(self._indicator_timer.isActive())
+
+    def shut_down(self) -> None:
+        """The window closes: the load in progress is dropped (not waited for), no new one starts."""
+        self._closed = True
+        self._indicator_timer.stop()
+        self._load = None
+
+    def _ended(self):
+        """No load runs any more: its indicator and Cancel go."""
+        window = self._window
+        self._load = None
+        self._indicator_timer.stop()
+        window.load_indicator.hide()
+        window.load_progress.setRange(0, 1)  # stops the style's busy animation
+        window.cancel_load_action.setEnabled(False)
+
+    def _on_done(self, paths: list[str], loaded: loading.LoadedFiles):
+        self._ended()
+        self._apply(paths, loaded)
+
+    def _on_error(self, paths: list[str], exc: BaseException):
+        self._ended()
+        self._failed(paths, exc)
+
+    @Slot()
+    def _show_indicator(self):
+        if self._load is not None and not self._closed:
+            self._window.load_progress.setRange(0, 0)  # busy: readers do not report progress
+            self._window.load_indicator.show()
+
+    def _apply(self, paths: list[str], loaded: loading.LoadedFiles):
+        window = self._window
+        document = window.document
+        window.controller.reset()
+        window.reset_patch_network()
+        window.loss_plot.clear()
+        for label in window.status_labels.values():
+            label.setText("-")
+        window.status_labels["state"].setText("Idle")
+        document.replace_content(loaded.targets, loaded.patches, loaded.patch_names)
+        points = document.target_points()
+        if points is not None and np.ptp(points[:, 2]) == 0 and document.settings.fit.kind != (
+                "curve"):
+            document.edit_settings("Kind (planar cloud)", kind="curve")
+            window.report("The cloud is planar: switched to curve fitting (2D).")
+        grid = None if points is None else control_grid_for(len(points), document.settings.fit)
+        if grid is not None:
+            document.edit_settings("Control grid (small cloud)", control_points_u=grid[0],
+                                   control_points_v=grid[1])
+            window.report(f"{len(points)} points are few for the control grid: reduced it to "
+                          f"{grid[0]} x {grid[1]} (Edit > Undo to keep the larger grid).")
+        for path in paths:
+            self.recent.add(path)
+        counts = [f"{len(t.points)} points in {t.name}" for t in loaded.targets]
+        if loaded.patch_names:
+            sources = sorted({Path(p).name for p in paths} - {t.name for t in loaded.targets})
+            counts.append(f"{len(loaded.patch_names)} NURBS shape(s) from {names(sources)}")
+        self.message = f"Opened {'; '.join(counts)}"
+        window.report(self.message)
+        window.setWindowTitle(f"NURBS Studio - {names([Path(p).name for p in paths])}")
+        window.files_loaded.emit(True)
+
+    def _failed(self, paths: list[str], exc: BaseException):
+        """One line naming the file and the problem (the log gets a traceback only for a bug),
+        then what it means for the document."""
+        path = getattr(exc, "load_path", None) or (paths[0] if len(paths) == 1 else None)
+        problem = describe(exc)
+        if path is None:
+            headline = f"Could not open {names([Path(p).name for p in paths])}: {problem}"
+        elif Path(path).name in problem:
+            headline = f"Could not open {problem}"  # the reader's message names the file
+        else:
+            headline = f"Could not open {path}: {problem}"
+        if not is_expected(exc):
+            headline += " (an unexpected error: the log has the details)"
+        self.message = message = headline
+        hint = getattr(exc, "install", None)
+        if hint and hint not in message:
+            message += f"\nInstall the missing package with: {hint}"
+        self._window.report(message + "\nThe document was left unchanged.", error=True, exc=exc)
+        self._window.files_loaded.emit(False)

@@ -1,0 +1,82 @@
+"""The settings policy: what an edit of the settings restarts, defers or switches in the window.
+
+It decides: every panel shows the new settings; a change of fit mode stops the other mode's fit
+and raises the mode's docks; a changed fit (or patch network) setting restarts a running or
+paused run of that fit, else applies at the next Start; a changed offset setting recomputes the
+offsets. The settings themselves (their values and limits) are :mod:`app.state`'s.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from PySide6.QtCore import QObject, Slot
+
+from app.controller import FitController
+from app.patch_controller import PatchController
+from app.state import FIT_MODES, Settings
+
+if TYPE_CHECKING:
+    from app.main_window import MainWindow
+
+#: the settings whose change recomputes the offsets
+OFFSET_FIELDS = {"offset_distance", "constrain_shared_edges", "show_offsets"}
+
+
+class SettingsPolicy(QObject):
+    """Follows ``Document.settings_changed`` for the window (see the module docstring)."""
+
+    def __init__(self, window: MainWindow):
+        super().__init__(window)
+        self._window = window
+
+    def show(self, settings: Settings) -> None:
+        """Every panel (and the viewport's mode) shows ``settings``."""
+        window = self._window
+        window.mode_selector.show_settings(settings)
+        window.patches_panel.show_settings(settings.patches)
+        window.scene.set_mode(settings.fit_mode)
+        window.fit_panel.show_settings(settings.fit)
+        window.offset_panel.show_settings(settings)
+        window.knot_panel.show_state(settings.fit, window.document.fitted)
+
+    @Slot(object, object)
+    def on_settings_changed(self, old: Settings, new: Settings) -> None:
+        self.show(new)
+        if old.fit_mode != new.fit_mode:
+            self._mode_changed(new.fit_mode)
+        if old.patches != new.patches:
+            self._restart_or_defer(self._window.patch_controller)
+        if old.fit != new.fit:
+            self._restart_or_defer(self._window.controller)
+        if any(getattr(old, name) != getattr(new, name) for name in OFFSET_FIELDS):
+            self._window.offsets.request()
+
+    def _restart_or_defer(self, controller: FitController | PatchController):
+        """The single-patch policy, for either fit: restart a running or paused run with the new
+        settings, else apply them at the next Start (a patch fit restarts from the cloud)."""
+        window = self._window
+        if controller.state in ("running", "paused", "stopping"):
+            controller.schedule_restart()
+            start = "the cloud" if controller is window.patch_controller else "the current shape"
+            window.statusBar().showMessage(f"Settings changed: restarting the fit from {start}",
+                                           4000)
+        else:
+            window.statusBar().showMessage("Settings changed: they apply at the next Start", 4000)
+
+    def _mode_changed(self, mode: str):
+        """The other fit stops (a run of the mode just left would draw where it is hidden)."""
+        window = self._window
+        other = window.controller if mode == "patches" else window.patch_controller
+        other.stop()
+        if mode == "patches":
+            window.patches_dock.raise_()
+            window.network_quality_dock.raise_()
+        else:
+            window.fit_dock.raise_()
+            window.quality_dock.raise_()
+        window.update_fit_actions()
+        window.rebuild_tree()
+        window.scene.reset_camera()
+        what = "a patch network" if mode == "patches" else "one patch"
+        window.statusBar().showMessage(f"Mode: {dict(FIT_MODES)[mode]}: Start fits {what}.", 4000)
