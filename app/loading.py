@@ -11,7 +11,6 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -19,6 +18,7 @@ from app.state import OffsetDisplay, Target
 from app.workers.display import DisplayGeometry, display_geometry
 from app.workers.fit_worker import FINAL_DEVIATION_POINTS, sampled_deviation
 from app.workers.quality import measure_quality
+from nurbs_core.geometry_arrays import GeometryArrays
 
 #: (menu label, suffix, needs the optional OCP package)
 EXPORT_FORMATS = (
@@ -38,7 +38,7 @@ CAD_INSTALL_HINT = 'pip install "nurbs-studio[cad]"'
 @dataclass
 class LoadedFiles:
     targets: list[Target] = field(default_factory=list)
-    patches: list[dict[str, Any]] = field(default_factory=list)
+    patches: list[GeometryArrays] = field(default_factory=list)
     patch_names: list[str] = field(default_factory=list)
 
 
@@ -101,7 +101,7 @@ def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
         loaded.targets.append(Target(path.name, points, str(path)))
 
 
-def tessellate(geometries: list[dict[str, Any]]) -> list[DisplayGeometry]:
+def tessellate(geometries: list[GeometryArrays]) -> list[DisplayGeometry]:
     return [display_geometry(g) for g in geometries]
 
 
@@ -117,7 +117,7 @@ class FittedDisplay:
     quality_cells: np.ndarray | None = None
 
 
-def fitted_display(geometry: dict[str, Any], points: np.ndarray | None,
+def fitted_display(geometry: GeometryArrays, points: np.ndarray | None,
                    statistics: dict[str, float] | None = None) -> FittedDisplay:
     """Display arrays, per-point deviation and quality of a fitted shape (e.g. from a session).
     statistics: the fit's own measures when it has them (only the quality map is computed)."""
@@ -127,8 +127,8 @@ def fitted_display(geometry: dict[str, Any], points: np.ndarray | None,
     display = display_geometry(geometry)
     result = FittedDisplay(display)
     if points is not None:
-        target = points[:, :2] if (geometry["kind"] == "curve" and
-                                   geometry["control_points"].shape[-1] == 2) else points
+        target = points[:, :2] if (geometry.kind == "curve" and
+                                   geometry.control_points.shape[-1] == 2) else points
         result.deviation = sampled_deviation(deviation, geometry_from_numpy(geometry), target,
                                              FINAL_DEVIATION_POINTS)
         if display.kind == "surface":
@@ -137,7 +137,7 @@ def fitted_display(geometry: dict[str, Any], points: np.ndarray | None,
     return result
 
 
-def compute_offsets(surfaces: list[dict[str, Any]], distance: float, constrain_shared: bool):
+def compute_offsets(surfaces: list[GeometryArrays], distance: float, constrain_shared: bool):
     """Offset patches; returns (OffsetDisplay, list of DisplayGeometry)."""
     from nurbs_core import geometry_from_numpy
     from nurbs_core.offset import offset_patches
@@ -149,7 +149,7 @@ def compute_offsets(surfaces: list[dict[str, Any]], distance: float, constrain_s
             tessellate(geometries))
 
 
-def export_geometry(geometries: list[dict[str, Any]], path: str) -> int:
+def export_geometry(geometries: list[GeometryArrays], path: str) -> int:
     """Write the shapes with ``nurbs_core.io.save`` (format from the suffix); returns the count."""
     from nurbs_core import geometry_from_numpy
     from nurbs_core.io import save

@@ -18,6 +18,7 @@ from app.panels.offset_panel import OffsetPanel
 from app.state import Document, OffsetDisplay
 from app.viewport.scene import SceneView
 from app.workers.jobs import JobRunner
+from nurbs_core.geometry_arrays import GeometryArrays
 
 log = logging.getLogger("app")
 
@@ -33,10 +34,10 @@ class OffsetController(QObject):
         self._running = False
         self._dirty = False
 
-    def sources(self) -> list[dict]:
-        surfaces = [p for p in self._document.patches if p["kind"] == "surface"]
+    def sources(self) -> list[GeometryArrays]:
+        surfaces = [p for p in self._document.patches if p.kind == "surface"]
         fitted = self._document.fitted
-        if not surfaces and fitted is not None and fitted["kind"] == "surface":
+        if not surfaces and fitted is not None and fitted.kind == "surface":
             surfaces = [fitted]
         return surfaces
 

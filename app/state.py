@@ -2,13 +2,16 @@
 
 Pure data plus Qt signals; no torch, no VTK. Settings edits go through a ``QUndoStack`` so every
 edit can be undone and redone; loading files replaces the content and is not an undoable edit.
-Geometry is held as the numpy dicts of ``NurbsCurve.numpy()`` / ``NurbsSurface.numpy()``.
+Geometry is held as the engine's numpy twins (:mod:`nurbs_core.geometry_arrays`: what
+``NurbsCurve.numpy()`` / ``NurbsSurface.numpy()`` return); anything else given to the document is
+converted once, on the way in.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,6 +23,7 @@ from PySide6.QtGui import QUndoCommand, QUndoStack
 from nurbs_core.fitting.config import INITS, LOSS_TERMS, OPTIMIZERS, FitConfig
 from nurbs_core.fitting.config import PARAMETERIZATIONS as _PARAMETERIZATIONS
 from nurbs_core.fitting.config import SOLVERS as _SOLVERS
+from nurbs_core.geometry_arrays import GeometryArrays, from_mapping
 from nurbs_core.patches.options import PatchOptions
 
 SESSION_FORMAT = "nurbs-studio-session-v2"
@@ -152,7 +156,7 @@ class Target:
 
 @dataclass
 class OffsetDisplay:
-    surfaces: list[dict[str, Any]] = field(default_factory=list)
+    surfaces: list[GeometryArrays] = field(default_factory=list)
     max_gap: float = 0.0
     shared_edges: int = 0
 
@@ -180,9 +184,9 @@ class Document(QObject):
     def __init__(self, parent: QObject | None = None):
         super().__init__(parent)
         self.targets: list[Target] = []
-        self.patches: list[dict[str, Any]] = []
+        self.patches: list[GeometryArrays] = []
         self.patch_names: list[str] = []
-        self.fitted: dict[str, Any] | None = None
+        self.fitted: GeometryArrays | None = None
         #: the fitted patch network (``nurbs_core.patches.network.PatchNetwork``) or None
         self.network: Any = None
         self.offsets = OffsetDisplay()
@@ -211,10 +215,11 @@ class Document(QObject):
         self.settings_changed.emit(old, new)
 
     # --- content ---------------------------------------------------------------------------------
-    def replace_content(self, targets: list[Target], patches: list[dict[str, Any]],
+    def replace_content(self, targets: list[Target], patches: list[Mapping[str, Any]],
                         patch_names: list[str]):
         """Swap in freshly loaded files (all already validated); drops the fit and offsets."""
-        self.targets, self.patches, self.patch_names = targets, patches, patch_names
+        self.targets, self.patch_names = targets, patch_names
+        self.patches = [from_mapping(p) for p in patches]
         self.fitted = None
         self.network = None
         self.offsets = OffsetDisplay()
@@ -222,10 +227,10 @@ class Document(QObject):
         self.fitted_changed.emit()
         self.offsets_changed.emit()
 
-    def set_fitted(self, geometry: dict[str, Any] | None, notify: bool = True):
+    def set_fitted(self, geometry: Mapping[str, Any] | None, notify: bool = True):
         """Replace the fitted shape. Live fit updates pass ``notify=False``: the controller
         already hands their display arrays to the view, so nothing needs re-tessellating."""
-        self.fitted = geometry
+        self.fitted = None if geometry is None else from_mapping(geometry)
         if notify:
             self.fitted_changed.emit()
 
@@ -242,7 +247,7 @@ class Document(QObject):
         clouds = [t.points for t in self.targets if t.visible and len(t.points)]
         return np.concatenate(clouds, axis=0) if clouds else None
 
-    def all_geometry(self) -> list[dict[str, Any]]:
+    def all_geometry(self) -> list[GeometryArrays]:
         """Fitted geometry, loaded patches and offsets: what Export writes."""
         items = [self.fitted] if self.fitted is not None else []
         return items + list(self.patches) + list(self.offsets.surfaces)
@@ -254,9 +259,9 @@ class Document(QObject):
             "settings": self.settings.to_json(),
             "targets": [{"name": t.name, "path": t.path, "visible": t.visible,
                          "points": t.points.tolist()} for t in self.targets],
-            "patches": [{"name": name, "geometry": _geometry_to_json(g)}
+            "patches": [{"name": name, "geometry": g.to_json()}
                         for name, g in zip(self.patch_names, self.patches, strict=True)],
-            "fitted": None if self.fitted is None else _geometry_to_json(self.fitted),
+            "fitted": None if self.fitted is None else self.fitted.to_json(),
         }
 
     def save_session(self, path: str | Path):
@@ -297,10 +302,10 @@ class Document(QObject):
                 points = np.asarray(item["points"], dtype=np.float64).reshape(-1, 3)
                 targets.append(Target(item["name"], points, item.get("path", ""),
                                       bool(item.get("visible", True))))
-            patches = [_geometry_from_json(p["geometry"]) for p in data.get("patches", [])]
+            patches = [from_mapping(p["geometry"]) for p in data.get("patches", [])]
             names = [p["name"] for p in data.get("patches", [])]
             fitted = data.get("fitted")
-            fitted = None if fitted is None else _geometry_from_json(fitted)
+            fitted = None if fitted is None else from_mapping(fitted)
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"{path}: damaged session ({exc})") from None
         return {"settings": settings, "targets": targets, "patches": patches, "names": names,
@@ -312,16 +317,3 @@ class Document(QObject):
         self.undo_stack.clear()
         self._apply_settings(session["settings"])
         self.set_fitted(session["fitted"])
-
-
-def _geometry_to_json(geometry: dict[str, Any]) -> dict[str, Any]:
-    return {key: value.tolist() if isinstance(value, np.ndarray) else value
-            for key, value in geometry.items()}
-
-
-def _geometry_from_json(data: dict[str, Any]) -> dict[str, Any]:
-    kind = data.get("kind")
-    if kind not in ("curve", "surface"):
-        raise ValueError(f"unknown geometry kind {kind!r}")
-    return {key: np.asarray(value, dtype=np.float64) if isinstance(value, list) else value
-            for key, value in data.items()}

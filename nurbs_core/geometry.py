@@ -7,7 +7,7 @@ Leading batch dimensions are allowed. Inputs can be numpy arrays (converted to f
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -16,6 +16,7 @@ from numpy.typing import ArrayLike
 
 from nurbs_core import evaluate as _ev
 from nurbs_core import knots as _knots
+from nurbs_core.geometry_arrays import CurveArrays, SurfaceArrays
 
 
 def _as_tensor(value: ArrayLike, dtype: torch.dtype | None = None, device: torch.device | str | None = None,
@@ -231,16 +232,15 @@ class NurbsCurve:
         return NurbsCurve(self.control_points.detach(), self.degree, self.knots.detach(),
                           self.weights.detach(), validate=False, metadata=self.metadata)
 
-    def numpy(self) -> dict[str, Any]:
-        """A dict of numpy copies (control_points (*B, n, d), weights (*B, n), knots) plus kind
-        and degree; the inverse of :meth:`from_numpy`."""
-        return {"kind": "curve", "degree": self.degree,
-                "control_points": self.control_points.detach().cpu().numpy().copy(),
-                "weights": self.weights.detach().cpu().numpy().copy(),
-                "knots": self.knots.detach().cpu().numpy().copy()}
+    def numpy(self) -> CurveArrays:
+        """The numpy twin (copies: control_points (*B, n, d), weights (*B, n), knots); the
+        inverse of :meth:`from_numpy`."""
+        return CurveArrays(self.degree, self.control_points.detach().cpu().numpy().copy(),
+                           self.weights.detach().cpu().numpy().copy(),
+                           self.knots.detach().cpu().numpy().copy())
 
     @classmethod
-    def from_numpy(cls, data: dict[str, Any], **kwargs: Any) -> NurbsCurve:
+    def from_numpy(cls, data: Mapping[str, Any], **kwargs: Any) -> NurbsCurve:
         """Rebuild from :meth:`numpy`'s dict; ``kwargs`` go to the constructor."""
         return cls(data["control_points"], data["degree"], data.get("knots"), data.get("weights"),
                    **kwargs)
@@ -425,17 +425,17 @@ class NurbsSurface:
                             self.knots_u.detach(), self.knots_v.detach(), self.weights.detach(),
                             validate=False, metadata=self.metadata)
 
-    def numpy(self) -> dict[str, Any]:
-        """A dict of numpy copies (control_points (*B, n_u, n_v, 3), weights (*B, n_u, n_v),
-        knots_u, knots_v) plus kind and degrees; the inverse of :meth:`from_numpy`."""
-        return {"kind": "surface", "degree_u": self.degree_u, "degree_v": self.degree_v,
-                "control_points": self.control_points.detach().cpu().numpy().copy(),
-                "weights": self.weights.detach().cpu().numpy().copy(),
-                "knots_u": self.knots_u.detach().cpu().numpy().copy(),
-                "knots_v": self.knots_v.detach().cpu().numpy().copy()}
+    def numpy(self) -> SurfaceArrays:
+        """The numpy twin (copies: control_points (*B, n_u, n_v, 3), weights (*B, n_u, n_v),
+        knots_u, knots_v); the inverse of :meth:`from_numpy`."""
+        return SurfaceArrays(self.degree_u, self.degree_v,
+                             self.control_points.detach().cpu().numpy().copy(),
+                             self.weights.detach().cpu().numpy().copy(),
+                             self.knots_u.detach().cpu().numpy().copy(),
+                             self.knots_v.detach().cpu().numpy().copy())
 
     @classmethod
-    def from_numpy(cls, data: dict[str, Any], **kwargs: Any) -> NurbsSurface:
+    def from_numpy(cls, data: Mapping[str, Any], **kwargs: Any) -> NurbsSurface:
         """Rebuild from :meth:`numpy`'s dict; ``kwargs`` go to the constructor."""
         return cls(data["control_points"], data["degree_u"], data["degree_v"], data.get("knots_u"),
                    data.get("knots_v"), data.get("weights"), **kwargs)
@@ -447,8 +447,9 @@ class NurbsSurface:
                 f"dtype={self.dtype})")
 
 
-def geometry_from_numpy(data: dict[str, Any], **kwargs: Any) -> NurbsCurve | NurbsSurface:
-    """Rebuild a NurbsCurve or NurbsSurface from its ``.numpy()`` dict."""
+def geometry_from_numpy(data: Mapping[str, Any], **kwargs: Any) -> NurbsCurve | NurbsSurface:
+    """Rebuild a NurbsCurve or NurbsSurface from its ``.numpy()`` twin (or any mapping with the
+    same keys, such as a session entry)."""
     kind = data.get("kind")
     if kind == "curve":
         return NurbsCurve.from_numpy(data, **kwargs)

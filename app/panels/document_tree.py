@@ -48,7 +48,7 @@ class DocumentTree(QTreeWidget):
             fitted = document.fitted
             self.shows_fit = fitted is not None
             if fitted is not None:
-                kind = fitted["kind"]
+                kind = fitted.kind
                 label = "Fitted surface" if kind == "surface" else "Fitted curve"
                 top = self._item(self, label, ("layer", kind), layer_visible(kind))
                 self._item(top, "Control net", ("layer", "control_net"),

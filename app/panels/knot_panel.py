@@ -96,7 +96,7 @@ class KnotPanel(QWidget):
             return np.asarray(custom), "Custom knots (edit a cell to change them)."
         fitted = self._fitted
         key = "knots" if s.kind == "curve" else f"knots_{direction}"
-        if fitted is not None and fitted.get("kind") == s.kind and key in fitted and (
+        if fitted is not None and fitted.kind == s.kind and (
                 np.size(fitted[key]) == count + degree + 1):
             return np.asarray(fitted[key]).reshape(-1), "Knots of the fitted shape."
         return uniform_knots(count, degree), "Uniform preset."

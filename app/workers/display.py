@@ -1,19 +1,18 @@
 """Display data for the viewport, computed in worker threads (torch runs here, never in the GUI).
 
-Every function takes a geometry dict (``NurbsCurve.numpy()`` / ``NurbsSurface.numpy()``) and
+Every function takes a geometry's numpy twin (``NurbsCurve.numpy()`` / ``NurbsSurface.numpy()``) and
 returns plain numpy arrays the GUI thread copies into its VTK meshes. Curves are lifted to 3D
 (z = 0) so the viewport handles 2D and 3D curves alike.
 """
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import torch
 
 from app.display_types import DisplayGeometry
 from nurbs_core import geometry_from_numpy
+from nurbs_core.geometry_arrays import GeometryArrays
 
 SURFACE_SAMPLES = 48  # tessellation per direction: smooth enough, cheap enough at 30 Hz
 CURVE_SAMPLES = 400
@@ -35,12 +34,12 @@ def _distinct(knots: np.ndarray, degree: int) -> np.ndarray:
     return np.unique(knots[degree:n + 1])
 
 
-def display_geometry(geometry: dict[str, Any], surface_samples: int = SURFACE_SAMPLES,
+def display_geometry(geometry: GeometryArrays, surface_samples: int = SURFACE_SAMPLES,
                      curve_samples: int = CURVE_SAMPLES) -> DisplayGeometry:
     """Tessellate a curve or surface, with its control net and knot lines."""
     shape = geometry_from_numpy(geometry)
     with torch.no_grad():
-        if geometry["kind"] == "curve":
+        if geometry.kind == "curve":
             a, b = shape.domain
             u = torch.linspace(a, b, curve_samples, dtype=shape.dtype)
             points = shape.evaluate(u).numpy()

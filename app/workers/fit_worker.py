@@ -17,7 +17,6 @@ import threading
 import time
 import traceback
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from PySide6.QtCore import QObject, Signal, Slot
@@ -25,6 +24,7 @@ from PySide6.QtCore import QObject, Signal, Slot
 from app.state import Settings
 from app.workers.display import DisplayGeometry, display_geometry
 from app.workers.quality import measure_quality
+from nurbs_core.geometry_arrays import GeometryArrays
 
 #: Deviation needs a closest-point projection of the whole cloud (~0.3 s for 4000 points here,
 #: about five fit iterations): do it at most this often (s), and always on the final snapshot.
@@ -38,7 +38,7 @@ class FitRequest:
     run_id: int
     target: np.ndarray
     settings: Settings
-    initial: dict[str, Any] | None = None
+    initial: GeometryArrays | None = None
 
 
 @dataclass
@@ -55,7 +55,7 @@ class DisplaySnapshot:
     run_id: int
     iteration: int
     iterations: int
-    geometry: dict[str, Any]
+    geometry: GeometryArrays
     display: DisplayGeometry
     losses: list[dict[str, float]] = field(default_factory=list)
     elapsed: float = 0.0
@@ -133,14 +133,14 @@ def sampled_deviation(distance_function, geometry, target: np.ndarray, limit: in
     return result
 
 
-def starting_geometry(request: FitRequest) -> dict[str, Any] | None:
+def starting_geometry(request: FitRequest) -> GeometryArrays | None:
     """The run's initial geometry: the current shape when the fit can continue from it (same
     kind, same dimension for curves), else None for the engine's initialization. The engine
     converts a different degree, control grid or custom knots itself (:func:`conform`)."""
     fit, initial = request.settings.fit, request.initial
-    if initial is None or initial.get("kind") != fit.kind:
+    if initial is None or initial.kind != fit.kind:
         return None
-    if fit.kind == "curve" and request.target.shape[1] != initial["control_points"].shape[-1]:
+    if fit.kind == "curve" and request.target.shape[1] != initial.control_points.shape[-1]:
         return None  # a 3D curve cannot continue on a 2D target (or the reverse)
     return initial
 
@@ -201,6 +201,7 @@ class FitWorker(QObject):
             self.run_finished.emit(request.run_id)
 
     def _run(self, request: FitRequest):
+        from nurbs_core import geometry_from_numpy
         from nurbs_core.fitting import deviation, iter_fit
 
         # the engine's modules (imported above on the first run) are long-lived: keep the
@@ -228,8 +229,8 @@ class FitWorker(QObject):
             final = snapshot.done and not (snapshot.status == "stopped" and self._hurry.is_set())
             if snapshot.done or now - last_deviation >= DEVIATION_INTERVAL:
                 limit = FINAL_DEVIATION_POINTS if final else LIVE_DEVIATION_POINTS
-                dev = sampled_deviation(deviation, _rebuild(snapshot.geometry), request.target,
-                                        limit)
+                dev = sampled_deviation(deviation, geometry_from_numpy(snapshot.geometry),
+                                        request.target, limit)
                 last_deviation = time.monotonic()
             display = display_geometry(snapshot.geometry)
             statistics = dict(snapshot.statistics) if snapshot.statistics else None
@@ -248,7 +249,3 @@ class FitWorker(QObject):
                 statistics=statistics, quality_cells=cells))
 
 
-def _rebuild(geometry: dict[str, Any]):
-    from nurbs_core import geometry_from_numpy
-
-    return geometry_from_numpy(geometry)

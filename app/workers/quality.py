@@ -9,11 +9,11 @@ numpy array the GUI thread paints. Nothing here touches Qt widgets or VTK.
 from __future__ import annotations
 
 import logging
-from typing import Any
 
 import numpy as np
 
 from app.display_types import CATEGORY_NAMES, FAR, FINE, FLIPPED, OVERLAP  # noqa: F401
+from nurbs_core.geometry_arrays import GeometryArrays
 
 log = logging.getLogger(__name__)
 
@@ -55,14 +55,14 @@ def quality_cells(categories: np.ndarray, map_u: np.ndarray, map_v: np.ndarray,
                                                                   np.asarray(grid_v))], axis=1)
 
 
-def measure_quality(geometry: dict[str, Any], target: np.ndarray, grid_u: np.ndarray,
+def measure_quality(geometry: GeometryArrays, target: np.ndarray, grid_u: np.ndarray,
                     grid_v: np.ndarray, statistics: dict[str, float] | None = None,
                     deviation: np.ndarray | None = None
                     ) -> tuple[dict[str, float] | None, np.ndarray | None]:
     """The statistics (the engine's, when the fit measured itself, else ``surface_quality``) and
     the quad categories of a fitted surface on its display grid.
 
-    geometry: a surface's numpy dict; target (N, 3); grid_u, grid_v: the display grid's
+    geometry: a surface's numpy twin; target (N, 3); grid_u, grid_v: the display grid's
     parameters; deviation (N,): the cloud-to-surface distances when every point was measured
     (saves a projection). Returns (statistics or None, cells or None): measuring is advice, so
     a cloud too small to judge (or any failure) leaves the fit as it is and says so in the log.
@@ -70,7 +70,7 @@ def measure_quality(geometry: dict[str, Any], target: np.ndarray, grid_u: np.nda
     from nurbs_core import geometry_from_numpy
     from nurbs_core.quality import quality_maps, surface_quality
 
-    if geometry.get("kind") != "surface" or np.shape(target)[-1] != 3:
+    if geometry.kind != "surface" or np.shape(target)[-1] != 3:
         return statistics, None
     try:
         surface = geometry_from_numpy(geometry)

@@ -385,7 +385,9 @@ class StopToken:
 class FitSnapshot:
     """An immutable view of a running fit; only numpy copies, never live tensors.
 
-    geometry: ``NurbsSurface.numpy()`` / ``NurbsCurve.numpy()`` dict in the input's coordinates.
+    geometry: the numpy twin (:class:`~nurbs_core.geometry_arrays.SurfaceArrays` /
+    :class:`~nurbs_core.geometry_arrays.CurveArrays`, what ``.numpy()`` returns) in the input's
+    coordinates; an empty mapping when the run failed before it had a shape.
     losses: one dict per iteration since the previous snapshot,
     ``{"iteration": k, "total": value, <term>: value, ...}`` (normalised units, see FitConfig);
     an iteration that was rolled back (non-finite or exploding loss) has no entry, and the
@@ -394,7 +396,7 @@ class FitSnapshot:
     """
 
     iteration: int
-    geometry: dict[str, Any]
+    geometry: Mapping[str, Any]
     losses: list[dict[str, float]]
     elapsed: float
     done: bool

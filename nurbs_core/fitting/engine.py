@@ -40,6 +40,7 @@ from nurbs_core.fitting.sheet import (
     uses_core,
 )
 from nurbs_core.geometry import NurbsCurve, NurbsSurface, geometry_from_numpy
+from nurbs_core.geometry_arrays import CurveArrays, GeometryArrays, SurfaceArrays
 from nurbs_core.quality import quality_warnings
 
 Geometry: TypeAlias = NurbsCurve | NurbsSurface
@@ -238,22 +239,19 @@ class _Run:
         return " x ".join(str(s) for s in shape)
 
     # ---------------------------------------------------------------------------------------
-    def _geometry_numpy(self) -> dict:
-        """The model's geometry in the points' units as a ``.numpy()``-style dict."""
+    def _geometry_numpy(self) -> GeometryArrays:
+        """The model's geometry in the points' units as its numpy twin (the fit's dtype)."""
         model, problem = self.model, self.problem
         control = model.control_points.detach().double().cpu().numpy() * problem.scale
         control = control + problem.center
         np_dtype = np.float32 if problem.dtype == torch.float32 else np.float64
         knots = [k.detach().cpu().numpy().astype(np_dtype) for k in model.knot_tensors()]
-        data = {"control_points": control.astype(np_dtype),
-                "weights": model.weights().detach().cpu().numpy().astype(np_dtype).copy()}
+        control = control.astype(np_dtype)
+        weights = model.weights().detach().cpu().numpy().astype(np_dtype).copy()
         if model.is_curve:
-            data.update(kind="curve", degree=model.degrees[0], knots=knots[0])
-        else:
-            degrees: tuple[int, ...] = model.degrees
-            data.update(kind="surface", degree_u=degrees[0], degree_v=degrees[1],
-                        knots_u=knots[0], knots_v=knots[1])
-        return data
+            return CurveArrays(model.degrees[0], control, weights, knots[0])
+        degrees: tuple[int, ...] = model.degrees
+        return SurfaceArrays(degrees[0], degrees[1], control, weights, knots[0], knots[1])
 
     def _snapshot(self, iteration: int, records: list[dict], status: str, done: bool,
                   message: str | None = None) -> FitSnapshot:

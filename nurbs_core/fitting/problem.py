@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -236,7 +237,7 @@ def initial_geometry(problem: Problem, config: FitConfig, initial=None):
 
 
 def _from_initial(problem: Problem, config: FitConfig, initial):
-    geometry = geometry_from_numpy(initial) if isinstance(initial, dict) else initial
+    geometry = geometry_from_numpy(initial) if isinstance(initial, Mapping) else initial
     if not isinstance(geometry, (NurbsCurve, NurbsSurface)):
         raise ValueError(f"initial must be a NurbsCurve, NurbsSurface or their numpy dict, got "
                          f"{type(initial).__name__}")

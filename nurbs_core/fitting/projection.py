@@ -7,6 +7,8 @@ memory stays bounded for millions of points; the cost is linear in the number of
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 import torch
 from scipy.spatial import cKDTree
@@ -114,7 +116,7 @@ def project(geometry, points, steps: int = 6, density: int | None = None):
     geometry: NurbsCurve / NurbsSurface (unbatched) or its numpy dict; points (N, d) array-like.
     Returns (parameters, distances): surfaces (N, 2), curves (N,); distances (N,), numpy float64.
     """
-    if isinstance(geometry, dict):
+    if isinstance(geometry, Mapping):
         geometry = geometry_from_numpy(geometry)
     geometry = geometry.detach().to(dtype=torch.float64)
     array = np.asarray(points, np.float64)

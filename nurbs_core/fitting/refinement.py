@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 import torch
 
@@ -26,7 +28,7 @@ def refine(geometry, points, parameters=None, count: int = 1):
     geometry: NurbsCurve / NurbsSurface (or numpy dict); points (N, d); parameters: known (N, 2) /
     (N,) or None to use foot points. The geometry does not move (exact knot insertion); it gains
     ``count`` control points per direction. Returns the refined geometry."""
-    if isinstance(geometry, dict):
+    if isinstance(geometry, Mapping):
         geometry = geometry_from_numpy(geometry)
     points = np.asarray(points, np.float64)
     if parameters is None:

@@ -23,6 +23,7 @@ from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, FitSnapshot, Loss
 from nurbs_core.fitting.least_squares import pca_parameters, principal_axes
 from nurbs_core.fitting.problem import Problem, conform
 from nurbs_core.geometry import NurbsSurface
+from nurbs_core.geometry_arrays import SurfaceArrays
 from nurbs_core.surfacing.core import CorePass, LeastSquaresCore
 from nurbs_core.surfacing.mesh import CloudMesh, median_spacing, voxel_subsample
 from nurbs_core.surfacing.neighbours import estimate_noise, local_frames
@@ -251,11 +252,10 @@ def surface_statistics(surface: NurbsSurface, points: np.ndarray, *, mesh: Cloud
     return stats
 
 
-def core_geometry_numpy(surface: NurbsSurface, problem: Problem) -> dict:
-    """The normalised surface's numpy dict in the input's coordinates."""
+def core_geometry_numpy(surface: NurbsSurface, problem: Problem) -> SurfaceArrays:
+    """The normalised surface's numpy twin in the input's coordinates."""
     data = surface.numpy()
-    data["control_points"] = data["control_points"] * problem.scale + problem.center
-    return data
+    return data.replace(control_points=data.control_points * problem.scale + problem.center)
 
 
 def sampled_distances(surface: NurbsSurface, points: np.ndarray, density: int = 256,

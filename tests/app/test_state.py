@@ -220,3 +220,25 @@ def test_a_closed_cloud_refusal_points_to_multi_patch_and_force_single_patch():
     assert "Force single patch" in message and "single_patch /" not in message
     assert refusal_message(ValueError("points must have shape (N, 3)")) == (
         "Cannot fit this target: points must have shape (N, 3)")
+
+
+def test_geometry_enters_the_document_as_the_engines_numpy_twin(tmp_path):
+    """Whatever mapping a caller hands over becomes a typed SurfaceArrays once, on the way in;
+    sessions write and read it."""
+    from nurbs_core.geometry_arrays import SurfaceArrays
+
+    document = Document()
+    plain = {"kind": "surface", "degree_u": 1, "degree_v": 1,
+             "control_points": np.arange(12.0).reshape(2, 2, 3), "knots_u": [0, 0, 1, 1],
+             "knots_v": [0, 0, 1, 1]}
+    document.set_fitted(plain)
+    fitted = document.fitted
+    assert isinstance(fitted, SurfaceArrays) and fitted.weights.shape == (2, 2)
+    document.set_fitted(fitted)
+    assert document.fitted is fitted  # a twin is kept as it is
+    path = tmp_path / "session.json"
+    document.save_session(path)
+    other = Document()
+    other.load_session(path)
+    assert isinstance(other.fitted, SurfaceArrays)
+    np.testing.assert_array_equal(other.fitted.control_points, fitted.control_points)

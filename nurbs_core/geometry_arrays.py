@@ -1,0 +1,117 @@
+"""The numpy twins of :class:`~nurbs_core.geometry.NurbsCurve` and
+:class:`~nurbs_core.geometry.NurbsSurface`: what ``.numpy()`` returns, what fit snapshots carry and
+what the app holds (numpy only: the GUI thread reads them without importing torch).
+
+Typed, immutable values with attribute access (``arrays.control_points``); for code written
+against the former plain dicts they are also read-only mappings (``arrays["knots_u"]``,
+``arrays.get("kind")``, ``dict(arrays)``). :func:`nurbs_core.geometry.geometry_from_numpy`
+rebuilds the torch object (in worker threads); :meth:`to_json` / :func:`from_mapping` are the
+session form.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+
+class _Arrays(Mapping[str, Any]):
+    """Read-only mapping over a twin's fields, with ``kind`` first."""
+
+    kind: ClassVar[str]
+    _ARRAYS: ClassVar[tuple[str, ...]]
+
+    def __getitem__(self, key: str) -> Any:
+        if key == "kind":
+            return self.kind
+        if key in self._keys():
+            return getattr(self, key)
+        raise KeyError(key)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(("kind", *self._keys()))
+
+    def __len__(self) -> int:
+        return 1 + len(self._keys())
+
+    @classmethod
+    def _keys(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in dataclasses.fields(cls))  # type: ignore[arg-type]
+
+    def replace(self, **changes: Any) -> Any:
+        """A copy with ``changes`` (e.g. moved control points)."""
+        return dataclasses.replace(self, **changes)  # type: ignore[type-var]
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict: kind, degrees, and the arrays as nested lists."""
+        return {key: value.tolist() if isinstance(value, np.ndarray) else value
+                for key, value in self.items()}
+
+    def __repr__(self) -> str:
+        shape = tuple(np.shape(self["control_points"]))
+        degrees = {k: v for k, v in self.items() if k.startswith("degree")}
+        return f"{type(self).__name__}({degrees}, control_points={shape})"
+
+
+def _array(value: Any) -> np.ndarray:
+    return np.asarray(value, dtype=np.float64)
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class CurveArrays(_Arrays):
+    """A curve as numpy arrays: control_points (*B, n, d), weights (*B, n), knots (n + p + 1,)
+    (or batched)."""
+
+    degree: int
+    control_points: np.ndarray
+    weights: np.ndarray
+    knots: np.ndarray
+    kind: ClassVar[str] = "curve"
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class SurfaceArrays(_Arrays):
+    """A surface as numpy arrays: control_points (*B, n_u, n_v, 3), weights (*B, n_u, n_v),
+    knots_u (n_u + p + 1,), knots_v (n_v + q + 1,) (or batched)."""
+
+    degree_u: int
+    degree_v: int
+    control_points: np.ndarray
+    weights: np.ndarray
+    knots_u: np.ndarray
+    knots_v: np.ndarray
+    kind: ClassVar[str] = "surface"
+
+
+GeometryArrays = CurveArrays | SurfaceArrays
+
+
+def from_mapping(data: Mapping[str, Any]) -> GeometryArrays:
+    """The twin of a ``{"kind": ..., ...}`` mapping (a former ``.numpy()`` dict, a session entry
+    or a twin itself). Missing weights are ones; missing knots are not allowed here. Raises
+    ValueError for an unknown kind or a missing field."""
+    if isinstance(data, (CurveArrays, SurfaceArrays)):
+        return data
+    kind = data.get("kind")
+    try:
+        if kind == "curve":
+            control = _array(data["control_points"])
+            weights = data.get("weights")
+            return CurveArrays(int(data["degree"]), control,
+                               np.ones(control.shape[:-1]) if weights is None else _array(weights),
+                               _array(data["knots"]))
+        if kind == "surface":
+            control = _array(data["control_points"])
+            weights = data.get("weights")
+            return SurfaceArrays(int(data["degree_u"]), int(data["degree_v"]), control,
+                                 np.ones(control.shape[:-1]) if weights is None
+                                 else _array(weights),
+                                 _array(data["knots_u"]), _array(data["knots_v"]))
+    except KeyError as exc:
+        raise ValueError(f"a {kind} needs {exc.args[0]!r}") from None
+    raise ValueError(f"unknown geometry kind {kind!r} (expected 'curve' or 'surface')")
+
