@@ -42,7 +42,14 @@ CURVE_LOSS = "chamfer+p2s"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from nurbs_core.fitting.config import DEFAULT_LOSS, PAPER_POINT_CLOUD_LOSS
+    from nurbs_core.fitting.config import (
+        DEFAULT_LOSS,
+        INITS,
+        OPTIMIZERS,
+        PAPER_POINT_CLOUD_LOSS,
+        PARAMETERIZATIONS,
+        SOLVERS,
+    )
 
     parser = argparse.ArgumentParser(
         prog="nurbs-fit", description="Fit a NURBS surface (or curve) to a point cloud.",
@@ -64,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
                              f"'{CURVE_LOSS}'); the paper's composite: "
                              f"'{PAPER_POINT_CLOUD_LOSS}'")
     parser.add_argument("--optimizer", default="adam",
-                        choices=["sgd", "momentum", "adam", "adagrad", "lbfgs"])
+                        choices=OPTIMIZERS)
     parser.add_argument("--learning-rate", type=float, default=None,
                         help="step size (default 0.01; 1.0 for lbfgs)")
     parser.add_argument("--tolerance", type=float, default=None, metavar="T",
@@ -76,7 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--stiffness", type=float, default=None, metavar="S",
                         help="fairing weight (thin plate + membrane) of the least-squares "
                              "core, relative to the data (default 1e-3; larger is smoother)")
-    parser.add_argument("--parameterization", default="auto", choices=["auto", "mesh", "plane"],
+    parser.add_argument("--parameterization", default="auto", choices=PARAMETERIZATIONS,
                         help="(u, v) of an unordered surface cloud: 'mesh' maps the cloud's "
                              "triangle mesh onto the unit square without folds (the default "
                              "'auto'), 'plane' projects onto the principal plane")
@@ -98,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seam-weight", type=float, default=None, metavar="W",
                         help="weight of tangent continuity across seams with --patches "
                              "(default 2)")
-    parser.add_argument("--solver", default="auto", choices=["auto", "least_squares", "gradient"],
+    parser.add_argument("--solver", default="auto", choices=SOLVERS,
                         help="'least_squares': fairing least squares with parameter correction; "
                              "'gradient': the torch optimisation from that start; 'auto' adds "
                              "the gradient fit only for a non-default loss or free knots/weights")
@@ -108,7 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "grid; with --control-points the grid is kept unless this is given)")
     parser.add_argument("--loss-tolerance", type=float, default=1e-7,
                         help="relative loss change that counts as converged (gradient fit)")
-    parser.add_argument("--init", default="pca", choices=["pca", "random", "least_squares"])
+    parser.add_argument("--init", default="pca", choices=INITS)
     parser.add_argument("--free-knots", action="store_true", help="optimize the interior knots")
     parser.add_argument("--free-weights", action="store_true", help="optimize the weights")
     parser.add_argument("--pin-boundary", action="store_true",
