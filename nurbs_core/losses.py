@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import torch
@@ -37,7 +38,8 @@ from nurbs_core.fitting.config import LOSS_TERMS, Loss
 # Pointwise losses
 
 
-def _check_paired(predicted: torch.Tensor, target: torch.Tensor):
+def _check_paired(predicted: torch.Tensor, target: torch.Tensor) -> None:
+    """ValueError unless predicted and target are both (N, d) with N >= 1."""
     if predicted.shape != target.shape:
         raise ValueError(f"paired losses need equal shapes, got {tuple(predicted.shape)} and "
                          f"{tuple(target.shape)}")
@@ -68,6 +70,7 @@ def mse_loss(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 
 def _numpy(points: torch.Tensor) -> np.ndarray:
+    """A detached float64 CPU copy of points (N, d)."""
     return points.detach().cpu().double().numpy()
 
 
@@ -215,20 +218,24 @@ class LossInputs:
         return cached
 
 
-def _need(inputs: LossInputs, name: str, term: str):
+def _need(inputs: LossInputs, name: str, term: str) -> torch.Tensor:
+    """The tensor ``inputs.<name>``, or ValueError when the fit does not provide it for ``term``."""
     value = getattr(inputs, name)
     if value is None:
         raise ValueError(f"loss term {term!r} needs {name}, which this fit does not provide")
-    return value
+    return cast(torch.Tensor, value)
 
 
-def _paired(fn):
+def _paired(fn: Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
+            ) -> Callable[[LossInputs, str], torch.Tensor]:
+    """A term of (LossInputs, name) from a paired loss of predicted, target (N, d)."""
     def term(inputs: LossInputs, name: str) -> torch.Tensor:
         return fn(_need(inputs, "paired_predicted", name), _need(inputs, "paired_target", name))
     return term
 
 
-def _set(reduce):
+def _set(reduce: Callable[[torch.Tensor], torch.Tensor]) -> Callable[[LossInputs, str], torch.Tensor]:
+    """A two-sided set term of (LossInputs, name) from a reduction of nearest distances (M,)."""
     def term(inputs: LossInputs, name: str) -> torch.Tensor:
         forward, backward = inputs.set_distances(name)
         return reduce(forward) + reduce(backward)
@@ -260,7 +267,7 @@ if {name: kind for name, (_, kind) in TERMS.items()} != LOSS_TERMS:  # pragma: n
 class CompositeLoss:
     """A weighted sum of named terms. ``loss(inputs) -> (total, {name: value tensor})``."""
 
-    def __init__(self, terms: list[tuple[float, str]]):
+    def __init__(self, terms: list[tuple[float, str]]) -> None:
         if not terms:
             raise ValueError("a loss needs at least one term")
         self.terms = list(terms)
@@ -282,9 +289,10 @@ class CompositeLoss:
             value = TERMS[name][0](inputs, name)
             values[name] = value
             total = weight * value if total is None else total + weight * value
+        assert total is not None, "a loss has at least one term"
         return total, values
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return "CompositeLoss(" + " + ".join(f"{w:g}*{n}" for w, n in self.terms) + ")"
 
 

@@ -17,6 +17,7 @@ import torch; ``fit`` and ``iter_fit`` do.
 from __future__ import annotations
 
 import importlib
+from typing import Any
 
 _LAZY = {
     "DEFAULT_LOSS": "config",
@@ -37,7 +38,7 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> Any:
     if name not in _LAZY:
         raise AttributeError(f"module 'nurbs_core.fitting' has no attribute {name!r}")
     value = getattr(importlib.import_module(f"nurbs_core.fitting.{_LAZY[name]}"), name)

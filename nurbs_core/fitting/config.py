@@ -242,7 +242,7 @@ class FitConfig:
         """A copy with ``changes``; custom knots that no longer fit the degree or the control
         count are dropped (back to the uniform ones)."""
         new = dataclasses.replace(self, **changes)
-        drop = {}
+        drop: dict[str, Any] = {}
         for d in ("u", "v"):
             knots = getattr(new, f"knots_{d}")
             count = getattr(new, f"control_points_{d}") + getattr(new, f"degree_{d}") + 1
@@ -275,14 +275,14 @@ class FitConfig:
 
     def validate(self) -> None:
         """Raise ValueError naming the first bad setting."""
-        def integer(name, minimum):
+        def integer(name: str, minimum: int) -> None:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
                 raise ValueError(f"{name} must be an integer, got {value!r}")
             if value < minimum:
                 raise ValueError(f"{name} must be at least {minimum}, got {value}")
 
-        def choice(name, options):
+        def choice(name: str, options: tuple[str, ...]) -> None:
             if getattr(self, name) not in options:
                 raise ValueError(f"{name} must be one of {', '.join(options)}; got "
                                  f"{getattr(self, name)!r}")
@@ -353,7 +353,7 @@ class FitConfig:
 class StopToken:
     """Thread-safe stop / pause switch checked by :func:`iter_fit` every iteration."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self._stop = threading.Event()
         self._running = threading.Event()
         self._running.set()

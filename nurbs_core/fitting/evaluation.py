@@ -27,6 +27,7 @@ from nurbs_core.fitting.least_squares import least_squares_fit
 from nurbs_core.fitting.model import TrainableGeometry
 from nurbs_core.fitting.problem import Problem
 from nurbs_core.fitting.projection import curve_newton, surface_gauss_newton
+from nurbs_core.geometry import NurbsCurve, NurbsSurface
 from nurbs_core.surfacing.core import MEMBRANE_RATIO
 from nurbs_core.surfacing.fairing import fairing_matrices
 
@@ -128,7 +129,7 @@ class Evaluation:
         geometry = self.model.geometry()
         index = slice(None) if batch is None else batch
         points = self.problem.points[index]
-        if self.model.is_curve:
+        if isinstance(geometry, NurbsCurve):
             params[index] = curve_newton(geometry, points, params[index])
         else:
             u, v = surface_gauss_newton(geometry, points, params[index, 0], params[index, 1])
@@ -142,6 +143,7 @@ class Evaluation:
         points = problem.points.double().numpy()
         params = problem.parameters.double().numpy()
         degrees = _degrees(model)
+        solved: NurbsCurve | NurbsSurface
         if model.is_curve:
             solved = least_squares_fit(points, params, degrees[0], None,
                                        model.control_points.shape[0], None, knots[0],

@@ -7,17 +7,21 @@ fixed knots): the accuracy yardstick for gradient fits. The collocation matrix i
 
 from __future__ import annotations
 
+from typing import Literal, overload
+
 import numpy as np
 import scipy.sparse
 import torch
+from numpy.typing import ArrayLike
 
 from nurbs_core.basis import basis_functions, find_span
 from nurbs_core.geometry import NurbsCurve, NurbsSurface
 from nurbs_core.knots import check_knots, clamped_uniform
 
 
-def compact_basis(knots, degree: int, parameters) -> tuple[np.ndarray, np.ndarray]:
-    """Spans (M,) int and non-zero basis values (M, p + 1) at ``parameters`` (float64 numpy)."""
+def compact_basis(knots: ArrayLike, degree: int, parameters: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Spans (M,) int and non-zero basis values (M, p + 1) at ``parameters`` (M,) (float64 numpy),
+    for a knot vector (n + p + 1,)."""
     # grid and scanline data repeat parameter values: evaluate each distinct value once
     values, inverse = np.unique(np.asarray(parameters, np.float64), return_inverse=True)
     U = torch.as_tensor(np.asarray(knots, np.float64)).unsqueeze(0)
@@ -40,8 +44,13 @@ def grid_axes(parameters: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     return None
 
 
-def collocation_matrix(knots, degree, parameters, knots_v=None, degree_v=None, parameters_v=None):
-    """Sparse CSR collocation matrix: (M, n) for curves, (M, n*m) for surfaces (col i*m + j)."""
+def collocation_matrix(knots: np.ndarray, degree: int, parameters: np.ndarray,
+                       knots_v: np.ndarray | None = None, degree_v: int | None = None,
+                       parameters_v: np.ndarray | None = None) -> scipy.sparse.csr_matrix:
+    """Sparse CSR collocation matrix: (M, n) for curves, (M, n*m) for surfaces (col i*m + j).
+
+    knots (n + p + 1,), parameters (M,); for surfaces also knots_v (m + q + 1,), degree_v q and
+    parameters_v (M,)."""
     span_u, basis_u = compact_basis(knots, degree, parameters)
     n = len(knots) - degree - 1
     rows = np.arange(len(span_u))
@@ -49,6 +58,7 @@ def collocation_matrix(knots, degree, parameters, knots_v=None, degree_v=None, p
     if knots_v is None:
         return scipy.sparse.csr_matrix(
             (basis_u.ravel(), (np.repeat(rows, degree + 1), cols_u.ravel())), shape=(len(rows), n))
+    assert degree_v is not None and parameters_v is not None, "a surface needs degree_v and parameters_v"
     span_v, basis_v = compact_basis(knots_v, degree_v, parameters_v)
     m = len(knots_v) - degree_v - 1
     cols_v = span_v[:, None] - degree_v + np.arange(degree_v + 1)
@@ -59,14 +69,19 @@ def collocation_matrix(knots, degree, parameters, knots_v=None, degree_v=None, p
 
 
 def _second_difference(count: int) -> scipy.sparse.csr_matrix:
+    """Second-difference operator (count - 2, count) (empty for count < 3)."""
     if count < 3:
         return scipy.sparse.csr_matrix((0, count))
     eye = scipy.sparse.eye(count, format="csr")
     return (eye[:-2] - 2 * eye[1:-1] + eye[2:]).tocsr()
 
 
-def _solve(matrix, points, smoothing_matrix=None, smoothing=0.0):
-    """Least squares via the normal equations (tiny: one unknown per control point)."""
+def _solve(matrix: scipy.sparse.csr_matrix, points: np.ndarray,
+           smoothing_matrix: scipy.sparse.csr_matrix | None = None,
+           smoothing: float = 0.0) -> np.ndarray:
+    """Least squares via the normal equations (tiny: one unknown per control point).
+
+    matrix (M, n), points (M, k) -> solution (n, k); smoothing_matrix (r, n) penalty rows."""
     normal = (matrix.T @ matrix).toarray()
     rhs = matrix.T @ points
     if smoothing > 0 and smoothing_matrix is not None and smoothing_matrix.shape[0]:
@@ -80,7 +95,10 @@ def _solve(matrix, points, smoothing_matrix=None, smoothing=0.0):
         return np.linalg.lstsq(normal, rhs, rcond=None)[0]
 
 
-def _knots_for(knots, count, degree, parameters, name):
+def _knots_for(knots: ArrayLike | None, count: int, degree: int, parameters: np.ndarray,
+               name: str) -> np.ndarray:
+    """The knot vector (count + degree + 1,) float64: ``knots`` checked against the parameters
+    (M,), or clamped uniform over their range."""
     if knots is not None:
         array = np.asarray(knots, np.float64)
         check_knots(torch.as_tensor(array), degree, count, name)
@@ -95,10 +113,27 @@ def _knots_for(knots, count, degree, parameters, name):
     return clamped_uniform(count, degree, (lo, hi)).numpy()
 
 
-def least_squares_fit(points, parameters, degree_u: int = 3, degree_v: int | None = 3,
-                      control_points_u: int = 12, control_points_v: int | None = 12,
-                      knots_u=None, knots_v=None, *, kind: str | None = None,
-                      smoothing: float = 0.0):
+@overload
+def least_squares_fit(points: ArrayLike, parameters: ArrayLike, degree_u: int = 3,
+                      degree_v: int | None = 3, control_points_u: int = 12,
+                      control_points_v: int | None = 12, knots_u: ArrayLike | None = None,
+                      knots_v: ArrayLike | None = None, *, kind: Literal["curve"],
+                      smoothing: float = 0.0) -> NurbsCurve: ...
+
+
+@overload
+def least_squares_fit(points: ArrayLike, parameters: ArrayLike, degree_u: int = 3,
+                      degree_v: int | None = 3, control_points_u: int = 12,
+                      control_points_v: int | None = 12, knots_u: ArrayLike | None = None,
+                      knots_v: ArrayLike | None = None, *, kind: str | None = None,
+                      smoothing: float = 0.0) -> NurbsCurve | NurbsSurface: ...
+
+
+def least_squares_fit(points: ArrayLike, parameters: ArrayLike, degree_u: int = 3,
+                      degree_v: int | None = 3, control_points_u: int = 12,
+                      control_points_v: int | None = 12, knots_u: ArrayLike | None = None,
+                      knots_v: ArrayLike | None = None, *, kind: str | None = None,
+                      smoothing: float = 0.0) -> NurbsCurve | NurbsSurface:
     """Exact L2 (least-squares) fit with fixed knots and known parameters.
 
     points (N, 3) with parameters (N, 2) -> NurbsSurface; points (N, d) with parameters (N,) (or
@@ -133,6 +168,7 @@ def least_squares_fit(points, parameters, degree_u: int = 3, degree_v: int | Non
     if points.shape[1] != 3:
         raise ValueError(f"surface points must be 3-D, got shape {points.shape}")
     n, m = control_points_u, control_points_v
+    assert degree_v is not None and m is not None, "a surface fit needs degree_v and control_points_v"
     for count, degree, d in ((n, degree_u, "u"), (m, degree_v, "v")):
         if count < degree + 1:
             raise ValueError(f"{count} control points in {d} cannot carry degree {degree}")
@@ -173,7 +209,8 @@ def principal_axes(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return centroid, vectors[:, order].T, np.sqrt(np.clip(values[order], 0, None))
 
 
-def pca_parameters(points: np.ndarray, dimensions: int) -> tuple[np.ndarray, np.ndarray]:
+def pca_parameters(points: np.ndarray,
+                   dimensions: int) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
     """Project on the first ``dimensions`` principal axes and rescale each to [0, 1].
 
     Returns parameters (N, dimensions) and the affine map (origin (d,), edges (dimensions, d)) so

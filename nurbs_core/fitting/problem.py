@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any, overload
 
 import numpy as np
 import torch
+from numpy.typing import ArrayLike
 
 from nurbs_core.fitting.config import FitConfig
 from nurbs_core.fitting.least_squares import (
@@ -55,7 +57,8 @@ class Problem:
         return self.points.shape[0]
 
 
-def _check_points(target, config: FitConfig) -> np.ndarray:
+def _check_points(target: ArrayLike, config: FitConfig) -> np.ndarray:
+    """The target points as (N, d) float64, or ValueError naming what is wrong with them."""
     try:
         points = np.asarray(target, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -91,7 +94,8 @@ def _check_points(target, config: FitConfig) -> np.ndarray:
     return points
 
 
-def _check_parameters(parameters, n: int, config: FitConfig) -> np.ndarray:
+def _check_parameters(parameters: ArrayLike, n: int, config: FitConfig) -> np.ndarray:
+    """Known parameters as (n,) (curves) or (n, 2) (surfaces) float64, or ValueError."""
     try:
         params = np.asarray(parameters, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -112,7 +116,9 @@ def _check_parameters(parameters, n: int, config: FitConfig) -> np.ndarray:
     return params
 
 
-def prepare(target, config: FitConfig, parameters=None) -> Problem:
+def prepare(target: ArrayLike, config: FitConfig, parameters: ArrayLike | None = None) -> Problem:
+    """Validate and normalise a fit's input: target points (N, d), known parameters (N, 2) /
+    (N,) or None."""
     config.validate()
     points = _check_points(target, config)
     dtype = torch.float32 if config.dtype == "float32" else torch.float64
@@ -153,12 +159,13 @@ def _uniform_knots(problem: Problem, config: FitConfig) -> list[np.ndarray]:
             for k in range(len(problem.domains))]
 
 
-def custom_knots(config: FitConfig, domains) -> list[np.ndarray] | None:
+def custom_knots(config: FitConfig,
+                 domains: Sequence[tuple[float, float]]) -> list[np.ndarray] | None:
     """The config's knot vectors mapped linearly onto ``domains`` ((lo, hi) per direction; a
     direction without custom knots gets clamped uniform ones), or None when it has none."""
     if not config.custom_knots:
         return None
-    result = []
+    result: list[np.ndarray] = []
     for k, (lo, hi) in enumerate(domains):
         d = "uv"[k]
         knots = getattr(config, f"knots_{d}")
@@ -172,8 +179,10 @@ def custom_knots(config: FitConfig, domains) -> list[np.ndarray] | None:
     return result
 
 
-def _plane_geometry(problem: Problem, config: FitConfig, knots):
-    """Plane (or line) through the cloud's principal axes, linearly parameterised."""
+def _plane_geometry(problem: Problem, config: FitConfig,
+                    knots: list[np.ndarray]) -> NurbsCurve | NurbsSurface:
+    """Plane (or line) through the cloud's principal axes, linearly parameterised (one knot
+    vector per direction)."""
     points = problem.points.double().numpy()
     dims = len(knots)
     _, (origin, edges) = pca_parameters(points, dims)
@@ -188,8 +197,10 @@ def _plane_geometry(problem: Problem, config: FitConfig, knots):
     return NurbsSurface(control, *degrees, *knots, dtype=problem.dtype)
 
 
-def _random_geometry(problem: Problem, config: FitConfig, knots):
-    """Gaussian control points around the centroid (the paper's random start)."""
+def _random_geometry(problem: Problem, config: FitConfig,
+                     knots: list[np.ndarray]) -> NurbsCurve | NurbsSurface:
+    """Gaussian control points around the centroid (the paper's random start; one knot vector
+    per direction)."""
     gen = torch.Generator().manual_seed(config.seed)
     points = problem.points.double()
     centroid = points.mean(0)
@@ -206,6 +217,7 @@ def start_parameters(problem: Problem) -> np.ndarray:
     """Initial per-point parameters: the known ones, the backbone chord-length parameters of an
     unordered curve cloud, else the PCA projection in [0, 1]."""
     if problem.known:
+        assert problem.parameters is not None, "known parameters are set"
         return problem.parameters.double().numpy()
     if problem.path_parameters is not None:
         return problem.path_parameters
@@ -214,7 +226,9 @@ def start_parameters(problem: Problem) -> np.ndarray:
     return params[:, 0] if dims == 1 else params
 
 
-def initial_geometry(problem: Problem, config: FitConfig, initial=None):
+def initial_geometry(problem: Problem, config: FitConfig,
+                     initial: NurbsCurve | NurbsSurface | Mapping[str, Any] | None = None
+                     ) -> NurbsCurve | NurbsSurface:
     """Starting geometry in normalised coordinates (see FitConfig.init and iter_fit's initial)."""
     if initial is not None:
         return _from_initial(problem, config, initial)
@@ -236,7 +250,9 @@ def initial_geometry(problem: Problem, config: FitConfig, initial=None):
     return geometry.to(dtype=problem.dtype)
 
 
-def _from_initial(problem: Problem, config: FitConfig, initial):
+def _from_initial(problem: Problem, config: FitConfig, initial: object) -> NurbsCurve | NurbsSurface:
+    """The caller's start geometry (or its numpy dict), checked against the fit, conformed to the
+    config and normalised; sets ``problem.domains`` to its domains."""
     geometry = geometry_from_numpy(initial) if isinstance(initial, Mapping) else initial
     if not isinstance(geometry, (NurbsCurve, NurbsSurface)):
         raise ValueError(f"initial must be a NurbsCurve, NurbsSurface or their numpy dict, got "
@@ -248,13 +264,14 @@ def _from_initial(problem: Problem, config: FitConfig, initial):
     if len(geometry.batch_shape):
         raise ValueError("initial must be a single curve or surface, not a batch")
     geometry = geometry.detach().to(dtype=torch.float64)
-    if is_curve and geometry.dimension != problem.points.shape[1]:
+    if isinstance(geometry, NurbsCurve) and geometry.dimension != problem.points.shape[1]:
         raise ValueError(f"initial curve is {geometry.dimension}-D but the points are "
                          f"{problem.points.shape[1]}-D")
     geometry = conform(geometry, config)
     center = torch.as_tensor(problem.center)
     control = (geometry.control_points - center) / problem.scale
-    if is_curve:
+    normalised: NurbsCurve | NurbsSurface
+    if isinstance(geometry, NurbsCurve):
         normalised = NurbsCurve(control, geometry.degree, geometry.knots, geometry.weights)
         domains = [geometry.domain]
     else:
@@ -262,6 +279,7 @@ def _from_initial(problem: Problem, config: FitConfig, initial):
                                   geometry.knots_v, geometry.weights)
         domains = list(geometry.domain)
     if problem.known:
+        assert problem.parameters is not None, "known parameters are set"
         columns = problem.parameters.double().numpy().reshape(problem.count, -1)
         for k, (lo, hi) in enumerate(domains):
             tol = 1e-9 * (hi - lo)
@@ -272,7 +290,15 @@ def _from_initial(problem: Problem, config: FitConfig, initial):
     return normalised.to(dtype=problem.dtype)
 
 
-def conform(geometry, config: FitConfig):
+@overload
+def conform(geometry: NurbsCurve, config: FitConfig) -> NurbsCurve: ...
+
+
+@overload
+def conform(geometry: NurbsSurface, config: FitConfig) -> NurbsSurface: ...
+
+
+def conform(geometry: NurbsCurve | NurbsSurface, config: FitConfig) -> NurbsCurve | NurbsSurface:
     """Bring ``geometry`` to the config's degrees, control counts and custom knots (if any):
     exactly when degree elevation and knot insertion (midpoints of the widest spans) get there
     without custom knots, otherwise by least squares on dense samples of it (non-rational
@@ -281,47 +307,54 @@ def conform(geometry, config: FitConfig):
     target_degrees = (config.degree_u,) if is_curve else (config.degree_u, config.degree_v)
     target_counts = ((config.control_points_u,) if is_curve
                      else (config.control_points_u, config.control_points_v))
-    degrees = (geometry.degree,) if is_curve else (geometry.degree_u, geometry.degree_v)
-    counts = (geometry.n_control_points,) if is_curve else tuple(geometry.shape)
-    domains = [geometry.domain] if is_curve else list(geometry.domain)
+    degrees = ((geometry.degree,) if isinstance(geometry, NurbsCurve)
+               else (geometry.degree_u, geometry.degree_v))
+    counts = ((geometry.n_control_points,) if isinstance(geometry, NurbsCurve)
+              else tuple(geometry.shape))
+    domains = [geometry.domain] if isinstance(geometry, NurbsCurve) else list(geometry.domain)
     knots = custom_knots(config, domains)
     if degrees == target_degrees and counts == target_counts:
-        current = [geometry.knots] if is_curve else [geometry.knots_u, geometry.knots_v]
+        current = ([geometry.knots] if isinstance(geometry, NurbsCurve)
+                   else [geometry.knots_u, geometry.knots_v])
         if knots is None or all(np.allclose(c.detach().cpu().double().numpy(), k, atol=1e-12)
                                 for c, k in zip(current, knots, strict=True)):
             return geometry
     raise_by = [t - d for t, d in zip(target_degrees, degrees, strict=True)]
     if knots is None and all(r >= 0 for r in raise_by):
-        elevated = (geometry.elevate_degree(raise_by[0]) if is_curve
+        elevated = (geometry.elevate_degree(raise_by[0]) if isinstance(geometry, NurbsCurve)
                     else geometry.elevate_degree(*raise_by))
-        new_counts = ((elevated.n_control_points,) if is_curve else tuple(elevated.shape))
+        new_counts = ((elevated.n_control_points,) if isinstance(elevated, NurbsCurve)
+                      else tuple(elevated.shape))
         if all(n <= t for n, t in zip(new_counts, target_counts, strict=True)):
             return _insert_to_counts(elevated, target_counts)
     # least squares on samples of the initial geometry
-    knots = [None, None] if knots is None else knots + [None] * (2 - len(knots))
+    padded: list[np.ndarray | None] = ([None, None] if knots is None
+                                       else [*knots, *[None] * (2 - len(knots))])
     density = [max(4 * c, 64) for c in target_counts]
-    if is_curve:
+    if isinstance(geometry, NurbsCurve):
         lo, hi = geometry.domain
         u = np.linspace(lo, hi, density[0])
         points = geometry.evaluate(torch.as_tensor(u)).detach().numpy()
         return least_squares_fit(points, u, config.degree_u, None, config.control_points_u, None,
-                                 knots[0], kind="curve")
+                                 padded[0], kind="curve")
     (u0, u1), (v0, v1) = geometry.domain
     u, v = np.linspace(u0, u1, density[0]), np.linspace(v0, v1, density[1])
     points = geometry.evaluate_grid(torch.as_tensor(u), torch.as_tensor(v)).detach().numpy()
     uu, vv = np.meshgrid(u, v, indexing="ij")
     return least_squares_fit(points.reshape(-1, 3), np.stack([uu.ravel(), vv.ravel()], -1),
                              config.degree_u, config.degree_v, config.control_points_u,
-                             config.control_points_v, *knots)
+                             config.control_points_v, *padded)
 
 
 def _widest_span_midpoint(knots: torch.Tensor) -> float:
+    """Midpoint of the widest knot span of a knot vector (n + p + 1,)."""
     breaks = np.unique(knots.detach().cpu().double().numpy())
     widest = int(np.argmax(np.diff(breaks)))
     return 0.5 * (breaks[widest] + breaks[widest + 1])
 
 
-def _insert_to_counts(geometry, target_counts):
+def _insert_to_counts(geometry: NurbsCurve | NurbsSurface,
+                      target_counts: tuple[int, ...]) -> NurbsCurve | NurbsSurface:
     """Exact knot insertion until the control counts reach ``target_counts`` (each >= current)."""
     if isinstance(geometry, NurbsCurve):
         while geometry.n_control_points < target_counts[0]:

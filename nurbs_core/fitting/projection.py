@@ -8,9 +8,11 @@ memory stays bounded for millions of points; the cost is linear in the number of
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import torch
+from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from nurbs_core.evaluate import curve_derivatives, surface_derivatives
@@ -20,6 +22,7 @@ CHUNK = 131072
 
 
 def _domain_of(knots: torch.Tensor, degree: int) -> tuple[float, float]:
+    """The domain [U_p, U_n] of a knot vector (n + p + 1,)."""
     k = knots.detach().reshape(-1)
     return float(k[degree]), float(k[k.shape[0] - degree - 1])
 
@@ -97,7 +100,10 @@ def curve_newton(curve: NurbsCurve, points: torch.Tensor, u: torch.Tensor,
     return u
 
 
-def _sample_grid(geometry, density: int):
+def _sample_grid(geometry: NurbsCurve | NurbsSurface,
+                 density: int) -> tuple[torch.Tensor, tuple[torch.Tensor, ...]]:
+    """Samples (S, d) over the domain (``density`` per direction) and their parameters: (u (S,),)
+    for curves, (u (S,), v (S,)) for surfaces (S = density**2, u-major)."""
     if isinstance(geometry, NurbsCurve):
         lo, hi = _domain_of(geometry.knots, geometry.degree)
         u = torch.linspace(lo, hi, density, dtype=geometry.dtype)
@@ -110,7 +116,8 @@ def _sample_grid(geometry, density: int):
     return grid, (uu.reshape(-1), vv.reshape(-1))
 
 
-def project(geometry, points, steps: int = 6, density: int | None = None):
+def project(geometry: NurbsCurve | NurbsSurface | Mapping[str, Any], points: ArrayLike,
+            steps: int = 6, density: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Foot-point parameters and distances of points on a curve or surface.
 
     geometry: NurbsCurve / NurbsSurface (unbatched) or its numpy dict; points (N, d) array-like.
@@ -121,13 +128,14 @@ def project(geometry, points, steps: int = 6, density: int | None = None):
     geometry = geometry.detach().to(dtype=torch.float64)
     array = np.asarray(points, np.float64)
     is_curve = isinstance(geometry, NurbsCurve)
-    dim = geometry.dimension if is_curve else 3
+    dim = geometry.dimension if isinstance(geometry, NurbsCurve) else 3
     if array.ndim != 2 or array.shape[1] != dim:
         raise ValueError(f"points must have shape (N, {dim}), got {array.shape}")
     if not np.isfinite(array).all():
         raise ValueError("points contain NaN or inf")
     if density is None:
-        count = geometry.n_control_points if is_curve else max(geometry.shape)
+        count = (geometry.n_control_points if isinstance(geometry, NurbsCurve)
+                 else max(geometry.shape))
         density = int(min(max(8 * count, 64), 4096 if is_curve else 256))
     samples, sample_params = _sample_grid(geometry, density)
     tree = cKDTree(samples.numpy())
@@ -138,7 +146,7 @@ def project(geometry, points, steps: int = 6, density: int | None = None):
         chunk = torch.as_tensor(array[start:start + CHUNK])
         _, index = tree.query(chunk.numpy(), k=1, workers=-1)
         index = torch.as_tensor(index)
-        if is_curve:
+        if isinstance(geometry, NurbsCurve):
             u = curve_newton(geometry, chunk, sample_params[0][index], steps)
             foot = geometry.evaluate(u).detach()
             params[start:start + CHUNK] = u.numpy()
@@ -151,6 +159,7 @@ def project(geometry, points, steps: int = 6, density: int | None = None):
     return params, distances
 
 
-def deviation(geometry, points) -> np.ndarray:
+def deviation(geometry: NurbsCurve | NurbsSurface | Mapping[str, Any],
+              points: ArrayLike) -> np.ndarray:
     """Distance (N,) from each point (N, d) to the curve / surface (foot-point projection)."""
     return project(geometry, points)[1]

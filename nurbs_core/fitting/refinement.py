@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import torch
+from numpy.typing import ArrayLike
 
 from nurbs_core.fitting.projection import project
-from nurbs_core.geometry import NurbsCurve, geometry_from_numpy
+from nurbs_core.geometry import NurbsCurve, NurbsSurface, geometry_from_numpy
 
 
 def _worst_span_midpoint(knots: np.ndarray, degree: int, params: np.ndarray,
@@ -22,7 +24,8 @@ def _worst_span_midpoint(knots: np.ndarray, degree: int, params: np.ndarray,
     return 0.5 * (breaks[worst] + breaks[worst + 1])
 
 
-def refine(geometry, points, parameters=None, count: int = 1):
+def refine(geometry: NurbsCurve | NurbsSurface | Mapping[str, Any], points: ArrayLike,
+           parameters: ArrayLike | None = None, count: int = 1) -> NurbsCurve | NurbsSurface:
     """Insert ``count`` knots per direction, each in the span with the largest error.
 
     geometry: NurbsCurve / NurbsSurface (or numpy dict); points (N, d); parameters: known (N, 2) /

@@ -14,6 +14,7 @@ import math
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -44,7 +45,7 @@ NOISE_TOLERANCE = 3.0
 MIN_TOLERANCE = 1e-5
 
 
-def uses_core(problem: Problem, config: FitConfig, initial) -> bool:
+def uses_core(problem: Problem, config: FitConfig, initial: object) -> bool:
     """Whether this fit starts with the least-squares core (unordered surface clouds)."""
     if config.kind != "surface" or problem.known or initial is not None:
         return False
@@ -104,6 +105,7 @@ def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
                                                                    replace=False))
     fitted = points if subset is None else points[subset]
     if start.mesh is not None:
+        assert start.mesh_uv is not None, "a mesh start carries the (u, v) of its vertices"
         start.parameters = interpolate_parameters(fitted, start.mesh, start.mesh_uv)
     else:
         start.parameters = pca_parameters(fitted, 2)[0]
@@ -113,6 +115,8 @@ def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
 
 def _sheet_start(points: np.ndarray, config: FitConfig,
                  corners: np.ndarray | None = None) -> SheetStart:
+    """The start for points (N, 3): (u, v) from the principal plane or the mesh map of the points,
+    with ``corners`` (4, 3) pinned to the corners of the unit square when given."""
     if config.parameterization == "plane":
         return SheetStart(pca_parameters(points, 2)[0], None)
     try:
@@ -160,7 +164,7 @@ def is_height_field(points: np.ndarray, agree: float = 0.98) -> bool:
 
 
 def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop: StopToken,
-                   started: float, result: dict) -> Iterator[FitSnapshot]:
+                   started: float, result: dict[str, Any]) -> Iterator[FitSnapshot]:
     """Run the least-squares passes, yielding a snapshot per pass (never ``done``). Fills
     ``result`` with "geometry" (NurbsSurface, normalised), "parameters" ((N, 2) for every point,
     None when a large cloud was fitted on a subset), "distances" (N,) for every point,
@@ -178,10 +182,11 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
     spacing = start.mesh.spacing if start.mesh is not None else median_spacing(pass_points)
     degrees = (config.degree_u, config.degree_v)
     limit = max(int(math.sqrt(len(pass_points) / 8)), max(degrees) + 1)
-    grid = tuple(min(c, max(limit, d + 1)) for c, d in
-                 zip((config.control_points_u, config.control_points_v), degrees, strict=True))
+    grid = cast(tuple[int, int], tuple(
+        min(c, max(limit, d + 1))
+        for c, d in zip((config.control_points_u, config.control_points_v), degrees, strict=True)))
     if config.max_control_points and not config.custom_knots:
-        max_grid = tuple(max(config.max_control_points, g) for g in grid)
+        max_grid = cast(tuple[int, int], tuple(max(config.max_control_points, g) for g in grid))
     else:
         max_grid = grid
     core = LeastSquaresCore(pass_points, pass_params, degrees, grid, config.stiffness,
@@ -207,6 +212,7 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
                               status="paused", message="paused", stage="least_squares")
             while stop.paused and not stop.stopped:
                 stop.wait_while_paused(0.1)
+    assert last is not None, "the core runs at least one pass"
     result["records"] = [_record(last, core.fairing_scale)]
     surface = last.geometry
     if config.custom_knots:  # the start of the gradient fit on the user's knots
