@@ -21,15 +21,24 @@ from __future__ import annotations
 import json
 import os
 import sys
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
+if TYPE_CHECKING:  # the script imports only numpy at start (and nothing of nurbs_core: run with -I)
+    import rhino3dm
 
-def _sequence(array) -> np.ndarray:
+#: OpenCASCADE objects (OCP ships no type information): shapes, geometry, arrays.
+OccObject = Any
+#: One item of the reply .npz: key (without the ``_<k>`` suffix) -> array.
+Arrays = dict[str, np.ndarray]
+
+
+def _sequence(array: OccObject) -> np.ndarray:
     return np.array([array.Value(k) for k in range(array.Lower(), array.Upper() + 1)])
 
 
-def _surface_arrays(surface) -> dict:
+def _surface_arrays(surface: OccObject) -> Arrays:
     if surface.IsUPeriodic() or surface.IsVPeriodic():
         surface = surface.Copy()
         if surface.IsUPeriodic():
@@ -50,7 +59,7 @@ def _surface_arrays(surface) -> dict:
             "degrees": np.array([surface.UDegree(), surface.VDegree()])}
 
 
-def _curve_arrays(curve) -> dict:
+def _curve_arrays(curve: OccObject) -> Arrays:
     if curve.IsPeriodic():
         curve = curve.Copy()
         curve.SetNotPeriodic()
@@ -66,7 +75,7 @@ class ReadError(Exception):
     pass
 
 
-def _read_shape(path: str, kind: str):
+def _read_shape(path: str, kind: str) -> OccObject:
     from OCP.IFSelect import IFSelect_ReturnStatus
     from OCP.IGESControl import IGESControl_Reader
     from OCP.STEPControl import STEPControl_Reader
@@ -81,7 +90,7 @@ def _read_shape(path: str, kind: str):
     return reader.OneShape()
 
 
-def _bspline_surface_of_face(face):
+def _bspline_surface_of_face(face: OccObject) -> OccObject | None:
     from OCP.BRep import BRep_Tool
     from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
     from OCP.Geom import Geom_BSplineSurface
@@ -95,7 +104,7 @@ def _bspline_surface_of_face(face):
     return surface if isinstance(surface, Geom_BSplineSurface) else None
 
 
-def read_items(path: str, kind: str) -> list[dict]:
+def read_items(path: str, kind: str) -> list[Arrays]:
     """Every face's untrimmed B-spline surface; the edges as curves when there are no faces."""
     from OCP.BRep import BRep_Tool
     from OCP.BRepAdaptor import BRepAdaptor_Curve
@@ -106,7 +115,7 @@ def read_items(path: str, kind: str) -> list[dict]:
     from OCP.TopoDS import TopoDS
 
     shape = _read_shape(path, kind)
-    items = []
+    items: list[Arrays] = []
     explorer = TopExp_Explorer(shape, TopAbs_ShapeEnum.TopAbs_FACE)
     while explorer.More():
         surface = _bspline_surface_of_face(TopoDS.Face(explorer.Current()))
@@ -147,22 +156,23 @@ def _check_point_count(count: int, available: int, what: str) -> None:
                         "bytes (damaged)")
 
 
-def _rhino_knots(knots) -> np.ndarray:
+def _rhino_knots(knots: rhino3dm.NurbsCurveKnotList | rhino3dm.NurbsSurfaceKnotList) -> np.ndarray:
     """openNURBS keeps n + p - 1 knots: the full vector repeats the first and last one."""
-    inner = np.asarray(knots.ToList(), dtype=np.float64).reshape(-1)
+    # rhino3dm's stubs lack the knot lists' ToList
+    inner = np.asarray(knots.ToList(), dtype=np.float64).reshape(-1)  # type: ignore[union-attr]
     if inner.size == 0:
         raise ReadError("an empty knot vector")
     return np.concatenate([inner[:1], inner, inner[-1:]])
 
 
-def _euclidean(homogeneous: np.ndarray, what: str):
+def _euclidean(homogeneous: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray]:
     weights = homogeneous[..., 3]
     if not (weights > 0).all():
         raise ReadError(f"{what}: non-positive or NaN weights")
     return homogeneous[..., :3] / weights[..., None], weights
 
 
-def _rhino_surface(surface, what: str, available: int) -> dict:
+def _rhino_surface(surface: rhino3dm.Surface | None, what: str, available: int) -> Arrays:
     import rhino3dm
 
     if surface is None:
@@ -170,7 +180,7 @@ def _rhino_surface(surface, what: str, available: int) -> dict:
     nurbs = surface if isinstance(surface, rhino3dm.NurbsSurface) else surface.ToNurbsSurface()
     if nurbs is None:
         raise ReadError(f"{what}: could not be converted to a NURBS surface")
-    points = nurbs.Points
+    points: Any = nurbs.Points  # rhino3dm's stubs lack the list's __getitem__
     n_u, n_v = int(points.CountU), int(points.CountV)
     if n_u < 2 or n_v < 2:
         raise ReadError(f"{what}: a {n_u} x {n_v} control net is not a surface")
@@ -186,13 +196,13 @@ def _rhino_surface(surface, what: str, available: int) -> dict:
             "degrees": np.array([nurbs.OrderU - 1, nurbs.OrderV - 1]), "label": np.array(what)}
 
 
-def _rhino_curve(curve, what: str, available: int) -> dict:
+def _rhino_curve(curve: rhino3dm.Curve, what: str, available: int) -> Arrays:
     import rhino3dm
 
     nurbs = curve if isinstance(curve, rhino3dm.NurbsCurve) else curve.ToNurbsCurve()
     if nurbs is None:
         raise ReadError(f"{what}: could not be converted to a NURBS curve")
-    points = nurbs.Points
+    points: Any = nurbs.Points  # rhino3dm's stubs lack the list's __len__ and __getitem__
     count = len(points)
     _check_point_count(count, available, what)
     homogeneous = np.array([(points[k].X, points[k].Y, points[k].Z, points[k].W)
@@ -205,7 +215,7 @@ def _rhino_curve(curve, what: str, available: int) -> dict:
             "label": np.array(what)}
 
 
-def _rhino_object(obj, index: int, available: int) -> list[dict]:
+def _rhino_object(obj: rhino3dm.File3dmObject, index: int, available: int) -> list[Arrays]:
     """The surfaces and curves of one model object (none for meshes, points, annotations...)."""
     import rhino3dm
 
@@ -216,10 +226,11 @@ def _rhino_object(obj, index: int, available: int) -> list[dict]:
         geometry = geometry.ToBrep(False)  # the caps are faces of its B-rep form only
         if geometry is None:
             raise ReadError(f"{what}: the capped extrusion has no B-rep form")
-    items = []
+    items: list[Arrays] = []
     if isinstance(geometry, rhino3dm.Brep):
-        for face_index in range(len(geometry.Faces)):
-            face = geometry.Faces[face_index]
+        faces: Any = geometry.Faces  # rhino3dm's stubs lack the list's __len__ and __getitem__
+        for face_index in range(len(faces)):
+            face = faces[face_index]
             items.append(_rhino_surface(face.UnderlyingSurface(), f"{what} face {face_index}",
                                         available))
     elif isinstance(geometry, rhino3dm.Surface):  # NurbsSurface, Extrusion, Rev/Sum/Plane
@@ -231,7 +242,7 @@ def _rhino_object(obj, index: int, available: int) -> list[dict]:
     return items
 
 
-def read_3dm_items(path: str) -> tuple[list[dict], int]:
+def read_3dm_items(path: str) -> tuple[list[Arrays], int]:
     """(every surface and curve of a .3dm file, its number of objects)."""
     import rhino3dm
 
@@ -239,9 +250,9 @@ def read_3dm_items(path: str) -> tuple[list[dict], int]:
     model = rhino3dm.File3dm.Read(path)
     if model is None:
         raise ReadError("not a readable .3dm file (openNURBS could not open it)")
-    objects = model.Objects
+    objects: Any = model.Objects  # rhino3dm's stubs lack the table's __len__ and __getitem__
     count = len(objects)
-    items = []
+    items: list[Arrays] = []
     for index in range(count):
         try:
             items += _rhino_object(objects[index], index, available)
@@ -256,7 +267,7 @@ def read_3dm_items(path: str) -> tuple[list[dict], int]:
 # --- the worker loop ---------------------------------------------------------------------------
 
 
-def _cap_memory(budget):
+def _cap_memory(budget: int | None) -> tuple[int, int] | None:
     """Lower the soft address-space limit to the current size + ``budget`` bytes; returns the
     limits to restore (None where RLIMIT_AS or /proc is not available, or without a budget)."""
     if not budget:
@@ -277,14 +288,14 @@ def _cap_memory(budget):
         return None
 
 
-def _restore_memory(previous) -> None:
+def _restore_memory(previous: tuple[int, int] | None) -> None:
     if previous is not None:
         import resource
 
         resource.setrlimit(resource.RLIMIT_AS, previous)
 
 
-_QUIET = []
+_QUIET: list[bool] = []
 
 
 def _quiet_occ() -> None:
@@ -296,7 +307,7 @@ def _quiet_occ() -> None:
         _QUIET.append(True)
 
 
-def _handle(request: dict, replies) -> dict:
+def _handle(request: dict[str, Any], replies: TextIO) -> dict[str, Any]:
     kind = request["kind"]
     library = "openNURBS" if kind == "3dm" else "OpenCASCADE"
     try:  # imported before the memory cap: they map large libraries
@@ -309,13 +320,15 @@ def _handle(request: dict, replies) -> dict:
     replies.write(json.dumps({"reading": True}) + "\n")  # the read's time limit starts now
     previous = _cap_memory(request.get("memory"))
     try:
+        items: list[Arrays]
         if kind == "3dm":
             items, objects = read_3dm_items(request["path"])
         else:
             items = read_items(request["path"], kind)
             objects = len(items)
-        arrays = {f"{key}_{k}": value for k, item in enumerate(items)
-                  for key, value in item.items()}
+        # Any values: numpy's stubs match **kwds against allow_pickle otherwise
+        arrays: dict[str, Any] = {f"{key}_{k}": value for k, item in enumerate(items)
+                                  for key, value in item.items()}
         np.savez(request["output"], **arrays)
         return {"ok": True, "count": len(items), "objects": objects}
     except ReadError as exc:

@@ -24,9 +24,12 @@ import base64
 import struct
 import uuid
 import zlib
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any, SupportsInt
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 ARCHIVE_VERSION = 60
 
@@ -102,22 +105,22 @@ class BrepTopology:
 class _Chunk:
     """A chunk being built: own data bytes interleaved with nested chunks."""
 
-    def __init__(self, typecode: int):
+    def __init__(self, typecode: int) -> None:
         self.typecode = typecode
         self.parts: list[bytes | _Chunk] = []
 
-    def pack(self, fmt: str, *values) -> None:
+    def pack(self, fmt: str, *values: Any) -> None:
         self.parts.append(struct.pack("<" + fmt, *values))
 
-    def ints(self, values) -> None:
-        values = [int(v) for v in values]
-        self.pack(f"{len(values)}i", *values)
+    def ints(self, values: Iterable[SupportsInt]) -> None:
+        numbers = [int(v) for v in values]
+        self.pack(f"{len(numbers)}i", *numbers)
 
-    def doubles(self, values) -> None:
-        values = [float(v) for v in np.ravel(values)]
-        self.pack(f"{len(values)}d", *values)
+    def doubles(self, values: ArrayLike) -> None:
+        numbers = [float(v) for v in np.ravel(values)]
+        self.pack(f"{len(numbers)}d", *numbers)
 
-    def int_array(self, values) -> None:
+    def int_array(self, values: Sequence[int]) -> None:
         """ON_BinaryArchive::WriteArray of ints: the count, then the values."""
         self.ints([len(values), *values])
 
@@ -173,7 +176,8 @@ def _write_surface(data: _Chunk, surface: Nurbs) -> None:
     data.doubles(control)
 
 
-def _object_array(parent: _Chunk, items: list[Nurbs], class_id: uuid.UUID, write) -> None:
+def _object_array(parent: _Chunk, items: list[Nurbs], class_id: uuid.UUID,
+                  write: Callable[[_Chunk, Nurbs], None]) -> None:
     """ON_CurveArray / ON_SurfaceArray::Write."""
     chunk = parent.chunk(TCODE_ANONYMOUS_CHUNK)
     chunk.pack("B", 0x10)
@@ -239,10 +243,11 @@ def _write_brep(data: _Chunk, brep: BrepTopology) -> None:
     region.pack("B", 0)  # no region topology
 
 
-def encode_brep(brep: BrepTopology, opennurbs_version: int) -> dict:
+def encode_brep(brep: BrepTopology, opennurbs_version: int) -> dict[str, Any]:
     """The dictionary ``rhino3dm.CommonObject.Decode`` takes, holding ``brep``."""
     root = _Chunk(0)
     _write_brep(_object(root, BREP_CLASS), brep)
     (wrapper,) = root.parts
+    assert isinstance(wrapper, _Chunk)  # _object added the class chunk, nothing else
     return {"version": 10000, "archive3dm": ARCHIVE_VERSION, "opennurbs": opennurbs_version,
             "data": base64.b64encode(wrapper.to_bytes()).decode("ascii")}

@@ -12,9 +12,11 @@ from __future__ import annotations
 import contextlib
 import os
 import secrets
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
+
+from nurbs_core.io.errors import StrPath
 
 _WRITE_MODES = ("w", "wb", "wt")
 
@@ -53,7 +55,7 @@ def _fsync_path(path: Path, directory: bool = False) -> None:
 
 
 @contextlib.contextmanager
-def atomic_path(path) -> Iterator[Path]:
+def atomic_path(path: StrPath) -> Iterator[Path]:
     """Yield a temporary path next to ``path`` (with its suffix, so writers that pick the format
     from the name still work) for a writer that needs a file name; the file written there
     replaces ``path`` when the block succeeds. The writer may create, truncate or recreate the
@@ -63,7 +65,7 @@ def atomic_path(path) -> Iterator[Path]:
 
 
 @contextlib.contextmanager
-def atomic_write(path, mode: str = "wb", encoding: str | None = "utf-8") -> Iterator[IO]:
+def atomic_write(path: StrPath, mode: str = "wb", encoding: str | None = "utf-8") -> Iterator[IO[Any]]:
     """Yield an open file handle (``mode`` "wb" or "w"; text uses ``encoding``, default UTF-8)
     whose content replaces ``path`` once the block ends without an exception."""
     if mode not in _WRITE_MODES:
@@ -75,7 +77,7 @@ def atomic_write(path, mode: str = "wb", encoding: str | None = "utf-8") -> Iter
 
 
 @contextlib.contextmanager
-def atomic_paths(paths) -> Iterator[list[Path]]:
+def atomic_paths(paths: Iterable[StrPath]) -> Iterator[list[Path]]:
     """Temporary paths (one per target, each with its target's suffix) for writing several files
     all-or-nothing: the targets are replaced only after every file was written and flushed; if
     any write fails, no target changes and no temporary file is left behind."""

@@ -22,18 +22,28 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from nurbs_core.io.errors import FileFormatError, require_ocp
+from nurbs_core.io.errors import FileFormatError, StrPath, require_ocp
 from nurbs_core.io.limits import configured_size
+
+if TYPE_CHECKING:
+    from nurbs_core.geometry import NurbsCurve, NurbsSurface
+    from nurbs_core.io.geometry_io import GeometryInput
+
+#: OpenCASCADE objects (OCP ships no type information): shapes, geometry, arrays.
+OccObject = Any
 
 STEP_SUFFIXES = (".step", ".stp")
 IGES_SUFFIXES = (".iges", ".igs")
 
 
-def distinct_knots(knots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def distinct_knots(knots: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Full knot vector (m,) -> (distinct values, multiplicities), exact (no tolerance)."""
     values, counts = np.unique(np.asarray(knots, dtype=np.float64), return_counts=True)
     return values, counts
@@ -53,7 +63,7 @@ def quiet_occ() -> None:
     _QUIETED = True
 
 
-def _array1_double(values):
+def _array1_double(values: Sequence[float] | np.ndarray) -> OccObject:
     from OCP.collections import Array1_double
 
     array = Array1_double(1, len(values))
@@ -62,7 +72,7 @@ def _array1_double(values):
     return array
 
 
-def _array1_int(values):
+def _array1_int(values: Sequence[int] | np.ndarray) -> OccObject:
     from OCP.collections import Array1_int
 
     array = Array1_int(1, len(values))
@@ -71,8 +81,9 @@ def _array1_int(values):
     return array
 
 
-def occ_surface(data: dict):
-    """A ``Geom_BSplineSurface`` from a surface's ``numpy()`` dict."""
+def occ_surface(data: dict[str, Any]) -> OccObject:
+    """A ``Geom_BSplineSurface`` from a surface's ``numpy()`` dict (control points (n_u, n_v, 3),
+    weights (n_u, n_v), full knot vectors)."""
     from OCP.collections import Array2_double, Array2_gp_Pnt
     from OCP.Geom import Geom_BSplineSurface
     from OCP.gp import gp_Pnt
@@ -94,8 +105,9 @@ def occ_surface(data: dict):
                                int(data["degree_v"]), False, False)
 
 
-def occ_curve(data: dict):
-    """A ``Geom_BSplineCurve`` from a curve's ``numpy()`` dict (2-D curves get z = 0)."""
+def occ_curve(data: dict[str, Any]) -> OccObject:
+    """A ``Geom_BSplineCurve`` from a curve's ``numpy()`` dict (control points (n, 2) or (n, 3),
+    weights (n,); 2-D curves get z = 0)."""
     from OCP.collections import Array1_gp_Pnt
     from OCP.Geom import Geom_BSplineCurve
     from OCP.gp import gp_Pnt
@@ -111,7 +123,7 @@ def occ_curve(data: dict):
                              _array1_int(mults), int(data["degree"]), False)
 
 
-def _compound(items):
+def _compound(items: Iterable[NurbsCurve | NurbsSurface]) -> OccObject:
     from OCP.BRep import BRep_Builder
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace
     from OCP.TopoDS import TopoDS_Compound
@@ -135,7 +147,7 @@ def _compound(items):
     return compound
 
 
-def step_bytes(shape, path) -> bytes:
+def step_bytes(shape: OccObject, path: StrPath) -> bytes:
     """The STEP (AP214, millimetres) text of an OCP shape, every real written as %.16E (17
     significant digits, exact for float64); ``path`` names the file in errors (OSError).
 
@@ -163,7 +175,7 @@ def step_bytes(shape, path) -> bytes:
     return stream.getvalue()
 
 
-def iges_bytes(shape, path, brep: bool = False) -> bytes:
+def iges_bytes(shape: OccObject, path: StrPath, brep: bool = False) -> bytes:
     """The IGES (millimetres) text of an OCP shape, every real written as %.16E (17 significant
     digits, exact for float64); ``path`` names the file in errors (OSError). Faces are trimmed
     surfaces (entities 128 + 144), or with ``brep`` IGES 5.3 B-rep entities (shells 514 of faces
@@ -191,7 +203,7 @@ def iges_bytes(shape, path, brep: bool = False) -> bytes:
     return stream.getvalue()
 
 
-def write_step(geometry_or_list, path) -> None:
+def write_step(geometry_or_list: GeometryInput, path: StrPath) -> None:
     """STEP (AP214): the geometry as one compound of faces and edges (see :func:`step_bytes`)."""
     require_ocp("Writing STEP")
     from nurbs_core.io.geometry_io import as_geometry_list
@@ -201,7 +213,7 @@ def write_step(geometry_or_list, path) -> None:
         handle.write(data)
 
 
-def write_iges(geometry_or_list, path) -> None:
+def write_iges(geometry_or_list: GeometryInput, path: StrPath) -> None:
     """IGES: the geometry as trimmed surfaces and curves (see :func:`iges_bytes`)."""
     require_ocp("Writing IGES")
     from nurbs_core.io.geometry_io import as_geometry_list
@@ -257,12 +269,12 @@ class _ReaderProcess:
     hang or allocate without bound on damaged files: a crash or a timeout ends the child, not the
     program, and the next read starts a new one)."""
 
-    def __init__(self):
-        self._process: subprocess.Popen | None = None
+    def __init__(self) -> None:
+        self._process: subprocess.Popen[str] | None = None
         self._lock = threading.Lock()
         self._pending = b""  # bytes the child wrote past its last complete line
 
-    def _start(self) -> subprocess.Popen:
+    def _start(self) -> subprocess.Popen[str]:
         script = Path(__file__).with_name("_occ_reader.py")
         # few malloc arenas: each reserves address space, which the child's memory cap counts
         environment = {**os.environ, "MALLOC_ARENA_MAX": "2"}
@@ -271,18 +283,20 @@ class _ReaderProcess:
                                 stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                                 bufsize=1, env=environment)
 
-    def _kill(self, process) -> None:
+    def _kill(self, process: subprocess.Popen[str]) -> None:
         process.kill()
         process.wait()
         self._process = None
 
-    def _reply(self, process, timeout: float, cpu: bool = False):
+    def _reply(self, process: subprocess.Popen[str], timeout: float,
+               cpu: bool = False) -> dict[str, Any] | Literal["timeout"] | None:
         """The child's next line as a dict; None when it died, "timeout" when it took too long:
         ``timeout`` seconds, of the child's CPU time with ``cpu`` (where /proc tells it: a
         library looping burns CPU, a busy machine only stretches the wall time; the wall time
         is still capped at WALL_TIME_FACTOR x timeout)."""
         start, used_before = time.monotonic(), _cpu_seconds(process.pid) if cpu else None
         pending = self._pending
+        assert process.stdout is not None  # started with stdout=PIPE
         descriptor = process.stdout.fileno()  # read unbuffered: select() sees only the pipe
         while b"\n" not in pending:
             elapsed = time.monotonic() - start
@@ -305,7 +319,7 @@ class _ReaderProcess:
             return None
 
     def request(self, path: str, kind: str, output: str, timeout: float,
-                memory: int | None = None) -> dict:
+                memory: int | None = None) -> dict[str, Any]:
         with self._lock:
             if self._process is None or self._process.poll() is not None:
                 self._pending = b""
@@ -319,6 +333,7 @@ class _ReaderProcess:
                                                       f"{START_TIMEOUT_SECONDS:g} s"}
                     return {"ok": False, "crashed": process.returncode}
             process = self._process
+            assert process.stdin is not None  # started with stdin=PIPE
             try:
                 process.stdin.write(json.dumps({"path": path, "kind": kind, "output": output,
                                                 "memory": memory}) + "\n")
@@ -342,6 +357,7 @@ class _ReaderProcess:
     def close(self) -> None:
         with self._lock:
             if self._process is not None and self._process.poll() is None:
+                assert self._process.stdin is not None  # started with stdin=PIPE
                 self._process.stdin.close()
                 try:
                     self._process.wait(timeout=5)
@@ -358,7 +374,8 @@ _LIBRARIES = {"step": ("OpenCASCADE", "STEP"), "iges": ("OpenCASCADE", "IGES"),
               "3dm": ("openNURBS (rhino3dm)", ".3dm")}
 
 
-def read_in_worker(path, kind: str, timeout: float | None = None) -> list:
+def read_in_worker(path: StrPath, kind: str,
+                   timeout: float | None = None) -> list[NurbsCurve | NurbsSurface]:
     """Every surface and curve the worker process reads from ``path`` (``kind`` "step", "iges" or
     "3dm"), as validated geometry with ``.metadata``; a crash, a timeout (``timeout`` seconds,
     by default :func:`read_timeout` of the file's size), running out of the memory cap
@@ -391,12 +408,13 @@ def read_in_worker(path, kind: str, timeout: float | None = None) -> list:
     warm.join()
     from nurbs_core.io.geometry_io import make_curve, make_surface
 
-    result = []
+    result: list[NurbsCurve | NurbsSurface] = []
     for k in range(reply["count"]):
         degrees = arrays[f"degrees_{k}"]
         surface = str(arrays[f"kind_{k}"]) == "surface"
         default = f"face {k}" if surface else f"edge {k}"
         what = str(arrays[f"label_{k}"]) if f"label_{k}" in arrays else default
+        item: NurbsCurve | NurbsSurface
         if surface:
             item = make_surface(path, arrays[f"control_{k}"], arrays[f"weights_{k}"],
                                 arrays[f"knots_u_{k}"], arrays[f"knots_v_{k}"],
@@ -413,8 +431,10 @@ def read_in_worker(path, kind: str, timeout: float | None = None) -> list:
     return result
 
 
-def read_cad(path, kind: str, timeout: float | None = None) -> list:
-    """All surfaces (untrimmed) of a STEP or IGES file; its curves when it has no faces.
+def read_cad(path: StrPath, kind: str,
+             timeout: float | None = None) -> list[NurbsCurve | NurbsSurface]:
+    """All surfaces (untrimmed) of a STEP or IGES file; its curves when it has no faces:
+    surfaces with control points (n_u, n_v, 3), curves (n, 3), Euclidean, with their weights.
 
     OpenCASCADE runs in a child process (see ``_occ_reader.py``), so a file that crashes it,
     hangs it (``timeout`` seconds; by default :func:`read_timeout` of the file's size) or makes

@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import BinaryIO
 
 import numpy as np
 
-from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.limits import MAX_LINE_BYTES, check_claimed_size, line_too_long
 
 
@@ -27,7 +29,7 @@ class PointCloud:
     attributes: dict[str, np.ndarray] = field(default_factory=dict)
     path: str | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.points = np.ascontiguousarray(self.points, dtype=np.float64)
         if self.points.ndim != 2 or self.points.shape[1] != 3:
             raise ValueError(f"points must have shape (N, 3), got {self.points.shape}")
@@ -50,7 +52,8 @@ class PointCloud:
         return self.attributes.get("colors")
 
 
-def check_points(path, points: np.ndarray, line_of_row=None) -> np.ndarray:
+def check_points(path: StrPath | None, points: np.ndarray,
+                 line_of_row: Callable[[int], int] | None = None) -> np.ndarray:
     """Raise FileFormatError unless points is a non-empty (N, 3) array of finite numbers.
 
     ``line_of_row(k)`` maps a row to its 1-based file line (text formats) so the error can say
@@ -85,7 +88,8 @@ NAMED_COLUMNS = {
 }
 
 
-def split_named_columns(path, names: list[str], columns: dict[str, np.ndarray]):
+def split_named_columns(path: StrPath | None, names: list[str], columns: dict[str, np.ndarray]
+                        ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Group named per-point columns into points (N, 3) and attributes.
 
     names: column names in file order; columns: name -> (N,) array. Unknown names become
@@ -168,7 +172,7 @@ def classify_extra_columns(extra: np.ndarray) -> dict[str, np.ndarray]:
 TEXT_CHUNK_BYTES = 1 << 20
 
 
-def _skip_lines(path, handle, skip: int, line: int, what: str) -> tuple[bytes, int]:
+def _skip_lines(path: StrPath, handle: BinaryIO, skip: int, line: int, what: str) -> tuple[bytes, int]:
     """Read past ``skip`` lines (counting line breaks a block at a time, never splitting them);
     return what follows the last skipped line break in the block and the next line number."""
     while skip:
@@ -184,7 +188,7 @@ def _skip_lines(path, handle, skip: int, line: int, what: str) -> tuple[bytes, i
     return b"", line
 
 
-def read_text_rows(path, offset: int, first_line: int, count: int, width: int, *,
+def read_text_rows(path: StrPath, offset: int, first_line: int, count: int, width: int, *,
                    skip: int = 0, what: str = "rows", header_line: int | None = None) -> np.ndarray:
     """(count, width) float64 from the whitespace-separated lines of ``path`` that start at
     byte ``offset`` (file line ``first_line``), after ``skip`` lines that are not parsed.
@@ -230,9 +234,12 @@ def read_text_rows(path, offset: int, first_line: int, count: int, width: int, *
             if max(lengths) > MAX_LINE_BYTES:
                 longest = int(np.argmax(lengths))
                 raise line_too_long(path, lengths[longest], line + longest)
+            def line_of(k: int, start: int = line) -> int:
+                return start + k
+
             with warnings.catch_warnings():  # numpy warns about empty lines: they are errors
                 warnings.simplefilter("ignore", UserWarning)
-                parsed = parse_table(path, rows, width, lambda k, start=line: start + k)
+                parsed = parse_table(path, rows, width, line_of)
             if filled + len(rows) > len(table):  # not once they parse: 2 * width bytes a row
                 raise FileFormatError(path, f"the header declares {count} {what}, more than "
                                             "the file can hold", line=line)

@@ -8,15 +8,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbs_core.io.geometry_io import as_geometry_list, numpy_of
+from nurbs_core.io.errors import StrPath
+from nurbs_core.io.geometry_io import GeometryInput, as_geometry_list, numpy_of
 
 
-def write_control_points_csv(geometry_or_list, path) -> None:
+def write_control_points_csv(geometry_or_list: GeometryInput, path: StrPath) -> None:
+    """Write the control points and weights of curves or surfaces as CSV (see the module)."""
     items = [numpy_of(item) for item in as_geometry_list(geometry_or_list)]
     kinds = {data["kind"] for data in items}
     if len(kinds) > 1:
         raise ValueError("a control-point CSV holds either surfaces or curves, not both")
-    rows = []
+    rows: list[np.ndarray] = []
     for index, data in enumerate(items):
         control, weights = data["control_points"], data["weights"]
         if data["kind"] == "surface":

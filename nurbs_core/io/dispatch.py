@@ -2,8 +2,20 @@
 
 from __future__ import annotations
 
-from nurbs_core.io.errors import FileFormatError
+from collections.abc import Iterable, Mapping
+from typing import TYPE_CHECKING, Any, TypeAlias, TypeGuard, cast
+
+from nurbs_core.io.cloud import PointCloud
+from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.points import POINT_CLOUD_SUFFIXES, _check_file, load_points, suffix_of
+
+if TYPE_CHECKING:
+    from nurbs_core.geometry import NurbsCurve, NurbsSurface
+    from nurbs_core.io.geometry_io import GeometryInput
+    from nurbs_core.patches.network import PatchNetwork
+
+#: One file for :func:`save_all`: (geometry or a patch network, path, options for the writer).
+SaveJob: TypeAlias = "tuple[GeometryInput | PatchNetwork, StrPath, Mapping[str, Any] | None]"
 
 CAD_SUFFIXES = (".step", ".stp", ".iges", ".igs")
 NURBS_SUFFIXES = (".3dm", ".json", ".dat", ".smesh", *CAD_SUFFIXES)
@@ -14,7 +26,7 @@ EXPORT_SUFFIXES = (".3dm", ".step", ".stp", ".iges", ".igs", ".json", ".obj", ".
                    ".glb", ".csv", ".dat")
 
 
-def _load_json(path) -> list:
+def _load_json(path: StrPath) -> list[NurbsCurve | NurbsSurface]:
     from nurbs_core.io import geomdl_json, json_format
 
     document = json_format.read_json_file(path)
@@ -32,8 +44,11 @@ def _load_json(path) -> list:
                                 "or a geomdl export ({\"shape\": {\"data\": ...}})")
 
 
-def load(path) -> list:
+def load(path: StrPath) -> list[NurbsCurve | NurbsSurface]:
     """Read NURBS geometry: a list of NurbsCurve / NurbsSurface (float64), one per item.
+
+    Curves have control points (n, 2) or (n, 3), surfaces (n_u, n_v, 3) (Euclidean), with
+    weights (n,) / (n_u, n_v) and full knot vectors.
 
     .3dm (rhino3dm), .json (ours, geomdl, nurbs-surface-json-v1; sniffed), .dat/.smesh,
     .step/.stp/.iges/.igs (OCP extra). Each item carries a ``metadata`` dict attribute.
@@ -58,8 +73,10 @@ def load(path) -> list:
     return read_cad(path, "step" if suffix in (".step", ".stp") else "iges")
 
 
-def load_any(path, **point_options):
+def load_any(path: StrPath, **point_options: Any) -> PointCloud | list[NurbsCurve | NurbsSurface]:
     """A PointCloud for point/mesh formats, a list of geometry for NURBS formats.
+
+    The cloud's points are (N, 3) float64; the geometry is what :func:`load` returns.
 
     ``.ply`` is a point cloud; ``.json`` and ``.dat`` are NURBS; keyword options go to
     :func:`load_points`.
@@ -73,8 +90,11 @@ def load_any(path, **point_options):
                                 f"{', '.join(sorted(set(NURBS_SUFFIXES + POINT_CLOUD_SUFFIXES)))}")
 
 
-def save(geometry_or_list, path, **options) -> None:
+def save(geometry_or_list: GeometryInput | PatchNetwork, path: StrPath, **options: Any) -> None:
     """Write one NurbsCurve / NurbsSurface or a list of them; the suffix picks the format.
+
+    Curves have control points (*B, n, d) with d 2 or 3, surfaces (*B, n_u, n_v, 3); a batch
+    shape B gives one item per entry.
 
     .3dm (rhino3dm; option ``version``), .step/.stp and .iges/.igs (OCP extra), .json (ours,
     lossless; option ``metadata`` for the document, ``indent``), .obj/.stl/.ply/.glb (surfaces
@@ -90,31 +110,32 @@ def save(geometry_or_list, path, **options) -> None:
     save_all([(geometry_or_list, path, options)])
 
 
-def save_all(jobs) -> None:
+def save_all(jobs: Iterable[SaveJob]) -> None:
     """Write several files all-or-nothing: ``jobs`` is a sequence of (geometry, path, options
     dict). Every suffix is checked first; the files are written to temporaries and replace
     their targets only when all of them were written (:func:`nurbs_core.io.atomic.atomic_paths`).
     """
     from nurbs_core.io.atomic import atomic_paths
 
-    jobs = [(geometry, path, dict(options or {})) for geometry, path, options in jobs]
-    for geometry, path, _ in jobs:
+    checked = [(geometry, path, dict(options or {})) for geometry, path, options in jobs]
+    for geometry, path, _ in checked:
         check_save_suffix(geometry, path)
-    with atomic_paths([path for _, path, _ in jobs]) as temporaries:
-        for (geometry, path, options), temporary in zip(jobs, temporaries, strict=True):
+    with atomic_paths([path for _, path, _ in checked]) as temporaries:
+        for (geometry, path, options), temporary in zip(checked, temporaries, strict=True):
             try:
                 _write(geometry, temporary, suffix_of(path), **options)
             except FileFormatError as exc:  # name the target, not the temporary file
                 raise FileFormatError(path, exc.problem, exc.line) from None
 
 
-def is_network(geometry) -> bool:
+def is_network(geometry: object) -> TypeGuard[PatchNetwork]:
+    """True when ``geometry`` is a :class:`~nurbs_core.patches.network.PatchNetwork`."""
     from nurbs_core.patches.network import PatchNetwork
 
     return isinstance(geometry, PatchNetwork)
 
 
-def check_save_suffix(geometry, path) -> None:
+def check_save_suffix(geometry: object, path: StrPath) -> None:
     """FileFormatError unless ``save`` can write ``geometry`` (geometry, or a patch network) in
     the format of ``path``'s suffix."""
     suffix = suffix_of(path)
@@ -127,39 +148,42 @@ def check_save_suffix(geometry, path) -> None:
                                     f"{', '.join(EXPORT_SUFFIXES)}")
 
 
-def _write(geometry_or_list, path, suffix: str, **options) -> None:
+def _write(geometry_or_list: GeometryInput | PatchNetwork, path: StrPath, suffix: str,
+           **options: Any) -> None:
     """Write to ``path`` (a temporary file) in the format of ``suffix``."""
     if is_network(geometry_or_list):
         from nurbs_core.io.network_io import write_network_file
 
         write_network_file(geometry_or_list, path, suffix, **options)
-    elif suffix == ".3dm":
+        return
+    geometry = cast("GeometryInput", geometry_or_list)  # not a network: curves and surfaces
+    if suffix == ".3dm":
         from nurbs_core.io.rhino import write_3dm
 
-        write_3dm(geometry_or_list, path, **options)
+        write_3dm(geometry, path, **options)
     elif suffix in (".step", ".stp"):
         from nurbs_core.io.cad import write_step
 
-        write_step(geometry_or_list, path, **options)
+        write_step(geometry, path, **options)
     elif suffix in (".iges", ".igs"):
         from nurbs_core.io.cad import write_iges
 
-        write_iges(geometry_or_list, path, **options)
+        write_iges(geometry, path, **options)
     elif suffix == ".json":
         from nurbs_core.io.json_format import write_json
 
-        write_json(geometry_or_list, path, **options)
+        write_json(geometry, path, **options)
     elif suffix in (".obj", ".stl", ".ply", ".glb"):
         from nurbs_core.io.tessellate import write_mesh
 
-        write_mesh(geometry_or_list, path, **options)
+        write_mesh(geometry, path, **options)
     elif suffix == ".csv":
         from nurbs_core.io.control_points_csv import write_control_points_csv
 
-        write_control_points_csv(geometry_or_list, path, **options)
+        write_control_points_csv(geometry, path, **options)
     elif suffix == ".dat":
         from nurbs_core.io.smesh import write_smesh
 
-        write_smesh(geometry_or_list, path, **options)
+        write_smesh(geometry, path, **options)
     else:  # check_save_suffix ran first
         raise FileFormatError(path, f"cannot save geometry as {suffix!r}")

@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import os
+from typing import TypeAlias
+
+#: What the readers and writers accept as a file name.
+StrPath: TypeAlias = "str | os.PathLike[str]"
 
 CAD_INSTALL_HINT = 'pip install "nurbs-studio[cad]"  (or: pip install cadquery-ocp-novtk)'
 
@@ -15,7 +19,7 @@ class FileFormatError(ValueError):
     line when there is one, as ``path:line: problem``.
     """
 
-    def __init__(self, path, message: str, line: int | None = None):
+    def __init__(self, path: StrPath | None, message: str, line: int | None = None) -> None:
         self.path = os.fspath(path) if path is not None else None
         self.line = line
         self.problem = message
@@ -26,13 +30,13 @@ class FileFormatError(ValueError):
 class MissingDependencyError(ImportError):
     """An optional package needed for a format is not installed; the message says how to get it."""
 
-    def __init__(self, what: str, install: str):
+    def __init__(self, what: str, install: str) -> None:
         self.install = install
         super().__init__(f"{what} needs an optional package that is not installed. "
                          f"Install it with: {install}")
 
 
-def require_ocp(what: str):
+def require_ocp(what: str) -> None:
     """Import OCP (the STEP/IGES extra) or raise MissingDependencyError with the install line."""
     try:
         import OCP  # noqa: F401
@@ -44,7 +48,7 @@ class OutputPathError(ValueError):
     """An output cannot be written where it was asked for (unknown suffix, missing or read-only
     folder, a directory, the same file as an input); raised before any work starts."""
 
-    def __init__(self, path, message: str):
+    def __init__(self, path: StrPath, message: str) -> None:
         self.path = os.fspath(path)
         self.problem = message
         super().__init__(f"cannot write {self.path}: {message}")

@@ -11,7 +11,11 @@ are ignored: the untrimmed surfaces are returned.
 
 from __future__ import annotations
 
-from nurbs_core.io.errors import FileFormatError
+from collections.abc import Callable
+from typing import Any
+
+from nurbs_core.geometry import NurbsCurve, NurbsSurface
+from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.geometry_io import file_array, file_integer, make_curve, make_surface
 from nurbs_core.io.json_format import json_key, json_object, read_json_file
 
@@ -20,23 +24,23 @@ from nurbs_core.io.json_format import json_key, json_object, read_json_file
 MAX_SIZE = 10**7
 
 
-def is_geomdl_document(document) -> bool:
+def is_geomdl_document(document: object) -> bool:
     return isinstance(document, dict) and isinstance(document.get("shape"), dict) and \
         "data" in document["shape"]
 
 
-def _net(path, entry: dict, what: str):
+def _net(path: StrPath, entry: dict[str, Any], what: str) -> tuple[Any, Any]:
     """(points list, weights or None) from ``control_points: {"points": ..., "weights": ...}``."""
     control = json_object(path, json_key(path, entry, "control_points", what),
                           f"{what} control_points")
     return json_key(path, control, "points", f"{what} control_points"), control.get("weights")
 
 
-def _metadata(entry: dict) -> dict:
+def _metadata(entry: dict[str, Any]) -> dict[str, Any]:
     return {k: entry[k] for k in ("name", "id") if k in entry}
 
 
-def _surface(path, entry: dict, what: str):
+def _surface(path: StrPath, entry: dict[str, Any], what: str) -> NurbsSurface:
     size_u = file_integer(path, json_key(path, entry, "size_u", what), "size_u", what,
                           maximum=MAX_SIZE)
     size_v = file_integer(path, json_key(path, entry, "size_v", what), "size_v", what,
@@ -69,7 +73,7 @@ def _surface(path, entry: dict, what: str):
     return surface
 
 
-def _curve(path, entry: dict, what: str):
+def _curve(path: StrPath, entry: dict[str, Any], what: str) -> NurbsCurve:
     points, weights = _net(path, entry, what)
     curve = make_curve(path, points, weights, json_key(path, entry, "knotvector", what),
                        json_key(path, entry, "degree", what), what=what)
@@ -77,7 +81,9 @@ def _curve(path, entry: dict, what: str):
     return curve
 
 
-def read_geomdl_json(path, document=None) -> list:
+def read_geomdl_json(path: StrPath, document: Any = None) -> list[NurbsCurve | NurbsSurface]:
+    """The surfaces (or curves) of a geomdl JSON export; ``document`` is the already parsed JSON
+    (read from ``path`` when None). Control nets are (size_u, size_v, 3) Euclidean."""
     document = read_json_file(path) if document is None else document
     if not is_geomdl_document(document):
         raise FileFormatError(path, "not a geomdl JSON document (no \"shape\": {\"data\": ...})")
@@ -89,8 +95,9 @@ def read_geomdl_json(path, document=None) -> list:
                                     "(surface or curve)")
     if not entries:
         raise FileFormatError(path, "the geomdl document holds no shapes")
-    reader = _surface if kind == "surface" else _curve
-    result = []
+    reader: Callable[[StrPath, dict[str, Any], str], NurbsCurve | NurbsSurface] = \
+        _surface if kind == "surface" else _curve
+    result: list[NurbsCurve | NurbsSurface] = []
     for index, entry in enumerate(entries):
         what = f"shape.data[{index}] ({kind})"
         result.append(reader(path, json_object(path, entry, f"shape.data[{index}]"), what))

@@ -3,23 +3,33 @@ and flattening what the caller passes to ``save`` into single numpy curves/surfa
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+from typing import Any, TypeAlias, TypeVar
+
 import numpy as np
 
 from nurbs_core.geometry import NurbsCurve, NurbsSurface
-from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.errors import FileFormatError, StrPath
+
+#: One curve or surface (possibly batched), as the readers return and the writers take.
+Geometry: TypeAlias = "NurbsCurve | NurbsSurface"
+#: What ``save`` and the writers take: one geometry or a list / tuple of them.
+GeometryInput: TypeAlias = "NurbsCurve | NurbsSurface | Sequence[NurbsCurve | NurbsSurface]"
+
+_T = TypeVar("_T")
 
 #: What building geometry from bad file data can raise (torch raises RuntimeError, numpy
 #: OverflowError for numbers past float64 and IndexError for arrays of the wrong rank).
 DATA_ERRORS = (ValueError, TypeError, OverflowError, IndexError, RuntimeError)
 
 
-def _short(value, limit: int = 60) -> str:
+def _short(value: object, limit: int = 60) -> str:
     text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def file_array(path, value, name: str, what: str, ndim: int | None = None,
-               line=None) -> np.ndarray:
+def file_array(path: StrPath, value: object, name: str, what: str, ndim: int | None = None,
+               line: int | None = None) -> np.ndarray:
     """``value`` (nested lists from JSON, or an array) as float64, or FileFormatError: null, text,
     ragged or wrongly nested lists, objects, numbers past float64, the wrong rank."""
     if value is None:
@@ -45,8 +55,8 @@ def file_array(path, value, name: str, what: str, ndim: int | None = None,
     return array
 
 
-def file_integer(path, value, name: str, what: str, minimum: int = 1, maximum: int | None = None,
-                 line=None) -> int:
+def file_integer(path: StrPath, value: object, name: str, what: str, minimum: int = 1,
+                 maximum: int | None = None, line: int | None = None) -> int:
     """An integer from file data (an int, or a float with an integer value), at least
     ``minimum`` and at most ``maximum``; strings, booleans, fractions, NaN: FileFormatError."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(
@@ -65,7 +75,8 @@ def file_integer(path, value, name: str, what: str, minimum: int = 1, maximum: i
     return number
 
 
-def _build(path, cls, arguments, what: str, line):
+def _build(path: StrPath, cls: Callable[..., _T], arguments: tuple[Any, ...], what: str,
+           line: int | None) -> _T:
     try:
         return cls(*arguments)
     except MemoryError:
@@ -74,8 +85,9 @@ def _build(path, cls, arguments, what: str, line):
         raise FileFormatError(path, f"invalid {what}: {exc}", line=line) from None
 
 
-def make_surface(path, control_points, weights, knots_u, knots_v, degree_u, degree_v,
-                 line=None, what="surface") -> NurbsSurface:
+def make_surface(path: StrPath, control_points: object, weights: object, knots_u: object,
+                 knots_v: object, degree_u: object, degree_v: object, line: int | None = None,
+                 what: str = "surface") -> NurbsSurface:
     """Validated float64 NurbsSurface from file data; any problem becomes a FileFormatError.
 
     control_points (n_u, n_v, 3) Euclidean, weights (n_u, n_v) or None, full knot vectors.
@@ -98,8 +110,8 @@ def make_surface(path, control_points, weights, knots_u, knots_v, degree_u, degr
     return _build(path, NurbsSurface, (control, degree_u, degree_v, ku, kv, w), what, line)
 
 
-def make_curve(path, control_points, weights, knots, degree, line=None,
-               what="curve") -> NurbsCurve:
+def make_curve(path: StrPath, control_points: object, weights: object, knots: object,
+               degree: object, line: int | None = None, what: str = "curve") -> NurbsCurve:
     """Validated float64 NurbsCurve from file data (control points (n, 2) or (n, 3)); any
     problem becomes a FileFormatError."""
     control = file_array(path, control_points, "control points", what, 2, line)
@@ -116,11 +128,11 @@ def make_curve(path, control_points, weights, knots, degree, line=None,
     return _build(path, NurbsCurve, (control, degree, k, w), what, line)
 
 
-def as_geometry_list(geometry_or_list) -> list:
+def as_geometry_list(geometry_or_list: GeometryInput) -> list[NurbsCurve | NurbsSurface]:
     """A list of single (unbatched) curves and surfaces; batched geometry is split per item."""
     items = list(geometry_or_list) if isinstance(geometry_or_list, (list, tuple)) else \
         [geometry_or_list]
-    result = []
+    result: list[NurbsCurve | NurbsSurface] = []
     for item in items:
         if not isinstance(item, (NurbsCurve, NurbsSurface)):
             raise TypeError(f"expected NurbsCurve or NurbsSurface, got {type(item).__name__}")
@@ -136,7 +148,8 @@ def as_geometry_list(geometry_or_list) -> list:
             for key in ("knots", "knots_u", "knots_v"):  # knots are either shared (1-D) or batched
                 if key in data and data[key].ndim > 1:
                     single[key] = data[key][index]
-            cls = NurbsCurve if data["kind"] == "curve" else NurbsSurface
+            cls: type[NurbsCurve] | type[NurbsSurface] = \
+                NurbsCurve if data["kind"] == "curve" else NurbsSurface
             single_item = cls.from_numpy(single)
             if hasattr(item, "metadata"):
                 single_item.metadata = dict(item.metadata)
@@ -146,13 +159,13 @@ def as_geometry_list(geometry_or_list) -> list:
     return result
 
 
-def numpy_of(item) -> dict:
+def numpy_of(item: NurbsCurve | NurbsSurface) -> dict[str, Any]:
     """``item.numpy()`` with float64 arrays (exact for float64 geometry)."""
     data = item.numpy()
     return {k: (np.asarray(v, dtype=np.float64) if isinstance(v, np.ndarray) else v)
             for k, v in data.items()}
 
 
-def metadata_of(item) -> dict:
+def metadata_of(item: object) -> dict[str, Any]:
     metadata = getattr(item, "metadata", None)
     return dict(metadata) if isinstance(metadata, dict) else {}

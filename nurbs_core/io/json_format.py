@@ -18,9 +18,12 @@ from __future__ import annotations
 
 import json
 import sys
+from typing import Any
 
-from nurbs_core.io.errors import FileFormatError
+from nurbs_core.geometry import NurbsCurve, NurbsSurface
+from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.geometry_io import (
+    GeometryInput,
     as_geometry_list,
     make_curve,
     make_surface,
@@ -40,7 +43,7 @@ _BYTES_PER_VALUE = 40
 JSON_MEMORY_SLACK = 512 * 2**20
 
 
-def read_json_file(path):
+def read_json_file(path: StrPath) -> Any:
     """The parsed JSON document, or FileFormatError: binary data, not UTF-8, invalid JSON,
     nesting deeper than Python's recursion limit, an integer of more than 4300 digits, or more
     values than fit in memory (estimated from the separators before parsing)."""
@@ -76,34 +79,35 @@ def read_json_file(path):
         raise FileFormatError(path, "the JSON is too large to read into memory") from None
 
 
-def json_object(path, value, what: str) -> dict:
+def json_object(path: StrPath, value: object, what: str) -> dict[str, Any]:
     """``value`` if it is a JSON object (a dict); FileFormatError naming ``what`` otherwise."""
     if not isinstance(value, dict):
         raise FileFormatError(path, f"{what} must be a JSON object, got {json_kind(value)}")
     return value
 
 
-def metadata_object(path, value, what: str) -> dict:
+def metadata_object(path: StrPath, value: object, what: str) -> dict[str, Any]:
     """A metadata entry: an object (copied) or null/absent (empty); anything else is refused."""
     if value is None:
         return {}
     return dict(json_object(path, value, f"{what} metadata"))
 
 
-def json_kind(value) -> str:
+def json_kind(value: object) -> str:
     names = {dict: "an object", list: "a list", str: "a string", bool: "a boolean",
              type(None): "null", int: "a number", float: "a number"}
     return names.get(type(value), type(value).__name__)
 
 
-def json_key(path, entry: dict, key: str, what: str):
+def json_key(path: StrPath, entry: dict[str, Any], key: str, what: str) -> Any:
     if key not in entry:
         raise FileFormatError(path, f"{what} lacks the key {key!r}")
     return entry[key]
 
 
-def _item_to_dict(item) -> dict:
+def _item_to_dict(item: NurbsCurve | NurbsSurface) -> dict[str, Any]:
     data = numpy_of(item)
+    entry: dict[str, Any]
     if data["kind"] == "surface":
         entry = {"kind": "surface", "degree_u": int(data["degree_u"]),
                  "degree_v": int(data["degree_v"]), "knots_u": data["knots_u"].tolist(),
@@ -116,7 +120,8 @@ def _item_to_dict(item) -> dict:
     return entry
 
 
-def write_json(geometry_or_list, path, metadata: dict | None = None, indent: int | None = None):
+def write_json(geometry_or_list: GeometryInput, path: StrPath, metadata: dict[str, Any] | None = None,
+               indent: int | None = None) -> None:
     """Write our versioned JSON. ``metadata`` (JSON-serialisable) is stored at the top level;
     each item's own ``.metadata`` dict, if it has one, is stored with it."""
     document = {"format": FORMAT_NAME, "version": FORMAT_VERSION, "metadata": metadata or {},
@@ -126,8 +131,11 @@ def write_json(geometry_or_list, path, metadata: dict | None = None, indent: int
         handle.write(text)
 
 
-def read_document(path, document=None):
-    """Read our JSON: (list of geometry, top-level metadata dict). Each item gets ``.metadata``."""
+def read_document(path: StrPath, document: Any = None
+                  ) -> tuple[list[NurbsCurve | NurbsSurface], dict[str, Any]]:
+    """Read our JSON: (list of geometry, top-level metadata dict). Each item gets ``.metadata``.
+
+    ``document`` is the already parsed JSON (read from ``path`` when None)."""
     document = read_json_file(path) if document is None else document
     if not isinstance(document, dict) or document.get("format") != FORMAT_NAME:
         raise FileFormatError(path, f"not a {FORMAT_NAME} JSON document (no \"format\": "
@@ -141,11 +149,12 @@ def read_document(path, document=None):
     items = document.get("geometry")
     if not isinstance(items, list) or not items:
         raise FileFormatError(path, "the document has no \"geometry\" list (or it is empty)")
-    geometry = []
-    for index, entry in enumerate(items):
+    geometry: list[NurbsCurve | NurbsSurface] = []
+    for index, raw_entry in enumerate(items):
         what = f"geometry[{index}]"
-        entry = json_object(path, entry, what)
+        entry = json_object(path, raw_entry, what)
         kind = entry.get("kind")
+        item: NurbsCurve | NurbsSurface
         if kind == "surface":
             item = make_surface(path, json_key(path, entry, "control_points", what),
                                 entry.get("weights"), json_key(path, entry, "knots_u", what),
@@ -164,7 +173,7 @@ def read_document(path, document=None):
     return geometry, metadata
 
 
-def read_shared_json(path, document=None):
+def read_shared_json(path: StrPath, document: Any = None) -> list[NurbsCurve | NurbsSurface]:
     """The shared data's ``nurbs-surface-json-v1``: one surface, key ``ctrlpts`` (Euclidean,
     u index first), ``weights`` nested or null, full knot vectors."""
     document = read_json_file(path) if document is None else document

@@ -21,7 +21,7 @@ import re
 
 import numpy as np
 
-from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.errors import FileFormatError, StrPath
 
 MAX_DECOMPRESSED_ENV = "NURBS_STUDIO_MAX_DECOMPRESSED"
 DECOMPRESSED_FLOOR = 64 * 2**20
@@ -87,7 +87,7 @@ def decompression_limit(compressed_size: int) -> int:
     return DECOMPRESSED_FLOOR + DECOMPRESSED_RATIO * max(0, int(compressed_size))
 
 
-def check_decompressed_size(path, claimed: int, compressed_size: int, what: str = "data") -> None:
+def check_decompressed_size(path: StrPath, claimed: int, compressed_size: int, what: str = "data") -> None:
     """Raise FileFormatError when inflating ``claimed`` bytes from ``compressed_size`` would pass
     the decompression limit; the message names the file, the claimed size, the cap and how to
     raise it."""
@@ -100,7 +100,7 @@ def check_decompressed_size(path, claimed: int, compressed_size: int, what: str 
                                     f"(for example 16G) or nurbs-fit --max-decompressed SIZE")
 
 
-def check_claimed_size(path, count: int, record_bytes: int, available: int,
+def check_claimed_size(path: StrPath, count: int, record_bytes: int, available: int,
                        what: str = "records", line: int | None = None) -> None:
     """Raise FileFormatError unless ``count`` records of ``record_bytes`` each fit in the
     ``available`` bytes the file really has (checked before anything is allocated)."""
@@ -114,7 +114,7 @@ def check_claimed_size(path, count: int, record_bytes: int, available: int,
                                     f"(truncated, or a lying header)", line=line)
 
 
-def sniff_text(path, what: str = "a text file") -> bytes:
+def sniff_text(path: StrPath, what: str = "a text file") -> bytes:
     """The first block of ``path``; FileFormatError if it is binary (NUL bytes, or not UTF-8 /
     Latin text) so that a large binary file with a text suffix is refused before it is read."""
     with open(path, "rb") as handle:
@@ -127,14 +127,14 @@ def sniff_text(path, what: str = "a text file") -> bytes:
     return head
 
 
-def line_too_long(path, length: int, line: int, limit: int = MAX_LINE_BYTES) -> FileFormatError:
+def line_too_long(path: StrPath, length: int, line: int, limit: int = MAX_LINE_BYTES) -> FileFormatError:
     """The error for a text line of ``length`` bytes, over ``limit``, at 1-based ``line``."""
     return FileFormatError(path, f"line of {format_size(length)} is longer than the "
                                  f"{format_size(limit)} a text line may have (not a point or "
                                  f"geometry file, or its line breaks are missing)", line=line)
 
 
-def check_line_lengths(path, raw: bytes, limit: int = MAX_LINE_BYTES, first_line: int = 1) -> None:
+def check_line_lengths(path: StrPath, raw: bytes, limit: int = MAX_LINE_BYTES, first_line: int = 1) -> None:
     """FileFormatError naming the first line of ``raw`` (a block whose first line is line
     ``first_line`` of the file) longer than ``limit`` bytes.
 

@@ -25,19 +25,27 @@ import re
 import stat
 import struct
 import urllib.parse
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from nurbs_core.io.cloud import PointCloud, check_points
-from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.errors import FileFormatError, StrPath
+
+if TYPE_CHECKING:
+    import trimesh
+    from trimesh.parent import Geometry as TrimeshGeometry
 from nurbs_core.io.limits import check_claimed_size, check_decompressed_size, format_size
 
 MESH_MODES = ("vertices", "sample")
 
 _GLB_MAGIC = b"glTF"
 _GLB_JSON, _GLB_BIN = 0x4E4F534A, 0x004E4942
-_GLTF_COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
-_GLTF_TYPE_SIZE = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+# keyed by whatever a glTF document holds there (looked up before it is known to be an int / str)
+_GLTF_COMPONENT_BYTES: dict[object, int] = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+_GLTF_TYPE_SIZE: dict[object, int] = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4,
+                                      "MAT3": 9, "MAT4": 16}
 #: OFF and STL headers are looked for in the first bytes of the file.
 _HEAD_BYTES = 1 << 16
 #: trimesh merges a glTF scene one placed primitive at a time (about half a millisecond each)
@@ -46,19 +54,19 @@ _MAX_GLTF_PLACEMENTS = 10_000
 _MAX_GLTF_NODES = 200_000
 
 
-def _natural(path, value, what: str) -> int:
+def _natural(path: StrPath, value: object, what: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or value < 0:
         raise FileFormatError(path, f"{what} must be a non-negative integer, got {value!r}"[:300])
     return value
 
 
-def _index(path, value, length: int, what: str) -> int:
+def _index(path: StrPath, value: object, length: int, what: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < length:
         raise FileFormatError(path, f"{what} must be an index below {length}, got {value!r}"[:300])
     return value
 
 
-def _indices(path, owner: dict, key: str, length: int, what: str, item: str) -> list[int]:
+def _indices(path: StrPath, owner: dict[str, Any], key: str, length: int, what: str, item: str) -> list[int]:
     """``owner[key]`` (default empty): a list of indices below ``length``."""
     values = owner.get(key, [])
     if not isinstance(values, list):
@@ -66,7 +74,7 @@ def _indices(path, owner: dict, key: str, length: int, what: str, item: str) -> 
     return [_index(path, value, length, f"{what}: {item}") for value in values]
 
 
-def _objects(path, document: dict, key: str) -> list:
+def _objects(path: StrPath, document: dict[str, Any], key: str) -> list[dict[str, Any]]:
     value = document.get(key, [])
     if not isinstance(value, list) or not all(isinstance(item, dict) for item in value):
         raise FileFormatError(path, f"glTF '{key}' must be a list of objects, got "
@@ -74,7 +82,7 @@ def _objects(path, document: dict, key: str) -> list:
     return value
 
 
-def _external_buffer(path, uri: str, length: int, what: str) -> bytes:
+def _external_buffer(path: StrPath, uri: str, length: int, what: str) -> bytes:
     """The first ``length`` bytes of a buffer file next to the glTF: a relative path inside its
     folder to a regular file (no URL, no device, no file elsewhere on the system)."""
     parsed = urllib.parse.urlparse(uri)
@@ -109,7 +117,7 @@ def _data_uri_bytes(uri: str) -> int:
     return len(urllib.parse.unquote(payload))
 
 
-def _check_gltf(path, document, chunks: list[int]) -> dict[str, bytes]:
+def _check_gltf(path: StrPath, document: object, chunks: list[int]) -> dict[str, bytes]:
     """Check a glTF document's layout against the data present; return the external buffers
     (uri -> bytes, read up to their declared length) for trimesh's resolver."""
     if not isinstance(document, dict):
@@ -118,7 +126,9 @@ def _check_gltf(path, document, chunks: list[int]) -> dict[str, bytes]:
     buffers, views, accessors = (_objects(path, document, key)
                                  for key in ("buffers", "bufferViews", "accessors"))
     meshes, nodes = _objects(path, document, "meshes"), _objects(path, document, "nodes")
-    sizes, external, unnamed = [], {}, iter(chunks)
+    sizes: list[int] = []
+    external: dict[str, bytes] = {}
+    unnamed = iter(chunks)
     for k, buffer in enumerate(buffers):
         length = _natural(path, buffer.get("byteLength"), f"buffer {k}: byteLength")
         uri = buffer.get("uri")
@@ -138,15 +148,15 @@ def _check_gltf(path, document, chunks: list[int]) -> dict[str, bytes]:
             raise FileFormatError(path, f"buffer {k} declares {length} bytes, but its data has "
                                         f"only {present}")
         sizes.append(length)
-    view_sizes = []
+    view_sizes: list[int] = []
     for k, view in enumerate(views):
-        buffer = _index(path, view.get("buffer"), len(buffers), f"buffer view {k}: buffer")
+        owner = _index(path, view.get("buffer"), len(buffers), f"buffer view {k}: buffer")
         offset = _natural(path, view.get("byteOffset", 0), f"buffer view {k}: byteOffset")
         length = _natural(path, view.get("byteLength"), f"buffer view {k}: byteLength")
-        if offset + length > sizes[buffer]:
+        if offset + length > sizes[owner]:
             raise FileFormatError(path, f"buffer view {k} (bytes {offset} to {offset + length}) "
-                                        f"runs past the end of buffer {buffer} "
-                                        f"({sizes[buffer]} bytes)")
+                                        f"runs past the end of buffer {owner} "
+                                        f"({sizes[owner]} bytes)")
         if view.get("byteStride") is not None and \
                 _natural(path, view["byteStride"], f"buffer view {k}: byteStride") == 0:
             raise FileFormatError(path, f"buffer view {k}: byteStride must be positive")
@@ -162,13 +172,13 @@ def _check_gltf(path, document, chunks: list[int]) -> dict[str, bytes]:
         element = _GLTF_COMPONENT_BYTES[component] * _GLTF_TYPE_SIZE[kind]
         offset = _natural(path, accessor.get("byteOffset", 0), f"accessor {k}: byteOffset")
         if "bufferView" in accessor:
-            view = _index(path, accessor["bufferView"], len(views), f"accessor {k}: bufferView")
-            stride = views[view].get("byteStride") or element
+            view_index = _index(path, accessor["bufferView"], len(views), f"accessor {k}: bufferView")
+            stride = views[view_index].get("byteStride") or element
             needed = offset + (count - 1) * stride + element if count else offset
-            if needed > view_sizes[view]:
+            if needed > view_sizes[view_index]:
                 raise FileFormatError(path, f"accessor {k} claims {count} items "
-                                            f"({format_size(needed)}), but buffer view {view} "
-                                            f"has only {format_size(view_sizes[view])}")
+                                            f"({format_size(needed)}), but buffer view {view_index} "
+                                            f"has only {format_size(view_sizes[view_index])}")
         else:
             zeros += count * element
         sparse = accessor.get("sparse")
@@ -179,14 +189,16 @@ def _check_gltf(path, document, chunks: list[int]) -> dict[str, bytes]:
     return external
 
 
-def _check_sparse(path, k: int, sparse, count: int, element: int, views, view_sizes) -> None:
+def _check_sparse(path: StrPath, k: int, sparse: object, count: int, element: int,
+                  views: list[dict[str, Any]], view_sizes: list[int]) -> None:
     if not isinstance(sparse, dict):
         raise FileFormatError(path, f"accessor {k}: sparse must be an object")
     changed = _natural(path, sparse.get("count"), f"accessor {k}: sparse count")
     if changed > count:
         raise FileFormatError(path, f"accessor {k}: sparse count {changed} is more than its "
                                     f"{count} items")
-    for part, size in (("indices", None), ("values", element)):
+    parts: tuple[tuple[str, int | None], ...] = (("indices", None), ("values", element))
+    for part, size in parts:
         block = sparse.get(part)
         if not isinstance(block, dict):
             raise FileFormatError(path, f"accessor {k}: sparse {part} must be an object")
@@ -202,14 +214,16 @@ def _check_sparse(path, k: int, sparse, count: int, element: int, views, view_si
                                         f"view {view}")
 
 
-def _check_scene(path, document, accessors, meshes, nodes, file_size: int) -> None:
+def _check_scene(path: StrPath, document: dict[str, Any], accessors: list[dict[str, Any]],
+                 meshes: list[dict[str, Any]], nodes: list[dict[str, Any]], file_size: int) -> None:
     """References between meshes, nodes and scenes; the nodes must form a forest (no cycles,
     one parent each) and the mesh data they instantiate must stay within the decompression
     limit (one mesh placed by many nodes is copied once per node)."""
     if len(nodes) > _MAX_GLTF_NODES:
         raise FileFormatError(path, f"the glTF scene has {len(nodes)} nodes, more than the "
                                     f"{_MAX_GLTF_NODES} that can be read in time")
-    weights, parts = [], []
+    weights: list[int] = []
+    parts: list[int] = []
     for k, mesh in enumerate(meshes):
         primitives = mesh.get("primitives", [])
         if not isinstance(primitives, list) or not all(isinstance(p, dict) for p in primitives):
@@ -237,18 +251,19 @@ def _check_scene(path, document, accessors, meshes, nodes, file_size: int) -> No
                                             "the node hierarchy is not a tree")
             parent[child] = k
         if node.get("mesh") is not None:
-            mesh = _index(path, node["mesh"], len(meshes), f"node {k}: mesh")
-            instanced += weights[mesh]
-            placed += parts[mesh]
+            mesh_index = _index(path, node["mesh"], len(meshes), f"node {k}: mesh")
+            instanced += weights[mesh_index]
+            placed += parts[mesh_index]
     settled: set[int] = set()
     for k in range(len(nodes)):  # with one parent each, a loop is the only way to fail a tree
-        chain, node = set(), k
-        while node in parent and node not in settled:
-            if node in chain:
-                raise FileFormatError(path, f"node {node} is its own ancestor: the node "
+        chain: set[int] = set()
+        at = k
+        while at in parent and at not in settled:
+            if at in chain:
+                raise FileFormatError(path, f"node {at} is its own ancestor: the node "
                                             "hierarchy has a cycle")
-            chain.add(node)
-            node = parent[node]
+            chain.add(at)
+            at = parent[at]
         settled |= chain
     for k, scene in enumerate(_objects(path, document, "scenes")):
         _indices(path, scene, "nodes", len(nodes), f"scene {k}", "node")
@@ -261,7 +276,7 @@ def _check_scene(path, document, accessors, meshes, nodes, file_size: int) -> No
                             what="the meshes the glTF scene places")
 
 
-def _check_glb(path) -> dict[str, bytes]:
+def _check_glb(path: StrPath) -> dict[str, bytes]:
     size = os.path.getsize(path)
     with open(path, "rb") as handle:
         head = handle.read(20)
@@ -274,7 +289,8 @@ def _check_glb(path) -> dict[str, bytes]:
             raise FileFormatError(path, "the first GLB chunk is not the JSON document")
         check_claimed_size(path, json_length, 1, size - 20, what="bytes of JSON")
         text = handle.read(json_length)
-        chunks, position = [], 20 + json_length
+        chunks: list[int] = []
+        position = 20 + json_length
         end = min(size, position + total)  # trimesh reads chunks for `total` bytes after the JSON
         while position + 8 <= end:
             handle.seek(position)
@@ -286,7 +302,7 @@ def _check_glb(path) -> dict[str, bytes]:
     return _check_gltf(path, _parse_json(path, text), chunks)
 
 
-def _parse_json(path, text: bytes):
+def _parse_json(path: StrPath, text: bytes) -> Any:
     try:
         return json.loads(text)
     except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
@@ -294,7 +310,7 @@ def _parse_json(path, text: bytes):
                                     f"{str(exc)[:200]}") from None
 
 
-def _check_stl(path) -> None:
+def _check_stl(path: StrPath) -> None:
     """A binary STL's triangle count must match its size exactly (84 + 50 per triangle);
     otherwise the file must be ASCII text starting with ``solid``."""
     size = os.path.getsize(path)
@@ -314,7 +330,7 @@ def _check_stl(path) -> None:
                                 f"{format_size(size)} (truncated, or a lying header)")
 
 
-def _check_off(path) -> None:
+def _check_off(path: StrPath) -> None:
     """The vertex and face counts of an OFF file against its size."""
     size = os.path.getsize(path)
     with open(path, "rb") as handle:
@@ -334,7 +350,7 @@ def _check_off(path) -> None:
     check_claimed_size(path, faces, 2, size - 6 * vertices, what="faces")
 
 
-def _check_before_trimesh(path, suffix: str) -> dict | None:
+def _check_before_trimesh(path: StrPath, suffix: str) -> dict[str, bytes] | None:
     """The count checks for ``suffix``; for glTF / GLB, the external buffers to resolve."""
     if suffix == ".stl":
         _check_stl(path)
@@ -353,7 +369,7 @@ def _check_before_trimesh(path, suffix: str) -> dict | None:
 
 
 @contextlib.contextmanager
-def _quiet_trimesh():
+def _quiet_trimesh() -> Iterator[None]:
     """trimesh logs recoverable parse problems as warnings with a full traceback (printed on
     stderr when the application has no logging set up); a reader reports problems as its own
     FileFormatError instead, so those warnings are held back while a file is read (used as a
@@ -367,15 +383,16 @@ def _quiet_trimesh():
         logger.setLevel(previous)
 
 
-def _load_trimesh(path, suffix: str):
+def _load_trimesh(path: StrPath, suffix: str) -> TrimeshGeometry:
     import trimesh
 
     external = _check_before_trimesh(path, suffix)
-    kwargs = {"process": False, "skip_materials": True}
+    kwargs: dict[str, Any] = {"process": False, "skip_materials": True}
     if suffix == ".obj":
         kwargs["maintain_order"] = True  # keep the file's vertex order
     if external is not None:  # only the buffers checked above, never other files
         kwargs["resolver"] = trimesh.resolvers.ZipResolver(external)
+    loaded: TrimeshGeometry | None
     try:
         with np.errstate(invalid="ignore", over="ignore"):  # NaN / inf are refused below
             loaded = trimesh.load(str(path), **kwargs)
@@ -391,14 +408,14 @@ def _load_trimesh(path, suffix: str):
     return loaded
 
 
-def _check_faces(path, faces: np.ndarray, vertex_count: int) -> None:
+def _check_faces(path: StrPath, faces: np.ndarray, vertex_count: int) -> None:
     if faces.size and (faces.min() < 0 or faces.max() >= vertex_count):
         bad = int(faces.max() if faces.max() >= vertex_count else faces.min())
         raise FileFormatError(path, f"a face refers to vertex {bad}, but the mesh has "
                                     f"{vertex_count} vertices")
 
 
-def _sample(path, mesh, count: int, seed: int) -> PointCloud:
+def _sample(path: StrPath, mesh: trimesh.Trimesh, count: int, seed: int) -> PointCloud:
     """``count`` points uniform over the area of a trimesh.Trimesh (trimesh's area-weighted
     sampling) with their face normals and face indices."""
     import trimesh
@@ -417,11 +434,12 @@ def _sample(path, mesh, count: int, seed: int) -> PointCloud:
         raise FileFormatError(path, f"the mesh cannot be sampled: {type(exc).__name__}: "
                                     f"{str(exc)[:300]}") from None
     attributes = {"normals": normals, "face_index": np.asarray(face_index)}
-    return PointCloud(check_points(path, np.asarray(points, dtype=np.float64)), attributes, path)
+    return PointCloud(check_points(path, np.asarray(points, dtype=np.float64)), attributes,
+                      os.fspath(path))
 
 
 @_quiet_trimesh()
-def sample_mesh_points(path, vertices: np.ndarray, faces: np.ndarray, count: int = 100_000,
+def sample_mesh_points(path: StrPath, vertices: np.ndarray, faces: np.ndarray, count: int = 100_000,
                        seed: int = 0) -> PointCloud:
     """``count`` points uniform over the area of the triangle mesh (vertices (V, 3), faces
     (F, 3)) read from ``path`` (by :func:`read_mesh_faces`), as ``load_points(path,
@@ -434,8 +452,11 @@ def sample_mesh_points(path, vertices: np.ndarray, faces: np.ndarray, count: int
 
 
 @_quiet_trimesh()
-def read_mesh_points(path, suffix: str, mesh_mode: str = "vertices",
+def read_mesh_points(path: StrPath, suffix: str, mesh_mode: str = "vertices",
                      sample_count: int = 100_000, seed: int = 0) -> PointCloud:
+    """The vertices of a mesh file (points (V, 3) float64, vertex colors if any), or with
+    ``mesh_mode="sample"`` ``sample_count`` points (N, 3) uniform over its area with their
+    ``normals`` (N, 3) and ``face_index`` (N,)."""
     import trimesh
 
     if mesh_mode not in MESH_MODES:
@@ -459,11 +480,11 @@ def read_mesh_points(path, suffix: str, mesh_mode: str = "vertices",
                 and len(colors) == len(vertices):
             attributes["colors"] = np.asarray(colors)
     check_points(path, vertices)
-    return PointCloud(vertices, attributes, path)
+    return PointCloud(vertices, attributes, os.fspath(path))
 
 
 @_quiet_trimesh()
-def read_mesh_faces(path, suffix: str) -> tuple[np.ndarray, np.ndarray] | None:
+def read_mesh_faces(path: StrPath, suffix: str) -> tuple[np.ndarray, np.ndarray] | None:
     """The file's triangle mesh as (vertices (V, 3) float64, faces (F, 3) int64), duplicate
     vertices merged (STL), or None when the file has no faces."""
     import trimesh

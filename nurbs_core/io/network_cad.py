@@ -9,19 +9,27 @@ shell is made a solid with outward normals (positive volume). The shape is check
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
 from nurbs_core.io.cad import iges_bytes, occ_surface, quiet_occ, step_bytes
-from nurbs_core.io.errors import require_ocp
+from nurbs_core.io.errors import StrPath, require_ocp
+
+if TYPE_CHECKING:
+    from nurbs_core.patches.network import PatchNetwork
+
+#: OpenCASCADE objects (OCP ships no type information): shapes, faces, shells, solids.
+OccShape = Any
 
 #: Sewing tolerance relative to the network's size (shared boundaries coincide exactly)
 SEWING_TOLERANCE = 1e-7
 
 
-def _faces(network) -> list:
+def _faces(network: PatchNetwork) -> list[OccShape]:
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
 
-    faces = []
+    faces: list[OccShape] = []
     for index, data in enumerate(network.surface_dicts()):
         try:
             faces.append(BRepBuilderAPI_MakeFace(occ_surface(data), 1e-7).Face())
@@ -31,7 +39,7 @@ def _faces(network) -> list:
     return faces
 
 
-def _count(shape, kind) -> int:
+def _count(shape: OccShape, kind: str) -> int:
     from OCP.TopAbs import TopAbs_ShapeEnum
     from OCP.TopExp import TopExp_Explorer
 
@@ -43,7 +51,7 @@ def _count(shape, kind) -> int:
     return count
 
 
-def _sew(network):
+def _sew(network: PatchNetwork) -> OccShape:
     """The sewn shell; ValueError unless it is one shell of every patch, closed iff the network
     is closed."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_Sewing
@@ -67,7 +75,7 @@ def _sew(network):
     return TopoDS.Shell(TopExp_Explorer(sewn, TopAbs_ShapeEnum.TopAbs_SHELL).Current())
 
 
-def _volume(shape) -> float:
+def _volume(shape: OccShape) -> float:
     from OCP.BRepGProp import BRepGProp
     from OCP.GProp import GProp_GProps
 
@@ -76,7 +84,7 @@ def _volume(shape) -> float:
     return properties.Mass()
 
 
-def _solid(shell):
+def _solid(shell: OccShape) -> OccShape:
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeSolid
     from OCP.ShapeFix import ShapeFix_Solid
 
@@ -89,7 +97,7 @@ def _solid(shell):
     return solid
 
 
-def network_shape(network):
+def network_shape(network: PatchNetwork) -> OccShape:
     """One ``TopoDS_Solid`` (closed network) or ``TopoDS_Shell`` (open) of all patches;
     ValueError when it cannot be built or BRepCheck_Analyzer finds it invalid."""
     require_ocp("Building a patch-network shape")
@@ -106,7 +114,7 @@ def network_shape(network):
     return shape
 
 
-def write_network_step(network, path) -> None:
+def write_network_step(network: PatchNetwork, path: StrPath) -> None:
     """STEP (AP214, 17 significant digits): a MANIFOLD_SOLID_BREP for a closed network, a
     SHELL_BASED_SURFACE_MODEL for an open one."""
     shape = network_shape(network)
@@ -114,7 +122,7 @@ def write_network_step(network, path) -> None:
         handle.write(step_bytes(shape, path))
 
 
-def write_network_iges(network, path) -> None:
+def write_network_iges(network: PatchNetwork, path: StrPath) -> None:
     """IGES (17 significant digits) in B-rep mode: one shell (entity 514; in a solid, 186, when
     the network is closed) of faces 510 sharing their edges."""
     shape = network_shape(network)

@@ -33,19 +33,23 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from nurbs_core.io.atomic import atomic_path
 from nurbs_core.io.dispatch import NETWORK_SUFFIXES
-from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.errors import FileFormatError, StrPath
+
+if TYPE_CHECKING:
+    from nurbs_core.patches.network import PatchNetwork
 from nurbs_core.io.json_format import read_json_file
 from nurbs_core.io.points import suffix_of
 
 NETWORK_FORMAT = "nurbs-studio-network-v1"
 
 
-def _plain(value):
+def _plain(value: object) -> Any:
     """JSON-ready copy of an info value (numpy arrays and scalars as lists and numbers); None
     for what JSON cannot hold."""
     if isinstance(value, np.ndarray):
@@ -59,7 +63,8 @@ def _plain(value):
     return value
 
 
-def network_document(network, metadata: dict | None = None) -> dict:
+def network_document(network: PatchNetwork, metadata: dict[str, Any] | None = None
+                     ) -> dict[str, Any]:
     """The JSON document of ``network`` (see the module docstring). ``info`` keeps the
     network's info entries JSON can hold (numpy values as lists / numbers); others are left
     out."""
@@ -80,18 +85,21 @@ def network_document(network, metadata: dict | None = None) -> dict:
             "adjacency": network.adjacency(), "patches": patches}
 
 
-def _json_chunks(document: dict) -> Iterator[str]:
+def _json_chunks(document: dict[str, Any]) -> Iterator[str]:
     return json.JSONEncoder(allow_nan=False).iterencode(document)
 
 
-def write_network_json(network, path, metadata: dict | None = None) -> None:
+def write_network_json(network: PatchNetwork, path: StrPath,
+                       metadata: dict[str, Any] | None = None) -> None:
+    """Write our lossless network JSON (see the module docstring)."""
     document = network_document(network, metadata)
     with open(path, "w", encoding="utf-8") as handle:
         for chunk in _json_chunks(document):
             handle.write(chunk)
 
 
-def write_network(network, path, *, metadata: dict | None = None, **options) -> None:
+def write_network(network: PatchNetwork, path: StrPath, *, metadata: dict[str, Any] | None = None,
+                  **options: Any) -> None:
     """Write ``network`` in the format of the suffix (see the module docstring), atomically.
     ``metadata`` (JSON-serialisable) goes into the JSON document, and into the .3dm object
     (name from ``metadata['name']``, every entry as a user string); STEP, IGES and meshes ignore
@@ -104,8 +112,8 @@ def write_network(network, path, *, metadata: dict | None = None, **options) -> 
         write_network_file(network, temporary, suffix, metadata=metadata, **options)
 
 
-def write_network_file(network, path, suffix: str, *, metadata: dict | None = None,
-                       **options) -> None:
+def write_network_file(network: PatchNetwork, path: StrPath, suffix: str, *,
+                       metadata: dict[str, Any] | None = None, **options: Any) -> None:
     """Write ``network`` to ``path`` as it stands (no temporary file: the caller makes the write
     atomic) in the format of ``suffix``, one of NETWORK_SUFFIXES."""
     if suffix == ".json":
@@ -133,7 +141,8 @@ def write_network_file(network, path, suffix: str, *, metadata: dict | None = No
 # --- reading -------------------------------------------------------------------------------
 
 
-def _array(path, document: dict, key: str, shape: tuple, dtype, where: str = "") -> np.ndarray:
+def _array(path: StrPath, document: dict[str, Any], key: str, shape: tuple[int | None, ...],
+           dtype: type[np.float64] | type[np.int64], where: str = "") -> np.ndarray:
     """document[key] as an array of ``shape`` (None = any size), finite, of ``dtype``."""
     name = f"{where}{key}"
     if key not in document:
@@ -154,14 +163,14 @@ def _array(path, document: dict, key: str, shape: tuple, dtype, where: str = "")
     return array
 
 
-def _integer(path, document: dict, key: str) -> int:
+def _integer(path: StrPath, document: dict[str, Any], key: str) -> int:
     value = document.get(key)
     if isinstance(value, bool) or not isinstance(value, int):
         raise FileFormatError(path, f"{key} must be an integer, got {value!r}")
     return value
 
 
-def _network_from(path, document):
+def _network_from(path: StrPath, document: object) -> PatchNetwork:
     from nurbs_core.patches.network import build_network
 
     if not isinstance(document, dict) or document.get("format") != NETWORK_FORMAT:
@@ -195,7 +204,7 @@ def _network_from(path, document):
     return network
 
 
-def _check_derived(path, document: dict, network) -> None:
+def _check_derived(path: StrPath, document: dict[str, Any], network: PatchNetwork) -> None:
     """The redundant fields (knots, valence, closed, adjacency, patches) agree with the network
     rebuilt from the layout and control points."""
     if not np.array_equal(_array(path, document, "knots", (network.size + network.degree + 1,),
@@ -216,8 +225,10 @@ def _check_derived(path, document: dict, network) -> None:
         if not isinstance(entry, dict):
             raise FileFormatError(path, f"patches[{p}] is not an object")
         where = f"patches[{p}]."
-        for key, shape in (("control_points", (n, n, 3)), ("weights", (n, n)),
-                           ("knots_u", (None,)), ("knots_v", (None,))):
+        shapes: tuple[tuple[str, tuple[int | None, ...]], ...] = (
+            ("control_points", (n, n, 3)), ("weights", (n, n)), ("knots_u", (None,)),
+            ("knots_v", (None,)))
+        for key, shape in shapes:
             if not np.array_equal(_array(path, entry, key, shape, np.float64, where),
                                   expected[key]):
                 raise FileFormatError(path, f"{where}{key} disagrees with the network")
@@ -225,7 +236,7 @@ def _check_derived(path, document: dict, network) -> None:
             raise FileFormatError(path, f"{where}degree_u/degree_v must be {network.degree}")
 
 
-def read_network_with_metadata(path) -> tuple:
+def read_network_with_metadata(path: StrPath) -> tuple[PatchNetwork, dict[str, Any]]:
     """(network, the document's metadata dict) of a network written as ``.json`` by
     :func:`write_network`, exactly (float64 bits); ``network.info`` is the stored info.
     FileFormatError for anything malformed or inconsistent."""
@@ -239,7 +250,7 @@ def read_network_with_metadata(path) -> tuple:
     return network, metadata
 
 
-def read_network(path):
+def read_network(path: StrPath) -> PatchNetwork:
     """The :class:`~nurbs_core.patches.network.PatchNetwork` of a ``.json`` written by
     :func:`write_network` (see :func:`read_network_with_metadata`)."""
     return read_network_with_metadata(path)[0]

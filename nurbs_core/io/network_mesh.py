@@ -10,14 +10,22 @@ mesh wound consistently with the patch normals S_u x S_v (outward for an outward
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
+from nurbs_core.io.errors import StrPath
 from nurbs_core.io.tessellate import MESH_EXPORT_SUFFIXES, grid_faces, tessellate_surface
+
+if TYPE_CHECKING:
+    import trimesh
+
+    from nurbs_core.patches.network import PatchNetwork
 
 NETWORK_MESH_SUFFIXES = MESH_EXPORT_SUFFIXES
 
 
-def network_mesh_arrays(network, resolution: int = 32) -> tuple[np.ndarray, np.ndarray]:
+def network_mesh_arrays(network: PatchNetwork, resolution: int = 32) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (N, 3) float64 and triangles (2 P (r - 1)^2, 3) of the welded mesh; r =
     ``resolution`` samples per patch side (at least 2). Shared samples come from the first patch
     (in patch order) that has them."""
@@ -29,19 +37,19 @@ def network_mesh_arrays(network, resolution: int = 32) -> tuple[np.ndarray, np.n
     weld = build_network(network.vertices, network.quads, size=resolution, degree=1).index
     vertices = np.zeros((int(weld.max()) + 1, 3))
     local_faces = grid_faces(resolution, resolution)
-    faces = []
+    pieces: list[np.ndarray] = []
     surfaces = network.surfaces()
     for p in reversed(range(network.patch_count)):  # so the first patch's samples stay
         grid, _ = tessellate_surface(surfaces[p], resolution)
         vertices[weld[p].ravel()] = grid
     for p in range(network.patch_count):
-        faces.append(weld[p].ravel()[local_faces])
-    faces = np.concatenate(faces)
+        pieces.append(weld[p].ravel()[local_faces])
+    faces = np.concatenate(pieces)
     used, faces = np.unique(faces, return_inverse=True)  # drop layout vertices no quad uses
     return vertices[used], faces.reshape(-1, 3)
 
 
-def network_mesh(network, resolution: int = 32):
+def network_mesh(network: PatchNetwork, resolution: int = 32) -> trimesh.Trimesh:
     """The welded mesh as a ``trimesh.Trimesh`` (not processed: vertices kept as built)."""
     import trimesh
 
@@ -49,7 +57,7 @@ def network_mesh(network, resolution: int = 32):
     return trimesh.Trimesh(vertices, faces, process=False)
 
 
-def write_network_mesh(network, path, resolution: int = 32) -> None:
+def write_network_mesh(network: PatchNetwork, path: StrPath, resolution: int = 32) -> None:
     """Write the welded mesh; the suffix (one of NETWORK_MESH_SUFFIXES) picks the format."""
     from nurbs_core.io.points import suffix_of
 

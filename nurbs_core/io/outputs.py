@@ -7,7 +7,7 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from nurbs_core.io.errors import OutputPathError
+from nurbs_core.io.errors import OutputPathError, StrPath
 from nurbs_core.io.points import suffix_of
 
 
@@ -22,7 +22,7 @@ def _same_file(first: Path, second: Path) -> bool:
         return False
 
 
-def check_output_paths(outputs: Iterable, inputs: Iterable = (), *,
+def check_output_paths(outputs: Iterable[StrPath], inputs: Iterable[StrPath | None] = (), *,
                        suffixes: Iterable[str] | None = None) -> list[Path]:
     """The outputs as Paths, once each is known to be writable; OutputPathError otherwise.
 

@@ -13,11 +13,13 @@ the bytes present (binary), the lines present (ASCII) or the announced decompres
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from typing import TypeAlias
 
 import numpy as np
 
 from nurbs_core.io.cloud import PointCloud, check_points, read_text_rows, split_named_columns
-from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.limits import check_claimed_size, check_decompressed_size, format_size
 
 _HEADER_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT",
@@ -51,8 +53,14 @@ _LZF_WALK_SPARSE = 12
 #: most 128 token starts, and the parse enters each block at one of its first 33 bytes.
 _LZF_BLOCK_BITS = 8
 
+#: The parsed header: key -> its words, and key -> its 1-based line.
+_Header: TypeAlias = "dict[str, list[str]]"
+_Lines: TypeAlias = "dict[str, int]"
+#: The fields of a record: (name, numpy type code such as "f4", count).
+_Fields: TypeAlias = "list[tuple[str, str, int]]"
 
-def lzf_decompress(data, expected_size: int) -> bytearray:
+
+def lzf_decompress(data: bytes, expected_size: int) -> bytearray:
     """Decompress an LZF stream (liblzf's format) of known output size.
 
     The output is allocated once (``expected_size``: the caller checks it against the
@@ -93,7 +101,8 @@ def _lzf_token_starts(source: np.ndarray, position: int, stop: int) -> tuple[np.
     the rest of the segment is split by :func:`_lzf_block_starts`."""
     end = min(stop + 33, len(source))
     steps = _LZF_TOKEN_STEPS[source[position:end]].tobytes()
-    walked, at, limit = [], 0, stop - position
+    walked: list[int] = []
+    at, limit = 0, stop - position
     while at < limit and len(walked) < _LZF_WALK_TOKENS:
         for _ in range(4096):
             if at >= limit:
@@ -187,7 +196,9 @@ def _lzf_segment(out: bytearray, source: np.ndarray, starts: np.ndarray, written
     return end
 
 
-def _lzf_slices(out, target, source, tokens: slice, starts, literal, run, distance, out_start):
+def _lzf_slices(out: bytearray, target: np.ndarray, source: np.ndarray, tokens: slice,
+                starts: np.ndarray, literal: np.ndarray, run: np.ndarray, distance: np.ndarray,
+                out_start: np.ndarray) -> None:
     """Decode a window of long tokens (highly compressible data) one back reference at a time
     with slice copies, after copying all its literal runs at once."""
     literal, run, distance, out_start = (literal[tokens], run[tokens], distance[tokens],
@@ -209,7 +220,9 @@ def _lzf_slices(out, target, source, tokens: slice, starts, literal, run, distan
             view[start:end] = view[origin:origin + end - start]
 
 
-def _lzf_window(target, source, tokens: slice, starts, literal, run, distance, out_start):
+def _lzf_window(target: np.ndarray, source: np.ndarray, tokens: slice, starts: np.ndarray,
+                literal: np.ndarray, run: np.ndarray, distance: np.ndarray,
+                out_start: np.ndarray) -> None:
     """Decode a window of whole tokens. Every output byte is a literal byte or a copy of an
     earlier byte at most 8192 back: the window (with the 8192 final bytes before it) becomes an
     array of links to the byte each one copies, a literal byte linking to itself, and pointer
@@ -248,7 +261,8 @@ def _lzf_window(target, source, tokens: slice, starts, literal, run, distance, o
     target[low:low + size] = values[link[history:]]
 
 
-def _parse_header(path, raw: bytes):
+def _parse_header(path: StrPath, raw: bytes) -> tuple[_Header, _Lines, int, int]:
+    """(header, lines, data offset, first data line) of the PCD header at the start of ``raw``."""
     header: dict[str, list[str]] = {}
     lines: dict[str, int] = {}
     position, number = 0, 0
@@ -276,7 +290,7 @@ def _parse_header(path, raw: bytes):
             return header, lines, position, number + 1
 
 
-def _count(path, header, lines, key: str) -> int:
+def _count(path: StrPath, header: _Header, lines: _Lines, key: str) -> int:
     words = header.get(key, ["1"] if key == "HEIGHT" else [])
     try:
         value = int(words[0])
@@ -288,7 +302,7 @@ def _count(path, header, lines, key: str) -> int:
     return value
 
 
-def _layout(path, header, lines):
+def _layout(path: StrPath, header: _Header, lines: _Lines) -> tuple[_Fields, int]:
     for key in ("FIELDS", "SIZE", "TYPE", "DATA"):
         if key not in header:
             raise FileFormatError(path, f"the PCD header has no {key} line")
@@ -299,19 +313,20 @@ def _layout(path, header, lines):
     if not (len(names) == len(header["SIZE"]) == len(header["TYPE"]) == len(counts)):
         raise FileFormatError(path, "FIELDS, SIZE, TYPE and COUNT have different lengths",
                               line=lines["FIELDS"])
-    fields = []
-    for name, size, kind, count in zip(names, header["SIZE"], header["TYPE"], counts, strict=True):
+    fields: _Fields = []
+    for name, size, kind, count_word in zip(names, header["SIZE"], header["TYPE"], counts,
+                                            strict=True):
         try:
             code = _KINDS[(kind.upper(), int(size))]
-            count = int(count)
+            count = int(count_word)
         except (KeyError, ValueError):
             raise FileFormatError(path, f"unsupported field {name!r}: TYPE {kind} SIZE {size} "
-                                        f"COUNT {count}", line=lines["TYPE"]) from None
+                                        f"COUNT {count_word}", line=lines["TYPE"]) from None
         if count < 1:
             raise FileFormatError(path, f"field {name!r} has COUNT {count}; it must be at least 1",
                                   line=lines.get("COUNT", lines["FIELDS"]))
         fields.append((name, code, count))
-    seen = set()
+    seen: set[str] = set()
     for name, _, _ in fields:
         if name in seen and name not in ("_", ""):
             raise FileFormatError(path, f"field {name!r} appears twice", line=lines["FIELDS"])
@@ -325,14 +340,14 @@ def _layout(path, header, lines):
     return fields, n_points
 
 
-def _record_bytes(fields) -> int:
+def _record_bytes(fields: _Fields) -> int:
     """Bytes of one point (Python integers: a COUNT of 10^9 must not overflow)."""
     return sum(np.dtype(code).itemsize * count for _, code, count in fields)
 
 
-def _record_dtype(path, fields) -> np.dtype:
+def _record_dtype(path: StrPath, fields: _Fields) -> np.dtype:
     """The packed record of the binary layout (padding fields ``_`` get unique names)."""
-    parts = []
+    parts: list[tuple[str, str] | tuple[str, str, tuple[int]]] = []
     for k, (name, code, count) in enumerate(fields):
         label = f"_padding_{k}" if name in ("_", "") else name
         parts.append((label, "<" + code, (count,)) if count > 1 else (label, "<" + code))
@@ -351,7 +366,9 @@ def _unpack_rgb(values: np.ndarray, with_alpha: bool) -> np.ndarray:
     return np.stack(channels, axis=1).astype(np.uint8)
 
 
-def read_pcd_points(path) -> PointCloud:
+def read_pcd_points(path: StrPath) -> PointCloud:
+    """The points of a PCD file (ascii, binary or binary_compressed): points (N, 3) float64,
+    the other fields as attributes (rgb / rgba unpacked to colors (N, 3) / (N, 4) uint8)."""
     size = os.path.getsize(path)
     with open(path, "rb") as handle:
         head = handle.read(_MAX_HEADER_BYTES)
@@ -367,7 +384,8 @@ def read_pcd_points(path) -> PointCloud:
                               line=lines.get("POINTS"))
     count_line = lines.get("POINTS", lines.get("WIDTH"))
     available = size - data_offset
-    line_of_row = None
+    line_of_row: Callable[[int], int] | None = None
+    values: dict[int, np.ndarray]
     if mode == "ascii":
         values = _read_ascii(path, data_offset, fields, n_points, first_data_line, count_line)
         line_of_row = lambda k: first_data_line + k  # noqa: E731
@@ -376,11 +394,14 @@ def read_pcd_points(path) -> PointCloud:
                            line=count_line)
         dtype = _record_dtype(path, fields)
         records = np.fromfile(path, dtype=dtype, count=n_points, offset=data_offset)
+        assert dtype.names is not None  # a record dtype has named fields
         labels = list(dtype.names)
         values = {k: records[labels[k]] for k in range(len(fields))}
     else:
         values = _read_compressed(path, data_offset, available, fields, n_points, count_line)
-    columns, names, extra = {}, [], {}
+    columns: dict[str, np.ndarray] = {}
+    names: list[str] = []
+    extra: dict[str, np.ndarray] = {}
     for k, (name, _code, count) in enumerate(fields):
         if name in ("_", ""):  # padding fields
             continue
@@ -394,14 +415,16 @@ def read_pcd_points(path) -> PointCloud:
     points, attributes = split_named_columns(path, names, columns)
     attributes.update(extra)
     check_points(path, points, line_of_row)
-    return PointCloud(points, attributes, path)
+    return PointCloud(points, attributes, os.fspath(path))
 
 
-def _read_ascii(path, offset: int, fields, n_points: int, first_line: int, count_line):
+def _read_ascii(path: StrPath, offset: int, fields: _Fields, n_points: int, first_line: int,
+                count_line: int | None) -> dict[int, np.ndarray]:
     width = sum(count for _, _, count in fields)
     table = read_text_rows(path, offset, first_line, n_points, width, what="points",
                            header_line=count_line)
-    values, column = {}, 0
+    values: dict[int, np.ndarray] = {}
+    column = 0
     for k, (name, code, count) in enumerate(fields):
         block = table[:, column: column + count]
         if name.lower() in ("rgb", "rgba") and code[0] == "f":
@@ -413,7 +436,8 @@ def _read_ascii(path, offset: int, fields, n_points: int, first_line: int, count
     return values
 
 
-def _read_compressed(path, offset: int, available: int, fields, n_points: int, count_line):
+def _read_compressed(path: StrPath, offset: int, available: int, fields: _Fields, n_points: int,
+                     count_line: int | None) -> dict[int, np.ndarray]:
     if available < 8:
         raise FileFormatError(path, "truncated: no compressed-data sizes after DATA")
     with open(path, "rb") as handle:
@@ -433,7 +457,8 @@ def _read_compressed(path, offset: int, available: int, fields, n_points: int, c
     except ValueError as exc:
         raise FileFormatError(path, f"corrupt LZF data: {exc}") from None
     del compressed
-    values, start = {}, 0
+    values: dict[int, np.ndarray] = {}
+    start = 0
     for k, (_name, code, count) in enumerate(fields):  # stored column by column
         column = np.frombuffer(data, dtype="<" + code, count=n_points * count, offset=start)
         values[k] = column if count == 1 else column.reshape(n_points, count)

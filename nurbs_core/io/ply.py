@@ -18,11 +18,12 @@ from __future__ import annotations
 import os
 import struct
 from dataclasses import dataclass, field
+from typing import BinaryIO, TypeAlias
 
 import numpy as np
 
 from nurbs_core.io.cloud import NAMED_COLUMNS, PointCloud, check_points, read_text_rows
-from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.limits import check_claimed_size, format_size
 
 _TYPES = {
@@ -40,6 +41,17 @@ _WALK_CHUNK = 1 << 22
 #: element of irregular lists before the vertices; uniform lists are walked vectorised).
 _MAX_IRREGULAR_ROWS = 2_000_000
 
+#: A property's type: a dtype code ("f4") for a scalar, (count code, item code) for a list.
+PropertyKind: TypeAlias = "str | tuple[str, str]"
+#: Where each vertex property goes: {property: (attribute, column or None)}.
+_Plan: TypeAlias = "dict[str, tuple[str, int | None]]"
+
+
+def _scalar_kind(kind: PropertyKind) -> str:
+    """The dtype code of a scalar property (list properties are handled before this is asked)."""
+    assert isinstance(kind, str), "a list property has no fixed dtype"
+    return kind
+
 
 @dataclass
 class PlyElement:
@@ -47,7 +59,7 @@ class PlyElement:
     count: int
     line: int
     # (name, dtype) for scalars; (name, (count dtype, item dtype)) for list properties
-    properties: list[tuple[str, object]] = field(default_factory=list)
+    properties: list[tuple[str, PropertyKind]] = field(default_factory=list)
 
     @property
     def has_lists(self) -> bool:
@@ -67,7 +79,9 @@ class PlyHeader:
         return next((e for e in self.elements if e.name == name), None)
 
     def fixed_dtype(self, element: PlyElement) -> np.dtype:
-        return np.dtype([(name, self.endian + kind) for name, kind in element.properties])
+        assert self.endian is not None  # only binary rows have a fixed dtype
+        endian = self.endian
+        return np.dtype([(name, endian + _scalar_kind(kind)) for name, kind in element.properties])
 
     def min_row_bytes(self, element: PlyElement) -> int:
         """The fewest bytes a row of ``element`` can take: binary, its scalars and the list
@@ -79,7 +93,9 @@ class PlyHeader:
                    for _, kind in element.properties)
 
 
-def read_header(path) -> PlyHeader:
+def read_header(path: StrPath) -> PlyHeader:
+    """The parsed PLY header (elements, their properties and counts), each count checked against
+    the bytes the file has; no data is read."""
     with open(path, "rb") as handle:
         head = handle.read(_MAX_HEADER_BYTES)
     if not head:
@@ -102,7 +118,7 @@ def read_header(path) -> PlyHeader:
     except UnicodeDecodeError:
         raise FileFormatError(path, "the PLY header contains non-ASCII bytes") from None
     elements: list[PlyElement] = []
-    fmt = None
+    fmt: str | None = None
     for number, raw in enumerate(header_text.splitlines(), start=1):
         words = raw.split()
         if not words or words[0] in ("ply", "comment", "obj_info"):
@@ -145,7 +161,7 @@ def read_header(path) -> PlyHeader:
     return header
 
 
-def _check_counts(path, header: PlyHeader) -> None:
+def _check_counts(path: StrPath, header: PlyHeader) -> None:
     """Every element count against the bytes that follow the header, before any allocation."""
     available = header.file_size - header.data_offset
     if header.endian is None:
@@ -159,14 +175,14 @@ def _check_counts(path, header: PlyHeader) -> None:
         available -= element.count * row
 
 
-def _vertex_plan(path, header: PlyHeader, vertex: PlyElement):
+def _vertex_plan(path: StrPath, header: PlyHeader, vertex: PlyElement) -> _Plan:
     """Where each vertex property goes: {property: (attribute, column or None)}."""
     if vertex.has_lists:
         raise FileFormatError(path, "list properties on the vertex element are not supported",
                               line=vertex.line)
     names = [name for name, _ in vertex.properties]
     groups: dict[str, dict[int, str]] = {}
-    plan: dict[str, tuple[str, int | None]] = {}
+    plan: _Plan = {}
     for name in names:
         target = NAMED_COLUMNS.get(name.lower())
         if target is None:
@@ -189,7 +205,7 @@ def _vertex_plan(path, header: PlyHeader, vertex: PlyElement):
     return plan
 
 
-def _allocate(plan, dtype: np.dtype, count: int):
+def _allocate(plan: _Plan, dtype: np.dtype, count: int) -> dict[str, np.ndarray]:
     arrays: dict[str, np.ndarray] = {}
     widths: dict[str, int] = {}
     kinds: dict[str, np.dtype] = {}
@@ -205,7 +221,7 @@ def _allocate(plan, dtype: np.dtype, count: int):
     return arrays
 
 
-def _scatter(plan, arrays, block, start: int):
+def _scatter(plan: _Plan, arrays: dict[str, np.ndarray], block: np.ndarray, start: int) -> None:
     stop = start + len(block)
     for name, (attribute, column) in plan.items():
         if column is None:
@@ -221,14 +237,18 @@ class _RowWalker:
     one at a time, at most ``_MAX_IRREGULAR_ROWS`` of them. Every list is checked against the
     bytes left in the file."""
 
-    def __init__(self, path, handle, header: PlyHeader, element: PlyElement):
+    def __init__(self, path: StrPath, handle: BinaryIO, header: PlyHeader,
+                 element: PlyElement) -> None:
         self.path, self.handle, self.element = path, handle, element
         self.end = header.file_size
-        self.parts = []  # (None, fixed bytes) or (count dtype, struct format, item bytes)
+        # (None, None, fixed bytes) or (count dtype, struct format, item bytes)
+        self.parts: list[tuple[np.dtype | None, str | None, int]] = []
+        assert header.endian is not None  # only binary elements are walked
+        endian = header.endian
         for _name, kind in element.properties:
             if isinstance(kind, tuple):
-                count_type = np.dtype(header.endian + kind[0])
-                self.parts.append((count_type, header.endian + count_type.char,
+                count_type = np.dtype(endian + kind[0])
+                self.parts.append((count_type, endian + count_type.char,
                                    np.dtype(kind[1]).itemsize))
             else:
                 self.parts.append((None, None, np.dtype(kind).itemsize))
@@ -242,13 +262,15 @@ class _RowWalker:
             self.buffer, self.buffer_at = self.handle.read(max(count, _WALK_CHUNK)), position
         return self.buffer, position - self.buffer_at
 
-    def _row(self, position: int, row: int):
+    def _row(self, position: int, row: int) -> tuple[int, list[tuple[int, np.dtype, int]]]:
         """(length, [(offset, count dtype, count)]) of the row at ``position``."""
-        offset, counts = 0, []
+        offset = 0
+        counts: list[tuple[int, np.dtype, int]] = []
         for count_type, code, size in self.parts:
             if count_type is None:
                 offset += size
                 continue
+            assert code is not None  # a list part has its count's struct format
             buffer, at = self._bytes(position + offset, count_type.itemsize)
             if at + count_type.itemsize > len(buffer):
                 raise FileFormatError(self.path, f"truncated inside element "
@@ -266,7 +288,8 @@ class _RowWalker:
                                f"{format_size(max(self.end - position, 0))} left in the file")
         return offset, counts
 
-    def _uniform(self, position: int, length: int, counts, rows: int) -> int:
+    def _uniform(self, position: int, length: int, counts: list[tuple[int, np.dtype, int]],
+                 rows: int) -> int:
         """How many rows from ``position`` (at least 1) have the lengths of the first."""
         want = min(rows, _WALK_CHUNK // length)
         if want < 2:
@@ -302,7 +325,7 @@ class _RowWalker:
         return position
 
 
-def _skip_elements(path, handle, header: PlyHeader, stop: PlyElement | None = None) -> int:
+def _skip_elements(path: StrPath, handle: BinaryIO, header: PlyHeader, stop: PlyElement | None = None) -> int:
     """The position after the binary elements before ``stop`` (all of them if None), each row
     with lists walked and checked against the file."""
     position = header.data_offset
@@ -316,7 +339,7 @@ def _skip_elements(path, handle, header: PlyHeader, stop: PlyElement | None = No
     return position
 
 
-def walk_list_elements(path) -> None:
+def walk_list_elements(path: StrPath) -> None:
     """Check every row of every binary element with lists (lengths against the file) without
     reading the data: before a PLY file goes to a library that would trust the lists."""
     header = read_header(path)
@@ -326,7 +349,8 @@ def walk_list_elements(path) -> None:
         _skip_elements(path, handle, header)
 
 
-def _read_binary(path, header: PlyHeader, vertex: PlyElement, plan) -> dict[str, np.ndarray]:
+def _read_binary(path: StrPath, header: PlyHeader, vertex: PlyElement,
+                 plan: _Plan) -> dict[str, np.ndarray]:
     dtype = header.fixed_dtype(vertex)
     size = header.file_size
     with open(path, "rb") as handle:
@@ -348,7 +372,8 @@ def _read_binary(path, header: PlyHeader, vertex: PlyElement, plan) -> dict[str,
     return arrays
 
 
-def _read_ascii(path, header: PlyHeader, vertex: PlyElement, plan) -> tuple[dict, int]:
+def _read_ascii(path: StrPath, header: PlyHeader, vertex: PlyElement,
+                plan: _Plan) -> tuple[dict[str, np.ndarray], int]:
     skip = 0
     for element in header.elements:  # one line per row of the elements before the vertices
         if element is vertex:
@@ -357,7 +382,7 @@ def _read_ascii(path, header: PlyHeader, vertex: PlyElement, plan) -> tuple[dict
     table = read_text_rows(path, header.data_offset, header.first_data_line, vertex.count,
                            len(vertex.properties), skip=skip, what="vertices",
                            header_line=vertex.line)
-    dtype = np.dtype([(name, "<" + kind) for name, kind in vertex.properties])
+    dtype = np.dtype([(name, "<" + _scalar_kind(kind)) for name, kind in vertex.properties])
     block = np.empty(vertex.count, dtype=dtype)
     for j, (name, _) in enumerate(vertex.properties):
         block[name] = table[:, j]
@@ -367,7 +392,9 @@ def _read_ascii(path, header: PlyHeader, vertex: PlyElement, plan) -> tuple[dict
     return arrays, header.first_data_line + skip
 
 
-def read_ply_points(path) -> PointCloud:
+def read_ply_points(path: StrPath) -> PointCloud:
+    """The vertices of a PLY file (ASCII or binary): points (N, 3) float64, the other vertex
+    properties as attributes (normals (N, 3), colors (N, 3) or (N, 4), ...)."""
     header = read_header(path)
     vertex = header.element("vertex")
     if vertex is None:
@@ -376,23 +403,24 @@ def read_ply_points(path) -> PointCloud:
         raise FileFormatError(path, "the PLY file has no vertices (element vertex 0)",
                               line=vertex.line)
     plan = _vertex_plan(path, header, vertex)
-    first_line = None
+    first_line: int | None = None
     if header.endian is None:
         arrays, first_line = _read_ascii(path, header, vertex, plan)
     else:
         arrays = _read_binary(path, header, vertex, plan)
     points = arrays.pop("points")
     check_points(path, points, None if first_line is None else (lambda k: first_line + k))
-    return PointCloud(points, arrays, path)
+    return PointCloud(points, arrays, os.fspath(path))
 
 
-def has_faces(path) -> bool:
+def has_faces(path: StrPath) -> bool:
+    """Whether the PLY header declares a non-empty 'face' element."""
     header = read_header(path)
     face = header.element("face")
     return face is not None and face.count > 0
 
 
-def write_ply_points(cloud: PointCloud, path) -> None:
+def write_ply_points(cloud: PointCloud, path: StrPath) -> None:
     """Binary little-endian PLY: x y z as double, plus nx ny nz, colors, intensity if present."""
     fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
     columns = [cloud.points[:, 0], cloud.points[:, 1], cloud.points[:, 2]]

@@ -11,8 +11,10 @@ import struct
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO, Any, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from nurbs_core.io.cloud import (
     NAMED_COLUMNS,
@@ -21,7 +23,7 @@ from nurbs_core.io.cloud import (
     classify_extra_columns,
     split_named_columns,
 )
-from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.limits import (
     MAX_COLUMNS,
     check_claimed_size,
@@ -36,11 +38,12 @@ POINT_CLOUD_SUFFIXES = (".ply", *TEXT_SUFFIXES, ".npy", ".npz", ".pcd", ".las", 
 POINT_EXPORT_SUFFIXES = (".ply", ".xyz", ".csv", ".npy", ".npz")
 
 
-def suffix_of(path) -> str:
+def suffix_of(path: StrPath) -> str:
+    """The lower-case suffix of ``path`` (``".ply"``; empty when it has none)."""
     return Path(os.fspath(path)).suffix.lower()
 
 
-def _check_file(path) -> None:
+def _check_file(path: StrPath) -> None:
     """FileNotFoundError / FileFormatError before a reader opens ``path``: missing, a symbolic
     link loop or a dangling link, a directory, not a regular file, unreadable, or empty."""
     name = os.fspath(path)
@@ -63,7 +66,7 @@ def _check_file(path) -> None:
         raise FileFormatError(path, "the file is empty")
 
 
-def load_points(path, *, mesh_mode: str = "vertices", sample_count: int = 100_000,
+def load_points(path: StrPath, *, mesh_mode: str = "vertices", sample_count: int = 100_000,
                 seed: int = 0) -> PointCloud:
     """Read a point cloud: points (N, 3) float64 plus the per-point attributes the file has.
 
@@ -118,8 +121,10 @@ def _dtype_problem(dtype: np.dtype, coordinates: bool) -> str | None:
     if dtype.names:
         if coordinates:
             return "a structured record, not a number"
+        fields = dtype.fields
+        assert fields is not None  # a dtype with field names has fields
         for name in dtype.names:
-            problem = _dtype_problem(dtype.fields[name][0], False)
+            problem = _dtype_problem(fields[name][0], False)
             if problem is not None:
                 return f"{problem} in field {name!r}"
         return None
@@ -144,7 +149,7 @@ def _dtype_problem(dtype: np.dtype, coordinates: bool) -> str | None:
     return f"values of dtype {dtype}, not numbers"
 
 
-def _layout_problem(shape: tuple, dtype: np.dtype) -> str | None:
+def _layout_problem(shape: tuple[int, ...], dtype: np.dtype) -> str | None:
     """Why an array of ``shape`` and ``dtype`` is not a point table, or None. A table is
     structured (N,) with x, y, z fields, or numeric (N, k) with 3 <= k <= MAX_COLUMNS."""
     if dtype.names:
@@ -152,8 +157,10 @@ def _layout_problem(shape: tuple, dtype: np.dtype) -> str | None:
             return f"expected a structured array of shape (N,), got shape {shape}"
         coordinates = {name for name in dtype.names
                        if NAMED_COLUMNS.get(name.strip().lower(), ("",))[0] == "points"}
+        fields = dtype.fields
+        assert fields is not None  # a dtype with field names has fields
         for name in dtype.names:
-            field_type = dtype.fields[name][0]
+            field_type = fields[name][0]
             if name in coordinates and field_type.shape:
                 return (f"field {name!r} holds arrays of shape {field_type.shape}, not one "
                         "coordinate per point")
@@ -173,17 +180,17 @@ def _layout_problem(shape: tuple, dtype: np.dtype) -> str | None:
     return None
 
 
-def _table_to_cloud(path, table: np.ndarray) -> PointCloud:
+def _table_to_cloud(path: StrPath, table: np.ndarray) -> PointCloud:
     """The cloud of a point table whose layout the caller checked on its header
     (:func:`_layout_problem`) before reading it."""
     if table.dtype.names:  # a structured array: use its field names
         names = list(table.dtype.names)
         points, attributes = split_named_columns(path, names, {n: table[n] for n in names})
-        return PointCloud(check_points(path, points), attributes, path)
+        return PointCloud(check_points(path, points), attributes, os.fspath(path))
     points = np.asarray(table[:, :3], dtype=np.float64)
     attributes = classify_extra_columns(np.asarray(table[:, 3:], np.float64)) \
         if table.shape[1] > 3 else {}
-    return PointCloud(check_points(path, points), attributes, path)
+    return PointCloud(check_points(path, points), attributes, os.fspath(path))
 
 
 #: numpy's own bound on an .npy header (format._MAX_HEADER_SIZE).
@@ -195,7 +202,7 @@ _READ_CHUNK = 16 * 2**20
 
 @dataclass
 class _NpyHeader:
-    shape: tuple
+    shape: tuple[int, ...]
     fortran_order: bool
     dtype: np.dtype
     header_bytes: int  # magic + length + header text: where the data starts
@@ -209,7 +216,7 @@ class _NpyHeader:
         return self.count * self.dtype.itemsize
 
 
-def _read_npy_header(path, handle, where: str = "") -> _NpyHeader:
+def _read_npy_header(path: StrPath, handle: IO[bytes], where: str = "") -> _NpyHeader:
     """The header of the .npy stream at ``handle`` (a file or an .npz member), without reading
     any data; its length is bounded before it is read, and pickled dtypes are never built."""
     try:
@@ -257,7 +264,7 @@ def _shaped(header: _NpyHeader, flat: np.ndarray) -> np.ndarray:
     return flat.reshape(header.shape)
 
 
-def _read_npy(path) -> PointCloud:
+def _read_npy(path: StrPath) -> PointCloud:
     with open(path, "rb") as handle:
         header = _read_npy_header(path, handle)
         problem = _layout_problem(header.shape, header.dtype)
@@ -270,12 +277,12 @@ def _read_npy(path) -> PointCloud:
     return _table_to_cloud(path, _shaped(header, flat))
 
 
-def _read_member(path, archive: zipfile.ZipFile, info: zipfile.ZipInfo,
+def _read_member(path: StrPath, archive: zipfile.ZipFile, info: zipfile.ZipInfo,
                  header: _NpyHeader) -> np.ndarray:
     """The data of one .npz member, read in bounded chunks: never more than the npy header and
     the zip directory announce, whatever the compressed stream holds."""
     flat = np.empty(header.count, dtype=header.dtype)
-    target = memoryview(flat.view(np.uint8).reshape(-1)) if header.count else memoryview(b"")
+    target = flat.view(np.uint8).reshape(-1).data if header.count else memoryview(b"")
     with archive.open(info) as member:
         skipped = member.read(header.header_bytes)
         if len(skipped) != header.header_bytes:
@@ -295,7 +302,7 @@ def _read_member(path, archive: zipfile.ZipFile, info: zipfile.ZipInfo,
     return _shaped(header, flat)
 
 
-def _read_npz(path) -> PointCloud:
+def _read_npz(path: StrPath) -> PointCloud:
     compressed_size = os.path.getsize(path)
     with zipfile.ZipFile(path) as archive:
         infos = [info for info in archive.infolist() if not info.is_dir()]
@@ -318,8 +325,8 @@ def _read_npz(path) -> PointCloud:
                     raise FileFormatError(path, f"{where}the zip entry holds "
                                                 f"{format_size(present)} of data, its .npy "
                                                 f"header describes {format_size(header.nbytes)}")
-            key = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
-            headers[key] = (info, header)
+            member_key = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
+            headers[member_key] = (info, header)
         key = "points" if "points" in headers else next(
             (k for k, (_, h) in headers.items() if len(h.shape) == 2 and h.shape[1] == 3), None)
         if key is None:
@@ -329,7 +336,7 @@ def _read_npz(path) -> PointCloud:
         if problem is not None:
             raise FileFormatError(path, f"member {info.filename!r}: {problem}")
         rows = header.shape[0]
-        attached = {}
+        attached: dict[str, tuple[zipfile.ZipInfo, _NpyHeader]] = {}
         for name, (other, other_header) in headers.items():
             if name == key or not other_header.shape or other_header.shape[0] != rows:
                 continue  # not one value per point: not an attribute
@@ -345,7 +352,7 @@ def _read_npz(path) -> PointCloud:
     return cloud
 
 
-def _read_numpy(path, suffix: str) -> PointCloud:
+def _read_numpy(path: StrPath, suffix: str) -> PointCloud:
     """.npy / .npz without np.load: every header (shape, dtype) is parsed and checked against the
     bytes present (and, in an archive, against the decompression limit) before any data is
     read; object, complex, text and raw-byte arrays are refused; pickles are never loaded."""
@@ -368,8 +375,10 @@ def _read_numpy(path, suffix: str) -> PointCloud:
                                     f"{exc}") from None
 
 
-def save_points(cloud_or_array, path) -> None:
+def save_points(cloud_or_array: PointCloud | ArrayLike, path: StrPath) -> None:
     """Write points (N, 3) (a PointCloud keeps its normals/colors/intensity where the format can).
+
+    ``cloud_or_array``: a PointCloud, or anything numpy reads as an (N, 3) array of coordinates.
 
     .ply: binary little-endian, double coordinates; .xyz: space separated with a header line;
     .csv: comma separated with a header; .npy: the (N, 3) float64 array; .npz: points plus every
@@ -396,4 +405,5 @@ def save_points(cloud_or_array, path) -> None:
         elif suffix == ".npy":
             np.save(temporary, cloud.points)
         else:
-            np.savez(temporary, points=cloud.points, **cloud.attributes)
+            # numpy's stubs match **kwds against allow_pickle: the names here are array names
+            np.savez(temporary, points=cloud.points, **cast("dict[str, Any]", cloud.attributes))

@@ -12,13 +12,21 @@ B-rep faces and extrusions, other surfaces via ``ToNurbsSurface``, and curves vi
 from __future__ import annotations
 
 import importlib.util
+from typing import TYPE_CHECKING, Any
 
-from nurbs_core.io.errors import MissingDependencyError
+from nurbs_core.io.errors import MissingDependencyError, StrPath
+
+if TYPE_CHECKING:
+    import rhino3dm
+
+    from nurbs_core.geometry import NurbsCurve, NurbsSurface
+    from nurbs_core.io.geometry_io import GeometryInput
 
 
-def read_3dm(path) -> list:
+def read_3dm(path: StrPath) -> list[NurbsCurve | NurbsSurface]:
     """Every NURBS surface, B-rep face (untrimmed), extrusion and curve of a .3dm file; each
-    item's ``.metadata`` holds the object's name.
+    item's ``.metadata`` holds the object's name. Surfaces have control points (n_u, n_v, 3),
+    curves (n, 3), both Euclidean with their weights.
 
     openNURBS runs in the reader process of :mod:`nurbs_core.io.cad` (``_occ_reader.py``):
     damaged .3dm files can make it allocate gigabytes or never return (a 10 KB file with a few
@@ -32,41 +40,43 @@ def read_3dm(path) -> list:
     return read_in_worker(path, "3dm")
 
 
-def _surface_to_rhino(data: dict):
+def _surface_to_rhino(data: dict[str, Any]) -> rhino3dm.NurbsSurface:
     import rhino3dm
 
     n_u, n_v = data["control_points"].shape[:2]
     p, q = data["degree_u"], data["degree_v"]
     surface = rhino3dm.NurbsSurface.Create(3, True, p + 1, q + 1, n_u, n_v)
     for k, value in enumerate(data["knots_u"][1:-1]):
-        surface.KnotsU[k] = float(value)
+        surface.KnotsU[k] = float(value)  # type: ignore[index]  # the stubs lack __setitem__
     for k, value in enumerate(data["knots_v"][1:-1]):
-        surface.KnotsV[k] = float(value)
+        surface.KnotsV[k] = float(value)  # type: ignore[index]  # the stubs lack __setitem__
     weights = data["weights"]
     homogeneous = data["control_points"] * weights[..., None]
     for i in range(n_u):
         for j in range(n_v):
             x, y, z = homogeneous[i, j]
-            surface.Points[i, j] = rhino3dm.Point4d(x, y, z, weights[i, j])
+            # the stubs lack __setitem__
+            surface.Points[i, j] = rhino3dm.Point4d(x, y, z, weights[i, j])  # type: ignore[index]
     return surface
 
 
-def _curve_to_rhino(data: dict):
+def _curve_to_rhino(data: dict[str, Any]) -> rhino3dm.NurbsCurve:
     import rhino3dm
 
     control = data["control_points"]
     n, dimension = control.shape
     curve = rhino3dm.NurbsCurve(3, True, data["degree"] + 1, n)
     for k, value in enumerate(data["knots"][1:-1]):
-        curve.Knots[k] = float(value)
+        curve.Knots[k] = float(value)  # type: ignore[index]  # the stubs lack __setitem__
     for k in range(n):
         w = float(data["weights"][k])
         xyz = list(control[k]) + [0.0] * (3 - dimension)
-        curve.Points[k] = rhino3dm.Point4d(xyz[0] * w, xyz[1] * w, xyz[2] * w, w)
+        # the stubs lack __setitem__
+        curve.Points[k] = rhino3dm.Point4d(xyz[0] * w, xyz[1] * w, xyz[2] * w, w)  # type: ignore[index]
     return curve
 
 
-def write_3dm(geometry_or_list, path, version: int = 7) -> None:
+def write_3dm(geometry_or_list: GeometryInput, path: StrPath, version: int = 7) -> None:
     """Write surfaces and curves as rational NURBS objects (names from ``.metadata['name']``)."""
     import rhino3dm
 
@@ -78,13 +88,15 @@ def write_3dm(geometry_or_list, path, version: int = 7) -> None:
         attributes = rhino3dm.ObjectAttributes()
         name = metadata_of(item).get("name")
         if name:
-            attributes.Name = str(name)
+            attributes.Name = str(name)  # type: ignore[misc]  # writable; the stubs say read-only
+        rhino_geometry: rhino3dm.NurbsSurface | rhino3dm.NurbsCurve
         if data["kind"] == "surface":
             rhino_geometry = _surface_to_rhino(data)
-            model.Objects.AddSurface(rhino_geometry, attributes)
+            # the stubs lack the overload taking attributes
+            model.Objects.AddSurface(rhino_geometry, attributes)  # type: ignore[call-arg]
         else:
             rhino_geometry = _curve_to_rhino(data)
-            model.Objects.AddCurve(rhino_geometry, attributes)
+            model.Objects.AddCurve(rhino_geometry, attributes)  # type: ignore[call-arg]  # ditto
         if not rhino_geometry.IsValid:
             raise ValueError(f"openNURBS rejects the geometry {item!r} as invalid")
     if not model.Write(str(path), version):

@@ -15,7 +15,7 @@ import struct
 import numpy as np
 
 from nurbs_core.io.cloud import PointCloud, check_points
-from nurbs_core.io.errors import FileFormatError, MissingDependencyError
+from nurbs_core.io.errors import FileFormatError, MissingDependencyError, StrPath
 from nurbs_core.io.limits import check_claimed_size, check_decompressed_size
 
 E57_INSTALL_HINT = "pip install pye57"
@@ -24,7 +24,7 @@ _LAS_HEADER_MIN = 227
 _LAS_VLR_HEADER, _LAS_EVLR_HEADER = 54, 60
 
 
-def check_las_header(path) -> None:
+def check_las_header(path: StrPath) -> None:
     """The sizes a LAS / LAZ public header block announces, against the file size."""
     size = os.path.getsize(path)
     with open(path, "rb") as handle:
@@ -60,7 +60,9 @@ def check_las_header(path) -> None:
         check_claimed_size(path, count, record, size - offset, what="points")
 
 
-def read_las_points(path) -> PointCloud:
+def read_las_points(path: StrPath) -> PointCloud:
+    """The points of a LAS / LAZ file (laspy): points (N, 3) float64 with the header's scale and
+    offset applied, ``intensity`` (N,), ``colors`` (N, 3) and ``classification`` (N,) when present."""
     try:
         import laspy
     except ImportError:
@@ -92,11 +94,12 @@ def read_las_points(path) -> PointCloud:
         raise FileFormatError(path, f"not a readable LAS/LAZ file: {type(exc).__name__}: "
                                     f"{str(exc)[:300]}") from None
     check_points(path, points)
-    return PointCloud(points, attributes, path)
+    return PointCloud(points, attributes, os.fspath(path))
 
 
-def read_e57_points(path) -> PointCloud:
-    """All scans of an E57 file, each moved into the file's frame by its pose, concatenated."""
+def read_e57_points(path: StrPath) -> PointCloud:
+    """All scans of an E57 file, each moved into the file's frame by its pose, concatenated:
+    points (N, 3) float64, ``intensity`` (N,) and ``colors`` (N, 3) when every scan has them."""
     try:
         import pye57
     except ImportError:
@@ -104,7 +107,7 @@ def read_e57_points(path) -> PointCloud:
     try:
         e57 = pye57.E57(str(path))
         size = os.path.getsize(path)
-        scans = []
+        scans: list[dict[str, np.ndarray]] = []
         for k in range(e57.scan_count):
             header = e57.get_header(k)
             count = int(header.point_count)
@@ -135,4 +138,4 @@ def read_e57_points(path) -> PointCloud:
                                                          s["colorBlue"]], axis=1)
                                                for s in scans])
     check_points(path, points)
-    return PointCloud(points, attributes, path)
+    return PointCloud(points, attributes, os.fspath(path))

@@ -13,10 +13,13 @@
 
 from __future__ import annotations
 
+from typing import Literal, overload
+
 import numpy as np
 
-from nurbs_core.io.errors import FileFormatError
-from nurbs_core.io.geometry_io import as_geometry_list, make_surface, numpy_of
+from nurbs_core.geometry import NurbsCurve, NurbsSurface
+from nurbs_core.io.errors import FileFormatError, StrPath
+from nurbs_core.io.geometry_io import GeometryInput, as_geometry_list, make_surface, numpy_of
 from nurbs_core.io.limits import MAX_LINE_BYTES, check_claimed_size, format_size, sniff_text
 from nurbs_core.io.text_points import parse_table
 
@@ -26,11 +29,20 @@ _BYTES_PER_KNOT = 64
 _MIN_POINT_LINE = 8
 
 
-def _numbers(path, text: str, line: int, count: int | None, what: str, integer=False):
+@overload
+def _numbers(path: StrPath, text: str, line: int, count: int | None, what: str, *,
+             integer: Literal[True]) -> list[int]: ...
+@overload
+def _numbers(path: StrPath, text: str, line: int, count: int | None, what: str, *,
+             integer: Literal[False] = False) -> np.ndarray: ...
+def _numbers(path: StrPath, text: str, line: int, count: int | None, what: str, *,
+             integer: bool = False) -> list[int] | np.ndarray:
+    """``count`` (when not None) numbers from a line: ints (``integer``) or a float64 array."""
     tokens = text.split()
     if count is not None and len(tokens) != count:
         raise FileFormatError(path, f"{what}: expected {count} values, found {len(tokens)}",
                               line=line)
+    values: list[int] | np.ndarray
     try:
         values = [int(t) for t in tokens] if integer else np.array(tokens, dtype=np.float64)
     except ValueError:
@@ -39,16 +51,17 @@ def _numbers(path, text: str, line: int, count: int | None, what: str, integer=F
     return values
 
 
-def _check_length(path, text: str, line: int, limit: int = MAX_LINE_BYTES) -> None:
+def _check_length(path: StrPath, text: str, line: int, limit: int = MAX_LINE_BYTES) -> None:
     if len(text) > limit:
         raise FileFormatError(path, f"line of {format_size(len(text))} is longer than the "
                                     f"{format_size(limit)} this line of an smesh file may have",
                               line=line)
 
 
-def read_smesh(path) -> list:
-    """One surface from an smesh file. The header's counts and degrees are checked (against
-    each other and against the bytes the file has) before anything is allocated."""
+def read_smesh(path: StrPath) -> list[NurbsCurve | NurbsSurface]:
+    """One surface from an smesh file (control points (n_u, n_v, 3), weights (n_u, n_v)). The
+    header's counts and degrees are checked (against each other and against the bytes the file
+    has) before anything is allocated."""
     sniff_text(path, "an smesh text file")
     with open(path, "rb") as handle:
         raw = handle.read()
@@ -112,7 +125,7 @@ def read_smesh(path) -> list:
     return [make_surface(path, net[..., :3], net[..., 3], knots_u, knots_v, degree_u, degree_v)]
 
 
-def write_smesh(geometry_or_list, path) -> None:
+def write_smesh(geometry_or_list: GeometryInput, path: StrPath) -> None:
     """Write one surface in smesh format (u index fastest, Euclidean x y z and weight)."""
     items = as_geometry_list(geometry_or_list)
     if len(items) != 1 or numpy_of(items[0])["kind"] != "surface":

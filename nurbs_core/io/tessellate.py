@@ -2,11 +2,20 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, cast
+
 import numpy as np
 import torch
 
 from nurbs_core.geometry import NurbsSurface
-from nurbs_core.io.geometry_io import as_geometry_list
+from nurbs_core.io.errors import StrPath
+from nurbs_core.io.geometry_io import GeometryInput, as_geometry_list
+
+if TYPE_CHECKING:
+    import trimesh
+
+#: Grid points per direction: one count for both, or (r_u, r_v).
+Resolution = int | tuple[int, int]
 
 MESH_EXPORT_SUFFIXES = (".obj", ".stl", ".ply", ".glb")
 
@@ -20,10 +29,13 @@ def grid_faces(count_u: int, count_v: int, offset: int = 0) -> np.ndarray:
     return np.concatenate([np.stack([a, b, c], axis=1), np.stack([a, c, d], axis=1)])
 
 
-def tessellate_surface(surface: NurbsSurface, resolution=64) -> tuple[np.ndarray, np.ndarray]:
+def tessellate_surface(surface: NurbsSurface, resolution: Resolution = 64
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """Evaluate on a uniform (r_u, r_v) grid over the domain: vertices (r_u r_v, 3) float64,
     faces (2 (r_u - 1)(r_v - 1), 3)."""
-    count_u, count_v = (resolution, resolution) if np.isscalar(resolution) else resolution
+    # numpy types np.isscalar as a guard for numpy scalars / str / bytes, not for our ints
+    count_u, count_v = cast("tuple[int, int]",
+                            (resolution, resolution) if np.isscalar(resolution) else resolution)
     count_u, count_v = int(count_u), int(count_v)
     if count_u < 2 or count_v < 2:
         raise ValueError(f"resolution must be at least 2 per direction, got {resolution}")
@@ -34,11 +46,14 @@ def tessellate_surface(surface: NurbsSurface, resolution=64) -> tuple[np.ndarray
     return vertices, grid_faces(count_u, count_v)
 
 
-def tessellate(geometry_or_list, resolution=64):
-    """One trimesh.Trimesh holding every surface (curves cannot be meshed: ValueError)."""
+def tessellate(geometry_or_list: GeometryInput, resolution: Resolution = 64) -> trimesh.Trimesh:
+    """One trimesh.Trimesh holding every surface (curves cannot be meshed: ValueError): vertices
+    (sum of r_u r_v, 3) float64, faces (sum of 2 (r_u - 1)(r_v - 1), 3)."""
     import trimesh
 
-    vertices, faces, offset = [], [], 0
+    vertices: list[np.ndarray] = []
+    faces: list[np.ndarray] = []
+    offset = 0
     for item in as_geometry_list(geometry_or_list):
         if not isinstance(item, NurbsSurface):
             raise ValueError("curves cannot be written to a mesh format; save them as .3dm, "
@@ -50,6 +65,7 @@ def tessellate(geometry_or_list, resolution=64):
     return trimesh.Trimesh(np.concatenate(vertices), np.concatenate(faces), process=False)
 
 
-def write_mesh(geometry_or_list, path, resolution=64) -> None:
+def write_mesh(geometry_or_list: GeometryInput, path: StrPath, resolution: Resolution = 64) -> None:
+    """Write the surfaces tessellated on a uniform grid (the format comes from the suffix)."""
     mesh = tessellate(geometry_or_list, resolution)
     mesh.export(str(path))

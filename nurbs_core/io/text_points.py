@@ -20,6 +20,7 @@ import codecs
 import itertools
 import os
 import re
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
@@ -30,7 +31,7 @@ from nurbs_core.io.cloud import (
     classify_extra_columns,
     split_named_columns,
 )
-from nurbs_core.io.errors import FileFormatError
+from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.limits import MAX_COLUMNS, MAX_LINE_BYTES, check_line_lengths, sniff_text
 
 #: Bytes read for the first block (enough for the header and a sample of rows) and the later ones.
@@ -72,7 +73,7 @@ def _decode(raw: bytes) -> str:
         return raw.decode("latin-1")
 
 
-def _text_blocks(path, head: bytes):
+def _text_blocks(path: StrPath, head: bytes) -> Iterator[tuple[int, bytes]]:
     """(first line number, bytes) of successive blocks of whole lines, each line checked against
     MAX_LINE_BYTES (a missing line break fails in the first block) and for NUL bytes. A file
     with only carriage returns (old Mac) has them read as line breaks."""
@@ -128,10 +129,11 @@ def _last_line(raw: bytes) -> str:
     return _decode(raw[raw.rfind(b"\n", 0, end) + 1: end])
 
 
-def _first_rows(raw: str, first_line: int, limit: int):
+def _first_rows(raw: str, first_line: int, limit: int) -> tuple[list[tuple[int, str]], str | None]:
     """Up to ``limit`` (line number, raw text) rows from the start of an untranslated block, and
     the raw line just before the first of them (None when it is the block's first line)."""
-    found, before = [], None
+    found: list[tuple[int, str]] = []
+    before: str | None = None
     lines = raw.split("\n")
     for k, line in enumerate(lines):
         if len(found) >= limit:
@@ -145,12 +147,14 @@ def _first_rows(raw: str, first_line: int, limit: int):
     return found, before
 
 
-def _decimal_comma(path, samples: list[tuple[int, str]]) -> bool:
+def _decimal_comma(path: StrPath, samples: list[tuple[int, str]]) -> bool:
     """Whether ``,`` is the decimal mark: some field separated by ``;`` or tabs (or, with only
     spaces between the fields, every field) is a number like ``2,5``, and no number has a ``.``.
     Both marks (``1.000,5``, or ``2,5`` and ``2.5`` in one file) or a field like ``1,2,3`` next
     to such numbers: FileFormatError with a hint on converting the file."""
-    comma_line = dot_line = odd = None
+    comma_line: int | None = None
+    dot_line: int | None = None
+    odd: tuple[int, str] | None = None
     for number, row in samples:
         row = row.strip()
         if not _NUMBER_CHARACTERS.fullmatch(row):  # a header, nan/inf...: no vote
@@ -187,7 +191,7 @@ def _decimal_comma(path, samples: list[tuple[int, str]]) -> bool:
     return True
 
 
-def _commented_header(before: str | None, width: int):
+def _commented_header(before: str | None, width: int) -> list[str] | None:
     """Column names from a comment line right before the data (CloudCompare writes
     ``//X,Y,Z,R,G,B``), when it names x, y and z and has one name per column."""
     if before is None:
@@ -202,18 +206,18 @@ def _commented_header(before: str | None, width: int):
     return None
 
 
-def _check_width(path, count: int, line: int) -> None:
+def _check_width(path: StrPath, count: int, line: int) -> None:
     if count > MAX_COLUMNS:
         raise FileFormatError(path, f"{count} columns are more than the {MAX_COLUMNS} a point file "
                                     "may have (not a point list?)", line=line)
 
 
-def _point_columns(path, names: list[str], line: int) -> list[int]:
+def _point_columns(path: StrPath, names: list[str], line: int | None) -> list[int]:
     """Column indices of x, y, z among the header's names (checked before the data is read)."""
     columns: dict[int, int] = {}
     for j, name in enumerate(names):
         target = NAMED_COLUMNS.get(name.strip().lower())
-        if target is not None and target[0] == "points":
+        if target is not None and target[0] == "points" and target[1] is not None:
             columns[target[1]] = j
     if sorted(columns) != [0, 1, 2]:
         raise FileFormatError(path, f"the columns {names} do not include x, y and z", line=line)
@@ -241,12 +245,14 @@ def _first_bad_row(rows: list[str], width: int) -> int:
     return low
 
 
-def parse_table(path, rows: list[str], width: int, line_of) -> np.ndarray:
+def parse_table(path: StrPath, rows: list[str], width: int,
+                line_of: Callable[[int], int]) -> np.ndarray:
     """(len(rows), width) float64 from whitespace-separated rows; errors name the line.
 
     numpy's C parser (np.loadtxt) reads well-formed rows and refuses ragged or non-numeric
     ones; only then is the first bad row found (by bisection) and named.
     """
+    table: np.ndarray | None
     try:
         table = np.loadtxt(rows, dtype=np.float64, comments=None, ndmin=2)
     except ValueError:
@@ -268,12 +274,12 @@ def parse_table(path, rows: list[str], width: int, line_of) -> np.ndarray:
 class _Block:
     """The data rows of one block and, on demand, their file line numbers."""
 
-    def __init__(self, text: str, first_line: int, skip: int):
+    def __init__(self, text: str, first_line: int, skip: int) -> None:
         self.text, self.first_line = text, first_line
         self.rows = _rows(text)
         self.skip = min(skip, len(self.rows))
         self.rows = self.rows[self.skip:]
-        self._numbers = None
+        self._numbers: np.ndarray | None = None
 
     def line_of(self, k: int) -> int:
         if self._numbers is None:
@@ -281,7 +287,7 @@ class _Block:
         return int(self._numbers[k + self.skip])
 
 
-def _check_finite(path, table: np.ndarray, point_columns: list[int], block: _Block,
+def _check_finite(path: StrPath, table: np.ndarray, point_columns: list[int], block: _Block,
                   first_row: int) -> None:
     finite = np.isfinite(table[:, point_columns]).all(axis=1)
     if not finite.all():
@@ -290,7 +296,9 @@ def _check_finite(path, table: np.ndarray, point_columns: list[int], block: _Blo
                                     f"({table[k, point_columns].tolist()})", line=block.line_of(k))
 
 
-def read_text_points(path) -> PointCloud:
+def read_text_points(path: StrPath) -> PointCloud:
+    """A point cloud from a delimited text file (.xyz .txt .pts .asc .csv): points (N, 3)
+    float64, the other columns as attributes (named by a header line, or by convention)."""
     with open(path, "rb") as handle:
         start = handle.read(4)
     if start.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
@@ -325,7 +333,9 @@ def read_text_points(path) -> PointCloud:
     line0, row0 = samples[0]
     first_tokens = row0.translate(table_of).split()
     _check_width(path, len(first_tokens), line0)
-    names, header_line, skip = None, None, 0
+    names: list[str] | None = None
+    header_line: int | None = None
+    skip = 0
     if not all(_is_number(t) for t in first_tokens):
         names = [t.strip("\"'") for t in row0.translate(_TO_SPACE).split()]
         header_line, skip = line0, 1
@@ -345,7 +355,8 @@ def read_text_points(path) -> PointCloud:
                               line=header_line or data_line)
     point_columns = _point_columns(path, names, header_line) if names is not None else [0, 1, 2]
     # 3. the data, block by block, into one buffer grown in place (realloc: no second copy)
-    buffer, count = None, 0
+    buffer: np.ndarray | None = None
+    count = 0
     for first_line, raw in itertools.chain(pending, blocks):
         block = _Block(_decode(raw.translate(bytes_table)), first_line, skip)
         skip -= block.skip
@@ -375,10 +386,10 @@ def read_text_points(path) -> PointCloud:
         points = table if width == 3 else table[:, :3].copy()
         attributes = classify_extra_columns(table[:, 3:]) if width > 3 else {}
     check_points(path, points)
-    return PointCloud(points, attributes, path)
+    return PointCloud(points, attributes, os.fspath(path))
 
 
-def write_text_points(cloud: PointCloud, path, delimiter: str) -> None:
+def write_text_points(cloud: PointCloud, path: StrPath, delimiter: str) -> None:
     """Write x y z (+ normals, colors, intensity) with a header line; floats as repr (exact)."""
     names = ["x", "y", "z"]
     blocks = [cloud.points]
