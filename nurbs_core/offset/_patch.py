@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import SupportsInt, TypeAlias, cast
+from typing import Any, SupportsInt, TypeAlias, cast
 
 import numpy as np
 import torch
@@ -60,7 +60,7 @@ def _as_patch(surface: object, index: int) -> _Patch:
                   surface.degree_u, surface.degree_v, surface)
 
 
-def _check_distance(distance) -> float:
+def _check_distance(distance: Any) -> float:
     try:
         value = float(distance)
     except (TypeError, ValueError):
