@@ -13,6 +13,10 @@ are written all-or-nothing, each atomically. Errors print one line (``nurbs-fit:
 ``--debug`` adds the traceback) and exit with status 1. The first Ctrl-C stops the fit and still
 writes the result reached so far; a second one, or one outside the fit, exits at once with status
 130 and leaves every output as it was.
+
+Several inputs (files, folders, globs, HDF5 datasets of clouds) with ``--output-dir DIR`` fit a
+batch: one result per input, a summary table, ``--jobs N`` / ``--scheduler`` on Dask; see
+:mod:`nurbs_core.batch`. Each input goes through :func:`fit_one`, the same code path as one file.
 """
 
 from __future__ import annotations
@@ -34,6 +38,8 @@ if TYPE_CHECKING:
 
 #: Exit status after Ctrl-C (128 + SIGINT), as shells report it.
 INTERRUPTED_STATUS = 130
+#: Exit status of a batch (``--output-dir``) in which some inputs failed (the others were written).
+SOME_FAILED_STATUS = 3
 
 PROGRESS_INTERVAL = 0.5  # seconds between progress lines
 #: Default loss for curves: Chamfer weighted like the foot-point term fits outlines closer than
@@ -52,12 +58,42 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     parser = argparse.ArgumentParser(
-        prog="nurbs-fit", description="Fit a NURBS surface (or curve) to a point cloud.",
-        epilog="Learning rates are relative to the cloud's bounding-box diagonal (see FitConfig).")
-    parser.add_argument("input", help="point cloud (.xyz, .txt, .ply, .pcd, .las, .npy, ...)")
-    parser.add_argument("--output", "-o", nargs="+", required=True, metavar="OUT",
-                        help="result file(s); the suffix picks the format (.3dm, .json, .step, "
-                             "...)")
+        prog="nurbs-fit", description="Fit a NURBS surface (or curve) to a point cloud, or to "
+                                      "many (a batch, with --output-dir).",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="Learning rates are relative to the cloud's bounding-box diagonal (see FitConfig).\n\n"
+               "batch: nurbs-fit scans/ 'more/*.ply' data.h5 --output-dir fits [--jobs 2]\n"
+               "  writes DIR/<input name><--format> per input and a summary (--summary);\n"
+               "  an HDF5 file holds clouds as 'points' (N, n, 3): item k is <stem>_<k>.\n\n"
+               "exit status: 0 success; 1 an error (one line on stderr; a batch: an error before\n"
+               f"  any input was fitted); 2 bad arguments; {SOME_FAILED_STATUS} a batch in which "
+               "some inputs failed\n"
+               "  (the others were written; see the summary); "
+               f"{INTERRUPTED_STATUS} interrupted (Ctrl-C).")
+    parser.add_argument("input", nargs="+",
+                        help="point cloud (.xyz, .txt, .ply, .pcd, .las, .npy, ...); with "
+                             "--output-dir any number of files, folders (their point-cloud files, "
+                             "sorted), globs and HDF5 files (.h5, .hdf5)")
+    parser.add_argument("--output", "-o", nargs="+", metavar="OUT",
+                        help="result file(s) of one input; the suffix picks the format (.3dm, "
+                             ".json, .step, ...)")
+    batch = parser.add_argument_group("batch (several inputs)")
+    batch.add_argument("--output-dir", default=None, metavar="DIR",
+                       help="fit every input, writing DIR/<input name><suffix> (created if "
+                            "missing)")
+    batch.add_argument("--format", default=".json", metavar="SUFFIX",
+                       help="suffix (format) of each result in --output-dir (default .json)")
+    batch.add_argument("--summary", default=None, metavar="FILE",
+                       help="summary table, .jsonl or .csv (default DIR/summary.jsonl): input, "
+                            "output, status (ok/failed/skipped), statistics, seconds, error")
+    batch.add_argument("--skip-existing", action="store_true",
+                       help="skip inputs whose result already exists (recorded as skipped)")
+    batch.add_argument("--jobs", type=int, default=1, metavar="N",
+                       help="worker processes on a local Dask cluster (default 1: in this "
+                            "process); needs the batch extra: pip install 'nurbs-studio[batch]'")
+    batch.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                       help="run on an existing Dask cluster (dask scheduler / dask worker; the "
+                            "workers must see the same files)")
     parser.add_argument("--curve", action="store_true",
                         help="fit a curve instead of a surface (2-D when every z is equal)")
     parser.add_argument("--degree", type=int, nargs="+", default=[3], metavar="P",
@@ -389,14 +425,18 @@ def _patch_input(path, quiet: bool):
     return check_points(path, vertices), mesh
 
 
-def run_patches(args, options, outputs: list[Path]) -> int:
-    """``--patches``: the network fit (``options``: its PatchOptions), its report and files."""
+def run_patches(args, options, outputs: list[Path], points=None) -> dict:
+    """``--patches``: the network fit (``options``: its PatchOptions), its report and files;
+    returns the statistics (``points``: the cloud when it is not read from ``args.input``)."""
     import torch
 
     from nurbs_core.io.dispatch import save_all
     from nurbs_core.patches.pipeline import iter_patch_fit
 
-    points, mesh = _patch_input(args.input, quiet=args.quiet)
+    if points is None:
+        points, mesh = _patch_input(args.input, quiet=args.quiet)
+    else:
+        mesh = None
     torch.set_num_threads(max(1, args.threads))
     print(f"{args.input}: {len(points)} points; fitting a network of bicubic patches "
           f"({options.patches} patches, stiffness {options.stiffness:g}, seam weight "
@@ -435,7 +475,45 @@ def run_patches(args, options, outputs: list[Path]) -> int:
     save_all([(result.network, path, {}) for path in outputs])
     for path in outputs:
         print(f"wrote {path}")
-    return 0
+    return _plain({"kind": "network", "points": len(points), "patches": quality.patches,
+                   "patch_size": quality.size, "passes": result.passes,
+                   "fit_seconds": sum(result.timings.values()), "closed": result.network.closed,
+                   "gap": seam.gap, "gap_relative": quality.gap_relative,
+                   "diagonal": quality.diagonal, "seam_median": seam.median, "seam_p99": seam.p99,
+                   "seam_max": seam.max, "mean": quality.c2s_mean, "rms": quality.c2s_rms,
+                   "p99": quality.c2s_p99, "s2c_mean": quality.s2c_mean,
+                   "flipped_fraction": quality.flipped_fraction, "area": quality.area,
+                   "volume": quality.volume, "warnings": list(result.warnings)})
+
+
+class FitFailed(ValueError):
+    """The fit ran and failed; the message is the one line nurbs-fit prints."""
+
+
+def _plain(values: dict) -> dict:
+    """Statistics as plain JSON values (numpy and torch scalars to Python; others dropped)."""
+    plain = {}
+    for key, value in values.items():
+        if hasattr(value, "item") and getattr(value, "ndim", 0) == 0:
+            value = value.item()
+        if isinstance(value, (tuple, list)):
+            value = [v.item() if hasattr(v, "item") else v for v in value]
+            if not all(isinstance(v, (bool, int, float, str)) for v in value):
+                continue
+        elif value is not None and not isinstance(value, (bool, int, float, str)):
+            continue
+        plain[key] = value
+    return plain
+
+
+def error_line(exc: BaseException) -> str:
+    """The one line nurbs-fit prints for an error (``nurbs-fit: error: ...``)."""
+    from nurbs_core.failures import describe, is_expected
+
+    message = describe(exc)
+    if not is_expected(exc):  # a bug: still one line, the traceback with --debug
+        message = f"internal error ({message}); run with --debug for the traceback"
+    return f"nurbs-fit: error: {message}"
 
 
 def _interrupt_handler(stop):
@@ -451,6 +529,28 @@ def _interrupt_handler(stop):
 
 
 def run(args) -> int:
+    """One input (``-o``): fit, report and write it (status 0, or 1 after a failed fit); a batch
+    (``--output-dir``) goes to :func:`nurbs_core.batch.run_batch`."""
+    if args.output_dir is not None:
+        from nurbs_core.batch import run_batch
+
+        return run_batch(args)
+    if isinstance(args.input, list):
+        (args.input,) = args.input  # main() checked there is one
+    try:
+        fit_one(args)
+    except FitFailed as exc:
+        print(f"nurbs-fit: error: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def fit_one(args, points=None, stoppable: bool = True) -> dict:
+    """Fit ``args.input`` (or the given ``points``, an (N, 3) cloud read from it) as the options
+    say, print the report, write every ``args.output`` file and return the statistics as a plain
+    dict (the distances, the quality measures, the Chamfer distance, ...). Raises on a bad input
+    (FitFailed when the fit itself failed). ``stoppable``: the first Ctrl-C stops the fit and
+    writes the result so far (single runs); otherwise Ctrl-C raises KeyboardInterrupt."""
     import numpy as np
 
     from nurbs_core.failures import one_line
@@ -463,8 +563,9 @@ def run(args) -> int:
     # a bad option fails before the cloud is read
     _field_settings(args.settings)
     if args.patches is not None:
-        return run_patches(args, _patch_options(args), outputs)
-    points = load_points(args.input).points
+        return run_patches(args, _patch_options(args), outputs, points=points)
+    if points is None:
+        points = load_points(args.input).points
     import torch
 
     from nurbs_core.fitting import StopToken, fit
@@ -504,15 +605,16 @@ def run(args) -> int:
             initial = NurbsCurve(initial.control_points[:, :2], initial.degree, initial.knots,
                                  initial.weights)
     stop = StopToken()
-    previous = signal.signal(signal.SIGINT, _interrupt_handler(stop))
+    if stoppable:
+        previous = signal.signal(signal.SIGINT, _interrupt_handler(stop))
     try:
         result = fit(target, config, stop=stop, parameters=parameters, initial=initial,
                      on_snapshot=_Progress(config.iterations, args.quiet))
     finally:
-        signal.signal(signal.SIGINT, previous)
+        if stoppable:
+            signal.signal(signal.SIGINT, previous)
     if result.status == "failed":
-        print(f"nurbs-fit: error: the fit failed: {one_line(result.message)}", file=sys.stderr)
-        return 1
+        raise FitFailed(f"the fit failed: {one_line(result.message)}")
     geometry = result.geometry.to(dtype=torch.float64)
     diagonal = float(np.linalg.norm(np.ptp(target, axis=0)))
     chamfer = _chamfer(geometry, target, np.random.default_rng(args.seed))
@@ -540,12 +642,42 @@ def run(args) -> int:
     save_all(jobs)  # all or nothing: no output is replaced unless every one was written
     for _, path, _ in jobs:
         print(f"wrote {path}")
-    return 0
+    counts = [int(n) for n in np.shape(geometry.control_points)[:-1]]
+    return _plain({**stats, "kind": config.kind, "points": len(points),
+                   "fit_status": result.status, "iterations": result.iterations,
+                   "fit_seconds": result.elapsed, "fit_message": one_line(result.message or ""),
+                   "diagonal": diagonal, "chamfer": chamfer, "control_points": counts})
+
+
+def _check_mode(parser: argparse.ArgumentParser, args) -> None:
+    """One input with ``-o``, or any inputs with ``--output-dir`` (argparse error otherwise)."""
+    if args.output_dir is None:
+        if not args.output:
+            parser.error("the following arguments are required: --output/-o (or --output-dir "
+                         "DIR for a batch)")
+        if len(args.input) > 1:
+            parser.error("several inputs need --output-dir DIR (one result per input)")
+        used = [name for name, value, default in (
+            ("--summary", args.summary, None), ("--skip-existing", args.skip_existing, False),
+            ("--jobs", args.jobs, 1), ("--scheduler", args.scheduler, None),
+            ("--format", args.format, ".json")) if value != default]
+        if used:
+            parser.error(f"{', '.join(used)} need --output-dir DIR")
+        return
+    if args.output:
+        parser.error("--output/-o names the result of one input; with --output-dir the results "
+                     "are named after the inputs (--format picks the suffix)")
+    if args.jobs < 1:
+        parser.error("--jobs takes a positive number of worker processes")
+    if args.scheduler is not None and args.jobs != 1:
+        parser.error("--scheduler runs on the cluster's workers: --jobs does not apply")
+    if args.summary is not None and Path(args.summary).suffix.lower() not in (".jsonl", ".csv"):
+        parser.error(f"--summary {args.summary}: the suffix must be .jsonl or .csv")
 
 
 def main(argv=None) -> int:
     """The console entry point: 0 on success, 1 on an error (one line on stderr), 2 for bad
-    arguments (argparse), 130 after Ctrl-C."""
+    arguments (argparse), 3 when some inputs of a batch failed, 130 after Ctrl-C."""
     interrupted = []
 
     def on_interrupt(*_):
@@ -556,9 +688,9 @@ def main(argv=None) -> int:
 
     previous = signal.signal(signal.SIGINT, on_interrupt)
     try:
-        from nurbs_core.failures import describe, is_expected
-
-        args = build_parser().parse_args(argv)
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        _check_mode(parser, args)
         try:
             return run(args)
         except Exception as exc:
@@ -566,10 +698,7 @@ def main(argv=None) -> int:
                 raise KeyboardInterrupt from None
             if args.debug:
                 traceback.print_exc()
-            message = describe(exc)
-            if not is_expected(exc):  # a bug: still one line, the traceback with --debug
-                message = f"internal error ({message}); run with --debug for the traceback"
-            print(f"nurbs-fit: error: {message}", file=sys.stderr)
+            print(error_line(exc), file=sys.stderr)
             return 1
     except (KeyboardInterrupt, Exception) as exc:
         if not (isinstance(exc, KeyboardInterrupt) or interrupted):

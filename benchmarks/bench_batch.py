@@ -1,0 +1,125 @@
+"""Throughput of ``nurbs-fit`` over many small clouds: one process per file against one batch.
+
+Run: ``python benchmarks/bench_batch.py [--count 200] [--points 700] [--process-sample 10]
+[--fit-args "--iterations 50"]``
+
+N generated open patches of 700 points (SplineDataset-like: saddles, bowls, height fields,
+leaflets, curled sheets with different seeds) are written as .npy files and fitted with the same
+options (default: the command's defaults) by
+(a) one ``nurbs-fit IN -o OUT`` process per file, as a shell loop does: run on the first
+    ``--process-sample`` files only, the rate extrapolated to all N (the output says so);
+(b) one ``nurbs-fit FOLDER --output-dir DIR`` process (``--jobs 1``: every fit in that process);
+(c) the same with ``--jobs 2`` (an embedded local Dask cluster of 2 worker processes).
+Each rate is patches per second of wall time of the whole command (start-up, imports and, for
+(c), the cluster's start included). Mean RMS is the point-to-surface RMS of the fits; (b) and
+(c) are also compared control point by control point. Nothing is batched in the engine here
+(no shared batch dimension): (b) and (c) save the start-up per file and use both cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import re
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from nurbs_core import samples
+
+SHAPES = (samples.saddle, samples.bowl, samples.height_field, samples.leaflet_like,
+          samples.curled_sheet)
+COMMAND = [sys.executable, "-m", "nurbs_core.cli"]
+
+
+def write_clouds(folder: Path, count: int, points: int) -> list[Path]:
+    paths = []
+    for k in range(count):
+        cloud = SHAPES[k % len(SHAPES)](points, seed=k).points
+        path = folder / f"patch{k:05d}.npy"
+        np.save(path, cloud)
+        paths.append(path)
+    return paths
+
+
+def _control(path: Path) -> np.ndarray:
+    (shape,) = json.loads(path.read_text())["geometry"]
+    return np.asarray(shape["control_points"], dtype=float)
+
+
+def per_process(paths: list[Path], out: Path, fit_args: list[str]) -> tuple[float, float]:
+    """(seconds per file, mean rms) of one nurbs-fit process per file."""
+    out.mkdir()
+    rms, start = [], time.perf_counter()
+    for path in paths:
+        done = subprocess.run([*COMMAND, str(path), "-o", str(out / f"{path.stem}.json"), "-q",
+                               *fit_args], capture_output=True, text=True, check=True)
+        rms.append(float(re.search(r"rms ([-+0-9.eE]+)", done.stdout).group(1)))
+    return (time.perf_counter() - start) / len(paths), float(np.mean(rms))
+
+
+def batch(folder: Path, out: Path, jobs: int, fit_args: list[str]) -> tuple[float, float, int]:
+    """(wall seconds, mean rms, failures) of one batch command."""
+    start = time.perf_counter()
+    done = subprocess.run([*COMMAND, str(folder), "--output-dir", str(out), "--jobs", str(jobs),
+                           "-q", *fit_args], capture_output=True, text=True)
+    seconds = time.perf_counter() - start
+    if done.returncode not in (0, 3):
+        raise RuntimeError(f"--jobs {jobs} failed ({done.returncode}): {done.stderr[-2000:]}")
+    rows = [json.loads(line) for line in (out / "summary.jsonl").read_text().splitlines()]
+    ok = [row for row in rows if row["status"] == "ok"]
+    return seconds, float(np.mean([row["rms"] for row in ok])), len(rows) - len(ok)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--count", type=int, default=200, help="clouds (default 200)")
+    parser.add_argument("--points", type=int, default=700, help="points per cloud (default 700)")
+    parser.add_argument("--process-sample", type=int, default=10,
+                        help="files fitted one process each in (a) (default 10)")
+    parser.add_argument("--fit-args", default="", help="nurbs-fit options for every fit")
+    args = parser.parse_args(argv)
+    fit_args = shlex.split(args.fit_args)
+    import torch
+
+    print(f"# nurbs-fit batch throughput: {args.count} clouds of {args.points} points, options "
+          f"[{args.fit_args or 'defaults'}]")
+    print(f"# machine: {platform.machine()} {platform.processor() or ''} {os.cpu_count()} cores, "
+          f"{platform.system()} {platform.release()}; Python {platform.python_version()}, torch "
+          f"{torch.__version__}; 1 torch thread per fit (nurbs-fit --threads 1), Dask workers "
+          f"with 1 thread each")
+    with tempfile.TemporaryDirectory(prefix="bench_batch_") as tmp:
+        root = Path(tmp)
+        folder = root / "clouds"
+        folder.mkdir()
+        paths = write_clouds(folder, args.count, args.points)
+        sample = paths[:max(1, min(args.process_sample, len(paths)))]
+        per_file, rms_a = per_process(sample, root / "a", fit_args)
+        rows = [(f"(a) one nurbs-fit process per file [{len(sample)} of {len(paths)} run, rate "
+                 f"extrapolated]", 1 / per_file, rms_a, 0)]
+        results = {}
+        for jobs, label in ((1, "(b) one process, --jobs 1"), (2, "(c) local Dask, --jobs 2")):
+            seconds, rms, failed = batch(folder, root / f"jobs{jobs}", jobs, fit_args)
+            results[jobs] = root / f"jobs{jobs}"
+            rows.append((label, len(paths) / seconds, rms, failed))
+        worst = max(float(np.abs(_control(results[1] / f"{p.stem}.json")
+                                 - _control(results[2] / f"{p.stem}.json")).max()) for p in paths
+                    if (results[1] / f"{p.stem}.json").exists())
+        worst_a = max(float(np.abs(_control(root / "a" / f"{p.stem}.json")
+                                   - _control(results[1] / f"{p.stem}.json")).max()) for p in sample)
+    width = max(len(r[0]) for r in rows)
+    print(f"{'mode':<{width}}  {'patches/s':>9}  {'x (a)':>6}  {'mean RMS':>10}  failed")
+    for label, rate, rms, failed in rows:
+        print(f"{label:<{width}}  {rate:9.2f}  {rate / rows[0][1]:6.1f}  {rms:10.4g}  {failed}")
+    print(f"# largest control-point difference: (a) vs (b) {worst_a:.3g}, (b) vs (c) {worst:.3g}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,15 @@
+"""Batch fitting for ``nurbs-fit``: many inputs, one result each, a summary table.
+
+``nurbs-fit IN... --output-dir DIR`` expands the inputs (:mod:`.inputs`: files, folders, globs,
+HDF5 datasets of clouds), fits each through :func:`nurbs_core.cli.fit_one` (the single-file code
+path, so every result equals a one-file run with the same options) in this process or on Dask
+workers (:mod:`.executors`), shows a progress line and writes the summary (:mod:`.runner`).
+Workers receive file paths and plain option dicts and return plain dicts (:mod:`.worker`): no
+tensor crosses a process. Nothing here imports torch or Dask at module level.
+"""
+
+from __future__ import annotations
+
+from nurbs_core.batch.runner import run_batch
+
+__all__ = ["run_batch"]

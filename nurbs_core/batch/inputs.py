@@ -1,0 +1,148 @@
+"""The inputs of a batch: files, folders, globs and HDF5 datasets expanded into items, each with
+its result's name. An input that cannot be expanded (missing, an empty folder, a glob that
+matches nothing, an unreadable HDF5 file) becomes an item with its error, never an exception."""
+
+from __future__ import annotations
+
+import glob
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+#: Suffixes read as HDF5 datasets of clouds (SplineDataset layout: ``points`` (N, n, 3)).
+HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf")
+#: The dataset of an HDF5 file that holds the clouds.
+HDF5_DATASET = "points"
+BATCH_EXTRA_HINT = "pip install 'nurbs-studio[batch]' (or: pip install h5py \"dask[distributed]\")"
+
+
+@dataclass
+class Item:
+    """One input of a batch: ``path`` (a cloud file, or an HDF5 file with ``index``), the name its
+    results are given, and ``error`` when it cannot be fitted at all."""
+
+    label: str
+    path: str  # as given (Dask executors make it absolute)
+    name: str
+    index: int | None = None
+    error: str | None = None
+    outputs: list[str] = field(default_factory=list)
+
+    def plain(self) -> dict:
+        """What a worker receives: paths and numbers only."""
+        return {"input": self.label, "path": self.path, "index": self.index,
+                "outputs": list(self.outputs)}
+
+
+def _is_glob(text: str) -> bool:
+    return any(c in text for c in "*?[")
+
+
+def _cloud_suffixes() -> tuple[str, ...]:
+    from nurbs_core.io.points import POINT_CLOUD_SUFFIXES
+
+    return (*POINT_CLOUD_SUFFIXES, *HDF5_SUFFIXES)
+
+
+def hdf5_count(path: str) -> int:
+    """The number of clouds in an HDF5 file (ValueError unless ``points`` is (N, n, 3))."""
+    try:
+        import h5py
+    except ImportError:
+        raise ImportError(f"{path}: reading HDF5 files needs h5py: {BATCH_EXTRA_HINT}") from None
+    with h5py.File(path, "r") as handle:
+        if HDF5_DATASET not in handle:
+            raise ValueError(f"{path}: no '{HDF5_DATASET}' dataset (expected the SplineDataset "
+                             f"layout, '{HDF5_DATASET}' of shape (N, n, 3))")
+        shape = handle[HDF5_DATASET].shape
+    if len(shape) != 3 or shape[2] != 3:
+        raise ValueError(f"{path}: '{HDF5_DATASET}' has shape {shape}, expected (N, n, 3)")
+    return int(shape[0])
+
+
+def hdf5_points(path: str, index: int):
+    """Cloud ``index`` of an HDF5 file as a float64 (n, 3) array, checked like a cloud file."""
+    import h5py
+    import numpy as np
+
+    from nurbs_core.io.cloud import check_points
+
+    with h5py.File(path, "r") as handle:
+        points = np.asarray(handle[HDF5_DATASET][index], dtype=np.float64)
+    return check_points(f"{path}[{index}]", points)
+
+
+def _file_items(path: Path) -> list[Item]:
+    text = os.fspath(path)
+    if path.suffix.lower() not in HDF5_SUFFIXES:
+        return [Item(os.fspath(path), text, path.stem)]
+    from nurbs_core.cli import error_line
+
+    try:
+        count = hdf5_count(text)
+    except Exception as exc:  # a bad HDF5 file is one failed input
+        return [Item(os.fspath(path), text, path.stem, error=error_line(exc))]
+    return [Item(f"{path}[{k}]", text, f"{path.stem}_{k}", index=k) for k in range(count)]
+
+
+def _error(label: str, message: str) -> Item:
+    return Item(label, label, Path(label).stem or "input", error=f"nurbs-fit: error: {message}")
+
+
+def expand(inputs: list[str], exclude: tuple[Path, ...] = ()) -> list[Item]:
+    """The items of ``inputs`` in order (a folder's point-cloud files sorted by name, a glob's
+    matches sorted), each file once; ``exclude``: files never taken from a folder or glob (the
+    summary)."""
+    suffixes = _cloud_suffixes()
+    excluded = {os.path.realpath(p) for p in exclude}
+    items: list[Item] = []
+    seen: set[str] = set()
+
+    def add(path: Path, listed: bool):
+        real = os.path.realpath(path)
+        if real in seen or (not listed and real in excluded):
+            return
+        seen.add(real)
+        items.extend(_file_items(path))
+
+    for text in inputs:
+        path = Path(text)
+        if path.is_dir():
+            files = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in suffixes)
+            if not files:
+                items.append(_error(text, f"{text}: the folder holds no point-cloud files "
+                                          f"({', '.join(suffixes)})"))
+            for file in files:
+                add(file, listed=False)
+        elif not path.exists() and _is_glob(text):
+            matches = sorted(glob.glob(text, recursive=True))
+            files = [Path(m) for m in matches if Path(m).is_file()]
+            if not files:
+                items.append(_error(text, f"{text}: no file matches"))
+            for file in files:
+                add(file, listed=False)
+        else:  # a file, or a missing one: the fit reports it like a single run would
+            add(path, listed=True)
+    return items
+
+
+def name_outputs(items: list[Item], directory: Path, suffix: str, offset: bool) -> None:
+    """Give each item its result path(s) in ``directory``: ``<stem><suffix>`` (HDF5 items:
+    ``<stem>_<k><suffix>``); inputs whose stems collide keep their whole name
+    (``scan.ply.json``), then a counter; ``offset``: the ``<name>_offset<suffix>`` companion."""
+    stems: dict[str, int] = {}
+    for item in items:
+        stems[item.name] = stems.get(item.name, 0) + 1
+    used: set[str] = set()
+    for item in items:
+        name = item.name
+        if stems[name] > 1 and item.index is None:
+            name = Path(item.path).name
+        base, k = name, 2
+        while name.lower() in used:
+            name, k = f"{base}_{k}", k + 1
+        used.add(name.lower())
+        main = directory / f"{name}{suffix}"
+        item.outputs = [os.fspath(main)]
+        if offset:
+            item.outputs.append(os.fspath(directory / f"{name}_offset{suffix}"))

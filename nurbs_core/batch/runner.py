@@ -1,0 +1,181 @@
+"""``nurbs-fit IN... --output-dir DIR``: expand the inputs, skip the finished ones, fit the rest
+(here or on Dask), show progress, write the summary and return the exit status: 0 when every
+input succeeded (or was skipped), 3 (:data:`nurbs_core.cli.SOME_FAILED_STATUS`) when some failed,
+130 after Ctrl-C (the finished results stay; rerun with ``--skip-existing`` for the rest)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+#: The first columns of the summary, in this order; the statistics follow.
+SUMMARY_COLUMNS = ("input", "output", "status", "seconds", "error")
+PROGRESS_INTERVAL = 0.5  # seconds between progress lines
+
+
+def _duration(seconds: float) -> str:
+    if not math.isfinite(seconds):
+        return "?"
+    seconds = int(round(seconds))
+    hours, rest = divmod(seconds, 3600)
+    return (f"{hours}:" if hours else "") + f"{rest // 60:02d}:{rest % 60:02d}"
+
+
+class Progress:
+    """``nurbs-fit: 12/200 (1 failed, 3 skipped)  2.41 inputs/s  ETA 01:18`` on stderr, at most
+    every PROGRESS_INTERVAL seconds (in place on a terminal); nothing when ``quiet``."""
+
+    def __init__(self, total: int, skipped: int, quiet: bool, failed: int = 0, stream=None):
+        """``skipped``, ``failed``: inputs settled before any fit (counted as finished)."""
+        self.total, self.skipped, self.quiet = total, skipped, quiet
+        self.stream = stream or sys.stderr
+        self.done, self.settled, self.failed = 0, skipped + failed, failed
+        self.start = time.perf_counter()
+        self.last, self.shown = -math.inf, -1
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+
+    def update(self, record: dict) -> None:
+        self.done += 1
+        self.failed += record["status"] == "failed"
+        self.show()
+
+    def show(self, final: bool = False) -> None:
+        now = time.perf_counter()
+        if self.quiet or (now - self.last < PROGRESS_INTERVAL and not final):
+            return
+        if final and self.shown == self.done and not self.tty:
+            return  # the last line already says it
+        self.last, self.shown = now, self.done
+        elapsed = now - self.start
+        rate = self.done / elapsed if elapsed > 0 else 0.0
+        finished = self.done + self.settled
+        left = self.total - finished
+        eta = left / rate if rate > 0 else (0.0 if left == 0 else math.inf)
+        line = (f"nurbs-fit: {finished}/{self.total} ({self.failed} failed, {self.skipped} "
+                f"skipped)  {rate:.2f} inputs/s  ETA {_duration(eta)}")
+        end = "\n" if final or not self.tty else ""
+        print(("\r" if self.tty else "") + line, end=end, file=self.stream, flush=True)
+
+
+def _cell(value) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, (list, dict)):
+        return json.dumps(value)
+    return str(value)
+
+
+def write_summary(path: Path, records: list[dict]) -> None:
+    """The summary, one row per input in input order: JSON Lines (``.jsonl``) or CSV (``.csv``,
+    the union of the statistics as columns), written atomically."""
+    from nurbs_core.io.atomic import atomic_write
+
+    if path.suffix.lower() == ".csv":
+        columns = list(SUMMARY_COLUMNS)
+        for record in records:
+            columns += [key for key in record if key not in columns and key != "traceback"]
+        text = io.StringIO()
+        writer = csv.writer(text)
+        writer.writerow(columns)
+        for record in records:
+            writer.writerow([_cell(record.get(column)) for column in columns])
+        content = text.getvalue()
+    else:
+        content = "".join(json.dumps({**{c: record.get(c) for c in SUMMARY_COLUMNS}, **record})
+                          + "\n" for record in records)
+    with atomic_write(path, "w") as handle:
+        handle.write(content)
+
+
+def _check(args, directory: Path, summary: Path) -> None:
+    """Options that would fail every input fail the run before any work (status 1)."""
+    from nurbs_core.cli import _config, _field_settings, _patch_options
+    from nurbs_core.io.dispatch import EXPORT_SUFFIXES, NETWORK_SUFFIXES
+    from nurbs_core.io.outputs import check_output_paths
+
+    suffixes = NETWORK_SUFFIXES if args.patches is not None else EXPORT_SUFFIXES
+    if args.format.lower() not in suffixes:
+        raise ValueError(f"--format {args.format}: the results can be written as "
+                         f"{', '.join(suffixes)}")
+    _field_settings(args.settings)
+    if args.patches is not None:
+        _patch_options(args)
+    else:
+        _config(args, 3)
+    if args.max_decompressed is not None:
+        from nurbs_core.io.limits import set_decompression_limit
+
+        set_decompression_limit(args.max_decompressed)
+    check_output_paths([summary], suffixes=(".jsonl", ".csv"))
+    if args.jobs > 1 or args.scheduler is not None:
+        from nurbs_core.batch.executors import check_available
+
+        check_available()
+
+
+def run_batch(args) -> int:
+    from nurbs_core.batch.executors import DaskExecutor, serial
+    from nurbs_core.batch.inputs import expand, name_outputs
+    from nurbs_core.cli import INTERRUPTED_STATUS, SOME_FAILED_STATUS
+
+    if not args.format.startswith("."):
+        args.format = "." + args.format
+    directory = Path(args.output_dir)
+    directory.mkdir(parents=True, exist_ok=True)
+    summary = Path(args.summary) if args.summary else directory / "summary.jsonl"
+    _check(args, directory, summary)
+    items = expand(args.input, exclude=(summary,))
+    name_outputs(items, directory, args.format.lower(), offset=args.offset is not None)
+    records: list[dict | None] = [None] * len(items)
+    todo = []
+    for position, item in enumerate(items):
+        if item.error is not None:
+            records[position] = {"input": item.label, "output": None, "status": "failed",
+                                 "seconds": 0.0, "error": item.error}
+        elif args.skip_existing and all(os.path.exists(p) for p in item.outputs):
+            records[position] = {"input": item.label, "output": item.outputs[0],
+                                 "status": "skipped", "seconds": 0.0, "error": ""}
+        else:
+            todo.append((position, item.plain()))
+    skipped = sum(r is not None and r["status"] == "skipped" for r in records)
+    progress = Progress(len(items), skipped, args.quiet,
+                        failed=sum(r is not None and r["status"] == "failed" for r in records))
+    options = {key: value for key, value in vars(args).items()}
+    where = ("this process" if args.jobs == 1 and args.scheduler is None else
+             f"{args.scheduler}" if args.scheduler else f"a local Dask cluster of {args.jobs} workers")
+    if not args.quiet:
+        print(f"nurbs-fit: {len(items)} inputs ({len(todo)} to fit, {skipped} skipped) on {where}; "
+              f"results in {directory}", file=sys.stderr, flush=True)
+    interrupted = False
+    try:
+        if todo and (args.jobs > 1 or args.scheduler is not None):
+            with DaskExecutor(args.jobs, args.scheduler, args.threads) as executor:
+                progress.start = time.perf_counter()  # the rate counts fitting, not start-up
+                for position, record in executor.run(options, todo):
+                    records[position] = {**record, "output": items[position].outputs[0]}
+                    progress.update(record)
+        else:
+            for position, record in serial(options, todo):
+                records[position] = record
+                progress.update(record)
+    except KeyboardInterrupt:
+        interrupted = True
+    progress.show(final=True)
+    done = [r for r in records if r is not None]
+    write_summary(summary, done)
+    failed = [r for r in done if r["status"] == "failed"]
+    ok = sum(r["status"] == "ok" for r in done)
+    if interrupted:
+        print(f"nurbs-fit: interrupted after {ok} results; rerun with --skip-existing to fit the "
+              f"other {len(items) - len(done)} (summary: {summary})", file=sys.stderr)
+        return INTERRUPTED_STATUS
+    print(f"{ok} fitted, {len(failed)} failed, {skipped} skipped; summary: {summary}")
+    for record in failed:
+        print(f"failed: {record['input']}: {record['error']}", file=sys.stderr)
+    return SOME_FAILED_STATUS if failed else 0

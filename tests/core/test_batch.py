@@ -1,0 +1,307 @@
+"""``nurbs-fit`` over many inputs (``--output-dir``): results identical to single runs, failures in
+the summary (exit status 3), ``--skip-existing``, Ctrl-C, HDF5 datasets, ``--jobs 2`` on a local
+Dask cluster and ``--scheduler`` on a cluster started with Dask's own commands. Small clouds,
+few iterations; no durations are asserted."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nurbs_core import samples
+from nurbs_core.cli import main
+from nurbs_core.io import save_points
+
+FIT = ["--iterations", "3", "--control-points", "5", "5", "--samples", "16"]
+GOOD = 6
+DASK_BIN = Path(sys.executable).with_name("dask")
+
+
+def _cloud(k: int) -> np.ndarray:
+    shape = (samples.saddle, samples.bowl, samples.height_field)[k % 3]
+    return shape(300, seed=k).points
+
+
+def _folder(root: Path, corrupt: bool = True) -> Path:
+    folder = root / "scans"
+    folder.mkdir()
+    for k in range(GOOD):  # text and binary formats both
+        if k % 2:
+            save_points(_cloud(k), folder / f"part{k}.ply")
+        else:
+            np.savetxt(folder / f"part{k}.xyz", _cloud(k))
+    if corrupt:
+        (folder / "broken.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex "
+                                            b"100\nproperty float x\nproperty float y\nproperty "
+                                            b"float z\nend_header\n" + bytes(40))
+        (folder / "nan.xyz").write_text("0 0 0\n1 nan 0\n0 1 0\n1 1 1\n")
+    (folder / "notes.md").write_text("not a cloud")  # not a point-cloud suffix: not an input
+    return folder
+
+
+def _control_points(path: Path) -> np.ndarray:
+    (shape,) = json.loads(path.read_text())["geometry"]
+    return np.asarray(shape["control_points"], dtype=float)
+
+
+def _summary(path: Path) -> dict[str, dict]:
+    if path.suffix == ".csv":
+        with open(path, newline="") as handle:
+            rows = list(csv.DictReader(handle))
+    else:
+        rows = [json.loads(line) for line in path.read_text().splitlines()]
+    return {Path(row["input"]).name: row for row in rows}
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """Each good cloud fitted by a single ``nurbs-fit IN -o OUT`` run: name -> control points."""
+    root = tmp_path_factory.mktemp("single")
+    folder = _folder(root, corrupt=False)
+    fits = {}
+    for source in sorted(folder.glob("part*")):
+        out = root / f"{source.stem}.json"
+        assert main([str(source), "-o", str(out), "-q", *FIT]) == 0
+        fits[source.stem] = _control_points(out)
+    return fits
+
+
+def _assert_same(out: Path, reference: dict) -> None:
+    for stem, control in reference.items():
+        np.testing.assert_allclose(_control_points(out / f"{stem}.json"), control, rtol=0, atol=1e-9)
+
+
+@pytest.mark.timeout(120)
+def test_folder_batch_matches_single_runs_and_reports_the_corrupt_files(tmp_path, reference,
+                                                                        capsys):
+    folder = _folder(tmp_path)
+    out = tmp_path / "fits"
+    assert main([str(folder), "--output-dir", str(out), *FIT]) == 3  # some inputs failed
+    captured = capsys.readouterr()
+    assert "ETA" in captured.err and "inputs/s" in captured.err  # the progress line
+    _assert_same(out, reference)
+    rows = _summary(out / "summary.jsonl")
+    assert sorted(rows) == sorted([*(f"{s}.{'ply' if int(s[-1]) % 2 else 'xyz'}" for s in reference),
+                                   "broken.ply", "nan.xyz"])
+    for name in ("broken.ply", "nan.xyz"):
+        row = rows[name]
+        assert row["status"] == "failed" and name in row["error"]
+        assert row["error"].startswith("nurbs-fit: error: ") and "\n" not in row["error"]
+        assert not (out / f"{Path(name).stem}.json").exists()
+    assert "truncated" in rows["broken.ply"]["error"] and "NaN" in rows["nan.xyz"]["error"]
+    good = rows["part0.xyz"]
+    assert good["status"] == "ok" and good["output"] == str(out / "part0.json")
+    # the statistics and the quality measures of the single run's report
+    for key in ("mean", "rms", "max", "chamfer", "s2c_p95", "flipped_fraction", "coverage",
+                "area_ratio", "bending_energy", "seconds"):
+        assert isinstance(good[key], float), key
+    assert good["control_points"] == [5, 5]
+
+    # the same error line as a single run prints
+    single = main([str(folder / "nan.xyz"), "-o", str(tmp_path / "x.json")])
+    assert single == 1
+    assert capsys.readouterr().err.strip() == rows["nan.xyz"]["error"]
+
+    # a rerun with --skip-existing fits nothing that was written (the failures are tried again)
+    mtimes = {p.name: p.stat().st_mtime_ns for p in out.glob("part*.json")}
+    assert main([str(folder), "--output-dir", str(out), "--skip-existing", "-q", *FIT]) == 3
+    rows = _summary(out / "summary.jsonl")
+    assert {name: row["status"] for name, row in rows.items() if name.startswith("part")} == \
+        dict.fromkeys((n for n in rows if n.startswith("part")), "skipped")
+    assert len([n for n in rows if n.startswith("part")]) == GOOD
+    assert {p.name: p.stat().st_mtime_ns for p in out.glob("part*.json")} == mtimes
+    # without the corrupt files, everything is skipped: status 0
+    (folder / "broken.ply").unlink()
+    (folder / "nan.xyz").unlink()
+    assert main([str(folder), "--output-dir", str(out), "--skip-existing", "-q", *FIT]) == 0
+    assert {row["status"] for row in _summary(out / "summary.jsonl").values()} == {"skipped"}
+    assert {p.name: p.stat().st_mtime_ns for p in out.glob("part*.json")} == mtimes
+
+
+@pytest.mark.timeout(120)
+def test_globs_files_csv_summary_and_missing_inputs(tmp_path, reference, capsys):
+    folder = _folder(tmp_path, corrupt=False)
+    out = tmp_path / "fits"
+    summary = tmp_path / "table.csv"
+    code = main([str(folder / "part*.ply"), str(folder / "part0.xyz"), str(folder / "part0.xyz"),
+                 str(tmp_path / "missing.xyz"), str(tmp_path / "none*.xyz"), "--output-dir",
+                 str(out), "--summary", str(summary), "-q", *FIT])
+    assert code == 3
+    rows = _summary(summary)
+    assert sorted(rows) == ["missing.xyz", "none*.xyz", "part0.xyz", "part1.ply", "part3.ply",
+                            "part5.ply"]  # part0.xyz once
+    assert rows["missing.xyz"]["status"] == rows["none*.xyz"]["status"] == "failed"
+    assert "no file matches" in rows["none*.xyz"]["error"]
+    assert float(rows["part1.ply"]["rms"]) > 0
+    assert "ETA" not in capsys.readouterr().err  # -q
+    for stem in ("part0", "part1", "part3", "part5"):
+        np.testing.assert_allclose(_control_points(out / f"{stem}.json"), reference[stem], atol=1e-9,
+                                   rtol=0)
+
+
+@pytest.mark.timeout(120)
+def test_hdf5_dataset_items_match_single_runs_of_their_clouds(tmp_path):
+    h5py = pytest.importorskip("h5py", reason="the batch extra (h5py) is not installed")
+    clouds = np.stack([_cloud(k) for k in range(3)]).astype(np.float32)
+    with h5py.File(tmp_path / "patches.h5", "w") as handle:
+        handle["points"] = clouds
+    out = tmp_path / "fits"
+    assert main([str(tmp_path / "patches.h5"), "--output-dir", str(out), "-q", *FIT]) == 0
+    rows = _summary(out / "summary.jsonl")
+    assert sorted(rows) == [f"patches.h5[{k}]" for k in range(3)]
+    for k in range(3):
+        np.save(tmp_path / f"cloud{k}.npy", clouds[k].astype(np.float64))
+        assert main([str(tmp_path / f"cloud{k}.npy"), "-o", str(tmp_path / f"c{k}.json"), "-q",
+                     *FIT]) == 0
+        np.testing.assert_allclose(_control_points(out / f"patches_{k}.json"),
+                                   _control_points(tmp_path / f"c{k}.json"), atol=1e-9, rtol=0)
+
+
+@pytest.mark.timeout(120)
+def test_ctrl_c_keeps_finished_results_and_a_rerun_finishes_the_rest(tmp_path, monkeypatch,
+                                                                     reference):
+    import nurbs_core.batch.executors as executors
+
+    folder = _folder(tmp_path, corrupt=False)
+    out = tmp_path / "fits"
+    real, calls = executors.fit_item, []
+
+    def interrupted_on_the_third(options, item, **kwargs):
+        calls.append(item["input"])
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(options, item, **kwargs)
+
+    monkeypatch.setattr(executors, "fit_item", interrupted_on_the_third)
+    assert main([str(folder), "--output-dir", str(out), "-q", *FIT]) == 130
+    assert sorted(p.name for p in out.glob("*.json")) == ["part0.json", "part1.json"]
+    assert [row["status"] for row in _summary(out / "summary.jsonl").values()] == ["ok", "ok"]
+    monkeypatch.setattr(executors, "fit_item", real)
+    assert main([str(folder), "--output-dir", str(out), "--skip-existing", "-q", *FIT]) == 0
+    statuses = {name: row["status"] for name, row in _summary(out / "summary.jsonl").items()}
+    assert statuses == {"part0.xyz": "skipped", "part1.ply": "skipped", "part2.xyz": "ok",
+                        "part3.ply": "ok", "part4.xyz": "ok", "part5.ply": "ok"}
+    _assert_same(out, reference)
+
+
+def test_usage_errors_and_help(tmp_path, capsys, monkeypatch):
+    source = tmp_path / "a.xyz"
+    np.savetxt(source, _cloud(0))
+    for argv in ([str(source), str(source), "-o", "x.json"], [str(source)],
+                 [str(source), "-o", "x.json", "--jobs", "2"],
+                 [str(source), "--output-dir", str(tmp_path), "--summary", "s.txt"],
+                 [str(source), "--output-dir", str(tmp_path), "-o", "x.json"]):
+        with pytest.raises(SystemExit) as exit_info:
+            main(argv)
+        assert exit_info.value.code == 2
+    capsys.readouterr()
+    assert main([str(source), "--output-dir", str(tmp_path / "o"), "--format", ".xyz"]) == 1
+    assert "--format .xyz" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "distributed", None)  # Dask not installed
+    assert main([str(source), "--output-dir", str(tmp_path / "o"), "--jobs", "2"]) == 1
+    assert "nurbs-studio[batch]" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    assert "3 a batch in which some inputs failed" in " ".join(capsys.readouterr().out.split())
+
+
+@pytest.mark.timeout(150)
+def test_jobs_2_on_a_local_dask_cluster_gives_the_same_results(tmp_path, reference):
+    pytest.importorskip("distributed", reason="the batch extra (dask[distributed]) is not installed")
+    folder = _folder(tmp_path)
+    out = tmp_path / "fits"
+    # the command in its own process, as users run it (Dask's client threads stay out of pytest)
+    assert _nurbs_fit(folder, "--output-dir", out, "--jobs", "2", "-q", *FIT).returncode == 3
+    _assert_same(out, reference)
+    rows = _summary(out / "summary.jsonl")
+    assert rows["nan.xyz"]["status"] == rows["broken.ply"]["status"] == "failed"
+    assert sum(row["status"] == "ok" for row in rows.values()) == GOOD
+
+
+def _nurbs_fit(*args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "nurbs_core.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=150)
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@pytest.mark.timeout(180)
+def test_scheduler_option_runs_on_a_cluster_started_with_dask_commands(tmp_path, reference):
+    pytest.importorskip("distributed", reason="the batch extra (dask[distributed]) is not installed")
+    if not DASK_BIN.exists():
+        pytest.skip(f"no {DASK_BIN} (the batch extra is not installed in this environment)")
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    commands = [[str(DASK_BIN), "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                 "--no-dashboard"]]
+    commands += [[str(DASK_BIN), "worker", address, "--nthreads", "1", "--nworkers", "1",
+                  "--no-dashboard", "--local-directory", str(tmp_path / f"w{k}")] for k in range(2)]
+    processes = []
+    try:
+        for k, command in enumerate(commands):
+            with open(logs / f"{k}.log", "wb") as log:
+                processes.append(subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
+                                                  env=env, cwd=tmp_path))
+            if k == 0:
+                deadline = time.monotonic() + 60
+                while True:  # the scheduler accepts connections
+                    try:
+                        socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                        break
+                    except OSError:
+                        assert processes[0].poll() is None, (logs / "0.log").read_text()
+                        assert time.monotonic() < deadline, "the scheduler did not start"
+                        time.sleep(0.2)
+        folder = _folder(tmp_path)
+        out = tmp_path / "fits"
+        done = _nurbs_fit(folder, "--output-dir", out, "--scheduler", address, *FIT)
+        assert done.returncode == 3, done.stderr
+        assert "on tcp://127.0.0.1:" in done.stderr
+        _assert_same(out, reference)
+        rows = _summary(out / "summary.jsonl")
+        assert sum(row["status"] == "ok" for row in rows.values()) == GOOD
+        assert rows["nan.xyz"]["status"] == "failed"
+    finally:
+        for process in reversed(processes):
+            process.terminate()
+        for process in reversed(processes):
+            try:
+                process.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+
+
+@pytest.mark.timeout(120)
+def test_gradient_fits_in_one_process_match_single_runs(tmp_path):
+    # the torch path too (its generators are seeded per fit): no state leaks from one input to the
+    # next in the same process
+    folder = tmp_path / "clouds"
+    folder.mkdir()
+    options = ["--solver", "gradient", "--free-knots", "--iterations", "4", "--control-points",
+               "5", "5", "--samples", "12", "-q"]
+    for k in range(2):
+        np.save(folder / f"c{k}.npy", _cloud(k + 3))
+    out = tmp_path / "fits"
+    assert main([str(folder), "--output-dir", str(out), *options]) == 0
+    for k in range(2):
+        single = tmp_path / f"single{k}.json"
+        assert main([str(folder / f"c{k}.npy"), "-o", str(single), *options]) == 0
+        np.testing.assert_allclose(_control_points(out / f"c{k}.json"), _control_points(single),
+                                   atol=1e-9, rtol=0)
