@@ -20,7 +20,9 @@ import numpy as np
 from PySide6.QtCore import QObject, Signal
 from PySide6.QtGui import QUndoCommand, QUndoStack
 
-from nurbs_core.fitting.config import INITS, LOSS_TERMS, OPTIMIZERS, FitConfig
+from nurbs_core.fitting.config import INITS, FitConfig
+from nurbs_core.fitting.config import LOSS_TERMS as LOSS_TERMS  # re-exported for the panels
+from nurbs_core.fitting.config import OPTIMIZERS as OPTIMIZERS
 from nurbs_core.fitting.config import PARAMETERIZATIONS as _PARAMETERIZATIONS
 from nurbs_core.fitting.config import SOLVERS as _SOLVERS
 from nurbs_core.geometry_arrays import GeometryArrays, from_mapping
@@ -33,7 +35,6 @@ OLD_SESSION_FORMATS = ("nurbs-studio-session-v1",)
 #: The choices the panels offer, in display order: the engine's own lists (FitConfig validates
 #: against the same tuples). l1 / l2 / mse pair the i-th sample with the i-th point: meaningful
 #: only for ordered targets.
-__all__ = ["LOSS_TERMS", "OPTIMIZERS"]
 INITIALIZATIONS = INITS
 #: labels of the engine's solvers and parameterisations of unordered surface clouds
 SOLVER_LABELS = {"least_squares": "least squares"}

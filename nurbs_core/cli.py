@@ -540,7 +540,7 @@ def run(args) -> int:
     try:
         fit_one(args)
     except FitFailed as exc:
-        print(f"nurbs-fit: error: {exc}", file=sys.stderr)
+        print(error_line(exc), file=sys.stderr)
         return 1
     return 0
 
