@@ -372,15 +372,23 @@ class _FixedSurfaceBasis:
                  v: ArrayLike) -> None:
         ku = torch.as_tensor(knots_u).detach()
         kv = torch.as_tensor(knots_v, dtype=ku.dtype, device=ku.device).detach()
-        u = torch.as_tensor(u, dtype=ku.dtype, device=ku.device).detach().unsqueeze(0)
-        v = torch.as_tensor(v, dtype=ku.dtype, device=ku.device).detach().unsqueeze(0)
+        u = torch.as_tensor(u, dtype=ku.dtype, device=ku.device).detach()
+        v = torch.as_tensor(v, dtype=ku.dtype, device=ku.device).detach()
+        # one shared basis (knots (K,), parameters (M,)) or one per surface of a batch of B
+        # (knots (B, K), parameters (B, M)): then the evaluator takes exactly B surfaces
+        batched = max(t.dim() for t in (ku, kv, u, v)) == 2
+        ku_b, kv_b, u_b, v_b = ((t if t.dim() == 2 else t.unsqueeze(0)) for t in (ku, kv, u, v))
+        if batched and len({t.shape[0] for t in (ku_b, kv_b, u_b, v_b)}) != 1:
+            raise ValueError("batched knots and parameters need the same batch size")
         self.knots_u, self.knots_v, self.degrees = ku, kv, (degree_u, degree_v)
-        self.span_u, self.basis_u, _ = _basis(ku.unsqueeze(0), degree_u, u, 0, False)
-        self.span_v, self.basis_v, _ = _basis(kv.unsqueeze(0), degree_v, v, 0, False)
+        self.span_u, self.basis_u, _ = _basis(ku_b, degree_u, u_b, 0, False)
+        self.span_v, self.basis_v, _ = _basis(kv_b, degree_v, v_b, 0, False)
 
 
 class SurfaceEvaluator(_FixedSurfaceBasis):
-    """Fixed knots and fixed paired parameters (u[k], v[k]); returns (*B, M, 3).
+    """Fixed knots and fixed paired parameters (u[k], v[k]); returns (*B, M, 3). Knots (K,) and
+    parameters (M,) are shared by any batch; knots (B, K) and parameters (B, M) give each of B
+    surfaces its own (control points then (B, n, m, 3)).
     ``higher_order=True`` as in :func:`surface_points`."""
 
     def __call__(self, control_points: torch.Tensor, weights: torch.Tensor | None = None, *,
@@ -401,14 +409,15 @@ class SurfaceEvaluator(_FixedSurfaceBasis):
 
 
 class SurfaceGridEvaluator(_FixedSurfaceBasis):
-    """Fixed knots, fixed grid u x v; returns (*B, len(u), len(v), 3).
+    """Fixed knots, fixed grid u x v; returns (*B, Mu, Mv, 3). Shared or per-surface knots and
+    parameters as in :class:`SurfaceEvaluator`.
     ``higher_order=True`` as in :func:`surface_grid_points`."""
 
     def __init__(self, knots_u: ArrayLike, knots_v: ArrayLike, degree_u: int, degree_v: int, u: ArrayLike,
                  v: ArrayLike) -> None:
         super().__init__(knots_u, knots_v, degree_u, degree_v, u, v)
-        n_u = self.knots_u.shape[0] - degree_u - 1
-        n_v = self.knots_v.shape[0] - degree_v - 1
+        n_u = self.knots_u.shape[-1] - degree_u - 1
+        n_v = self.knots_v.shape[-1] - degree_v - 1
         self.dense_u = dense_basis_matrix(self.basis_u, self.span_u, degree_u, n_u)
         self.dense_v = dense_basis_matrix(self.basis_v, self.span_v, degree_v, n_v)
 

@@ -20,7 +20,7 @@ import numpy as np
 from nurbs_core.knot_vectors import clamped_problem
 
 OPTIMIZERS = ("adam", "sgd", "momentum", "adagrad", "lbfgs")
-INITS = ("pca", "least_squares", "random")
+INITS = ("pca", "least_squares", "random", "learned")
 PARAMETERIZATIONS = ("auto", "mesh", "plane")
 SOLVERS = ("auto", "least_squares", "gradient")
 KINDS = ("surface", "curve")
@@ -148,7 +148,12 @@ class FitConfig:
     it orders the points along the cloud's backbone (minimum spanning tree, see
     :mod:`nurbs_core.fitting.ordering`) and starts from least squares with those chord-length
     parameters (the principal line only when no ordering exists); "least_squares" does the same
-    for curves and uses PCA parameters for surfaces; "random" is the paper's Gaussian start.
+    for curves and uses PCA parameters for surfaces; "random" is the paper's Gaussian start;
+    "learned" (unordered surface clouds of open patches) starts from the surface a trained encoder
+    predicts (``learned_model``: a ``nurbs-train`` model file, None for the one shipped with the
+    ``learn`` extra) and continues with the gradient fit; without the extra or the model, or for
+    a cloud that is not an open patch, it falls back to "pca" and the first message says why
+    (:mod:`nurbs_core.fitting.learned_start`).
     For unordered clouds the pointwise
     terms (l1, l2, mse, p2s) use per-point foot-point parameters; with ``parameter_correction`` they
     are refined by Gauss-Newton steps every ``correction_interval`` iterations, and a ``p2s`` term
@@ -211,6 +216,8 @@ class FitConfig:
     free_weights: bool = False
     pin_boundary: bool = False
     init: str = "pca"
+    #: the model file of init "learned" (None: the model shipped with the learn extra)
+    learned_model: str | None = None
     samples_u: int = 64
     samples_v: int = 64
     parameter_correction: bool = True

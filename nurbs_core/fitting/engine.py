@@ -25,11 +25,12 @@ from nurbs_core import losses as _losses
 from nurbs_core.fitting.config import FitConfig, FitResult, FitSnapshot, StopToken
 from nurbs_core.fitting.evaluation import Evaluation, cloud_tree, draw_batch, uses_parameters
 from nurbs_core.fitting.guard import DivergenceGuard
+from nurbs_core.fitting.learned_start import LEARNED_WARMUP_ITERATIONS, learned_start
 from nurbs_core.fitting.model import TrainableGeometry
 from nurbs_core.fitting.problem import Problem, initial_geometry, prepare, start_parameters
 from nurbs_core.fitting.projection import project
 from nurbs_core.fitting.refinement import refine
-from nurbs_core.fitting.schedule import LearningRateSchedule
+from nurbs_core.fitting.schedule import WARMUP_ITERATIONS, LearningRateSchedule
 from nurbs_core.fitting.sheet import (
     SheetStart,
     core_geometry_numpy,
@@ -72,22 +73,45 @@ def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopTo
     if not problem.known and config.parameter_correction and "pointwise" not in loss.kinds():
         loss = loss.with_term(1.0, "p2s")
     stop = stop or StopToken()
+    note = None
+    if config.init == "learned" and initial is None:
+        learned = learned_start(problem.points_input, config, known=problem.known)
+        if learned.surface is not None:
+            geometry = initial_geometry(problem, config, learned.surface)
+            return _gradient_run(problem, config, geometry, loss, stop, True,
+                                 learned=learned.message)
+        config, note = config.replace(init="pca"), learned.message
     if uses_core(problem, config, initial):
         # the fold-free start runs (and refuses shapes one patch cannot hold) before iterating
-        return _sheet_run(problem, config, sheet_start(problem, config), loss, stop, started)
+        return _noted(_sheet_run(problem, config, sheet_start(problem, config), loss, stop,
+                                 started), note)
     geometry = initial_geometry(problem, config, initial)
-    return _gradient_run(problem, config, geometry, loss, stop, initial is not None)
+    return _noted(_gradient_run(problem, config, geometry, loss, stop, initial is not None), note)
+
+
+def _noted(snapshots: Iterator[FitSnapshot], note: str | None) -> Iterator[FitSnapshot]:
+    """``snapshots`` with ``note`` put before the message of the first one and the final one."""
+    first = True
+    for snapshot in snapshots:
+        if note is not None and (first or snapshot.done):
+            snapshot = dataclasses.replace(
+                snapshot, message=note if not snapshot.message else f"{note}; {snapshot.message}")
+        first = False
+        yield snapshot
 
 
 def _gradient_run(problem: Problem, config: FitConfig, geometry: Geometry,
                   loss: _losses.CompositeLoss, stop: StopToken,
-                  from_initial: bool) -> Iterator[FitSnapshot]:
-    """The gradient fit from ``geometry`` (normalised coordinates) on ``config.threads`` threads."""
+                  from_initial: bool, learned: str | None = None) -> Iterator[FitSnapshot]:
+    """The gradient fit from ``geometry`` (normalised coordinates) on ``config.threads`` threads.
+    ``learned``: the start is a learned prediction (this message says whose): it is shown as
+    iteration 0 and the warm-up is the short one of a learned start."""
     saved_threads = torch.get_num_threads()
     if config.threads is not None:
         torch.set_num_threads(config.threads)
     try:
-        yield from _Run(problem, config, geometry, loss, stop, from_initial).loop()
+        yield from _Run(problem, config, geometry, loss, stop, from_initial,
+                        learned=learned).loop()
     finally:
         if config.threads is not None:
             torch.set_num_threads(saved_threads)
@@ -171,11 +195,12 @@ class _Run:
     def __init__(self, problem: Problem, config: FitConfig, geometry: Geometry,
                  loss: _losses.CompositeLoss, stop: StopToken, from_initial: bool,
                  start_params: np.ndarray | None = None, offset: int = 0,
-                 started: float | None = None):
+                 started: float | None = None, learned: str | None = None):
         """``geometry``: the start (normalised coordinates); ``from_initial``: it is the caller's
         geometry (warm up); ``start_params``: foot-point parameters (N, 2) to start from (the
         least-squares core's); ``offset``: the iterations already done before this run (records
-        and snapshots count on from there); ``started``: the run's ``perf_counter`` start."""
+        and snapshots count on from there); ``started``: the run's ``perf_counter`` start;
+        ``learned``: the start is a learned prediction (the message of iteration 0's snapshot)."""
         self.problem, self.config, self.loss, self.stop = problem, config, loss, stop
         self.offset = offset
         self.generator = torch.Generator().manual_seed(config.seed)
@@ -195,8 +220,16 @@ class _Run:
         self.evaluation = self._evaluation(params)
         stage_length = max(1, math.ceil(config.iterations / (config.refinements + 1)))
         warm_up = from_initial or config.init == "least_squares" or problem.start_is_fit
-        self.schedule = LearningRateSchedule(config, stage_length, self._leaves(), warm_up)
+        self.learned = learned
+        self.schedule = LearningRateSchedule(
+            config, stage_length, self._leaves(), warm_up,
+            LEARNED_WARMUP_ITERATIONS if learned is not None else WARMUP_ITERATIONS)
         self.guard = DivergenceGuard(self.model.state())
+        #: the loop's state: iterations done, records since the last snapshot, the outcome
+        self.iteration, self.stage_start, self.quiet = 0, 0, 0
+        self.previous_total: float | None = None
+        self.records: list[dict] = []
+        self.status, self.message = "budget", cast(str | None, None)
 
     # ---------------------------------------------------------------------------------------
     def _model(self, geometry: Geometry) -> TrainableGeometry:
@@ -284,72 +317,88 @@ class _Run:
         """Iterate to the budget, convergence, a stop or divergence; yield throttled snapshots and
         a final one (``done=True``), or a "failed" one when something raises."""
         config, stop = self.config, self.stop
-        records: list[dict] = []
         last_yield = -math.inf
-        status, message = "budget", None
-        iteration, stage_start = 0, 0
-        previous_total: float | None = None
-        quiet = 0
+        if self.learned is not None:
+            # the prediction itself, before the first step
+            yield self._snapshot(0, [], "running", False, self.learned)
+            last_yield = time.perf_counter()
         try:
-            while iteration < config.iterations:
+            while self.iteration < config.iterations:
                 if stop.stopped:
-                    status = "stopped"
+                    self.status = "stopped"
                     break
                 if stop.paused:
-                    yield self._snapshot(iteration, records, "paused", False, "paused")
-                    records = []
+                    yield self._snapshot(self.iteration, self.records, "paused", False, "paused")
+                    self.records = []
                     while stop.paused and not stop.stopped:
                         stop.wait_while_paused(0.1)
                     continue
-                iteration += 1
+                self.iteration += 1
                 batch = draw_batch(self.problem.count, config.batch_size, self.generator)
                 if (self.evaluation.params is not None and not self.problem.known
                         and config.parameter_correction
-                        and (iteration - stage_start) % config.correction_interval == 0):
+                        and (self.iteration - self.stage_start) % config.correction_interval == 0):
                     self.evaluation.correct(batch)
                 before = self.model.state()
                 total_value, terms = self._step(batch)
-                reason = self.guard.check(self.model, before, total_value)
-                if reason is not None:
-                    self.schedule.halve()
-                    rate = self.schedule.learning_rate
-                    self.pending_message = self.guard.rollback_message(iteration, reason, rate)
-                    if self.guard.exhausted:
-                        status, message = "diverged", self.guard.give_up_message(rate)
-                        break
-                    previous_total = None
-                    continue
-                self.guard.accept(total_value, before)
-                record = {"iteration": iteration + self.offset, "total": total_value}
-                record.update({k: float(v) for k, v in terms.items()})
-                records.append(record)
-                self.schedule.observe(total_value)
-                converged = False
-                if previous_total is not None:
-                    change = abs(previous_total - total_value)
-                    quiet = quiet + 1 if change <= config.loss_tolerance * abs(total_value) else 0
-                    converged = quiet >= 5
-                previous_total = total_value
-                stage_done = converged or (iteration - stage_start) >= self.schedule.stage_length
-                if stage_done and self.stages_done < config.refinements \
-                        and iteration < config.iterations:
-                    self._refine_stage(iteration)
-                    stage_start, previous_total, quiet = iteration, None, 0
-                elif converged:
-                    status = "converged"
+                if self.after_step(before, total_value, terms):
                     break
                 if time.perf_counter() - last_yield >= config.snapshot_interval:
                     note, self.pending_message = self.pending_message, None
-                    yield self._snapshot(iteration, records, "running", False, note)
-                    records, last_yield = [], time.perf_counter()
+                    yield self._snapshot(self.iteration, self.records, "running", False, note)
+                    self.records, last_yield = [], time.perf_counter()
         except Exception as exc:  # report to the app as a failed run instead of killing its thread
-            yield self._snapshot(iteration, records, "failed", True, f"{type(exc).__name__}: {exc}")
+            yield self._snapshot(self.iteration, self.records, "failed", True,
+                                 f"{type(exc).__name__}: {exc}")
             return
-        if status == "budget" and config.iterations == 0:
+        yield self.final_snapshot()
+
+    def after_step(self, before: list[torch.Tensor], total_value: float,
+                   terms: dict[str, torch.Tensor]) -> bool:
+        """The bookkeeping after iteration ``self.iteration``'s step, whose loss ``total_value``
+        (and ``terms``) was evaluated at ``before``: roll back a diverging step, else record it,
+        update the schedule, test convergence and refine between stages. True when the fit is
+        over (``self.status`` says why)."""
+        config = self.config
+        iteration = self.iteration
+        reason = self.guard.check(self.model, before, total_value)
+        if reason is not None:
+            self.schedule.halve()
+            rate = self.schedule.learning_rate
+            self.pending_message = self.guard.rollback_message(iteration, reason, rate)
+            if self.guard.exhausted:
+                self.status, self.message = "diverged", self.guard.give_up_message(rate)
+                return True
+            self.previous_total = None
+            return False
+        self.guard.accept(total_value, before)
+        record = {"iteration": iteration + self.offset, "total": total_value}
+        record.update({k: float(v) for k, v in terms.items()})
+        self.records.append(record)
+        self.schedule.observe(total_value)
+        converged = False
+        if self.previous_total is not None:
+            change = abs(self.previous_total - total_value)
+            self.quiet = self.quiet + 1 if change <= config.loss_tolerance * abs(total_value) else 0
+            converged = self.quiet >= 5
+        self.previous_total = total_value
+        stage_done = converged or (iteration - self.stage_start) >= self.schedule.stage_length
+        if stage_done and self.stages_done < config.refinements and iteration < config.iterations:
+            self._refine_stage(iteration)
+            self.stage_start, self.previous_total, self.quiet = iteration, None, 0
+        elif converged:
+            self.status = "converged"
+            return True
+        return False
+
+    def final_snapshot(self) -> FitSnapshot:
+        """The done snapshot of the run's current state and status."""
+        message = self.message
+        if self.status == "budget" and self.config.iterations == 0:
             message = "no iterations requested"
         if message is None:
             message, self.pending_message = self.pending_message, None
-        yield self._snapshot(iteration, records, status, True, message)
+        return self._snapshot(self.iteration, self.records, self.status, True, message)
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,0 +1,105 @@
+"""init="learned": the engine's side (a prediction as iteration 0, the short warm-up, the
+fall-backs). The model itself is tested in test_learn.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nurbs_core import samples
+from nurbs_core.fitting import FitConfig, fit, iter_fit
+from nurbs_core.fitting import learned_start as learned
+from nurbs_core.fitting.schedule import WARMUP_ITERATIONS
+from nurbs_core.geometry import NurbsSurface
+
+
+def _fake_predictor(surface: NurbsSurface):
+    calls = []
+
+    def predictor(path):
+        def predict(points):
+            calls.append(len(points))
+            return surface
+        return predict
+    return predictor, calls
+
+
+@pytest.fixture
+def sheet():
+    return samples.saddle(600, seed=3)
+
+
+def _plane_start(points: np.ndarray) -> NurbsSurface:
+    """A flat 8 x 8 cubic net over the cloud's bounding box at its mean height: a rough start."""
+    lo, hi = points.min(0), points.max(0)
+    g = np.linspace(0, 1, 8)
+    x, y = np.meshgrid(lo[0] + g * (hi[0] - lo[0]), lo[1] + g * (hi[1] - lo[1]), indexing="ij")
+    control = np.stack([x, y, np.full((8, 8), points[:, 2].mean())], -1)
+    return NurbsSurface(control, 3, 3)
+
+
+def test_the_prediction_is_iteration_zero_and_the_fit_continues_from_it(monkeypatch, sheet):
+    start = _plane_start(sheet.points)
+    predictor, calls = _fake_predictor(start)
+    monkeypatch.setattr(learned, "_predictor", predictor)
+    config = FitConfig(init="learned", iterations=20, threads=1, control_points_u=8,
+                       control_points_v=8)
+    snapshots = list(iter_fit(sheet.points, config))
+    assert calls == [len(sheet.points)]
+    first = snapshots[0]
+    assert first.iteration == 0 and first.message.startswith("learned start (the shipped model")
+    np.testing.assert_allclose(first.geometry.control_points, start.control_points.numpy(),
+                               atol=1e-12)
+    assert snapshots[-1].done and snapshots[-1].iteration == 20 and snapshots[-1].stage == "gradient"
+
+
+def test_a_learned_start_warms_up_briefly(monkeypatch, sheet):
+    """The learning rate reaches its full value after LEARNED_WARMUP_ITERATIONS, not after the
+    WARMUP_ITERATIONS of other starts that are fits."""
+    from nurbs_core.fitting import schedule
+
+    rates = []
+    original = schedule.LearningRateSchedule._apply_learning_rate
+
+    def spy(self):
+        original(self)
+        rates.append(self.optimizer.param_groups[0]["lr"])
+    monkeypatch.setattr(schedule.LearningRateSchedule, "_apply_learning_rate", spy)
+    predictor, _ = _fake_predictor(_plane_start(sheet.points))
+    monkeypatch.setattr(learned, "_predictor", predictor)
+    config = FitConfig(init="learned", iterations=12, threads=1, lr_schedule="none",
+                       control_points_u=8, control_points_v=8)
+    fit(sheet.points, config)
+    short = learned.LEARNED_WARMUP_ITERATIONS
+    assert short < WARMUP_ITERATIONS
+    assert rates[0] == pytest.approx(config.learning_rate * 1e-3)
+    assert all(r < config.learning_rate for r in rates[:short])
+    assert rates[short:] == [config.learning_rate] * (len(rates) - short)
+
+
+@pytest.mark.parametrize("case", ["no model", "no module", "closed", "known parameters"])
+def test_without_a_usable_model_or_an_open_patch_it_falls_back_and_says_why(monkeypatch, case):
+    cloud = samples.sphere(800, seed=0).points if case == "closed" else \
+        samples.saddle(600, seed=1).points
+    if case == "no model":
+        def predictor(path):
+            raise RuntimeError("no model file at /nowhere.pt")  # as LearnedModelUnavailable
+    elif case == "no module":
+        def predictor(path):
+            raise ImportError("No module named 'nurbs_core.learn'")
+    else:
+        predictor, _ = _fake_predictor(_plane_start(cloud))
+    monkeypatch.setattr(learned, "_predictor", predictor)
+    parameters = None
+    if case == "known parameters":
+        parameters = np.random.default_rng(0).random((len(cloud), 2))
+    config = FitConfig(init="learned", iterations=5, threads=1, single_patch=case == "closed")
+    result = fit(cloud, config, parameters=parameters)
+    expected = {"no model": "no learned model: no model file at /nowhere.pt",
+                "no module": "needs the 'learn' extra",
+                "closed": "predicts open patches and this cloud is not one",
+                "known parameters": "for unordered surface clouds"}[case]
+    assert expected in result.message and "falling back to init 'pca'" in result.message
+    same = fit(cloud, config.replace(init="pca"), parameters=parameters)
+    np.testing.assert_allclose(result.geometry.control_points.numpy(),
+                               same.geometry.control_points.numpy(), atol=0)
