@@ -9,6 +9,8 @@
 * ``refinement``    knot insertion where the error is largest (``refine``)
 * ``engine``        the optimisation loop (``iter_fit``, ``fit``), with its learning-rate
                     ``schedule``, divergence ``guard`` and loss ``evaluation``
+* ``batched``       many fits with known parameters in one batch (``fit_batch``)
+* ``learned_start`` the start of init "learned" (a trained encoder's prediction)
 
 The names load on first use (PEP 562): ``from nurbs_core.fitting import FitConfig`` does not
 import torch; ``fit`` and ``iter_fit`` do.
@@ -29,6 +31,7 @@ _LAZY = {
     "StopToken": "config",
     "fit": "engine",
     "iter_fit": "engine",
+    "fit_batch": "batched",
     "statistics": "engine",
     "least_squares_fit": "least_squares",
     "conform": "problem",
