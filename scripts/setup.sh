@@ -38,6 +38,6 @@ if ! .venv/bin/python -c "import torch" >/dev/null 2>&1; then
   .venv/bin/python -m pip install -q --upgrade pip
   .venv/bin/python -m pip install -q "torch==2.13.0"
 fi
-echo "[setup] installing nurbs-studio with extras [app,cad,e57,test,batch]"
-.venv/bin/python -m pip install -q -e ".[app,cad,e57,test,batch]" "torch==2.13.0"
+echo "[setup] installing nurbs-studio with extras [app,cad,e57,test,batch,learn]"
+.venv/bin/python -m pip install -q -e ".[app,cad,e57,test,batch,learn]" "torch==2.13.0"
 echo "[setup] ready: .venv"

@@ -148,7 +148,10 @@ class FitSettingsPanel(QWidget):
         self.init = QComboBox()
         for name in INITIALIZATIONS:
             self.init.addItem(name, name)
-        self.init.setToolTip("how a fresh fit (after Reset) builds its first shape")
+        self.init.setToolTip("how a fresh fit (after Reset) builds its first shape; 'learned': "
+                             "a trained network's prediction for an open patch, then the "
+                             "gradient fit (falls back to 'pca', saying why, without a model "
+                             "or for a closed shape)")
         form.addRow("Method", self.optimizer)
         form.addRow("Learning rate", self.learning_rate)
         form.addRow("Iterations", self.iterations)

@@ -151,7 +151,7 @@ class FitConfig:
     for curves and uses PCA parameters for surfaces; "random" is the paper's Gaussian start;
     "learned" (unordered surface clouds of open patches) starts from the surface a trained encoder
     predicts (``learned_model``: a ``nurbs-train`` model file, None for the one shipped with the
-    ``learn`` extra) and continues with the gradient fit; without the extra or the model, or for
+    package) and continues with the gradient fit; without a usable model, or for
     a cloud that is not an open patch, it falls back to "pca" and the first message says why
     (:mod:`nurbs_core.fitting.learned_start`).
     For unordered clouds the pointwise
@@ -216,7 +216,7 @@ class FitConfig:
     free_weights: bool = False
     pin_boundary: bool = False
     init: str = "pca"
-    #: the model file of init "learned" (None: the model shipped with the learn extra)
+    #: the model file of init "learned" (None: the model shipped with the package)
     learned_model: str | None = None
     samples_u: int = 64
     samples_v: int = 64

@@ -1,12 +1,13 @@
 """The learned start of a surface fit (``FitConfig.init == "learned"``).
 
-A trained encoder (:mod:`nurbs_core.learn`, the optional ``learn`` extra) predicts a control grid
+A trained encoder (:mod:`nurbs_core.learn`; torch only, the ``learn`` extra adds HDF5 datasets for
+training) predicts a control grid
 from the cloud in one forward pass; the gradient fit then continues from that surface, with a
 short warm-up (:data:`LEARNED_WARMUP_ITERATIONS`) because the prediction is close but not a fit.
 
 The model is trained on open patches only. The start falls back to the configuration's usual
 path (the cloud's principal plane, or the least-squares core of an unordered cloud), with the
-reason in the run's first message, when the extra or the model file is missing, when the points
+reason in the run's first message, when the model file is missing or unreadable, when the points
 are not an unordered surface cloud, or when the cloud is not an open patch: the mesh test of the
 least-squares core's start (:func:`nurbs_core.fitting.sheet.sheet_start`) decides that, so the
 learned start and the core agree on what one patch can hold.
@@ -59,8 +60,8 @@ def learned_start(points: np.ndarray, config: FitConfig, *, known: bool) -> Lear
     try:
         predict = _predictor(config.learned_model)
     except ImportError as exc:
-        return LearnedStart(None, f"the learned start needs the 'learn' extra "
-                            f"(pip install \"nurbs-studio[learn]\"): {exc}" + fallback)
+        return LearnedStart(None, f"the learned start cannot load nurbs_core.learn ({exc})"
+                            + fallback)
     except Exception as exc:  # LearnedModelUnavailable, a damaged file: say so and go on
         return LearnedStart(None, f"no learned model: {exc}" + fallback)
     reason = _not_an_open_patch(points, config)

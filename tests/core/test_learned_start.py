@@ -96,7 +96,7 @@ def test_without_a_usable_model_or_an_open_patch_it_falls_back_and_says_why(monk
     config = FitConfig(init="learned", iterations=5, threads=1, single_patch=case == "closed")
     result = fit(cloud, config, parameters=parameters)
     expected = {"no model": "no learned model: no model file at /nowhere.pt",
-                "no module": "needs the 'learn' extra",
+                "no module": "cannot load nurbs_core.learn",
                 "closed": "predicts open patches and this cloud is not one",
                 "known parameters": "for unordered surface clouds"}[case]
     assert expected in result.message and "falling back to init 'pca'" in result.message

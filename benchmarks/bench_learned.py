@@ -1,0 +1,170 @@
+"""The learned start: the paper's reconstruction table, inference time, and fit iterations saved.
+
+Run: ``python benchmarks/bench_learned.py [--patches 24] [--table 200]
+[--model "supervised 20x20=/tmp/sup/best.pt" ...] [--warm-up 0 5 10 30] [--data SPLINES.h5]``
+
+1. **Table** (``--table`` held-out patches of the generator's ``test`` split, disjoint from the
+   training and validation streams; or the clouds of a SplineDataset HDF5 file with ``--data``):
+   for the shipped model and every ``--model NAME=PATH``, the means over patches of the
+   metrics of :func:`nurbs_core.learn.losses.patch_metrics` in the cloud's normalised frame (the
+   ParSeNet normalisation: the cloud fits [-1, 1]^3), each x 100:
+   100 x CD = 100 (mean_s d(s, P)^2 + mean_p d(p, S)^2), 100 x HD = 100 (max_s d(s, P)^2 +
+   max_p d(p, S)^2), with S a 100 x 100 parameter grid on the predicted surface and P the
+   cloud (two-sided, squared distances); 100 x Lap = 100 x the mean squared umbrella Laplacian of
+   the control net. The PCA plane grid (the start the network's residual is added to) is the
+   reference row, the paper's numbers are printed beside.
+2. **Inference**: milliseconds per patch of ``predict_surface`` (resampling, normalisation,
+   forward pass, mapping back) on one torch thread, median over the patches.
+3. **Iterations**: ``--patches`` held-out clouds of 700 points (half from the test split, half
+   made by other means: ``nurbs_core.samples`` saddles, bowls, terrains, leaflets, curled
+   sheets), each fitted by the gradient fit (default loss, 12 x 12 control points) from today's
+   start (``init="pca"``: the principal plane, ``parameterization="plane"``) and from the
+   learned one (``init="learned"``). The accuracy today's start reaches after 100 iterations
+   (RMS point-to-surface distance at foot points) is the target; printed: the iteration at which
+   the learned start first reaches it (median and worst, and as a fraction of 100), and the final
+   RMS of both after ``--iterations``. ``--warm-up`` repeats part 3 for other warm-up lengths of
+   a learned start (the engine's ``LEARNED_WARMUP_ITERATIONS``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics as stats_lib
+import time
+
+import numpy as np
+import torch
+
+from nurbs_core import samples
+from nurbs_core.fitting import FitConfig, engine, iter_fit
+from nurbs_core.fitting import statistics as fit_statistics
+from nurbs_core.learn.data import PatchGenerator, load_spline_dataset
+from nurbs_core.learn.predict import load_model, predict_surface
+from nurbs_core.learn.train import evaluate
+
+PAPER = {"supervised 20x20": (1.184, 0.994, 1.340), "unsupervised 20x20": (0.018, 0.234, 0.202),
+         "unsupervised 5x5": (0.020, 0.256, 2.462), "unsupervised 4x4": (0.028, 0.274, 3.356)}
+OTHER_SHAPES = (samples.saddle, samples.bowl, samples.height_field, samples.leaflet_like,
+                samples.curled_sheet)
+
+
+def table(models: dict[str, str | None], count: int, data: str | None) -> None:
+    dataset = load_spline_dataset(data, limit=count) if data else PatchGenerator(count, split="test")
+    indices = list(range(min(count, len(dataset))))
+    print(f"\n## 1. reconstruction on {len(indices)} held-out patches "
+          f"({'SplineDataset file ' + data if data else 'generated test split'}), means x 100")
+    print(f"{'model':<28} {'grid':>6} {'CD':>8} {'HD':>8} {'Lap':>8}   paper CD / HD / Lap")
+    plane_done = False
+    for name, path in models.items():
+        model = load_model(path)
+        sums = evaluate(model.network, dataset, indices, torch.device("cpu"))
+        n = float(sums["count"])
+        grid = "x".join(map(str, model.grid))
+        paper = PAPER.get(name)
+        paper_text = " / ".join(f"{v:.3f}" for v in paper) if paper else ""
+        print(f"{name:<28} {grid:>6} {float(sums['chamfer']) / n:8.4f} "
+              f"{float(sums['hausdorff']) / n:8.4f} {float(sums['laplacian']) / n:8.4f}   "
+              f"{paper_text}")
+        if not plane_done:
+            print(f"{'PCA plane grid (reference)':<28} {grid:>6} "
+                  f"{float(sums['plane_chamfer']) / n:8.4f} "
+                  f"{float(sums['plane_hausdorff']) / n:8.4f} "
+                  f"{float(sums['plane_laplacian']) / n:8.4f}")
+            plane_done = True
+
+
+def held_out_clouds(count: int) -> list[tuple[str, np.ndarray]]:
+    generated = PatchGenerator(count - count // 2, split="test", seed=1)
+    clouds = [(f"test split #{i}", generated[i].points.astype(np.float64))
+              for i in range(len(generated))]
+    for k in range(count // 2):
+        shape = OTHER_SHAPES[k % len(OTHER_SHAPES)]
+        clouds.append((f"{shape.__name__} seed {100 + k}", shape(700, seed=100 + k).points))
+    return clouds
+
+
+def inference_ms(clouds: list[tuple[str, np.ndarray]], path: str | None) -> float:
+    model = load_model(path)
+    predict_surface(clouds[0][1], model)  # warm
+    times = []
+    for _, points in clouds:
+        start = time.perf_counter()
+        predict_surface(points, model)
+        times.append(time.perf_counter() - start)
+    return 1e3 * stats_lib.median(times)
+
+
+def rms_by_iteration(points: np.ndarray, config: FitConfig) -> list[float]:
+    """RMS foot-point distance of the geometry after each iteration 0..config.iterations (the
+    start first: the learned start's iteration-0 snapshot, or a zero-iteration run)."""
+    curve: dict[int, float] = {}
+    if config.init != "learned":
+        start = next(iter(iter_fit(points, config.replace(iterations=0))))
+        curve[0] = fit_statistics(_surface(start.geometry), points)["rms"]
+    for snapshot in iter_fit(points, config.replace(snapshot_interval=0.0)):
+        if snapshot.geometry:
+            curve[snapshot.iteration] = fit_statistics(_surface(snapshot.geometry), points)["rms"]
+    last = max(curve)
+    return [curve.get(i, curve[max(k for k in curve if k <= i)]) for i in range(last + 1)]
+
+
+def _surface(arrays):
+    from nurbs_core.geometry import geometry_from_numpy
+
+    return geometry_from_numpy(arrays, dtype=torch.float64)
+
+
+def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, warm_ups: list[int],
+               path: str | None) -> None:
+    base = FitConfig(solver="gradient", iterations=budget, threads=1, learned_model=path)
+    today = base.replace(init="pca", parameterization="plane")
+    learned = base.replace(init="learned")
+    print(f"\n## 3. fit iterations on {len(clouds)} held-out clouds (gradient fit, default loss, "
+          f"12 x 12 control points; target: today's start's RMS after 100 iterations)")
+    reference = [rms_by_iteration(points, today) for _, points in clouds]
+    for warm in warm_ups:
+        engine.LEARNED_WARMUP_ITERATIONS = warm
+        reached, worse = [], []
+        for (name, points), ref in zip(clouds, reference, strict=True):
+            target = ref[min(100, len(ref) - 1)]
+            curve = rms_by_iteration(points, learned)
+            hit = next((i for i, r in enumerate(curve) if r <= target), None)
+            reached.append(hit if hit is not None else budget + 1)
+            if curve[-1] > ref[-1] * 1.01:
+                worse.append(f"{name} ({curve[-1]:.3g} vs {ref[-1]:.3g})")
+        median = stats_lib.median(reached)
+        print(f"warm-up {warm:>2}: iterations to reach the target: median {median:g} "
+              f"({median / 100:.0%} of 100), worst {max(reached)}, reached by "
+              f"{sum(r <= 100 for r in reached)}/{len(reached)}; final RMS worse than today's "
+              f"(>1%): {len(worse)}" + (f" [{'; '.join(worse)}]" if worse else ""))
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--patches", type=int, default=24)
+    parser.add_argument("--table", type=int, default=200)
+    parser.add_argument("--iterations", type=int, default=200)
+    parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH")
+    parser.add_argument("--warm-up", type=int, nargs="+", default=[engine.LEARNED_WARMUP_ITERATIONS])
+    parser.add_argument("--data", help="a SplineDataset-format HDF5 file for the table")
+    parser.add_argument("--learned-model", help="the model of parts 2 and 3 and the table's first "
+                        "row (default: the shipped one)")
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+    print(f"# machine: {platform.machine()} {os.cpu_count()} cores, torch {torch.__version__}, "
+          f"1 torch thread")
+    models: dict[str, str | None] = {"unsupervised 20x20": args.learned_model}
+    for item in args.model:
+        name, _, path = item.partition("=")
+        models[name] = path
+    table(models, args.table, args.data)
+    clouds = held_out_clouds(args.patches)
+    print(f"\n## 2. inference: {inference_ms(clouds, args.learned_model):.1f} ms per patch (median; 700 points, one "
+          f"thread, resampling and mapping back included)")
+    iterations(clouds, args.iterations, args.warm_up, args.learned_model)
+
+
+if __name__ == "__main__":
+    main()
