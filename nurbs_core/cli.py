@@ -584,7 +584,7 @@ def fit_one(args, points=None, stoppable: bool = True) -> dict:
     if args.offset is not None and args.curve:
         raise ValueError("--offset applies to surfaces only")
     core = (not args.curve and parameters is None and args.initial is None
-            and resolved_solver(config) == "least_squares")
+            and config.init != "learned" and resolved_solver(config) == "least_squares")
     how = (f"by fairing least squares (stiffness {config.stiffness:g}"
            + (f", grid growing to at most {config.max_control_points} per direction"
               if config.max_control_points else "") + ")") if core else \

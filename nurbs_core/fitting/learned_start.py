@@ -8,9 +8,11 @@ short warm-up (:data:`LEARNED_WARMUP_ITERATIONS`) because the prediction is clos
 The model is trained on open patches only. The start falls back to the configuration's usual
 path (the cloud's principal plane, or the least-squares core of an unordered cloud), with the
 reason in the run's first message, when the model file is missing or unreadable, when the points
-are not an unordered surface cloud, or when the cloud is not an open patch: the mesh test of the
-least-squares core's start (:func:`nurbs_core.fitting.sheet.sheet_start`) decides that, so the
-learned start and the core agree on what one patch can hold.
+are not an unordered surface cloud, when the cloud is not an open patch (the mesh test of the
+least-squares core's start, :func:`nurbs_core.fitting.sheet.sheet_start`, decides that, so the
+learned start and the core agree on what one patch can hold), and when the prediction is not a
+clean sheet over the cloud (any of :func:`nurbs_core.quality.quality_warnings`: folds, overlap,
+uncovered cloud; a start with folds keeps them through the fit).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 
 from nurbs_core.fitting.config import FitConfig
 from nurbs_core.geometry import NurbsSurface
+from nurbs_core.quality import quality_warnings, surface_quality
 
 #: Warm-up iterations of the learning rate after a learned start (the usual warm-up for starts
 #: that are already fits is ``schedule.WARMUP_ITERATIONS``); measured with
@@ -72,6 +75,12 @@ def learned_start(points: np.ndarray, config: FitConfig, *, known: bool) -> Lear
     surface = predict(points)
     seconds = time.perf_counter() - started
     name = config.learned_model or "the shipped model"
+    # a start that folds, overlaps itself or leaves the cloud uncovered keeps those flaws through
+    # the fit: judge the prediction as every fit is judged, and use only a clean one
+    problems = quality_warnings(surface_quality(surface, points))
+    if problems:
+        return LearnedStart(None, f"the learned prediction ({name}, {seconds * 1e3:.0f} ms) is not "
+                            f"a clean sheet: {'; '.join(problems)}" + fallback)
     return LearnedStart(surface, f"learned start ({name}, {seconds * 1e3:.0f} ms)")
 
 

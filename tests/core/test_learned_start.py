@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from nurbs_core import samples
 from nurbs_core.fitting import FitConfig, fit, iter_fit
@@ -38,8 +39,15 @@ def _plane_start(points: np.ndarray) -> NurbsSurface:
     return NurbsSurface(control, 3, 3)
 
 
+def _clean_start(points: np.ndarray) -> NurbsSurface:
+    """A clean 8 x 8 sheet over the cloud (the least-squares core's fit): a start that passes the
+    quality check."""
+    return fit(points, FitConfig(threads=1, control_points_u=8, control_points_v=8,
+                                 max_control_points=0)).geometry.to(dtype=torch.float64)
+
+
 def test_the_prediction_is_iteration_zero_and_the_fit_continues_from_it(monkeypatch, sheet):
-    start = _plane_start(sheet.points)
+    start = _clean_start(sheet.points)
     predictor, calls = _fake_predictor(start)
     monkeypatch.setattr(learned, "_predictor", predictor)
     config = FitConfig(init="learned", iterations=20, threads=1, control_points_u=8,
@@ -65,7 +73,7 @@ def test_a_learned_start_warms_up_briefly(monkeypatch, sheet):
         original(self)
         rates.append(self.optimizer.param_groups[0]["lr"])
     monkeypatch.setattr(schedule.LearningRateSchedule, "_apply_learning_rate", spy)
-    predictor, _ = _fake_predictor(_plane_start(sheet.points))
+    predictor, _ = _fake_predictor(_clean_start(sheet.points))
     monkeypatch.setattr(learned, "_predictor", predictor)
     config = FitConfig(init="learned", iterations=12, threads=1, lr_schedule="none",
                        control_points_u=8, control_points_v=8)
@@ -77,7 +85,15 @@ def test_a_learned_start_warms_up_briefly(monkeypatch, sheet):
     assert rates[short:] == [config.learning_rate] * (len(rates) - short)
 
 
-@pytest.mark.parametrize("case", ["no model", "no module", "closed", "known parameters"])
+def _folded_start(points: np.ndarray) -> NurbsSurface:
+    """The plane start with its far half of the net folded back over the near half."""
+    control = _plane_start(points).control_points.numpy().copy()
+    control[5:, :, 0] = control[7 - np.arange(5, 8), :, 0]
+    control[5:, :, 2] += 0.02
+    return NurbsSurface(control, 3, 3)
+
+
+@pytest.mark.parametrize("case", ["no model", "no module", "closed", "known parameters", "folded"])
 def test_without_a_usable_model_or_an_open_patch_it_falls_back_and_says_why(monkeypatch, case):
     cloud = samples.sphere(800, seed=0).points if case == "closed" else \
         samples.saddle(600, seed=1).points
@@ -87,6 +103,8 @@ def test_without_a_usable_model_or_an_open_patch_it_falls_back_and_says_why(monk
     elif case == "no module":
         def predictor(path):
             raise ImportError("No module named 'nurbs_core.learn'")
+    elif case == "folded":
+        predictor, _ = _fake_predictor(_folded_start(cloud))
     else:
         predictor, _ = _fake_predictor(_plane_start(cloud))
     monkeypatch.setattr(learned, "_predictor", predictor)
@@ -98,7 +116,8 @@ def test_without_a_usable_model_or_an_open_patch_it_falls_back_and_says_why(monk
     expected = {"no model": "no learned model: no model file at /nowhere.pt",
                 "no module": "cannot load nurbs_core.learn",
                 "closed": "predicts open patches and this cloud is not one",
-                "known parameters": "for unordered surface clouds"}[case]
+                "known parameters": "for unordered surface clouds",
+                "folded": "is not a clean sheet"}[case]
     assert expected in result.message and "falling back to init 'pca'" in result.message
     same = fit(cloud, config.replace(init="pca"), parameters=parameters)
     np.testing.assert_allclose(result.geometry.control_points.numpy(),
