@@ -96,16 +96,24 @@ def inference_ms(clouds: list[tuple[str, np.ndarray]], path: str | None) -> floa
     return 1e3 * stats_lib.median(times)
 
 
-def rms_by_iteration(points: np.ndarray, config: FitConfig) -> list[float]:
+def rms_by_iteration(points: np.ndarray, config: FitConfig,
+                     messages: list[str] | None = None) -> list[float]:
     """RMS foot-point distance of the geometry after each iteration 0..config.iterations (the
-    start first: the learned start's iteration-0 snapshot, or a zero-iteration run)."""
+    start first: the learned start's iteration-0 snapshot, or a zero-iteration run); the first
+    snapshot's message is appended to ``messages``."""
     curve: dict[int, float] = {}
     if config.init != "learned":
         start = next(iter(iter_fit(points, config.replace(iterations=0))))
         curve[0] = fit_statistics(_surface(start.geometry), points)["rms"]
     for snapshot in iter_fit(points, config.replace(snapshot_interval=0.0)):
+        if messages is not None:
+            messages.append(snapshot.message or "")
+            messages = None
         if snapshot.geometry:
             curve[snapshot.iteration] = fit_statistics(_surface(snapshot.geometry), points)["rms"]
+    if 0 not in curve:  # a learned start that fell back: its start is the PCA plane's
+        start = next(iter(iter_fit(points, config.replace(iterations=0))))
+        curve[0] = fit_statistics(_surface(start.geometry), points)["rms"]
     last = max(curve)
     return [curve.get(i, curve[max(k for k in curve if k <= i)]) for i in range(last + 1)]
 
@@ -126,14 +134,18 @@ def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, warm_ups: list
     reference = [rms_by_iteration(points, today) for _, points in clouds]
     for warm in warm_ups:
         engine.LEARNED_WARMUP_ITERATIONS = warm
-        reached, worse = [], []
+        reached, worse, messages = [], [], []
         for (name, points), ref in zip(clouds, reference, strict=True):
             target = ref[min(100, len(ref) - 1)]
-            curve = rms_by_iteration(points, learned)
+            curve = rms_by_iteration(points, learned, messages)
             hit = next((i for i, r in enumerate(curve) if r <= target), None)
             reached.append(hit if hit is not None else budget + 1)
             if curve[-1] > ref[-1] * 1.01:
                 worse.append(f"{name} ({curve[-1]:.3g} vs {ref[-1]:.3g})")
+        used = [m.startswith("learned start") for m in messages]
+        fallbacks = sorted({m.split(":")[0] for m in messages if not m.startswith("learned start")})
+        print(f"learned start used on {sum(used)}/{len(used)} clouds; fell back on the others "
+              f"({'; '.join(fallbacks) or '-'})")
         median = stats_lib.median(reached)
         print(f"warm-up {warm:>2}: iterations to reach the target: median {median:g} "
               f"({median / 100:.0%} of 100), worst {max(reached)}, reached by "
@@ -159,7 +171,8 @@ def main(argv: list[str] | None = None) -> None:
     for item in args.model:
         name, _, path = item.partition("=")
         models[name] = path
-    table(models, args.table, args.data)
+    if args.table > 0:
+        table(models, args.table, args.data)
     clouds = held_out_clouds(args.patches)
     milliseconds = inference_ms(clouds, args.learned_model)
     print(f"\n## 2. inference: {milliseconds:.1f} ms per patch (median; 700 points, one thread, "
