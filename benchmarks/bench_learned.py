@@ -22,7 +22,10 @@ Run: ``python benchmarks/bench_learned.py [--patches 24] [--table 200]
    learned one (``init="learned"``). The accuracy today's start reaches after 100 iterations
    (RMS point-to-surface distance at foot points) is the target; printed: the iteration at which
    the learned start first reaches it (median and worst, and as a fraction of 100), and the final
-   RMS of both after ``--iterations``. ``--warm-up`` repeats part 3 for other warm-up lengths of
+   RMS of both after ``--iterations``. A learned start that falls back (its message says why)
+   runs the config's own ``pca`` path: for these unordered clouds the least-squares core's start,
+   not the plane, so its iteration counts then measure the core, not the model. ``--warm-up``
+   repeats part 3 for other warm-up lengths of
    a learned start (the engine's ``LEARNED_WARMUP_ITERATIONS``).
 """
 
@@ -143,7 +146,8 @@ def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, warm_ups: list
             if curve[-1] > ref[-1] * 1.01:
                 worse.append(f"{name} ({curve[-1]:.3g} vs {ref[-1]:.3g})")
         used = [m.startswith("learned start") for m in messages]
-        fallbacks = sorted({m.split(":")[0] for m in messages if not m.startswith("learned start")})
+        fallbacks = sorted({m.split(" (")[0] + (": not a clean sheet" if "clean sheet" in m else "")
+                            for m in messages if not m.startswith("learned start")})
         print(f"learned start used on {sum(used)}/{len(used)} clouds; fell back on the others "
               f"({'; '.join(fallbacks) or '-'})")
         median = stats_lib.median(reached)
