@@ -152,6 +152,18 @@ def evaluate(model: SplineNet, dataset: PatchGenerator | SplineDataset, indices:
     return sums
 
 
+def _load_weights(path: Path, model: SplineNet, device: torch.device,
+                  parser: argparse.ArgumentParser) -> dict[str, Any]:
+    """Load the weights of the model file ``path`` into ``model`` (an argparse error when it holds
+    another architecture); returns the file's dict."""
+    checkpoint: dict[str, Any] = torch.load(path, map_location=device, weights_only=True)
+    if checkpoint["config"] != model.config():
+        parser.error(f"{path} holds a {checkpoint['config']} model, the options give "
+                     f"{model.config()}")
+    model.load_state_dict(checkpoint["state_dict"])
+    return checkpoint
+
+
 def _save(path: Path, payload: dict[str, Any]) -> None:
     """torch.save to a temporary file next to ``path``, then os.replace."""
     from nurbs_core.io.atomic import atomic_write
@@ -243,19 +255,11 @@ def _train(args: argparse.Namespace, argv: list[str], grid: tuple[int, int], ran
                           point_count=point_count)
     model = model.to(device)
     if args.init_from is not None:
-        initial = torch.load(args.init_from, map_location=device, weights_only=True)
-        if initial["config"] != model.config():
-            parser.error(f"{args.init_from} holds a {initial['config']} model, the options give "
-                         f"{model.config()}")
-        model.load_state_dict(initial["state_dict"])
+        _load_weights(args.init_from, model, device, parser)
     optimizer = torch.optim.Adam(model.parameters(), lr=args.lr)
     start_epoch, best, history = 0, math.inf, []
     if args.resume is not None:
-        checkpoint = torch.load(args.resume, map_location=device, weights_only=True)
-        if checkpoint["config"] != model.config():
-            parser.error(f"{args.resume} holds a {checkpoint['config']} model, the options give "
-                         f"{model.config()}")
-        model.load_state_dict(checkpoint["state_dict"])
+        checkpoint = _load_weights(args.resume, model, device, parser)
         optimizer.load_state_dict(checkpoint["optimizer"])
         start_epoch = int(checkpoint["epoch"])
         best = float(checkpoint["best"])

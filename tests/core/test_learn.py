@@ -327,3 +327,17 @@ def test_normal_consistency_is_zero_on_a_plane_small_on_a_bend_and_large_on_a_fo
     assert values[2] > 20 * values[1]
     grid = bent[::6, ::6].clone().requires_grad_(True)
     assert torch.autograd.gradcheck(lambda g: normal_consistency(g[None]), (grid,))
+
+
+def test_init_from_starts_a_new_run_from_a_models_weights(tmp_path):
+    first, second = tmp_path / "first", tmp_path / "second"
+    assert train.main(TINY + ["--epochs", "1", "--out", str(first)]) == 0
+    assert train.main(TINY + ["--epochs", "1", "--out", str(second), "--lr", "1e-30",
+                              "--init-from", str(first / "last.pt")]) == 0
+    before, after = _state(first / "last.pt"), _state(second / "last.pt")
+    assert after["epoch"] == 1  # a new run: its own epoch count, not the source's
+    for name, value in before["state_dict"].items():  # a step of 1e-30 leaves the weights
+        torch.testing.assert_close(after["state_dict"][name], value, rtol=0, atol=1e-20)
+    with pytest.raises(SystemExit):  # another architecture is refused
+        train.main(TINY[:1] + ["4"] + TINY[2:] + ["--epochs", "1", "--out", str(tmp_path / "x"),
+                                                  "--init-from", str(first / "last.pt")])
