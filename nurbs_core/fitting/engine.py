@@ -73,18 +73,18 @@ def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopTo
     if not problem.known and config.parameter_correction and "pointwise" not in loss.kinds():
         loss = loss.with_term(1.0, "p2s")
     stop = stop or StopToken()
-    note = None
+    note, sheet = None, None
     if config.init == "learned" and initial is None:
-        learned = learned_start(problem.points_input, config, known=problem.known)
+        learned = learned_start(problem, config)
         if learned.surface is not None:
             geometry = initial_geometry(problem, config, learned.surface)
             return _gradient_run(problem, config, geometry, loss, stop, True,
                                  learned=learned.message)
-        config, note = config.replace(init="pca"), learned.message
+        config, note, sheet = config.replace(init="pca"), learned.message, learned.sheet
     if uses_core(problem, config, initial):
         # the fold-free start runs (and refuses shapes one patch cannot hold) before iterating
-        return _noted(_sheet_run(problem, config, sheet_start(problem, config), loss, stop,
-                                 started), note)
+        start = sheet if sheet is not None else sheet_start(problem, config)
+        return _noted(_sheet_run(problem, config, start, loss, stop, started), note)
     geometry = initial_geometry(problem, config, initial)
     return _noted(_gradient_run(problem, config, geometry, loss, stop, initial is not None), note)
 

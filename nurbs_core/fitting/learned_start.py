@@ -25,12 +25,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbs_core.fitting.config import FitConfig
+from nurbs_core.fitting.problem import Problem
+from nurbs_core.fitting.sheet import SheetStart, sheet_start
 from nurbs_core.geometry import NurbsSurface
 from nurbs_core.quality import quality_warnings, surface_quality
 
 #: Warm-up iterations of the learning rate after a learned start (the usual warm-up for starts
-#: that are already fits is ``schedule.WARMUP_ITERATIONS``); measured with
-#: ``benchmarks/bench_learned.py --warm-up``.
+#: that are already fits is ``schedule.WARMUP_ITERATIONS``). Not yet a measured choice: with the
+#: shipped model, 0, 5 and 30 made no difference (``benchmarks/bench_learned.py --warm-up``).
 LEARNED_WARMUP_ITERATIONS = 5
 
 
@@ -41,6 +43,8 @@ class LearnedStart:
 
     surface: NurbsSurface | None
     message: str
+    #: the core's start of this cloud, built by the open-patch test (for a fall-back to use)
+    sheet: SheetStart | None = None
 
 
 @functools.lru_cache(maxsize=4)
@@ -52,12 +56,10 @@ def _predictor(path: str | None) -> Callable[[np.ndarray], NurbsSurface]:
     return functools.partial(predict_surface, model=model)
 
 
-def learned_start(points: np.ndarray, config: FitConfig, *, known: bool) -> LearnedStart:
-    """Predict the start for ``points`` (N, 3) (the fit's input, not normalised) or say why not.
-
-    ``known``: the fit has known parameters (a learned start is for unordered clouds only)."""
+def learned_start(problem: Problem, config: FitConfig) -> LearnedStart:
+    """Predict the start for the fit's ``problem`` (from its input points) or say why not."""
     fallback = "; falling back to init 'pca'"
-    if config.kind != "surface" or known:
+    if config.kind != "surface" or problem.known:
         return LearnedStart(None, "the learned start is for unordered surface clouds"
                             + fallback)
     try:
@@ -67,10 +69,17 @@ def learned_start(points: np.ndarray, config: FitConfig, *, known: bool) -> Lear
                             + fallback)
     except Exception as exc:  # LearnedModelUnavailable, a damaged file: say so and go on
         return LearnedStart(None, f"no learned model: {exc}" + fallback)
-    reason = _not_an_open_patch(points, config)
-    if reason is not None:
-        return LearnedStart(None, f"the learned model predicts open patches and {reason}"
-                            + fallback)
+    # the core's mesh test: is the cloud an open patch? (single_patch only decides what happens
+    # when it is not, so a fall-back reuses the start it built)
+    try:
+        sheet = sheet_start(problem, config.replace(single_patch=False))
+    except ValueError as exc:
+        return LearnedStart(None, f"the learned model predicts open patches and this cloud is "
+                            f"not one ({exc})" + fallback)
+    if sheet.closed is not None:
+        return LearnedStart(None, f"the learned model predicts open patches and this cloud is a "
+                            f"tube (closed in {sheet.closed})" + fallback, sheet)
+    points = problem.points_input
     started = time.perf_counter()
     surface = predict(points)
     seconds = time.perf_counter() - started
@@ -80,20 +89,5 @@ def learned_start(points: np.ndarray, config: FitConfig, *, known: bool) -> Lear
     problems = quality_warnings(surface_quality(surface, points))
     if problems:
         return LearnedStart(None, f"the learned prediction ({name}, {seconds * 1e3:.0f} ms) is not "
-                            f"a clean sheet: {'; '.join(problems)}" + fallback)
+                            f"a clean sheet: {'; '.join(problems)}" + fallback, sheet)
     return LearnedStart(surface, f"learned start ({name}, {seconds * 1e3:.0f} ms)")
-
-
-def _not_an_open_patch(points: np.ndarray, config: FitConfig) -> str | None:
-    """Why the cloud is not an open patch (the core's mesh test), or None when it is one."""
-    from nurbs_core.fitting.problem import prepare
-    from nurbs_core.fitting.sheet import sheet_start
-
-    try:
-        start = sheet_start(prepare(points, config.replace(init="pca", single_patch=False)),
-                            config.replace(init="pca", single_patch=False))
-    except ValueError as exc:
-        return f"this cloud is not one ({exc})"
-    if start.closed is not None:
-        return f"this cloud is a tube (closed in {start.closed})"
-    return None
