@@ -11,10 +11,22 @@ control grid (B, n_u, n_v, 3) of a clamped uniform bicubic patch on [0, 1]^2 (an
   neighbours in feature space, 64/64/128/256 channels, concatenated, a 1 x 1 convolution to 1024,
   global max pooling, head 1024-1024-1024-out.
 
-The head ends in tanh. With ``residual=True`` (default) the tanh output is added to the control
-grid of the cloud's principal plane (:func:`plane_grid`: the plane x = 0 of the normalised frame,
-spanned by its two largest principal axes and covering the cloud's extent), which trains much
-faster than predicting absolute control points; ``residual=False`` predicts them directly.
+The head ends in tanh. What it predicts is ``output``:
+
+* ``"graph"``: a height field over the cloud's principal plane (:func:`graph_grid`). Each control
+  point's height along x (the smallest principal axis) is predicted; its in-plane position is a
+  tensor product of two monotone spacings of the cloud's extent (one along z for the rows, one along
+  y for the columns), also predicted. The in-plane map is then injective, so the surface is a graph
+  over the plane: it cannot fold, crumple or overlap itself, whatever the network outputs. It
+  cannot hold a cloud that curls past a half turn (the learned start falls back there).
+* ``"residual"``: the tanh output is added to the control grid of the principal plane
+  (:func:`plane_grid`: the plane x = 0 of the normalised frame, spanned by its two largest
+  principal axes and covering the cloud's extent); trains much faster than absolute control
+  points, but the net is free to fold (the fold penalty of :mod:`nurbs_core.learn.regularity`
+  helps, it does not guarantee).
+* ``"absolute"``: control points directly.
+
+``residual=True`` / ``False`` (older model files) mean ``"residual"`` / ``"absolute"``.
 """
 
 from __future__ import annotations
@@ -27,6 +39,9 @@ from torch import nn
 from nurbs_core.learn.normalize import VERSION as NORMALIZATION_VERSION
 
 ENCODERS = ("pointnet", "dgcnn")
+OUTPUTS = ("graph", "residual", "absolute")
+#: in a "graph" output every spacing step is at least this share of the uniform step
+MIN_STEP_SHARE = 0.25
 
 
 def plane_grid(points: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
@@ -42,6 +57,33 @@ def plane_grid(points: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
     shape = (points.shape[0], grid[0], grid[1])
     return torch.stack([torch.zeros(shape, dtype=points.dtype, device=points.device),
                         y[:, None, :].expand(shape), z[:, :, None].expand(shape)], -1)
+
+
+def _monotone(logits: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:
+    """Increasing sequences from low (B,) to high (B,) with steps from logits (B, n - 1): each step
+    a mix of the uniform step (share MIN_STEP_SHARE) and a softmax of the logits, so every step is
+    positive and zero logits give the uniform spacing. -> (B, n)."""
+    count = logits.shape[-1]
+    steps = MIN_STEP_SHARE / count + (1.0 - MIN_STEP_SHARE) * torch.softmax(logits, -1)
+    fraction = torch.cat([torch.zeros_like(steps[:, :1]), steps.cumsum(-1)], -1)
+    fraction = fraction / fraction[:, -1:]
+    return low[:, None] + (high - low)[:, None] * fraction
+
+
+def graph_grid(points: torch.Tensor, heights: torch.Tensor, row_logits: torch.Tensor,
+               column_logits: torch.Tensor) -> torch.Tensor:
+    """A control grid that is a height field over the principal plane of normalised clouds.
+
+    points (B, N, 3) give the extent; heights (B, n_u, n_v) the x of each control point;
+    row_logits (B, n_u - 1) the spacing of the rows along z (from the cloud's minimum to its
+    maximum), column_logits (B, n_v - 1) that of the columns along y. -> (B, n_u, n_v, 3). With
+    zero heights and logits this is :func:`plane_grid`."""
+    low = points.detach().amin(1)
+    high = points.detach().amax(1)
+    z = _monotone(row_logits, low[:, 2], high[:, 2])  # (B, n_u)
+    y = _monotone(column_logits, low[:, 1], high[:, 1])  # (B, n_v)
+    shape = heights.shape
+    return torch.stack([heights, y[:, None, :].expand(shape), z[:, :, None].expand(shape)], -1)
 
 
 def _conv_block(channels_in: int, channels_out: int) -> nn.Sequential:
@@ -111,10 +153,16 @@ class SplineNet(nn.Module):
     stored in model files and ``SplineNet.from_config`` rebuilds the network from it."""
 
     def __init__(self, encoder: str = "pointnet", grid: tuple[int, int] = (20, 20),
-                 residual: bool = True, rational: bool = False, point_count: int = 700) -> None:
+                 residual: bool = True, rational: bool = False, point_count: int = 700,
+                 output: str | None = None) -> None:
         super().__init__()
         if encoder not in ENCODERS:
             raise ValueError(f"encoder must be one of {ENCODERS}, got {encoder!r}")
+        output = output if output is not None else ("residual" if residual else "absolute")
+        if output not in OUTPUTS:
+            raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
+        self.output = output
+        residual = output != "absolute"
         grid = (int(grid[0]), int(grid[1]))
         if min(grid) < 4:
             raise ValueError(f"a bicubic grid needs at least 4 x 4 control points, got {grid}")
@@ -126,13 +174,15 @@ class SplineNet(nn.Module):
             self.encoder, hidden = PointNetEncoder(), (256,)
         else:
             self.encoder, hidden = DGCNNEncoder(), (1024, 1024)
-        channels = 4 if rational else 3
+        channels = (1 if output == "graph" else 3) + (1 if rational else 0)
+        self.channels = channels
         layers: list[nn.Module] = []
         previous = self.encoder.features
         for width in hidden:
             layers += [nn.Linear(previous, width), nn.ReLU(inplace=True)]
             previous = width
-        last = nn.Linear(previous, grid[0] * grid[1] * channels)
+        spacings = grid[0] + grid[1] - 2 if output == "graph" else 0
+        last = nn.Linear(previous, grid[0] * grid[1] * channels + spacings)
         if residual:
             # start at the plane: a small last layer, so the first predictions are near it
             with torch.no_grad():
@@ -142,13 +192,20 @@ class SplineNet(nn.Module):
 
     def forward(self, points: torch.Tensor) -> dict[str, torch.Tensor | None]:
         features = self.encoder(points)
-        out = self.head(features).view(points.shape[0], self.grid[0], self.grid[1], -1)
-        control_points = torch.tanh(out[..., :3])
-        if self.residual:
-            control_points = control_points + plane_grid(points, self.grid)
+        batch, (n_u, n_v) = points.shape[0], self.grid
+        flat = self.head(features)
+        out = flat[:, :n_u * n_v * self.channels].view(batch, n_u, n_v, self.channels)
+        if self.output == "graph":
+            spacing = flat[:, n_u * n_v * self.channels:]
+            control_points = graph_grid(points, torch.tanh(out[..., 0]), spacing[:, :n_u - 1],
+                                        spacing[:, n_u - 1:])
+        else:
+            control_points = torch.tanh(out[..., :3])
+            if self.residual:
+                control_points = control_points + plane_grid(points, self.grid)
         weights = None
         if self.rational:
-            weights = nn.functional.softplus(out[..., 3] + 0.4610) + 0.05  # 1 at zero output
+            weights = nn.functional.softplus(out[..., -1] + 0.4610) + 0.05  # 1 at zero output
         return {"control_points": control_points, "weights": weights}
 
     def parameter_count(self) -> int:
@@ -156,8 +213,8 @@ class SplineNet(nn.Module):
 
     def config(self) -> dict[str, Any]:
         return {"encoder": self.encoder_name, "grid": list(self.grid), "residual": self.residual,
-                "rational": self.rational, "point_count": self.point_count, "degree": 3,
-                "normalization": NORMALIZATION_VERSION}
+                "output": self.output, "rational": self.rational, "point_count": self.point_count,
+                "degree": 3, "normalization": NORMALIZATION_VERSION}
 
     @classmethod
     def from_config(cls, config: dict[str, Any]) -> SplineNet:
@@ -166,4 +223,4 @@ class SplineNet(nn.Module):
                              f"version has {NORMALIZATION_VERSION!r}")
         return cls(encoder=config["encoder"], grid=tuple(config["grid"]),
                    residual=bool(config["residual"]), rational=bool(config["rational"]),
-                   point_count=int(config.get("point_count", 700)))
+                   point_count=int(config.get("point_count", 700)), output=config.get("output"))

@@ -38,7 +38,7 @@ import torch
 
 from nurbs_core.learn.data import PatchGenerator, SplineDataset, load_spline_dataset
 from nurbs_core.learn.losses import SplineLoss, patch_metrics
-from nurbs_core.learn.model import ENCODERS, SplineNet, plane_grid
+from nurbs_core.learn.model import ENCODERS, OUTPUTS, SplineNet, plane_grid
 from nurbs_core.learn.normalize import Normalization
 
 #: validation metrics (x 100, :func:`patch_metrics`), of the model and of the PCA plane grid
@@ -61,8 +61,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "default 0: the paper's loss)")
     parser.add_argument("--init-from", type=Path, metavar="CKPT",
                         help="start from this model's weights (a new run: fresh optimizer, epoch 0)")
-    parser.add_argument("--absolute", action="store_true",
-                        help="predict absolute control points instead of a residual over the PCA plane")
+    parser.add_argument("--output", choices=OUTPUTS, default="graph",
+                        help="graph: a height field over the cloud's principal plane (cannot fold); "
+                        "residual: free control points added to the plane's grid; absolute")
+    parser.add_argument("--absolute", action="store_true", help="the same as --output absolute")
     parser.add_argument("--rational", action="store_true", help="also predict positive weights")
     parser.add_argument("--epochs", type=int, default=10, help="train up to this epoch count")
     parser.add_argument("--samples-per-epoch", type=int, default=2000)
@@ -251,8 +253,8 @@ def _train(args: argparse.Namespace, argv: list[str], grid: tuple[int, int], ran
     # the initial weights depend on --seed only; fork_rng leaves the caller's global RNG alone
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(args.seed)
-        model = SplineNet(args.encoder, grid, residual=not args.absolute, rational=args.rational,
-                          point_count=point_count)
+        model = SplineNet(args.encoder, grid, rational=args.rational, point_count=point_count,
+                          output="absolute" if args.absolute else args.output)
     model = model.to(device)
     if args.init_from is not None:
         _load_weights(args.init_from, model, device, parser)
@@ -269,7 +271,7 @@ def _train(args: argparse.Namespace, argv: list[str], grid: tuple[int, int], ran
                   f"continuing with --seed {args.seed} changes the data stream", file=sys.stderr)
     if say:
         print(f"SplineNet {args.encoder} grid {grid[0]}x{grid[1]} "
-              f"{'residual' if model.residual else 'absolute'}{' rational' if args.rational else ''}: "
+              f"{model.output}{' rational' if args.rational else ''}: "
               f"{model.parameter_count():,} parameters; loss {loss_fn!r}; {world} process(es) on "
               f"{device}; epochs {start_epoch}..{args.epochs}", flush=True)
     network: torch.nn.Module = model

@@ -15,6 +15,7 @@ import torch
 from scipy.spatial import cKDTree
 
 from nurbs_core import losses as engine_losses
+from nurbs_core.geometry import NurbsSurface
 from nurbs_core.learn import data, losses, model, normalize, predict, train
 
 REPO = Path(__file__).resolve().parents[2]
@@ -211,6 +212,50 @@ def test_metrics_and_models():
         assert all(value.shape == (2,) for value in metrics.values())
     assert 2e5 < model.SplineNet().parameter_count() < 6e5
     assert model.SplineNet("dgcnn").parameter_count() > 3e6
+
+
+def _saturated(network: model.SplineNet) -> model.SplineNet:
+    """The network with its last layer blown up, so its outputs are extreme."""
+    with torch.no_grad():
+        last = network.head[-1]
+        last.weight.normal_(0.0, 5.0, generator=torch.Generator().manual_seed(3))
+        last.bias.normal_(0.0, 5.0, generator=torch.Generator().manual_seed(4))
+    return network
+
+
+def test_graph_output_is_a_height_field_that_cannot_fold():
+    """Whatever the network outputs, the "graph" surface is a height field over the cloud's
+    principal plane: its in-plane map (y, z)(u, v) is a tensor product of two increasing
+    functions, so it cannot fold or overlap; zero outputs give the plane grid."""
+    points = torch.rand(3, 64, 3) * 2 - 1
+    network = model.SplineNet("pointnet", (7, 9), output="graph")
+    with torch.no_grad():
+        network.head[-1].weight.zero_()
+    torch.testing.assert_close(network(points)["control_points"], model.plane_grid(points, (7, 9)))
+    grid = _saturated(network)(points)["control_points"].detach().double()
+    assert float(grid[..., 0].abs().max()) > 0.9  # the heights are extreme...
+    z, y = grid[..., 2], grid[..., 1]
+    torch.testing.assert_close(z, z[:, :, :1].expand_as(z))  # ... rows stay rows
+    torch.testing.assert_close(y, y[:, :1, :].expand_as(y))
+    assert bool((z.diff(dim=1) > 0).all()) and bool((y.diff(dim=2) > 0).all())
+    torch.testing.assert_close(z[:, 0, 0], points.amin(1)[:, 2].double())
+    torch.testing.assert_close(z[:, -1, 0], points.amax(1)[:, 2].double())
+    t = np.linspace(0.0, 1.0, 101)
+    for control_points in grid:
+        samples = NurbsSurface(control_points, 3, 3).evaluate_grid(t, t)
+        assert bool((samples[..., 2].diff(dim=0) > 0).all())
+        assert bool((samples[..., 1].diff(dim=1) > 0).all())
+
+
+def test_model_config_round_trip_and_older_files():
+    network = model.SplineNet("pointnet", (5, 6), output="graph", rational=True)
+    again = model.SplineNet.from_config(network.config())
+    assert (again.output, again.grid, again.rational) == ("graph", (5, 6), True)
+    older = {key: value for key, value in network.config().items() if key != "output"}
+    assert model.SplineNet.from_config(older).output == "residual"
+    assert model.SplineNet.from_config({**older, "residual": False}).output == "absolute"
+    with pytest.raises(ValueError, match="output must be one of"):
+        model.SplineNet(output="mesh")
 
 
 # --- training ---------------------------------------------------------------------------------
