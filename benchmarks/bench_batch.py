@@ -1,7 +1,7 @@
 """Throughput of ``nurbs-fit`` over many small clouds: one process per file against one batch.
 
 Run: ``python benchmarks/bench_batch.py [--count 200] [--points 700] [--process-sample 10]
-[--fit-args "--iterations 50"]``
+[--fit-args "--iterations 50"] [--grid 25 28]``
 
 N generated open patches of 700 points (SplineDataset-like: saddles, bowls, height fields,
 leaflets, curled sheets with different seeds) are written as .npy files and fitted with the same
@@ -14,6 +14,11 @@ Each rate is patches per second of wall time of the whole command (start-up, imp
 (c), the cluster's start included). Mean RMS is the point-to-surface RMS of the fits; (b) and
 (c) are also compared control point by control point. Nothing is batched in the engine here
 (no shared batch dimension): (b) and (c) save the start-up per file and use both cores.
+
+``--grid NU NV``: the clouds are ordered NU x NV grids instead (height fields of several shapes,
+u-major) and every mode fits them with ``nurbs-fit --grid NU NV`` (known parameters: the
+gradient fit). Then (b) and (c) fit up to ``--batch-fits`` inputs at once with the engine's
+``fit_batch`` (its default, 32, unless ``--fit-args`` sets it); (a) still fits one per process.
 """
 
 from __future__ import annotations
@@ -39,10 +44,28 @@ SHAPES = (samples.saddle, samples.bowl, samples.height_field, samples.leaflet_li
 COMMAND = [sys.executable, "-m", "nurbs_core.cli"]
 
 
-def write_clouds(folder: Path, count: int, points: int) -> list[Path]:
+def grid_cloud(k: int, count_u: int, count_v: int) -> np.ndarray:
+    """Cloud ``k`` of ``--grid``: a noisy height field sampled on a count_u x count_v grid of the
+    unit square, u-major (a wave, a saddle or a bump, by ``k``)."""
+    rng = np.random.default_rng(k)
+    u, v = (a.ravel() for a in np.meshgrid(np.linspace(0, 1, count_u), np.linspace(0, 1, count_v),
+                                            indexing="ij"))
+    x, y = 2 * u - 1, 2 * v - 1
+    z = (0.3 * np.sin(3 * x + k) * np.cos(2 * y + 0.1 * k), 0.5 * (x * x - y * y),
+         0.6 * np.exp(-2 * (x * x + y * y)))[k % 3]
+    return np.stack([(1 + 0.05 * (k % 7)) * x, y, z + 0.003 * rng.standard_normal(u.size)], -1)
+
+
+def write_clouds(folder: Path, count: int, points: int,
+                 grid: tuple[int, int] | None = None) -> list[Path]:
+    """``count`` clouds as .npy files: open patches of ``points`` points, or the ordered clouds
+    of ``grid`` (:func:`grid_cloud`)."""
     paths = []
     for k in range(count):
-        cloud = SHAPES[k % len(SHAPES)](points, seed=k).points
+        if grid is None:
+            cloud = SHAPES[k % len(SHAPES)](points, seed=k).points
+        else:
+            cloud = grid_cloud(k, *grid)
         path = folder / f"patch{k:05d}.npy"
         np.save(path, cloud)
         paths.append(path)
@@ -85,12 +108,22 @@ def main(argv=None) -> None:
     parser.add_argument("--process-sample", type=int, default=10,
                         help="files fitted one process each in (a) (default 10)")
     parser.add_argument("--fit-args", default="", help="nurbs-fit options for every fit")
+    parser.add_argument("--grid", type=int, nargs=2, default=None, metavar=("NU", "NV"),
+                        help="ordered NU x NV grid clouds (instead of --points) fitted with "
+                             "nurbs-fit --grid NU NV: (b) and (c) batch them with fit_batch")
     args = parser.parse_args(argv)
     fit_args = shlex.split(args.fit_args)
+    grid = (args.grid[0], args.grid[1]) if args.grid else None
+    if grid is not None:
+        fit_args = ["--grid", *map(str, grid), *fit_args]
+        args.points = grid[0] * grid[1]
     import torch
 
-    print(f"# nurbs-fit batch throughput: {args.count} clouds of {args.points} points, options "
-          f"[{args.fit_args or 'defaults'}]")
+    clouds = f"{args.count} clouds of {args.points} points" + (
+        f" on a {grid[0]} x {grid[1]} grid (nurbs-fit --grid: batched fits in (b), (c))"
+        if grid else "")
+    print(f"# nurbs-fit batch throughput: {clouds}, options "
+          f"[{shlex.join(fit_args) or 'defaults'}]")
     print(f"# machine: {platform.machine()} {platform.processor() or ''} {os.cpu_count()} cores, "
           f"{platform.system()} {platform.release()}; Python {platform.python_version()}, torch "
           f"{torch.__version__}; 1 torch thread per fit (nurbs-fit --threads 1), Dask workers "
@@ -99,7 +132,7 @@ def main(argv=None) -> None:
         root = Path(tmp)
         folder = root / "clouds"
         folder.mkdir()
-        paths = write_clouds(folder, args.count, args.points)
+        paths = write_clouds(folder, args.count, args.points, grid)
         sample = paths[:max(1, min(args.process_sample, len(paths)))]
         per_file, rms_a = per_process(sample, root / "a", fit_args)
         rows = [(f"(a) one nurbs-fit process per file [{len(sample)} of {len(paths)} run, rate "

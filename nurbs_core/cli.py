@@ -16,7 +16,9 @@ writes the result reached so far; a second one, or one outside the fit, exits at
 
 Several inputs (files, folders, globs, HDF5 datasets of clouds) with ``--output-dir DIR`` fit a
 batch: one result per input, a summary table, ``--jobs N`` / ``--scheduler`` on Dask; see
-:mod:`nurbs_core.batch`. Each input goes through :func:`fit_one`, the same code path as one file.
+:mod:`nurbs_core.batch`. Each input goes through :func:`fit_one`, the same code path as one file,
+or through its steps (:func:`prepare_fit`, :func:`finish_fit`) around one ``fit_batch`` of up to
+``--batch-fits`` ``--grid`` inputs: the same results.
 """
 
 from __future__ import annotations
@@ -27,11 +29,18 @@ import signal
 import sys
 import time
 import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     import numpy as np
+
+    from nurbs_core.fitting.config import FitConfig, FitResult, FitSnapshot, StopToken
+    from nurbs_core.geometry import NurbsCurve, NurbsSurface
+    from nurbs_core.patches.closed_mesh import ClosedMesh
+    from nurbs_core.patches.options import PatchOptions
 
 # Nothing heavy at module level: numpy, the engine and torch load inside main(), where Ctrl-C
 # during start-up is caught (status 130, no traceback); --help and bad outputs never load torch.
@@ -40,6 +49,8 @@ if TYPE_CHECKING:
 INTERRUPTED_STATUS = 130
 #: Exit status of a batch (``--output-dir``) in which some inputs failed (the others were written).
 SOME_FAILED_STATUS = 3
+#: Default of ``--batch-fits``: how many ``--grid`` inputs of a batch are fitted together.
+DEFAULT_BATCH_FITS = 32
 
 PROGRESS_INTERVAL = 0.5  # seconds between progress lines
 #: Default loss for curves: Chamfer weighted like the foot-point term fits outlines closer than
@@ -94,6 +105,12 @@ def build_parser() -> argparse.ArgumentParser:
     batch.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                        help="run on an existing Dask cluster (dask scheduler / dask worker; the "
                             "workers must see the same files)")
+    batch.add_argument("--batch-fits", type=int, default=DEFAULT_BATCH_FITS, metavar="K",
+                       help="with --grid, fit up to K inputs at once in one batch (the "
+                            "engine's fit_batch; each result equals its own fit) when the fits "
+                            "can share one (surfaces; not with --optimizer lbfgs, --free-knots, "
+                            f"--refine, --initial or --init learned); default {DEFAULT_BATCH_FITS}"
+                            "; 1 fits one input at a time")
     parser.add_argument("--curve", action="store_true",
                         help="fit a curve instead of a surface (2-D when every z is equal)")
     parser.add_argument("--degree", type=int, nargs="+", default=[3], metavar="P",
@@ -198,9 +215,9 @@ def _pair(values: list[int], name: str, count: int) -> list[int]:
     return values
 
 
-def _config(args, dimensions: int):
+def _config(args: argparse.Namespace, dimensions: int) -> FitConfig:
     """The FitConfig the arguments describe."""
-    from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig
+    from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, Loss
 
     directions = 1 if args.curve else 2
     degrees = _pair(args.degree, "--degree", directions)
@@ -212,7 +229,7 @@ def _config(args, dimensions: int):
     learning_rate = args.learning_rate
     if learning_rate is None:
         learning_rate = 1.0 if args.optimizer == "lbfgs" else 0.01
-    loss = args.loss or (CURVE_LOSS if args.curve else DEFAULT_LOSS)
+    loss = Loss.of(args.loss or (CURVE_LOSS if args.curve else DEFAULT_LOSS))
     max_counts = args.max_control_points
     if max_counts is None:
         max_counts = 0 if args.control_points else FitConfig.max_control_points
@@ -238,7 +255,7 @@ def _config(args, dimensions: int):
     return dataclasses.replace(config, **_field_settings(args.settings))
 
 
-def _field_settings(items: list[str]) -> dict:
+def _field_settings(items: list[str]) -> dict[str, Any]:
     """``--set FIELD=VALUE`` pairs as FitConfig keyword arguments (ValueError for an unknown
     field or a missing ``=``)."""
     import dataclasses
@@ -247,7 +264,7 @@ def _field_settings(items: list[str]) -> dict:
     from nurbs_core.fitting.config import FitConfig
 
     known = {f.name for f in dataclasses.fields(FitConfig)}
-    values = {}
+    values: dict[str, Any] = {}
     for item in items:
         name, equals, text = item.partition("=")
         name = name.strip()
@@ -262,6 +279,7 @@ def _field_settings(items: list[str]) -> dict:
 
 
 def _grid_parameters(count_u: int, count_v: int, points: int) -> np.ndarray:
+    """The known (u, v) (N, 2) of ``--grid NU NV``: uniform on the unit square, u-major."""
     import numpy as np
 
     if count_u * count_v != points:
@@ -272,11 +290,14 @@ def _grid_parameters(count_u: int, count_v: int, points: int) -> np.ndarray:
 
 
 class _Progress:
+    """The fit's progress lines on stderr (the snapshot callback), at most every
+    PROGRESS_INTERVAL seconds; nothing when ``quiet``."""
+
     def __init__(self, total: int, quiet: bool):
         self.total, self.quiet, self.last = total, quiet, -math.inf
-        self.record: dict | None = None
+        self.record: dict[str, float] | None = None
 
-    def __call__(self, snapshot):
+    def __call__(self, snapshot: FitSnapshot) -> None:
         if snapshot.losses:
             self.record = snapshot.losses[-1]
         # the final snapshot has no records when the previous one already carried the last
@@ -299,7 +320,8 @@ class _Progress:
         print(line, file=sys.stderr, flush=True)
 
 
-def _chamfer(geometry, points: np.ndarray, gen: np.random.Generator) -> float:
+def _chamfer(geometry: NurbsCurve | NurbsSurface, points: np.ndarray,
+             gen: np.random.Generator) -> float:
     """Two-sided Chamfer between dense samples of the result and (up to 200k of) the points."""
     import torch
 
@@ -338,7 +360,7 @@ def _quality_text(stats: dict, diagonal: float) -> str:
     return "\n".join(lines)
 
 
-def _lift(curve, z: float):
+def _lift(curve: NurbsCurve, z: float) -> NurbsCurve:
     """A 2-D NurbsCurve fitted in the xy-plane back in 3-D at height z (for the file writers)."""
     import torch
 
@@ -350,15 +372,18 @@ def _lift(curve, z: float):
 
 
 def _offset_path(path: Path) -> Path:
+    """The ``--offset`` companion of an output: ``<name>_offset<suffix>``."""
     return path.with_name(f"{path.stem}_offset{path.suffix}")
 
 
-def _patch_options(args):
+def _patch_options(args: argparse.Namespace) -> PatchOptions:
+    """The PatchOptions of ``--patches`` (ValueError for options a network fit cannot take)."""
     from nurbs_core.patches.options import PatchOptions
 
     if args.curve or args.single_patch or args.grid is not None or args.initial is not None:
         raise ValueError("--patches fits a network of surface patches: it cannot be combined "
                          "with --curve, --single-patch, --grid or --initial")
+    target: int | str
     if args.patches == "auto":
         target = "auto"
     else:
@@ -366,7 +391,7 @@ def _patch_options(args):
             target = int(args.patches)
         except ValueError:
             raise ValueError(f"--patches takes 'auto' or a patch count, got {args.patches!r}") from None
-    extra = {}
+    extra: dict[str, Any] = {}  # the defaults stay PatchOptions's own
     if args.stiffness is not None:
         extra["stiffness"] = args.stiffness
     if args.seam_weight is not None:
@@ -376,7 +401,7 @@ def _patch_options(args):
     return options
 
 
-def _check_outputs(args) -> list[Path]:
+def _check_outputs(args: argparse.Namespace) -> list[Path]:
     """Every output (and each ``--offset`` companion) checked before any work: a known suffix for
     what is written, an existing writable folder, never the input or ``--initial`` file."""
     from nurbs_core.io.dispatch import EXPORT_SUFFIXES, NETWORK_SUFFIXES
@@ -394,7 +419,7 @@ def _check_outputs(args) -> list[Path]:
 FILE_MESH_SAMPLES = 10_000
 
 
-def _patch_input(path, quiet: bool):
+def _patch_input(path: str, quiet: bool) -> tuple[np.ndarray, ClosedMesh | None]:
     """The points to fit with ``--patches`` (N, 3) and the input file's own closed mesh for the
     layout, or None (a cloud, or a mesh that cannot serve: then it is rebuilt from the points,
     and the reason is printed). A mesh file is read once."""
@@ -425,7 +450,8 @@ def _patch_input(path, quiet: bool):
     return check_points(path, vertices), mesh
 
 
-def run_patches(args, options, outputs: list[Path], points=None) -> dict:
+def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[Path],
+                points: np.ndarray | None = None) -> dict[str, Any]:
     """``--patches``: the network fit (``options``: its PatchOptions), its report and files;
     returns the statistics (``points``: the cloud when it is not read from ``args.input``)."""
     import torch
@@ -446,16 +472,17 @@ def run_patches(args, options, outputs: list[Path], points=None) -> dict:
         result = event.result or result
         if args.quiet:
             continue
-        if event.kind == "mesh":
+        if event.kind == "mesh" and event.mesh is not None:
             print(f"closed mesh: {len(event.mesh.faces)} triangles", file=sys.stderr)
-        elif event.kind == "layout":
+        elif event.kind == "layout" and event.layout is not None:
             layout = event.layout
             print(f"layout: {len(layout.quads)} patches, {len(layout.irregular)} irregular "
                   f"corners", file=sys.stderr)
-        elif event.kind == "pass" and event.fit_pass.stage != "wrap":
+        elif event.kind == "pass" and event.fit_pass is not None and event.fit_pass.stage != "wrap":
             p = event.fit_pass
             print(f"{p.stage} pass {p.index}  {p.size}x{p.size} per patch  rms {p.rms:.4g}  "
                   f"seam max {p.seam:.2f} deg", file=sys.stderr, flush=True)
+    assert result is not None  # iter_patch_fit always ends with the "done" event
     quality = result.quality
     seam = quality.seam
     print(f"patches: {quality.patches} ({quality.size}x{quality.size} control points each, "
@@ -490,9 +517,9 @@ class FitFailed(ValueError):
     """The fit ran and failed; the message is the one line nurbs-fit prints."""
 
 
-def _plain(values: dict) -> dict:
+def _plain(values: dict[str, Any]) -> dict[str, Any]:
     """Statistics as plain JSON values (numpy and torch scalars to Python; others dropped)."""
-    plain = {}
+    plain: dict[str, Any] = {}
     for key, value in values.items():
         if hasattr(value, "item") and getattr(value, "ndim", 0) == 0:
             value = value.item()
@@ -516,10 +543,10 @@ def error_line(exc: BaseException) -> str:
     return f"nurbs-fit: error: {message}"
 
 
-def _interrupt_handler(stop):
+def _interrupt_handler(stop: StopToken) -> Callable[..., None]:
     """SIGINT during the fit: the first stops it (the result so far is still written), the
     second aborts (KeyboardInterrupt: status 130, the outputs untouched)."""
-    def handler(*_):
+    def handler(*_: object) -> None:
         if stop.stopped:
             raise KeyboardInterrupt
         stop.stop()
@@ -528,7 +555,7 @@ def _interrupt_handler(stop):
     return handler
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     """One input (``-o``): fit, report and write it (status 0, or 1 after a failed fit); a batch
     (``--output-dir``) goes to :func:`nurbs_core.batch.run_batch`."""
     if args.output_dir is not None:
@@ -545,16 +572,43 @@ def run(args) -> int:
     return 0
 
 
-def fit_one(args, points=None, stoppable: bool = True) -> dict:
+def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
+            stoppable: bool = True) -> dict[str, Any]:
     """Fit ``args.input`` (or the given ``points``, an (N, 3) cloud read from it) as the options
     say, print the report, write every ``args.output`` file and return the statistics as a plain
     dict (the distances, the quality measures, the Chamfer distance, ...). Raises on a bad input
     (FitFailed when the fit itself failed). ``stoppable``: the first Ctrl-C stops the fit and
-    writes the result so far (single runs); otherwise Ctrl-C raises KeyboardInterrupt."""
-    import numpy as np
+    writes the result so far (single runs); otherwise Ctrl-C raises KeyboardInterrupt.
 
-    from nurbs_core.failures import one_line
-    from nurbs_core.io import load_points
+    The three steps, :func:`prepare_fit`, :func:`run_fit` and :func:`finish_fit`, are also run
+    apart (a batch fits many prepared inputs at once with ``fit_batch``)."""
+    if args.patches is not None:
+        outputs = _check_before_work(args)
+        return run_patches(args, _patch_options(args), outputs, points=points)
+    prepared = prepare_fit(args, points)
+    return finish_fit(prepared, run_fit(prepared, stoppable))
+
+
+@dataclass
+class PreparedFit:
+    """One input ready to fit (:func:`prepare_fit`): its options, its checked outputs, the cloud
+    as read (N, 3), the ``target`` fitted (the cloud; its xy for a curve whose points share one
+    z: ``flat_z``), the FitConfig, the known parameters of ``--grid`` (N, 2) and the ``--initial``
+    start."""
+
+    args: argparse.Namespace
+    outputs: list[Path]
+    points: np.ndarray
+    target: np.ndarray
+    flat_z: bool
+    config: FitConfig
+    parameters: np.ndarray | None
+    initial: NurbsCurve | NurbsSurface | None
+
+
+def _check_before_work(args: argparse.Namespace) -> list[Path]:
+    """What must hold before any input is read: the ``--max-decompressed`` limit applied, every
+    output checked (:func:`_check_outputs`), the ``--set`` fields known. Returns the outputs."""
     from nurbs_core.io.limits import set_decompression_limit
 
     if args.max_decompressed is not None:
@@ -562,59 +616,103 @@ def fit_one(args, points=None, stoppable: bool = True) -> dict:
     outputs = _check_outputs(args)
     # a bad option fails before the cloud is read
     _field_settings(args.settings)
-    if args.patches is not None:
-        return run_patches(args, _patch_options(args), outputs, points=points)
+    return outputs
+
+
+def prepare_fit(args: argparse.Namespace, points: np.ndarray | None = None) -> PreparedFit:
+    """The first step of :func:`fit_one` (a curve or surface; not ``--patches``): check the
+    outputs and options, read ``args.input`` (unless ``points``, the (N, 3) cloud read from it,
+    are given), build the FitConfig, the ``--grid`` parameters and the ``--initial`` start, and
+    print the report's first line (stderr). Raises on a bad input or option."""
+    import numpy as np
+
+    from nurbs_core.io import load_points
+
+    outputs = _check_before_work(args)
     if points is None:
         points = load_points(args.input).points
-    import torch
-
-    from nurbs_core.fitting import StopToken, fit
-    from nurbs_core.fitting.sheet import resolved_solver
-    from nurbs_core.geometry import NurbsCurve
-    from nurbs_core.io.dispatch import save_all
-
-    flat_z = args.curve and len(points) and np.ptp(points[:, 2]) == 0
+    flat_z = bool(args.curve and len(points) and np.ptp(points[:, 2]) == 0)
     target = points[:, :2] if flat_z else points
     config = _config(args, target.shape[1])
     parameters = None
     if args.grid is not None:
         if args.curve:
             raise ValueError("--grid applies to surfaces only")
-        parameters = _grid_parameters(*args.grid, len(points))
+        count_u, count_v = args.grid
+        parameters = _grid_parameters(count_u, count_v, len(points))
     if args.offset is not None and args.curve:
         raise ValueError("--offset applies to surfaces only")
-    core = (not args.curve and parameters is None and args.initial is None
+    _print_plan(args, config, len(points), known_parameters=parameters is not None)
+    return PreparedFit(args, outputs, points, target, flat_z, config, parameters,
+                       _initial(args, flat_z))
+
+
+def _print_plan(args: argparse.Namespace, config: FitConfig, count: int,
+                known_parameters: bool) -> None:
+    """The report's first line (stderr): the input, its size and how it is fitted."""
+    from nurbs_core.fitting.sheet import resolved_solver
+
+    core = (not args.curve and not known_parameters and args.initial is None
             and config.init != "learned" and resolved_solver(config) == "least_squares")
     how = (f"by fairing least squares (stiffness {config.stiffness:g}"
            + (f", grid growing to at most {config.max_control_points} per direction"
               if config.max_control_points else "") + ")") if core else \
         f"with {config.optimizer}, loss {config.loss}"
-    print(f"{args.input}: {len(points)} points; fitting a {config.kind} "
+    print(f"{args.input}: {count} points; fitting a {config.kind} "
           f"(degree {config.degree_u}" + ("" if args.curve else f"x{config.degree_v}")
           + f", {config.control_points_u}" + ("" if args.curve else f"x{config.control_points_v}")
           + f" control points) {how}", file=sys.stderr)
-    initial = None
-    if args.initial is not None:
-        from nurbs_core.io import load
 
-        shapes = load(args.initial)
-        if not shapes:
-            raise ValueError(f"{args.initial} holds no curve or surface")
-        initial = shapes[0]
-        if flat_z and isinstance(initial, NurbsCurve) and initial.dimension == 3:
-            initial = NurbsCurve(initial.control_points[:, :2], initial.degree, initial.knots,
-                                 initial.weights)
+
+def _initial(args: argparse.Namespace, flat_z: bool) -> NurbsCurve | NurbsSurface | None:
+    """The start of ``--initial`` (the file's first curve or surface; a 3-D curve in the plane
+    when the points are: ``flat_z``), or None."""
+    if args.initial is None:
+        return None
+    from nurbs_core.geometry import NurbsCurve
+    from nurbs_core.io import load
+
+    shapes = load(args.initial)
+    if not shapes:
+        raise ValueError(f"{args.initial} holds no curve or surface")
+    initial = shapes[0]
+    if flat_z and isinstance(initial, NurbsCurve) and initial.dimension == 3:
+        initial = NurbsCurve(initial.control_points[:, :2], initial.degree, initial.knots,
+                             initial.weights)
+    return initial
+
+
+def run_fit(prepared: PreparedFit, stoppable: bool = True) -> FitResult:
+    """The second step of :func:`fit_one`: the fit, with progress lines on stderr (unless
+    ``--quiet``). ``stoppable``: the first Ctrl-C stops the fit (its result so far is returned),
+    a second raises KeyboardInterrupt; otherwise Ctrl-C raises at once."""
+    from nurbs_core.fitting import StopToken, fit
+
     stop = StopToken()
     if stoppable:
         previous = signal.signal(signal.SIGINT, _interrupt_handler(stop))
     try:
-        result = fit(target, config, stop=stop, parameters=parameters, initial=initial,
-                     on_snapshot=_Progress(config.iterations, args.quiet))
+        return fit(prepared.target, prepared.config, stop=stop, parameters=prepared.parameters,
+                   initial=prepared.initial,
+                   on_snapshot=_Progress(prepared.config.iterations, prepared.args.quiet))
     finally:
         if stoppable:
             signal.signal(signal.SIGINT, previous)
+
+
+def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
+    """The last step of :func:`fit_one`: the rest of the report (status, distances, Chamfer,
+    quality), the ``--offset`` surface, every output written (all or nothing, each atomically)
+    and the statistics as a plain dict. Raises FitFailed when the fit failed."""
+    import numpy as np
+    import torch
+
+    from nurbs_core.failures import one_line
+    from nurbs_core.io.dispatch import save_all
+
     if result.status == "failed":
-        raise FitFailed(f"the fit failed: {one_line(result.message)}")
+        raise FitFailed(f"the fit failed: {one_line(str(result.message))}")
+    args, config, target = prepared.args, prepared.config, prepared.target
     geometry = result.geometry.to(dtype=torch.float64)
     diagonal = float(np.linalg.norm(np.ptp(target, axis=0)))
     chamfer = _chamfer(geometry, target, np.random.default_rng(args.seed))
@@ -629,27 +727,28 @@ def fit_one(args, points=None, stoppable: bool = True) -> dict:
     print(f"chamfer distance: {chamfer:.6g} ({chamfer / diagonal:.3%} of the diagonal)")
     if "flipped_fraction" in stats:
         print(_quality_text(stats, diagonal))
-    if flat_z:
-        geometry = _lift(geometry, float(points[0, 2]))
+    if prepared.flat_z:
+        geometry = _lift(geometry, float(prepared.points[0, 2]))
     offset = None
     if args.offset is not None:
         from nurbs_core.offset import offset_surface
 
         offset = offset_surface(geometry, args.offset)
-    jobs = [(geometry, path, {}) for path in outputs]
+    jobs: list[tuple[NurbsCurve | NurbsSurface, Path, dict[str, Any]]] = [
+        (geometry, path, {}) for path in prepared.outputs]
     if offset is not None:
-        jobs += [(offset, _offset_path(path), {}) for path in outputs]
+        jobs += [(offset, _offset_path(path), {}) for path in prepared.outputs]
     save_all(jobs)  # all or nothing: no output is replaced unless every one was written
     for _, path, _ in jobs:
         print(f"wrote {path}")
     counts = [int(n) for n in np.shape(geometry.control_points)[:-1]]
-    return _plain({**stats, "kind": config.kind, "points": len(points),
+    return _plain({**stats, "kind": config.kind, "points": len(prepared.points),
                    "fit_status": result.status, "iterations": result.iterations,
                    "fit_seconds": result.elapsed, "fit_message": one_line(result.message or ""),
                    "diagonal": diagonal, "chamfer": chamfer, "control_points": counts})
 
 
-def _check_mode(parser: argparse.ArgumentParser, args) -> None:
+def _check_mode(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """One input with ``-o``, or any inputs with ``--output-dir`` (argparse error otherwise)."""
     if args.output_dir is None:
         if not args.output:
@@ -660,7 +759,8 @@ def _check_mode(parser: argparse.ArgumentParser, args) -> None:
         used = [name for name, value, default in (
             ("--summary", args.summary, None), ("--skip-existing", args.skip_existing, False),
             ("--jobs", args.jobs, 1), ("--scheduler", args.scheduler, None),
-            ("--format", args.format, ".json")) if value != default]
+            ("--format", args.format, ".json"),
+            ("--batch-fits", args.batch_fits, DEFAULT_BATCH_FITS)) if value != default]
         if used:
             parser.error(f"{', '.join(used)} need --output-dir DIR")
         return
@@ -669,18 +769,20 @@ def _check_mode(parser: argparse.ArgumentParser, args) -> None:
                      "are named after the inputs (--format picks the suffix)")
     if args.jobs < 1:
         parser.error("--jobs takes a positive number of worker processes")
+    if args.batch_fits < 1:
+        parser.error("--batch-fits takes a positive number of inputs (1: no batching)")
     if args.scheduler is not None and args.jobs != 1:
         parser.error("--scheduler runs on the cluster's workers: --jobs does not apply")
     if args.summary is not None and Path(args.summary).suffix.lower() not in (".jsonl", ".csv"):
         parser.error(f"--summary {args.summary}: the suffix must be .jsonl or .csv")
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """The console entry point: 0 on success, 1 on an error (one line on stderr), 2 for bad
     arguments (argparse), 3 when some inputs of a batch failed, 130 after Ctrl-C."""
-    interrupted = []
+    interrupted: list[bool] = []
 
-    def on_interrupt(*_):
+    def on_interrupt(*_: object) -> None:
         # remembered as well as raised: a KeyboardInterrupt inside a C extension's import (numpy
         # at start-up) comes out as an ImportError, which must still count as Ctrl-C
         interrupted.append(True)

@@ -2,8 +2,11 @@
 
 ``nurbs-fit IN... --output-dir DIR`` expands the inputs (:mod:`.inputs`: files, folders, globs,
 HDF5 datasets of clouds), fits each through :func:`nurbs_core.cli.fit_one` (the single-file code
-path, so every result equals a one-file run with the same options) in this process or on Dask
-workers (:mod:`.executors`), shows a progress line and writes the summary (:mod:`.runner`).
+path, so every result equals a one-file run with the same options), or, for clouds with the known
+parameters of ``--grid``, chunks of ``--batch-fits`` inputs through ``prepare_fit``, one
+:func:`nurbs_core.fitting.fit_batch` and ``finish_fit`` (the engine's batch dimension; each result
+equals the single run's to 1e-9), in this process or on Dask workers (:mod:`.executors`),
+shows a progress line and writes the summary (:mod:`.runner`).
 Workers receive file paths and plain option dicts and return plain dicts (:mod:`.worker`): no
 tensor crosses a process. Nothing here imports torch or Dask at module level.
 """

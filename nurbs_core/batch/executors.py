@@ -1,23 +1,37 @@
 """Where the items of a batch run: one after the other in this process (``--jobs 1``), or on
 Dask (``dask.distributed``): an embedded LocalCluster for ``--jobs N``, an existing cluster for
-``--scheduler``. Each executor yields ``(position, record)`` as inputs finish."""
+``--scheduler``. Each executor yields ``(position, record)`` as inputs finish. The items go out
+in chunks (:func:`nurbs_core.batch.worker.chunk_size`: ``--batch-fits`` of them when they can be
+fitted together, else one), each fitted by :func:`nurbs_core.batch.worker.iter_chunk`."""
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Iterator
-from typing import Any
+from typing import Any, TypeAlias
 
 from nurbs_core.batch.inputs import BATCH_EXTRA_HINT
-from nurbs_core.batch.worker import fit_item, pin_worker, prepare_worker
+from nurbs_core.batch.worker import chunk_size, fit_chunk, iter_chunk, pin_worker, prepare_worker
 
 WORKER_WAIT_S = 60  # --scheduler: how long to wait for the first worker
 UNSET_TRIM = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
 
 
-def serial(options: dict, items: list[tuple[int, dict]]) -> Iterator[tuple[int, dict]]:
-    for position, item in items:
-        yield position, fit_item(options, item)
+#: Items with their positions in the batch (the summary's order).
+PositionedItems: TypeAlias = list[tuple[int, dict]]
+
+
+def chunks(items: PositionedItems, size: int) -> list[PositionedItems]:
+    """``items`` in consecutive chunks of at most ``size``."""
+    return [items[k:k + size] for k in range(0, len(items), size)]
+
+
+def serial(options: dict, items: PositionedItems) -> Iterator[tuple[int, dict]]:
+    """Fit the items in this process, a chunk at a time; each record as it is settled."""
+    for chunk in chunks(items, chunk_size(options)):
+        for index, record in iter_chunk(options, [item for _, item in chunk]):
+            yield chunk[index][0], record
 
 
 def _distributed():
@@ -91,29 +105,36 @@ class DaskExecutor:
     def workers(self) -> int:
         return len(self.client.scheduler_info().get("workers", {}))
 
-    def run(self, options: dict, items: list[tuple[int, dict]]) -> Iterator[tuple[int, dict]]:
+    def run(self, options: dict, items: PositionedItems) -> Iterator[tuple[int, dict]]:
+        """Fit the items on the cluster, one task per chunk (chunks no larger than keeps every
+        worker busy); each record as its chunk finishes. A chunk whose worker died fails its
+        items."""
         distributed = _distributed()
         futures = {}
         if options.get("initial"):
             options = {**options, "initial": os.path.abspath(options["initial"])}
-        for position, item in items:
-            # the workers may run elsewhere: absolute paths (they must see the same files)
-            item = {**item, "path": os.path.abspath(item["path"]),
-                    "outputs": [os.path.abspath(p) for p in item["outputs"]]}
-            future = self.client.submit(fit_item, options, item, pure=False,
-                                        key=f"nurbs-fit-{position}-{os.getpid()}")
-            futures[future] = (position, item)
+        # the workers may run elsewhere: absolute paths (they must see the same files)
+        items = [(position, {**item, "path": os.path.abspath(item["path"]),
+                             "outputs": [os.path.abspath(p) for p in item["outputs"]]})
+                 for position, item in items]
+        size = min(chunk_size(options), math.ceil(len(items) / max(1, self.workers)))
+        for chunk in chunks(items, max(1, size)):
+            future = self.client.submit(fit_chunk, options, [item for _, item in chunk],
+                                        pure=False, key=f"nurbs-fit-{chunk[0][0]}-{os.getpid()}")
+            futures[future] = chunk
         try:
             for future in distributed.as_completed(futures):
-                position, item = futures[future]
+                chunk = futures[future]
                 try:
-                    record = future.result()
-                except Exception as exc:  # the worker died (memory, a crash): this input failed
+                    records = future.result()
+                except Exception as exc:  # the worker died (memory, a crash): these inputs failed
                     from nurbs_core.cli import error_line
 
-                    record = {"input": item["input"], "output": item["outputs"][0],
-                              "status": "failed", "seconds": None,
-                              "error": error_line(RuntimeError(f"the worker failed: {exc}"))}
-                yield position, record
+                    error = error_line(RuntimeError(f"the worker failed: {exc}"))
+                    records = [{"input": item["input"], "output": item["outputs"][0],
+                                "status": "failed", "seconds": None, "error": error}
+                               for _, item in chunk]
+                for (position, _), record in zip(chunk, records, strict=True):
+                    yield position, record
         finally:
             self.client.cancel(list(futures))

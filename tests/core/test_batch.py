@@ -1,7 +1,8 @@
 """``nurbs-fit`` over many inputs (``--output-dir``): results identical to single runs, failures in
 the summary (exit status 3), ``--skip-existing``, Ctrl-C, HDF5 datasets, ``--jobs 2`` on a local
-Dask cluster and ``--scheduler`` on a cluster started with Dask's own commands. Small clouds,
-few iterations; no durations are asserted."""
+Dask cluster and ``--scheduler`` on a cluster started with Dask's own commands; ``--grid``
+inputs fitted together (``--batch-fits``, the engine's fit_batch), equal to single runs. Small
+clouds, few iterations; no durations are asserted."""
 
 from __future__ import annotations
 
@@ -18,12 +19,15 @@ import numpy as np
 import pytest
 
 from nurbs_core import samples
-from nurbs_core.cli import main
-from nurbs_core.io import save_points
+from nurbs_core.cli import SOME_FAILED_STATUS, main
+from nurbs_core.io import load, save_points
 
 FIT = ["--iterations", "3", "--control-points", "5", "5", "--samples", "16"]
 GOOD = 6
 DASK_BIN = Path(sys.executable).with_name("dask")
+#: A binary PLY file cut short: 100 vertices announced, 40 bytes of data.
+BROKEN_PLY = (b"ply\nformat binary_little_endian 1.0\nelement vertex 100\nproperty float x\n"
+              b"property float y\nproperty float z\nend_header\n" + bytes(40))
 
 
 def _cloud(k: int) -> np.ndarray:
@@ -40,9 +44,7 @@ def _folder(root: Path, corrupt: bool = True) -> Path:
         else:
             np.savetxt(folder / f"part{k}.xyz", _cloud(k))
     if corrupt:
-        (folder / "broken.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex "
-                                            b"100\nproperty float x\nproperty float y\nproperty "
-                                            b"float z\nend_header\n" + bytes(40))
+        (folder / "broken.ply").write_bytes(BROKEN_PLY)
         (folder / "nan.xyz").write_text("0 0 0\n1 nan 0\n0 1 0\n1 1 1\n")
     (folder / "notes.md").write_text("not a cloud")  # not a point-cloud suffix: not an input
     return folder
@@ -169,11 +171,11 @@ def test_hdf5_dataset_items_match_single_runs_of_their_clouds(tmp_path):
 @pytest.mark.timeout(120)
 def test_ctrl_c_keeps_finished_results_and_a_rerun_finishes_the_rest(tmp_path, monkeypatch,
                                                                      reference):
-    import nurbs_core.batch.executors as executors
+    import nurbs_core.batch.worker as worker
 
     folder = _folder(tmp_path, corrupt=False)
     out = tmp_path / "fits"
-    real, calls = executors.fit_item, []
+    real, calls = worker.fit_item, []
 
     def interrupted_on_the_third(options, item, **kwargs):
         calls.append(item["input"])
@@ -181,11 +183,11 @@ def test_ctrl_c_keeps_finished_results_and_a_rerun_finishes_the_rest(tmp_path, m
             raise KeyboardInterrupt
         return real(options, item, **kwargs)
 
-    monkeypatch.setattr(executors, "fit_item", interrupted_on_the_third)
+    monkeypatch.setattr(worker, "fit_item", interrupted_on_the_third)
     assert main([str(folder), "--output-dir", str(out), "-q", *FIT]) == 130
     assert sorted(p.name for p in out.glob("*.json")) == ["part0.json", "part1.json"]
     assert [row["status"] for row in _summary(out / "summary.jsonl").values()] == ["ok", "ok"]
-    monkeypatch.setattr(executors, "fit_item", real)
+    monkeypatch.setattr(worker, "fit_item", real)
     assert main([str(folder), "--output-dir", str(out), "--skip-existing", "-q", *FIT]) == 0
     statuses = {name: row["status"] for name, row in _summary(out / "summary.jsonl").items()}
     assert statuses == {"part0.xyz": "skipped", "part1.ply": "skipped", "part2.xyz": "ok",
@@ -199,7 +201,9 @@ def test_usage_errors_and_help(tmp_path, capsys, monkeypatch):
     for argv in ([str(source), str(source), "-o", "x.json"], [str(source)],
                  [str(source), "-o", "x.json", "--jobs", "2"],
                  [str(source), "--output-dir", str(tmp_path), "--summary", "s.txt"],
-                 [str(source), "--output-dir", str(tmp_path), "-o", "x.json"]):
+                 [str(source), "--output-dir", str(tmp_path), "-o", "x.json"],
+                 [str(source), "-o", "x.json", "--batch-fits", "4"],
+                 [str(source), "--output-dir", str(tmp_path), "--batch-fits", "0"]):
         with pytest.raises(SystemExit) as exit_info:
             main(argv)
         assert exit_info.value.code == 2
@@ -305,3 +309,182 @@ def test_gradient_fits_in_one_process_match_single_runs(tmp_path):
         assert main([str(folder / f"c{k}.npy"), "-o", str(single), *options]) == 0
         np.testing.assert_allclose(_control_points(out / f"c{k}.json"), _control_points(single),
                                    atol=1e-9, rtol=0)
+
+
+# --grid inputs fitted together: --batch-fits K chunks through the engine's fit_batch ----------
+
+GRID = ["--grid", "10", "12", "--iterations", "20", "--control-points", "5", "5", "--samples", "16",
+        "-q"]
+GRIDS = 5
+
+
+def _grid_cloud(k: int) -> np.ndarray:
+    """A 10 x 12 grid of points (u-major, as --grid 10 12 reads it) on a wavy sheet."""
+    u, v = np.meshgrid(np.linspace(0, 1, 10), np.linspace(0, 1, 12), indexing="ij")
+    z = 0.3 * np.sin(3 * u + k) * np.cos(2 * v) + 0.005 * np.random.default_rng(k).standard_normal(u.shape)
+    return np.stack([(1 + 0.2 * k) * u, v, z], -1).reshape(-1, 3)
+
+
+def _grid_folder(root: Path, bad: bool = True) -> Path:
+    """GRIDS grid clouds (.xyz and .ply), and with ``bad`` a truncated file and a cloud that is
+    not a 10 x 12 grid."""
+    folder = root / "grids"
+    folder.mkdir()
+    for k in range(GRIDS):
+        if k % 2:
+            save_points(_grid_cloud(k), folder / f"grid{k}.ply")
+        else:
+            np.savetxt(folder / f"grid{k}.xyz", _grid_cloud(k))
+    if bad:
+        (folder / "broken.ply").write_bytes(BROKEN_PLY)
+        np.savetxt(folder / "short.xyz", _grid_cloud(0)[:50])
+    return folder
+
+
+def _read_control(path: Path) -> np.ndarray:
+    (shape,) = load(path)
+    return shape.control_points.numpy()
+
+
+def _single_runs(root: Path, folder: Path, options: list[str]) -> dict[str, np.ndarray]:
+    """Each grid cloud of ``folder`` fitted by a single ``nurbs-fit IN --grid ... -o OUT`` run."""
+    fits = {}
+    for source in sorted(folder.glob("grid*")):
+        out = root / f"{source.stem}.json"
+        assert main([str(source), "-o", str(out), *options]) == 0
+        fits[source.stem] = _read_control(out)
+    return fits
+
+
+@pytest.fixture(scope="module")
+def grid_reference(tmp_path_factory) -> dict[str, np.ndarray]:
+    root = tmp_path_factory.mktemp("grid_single")
+    return _single_runs(root, _grid_folder(root, bad=False), GRID)
+
+
+@pytest.fixture
+def batch_sizes(monkeypatch) -> list[int]:
+    """The number of clouds of every fit_batch call (the calls still run)."""
+    import nurbs_core.fitting.batched as batched
+
+    real, sizes = batched.fit_batch, []
+
+    def counted(targets, config=None, *, parameters):
+        sizes.append(len(targets))
+        return real(targets, config, parameters=parameters)
+
+    monkeypatch.setattr(batched, "fit_batch", counted)
+    return sizes
+
+
+def _assert_grid_results(out: Path, reference: dict[str, np.ndarray]) -> None:
+    assert sorted(p.stem for p in out.glob("*.json")) == sorted(reference)
+    for stem, control in reference.items():
+        np.testing.assert_allclose(_read_control(out / f"{stem}.json"), control, rtol=0, atol=1e-9)
+
+
+@pytest.mark.timeout(120)
+def test_grid_batch_fits_chunks_together_like_single_runs(tmp_path, grid_reference, batch_sizes,
+                                                         capsys):
+    folder = _grid_folder(tmp_path)
+    out = tmp_path / "fits"
+    assert main([str(folder), "--output-dir", str(out), "--batch-fits", "4", *GRID]) == \
+        SOME_FAILED_STATUS
+    # 7 inputs (sorted) in chunks of 4 and 3: broken.ply grid0-2 | grid3-4 short.xyz; the bad
+    # ones fail before the fit, the others of each chunk are fitted in one fit_batch
+    assert batch_sizes == [3, 2]
+    _assert_grid_results(out, grid_reference)
+    rows = _summary(out / "summary.jsonl")
+    assert {name: row["status"] for name, row in rows.items()} == {
+        **{f"grid{k}.{'ply' if k % 2 else 'xyz'}": "ok" for k in range(GRIDS)},
+        "broken.ply": "failed", "short.xyz": "failed"}
+    assert "needs 120 points, the file has 50" in rows["short.xyz"]["error"]
+    capsys.readouterr()
+    for name in ("broken.ply", "short.xyz"):  # the error line of a single run
+        assert main([str(folder / name), "-o", str(tmp_path / "x.json"), *GRID]) == 1
+        assert capsys.readouterr().err.strip() == rows[name]["error"]
+
+    # one at a time (--batch-fits 1): no fit_batch, the same records
+    batch_sizes.clear()
+    alone = tmp_path / "alone"
+    assert main([str(folder), "--output-dir", str(alone), "--batch-fits", "1", *GRID]) == \
+        SOME_FAILED_STATUS
+    assert batch_sizes == []
+    _assert_grid_results(alone, grid_reference)
+    rows_alone = _summary(alone / "summary.jsonl")
+    assert sorted(rows_alone) == sorted(rows)
+    for name, row in rows.items():
+        single = rows_alone[name]
+        assert list(row) == list(single), name  # the same keys, in the same order
+        assert (row["status"], row["error"]) == (single["status"], single["error"])
+        for key in ("rms", "paired_rms", "chamfer", "iterations", "control_points", "points"):
+            if row["status"] == "ok":
+                assert row[key] == pytest.approx(single[key], rel=1e-9), (name, key)
+
+
+@pytest.mark.timeout(120)
+def test_a_chunk_whose_fit_batch_fails_is_fitted_one_by_one(tmp_path, grid_reference,
+                                                            monkeypatch):
+    import nurbs_core.fitting.batched as batched
+
+    def broken(*args, **kwargs):
+        raise ValueError("cloud 2: a bad cloud")
+
+    monkeypatch.setattr(batched, "fit_batch", broken)
+    out = tmp_path / "fits"
+    assert main([str(_grid_folder(tmp_path, bad=False)), "--output-dir", str(out), *GRID]) == 0
+    _assert_grid_results(out, grid_reference)
+
+
+@pytest.mark.timeout(120)
+def test_an_output_that_cannot_be_written_fails_only_its_input(tmp_path, grid_reference,
+                                                               batch_sizes, monkeypatch):
+    import nurbs_core.io.dispatch as dispatch
+
+    real = dispatch.save_all
+
+    def full_disk_for_grid2(jobs):
+        jobs = list(jobs)
+        if any(Path(path).stem == "grid2" for _, path, _ in jobs):
+            raise OSError(28, "No space left on device")
+        return real(jobs)
+
+    monkeypatch.setattr(dispatch, "save_all", full_disk_for_grid2)
+    out = tmp_path / "fits"
+    assert main([str(_grid_folder(tmp_path, bad=False)), "--output-dir", str(out),
+                 *GRID]) == SOME_FAILED_STATUS
+    assert batch_sizes == [GRIDS]  # one chunk (--batch-fits 32 by default)
+    rows = _summary(out / "summary.jsonl")
+    assert rows["grid2.xyz"]["status"] == "failed"
+    assert "No space left on device" in rows["grid2.xyz"]["error"]
+    assert rows["grid2.xyz"]["error"].startswith("nurbs-fit: error: ")
+    assert not (out / "grid2.json").exists()
+    _assert_grid_results(out, {k: v for k, v in grid_reference.items() if k != "grid2"})
+
+
+@pytest.mark.timeout(120)
+def test_options_that_cannot_batch_fit_one_by_one(tmp_path, batch_sizes):
+    """L-BFGS (batch_problem refuses it): each input through its own fit, as a single run."""
+    options = [*GRID, "--optimizer", "lbfgs", "--iterations", "5"]  # (the last --iterations)
+    folder = _grid_folder(tmp_path, bad=False)
+    for path in sorted(folder.glob("grid*"))[2:]:  # two inputs keep it short
+        path.unlink()
+    reference = _single_runs(tmp_path, folder, options)
+    out = tmp_path / "fits"
+    assert main([str(folder), "--output-dir", str(out), *options]) == 0
+    assert batch_sizes == []
+    _assert_grid_results(out, reference)
+
+
+@pytest.mark.timeout(150)
+def test_grid_batch_on_a_local_dask_cluster(tmp_path, grid_reference):
+    pytest.importorskip("distributed", reason="the batch extra (dask[distributed]) is not installed")
+    folder = _grid_folder(tmp_path)
+    out = tmp_path / "fits"
+    # 7 inputs on 2 workers: chunks of 4 and 3, one task each
+    done = _nurbs_fit(folder, "--output-dir", out, "--jobs", "2", "--batch-fits", "4", *GRID)
+    assert done.returncode == SOME_FAILED_STATUS, done.stderr
+    _assert_grid_results(out, grid_reference)
+    rows = _summary(out / "summary.jsonl")
+    assert rows["broken.ply"]["status"] == rows["short.xyz"]["status"] == "failed"
+    assert sum(row["status"] == "ok" for row in rows.values()) == GRIDS
