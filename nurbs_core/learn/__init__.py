@@ -3,11 +3,13 @@
 An optional part of the engine (the core never imports it). A network (PointNet by default,
 DGCNN as an option) reads the cloud of one open patch in a normalised frame
 (:mod:`nurbs_core.learn.normalize`) and predicts the control grid of a clamped uniform bicubic
-patch, as a residual over the plane of the cloud's two principal axes
-(:mod:`nurbs_core.learn.model`). It trains without control-point labels through the engine's
-differentiable surface evaluation with the NURBS-Diff paper's Chamfer + 0.1 Laplacian + 10
-Hausdorff loss (:mod:`nurbs_core.learn.losses`, :mod:`nurbs_core.learn.train`, the ``nurbs-train``
-command) on procedurally generated patches (:mod:`nurbs_core.learn.data`) or SplineDataset files.
+patch: a height field over the plane of the cloud's two principal axes, which cannot fold
+(``output="graph"``, nurbs-train's default), or free control points added to that plane's grid
+(``"residual"``, the shipped model) (:mod:`nurbs_core.learn.model`). It trains without
+control-point labels through the engine's differentiable surface evaluation with the NURBS-Diff
+paper's Chamfer + 0.1 Laplacian + 10 Hausdorff loss (:mod:`nurbs_core.learn.losses`,
+:mod:`nurbs_core.learn.train`, the ``nurbs-train`` command) on procedurally generated patches
+(:mod:`nurbs_core.learn.data`) or SplineDataset files.
 
 Inference: ``predict_surface(points)`` with the model shipped in ``nurbs_core/learn/models``
 (:mod:`nurbs_core.learn.predict`). Names load on first use, so importing the package is light.

@@ -14,9 +14,9 @@ exactly; the optimizer state and the epoch count are saved. Clouds are normalise
 ``OUT/last.pt`` is written after every epoch (with the optimizer state, for ``--resume``) and
 ``OUT/best.pt`` when the validation Chamfer improves (the model only: this is the file to ship),
 both atomically. A model file is a dict of plain types and tensors, loadable with
-``torch.load(path, weights_only=True)``: {"state_dict", "config" (encoder, grid, residual,
-rational, point count, normalisation version), "training" (command line, seed, epochs, metrics,
-history)}.
+``torch.load(path, weights_only=True)``: {"state_dict", "config" (encoder, grid, output,
+residual, rational, point count, normalisation version), "training" (command line, seed,
+epochs, metrics, history)}.
 
 Under ``torchrun`` (RANK / WORLD_SIZE / LOCAL_RANK set) the processes form a group (gloo on the
 CPU, nccl on CUDA), the model is wrapped in DistributedDataParallel, each global batch of

@@ -20,7 +20,7 @@ import pytest
 
 from nurbs_core import samples
 from nurbs_core.cli import SOME_FAILED_STATUS, main
-from nurbs_core.io import load, save_points
+from nurbs_core.io import save_points
 
 FIT = ["--iterations", "3", "--control-points", "5", "5", "--samples", "16"]
 GOOD = 6
@@ -35,14 +35,19 @@ def _cloud(k: int) -> np.ndarray:
     return shape(300, seed=k).points
 
 
+def _write_clouds(folder: Path, stem: str, clouds: list[np.ndarray]) -> None:
+    """``folder/<stem><k>``: text (.xyz) and binary (.ply) formats alternately."""
+    folder.mkdir()
+    for k, cloud in enumerate(clouds):
+        if k % 2:
+            save_points(cloud, folder / f"{stem}{k}.ply")
+        else:
+            np.savetxt(folder / f"{stem}{k}.xyz", cloud)
+
+
 def _folder(root: Path, corrupt: bool = True) -> Path:
     folder = root / "scans"
-    folder.mkdir()
-    for k in range(GOOD):  # text and binary formats both
-        if k % 2:
-            save_points(_cloud(k), folder / f"part{k}.ply")
-        else:
-            np.savetxt(folder / f"part{k}.xyz", _cloud(k))
+    _write_clouds(folder, "part", [_cloud(k) for k in range(GOOD)])
     if corrupt:
         (folder / "broken.ply").write_bytes(BROKEN_PLY)
         (folder / "nan.xyz").write_text("0 0 0\n1 nan 0\n0 1 0\n1 1 1\n")
@@ -329,21 +334,11 @@ def _grid_folder(root: Path, bad: bool = True) -> Path:
     """GRIDS grid clouds (.xyz and .ply), and with ``bad`` a truncated file and a cloud that is
     not a 10 x 12 grid."""
     folder = root / "grids"
-    folder.mkdir()
-    for k in range(GRIDS):
-        if k % 2:
-            save_points(_grid_cloud(k), folder / f"grid{k}.ply")
-        else:
-            np.savetxt(folder / f"grid{k}.xyz", _grid_cloud(k))
+    _write_clouds(folder, "grid", [_grid_cloud(k) for k in range(GRIDS)])
     if bad:
         (folder / "broken.ply").write_bytes(BROKEN_PLY)
         np.savetxt(folder / "short.xyz", _grid_cloud(0)[:50])
     return folder
-
-
-def _read_control(path: Path) -> np.ndarray:
-    (shape,) = load(path)
-    return shape.control_points.numpy()
 
 
 def _single_runs(root: Path, folder: Path, options: list[str]) -> dict[str, np.ndarray]:
@@ -352,7 +347,7 @@ def _single_runs(root: Path, folder: Path, options: list[str]) -> dict[str, np.n
     for source in sorted(folder.glob("grid*")):
         out = root / f"{source.stem}.json"
         assert main([str(source), "-o", str(out), *options]) == 0
-        fits[source.stem] = _read_control(out)
+        fits[source.stem] = _control_points(out)
     return fits
 
 
@@ -380,7 +375,7 @@ def batch_sizes(monkeypatch) -> list[int]:
 def _assert_grid_results(out: Path, reference: dict[str, np.ndarray]) -> None:
     assert sorted(p.stem for p in out.glob("*.json")) == sorted(reference)
     for stem, control in reference.items():
-        np.testing.assert_allclose(_read_control(out / f"{stem}.json"), control, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(_control_points(out / f"{stem}.json"), control, rtol=0, atol=1e-9)
 
 
 @pytest.mark.timeout(120)
