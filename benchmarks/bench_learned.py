@@ -27,6 +27,11 @@ Run: ``python benchmarks/bench_learned.py [--patches 24] [--table 200]
    not the plane, so its iteration counts then measure the core, not the model. ``--warm-up``
    repeats part 3 for other warm-up lengths of
    a learned start (the engine's ``LEARNED_WARMUP_ITERATIONS``).
+4. **Least squares at fixed parameters** (``--least-squares``): for the same clouds, the RMS of
+   one least-squares solve (12 x 12, the engine's start smoothing 1e-4) at the plane projection's
+   parameters (``init="least_squares"``, ``parameterization="plane"``, 0 iterations) and at the
+   foot points of the learned prediction, beside the target of part 3: whether the prediction's
+   parameterization is better than the closed-form start's.
 """
 
 from __future__ import annotations
@@ -43,6 +48,8 @@ import torch
 from nurbs_core import samples
 from nurbs_core.fitting import FitConfig, engine, iter_fit
 from nurbs_core.fitting import statistics as fit_statistics
+from nurbs_core.fitting.least_squares import least_squares_fit
+from nurbs_core.fitting.projection import project
 from nurbs_core.learn.data import PatchGenerator, load_spline_dataset
 from nurbs_core.learn.predict import load_model, predict_surface
 from nurbs_core.learn.train import evaluate
@@ -128,7 +135,8 @@ def _surface(arrays):
 
 
 def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, warm_ups: list[int],
-               path: str | None) -> None:
+               path: str | None) -> list[list[float]]:
+    """Part 3; returns today's start's RMS curves (the targets of part 4)."""
     base = FitConfig(solver="gradient", iterations=budget, threads=1, learned_model=path)
     today = base.replace(init="pca", parameterization="plane")
     learned = base.replace(init="learned")
@@ -155,6 +163,31 @@ def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, warm_ups: list
               f"({median / 100:.0%} of 100), worst {max(reached)}, reached by "
               f"{sum(r <= 100 for r in reached)}/{len(reached)}; final RMS worse than today's "
               f"(>1%): {len(worse)}" + (f" [{'; '.join(worse)}]" if worse else ""))
+    return reference
+
+
+def least_squares_starts(clouds: list[tuple[str, np.ndarray]], reference: list[list[float]],
+                         path: str | None) -> None:
+    model = load_model(path)
+    plane = FitConfig(solver="gradient", init="least_squares", parameterization="plane",
+                      iterations=0, threads=1)
+    print("\n## 4. one least-squares solve (12 x 12) at fixed parameters; target: part 3's")
+    print(f"{'cloud':28s} {'target':>8s} {'plane':>8s} {'learned':>8s}")
+    beats_target = beats_plane = 0
+    for (name, points), ref in zip(clouds, reference, strict=True):
+        target = ref[min(100, len(ref) - 1)]
+        start = next(iter(iter_fit(points, plane)))
+        at_plane = fit_statistics(_surface(start.geometry), points)["rms"]
+        feet, _ = project(predict_surface(points, model), points)
+        low, high = feet.min(0), feet.max(0)
+        solved = least_squares_fit(points, (feet - low) / np.maximum(high - low, 1e-12), 3, 3,
+                                   12, 12, smoothing=1e-4)
+        at_learned = fit_statistics(solved, points)["rms"]
+        beats_target += at_learned <= target
+        beats_plane += at_learned < at_plane
+        print(f"{name:28s} {target:8.4f} {at_plane:8.4f} {at_learned:8.4f}")
+    print(f"learned parameters: at or below the target on {beats_target}/{len(clouds)}, better "
+          f"than the plane's on {beats_plane}/{len(clouds)}")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -164,6 +197,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--iterations", type=int, default=200)
     parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH")
     parser.add_argument("--warm-up", type=int, nargs="+", default=[engine.LEARNED_WARMUP_ITERATIONS])
+    parser.add_argument("--least-squares", action="store_true", help="part 4: one least-squares "
+                        "solve at the plane's and at the learned surface's parameters")
     parser.add_argument("--data", help="a SplineDataset-format HDF5 file for the table")
     parser.add_argument("--learned-model", help="the model of parts 2 and 3 and the table's first "
                         "row (default: the shipped one)")
@@ -171,7 +206,8 @@ def main(argv: list[str] | None = None) -> None:
     torch.set_num_threads(1)
     print(f"# machine: {platform.machine()} {os.cpu_count()} cores, torch {torch.__version__}, "
           f"1 torch thread")
-    models: dict[str, str | None] = {"unsupervised 20x20": args.learned_model}
+    first = "unsupervised 20x20" if args.learned_model is None else "--learned-model"
+    models: dict[str, str | None] = {first: args.learned_model}
     for item in args.model:
         name, _, path = item.partition("=")
         models[name] = path
@@ -181,7 +217,9 @@ def main(argv: list[str] | None = None) -> None:
     milliseconds = inference_ms(clouds, args.learned_model)
     print(f"\n## 2. inference: {milliseconds:.1f} ms per patch (median; 700 points, one thread, "
           f"resampling and mapping back included)")
-    iterations(clouds, args.iterations, args.warm_up, args.learned_model)
+    reference = iterations(clouds, args.iterations, args.warm_up, args.learned_model)
+    if args.least_squares:
+        least_squares_starts(clouds, reference, args.learned_model)
 
 
 if __name__ == "__main__":
