@@ -398,7 +398,8 @@ class FitSnapshot:
     losses: one dict per iteration since the previous snapshot,
     ``{"iteration": k, "total": value, <term>: value, ...}`` (normalised units, see FitConfig);
     an iteration that was rolled back (non-finite or exploding loss) has no entry, and the
-    snapshot's ``message`` says what happened.
+    next snapshot's ``message`` says what happened; the final snapshot's message sums up every
+    roll-back of the fit (it does not depend on which snapshots were sent on the way).
     status: one of "running", "paused", "converged", "stopped", "budget", "diverged", "failed".
     """
 

@@ -392,12 +392,20 @@ class _Run:
         return False
 
     def final_snapshot(self) -> FitSnapshot:
-        """The done snapshot of the run's current state and status."""
+        """The done snapshot of the run's current state and status. Its message does not depend
+        on which snapshots were sent before: a pending roll-back message gives way to the
+        guard's summary of all of them."""
         message = self.message
         if self.status == "budget" and self.config.iterations == 0:
             message = "no iterations requested"
         if message is None:
             message, self.pending_message = self.pending_message, None
+            if message is not None and message == self.guard.last_message:
+                message = None
+        summary = None if self.status == "diverged" else self.guard.summary(
+            self.schedule.learning_rate)
+        if summary is not None:
+            message = summary if message is None else f"{message}; {summary}"
         return self._snapshot(self.iteration, self.records, self.status, True, message)
 
 

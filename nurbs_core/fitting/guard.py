@@ -28,6 +28,9 @@ class DivergenceGuard:
     def __init__(self, state: list[torch.Tensor]):
         """``state``: the first stage's starting state (the fallback until a step is accepted)."""
         self.rollbacks = 0
+        #: the iteration of the last roll-back and what its snapshot says (None before the first)
+        self.last_rollback: int | None = None
+        self.last_message: str | None = None
         #: the stage's best loss so far (None before its first accepted step)
         self.reference: float | None = None
         self.last_good = state
@@ -62,10 +65,21 @@ class DivergenceGuard:
         """True once the fit has rolled back more than :data:`MAX_ROLLBACKS` times."""
         return self.rollbacks > MAX_ROLLBACKS
 
-    @staticmethod
-    def rollback_message(iteration: int, reason: str, learning_rate: float) -> str:
-        return (f"iteration {iteration}: {reason}; rolled back to the last good "
-                f"state and halved the learning rate to {learning_rate:.3g}")
+    def rollback_message(self, iteration: int, reason: str, learning_rate: float) -> str:
+        """What the snapshot after roll-back number :attr:`rollbacks` (at ``iteration``) says."""
+        self.last_rollback = iteration
+        self.last_message = (f"iteration {iteration}: {reason}; rolled back to the last good "
+                             f"state and halved the learning rate to {learning_rate:.3g}")
+        return self.last_message
+
+    def summary(self, learning_rate: float) -> str | None:
+        """What the final message of a fit that did not give up says about its roll-backs (None
+        when there were none): the same whatever snapshots were sent on the way."""
+        if not self.rollbacks:
+            return None
+        steps = "1 diverging step" if self.rollbacks == 1 else f"{self.rollbacks} diverging steps"
+        return (f"{steps} rolled back (the last at iteration {self.last_rollback}); "
+                f"the learning rate was halved to {learning_rate:.3g}")
 
     def give_up_message(self, learning_rate: float) -> str:
         return (f"gave up after {self.rollbacks} roll-backs; the learning rate "

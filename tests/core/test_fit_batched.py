@@ -54,14 +54,15 @@ def test_a_diverging_fit_rolls_back_alone():
     """One cloud with a learning rate that explodes, the others fine: its roll-backs and halved
     rate are its own, exactly as in its single fit."""
     config = FitConfig(iterations=30, control_points_u=6, control_points_v=5, threads=1,
-                       loss="mse", optimizer="sgd", learning_rate=40.0)
+                       loss="mse", optimizer="sgd", learning_rate=25.0)
     singles = [fit(points, config, parameters=params) for points, params in CLOUDS]
-    assert any("rolled back" in (s.message or "") or s.status == "diverged" for s in singles)
+    assert any("rolled back" in (s.message or "") for s in singles)
+    assert not all("rolled back" in (s.message or "") for s in singles)
     batched = fit_batch([c[0] for c in CLOUDS], config, parameters=[c[1] for c in CLOUDS])
     for one, many in zip(singles, batched, strict=True):
-        # (the single fit reports a roll-back in the snapshot after it; the batch has only the
-        # final one, whose message then says it)
-        assert (many.status, many.iterations) == (one.status, one.iterations)
+        # (the final message sums up the roll-backs whatever snapshots were sent on the way)
+        assert (many.status, many.iterations, many.message) == (one.status, one.iterations,
+                                                                one.message)
         np.testing.assert_allclose(many.geometry.control_points.numpy(),
                                    one.geometry.control_points.numpy(), rtol=0, atol=1e-9)
 

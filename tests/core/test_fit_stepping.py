@@ -131,6 +131,21 @@ def test_diverging_steps_roll_back_and_halve_the_learning_rate():
     assert totals[-1] < totals[0]  # it recovered and kept fitting
 
 
+def test_the_final_message_sums_up_the_roll_backs_whatever_was_sent_on_the_way():
+    """Whether a roll-back's own snapshot was sent depends on the clock; the result's message
+    must not: with a snapshot after every step and with none until the end it is the same."""
+    points, params = _grid()
+    config = _small(optimizer="sgd", learning_rate=1e9, loss="mse", iterations=60,
+                    lr_schedule="none")
+    every = fit(points, config.replace(snapshot_interval=0.0), parameters=params)
+    none = fit(points, config.replace(snapshot_interval=1e9), parameters=params)
+    assert every.snapshots > 10 and none.snapshots <= 2
+    assert every.message == none.message
+    rollbacks = int(every.message.split(" diverging step")[0].split("; ")[-1])
+    assert rollbacks >= 2 and "rolled back (the last at iteration" in every.message
+    assert f"halved to {config.learning_rate / 2 ** rollbacks:.3g}" in every.message
+
+
 def test_iter_fit_validates_before_returning():
     with pytest.raises(ValueError, match="empty"):
         iter_fit(np.zeros((0, 3)), FitConfig())
