@@ -12,7 +12,9 @@ Run: ``python benchmarks/bench_learned.py [--patches 24] [--table 200]
    max_p d(p, S)^2), with S a 100 x 100 parameter grid on the predicted surface and P the
    cloud (two-sided, squared distances); 100 x Lap = 100 x the mean squared umbrella Laplacian of
    the control net. The PCA plane grid (the start the network's residual is added to) is the
-   reference row, the paper's numbers are printed beside.
+   reference row, the paper's numbers are printed beside. The last row is ``nurbs-fit``'s default
+   fit of the same clouds (the least-squares core on the cloud's mesh map, no learning), measured
+   the same way: what a learned prediction competes with.
 2. **Inference**: milliseconds per patch of ``predict_surface`` (resampling, normalisation,
    forward pass, mapping back) on one torch thread, median over the patches.
 3. **Iterations**: ``--patches`` held-out clouds of 700 points (half from the test split, half
@@ -46,11 +48,13 @@ import numpy as np
 import torch
 
 from nurbs_core import samples
-from nurbs_core.fitting import FitConfig, engine, iter_fit
+from nurbs_core.fitting import FitConfig, engine, fit, iter_fit
 from nurbs_core.fitting import statistics as fit_statistics
 from nurbs_core.fitting.least_squares import least_squares_fit
 from nurbs_core.fitting.projection import project
 from nurbs_core.learn.data import PatchGenerator, load_spline_dataset
+from nurbs_core.learn.losses import folded_fraction, laplacian, nearest_squared
+from nurbs_core.learn.normalize import Normalization
 from nurbs_core.learn.predict import load_model, predict_surface
 from nurbs_core.learn.train import evaluate
 
@@ -83,6 +87,45 @@ def table(models: dict[str, str | None], count: int, data: str | None) -> None:
                   f"{float(sums['plane_chamfer']) / n:8.4f} "
                   f"{float(sums['plane_hausdorff']) / n:8.4f} {0.0:8.4f} {0.0:6.2f}%")
             plane_done = True
+
+
+def core_row(count: int, data: str | None) -> None:
+    """The table's row of the default ``nurbs-fit`` (the least-squares core, no learning) on the
+    same patches, measured as :func:`patch_metrics` measures a prediction: its surface mapped to
+    each cloud's normalised frame and sampled on a 100 x 100 grid of its domain (the core's own
+    knots and grid, so its Laplacian is of another net and not comparable)."""
+    dataset = load_spline_dataset(data, limit=count) if data else PatchGenerator(count, split="test")
+    sums = dict.fromkeys(("chamfer", "hausdorff", "laplacian", "folded"), 0.0)
+    refused, seconds, done = 0, [], 0
+    t = torch.linspace(0, 1, 100, dtype=torch.float64)
+    for index in range(min(count, len(dataset))):
+        points = torch.as_tensor(dataset[index].points, dtype=torch.float64)
+        started = time.perf_counter()
+        try:
+            result = fit(points.numpy(), FitConfig(threads=1))
+        except ValueError:  # not one patch by the core's mesh test
+            refused += 1
+            continue
+        seconds.append(time.perf_counter() - started)
+        surface = result.geometry
+        normalization = Normalization.fit(points)
+        (u0, u1), (v0, v1) = surface.domain
+        grid = surface.evaluate_grid(u0 + (u1 - u0) * t, v0 + (v1 - v0) * t).detach()
+        grid = normalization.apply(grid[None])
+        cloud = normalization.apply(points[None])
+        forward, backward = nearest_squared(grid.reshape(1, -1, 3), cloud)
+        sums["chamfer"] += 100 * float(forward.mean() + backward.mean())
+        sums["hausdorff"] += 100 * float(forward.max() + backward.max())
+        sums["laplacian"] += 100 * float(laplacian(normalization.apply(
+            surface.control_points.detach()[None])))
+        sums["folded"] += 100 * float(folded_fraction(grid))
+        done += 1
+    n = max(done, 1)
+    print(f"{'least-squares core (default)':<28} {'own':>6} {sums['chamfer'] / n:8.4f} "
+          f"{sums['hausdorff'] / n:8.4f} {sums['laplacian'] / n:8.4f} "
+          f"{sums['folded'] / n:6.2f}%   nurbs-fit's default, no learning: "
+          f"{1e3 * stats_lib.median(seconds):.0f} ms per patch (median), "
+          f"refused {refused} of {done + refused}")
 
 
 def held_out_clouds(count: int) -> list[tuple[str, np.ndarray]]:
@@ -213,6 +256,7 @@ def main(argv: list[str] | None = None) -> None:
         models[name] = path
     if args.table > 0:
         table(models, args.table, args.data)
+        core_row(args.table, args.data)
     clouds = held_out_clouds(args.patches)
     milliseconds = inference_ms(clouds, args.learned_model)
     print(f"\n## 2. inference: {milliseconds:.1f} ms per patch (median; 700 points, one thread, "
