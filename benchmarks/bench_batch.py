@@ -19,6 +19,8 @@ Each rate is patches per second of wall time of the whole command (start-up, imp
 u-major) and every mode fits them with ``nurbs-fit --grid NU NV`` (known parameters: the
 gradient fit). Then (b) and (c) fit up to ``--batch-fits`` inputs at once with the engine's
 ``fit_batch`` (its default, 32, unless ``--fit-args`` sets it); (a) still fits one per process.
+With ``--fit-args "--solver least_squares"`` every fit is the exact least-squares solve at the
+grid's parameters, and each batch of clouds on the one grid shares one factorisation.
 """
 
 from __future__ import annotations

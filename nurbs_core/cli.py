@@ -159,9 +159,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="weight of tangent continuity across seams with --patches "
                              "(default 2)")
     parser.add_argument("--solver", default="auto", choices=SOLVERS,
-                        help="'least_squares': fairing least squares with parameter correction; "
-                             "'gradient': the torch optimisation from that start; 'auto' adds "
-                             "the gradient fit only for a non-default loss or free knots/weights")
+                        help="'least_squares': fairing least squares with parameter correction "
+                             "(with --grid: the exact least-squares solve at the grid's "
+                             "parameters, no iterations); 'gradient': the torch optimisation "
+                             "from that start; 'auto' adds the gradient fit only for a "
+                             "non-default loss or free knots/weights")
     parser.add_argument("--max-control-points", type=int, default=None, metavar="N",
                         help="largest control grid per direction the least-squares core may "
                              "grow to while the tolerance is not met (default 40; 0 keeps the "
@@ -654,10 +656,14 @@ def _print_plan(args: argparse.Namespace, config: FitConfig, count: int,
 
     core = (not args.curve and not known_parameters and args.initial is None
             and config.init != "learned" and resolved_solver(config) == "least_squares")
-    how = (f"by fairing least squares (stiffness {config.stiffness:g}"
-           + (f", grid growing to at most {config.max_control_points} per direction"
-              if config.max_control_points else "") + ")") if core else \
-        f"with {config.optimizer}, loss {config.loss}"
+    if known_parameters and config.solver == "least_squares":
+        how = "by exact least squares at the known parameters"
+    elif core:
+        how = (f"by fairing least squares (stiffness {config.stiffness:g}"
+               + (f", grid growing to at most {config.max_control_points} per direction"
+                  if config.max_control_points else "") + ")")
+    else:
+        how = f"with {config.optimizer}, loss {config.loss}"
     print(f"{args.input}: {count} points; fitting a {config.kind} "
           f"(degree {config.degree_u}" + ("" if args.curve else f"x{config.degree_v}")
           + f", {config.control_points_u}" + ("" if args.curve else f"x{config.control_points_v}")

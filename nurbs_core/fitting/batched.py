@@ -12,6 +12,10 @@ on its cloud alone (to rounding; ``tests/core/test_fit_batched.py`` holds them t
 Fits are grouped by control-grid shape (the config's, so one group unless the degrees or counts
 differ). Set terms (chamfer, hausdorff) look up nearest neighbours per fit with k-d trees: at
 these sizes a tree query is cheaper than a batched all-pairs distance.
+
+With ``solver="least_squares"`` there are no iterations: each fit is the exact least-squares
+solve at its parameters (:mod:`nurbs_core.fitting.exact`), and clouds that share their
+parameters share one factorisation.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from nurbs_core import losses as _losses
 from nurbs_core.evaluate import SurfaceEvaluator, SurfaceGridEvaluator
 from nurbs_core.fitting.config import FitConfig, FitResult, StopToken
 from nurbs_core.fitting.engine import _Run, statistics
+from nurbs_core.fitting.exact import exact_geometries, exact_problem, exact_snapshot
 from nurbs_core.fitting.problem import initial_geometry, prepare
 from nurbs_core.geometry import geometry_from_numpy
 
@@ -35,6 +40,8 @@ def batch_problem(config: FitConfig, counts: Sequence[int]) -> str | None:
     """Why ``config`` cannot fit clouds of ``counts`` points in one batch, or None when it can."""
     if config.kind != "surface":
         return "batched fits are for surfaces"
+    if config.solver == "least_squares":
+        return exact_problem(config)
     if config.optimizer == "lbfgs":
         return "L-BFGS re-evaluates each fit inside its line search"
     if config.free_knots:
@@ -59,6 +66,8 @@ def fit_batch(targets: Sequence[ArrayLike], config: FitConfig | None = None, *,
     if len(targets) != len(parameters):
         raise ValueError(f"{len(targets)} clouds but {len(parameters)} parameter arrays")
     started = time.perf_counter()
+    if config.solver == "least_squares":
+        return _exact_batch(targets, config, parameters, started)
     runs: list[_Run] = []
     for index, (target, params) in enumerate(zip(targets, parameters, strict=True)):
         try:
@@ -168,6 +177,34 @@ class _BatchedGroup:
             totals.append(total)
             terms.append(values)
         return totals, terms
+
+
+def _exact_batch(targets: Sequence[ArrayLike], config: FitConfig,
+                 parameters: Sequence[ArrayLike], started: float) -> list[FitResult]:
+    """:func:`fit_batch` with solver "least_squares": the exact solves, one factorisation per
+    set of shared parameters (:func:`~nurbs_core.fitting.exact.exact_geometries`)."""
+    problems = []
+    for index, (target, params) in enumerate(zip(targets, parameters, strict=True)):
+        try:
+            problems.append(prepare(target, config, params))
+        except ValueError as exc:
+            raise ValueError(f"cloud {index}: {exc}") from None
+    reason = batch_problem(config, [problem.count for problem in problems])
+    if reason is not None:
+        raise ValueError(f"these fits cannot run as one batch: {reason}")
+    geometries = exact_geometries(problems, config)
+    results = []
+    for problem, geometry, target, params in zip(problems, geometries, targets, parameters,
+                                                 strict=True):
+        final = exact_snapshot(problem, geometry, started)
+        dtype = torch.float32 if config.dtype == "float32" else torch.float64
+        surface = geometry_from_numpy(final.geometry, dtype=dtype)
+        results.append(FitResult(
+            geometry=surface, history=list(final.losses), status=final.status,
+            message=final.message,
+            statistics=statistics(surface, np.asarray(target, np.float64), params),
+            iterations=final.iteration, elapsed=time.perf_counter() - started, snapshots=1))
+    return results
 
 
 def _evaluated(total: torch.Tensor) -> Callable[[], torch.Tensor]:

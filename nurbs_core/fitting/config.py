@@ -204,10 +204,12 @@ class FitConfig:
     #: ValueError says why one patch cannot hold it); a tube is always one patch, cut open along
     #: its shortest seam and closed again there
     single_patch: bool = False
-    #: "least_squares": the fairing least-squares core with parameter correction; "gradient":
-    #: the torch optimisation (any loss, free knots, weights), started from the least-squares
-    #: solution for unordered surface clouds; "auto": least squares alone unless the loss is
-    #: not the default or knots / weights are free
+    #: "least_squares": the fairing least-squares core with parameter correction (with known
+    #: parameters: the exact least-squares solve at them, no iterations,
+    #: :mod:`nurbs_core.fitting.exact`); "gradient": the torch optimisation (any loss, free
+    #: knots, weights), started from the least-squares solution for unordered surface clouds;
+    #: "auto": least squares alone unless the loss is not the default or knots / weights are
+    #: free (with known parameters: the gradient fit)
     solver: str = "auto"
     #: largest control grid per direction the least-squares core may grow to while the
     #: tolerance is not met (0: keep the configured grid)

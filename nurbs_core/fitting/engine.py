@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike
 from nurbs_core import losses as _losses
 from nurbs_core.fitting.config import FitConfig, FitResult, FitSnapshot, StopToken
 from nurbs_core.fitting.evaluation import Evaluation, cloud_tree, draw_batch, uses_parameters
+from nurbs_core.fitting.exact import exact_geometry, exact_problem, exact_snapshot, uses_exact
 from nurbs_core.fitting.guard import DivergenceGuard
 from nurbs_core.fitting.learned_start import LEARNED_WARMUP_ITERATIONS, learned_start
 from nurbs_core.fitting.model import TrainableGeometry
@@ -73,6 +74,11 @@ def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopTo
     if not problem.known and config.parameter_correction and "pointwise" not in loss.kinds():
         loss = loss.with_term(1.0, "p2s")
     stop = stop or StopToken()
+    if uses_exact(problem, config):
+        reason = exact_problem(config, initial is not None)
+        if reason is not None:
+            raise ValueError(reason)
+        return iter([exact_snapshot(problem, exact_geometry(problem, config), started)])
     note, sheet = None, None
     if config.init == "learned" and initial is None:
         learned = learned_start(problem, config)

@@ -176,23 +176,40 @@ def least_squares_fit(points: ArrayLike, parameters: ArrayLike, degree_u: int = 
         raise ValueError(f"{points.shape[0]} points cannot determine {n} x {m} control points")
     U = _knots_for(knots_u, n, degree_u, params[:, 0], "knots_u")
     V = _knots_for(knots_v, m, degree_v, params[:, 1], "knots_v")
-    axes = grid_axes(params) if smoothing == 0 else None
+    control = surface_controls(points[None], params, (degree_u, degree_v), U, V, smoothing)[0]
+    return NurbsSurface(control, degree_u, degree_v, U, V)
+
+
+def surface_controls(points: np.ndarray, parameters: np.ndarray, degrees: tuple[int, int],
+                     knots_u: np.ndarray, knots_v: np.ndarray,
+                     smoothing: float = 0.0) -> np.ndarray:
+    """The least-squares control grids (B, n, m, 3) of B clouds (B, M, 3) that share their
+    parameters (M, 2), degrees and knot vectors (n + p + 1,), (m + q + 1,): one factorisation,
+    the clouds' coordinates as its 3 B right-hand sides. Each grid is what
+    :func:`least_squares_fit` gives for its cloud alone (it is this function with B = 1)."""
+    count, size = points.shape[0], points.shape[1]
+    degree_u, degree_v = degrees
+    n, m = len(knots_u) - degree_u - 1, len(knots_v) - degree_v - 1
+    # (M, 3 B): point k's coordinates, cloud by cloud
+    rhs = points.transpose(1, 0, 2).reshape(size, 3 * count)
+    axes = grid_axes(parameters) if smoothing == 0 else None
     if axes is not None and axes[0].size >= n and axes[1].size >= m:
         # grid data: the collocation matrix is a Kronecker product, so the least-squares solution
         # is separable, C = pinv(A_u) Z pinv(A_v)^T, at O(N) cost
-        matrix_u = collocation_matrix(U, degree_u, axes[0])
-        matrix_v = collocation_matrix(V, degree_v, axes[1])
-        grid = points.reshape(axes[0].size, axes[1].size, 3)
-        step = _solve(matrix_u, grid.reshape(axes[0].size, -1)).reshape(n, axes[1].size, 3)
+        matrix_u = collocation_matrix(knots_u, degree_u, axes[0])
+        matrix_v = collocation_matrix(knots_v, degree_v, axes[1])
+        grid = rhs.reshape(axes[0].size, axes[1].size, 3 * count)
+        step = _solve(matrix_u, grid.reshape(axes[0].size, -1)).reshape(n, axes[1].size, -1)
         control = _solve(matrix_v, step.transpose(1, 0, 2).reshape(axes[1].size, -1))
-        control = control.reshape(m, n, 3).transpose(1, 0, 2)
-        return NurbsSurface(np.ascontiguousarray(control), degree_u, degree_v, U, V)
-    matrix = collocation_matrix(U, degree_u, params[:, 0], V, degree_v, params[:, 1])
-    eye_u, eye_v = scipy.sparse.eye(n), scipy.sparse.eye(m)
-    penalty = scipy.sparse.vstack([scipy.sparse.kron(_second_difference(n), eye_v),
-                                   scipy.sparse.kron(eye_u, _second_difference(m))]).tocsr()
-    control = _solve(matrix, points, penalty, smoothing)
-    return NurbsSurface(control.reshape(n, m, 3), degree_u, degree_v, U, V)
+        control = control.reshape(m, n, 3 * count).transpose(1, 0, 2)
+    else:
+        matrix = collocation_matrix(knots_u, degree_u, parameters[:, 0], knots_v, degree_v,
+                                    parameters[:, 1])
+        eye_u, eye_v = scipy.sparse.eye(n), scipy.sparse.eye(m)
+        penalty = scipy.sparse.vstack([scipy.sparse.kron(_second_difference(n), eye_v),
+                                       scipy.sparse.kron(eye_u, _second_difference(m))]).tocsr()
+        control = _solve(matrix, rhs, penalty, smoothing).reshape(n, m, 3 * count)
+    return np.ascontiguousarray(control.reshape(n, m, count, 3).transpose(2, 0, 1, 3))
 
 
 # --------------------------------------------------------------------------------------------

@@ -471,6 +471,23 @@ def test_options_that_cannot_batch_fit_one_by_one(tmp_path, batch_sizes):
     _assert_grid_results(out, reference)
 
 
+@pytest.mark.timeout(120)
+def test_grid_least_squares_solves_each_chunk_at_once_like_single_runs(tmp_path, batch_sizes):
+    """--solver least_squares: the exact solve, a chunk of clouds on one grid in one
+    factorisation, each result the single run's."""
+    options = [*GRID, "--solver", "least_squares"]
+    folder = _grid_folder(tmp_path, bad=False)
+    reference = _single_runs(tmp_path, folder, options)
+    out = tmp_path / "fits"
+    assert main([str(folder), "--output-dir", str(out), "--batch-fits", "4", *options]) == 0
+    assert batch_sizes == [4]  # (the fifth input, a chunk of one, is fitted alone)
+    _assert_grid_results(out, reference)
+    rows = _summary(out / "summary.jsonl")
+    assert len(rows) == GRIDS
+    assert all(row["iterations"] == 0 and "exact least squares" in row["fit_message"]
+               for row in rows.values())
+
+
 @pytest.mark.timeout(150)
 def test_grid_batch_on_a_local_dask_cluster(tmp_path, grid_reference):
     pytest.importorskip("distributed", reason="the batch extra (dask[distributed]) is not installed")
