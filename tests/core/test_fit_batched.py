@@ -55,16 +55,23 @@ def test_a_diverging_fit_rolls_back_alone():
     rate are its own, exactly as in its single fit."""
     config = FitConfig(iterations=30, control_points_u=6, control_points_v=5, threads=1,
                        loss="mse", optimizer="sgd", learning_rate=25.0)
-    singles = [fit(points, config, parameters=params) for points, params in CLOUDS]
+    # (the final message sums up the roll-backs whatever snapshots were sent on the way)
+    singles = assert_batch_equals_single_fits(CLOUDS, config, atol=1e-9)
     assert any("rolled back" in (s.message or "") for s in singles)
     assert not all("rolled back" in (s.message or "") for s in singles)
-    batched = fit_batch([c[0] for c in CLOUDS], config, parameters=[c[1] for c in CLOUDS])
+
+
+def assert_batch_equals_single_fits(clouds, config, atol):
+    """fit_batch over ``clouds`` ((points, parameters) pairs) against one fit per cloud: the
+    same status, iterations and message, control points within ``atol``. Returns the singles."""
+    singles = [fit(points, config, parameters=params) for points, params in clouds]
+    batched = fit_batch([c[0] for c in clouds], config, parameters=[c[1] for c in clouds])
     for one, many in zip(singles, batched, strict=True):
-        # (the final message sums up the roll-backs whatever snapshots were sent on the way)
         assert (many.status, many.iterations, many.message) == (one.status, one.iterations,
                                                                 one.message)
         np.testing.assert_allclose(many.geometry.control_points.numpy(),
-                                   one.geometry.control_points.numpy(), rtol=0, atol=1e-9)
+                                   one.geometry.control_points.numpy(), rtol=0, atol=atol)
+    return singles
 
 
 def test_what_cannot_be_batched_is_refused_with_the_reason():
