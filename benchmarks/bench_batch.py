@@ -11,8 +11,11 @@ options (default: the command's defaults) by
 (b) one ``nurbs-fit FOLDER --output-dir DIR`` process (``--jobs 1``: every fit in that process);
 (c) the same with ``--jobs 2`` (an embedded local Dask cluster of 2 worker processes).
 Each rate is patches per second of wall time of the whole command (start-up, imports and, for
-(c), the cluster's start included). Mean RMS is the point-to-surface RMS of the fits; (b) and
-(c) are also compared control point by control point. Nothing is batched in the engine here
+(c), the cluster's start included). Mean RMS is the point-to-surface RMS of the fits, and the
+quality columns are the means of the fits' flipped and overlapping area and coverage (percent;
+(a) reads them from each report, (b) and (c) from the summary; "nan" for fits at known
+parameters, which have no such measures); (b) and (c) are also compared control point by
+control point. Nothing is batched in the engine here
 (no shared batch dimension): (b) and (c) save the start-up per file and use both cores.
 
 ``--grid NU NV``: the clouds are ordered NU x NV grids instead (height fields of several shapes,
@@ -79,19 +82,40 @@ def _control(path: Path) -> np.ndarray:
     return np.asarray(shape["control_points"], dtype=float)
 
 
-def per_process(paths: list[Path], out: Path, fit_args: list[str]) -> tuple[float, float]:
-    """(seconds per file, mean rms) of one nurbs-fit process per file."""
+#: the quality measures of the table (summary keys), as nurbs-fit's report prints them
+QUALITY = {"flipped_fraction": r"flipped area: ([0-9.]+)%",
+           "overlap_fraction": r"overlapping sheets over ([0-9.]+)%",
+           "coverage": r"coverage ([0-9.]+)%"}
+
+
+def _means(rows: list[dict[str, float]]) -> dict[str, float]:
+    """Mean RMS and mean of each quality measure (percent; NaN where a fit has none, as fits at
+    known parameters)."""
+    out = {"rms": float(np.mean([row["rms"] for row in rows]))}
+    for key in QUALITY:
+        values = [row[key] for row in rows if key in row]
+        out[key] = 100 * float(np.mean(values)) if len(values) == len(rows) else float("nan")
+    return out
+
+
+def per_process(paths: list[Path], out: Path, fit_args: list[str]) -> tuple[float, dict]:
+    """(seconds per file, mean rms and quality measures) of one nurbs-fit process per file."""
     out.mkdir()
-    rms, start = [], time.perf_counter()
+    rows, start = [], time.perf_counter()
     for path in paths:
         done = subprocess.run([*COMMAND, str(path), "-o", str(out / f"{path.stem}.json"), "-q",
                                *fit_args], capture_output=True, text=True, check=True)
-        rms.append(float(re.search(r"rms ([-+0-9.eE]+)", done.stdout).group(1)))
-    return (time.perf_counter() - start) / len(paths), float(np.mean(rms))
+        row = {"rms": float(re.search(r"rms ([-+0-9.eE]+)", done.stdout).group(1))}
+        for key, pattern in QUALITY.items():
+            found = re.search(pattern, done.stdout)
+            if found:
+                row[key] = float(found.group(1)) / 100
+        rows.append(row)
+    return (time.perf_counter() - start) / len(paths), _means(rows)
 
 
-def batch(folder: Path, out: Path, jobs: int, fit_args: list[str]) -> tuple[float, float, int]:
-    """(wall seconds, mean rms, failures) of one batch command."""
+def batch(folder: Path, out: Path, jobs: int, fit_args: list[str]) -> tuple[float, dict, int]:
+    """(wall seconds, mean rms and quality measures, failures) of one batch command."""
     start = time.perf_counter()
     done = subprocess.run([*COMMAND, str(folder), "--output-dir", str(out), "--jobs", str(jobs),
                            "-q", *fit_args], capture_output=True, text=True)
@@ -100,7 +124,7 @@ def batch(folder: Path, out: Path, jobs: int, fit_args: list[str]) -> tuple[floa
         raise RuntimeError(f"--jobs {jobs} failed ({done.returncode}): {done.stderr[-2000:]}")
     rows = [json.loads(line) for line in (out / "summary.jsonl").read_text().splitlines()]
     ok = [row for row in rows if row["status"] == "ok"]
-    return seconds, float(np.mean([row["rms"] for row in ok])), len(rows) - len(ok)
+    return seconds, _means(ok), len(rows) - len(ok)
 
 
 def main(argv=None) -> None:
@@ -136,23 +160,26 @@ def main(argv=None) -> None:
         folder.mkdir()
         paths = write_clouds(folder, args.count, args.points, grid)
         sample = paths[:max(1, min(args.process_sample, len(paths)))]
-        per_file, rms_a = per_process(sample, root / "a", fit_args)
+        per_file, means_a = per_process(sample, root / "a", fit_args)
         rows = [(f"(a) one nurbs-fit process per file [{len(sample)} of {len(paths)} run, rate "
-                 f"extrapolated]", 1 / per_file, rms_a, 0)]
+                 f"extrapolated]", 1 / per_file, means_a, 0)]
         results = {}
         for jobs, label in ((1, "(b) one process, --jobs 1"), (2, "(c) local Dask, --jobs 2")):
-            seconds, rms, failed = batch(folder, root / f"jobs{jobs}", jobs, fit_args)
+            seconds, means, failed = batch(folder, root / f"jobs{jobs}", jobs, fit_args)
             results[jobs] = root / f"jobs{jobs}"
-            rows.append((label, len(paths) / seconds, rms, failed))
+            rows.append((label, len(paths) / seconds, means, failed))
         worst = max(float(np.abs(_control(results[1] / f"{p.stem}.json")
                                  - _control(results[2] / f"{p.stem}.json")).max()) for p in paths
                     if (results[1] / f"{p.stem}.json").exists())
         worst_a = max(float(np.abs(_control(root / "a" / f"{p.stem}.json")
                                    - _control(results[1] / f"{p.stem}.json")).max()) for p in sample)
     width = max(len(r[0]) for r in rows)
-    print(f"{'mode':<{width}}  {'patches/s':>9}  {'x (a)':>6}  {'mean RMS':>10}  failed")
-    for label, rate, rms, failed in rows:
-        print(f"{label:<{width}}  {rate:9.2f}  {rate / rows[0][1]:6.1f}  {rms:10.4g}  {failed}")
+    print(f"{'mode':<{width}}  {'patches/s':>9}  {'x (a)':>6}  {'mean RMS':>10}  "
+          f"{'flipped %':>9}  {'overlap %':>9}  {'coverage %':>10}  failed")
+    for label, rate, means, failed in rows:
+        print(f"{label:<{width}}  {rate:9.2f}  {rate / rows[0][1]:6.1f}  {means['rms']:10.4g}  "
+              f"{means['flipped_fraction']:9.3f}  {means['overlap_fraction']:9.3f}  "
+              f"{means['coverage']:10.2f}  {failed}")
     print(f"# largest control-point difference: (a) vs (b) {worst_a:.3g}, (b) vs (c) {worst:.3g}")
 
 
