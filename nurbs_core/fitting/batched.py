@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike
 
 from nurbs_core import losses as _losses
 from nurbs_core.evaluate import SurfaceEvaluator, SurfaceGridEvaluator
-from nurbs_core.fitting.config import FitConfig, FitResult, StopToken
+from nurbs_core.fitting.config import FitConfig, FitResult, FitSnapshot, StopToken
 from nurbs_core.fitting.engine import _Run, statistics
 from nurbs_core.fitting.exact import exact_geometries, exact_problem, exact_snapshot
 from nurbs_core.fitting.problem import initial_geometry, prepare
@@ -193,18 +193,10 @@ def _exact_batch(targets: Sequence[ArrayLike], config: FitConfig,
     if reason is not None:
         raise ValueError(f"these fits cannot run as one batch: {reason}")
     geometries = exact_geometries(problems, config)
-    results = []
-    for problem, geometry, target, params in zip(problems, geometries, targets, parameters,
-                                                 strict=True):
-        final = exact_snapshot(problem, geometry, started)
-        dtype = torch.float32 if config.dtype == "float32" else torch.float64
-        surface = geometry_from_numpy(final.geometry, dtype=dtype)
-        results.append(FitResult(
-            geometry=surface, history=list(final.losses), status=final.status,
-            message=final.message,
-            statistics=statistics(surface, np.asarray(target, np.float64), params),
-            iterations=final.iteration, elapsed=time.perf_counter() - started, snapshots=1))
-    return results
+    return [_from_final(exact_snapshot(problem, geometry, started), config, target, params,
+                        time.perf_counter() - started)
+            for problem, geometry, target, params in zip(problems, geometries, targets,
+                                                         parameters, strict=True)]
 
 
 def _evaluated(total: torch.Tensor) -> Callable[[], torch.Tensor]:
@@ -214,8 +206,14 @@ def _evaluated(total: torch.Tensor) -> Callable[[], torch.Tensor]:
 
 def _result(run: _Run, target: ArrayLike, params: ArrayLike, elapsed: float) -> FitResult:
     """The :class:`FitResult` of a finished run, as :func:`fit` builds it."""
-    final = run.final_snapshot()
-    dtype = torch.float32 if run.config.dtype == "float32" else torch.float64
+    return _from_final(run.final_snapshot(), run.config, target, params, elapsed)
+
+
+def _from_final(final: FitSnapshot, config: FitConfig, target: ArrayLike, params: ArrayLike,
+                elapsed: float) -> FitResult:
+    """The :class:`FitResult` of a fit whose only snapshot is its final one, as :func:`fit`
+    builds it (geometry in the config's dtype, statistics at the known parameters)."""
+    dtype = torch.float32 if config.dtype == "float32" else torch.float64
     geometry = geometry_from_numpy(final.geometry, dtype=dtype)
     return FitResult(geometry=geometry, history=list(final.losses), status=final.status,
                      message=final.message,
