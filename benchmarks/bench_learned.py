@@ -21,18 +21,20 @@ Run: ``python benchmarks/bench_learned.py [--patches 24] [--table 200]
    made by other means: ``nurbs_core.samples`` saddles, bowls, terrains, leaflets, curled
    sheets), each fitted by the gradient fit (default loss, 12 x 12 control points) from today's
    start (``init="pca"``: the principal plane, ``parameterization="plane"``) and from the
-   learned one (``init="learned"``). The accuracy today's start reaches after 100 iterations
-   (RMS point-to-surface distance at foot points) is the target; printed: the iteration at which
-   the learned start first reaches it (median and worst, and as a fraction of 100), and the final
-   RMS of both after ``--iterations``. A learned start that falls back (its message says why)
-   runs the config's own ``pca`` path: for these unordered clouds the least-squares core's start,
-   not the plane, so its iteration counts then measure the core, not the model. ``--warm-up``
-   repeats part 3 for other warm-up lengths of
-   a learned start (the engine's ``LEARNED_WARMUP_ITERATIONS``).
+   learned one (``init="learned"``: one least-squares solve at the parameters the prediction
+   gives the points, :mod:`nurbs_core.fitting.learned_start`). The accuracy today's start
+   reaches after 100 iterations (RMS point-to-surface distance at foot points) is the target;
+   printed: the iteration at which the learned start first reaches it (median and worst, and as
+   a fraction of 100), and the final RMS of both after ``--iterations``. A learned start that
+   falls back (its message says why) runs the config's own ``pca`` path: for these unordered
+   clouds the least-squares core's start, not the plane, so its iteration counts then measure
+   the core, not the model. ``--warm-up`` repeats part 3 for other warm-up lengths of a learned
+   start (the engine's ``LEARNED_WARMUP_ITERATIONS``).
 4. **Least squares at fixed parameters** (``--least-squares``): for the same clouds, the RMS of
    one least-squares solve (12 x 12, the engine's start smoothing 1e-4) at the plane projection's
    parameters (``init="least_squares"``, ``parameterization="plane"``, 0 iterations) and at the
-   foot points of the learned prediction, beside the target of part 3: whether the prediction's
+   parameters of the learned prediction (the learned start's iteration 0, whether or not it passes
+   the start's quality check), beside the target of part 3: whether the prediction's
    parameterization is better than the closed-form start's.
 """
 
@@ -50,8 +52,8 @@ import torch
 from nurbs_core import samples
 from nurbs_core.fitting import FitConfig, engine, fit, iter_fit
 from nurbs_core.fitting import statistics as fit_statistics
-from nurbs_core.fitting.least_squares import least_squares_fit
-from nurbs_core.fitting.projection import project
+from nurbs_core.fitting.learned_start import foot_parameters
+from nurbs_core.fitting.problem import least_squares_start, prepare
 from nurbs_core.learn.data import PatchGenerator, load_spline_dataset
 from nurbs_core.learn.losses import folded_fraction, laplacian, nearest_squared
 from nurbs_core.learn.normalize import Normalization
@@ -221,11 +223,12 @@ def least_squares_starts(clouds: list[tuple[str, np.ndarray]], reference: list[l
         target = ref[min(100, len(ref) - 1)]
         start = next(iter(iter_fit(points, plane)))
         at_plane = fit_statistics(_surface(start.geometry), points)["rms"]
-        feet, _ = project(predict_surface(points, model), points)
-        low, high = feet.min(0), feet.max(0)
-        solved = least_squares_fit(points, (feet - low) / np.maximum(high - low, 1e-12), 3, 3,
-                                   12, 12, smoothing=1e-4)
-        at_learned = fit_statistics(solved, points)["rms"]
+        config = FitConfig(solver="gradient", init="learned", learned_model=path, threads=1)
+        problem = prepare(points, config)
+        solved = least_squares_start(problem, config,
+                                     foot_parameters(problem, predict_surface(points, model)))
+        at_learned = fit_statistics(solved.to(dtype=torch.float64),
+                                    problem.points.double().numpy())["rms"] * problem.scale
         beats_target += at_learned <= target
         beats_plane += at_learned < at_plane
         print(f"{name:28s} {target:8.4f} {at_plane:8.4f} {at_learned:8.4f}")

@@ -82,9 +82,8 @@ def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopTo
     note, sheet = None, None
     if config.init == "learned" and initial is None:
         learned = learned_start(problem, config)
-        if learned.surface is not None:
-            geometry = initial_geometry(problem, config, learned.surface)
-            return _gradient_run(problem, config, geometry, loss, stop, True,
+        if learned.geometry is not None:
+            return _gradient_run(problem, config, learned.geometry, loss, stop, True,
                                  learned=learned.message)
         config, note, sheet = config.replace(init="pca"), learned.message, learned.sheet
     if uses_core(problem, config, initial):

@@ -1,17 +1,21 @@
 """The learned start of a surface fit (``FitConfig.init == "learned"``).
 
 A trained encoder (:mod:`nurbs_core.learn`; torch only, the ``learn`` extra adds HDF5 datasets for
-training) predicts a control grid
-from the cloud in one forward pass; the gradient fit then continues from that surface, with a
-short warm-up (:data:`LEARNED_WARMUP_ITERATIONS`) because the prediction is close but not a fit.
+training) predicts a control grid from the cloud in one forward pass. What the prediction knows
+and a plane does not is the patch's parameterisation: where each point lies on the sheet, even on
+a patch that bends far out of any plane. The start takes that from it: each point's parameters
+are its foot point on the predicted surface (stretched over the domain), and one least-squares
+solve at those parameters gives the control points (the config's degrees, counts and knots, like
+``init="least_squares"`` at the plane's parameters). The gradient fit then continues from that
+start, with a short warm-up (:data:`LEARNED_WARMUP_ITERATIONS`) because it is already a fit.
 
 The model is trained on open patches only. The start falls back to the configuration's usual
 path (the cloud's principal plane, or the least-squares core of an unordered cloud), with the
 reason in the run's first message, when the model file is missing or unreadable, when the points
 are not an unordered surface cloud, when the cloud is not an open patch (the mesh test of the
 least-squares core's start, :func:`nurbs_core.fitting.sheet.sheet_start`, decides that, so the
-learned start and the core agree on what one patch can hold), and when the prediction is not a
-clean sheet over the cloud (any of :func:`nurbs_core.quality.quality_warnings`: folds, overlap,
+learned start and the core agree on what one patch can hold), and when the start is not a clean
+sheet over the cloud (any of :func:`nurbs_core.quality.quality_warnings`: folds, overlap,
 uncovered cloud; a start with folds keeps them through the fit).
 """
 
@@ -23,9 +27,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
+from nurbs_core.evaluate import surface_derivatives
 from nurbs_core.fitting.config import FitConfig
-from nurbs_core.fitting.problem import Problem
+from nurbs_core.fitting.problem import Problem, least_squares_start
+from nurbs_core.fitting.projection import project
 from nurbs_core.fitting.sheet import SheetStart, sheet_start
 from nurbs_core.geometry import NurbsSurface
 from nurbs_core.quality import quality_warnings, surface_quality
@@ -38,10 +45,10 @@ LEARNED_WARMUP_ITERATIONS = 5
 
 @dataclass(frozen=True)
 class LearnedStart:
-    """The predicted surface in the points' units (None when the start fell back) and the line
-    the run reports: which model, how long the prediction took, or why it fell back."""
+    """The start in the fit's normalised coordinates (None when it fell back) and the line the
+    run reports: which model, how long the prediction took, or why it fell back."""
 
-    surface: NurbsSurface | None
+    geometry: NurbsSurface | None
     message: str
     #: the core's start of this cloud, built by the open-patch test (for a fall-back to use)
     sheet: SheetStart | None = None
@@ -79,15 +86,44 @@ def learned_start(problem: Problem, config: FitConfig) -> LearnedStart:
     if sheet.closed is not None:
         return LearnedStart(None, f"the learned model predicts open patches and this cloud is a "
                             f"tube (closed in {sheet.closed})" + fallback, sheet)
-    points = problem.points_input
     started = time.perf_counter()
-    surface = predict(points)
+    prediction = predict(problem.points_input)
     seconds = time.perf_counter() - started
     name = config.learned_model or "the shipped model"
+    geometry = least_squares_start(problem, config, foot_parameters(problem, prediction))
+    assert isinstance(geometry, NurbsSurface), "a surface fit starts from a surface"
     # a start that folds, overlaps itself or leaves the cloud uncovered keeps those flaws through
-    # the fit: judge the prediction as every fit is judged, and use only a clean one
-    problems = quality_warnings(surface_quality(surface, points))
+    # the fit: judge it as every fit is judged, and use only a clean one
+    problems = quality_warnings(surface_quality(geometry.to(dtype=torch.float64),
+                                                problem.points.double().numpy()))
     if problems:
-        return LearnedStart(None, f"the learned prediction ({name}, {seconds * 1e3:.0f} ms) is not "
+        return LearnedStart(None, f"the learned start ({name}, {seconds * 1e3:.0f} ms) is not "
                             f"a clean sheet: {'; '.join(problems)}" + fallback, sheet)
-    return LearnedStart(surface, f"learned start ({name}, {seconds * 1e3:.0f} ms)")
+    return LearnedStart(geometry, f"learned start ({name}, {seconds * 1e3:.0f} ms)")
+
+
+def foot_parameters(problem: Problem, prediction: NurbsSurface) -> np.ndarray:
+    """Each point's parameters (N, 2) in ``problem.domains`` from ``prediction``: its foot point,
+    carried past the prediction's border to first order (one unclamped Gauss-Newton step, which
+    moves only the points whose foot is clamped to the border: where the prediction stops short
+    of the cloud, those points would otherwise pile up on the border curve and crease the start),
+    then stretched linearly so that the cloud spans the domain in both directions."""
+    surface = prediction.detach().to(dtype=torch.float64)
+    points = np.asarray(problem.points_input, np.float64)
+    feet, _ = project(surface, points)
+    u, v = (torch.as_tensor(feet[:, k].copy()) for k in range(2))
+    s, s_u, s_v = surface_derivatives(surface.control_points, surface.weights, surface.knots_u,
+                                      surface.knots_v, surface.degree_u, surface.degree_v, u, v)
+    residual = torch.as_tensor(points) - s
+    a, b, c = (s_u * s_u).sum(-1), (s_u * s_v).sum(-1), (s_v * s_v).sum(-1)
+    g_u, g_v = (s_u * residual).sum(-1), (s_v * residual).sum(-1)
+    det = a * c - b * b
+    usable = det > 1e-12 * (a * c).clamp_min(torch.finfo(det.dtype).tiny)
+    det = torch.where(usable, det, torch.ones_like(det))
+    du = torch.where(usable, (c * g_u - b * g_v) / det, torch.zeros_like(det))
+    dv = torch.where(usable, (a * g_v - b * g_u) / det, torch.zeros_like(det))
+    feet = torch.stack([u + du, v + dv], -1).numpy()
+    low, high = feet.min(0), feet.max(0)
+    unit = (feet - low) / np.maximum(high - low, 1e-12)
+    (u0, u1), (v0, v1) = problem.domains
+    return np.stack([u0 + unit[:, 0] * (u1 - u0), v0 + unit[:, 1] * (v1 - v0)], -1)

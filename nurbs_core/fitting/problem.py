@@ -241,10 +241,19 @@ def initial_geometry(problem: Problem, config: FitConfig,
         problem.path_parameters = path_parameters(problem.points.double().numpy(), config.seed)
     if config.init == "pca" and problem.path_parameters is None:
         return _plane_geometry(problem, config, knots)
-    params = start_parameters(problem)
+    return least_squares_start(problem, config, start_parameters(problem))
+
+
+def least_squares_start(problem: Problem, config: FitConfig,
+                        parameters: np.ndarray) -> NurbsCurve | NurbsSurface:
+    """The least-squares start at per-point ``parameters`` ((N, 2) for surfaces, (N,) for curves,
+    inside ``problem.domains``): the config's degrees, control counts and knots (custom or clamped
+    uniform over the domains), normalised coordinates, a little smoothing (1e-4) unless the
+    parameters are the known ones."""
+    knots = _uniform_knots(problem, config)
     smoothing = 0.0 if problem.known else 1e-4
     kind_kw = dict(kind="curve") if config.kind == "curve" else {}
-    geometry = least_squares_fit(problem.points.double().numpy(), params, config.degree_u,
+    geometry = least_squares_fit(problem.points.double().numpy(), parameters, config.degree_u,
                                  config.degree_v, config.control_points_u, config.control_points_v,
                                  *knots + [None] * (2 - len(knots)), smoothing=smoothing, **kind_kw)
     return geometry.to(dtype=problem.dtype)

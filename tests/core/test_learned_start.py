@@ -1,5 +1,5 @@
-"""init="learned": the engine's side (a prediction as iteration 0, the short warm-up, the
-fall-backs). The model itself is tested in test_learn.py."""
+"""init="learned": the engine's side (a solve at the prediction's parameters as iteration 0, the
+short warm-up, the fall-backs). The model itself is tested in test_learn.py."""
 
 from __future__ import annotations
 
@@ -8,10 +8,12 @@ import pytest
 import torch
 
 from nurbs_core import samples
-from nurbs_core.fitting import FitConfig, fit, iter_fit
+from nurbs_core.fitting import FitConfig, fit, iter_fit, statistics
 from nurbs_core.fitting import learned_start as learned
+from nurbs_core.fitting.least_squares import least_squares_fit
+from nurbs_core.fitting.projection import project
 from nurbs_core.fitting.schedule import WARMUP_ITERATIONS
-from nurbs_core.geometry import NurbsSurface
+from nurbs_core.geometry import NurbsSurface, geometry_from_numpy
 
 
 def _fake_predictor(surface: NurbsSurface):
@@ -46,9 +48,37 @@ def _clean_start(points: np.ndarray) -> NurbsSurface:
                                  max_control_points=0)).geometry.to(dtype=torch.float64)
 
 
-def test_the_prediction_is_iteration_zero_and_the_fit_continues_from_it(monkeypatch, sheet):
-    start = _clean_start(sheet.points)
-    predictor, calls = _fake_predictor(start)
+def _solved_at_feet(points: np.ndarray, prediction: NurbsSurface, count: int) -> np.ndarray:
+    """The start the learned start should build, composed from the public parts: foot points on
+    the prediction, carried past its border by one unclamped Gauss-Newton step (derivatives by
+    central differences here), stretched over [0, 1]^2, one least-squares solve there (count x
+    count, the start smoothing 1e-4); its control points (count, count, 3) in the points' units."""
+    feet, _ = project(prediction, points)
+    domain = np.array(prediction.domain)  # (2, 2): (lo, hi) per direction
+
+    def at(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return prediction.evaluate(torch.as_tensor(u), torch.as_tensor(v)).detach().numpy()
+
+    def difference(k: int) -> np.ndarray:  # central, one-sided at the border
+        high = np.minimum(feet[:, k] + 1e-6, domain[k, 1])
+        low = np.maximum(feet[:, k] - 1e-6, domain[k, 0])
+        plus, minus = feet.copy(), feet.copy()
+        plus[:, k], minus[:, k] = high, low
+        return (at(*plus.T) - at(*minus.T)) / (high - low)[:, None]
+    s_u, s_v = difference(0), difference(1)
+    jacobian = np.stack([s_u, s_v], -1)  # (N, 3, 2)
+    normal = np.einsum("nki,nkj->nij", jacobian, jacobian)
+    gradient = np.einsum("nki,nk->ni", jacobian, points - at(*feet.T))
+    step = np.linalg.solve(normal, gradient[..., None])[..., 0]
+    feet = feet + step
+    low, high = feet.min(0), feet.max(0)
+    return least_squares_fit(points, (feet - low) / (high - low), 3, 3, count, count,
+                             smoothing=1e-4).control_points.numpy()
+
+
+def test_the_start_is_a_solve_at_the_predictions_parameters_and_iteration_zero(monkeypatch, sheet):
+    prediction = _clean_start(sheet.points)
+    predictor, calls = _fake_predictor(prediction)
     monkeypatch.setattr(learned, "_predictor", predictor)
     config = FitConfig(init="learned", iterations=20, threads=1, control_points_u=8,
                        control_points_v=8)
@@ -56,9 +86,32 @@ def test_the_prediction_is_iteration_zero_and_the_fit_continues_from_it(monkeypa
     assert calls == [len(sheet.points)]
     first = snapshots[0]
     assert first.iteration == 0 and first.message.startswith("learned start (the shipped model")
-    np.testing.assert_allclose(first.geometry.control_points, start.control_points.numpy(),
-                               atol=1e-12)
+    np.testing.assert_allclose(first.geometry.control_points,
+                               _solved_at_feet(sheet.points, prediction, 8), atol=1e-6)
     assert snapshots[-1].done and snapshots[-1].iteration == 20 and snapshots[-1].stage == "gradient"
+
+
+def test_a_coarse_prediction_gives_a_close_start(monkeypatch, sheet):
+    """What the start takes from a prediction is its parameterisation: a prediction 5 % of the
+    patch's size off the cloud (a smooth bulge), parameterised like a good fit, gives a start as
+    close as a solve at the good fit's own parameters, many times closer than the prediction."""
+    good = _clean_start(sheet.points)
+    control = good.control_points.numpy().copy()
+    size = float(np.ptp(sheet.points, axis=0).max())
+    g = np.linspace(0, 1, 8)
+    control[..., 2] += 0.05 * size * np.sin(np.pi * g)[:, None] * np.sin(np.pi * g)[None, :]
+    coarse = NurbsSurface(control, 3, 3, good.knots_u, good.knots_v)
+    predictor, _ = _fake_predictor(coarse)
+    monkeypatch.setattr(learned, "_predictor", predictor)
+    config = FitConfig(init="learned", iterations=0, threads=1, control_points_u=8,
+                       control_points_v=8)
+    start = next(iter(iter_fit(sheet.points, config)))
+    assert start.message.startswith("learned start")
+    rms = statistics(geometry_from_numpy(start.geometry), sheet.points)["rms"]
+    at_good = statistics(NurbsSurface(_solved_at_feet(sheet.points, good, 8), 3, 3),
+                         sheet.points)["rms"]
+    assert rms <= 1.2 * at_good
+    assert rms < 0.2 * statistics(coarse, sheet.points)["rms"]
 
 
 def test_a_learned_start_warms_up_briefly(monkeypatch, sheet):
