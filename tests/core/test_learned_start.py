@@ -175,3 +175,18 @@ def test_without_a_usable_model_or_an_open_patch_it_falls_back_and_says_why(monk
     same = fit(cloud, config.replace(init="pca"), parameters=parameters)
     np.testing.assert_allclose(result.geometry.control_points.numpy(),
                                same.geometry.control_points.numpy(), atol=0)
+
+
+@pytest.mark.parametrize("shape, seed", [(samples.bowl, 101), (samples.bowl, 106),
+                                         (samples.height_field, 107)])
+def test_the_shipped_models_start_is_clean_and_closer_than_the_planes(shape, seed):
+    """With the shipped model (no fake), the start on bent held-out clouds passes the quality
+    check and is closer than the least-squares start at the plane's parameters."""
+    points = shape(700, seed=seed).points
+    config = FitConfig(solver="gradient", init="learned", iterations=0, threads=1)
+    start = next(iter(iter_fit(points, config)))
+    assert start.message.startswith("learned start (the shipped model"), start.message
+    plane = next(iter(iter_fit(points, config.replace(init="least_squares",
+                                                      parameterization="plane"))))
+    rms = statistics(geometry_from_numpy(start.geometry), points)["rms"]
+    assert rms < statistics(geometry_from_numpy(plane.geometry), points)["rms"]
