@@ -5,9 +5,10 @@ Run: ``python benchmarks/bench_learned.py [--patches 24] [--table 200]
 
 1. **Table** (``--table`` held-out patches of the generator's ``test`` split, disjoint from the
    training and validation streams; or the clouds of a SplineDataset HDF5 file with ``--data``):
-   for the shipped model and every ``--model NAME=PATH``, the means over patches of the
+   for the shipped models and every ``--model NAME=PATH``, the means over patches of the
    metrics of :func:`nurbs_core.learn.losses.patch_metrics` in the cloud's normalised frame (the
-   ParSeNet normalisation: the cloud fits [-1, 1]^3), each x 100:
+   ParSeNet normalisation: the cloud fits [-1, 1]^3), each x 100 (both shipped models by default:
+   the learned start's, supervised, and the unsupervised one):
    100 x CD = 100 (mean_s d(s, P)^2 + mean_p d(p, S)^2), 100 x HD = 100 (max_s d(s, P)^2 +
    max_p d(p, S)^2), with S a 100 x 100 parameter grid on the predicted surface and P the
    cloud (two-sided, squared distances); 100 x Lap = 100 x the mean squared umbrella Laplacian of
@@ -57,11 +58,12 @@ from nurbs_core.fitting.problem import least_squares_start, prepare
 from nurbs_core.learn.data import PatchGenerator, load_spline_dataset
 from nurbs_core.learn.losses import folded_fraction, laplacian, nearest_squared
 from nurbs_core.learn.normalize import Normalization
-from nurbs_core.learn.predict import load_model, predict_surface
+from nurbs_core.learn.predict import SHIPPED_MODEL, load_model, predict_surface
 from nurbs_core.learn.train import evaluate
 
 PAPER = {"supervised 20x20": (1.184, 0.994, 1.340), "unsupervised 20x20": (0.018, 0.234, 0.202),
          "unsupervised 5x5": (0.020, 0.256, 2.462), "unsupervised 4x4": (0.028, 0.274, 3.356)}
+UNSUPERVISED_MODEL = SHIPPED_MODEL.with_name("splinenet_pointnet_20_unsupervised.pt")
 OTHER_SHAPES = (samples.saddle, samples.bowl, samples.height_field, samples.leaflet_like,
                 samples.curled_sheet)
 
@@ -252,8 +254,10 @@ def main(argv: list[str] | None = None) -> None:
     torch.set_num_threads(1)
     print(f"# machine: {platform.machine()} {os.cpu_count()} cores, torch {torch.__version__}, "
           f"1 torch thread")
-    first = "unsupervised 20x20" if args.learned_model is None else "--learned-model"
-    models: dict[str, str | None] = {first: args.learned_model}
+    # the shipped models: the learned start's (supervised) and the paper's unsupervised one
+    models: dict[str, str | None] = (
+        {"supervised 20x20": None, "unsupervised 20x20": str(UNSUPERVISED_MODEL)}
+        if args.learned_model is None else {"--learned-model": args.learned_model})
     for item in args.model:
         name, _, path = item.partition("=")
         models[name] = path
