@@ -8,7 +8,10 @@
 Every epoch draws fresh patches from :class:`nurbs_core.learn.data.PatchGenerator` (sample i of
 epoch k depends only on ``(seed, k, i)``) or a shuffled pass over ``--data`` (the order depends
 only on ``(seed, k)``), so the data stream needs no saved RNG state and ``--resume`` continues it
-exactly; the optimizer state and the epoch count are saved. Clouds are normalised per patch
+exactly; the optimizer state and the epoch count are saved. With ``--cad-fraction F`` about that
+share of the training samples are faces of random CAD solids instead
+(:class:`nurbs_core.learn.cad_faces.MixedPatches`, also a function of the seed, epoch and index;
+needs OCP); validation stays on generated patches. Clouds are normalised per patch
 (:mod:`nurbs_core.learn.normalize`) and the loss is computed in that frame.
 
 ``OUT/last.pt`` is written after every epoch (with the optimizer state, for ``--resume``) and
@@ -36,6 +39,7 @@ from typing import Any
 
 import torch
 
+from nurbs_core.learn.cad_faces import CadFaceGenerator, MixedPatches, require_ocp
 from nurbs_core.learn.data import PatchGenerator, SplineDataset, load_spline_dataset
 from nurbs_core.learn.losses import SplineLoss, patch_metrics
 from nurbs_core.learn.model import ENCODERS, OUTPUTS, SplineNet, plane_grid
@@ -75,6 +79,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--points", type=int, default=700, help="points per generated patch")
     parser.add_argument("--data", type=Path, help="a SplineDataset HDF5 file instead of the generator")
+    parser.add_argument("--cad-fraction", type=float, default=0.0, metavar="F",
+                        help="replace about this share of the training samples by faces of random "
+                             "CAD solids (nurbs_core.learn.cad_faces, needs OCP; default 0); "
+                             "validation stays on generated patches")
     parser.add_argument("--validation", type=int, default=64, help="held-out patches per epoch")
     parser.add_argument("--out", type=Path, required=True, help="directory for last.pt and best.pt")
     parser.add_argument("--resume", type=Path, help="a last.pt to continue from")
@@ -225,7 +233,11 @@ def _train(args: argparse.Namespace, argv: list[str], grid: tuple[int, int], ran
     say = rank == 0
     # data
     validation: PatchGenerator | SplineDataset
-    train_data: PatchGenerator | SplineDataset
+    train_data: PatchGenerator | SplineDataset | MixedPatches
+    if not 0.0 <= args.cad_fraction <= 1.0:
+        parser.error(f"--cad-fraction must be in [0, 1], got {args.cad_fraction}")
+    if args.cad_fraction > 0 and args.data is not None:
+        parser.error("--cad-fraction mixes CAD faces into the generated patches: not with --data")
     if args.data is not None:
         dataset = load_spline_dataset(args.data)
         train_data, validation = dataset.split(args.validation)
@@ -234,6 +246,13 @@ def _train(args: argparse.Namespace, argv: list[str], grid: tuple[int, int], ran
     else:
         train_data = PatchGenerator(args.samples_per_epoch, args.seed, "train", point_count=args.points)
         validation = PatchGenerator(args.validation, args.seed, "validation", point_count=args.points)
+        if args.cad_fraction > 0:
+            try:
+                require_ocp()
+            except ImportError as error:
+                parser.error(f"--cad-fraction: {error}")
+            cad = CadFaceGenerator(args.samples_per_epoch, args.seed, "train", point_count=args.points)
+            train_data = MixedPatches(train_data, cad, args.cad_fraction, args.seed)
     if args.loss == "supervised":
         truth_grid = (20, 20)
         if isinstance(train_data, SplineDataset) and train_data.control_points is not None:
@@ -269,6 +288,11 @@ def _train(args: argparse.Namespace, argv: list[str], grid: tuple[int, int], ran
         if int(checkpoint["training"]["seed"]) != args.seed and rank == 0:
             print(f"warning: {args.resume} was trained with --seed {checkpoint['training']['seed']}; "
                   f"continuing with --seed {args.seed} changes the data stream", file=sys.stderr)
+        trained_fraction = float(checkpoint["training"].get("cad_fraction", 0.0))
+        if trained_fraction != args.cad_fraction and rank == 0:
+            print(f"warning: {args.resume} was trained with --cad-fraction {trained_fraction}; "
+                  f"continuing with --cad-fraction {args.cad_fraction} changes the data stream",
+                  file=sys.stderr)
     if say:
         print(f"SplineNet {args.encoder} grid {grid[0]}x{grid[1]} "
               f"{model.output}{' rational' if args.rational else ''}: "
@@ -284,7 +308,7 @@ def _train(args: argparse.Namespace, argv: list[str], grid: tuple[int, int], ran
     steps_per_epoch = math.ceil(len(train_data) / args.batch_size)
     record = {"command": "nurbs-train " + shlex.join(argv), "argv": argv, "seed": args.seed,
               "world_size": world, "threads": args.threads, "torch": str(torch.__version__),
-              "loss": repr(loss_fn)}
+              "loss": repr(loss_fn), "cad_fraction": args.cad_fraction}
     for epoch in range(start_epoch, args.epochs):
         epoch_start = time.perf_counter()
         train_data.set_epoch(epoch)
