@@ -29,6 +29,7 @@ CPU, nccl on CUDA), the model is wrapped in DistributedDataParallel, each global
 from __future__ import annotations
 
 import argparse
+import gc
 import math
 import os
 import shlex
@@ -218,12 +219,22 @@ def main(argv: list[str] | None = None) -> int:
     grid = (args.grid[0], args.grid[-1])
     torch.set_num_threads(max(1, args.threads))
     rank, world, device = _distributed_setup(torch.device(args.device))
+    finished = False
     try:
-        return _train(args, argv, grid, rank, world, device, parser)
+        status = _train(args, argv, grid, rank, world, device, parser)
+        finished = True
+        return status
     finally:
         if world > 1:
             import torch.distributed as dist
 
+            # the DDP wrapper of _train sits in reference cycles that still hold the process group:
+            # freed only at interpreter shutdown, gloo's worker threads then aborted the process
+            # now and then (SIGABRT, "terminate called without an active exception"). Free it
+            # now, and let every rank finish communicating before any tears its connections down.
+            gc.collect()
+            if finished:
+                dist.barrier()
             dist.destroy_process_group()
 
 
