@@ -1,7 +1,12 @@
 """The learned start: the paper's reconstruction table, inference time, and fit iterations saved.
 
-Run: ``python benchmarks/bench_learned.py [--patches 24] [--table 200]
+Run: ``python benchmarks/bench_learned.py [--patches 24] [--cad 12] [--table 200] [--cad-table 100]
 [--model "supervised 20x20=/tmp/sup/best.pt" ...] [--warm-up 0 5 10 30] [--data SPLINES.h5]``
+
+Held-out data made by other means than the training generator's: ``nurbs_core.samples`` shapes,
+and faces of random CAD solids (:mod:`nurbs_core.learn.cad_faces`, its ``test`` split: trimmed
+planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-table``) and 3
+(``--cad``).
 
 1. **Table** (``--table`` held-out patches of the generator's ``test`` split, disjoint from the
    training and validation streams; or the clouds of a SplineDataset HDF5 file with ``--data``):
@@ -68,11 +73,20 @@ OTHER_SHAPES = (samples.saddle, samples.bowl, samples.height_field, samples.leaf
                 samples.curled_sheet)
 
 
-def table(models: dict[str, str | None], count: int, data: str | None) -> None:
-    dataset = load_spline_dataset(data, limit=count) if data else PatchGenerator(count, split="test")
+def _dataset(count: int, data: str | None, cad: bool):
+    if data:
+        return load_spline_dataset(data, limit=count), f"SplineDataset file {data}"
+    if cad:
+        from nurbs_core.learn.cad_faces import CadFaceGenerator
+
+        return CadFaceGenerator(count, split="test"), "faces of random CAD solids, test split"
+    return PatchGenerator(count, split="test"), "generated test split"
+
+
+def table(models: dict[str, str | None], count: int, data: str | None, cad: bool = False) -> None:
+    dataset, title = _dataset(count, data, cad)
     indices = list(range(min(count, len(dataset))))
-    print(f"\n## 1. reconstruction on {len(indices)} held-out patches "
-          f"({'SplineDataset file ' + data if data else 'generated test split'}), means x 100")
+    print(f"\n## 1. reconstruction on {len(indices)} held-out patches ({title}), means x 100")
     print(f"{'model':<28} {'grid':>6} {'CD':>8} {'HD':>8} {'Lap':>8} {'folded':>7}   "
           f"paper CD / HD / Lap")
     plane_done = False
@@ -93,12 +107,12 @@ def table(models: dict[str, str | None], count: int, data: str | None) -> None:
             plane_done = True
 
 
-def core_row(count: int, data: str | None) -> None:
+def core_row(count: int, data: str | None, cad: bool = False) -> None:
     """The table's row of the default ``nurbs-fit`` (the least-squares core, no learning) on the
     same patches, measured as :func:`patch_metrics` measures a prediction: its surface mapped to
     each cloud's normalised frame and sampled on a 100 x 100 grid of its domain (the core's own
     knots and grid, so its Laplacian is of another net and not comparable)."""
-    dataset = load_spline_dataset(data, limit=count) if data else PatchGenerator(count, split="test")
+    dataset, _ = _dataset(count, data, cad)
     sums = dict.fromkeys(("chamfer", "hausdorff", "laplacian", "folded"), 0.0)
     refused, seconds, done = 0, [], 0
     t = torch.linspace(0, 1, 100, dtype=torch.float64)
@@ -132,13 +146,25 @@ def core_row(count: int, data: str | None) -> None:
           f"refused {refused} of {done + refused}")
 
 
-def held_out_clouds(count: int) -> list[tuple[str, np.ndarray]]:
+def held_out_clouds(count: int, cad: int = 0) -> list[tuple[str, np.ndarray]]:
+    """``count`` clouds (half of the generator's test split, half of ``nurbs_core.samples``),
+    then ``cad`` faces of random CAD solids (their generator's test split; needs OCP)."""
     generated = PatchGenerator(count - count // 2, split="test", seed=1)
     clouds = [(f"test split #{i}", generated[i].points.astype(np.float64))
               for i in range(len(generated))]
     for k in range(count // 2):
         shape = OTHER_SHAPES[k % len(OTHER_SHAPES)]
         clouds.append((f"{shape.__name__} seed {100 + k}", shape(700, seed=100 + k).points))
+    if cad:
+        from nurbs_core.learn.cad_faces import CadFaceGenerator
+
+        faces = CadFaceGenerator(cad, seed=1, split="test")
+        for i in range(cad):
+            sample = faces[i]
+            turn = sample.info.get("turn")
+            clouds.append((f"cad #{i} {sample.info['surface_type']}"
+                           + (f" {turn:.2f} turn" if turn else ""),
+                           sample.points.astype(np.float64)))
     return clouds
 
 
@@ -248,6 +274,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--least-squares", action="store_true", help="part 4: one least-squares "
                         "solve at the plane's and at the learned surface's parameters")
     parser.add_argument("--data", help="a SplineDataset-format HDF5 file for the table")
+    parser.add_argument("--cad", type=int, default=12, help="faces of random CAD solids added to "
+                        "parts 2-4's clouds (OpenCASCADE, the cad extra; 0 without it)")
+    parser.add_argument("--cad-table", type=int, default=100, help="the table again on this many "
+                        "faces of random CAD solids (0: not)")
     parser.add_argument("--learned-model", help="the model of parts 2 and 3 and the table's first "
                         "row (default: the shipped one)")
     args = parser.parse_args(argv)
@@ -264,7 +294,10 @@ def main(argv: list[str] | None = None) -> None:
     if args.table > 0:
         table(models, args.table, args.data)
         core_row(args.table, args.data)
-    clouds = held_out_clouds(args.patches)
+    if args.cad_table > 0:
+        table(models, args.cad_table, None, cad=True)
+        core_row(args.cad_table, None, cad=True)
+    clouds = held_out_clouds(args.patches, args.cad)
     milliseconds = inference_ms(clouds, args.learned_model)
     print(f"\n## 2. inference: {milliseconds:.1f} ms per patch (median; 700 points, one thread, "
           f"resampling and mapping back included)")

@@ -5,14 +5,17 @@ DGCNN as an option) reads the cloud of one open patch in a normalised frame
 (:mod:`nurbs_core.learn.normalize`) and predicts the control grid of a clamped uniform bicubic
 patch: a height field over the plane of the cloud's two principal axes, which cannot fold
 (``output="graph"``, nurbs-train's default), or free control points added to that plane's grid
-(``"residual"``, the shipped model) (:mod:`nurbs_core.learn.model`). It trains without
+(``"residual"``, the shipped models) (:mod:`nurbs_core.learn.model`). It trains without
 control-point labels through the engine's differentiable surface evaluation with the NURBS-Diff
-paper's Chamfer + 0.1 Laplacian + 10 Hausdorff loss (:mod:`nurbs_core.learn.losses`,
-:mod:`nurbs_core.learn.train`, the ``nurbs-train`` command) on procedurally generated patches
-(:mod:`nurbs_core.learn.data`) or SplineDataset files.
+paper's Chamfer + 0.1 Laplacian + 10 Hausdorff loss, or with ParSeNet's supervised loss
+(:mod:`nurbs_core.learn.losses`, :mod:`nurbs_core.learn.train`, the ``nurbs-train`` command) on
+procedurally generated patches (:mod:`nurbs_core.learn.data`), faces of random CAD solids
+(:mod:`nurbs_core.learn.cad_faces`, OpenCASCADE) or SplineDataset files.
 
-Inference: ``predict_surface(points)`` with the model shipped in ``nurbs_core/learn/models``
-(:mod:`nurbs_core.learn.predict`). Names load on first use, so importing the package is light.
+Inference: ``predict_surface(points)`` with the models shipped in ``nurbs_core/learn/models``
+(:mod:`nurbs_core.learn.predict`; the default one is the learned start's,
+:mod:`nurbs_core.fitting.learned_start`). Names load on first use, so importing the package is
+light.
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ _LAZY = {
     "predict_control_points": "nurbs_core.learn.predict",
     "PatchGenerator": "nurbs_core.learn.data",
     "load_spline_dataset": "nurbs_core.learn.data",
+    "CadFaceGenerator": "nurbs_core.learn.cad_faces",
+    "MixedPatches": "nurbs_core.learn.cad_faces",
     "Normalization": "nurbs_core.learn.normalize",
     "SplineNet": "nurbs_core.learn.model",
     "SplineLoss": "nurbs_core.learn.losses",
