@@ -35,7 +35,10 @@ planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-ta
    falls back (its message says why) runs the config's own ``pca`` path: for these unordered
    clouds the least-squares core's start, not the plane, so its iteration counts then measure
    the core, not the model. ``--warm-up`` repeats part 3 for other warm-up lengths of a learned
-   start (the engine's ``LEARNED_WARMUP_ITERATIONS``).
+   start (the engine's ``LEARNED_WARMUP_ITERATIONS``). ``--today default`` measures against the
+   gradient fit's own default start instead (the least-squares core's, on the cloud's mesh map).
+   For both starts the final fits' quality is printed too: how many fold or overlap themselves
+   by the fit's quality warnings (RMS alone cannot see a fold).
 4. **Least squares at fixed parameters** (``--least-squares``): for the same clouds, the RMS of
    one least-squares solve (12 x 12, the engine's start smoothing 1e-4) at the plane projection's
    parameters (``init="least_squares"``, ``parameterization="plane"``, 0 iterations) and at the
@@ -65,6 +68,7 @@ from nurbs_core.learn.losses import folded_fraction, laplacian, nearest_squared
 from nurbs_core.learn.normalize import Normalization
 from nurbs_core.learn.predict import SHIPPED_MODEL, load_model, predict_surface
 from nurbs_core.learn.train import evaluate
+from nurbs_core.quality import WARN_FLIPPED, WARN_OVERLAP, surface_quality
 
 PAPER = {"supervised 20x20": (1.184, 0.994, 1.340), "unsupervised 20x20": (0.018, 0.234, 0.202),
          "unsupervised 5x5": (0.020, 0.256, 2.462), "unsupervised 4x4": (0.028, 0.274, 3.356)}
@@ -180,10 +184,12 @@ def inference_ms(clouds: list[tuple[str, np.ndarray]], path: str | None) -> floa
 
 
 def rms_by_iteration(points: np.ndarray, config: FitConfig,
-                     messages: list[str] | None = None) -> list[float]:
+                     messages: list[str] | None = None,
+                     finals: list[dict] | None = None) -> list[float]:
     """RMS foot-point distance of the geometry after each iteration 0..config.iterations (the
     start first: the learned start's iteration-0 snapshot, or a zero-iteration run); the first
-    snapshot's message is appended to ``messages``."""
+    snapshot's message is appended to ``messages``, the final fit's quality measures
+    (:func:`nurbs_core.quality.surface_quality`) to ``finals``."""
     curve: dict[int, float] = {}
     if config.init != "learned":
         start = next(iter(iter_fit(points, config.replace(iterations=0))))
@@ -194,6 +200,8 @@ def rms_by_iteration(points: np.ndarray, config: FitConfig,
             messages = None
         if snapshot.geometry:
             curve[snapshot.iteration] = fit_statistics(_surface(snapshot.geometry), points)["rms"]
+        if snapshot.done and finals is not None:
+            finals.append(surface_quality(_surface(snapshot.geometry), points))
     if 0 not in curve:  # a learned start that fell back: its start is the PCA plane's
         start = next(iter(iter_fit(points, config.replace(iterations=0))))
         curve[0] = fit_statistics(_surface(start.geometry), points)["rms"]
@@ -208,20 +216,26 @@ def _surface(arrays):
 
 
 def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, warm_ups: list[int],
-               path: str | None) -> list[list[float]]:
-    """Part 3; returns today's start's RMS curves (the targets of part 4)."""
+               path: str | None, today_start: str = "plane") -> list[list[float]]:
+    """Part 3; returns today's start's RMS curves (the targets of part 4). ``today_start``:
+    "plane" (the principal plane, the start the learned one was first measured against) or
+    "default" (the gradient fit's own start for unordered clouds: the least-squares core's)."""
     base = FitConfig(solver="gradient", iterations=budget, threads=1, learned_model=path)
-    today = base.replace(init="pca", parameterization="plane")
+    today = (base.replace(init="pca", parameterization="plane") if today_start == "plane"
+             else base.replace(init="pca"))
     learned = base.replace(init="learned")
     print(f"\n## 3. fit iterations on {len(clouds)} held-out clouds (gradient fit, default loss, "
-          f"12 x 12 control points; target: today's start's RMS after 100 iterations)")
-    reference = [rms_by_iteration(points, today) for _, points in clouds]
+          f"12 x 12 control points; target: today's start's ({today_start}) RMS after 100 "
+          f"iterations)")
+    today_finals: list[dict] = []
+    reference = [rms_by_iteration(points, today, finals=today_finals) for _, points in clouds]
+    print(f"today's start, final fits: {_folded_count(today_finals)}")
     for warm in warm_ups:
         engine.LEARNED_WARMUP_ITERATIONS = warm
-        reached, worse, messages = [], [], []
+        reached, worse, messages, finals = [], [], [], []
         for (name, points), ref in zip(clouds, reference, strict=True):
             target = ref[min(100, len(ref) - 1)]
-            curve = rms_by_iteration(points, learned, messages)
+            curve = rms_by_iteration(points, learned, messages, finals)
             hit = next((i for i, r in enumerate(curve) if r <= target), None)
             reached.append(hit if hit is not None else budget + 1)
             if curve[-1] > ref[-1] * 1.01:
@@ -236,7 +250,19 @@ def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, warm_ups: list
               f"({median / 100:.0%} of 100), worst {max(reached)}, reached by "
               f"{sum(r <= 100 for r in reached)}/{len(reached)}; final RMS worse than today's "
               f"(>1%): {len(worse)}" + (f" [{'; '.join(worse)}]" if worse else ""))
+        print(f"warm-up {warm:>2}: learned start, final fits: {_folded_count(finals)}")
     return reference
+
+
+def _folded_count(finals: list[dict]) -> str:
+    """How many final fits fold or overlap themselves by the fit's own quality warnings, and the
+    mean flipped and overlapping fractions."""
+    bad = sum(q["flipped_fraction"] > WARN_FLIPPED or q["overlap_fraction"] > WARN_OVERLAP
+              for q in finals)
+    flipped = 100 * np.mean([q["flipped_fraction"] for q in finals])
+    overlap = 100 * np.mean([q["overlap_fraction"] for q in finals])
+    return (f"{bad}/{len(finals)} fold or overlap (> {WARN_FLIPPED:.0%}); mean flipped "
+            f"{flipped:.1f}%, mean overlapping {overlap:.1f}%")
 
 
 def least_squares_starts(clouds: list[tuple[str, np.ndarray]], reference: list[list[float]],
@@ -271,6 +297,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--iterations", type=int, default=200)
     parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH")
     parser.add_argument("--warm-up", type=int, nargs="+", default=[engine.LEARNED_WARMUP_ITERATIONS])
+    parser.add_argument("--today", choices=("plane", "default"), default="plane",
+                        help="part 3's reference start: the principal plane, or the gradient "
+                        "fit's default start (the least-squares core's)")
     parser.add_argument("--least-squares", action="store_true", help="part 4: one least-squares "
                         "solve at the plane's and at the learned surface's parameters")
     parser.add_argument("--data", help="a SplineDataset-format HDF5 file for the table")
@@ -301,7 +330,7 @@ def main(argv: list[str] | None = None) -> None:
     milliseconds = inference_ms(clouds, args.learned_model)
     print(f"\n## 2. inference: {milliseconds:.1f} ms per patch (median; 700 points, one thread, "
           f"resampling and mapping back included)")
-    reference = iterations(clouds, args.iterations, args.warm_up, args.learned_model)
+    reference = iterations(clouds, args.iterations, args.warm_up, args.learned_model, args.today)
     if args.least_squares:
         least_squares_starts(clouds, reference, args.learned_model)
 
