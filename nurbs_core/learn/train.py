@@ -40,7 +40,8 @@ from typing import Any
 
 import torch
 
-from nurbs_core.learn.cad_faces import CadFaceGenerator, MixedPatches, require_ocp
+from nurbs_core.learn.cad_faces import CadFaceGenerator, MixedPatches
+from nurbs_core.learn.cad_solids import require_ocp
 from nurbs_core.learn.data import PatchGenerator, SplineDataset, load_spline_dataset
 from nurbs_core.learn.losses import SplineLoss, patch_metrics
 from nurbs_core.learn.model import ENCODERS, OUTPUTS, SplineNet, plane_grid
