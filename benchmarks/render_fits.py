@@ -5,6 +5,10 @@ A fold shows as a red fleck on a blue side (or the reverse), a curtain as a shee
 on it, an overlap as two layers. Prints each fit's status and quality measures beside the image.
 
     xvfb-run -a .venv/bin/python benchmarks/render_fits.py [--out /tmp/renders] [--points 4000]
+
+``--learned``: instead, the gradient fit (100 iterations, 12 x 12) of held-out clouds of
+``bench_learned.py`` (a 0.79-turn CAD extrusion face, a curled CAD B-spline face, a bowl) from
+the principal plane and from the learned start, side by side per cloud (plane left).
 """
 
 from __future__ import annotations
@@ -53,6 +57,7 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="renders")
     parser.add_argument("--points", type=int, default=4000)
+    parser.add_argument("--learned", action="store_true", help="plane vs learned starts")
     args = parser.parse_args(argv)
 
     import torch
@@ -65,6 +70,9 @@ def main(argv=None) -> None:
     torch.set_num_threads(1)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.learned:
+        _learned(out)
+        return
     for name, make in (("curled_sheet", samples.curled_sheet), ("terrain", samples.height_field)):
         shape = make(args.points)
         result = fit(shape.points, FitConfig())
@@ -81,6 +89,44 @@ def main(argv=None) -> None:
     _render([_grid_mesh(s, 20) for s in network.network.surfaces()], shape.points,
             out / "sphere.png", [(20, 0), (20, 180)])
     print(f"wrote {out}/curled_sheet.png, terrain.png, sphere.png")
+
+
+def _learned(out: Path) -> None:
+    import numpy as np
+    import pyvista as pv
+
+    from nurbs_core.fitting import FitConfig, fit
+    from nurbs_core.quality import surface_quality
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_learned import held_out_clouds
+
+    clouds = held_out_clouds(24, 12)
+    chosen = [c for c in clouds if c[0].startswith(("cad #7 ", "cad #8 ", "bowl seed 106"))]
+    base = FitConfig(solver="gradient", iterations=100, threads=1)
+    for name, points in chosen:
+        results = [fit(points, base.replace(init="pca", parameterization="plane")),
+                   fit(points, base.replace(init="learned"))]
+        for label, result in zip(("plane", "learned"), results, strict=True):
+            q = surface_quality(result.geometry, points)
+            print(f"{name} from the {label} start: rms {result.statistics['rms']:.4g}, flipped "
+                  f"{q['flipped_fraction']:.3f}, overlap {q['overlap_fraction']:.3f}, coverage "
+                  f"{q['coverage']:.3f} ({result.message})")
+        slug = name.split(" (")[0].replace(" ", "_").replace("#", "")
+        for side, elevation in (("front", 30), ("back", -150)):
+            plotter = pv.Plotter(off_screen=True, shape=(1, 2), window_size=(1400, 650))
+            for k, result in enumerate(results):
+                plotter.subplot(0, k)
+                plotter.add_mesh(_grid_mesh(result.geometry, 80), color="#5b8fd9",
+                                 backface_params={"color": "#d9675b"}, smooth_shading=True)
+                plotter.add_points(np.asarray(points)[::2], color="black", point_size=2)
+                plotter.view_isometric()
+                plotter.camera.elevation = elevation
+                plotter.add_text(f"{name}: {('plane', 'learned')[k]} start, 100 iterations",
+                                 font_size=9)
+            plotter.screenshot(str(out / f"learned_{slug}_{side}.png"))
+            plotter.close()
+    print(f"wrote {out}/learned_*.png")
 
 
 if __name__ == "__main__":
