@@ -26,7 +26,11 @@ from nurbs_core.fitting.config import FitConfig, FitResult, FitSnapshot, StopTok
 from nurbs_core.fitting.evaluation import Evaluation, cloud_tree, draw_batch, uses_parameters
 from nurbs_core.fitting.exact import exact_geometry, exact_problem, exact_snapshot, uses_exact
 from nurbs_core.fitting.guard import DivergenceGuard
-from nurbs_core.fitting.learned_start import LEARNED_WARMUP_ITERATIONS, learned_start
+from nurbs_core.fitting.learned_start import (
+    LEARNED_LEARNING_RATE_SCALE,
+    LEARNED_WARMUP_ITERATIONS,
+    learned_start,
+)
 from nurbs_core.fitting.model import TrainableGeometry
 from nurbs_core.fitting.problem import Problem, initial_geometry, prepare, start_parameters
 from nurbs_core.fitting.projection import project
@@ -83,7 +87,9 @@ def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopTo
     if config.init == "learned" and initial is None:
         learned = learned_start(problem, config)
         if learned.geometry is not None:
-            return _gradient_run(problem, config, learned.geometry, loss, stop, True,
+            gentle = config.replace(
+                learning_rate=config.learning_rate * LEARNED_LEARNING_RATE_SCALE)
+            return _gradient_run(problem, gentle, learned.geometry, loss, stop, True,
                                  learned=learned.message)
         config, note, sheet = config.replace(init="pca"), learned.message, learned.sheet
     if uses_core(problem, config, initial):
@@ -110,7 +116,7 @@ def _gradient_run(problem: Problem, config: FitConfig, geometry: Geometry,
                   from_initial: bool, learned: str | None = None) -> Iterator[FitSnapshot]:
     """The gradient fit from ``geometry`` (normalised coordinates) on ``config.threads`` threads.
     ``learned``: the start is a learned prediction (this message says whose): it is shown as
-    iteration 0 and the warm-up is the short one of a learned start."""
+    iteration 0 and the warm-up is the one of a learned start."""
     saved_threads = torch.get_num_threads()
     if config.threads is not None:
         torch.set_num_threads(config.threads)

@@ -1,5 +1,5 @@
 """init="learned": the engine's side (a solve at the prediction's parameters as iteration 0, the
-short warm-up, the fall-backs). The model itself is tested in test_learn.py."""
+gentle refinement, the fall-backs). The model itself is tested in test_learn.py."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ from nurbs_core.fitting import FitConfig, fit, iter_fit, statistics
 from nurbs_core.fitting import learned_start as learned
 from nurbs_core.fitting.least_squares import least_squares_fit
 from nurbs_core.fitting.projection import project
-from nurbs_core.fitting.schedule import WARMUP_ITERATIONS
 from nurbs_core.geometry import NurbsSurface, geometry_from_numpy
 
 
@@ -114,9 +113,9 @@ def test_a_coarse_prediction_gives_a_close_start(monkeypatch, sheet):
     assert rms < 0.2 * statistics(coarse, sheet.points)["rms"]
 
 
-def test_a_learned_start_warms_up_briefly(monkeypatch, sheet):
-    """The learning rate reaches its full value after LEARNED_WARMUP_ITERATIONS, not after the
-    WARMUP_ITERATIONS of other starts that are fits."""
+def test_a_learned_start_is_refined_gently(monkeypatch, sheet):
+    """The learning rate warms up over LEARNED_WARMUP_ITERATIONS to LEARNED_LEARNING_RATE_SCALE
+    x the configured rate, and stays there; the run's message says at which rate."""
     from nurbs_core.fitting import schedule
 
     rates = []
@@ -128,14 +127,18 @@ def test_a_learned_start_warms_up_briefly(monkeypatch, sheet):
     monkeypatch.setattr(schedule.LearningRateSchedule, "_apply_learning_rate", spy)
     predictor, _ = _fake_predictor(_clean_start(sheet.points))
     monkeypatch.setattr(learned, "_predictor", predictor)
-    config = FitConfig(init="learned", iterations=12, threads=1, lr_schedule="none",
-                       control_points_u=8, control_points_v=8)
+    warm_up = learned.LEARNED_WARMUP_ITERATIONS
+    config = FitConfig(init="learned", iterations=warm_up + 10, threads=1, lr_schedule="none",
+                       control_points_u=8, control_points_v=8, learning_rate=0.02)
+    first = next(iter(iter_fit(sheet.points, config)))  # iteration 0: the start, before any step
+    rates.clear()
     fit(sheet.points, config)
-    short = learned.LEARNED_WARMUP_ITERATIONS
-    assert short < WARMUP_ITERATIONS
-    assert rates[0] == pytest.approx(config.learning_rate * 1e-3)
-    assert all(r < config.learning_rate for r in rates[:short])
-    assert rates[short:] == [config.learning_rate] * (len(rates) - short)
+    gentle = config.learning_rate * learned.LEARNED_LEARNING_RATE_SCALE
+    assert learned.LEARNED_LEARNING_RATE_SCALE < 1
+    assert rates[0] == pytest.approx(gentle * 1e-3)
+    assert all(r < gentle for r in rates[:warm_up])
+    assert rates[warm_up:] == pytest.approx([gentle] * (len(rates) - warm_up))
+    assert len(rates) > warm_up and f"refined at learning rate {gentle:g}" in first.message
 
 
 def _folded_start(points: np.ndarray) -> NurbsSurface:
