@@ -45,10 +45,6 @@ planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-ta
    parameters of the learned prediction (the learned start's iteration 0, whether or not it passes
    the start's quality check), beside the target of part 3: whether the prediction's
    parameterization is better than the closed-form start's.
-5. **The least-squares core** (``--core``; ``--iterations 0`` skips part 3): ``nurbs-fit``'s
-   default fit (``FitConfig()``: the least-squares core, which grows its grid and corrects the
-   parameters pass by pass) of the same clouds from its own start (the cloud's mesh map) and from
-   the learned parameters (``init="learned"``): passes, final RMS, flipped area and seconds.
 """
 
 from __future__ import annotations
@@ -294,46 +290,6 @@ def least_squares_starts(clouds: list[tuple[str, np.ndarray]], reference: list[l
           f"than the plane's on {beats_plane}/{len(clouds)}")
 
 
-def core_starts(clouds: list[tuple[str, np.ndarray]], path: str | None) -> None:
-    """Part 5: ``nurbs-fit``'s default fit (the least-squares core) from its own start (the
-    cloud's mesh map) and from the learned parameters (``init="learned"``): passes, final RMS,
-    folds and time per cloud."""
-    print("\n## 5. the least-squares core (nurbs-fit's default) from the mesh map and from the "
-          "learned parameters")
-    print(f"{'cloud':28s} {'passes':>13s} {'rms':>19s} {'flipped %':>13s} {'seconds':>11s}")
-    rows = []
-    for name, points in clouds:
-        row = []
-        for init in ("pca", "learned"):
-            started = time.perf_counter()
-            try:
-                result = fit(points, FitConfig(init=init, threads=1, learned_model=path))
-            except ValueError:  # not one patch by the core's mesh test
-                row = []
-                break
-            seconds = time.perf_counter() - started
-            quality = surface_quality(result.geometry, points)
-            used = init == "pca" or (result.message or "").startswith("learned start")
-            row.append((result.iterations, result.statistics["rms"],
-                        100 * quality["flipped_fraction"], seconds, used))
-        if not row:
-            print(f"{name:28s} refused (not one patch)")
-            continue
-        rows.append(row)
-        (pa, ra, fa, sa, _), (pb, rb, fb, sb, used) = row
-        print(f"{name:28s} {pa:>6d} {pb:>6d} {ra:9.5f} {rb:9.5f} {fa:6.2f} {fb:6.2f} "
-              f"{sa:5.2f} {sb:5.2f}" + ("" if used else "  (fell back)"))
-    used_rows = [r for r in rows if r[1][4]]
-    print(f"learned parameters used on {len(used_rows)}/{len(rows)}; on those: median passes "
-          f"{stats_lib.median(r[0][0] for r in used_rows):g} -> "
-          f"{stats_lib.median(r[1][0] for r in used_rows):g}, final RMS higher (>1%) on "
-          f"{sum(r[1][1] > 1.01 * r[0][1] for r in used_rows)}, lower (<-1%) on "
-          f"{sum(r[1][1] < 0.99 * r[0][1] for r in used_rows)}, flipped > 1% on "
-          f"{sum(r[0][2] > 1 for r in used_rows)} -> {sum(r[1][2] > 1 for r in used_rows)}, "
-          f"median seconds {stats_lib.median(r[0][3] for r in used_rows):.2f} -> "
-          f"{stats_lib.median(r[1][3] for r in used_rows):.2f}" if used_rows else "")
-
-
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--patches", type=int, default=24)
@@ -344,9 +300,6 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--today", choices=("plane", "default"), default="plane",
                         help="part 3's reference start: the principal plane, or the gradient "
                         "fit's default start (the least-squares core's)")
-    parser.add_argument("--core", action="store_true", help="part 5: nurbs-fit's default fit "
-                        "(the least-squares core) from its mesh map and from the learned "
-                        "parameters")
     parser.add_argument("--least-squares", action="store_true", help="part 4: one least-squares "
                         "solve at the plane's and at the learned surface's parameters")
     parser.add_argument("--data", help="a SplineDataset-format HDF5 file for the table")
@@ -377,12 +330,8 @@ def main(argv: list[str] | None = None) -> None:
     milliseconds = inference_ms(clouds, args.learned_model)
     print(f"\n## 2. inference: {milliseconds:.1f} ms per patch (median; 700 points, one thread, "
           f"resampling and mapping back included)")
-    if args.iterations > 0:
-        reference = iterations(clouds, args.iterations, args.warm_up, args.learned_model,
-                               args.today)
-    if args.core:
-        core_starts(clouds, args.learned_model)
-    if args.least_squares and args.iterations > 0:
+    reference = iterations(clouds, args.iterations, args.warm_up, args.learned_model, args.today)
+    if args.least_squares:
         least_squares_starts(clouds, reference, args.learned_model)
 
 

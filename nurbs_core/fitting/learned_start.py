@@ -6,15 +6,9 @@ and a plane does not is the patch's parameterisation: where each point lies on t
 a patch that bends far out of any plane. The start takes that from it: each point's parameters
 are its foot point on the predicted surface (stretched over the domain), and one least-squares
 solve at those parameters gives the control points (the config's degrees, counts and knots, like
-``init="least_squares"`` at the plane's parameters). The fit then goes on from there:
-
-* the least-squares core (the default solver of unordered clouds) starts from the learned
-  parameters instead of its mesh map's (it grows its grid and corrects the parameters as usual;
-  the solve above is the quality check's candidate);
-* the gradient fit (``solver="gradient"``) starts from that solve, shown as iteration 0, and
-  refines it gently: at a tenth of the configured learning rate
-  (:data:`LEARNED_LEARNING_RATE_SCALE`), after the warm-up of starts that are already fits
-  (:data:`LEARNED_WARMUP_ITERATIONS`).
+``init="least_squares"`` at the plane's parameters). The gradient fit then continues from that
+start, gently: at a tenth of the configured learning rate (:data:`LEARNED_LEARNING_RATE_SCALE`),
+after the warm-up of starts that are already fits (:data:`LEARNED_WARMUP_ITERATIONS`).
 
 The model is trained on open patches only. The start falls back to the configuration's usual
 path (the cloud's principal plane, or the least-squares core of an unordered cloud), with the
@@ -28,7 +22,6 @@ uncovered cloud; a start with folds keeps them through the fit).
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import time
 from collections.abc import Callable
@@ -41,7 +34,7 @@ from nurbs_core.evaluate import surface_derivatives
 from nurbs_core.fitting.config import FitConfig
 from nurbs_core.fitting.problem import Problem, least_squares_start
 from nurbs_core.fitting.projection import project
-from nurbs_core.fitting.sheet import SheetStart, resolved_solver, sheet_start
+from nurbs_core.fitting.sheet import SheetStart, sheet_start
 from nurbs_core.geometry import NurbsSurface
 from nurbs_core.quality import quality_warnings, surface_quality
 
@@ -66,19 +59,8 @@ class LearnedStart:
 
     geometry: NurbsSurface | None
     message: str
-    #: the core's start of this cloud, built by the open-patch test (a fall-back uses it; the
-    #: least-squares core starts from it with :attr:`parameters` instead of its own)
+    #: the core's start of this cloud, built by the open-patch test (for a fall-back to use)
     sheet: SheetStart | None = None
-    #: (N, 2) every point's parameters from the prediction (None when the start fell back)
-    parameters: np.ndarray | None = None
-
-    def core_start(self) -> SheetStart:
-        """The least-squares core's start with the learned parameters in place of the mesh
-        map's (its mesh kept for the quality measures; a large cloud's subset kept)."""
-        assert self.sheet is not None and self.parameters is not None, "a learned start"
-        subset = self.sheet.subset
-        parameters = self.parameters if subset is None else self.parameters[subset]
-        return dataclasses.replace(self.sheet, parameters=parameters, message=None)
 
 
 @functools.lru_cache(maxsize=4)
@@ -117,8 +99,7 @@ def learned_start(problem: Problem, config: FitConfig) -> LearnedStart:
     prediction = predict(problem.points_input)
     seconds = time.perf_counter() - started
     name = config.learned_model or "the shipped model"
-    parameters = foot_parameters(problem, prediction)
-    geometry = least_squares_start(problem, config, parameters)
+    geometry = least_squares_start(problem, config, foot_parameters(problem, prediction))
     assert isinstance(geometry, NurbsSurface), "a surface fit starts from a surface"
     # a start that folds, overlaps itself or leaves the cloud uncovered keeps those flaws through
     # the fit: judge it as every fit is judged, and use only a clean one
@@ -127,12 +108,9 @@ def learned_start(problem: Problem, config: FitConfig) -> LearnedStart:
     if problems:
         return LearnedStart(None, f"the learned start ({name}, {seconds * 1e3:.0f} ms) is not "
                             f"a clean sheet: {'; '.join(problems)}" + fallback, sheet)
-    if resolved_solver(config) == "least_squares":
-        return LearnedStart(geometry, f"learned start ({name}, {seconds * 1e3:.0f} ms): the "
-                            "least-squares core starts from its parameters", sheet, parameters)
     rate = config.learning_rate * LEARNED_LEARNING_RATE_SCALE
     return LearnedStart(geometry, f"learned start ({name}, {seconds * 1e3:.0f} ms); refined at "
-                        f"learning rate {rate:g}", sheet, parameters)
+                        f"learning rate {rate:g}")
 
 
 def foot_parameters(problem: Problem, prediction: NurbsSurface) -> np.ndarray:

@@ -11,7 +11,6 @@ from nurbs_core import samples
 from nurbs_core.fitting import FitConfig, fit, iter_fit, statistics
 from nurbs_core.fitting import learned_start as learned
 from nurbs_core.fitting.least_squares import least_squares_fit
-from nurbs_core.fitting.problem import prepare
 from nurbs_core.fitting.projection import project
 from nurbs_core.geometry import NurbsSurface, geometry_from_numpy
 
@@ -80,8 +79,8 @@ def test_the_start_is_a_solve_at_the_predictions_parameters_and_iteration_zero(m
     prediction = _clean_start(sheet.points)
     predictor, calls = _fake_predictor(prediction)
     monkeypatch.setattr(learned, "_predictor", predictor)
-    config = FitConfig(init="learned", solver="gradient", iterations=20, threads=1,
-                       control_points_u=8, control_points_v=8)
+    config = FitConfig(init="learned", iterations=20, threads=1, control_points_u=8,
+                       control_points_v=8)
     snapshots = list(iter_fit(sheet.points, config))
     assert calls == [len(sheet.points)]
     first = snapshots[0]
@@ -103,8 +102,8 @@ def test_a_coarse_prediction_gives_a_close_start(monkeypatch, sheet):
     coarse = NurbsSurface(control, 3, 3, good.knots_u, good.knots_v)
     predictor, _ = _fake_predictor(coarse)
     monkeypatch.setattr(learned, "_predictor", predictor)
-    config = FitConfig(init="learned", solver="gradient", iterations=0, threads=1,
-                       control_points_u=8, control_points_v=8)
+    config = FitConfig(init="learned", iterations=0, threads=1, control_points_u=8,
+                       control_points_v=8)
     start = next(iter(iter_fit(sheet.points, config)))
     assert start.message.startswith("learned start")
     rms = statistics(geometry_from_numpy(start.geometry), sheet.points)["rms"]
@@ -112,32 +111,6 @@ def test_a_coarse_prediction_gives_a_close_start(monkeypatch, sheet):
                          sheet.points)["rms"]
     assert rms <= 1.2 * at_good
     assert rms < 0.2 * statistics(coarse, sheet.points)["rms"]
-
-
-def test_the_least_squares_core_starts_from_the_learned_parameters(monkeypatch, sheet):
-    """With the default solver (the least-squares core) the learned parameters replace the mesh
-    map's: the core is given exactly the prediction's parameters and fits on from there, about
-    as close as from its own start."""
-    from nurbs_core.fitting import sheet as sheet_module
-
-    prediction = _clean_start(sheet.points)
-    predictor, _ = _fake_predictor(prediction)
-    monkeypatch.setattr(learned, "_predictor", predictor)
-    seen = []
-    original = sheet_module.LeastSquaresCore.__init__
-
-    def spy(self, points, parameters, *args, **kwargs):
-        seen.append(np.array(parameters))
-        original(self, points, parameters, *args, **kwargs)
-    monkeypatch.setattr(sheet_module.LeastSquaresCore, "__init__", spy)
-    snapshots = list(iter_fit(sheet.points, FitConfig(init="learned", threads=1)))
-    assert snapshots[0].message.startswith("learned start (the shipped model")
-    assert "the least-squares core starts from its parameters" in snapshots[0].message
-    assert snapshots[-1].done and snapshots[-1].stage == "least_squares"
-    problem = prepare(sheet.points, FitConfig())
-    np.testing.assert_allclose(seen[0], learned.foot_parameters(problem, prediction), atol=1e-12)
-    default = fit(sheet.points, FitConfig(threads=1))
-    assert snapshots[-1].statistics["rms"] <= 1.05 * default.statistics["rms"]
 
 
 def test_a_learned_start_is_refined_gently(monkeypatch, sheet):
@@ -155,8 +128,7 @@ def test_a_learned_start_is_refined_gently(monkeypatch, sheet):
     predictor, _ = _fake_predictor(_clean_start(sheet.points))
     monkeypatch.setattr(learned, "_predictor", predictor)
     warm_up = learned.LEARNED_WARMUP_ITERATIONS
-    config = FitConfig(init="learned", solver="gradient", iterations=warm_up + 10, threads=1,
-                       lr_schedule="none",
+    config = FitConfig(init="learned", iterations=warm_up + 10, threads=1, lr_schedule="none",
                        control_points_u=8, control_points_v=8, learning_rate=0.02)
     first = next(iter(iter_fit(sheet.points, config)))  # iteration 0: the start, before any step
     rates.clear()
