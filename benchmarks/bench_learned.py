@@ -38,7 +38,8 @@ planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-ta
    start (the engine's ``LEARNED_WARMUP_ITERATIONS``). ``--today default`` measures against the
    gradient fit's own default start instead (the least-squares core's, on the cloud's mesh map).
    For both starts the final fits' quality is printed too: how many fold or overlap themselves
-   by the fit's quality warnings (RMS alone cannot see a fold).
+   by the fit's quality warnings, their area against the cloud's and how far the surface runs
+   past the cloud (RMS alone sees neither).
 4. **Least squares at fixed parameters** (``--least-squares``): for the same clouds, the RMS of
    one least-squares solve (12 x 12, the engine's start smoothing 1e-4) at the plane projection's
    parameters (``init="least_squares"``, ``parameterization="plane"``, 0 iterations) and at the
@@ -261,8 +262,11 @@ def _folded_count(finals: list[dict]) -> str:
               for q in finals)
     flipped = 100 * np.mean([q["flipped_fraction"] for q in finals])
     overlap = 100 * np.mean([q["overlap_fraction"] for q in finals])
+    area = np.median([q["area_ratio"] for q in finals])
+    reach = np.median([q["s2c_p95"] / q["spacing"] for q in finals])
     return (f"{bad}/{len(finals)} fold or overlap (> {WARN_FLIPPED:.0%}); mean flipped "
-            f"{flipped:.1f}%, mean overlapping {overlap:.1f}%")
+            f"{flipped:.1f}%, mean overlapping {overlap:.1f}%; median area {area:.2f} x the "
+            f"cloud's, median surface-to-cloud p95 {reach:.1f} spacings (past the cloud's edge)")
 
 
 def least_squares_starts(clouds: list[tuple[str, np.ndarray]], reference: list[list[float]],
