@@ -3,8 +3,9 @@
 Run: ``python benchmarks/bench_learned.py [--patches 24] [--cad 12] [--table 200] [--cad-table 100]
 [--model "supervised 20x20=/tmp/sup/best.pt" ...] [--warm-up 0 5 10 30] [--data SPLINES.h5]``
 
-Held-out data made by other means than the training generator's: ``nurbs_core.samples`` shapes,
-and faces of random CAD solids (:mod:`nurbs_core.learn.cad_faces`, its ``test`` split: trimmed
+Held-out data beside the patch generator's test split: ``nurbs_core.samples`` shapes (made by
+other means), and faces of random CAD solids (:mod:`nurbs_core.learn.cad_faces`, its ``test``
+split, disjoint from the ``train`` stream that ``nurbs-train --cad-fraction`` mixes in: trimmed
 planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-table``) and 3
 (``--cad``).
 

@@ -180,8 +180,7 @@ def test_without_a_usable_model_or_an_open_patch_it_falls_back_and_says_why(monk
                                same.geometry.control_points.numpy(), atol=0)
 
 
-@pytest.mark.parametrize("shape, seed", [(samples.bowl, 101), (samples.bowl, 106),
-                                         (samples.height_field, 107)])
+@pytest.mark.parametrize("shape, seed", [(samples.bowl, 111), (samples.saddle, 105)])
 def test_the_shipped_models_start_is_clean_and_closer_than_the_planes(shape, seed):
     """With the shipped model (no fake), the start on bent held-out clouds passes the quality
     check and is closer than the least-squares start at the plane's parameters."""
