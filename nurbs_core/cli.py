@@ -655,7 +655,7 @@ def _print_plan(args: argparse.Namespace, config: FitConfig, count: int,
     from nurbs_core.fitting.sheet import resolved_solver
 
     core = (not args.curve and not known_parameters and args.initial is None
-            and config.init != "learned" and resolved_solver(config) == "least_squares")
+            and resolved_solver(config) == "least_squares")
     if known_parameters and config.solver == "least_squares":
         how = "by exact least squares at the known parameters"
     elif core:

@@ -151,7 +151,8 @@ class FitConfig:
     for curves and uses PCA parameters for surfaces; "random" is the paper's Gaussian start;
     "learned" (unordered surface clouds of open patches) starts from the surface a trained encoder
     predicts (``learned_model``: a ``nurbs-train`` model file, None for the one shipped with the
-    package) and continues with the gradient fit; without a usable model, or for
+    package) and continues with the gradient fit (with ``solver="least_squares"``: the
+    least-squares core from the prediction's parameters); without a usable model, or for
     a cloud that is not an open patch, it falls back to "pca" and the first message says why
     (:mod:`nurbs_core.fitting.learned_start`).
     For unordered clouds the pointwise

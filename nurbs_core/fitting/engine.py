@@ -86,6 +86,9 @@ def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopTo
     note, sheet = None, None
     if config.init == "learned" and initial is None:
         learned = learned_start(problem, config)
+        if learned.geometry is not None and learned.for_core:
+            return _noted(_sheet_run(problem, config, learned.core_start(), loss, stop, started),
+                          learned.message)
         if learned.geometry is not None:
             gentle = config.replace(
                 learning_rate=config.learning_rate * LEARNED_LEARNING_RATE_SCALE)

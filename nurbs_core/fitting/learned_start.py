@@ -22,6 +22,7 @@ uncovered cloud; a start with folds keeps them through the fit).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import time
 from collections.abc import Callable
@@ -35,9 +36,11 @@ from nurbs_core.fitting.config import FitConfig
 from nurbs_core.fitting.problem import Problem, least_squares_start
 from nurbs_core.fitting.projection import project
 from nurbs_core.fitting.schedule import WARMUP_ITERATIONS
-from nurbs_core.fitting.sheet import SheetStart, sheet_start
+from nurbs_core.fitting.sheet import SheetStart, resolved_solver, sheet_start
 from nurbs_core.geometry import NurbsSurface
 from nurbs_core.quality import quality_warnings, surface_quality
+from nurbs_core.surfacing.parameterize import interpolate_parameters
+from nurbs_core.surfacing.warp import pin_to_square
 
 #: The gradient fit refines a learned start at this fraction of ``config.learning_rate``. The
 #: start is already a least-squares fit at good parameters, and Adam's first steps move every
@@ -52,6 +55,9 @@ LEARNED_LEARNING_RATE_SCALE = 0.1
 #: that are already fits. A 5-iteration warm-up creased more in the same measurement (after 25
 #: iterations at lr 0.01: 20 % flipped against none; at 0.003: 1.1 % against none).
 LEARNED_WARMUP_ITERATIONS = WARMUP_ITERATIONS
+#: A pinned learned map may turn over at most this fraction of the cloud's mesh area (the
+#: parameter correction irons out a few noisy triangles; more is a map that folds).
+MAX_PINNED_FLIPPED = 0.01
 
 
 @dataclass(frozen=True)
@@ -61,8 +67,23 @@ class LearnedStart:
 
     geometry: NurbsSurface | None
     message: str
-    #: the core's start of this cloud, built by the open-patch test (for a fall-back to use)
+    #: the core's start of this cloud, built by the open-patch test (a fall-back uses it; the
+    #: least-squares core starts from it with :attr:`parameters` instead of its own)
     sheet: SheetStart | None = None
+    #: (N, 2) every point's parameters in [0, 1]^2 from the prediction, pinned to the square
+    #: along the cloud's outline (None when the start fell back)
+    parameters: np.ndarray | None = None
+    #: the least-squares core goes on from :meth:`core_start` (the config's solver resolves to
+    #: it); otherwise the gradient fit refines :attr:`geometry`
+    for_core: bool = False
+
+    def core_start(self) -> SheetStart:
+        """The least-squares core's start with the learned parameters in place of the mesh
+        map's (its mesh kept for the quality measures; a large cloud's subset kept)."""
+        assert self.sheet is not None and self.parameters is not None, "a learned start"
+        subset = self.sheet.subset
+        parameters = self.parameters if subset is None else self.parameters[subset]
+        return dataclasses.replace(self.sheet, parameters=parameters, message=None)
 
 
 @functools.lru_cache(maxsize=4)
@@ -101,28 +122,68 @@ def learned_start(problem: Problem, config: FitConfig) -> LearnedStart:
     prediction = predict(problem.points_input)
     seconds = time.perf_counter() - started
     name = config.learned_model or "the shipped model"
-    geometry = least_squares_start(problem, config, foot_parameters(problem, prediction))
+    said = f"the learned start ({name}, {seconds * 1e3:.0f} ms)"
+    try:
+        unit = pinned_parameters(problem, sheet, prediction)
+    except ValueError as exc:
+        return LearnedStart(None, f"{said} cannot be pinned to the cloud's outline: {exc}"
+                            + fallback, sheet)
+    (u0, u1), (v0, v1) = problem.domains
+    parameters = np.stack([u0 + unit[:, 0] * (u1 - u0), v0 + unit[:, 1] * (v1 - v0)], -1)
+    geometry = least_squares_start(problem, config, parameters)
     assert isinstance(geometry, NurbsSurface), "a surface fit starts from a surface"
     # a start that folds, overlaps itself or leaves the cloud uncovered keeps those flaws through
     # the fit: judge it as every fit is judged, and use only a clean one
     problems = quality_warnings(surface_quality(geometry.to(dtype=torch.float64),
                                                 problem.points.double().numpy()))
     if problems:
-        return LearnedStart(None, f"the learned start ({name}, {seconds * 1e3:.0f} ms) is not "
-                            f"a clean sheet: {'; '.join(problems)}" + fallback, sheet)
+        return LearnedStart(None, f"{said} is not a clean sheet: {'; '.join(problems)}"
+                            + fallback, sheet)
+    if resolved_solver(config) == "least_squares":
+        return LearnedStart(geometry, f"learned start ({name}, {seconds * 1e3:.0f} ms): the "
+                            "least-squares core starts from its parameters", sheet, unit, True)
     rate = config.learning_rate * LEARNED_LEARNING_RATE_SCALE
     return LearnedStart(geometry, f"learned start ({name}, {seconds * 1e3:.0f} ms); refined at "
-                        f"learning rate {rate:g}")
+                        f"learning rate {rate:g}", sheet, unit)
+
+
+def pinned_parameters(problem: Problem, sheet: SheetStart, prediction: NurbsSurface) -> np.ndarray:
+    """Every point's parameters (N, 2) in [0, 1]^2 from ``prediction``: the foot points of the
+    cloud's mesh vertices on it (:func:`foot_points`), pinned to the square along the mesh's
+    outline (:func:`nurbs_core.surfacing.warp.pin_to_square`: without that, a square patch over
+    a round cloud leaves its corners empty and the fit runs on past the cloud there), and
+    interpolated to the points over the mesh's triangles. Raises ValueError when the cloud has no
+    mesh (a height field mapped by its plane), when the pinned map turns over more than
+    :data:`MAX_PINNED_FLIPPED` of the mesh's area, or when the map's corners do not follow the
+    outline."""
+    mesh = sheet.mesh
+    if mesh is None:
+        raise ValueError("the cloud has no mesh outline (it is mapped by its principal plane)")
+    vertices = mesh.vertices * problem.scale + problem.center
+    pinned = pin_to_square(mesh, foot_points(prediction, vertices))
+    if pinned.flipped > MAX_PINNED_FLIPPED:
+        raise ValueError(f"the pinned map turns over {pinned.flipped:.1%} of the cloud")
+    return interpolate_parameters(problem.points.double().numpy(), mesh, pinned.mesh_uv)
 
 
 def foot_parameters(problem: Problem, prediction: NurbsSurface) -> np.ndarray:
-    """Each point's parameters (N, 2) in ``problem.domains`` from ``prediction``: its foot point,
-    carried past the prediction's border to first order (one unclamped Gauss-Newton step, which
-    moves only the points whose foot is clamped to the border: where the prediction stops short
-    of the cloud, those points would otherwise pile up on the border curve and crease the start),
-    then stretched linearly so that the cloud spans the domain in both directions."""
+    """Each point's parameters (N, 2) in ``problem.domains`` from ``prediction`` (its foot points,
+    :func:`foot_points`), stretched linearly so that the cloud spans the domain in both
+    directions; unlike :func:`pinned_parameters`, the border is not pinned."""
+    feet = foot_points(prediction, np.asarray(problem.points_input, np.float64))
+    low, high = feet.min(0), feet.max(0)
+    unit = (feet - low) / np.maximum(high - low, 1e-12)
+    (u0, u1), (v0, v1) = problem.domains
+    return np.stack([u0 + unit[:, 0] * (u1 - u0), v0 + unit[:, 1] * (v1 - v0)], -1)
+
+
+def foot_points(prediction: NurbsSurface, points: np.ndarray) -> np.ndarray:
+    """The parameters (N, 2) of the foot points of ``points`` (N, 3) on ``prediction`` (the same
+    units), carried past the prediction's border to first order (one unclamped Gauss-Newton step,
+    which moves only the points whose foot is clamped to the border: where the prediction stops
+    short of the cloud, those points would otherwise pile up on the border curve and crease the
+    start)."""
     surface = prediction.detach().to(dtype=torch.float64)
-    points = np.asarray(problem.points_input, np.float64)
     feet, _ = project(surface, points)
     u, v = (torch.as_tensor(feet[:, k].copy()) for k in range(2))
     s, s_u, s_v = surface_derivatives(surface.control_points, surface.weights, surface.knots_u,
@@ -135,8 +196,4 @@ def foot_parameters(problem: Problem, prediction: NurbsSurface) -> np.ndarray:
     det = torch.where(usable, det, torch.ones_like(det))
     du = torch.where(usable, (c * g_u - b * g_v) / det, torch.zeros_like(det))
     dv = torch.where(usable, (a * g_v - b * g_u) / det, torch.zeros_like(det))
-    feet = torch.stack([u + du, v + dv], -1).numpy()
-    low, high = feet.min(0), feet.max(0)
-    unit = (feet - low) / np.maximum(high - low, 1e-12)
-    (u0, u1), (v0, v1) = problem.domains
-    return np.stack([u0 + unit[:, 0] * (u1 - u0), v0 + unit[:, 1] * (v1 - v0)], -1)
+    return torch.stack([u + du, v + dv], -1).numpy()

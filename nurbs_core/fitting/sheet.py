@@ -54,9 +54,12 @@ def uses_core(problem: Problem, config: FitConfig, initial: object) -> bool:
 
 def resolved_solver(config: FitConfig) -> str:
     """"least_squares" or "gradient" (see FitConfig.solver; custom knots need the gradient fit,
-    the core chooses its own knots)."""
+    the core chooses its own knots; a learned start is refined by the gradient fit unless the
+    core is asked for: :mod:`nurbs_core.fitting.learned_start`)."""
     if config.solver != "auto":
         return config.solver
+    if config.init == "learned":
+        return "gradient"
     plain = (config.loss == Loss.parse(DEFAULT_LOSS) and not config.free_knots
              and not config.free_weights and not config.pin_boundary and not config.custom_knots)
     return "least_squares" if plain else "gradient"

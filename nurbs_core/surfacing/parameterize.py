@@ -26,7 +26,7 @@ from nurbs_core.surfacing.tube import cut_open, shortest_seam
 #: Rounds of removing folded triangles from the mesh when its map still flips some.
 MAX_REPAIRS = 3
 
-_SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 
 
 @dataclass
@@ -127,11 +127,11 @@ def _map(points: np.ndarray, mesh: CloudMesh, corners: np.ndarray | None,
             raise ValueError("the four corners must lie near four different points of the "
                              "scan's outline")
         candidates = [np.sort(positions)]
-    vertices, faces = _cone_fill(mesh.vertices, mesh.faces, topology.loops[1:])
-    solve = _MeanValueSolver(vertices, faces, outer)
+    vertices, faces = cone_fill(mesh.vertices, mesh.faces, topology.loops[1:])
+    solve = MeanValueSolver(vertices, faces, outer)
     best = None
     for corner_positions in candidates:
-        boundary_uv = _square_boundary(mesh.vertices, outer, corner_positions)
+        boundary_uv = square_boundary(mesh.vertices, outer, corner_positions)
         uv = solve(boundary_uv)
         score = area_distortion(mesh.vertices, mesh.faces, uv[: len(mesh.vertices)])
         if best is None or score < best[0]:
@@ -187,7 +187,7 @@ def area_distortion(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) -> 
     return float(np.sqrt((weight * (ratio - mean) ** 2).sum()))
 
 
-class _MeanValueSolver:
+class MeanValueSolver:
     """Floater's mean-value map with the outer loop fixed: the interior system is factorised
     once and solved for any boundary positions."""
 
@@ -213,9 +213,9 @@ class _MeanValueSolver:
         return uv
 
 
-def _square_boundary(vertices: np.ndarray, loop: np.ndarray, corners: np.ndarray) -> np.ndarray:
+def square_boundary(vertices: np.ndarray, loop: np.ndarray, corners: np.ndarray) -> np.ndarray:
     """(L, 2) positions on the square's perimeter for the loop's vertices: the corner at loop
-    position corners[k] goes to _SQUARE[k], the vertices between by chord length."""
+    position corners[k] goes to SQUARE[k], the vertices between by chord length."""
     n = len(loop)
     points = vertices[loop]
     segment = np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1)
@@ -226,12 +226,12 @@ def _square_boundary(vertices: np.ndarray, loop: np.ndarray, corners: np.ndarray
         index = np.arange(start, stop if stop > start else stop + n) % n
         lengths = segment[index]
         t = np.r_[0.0, np.cumsum(lengths)[:-1]] / max(lengths.sum(), 1e-300)
-        a, b = _SQUARE[side], _SQUARE[(side + 1) % 4]
+        a, b = SQUARE[side], SQUARE[(side + 1) % 4]
         uv[index] = a + t[:, None] * (b - a)
     return uv
 
 
-def _cone_fill(vertices: np.ndarray, faces: np.ndarray,
+def cone_fill(vertices: np.ndarray, faces: np.ndarray,
                holes: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Close each inner hole with a fan around a new vertex at the hole's centroid."""
     if not holes:
