@@ -59,6 +59,14 @@ LEARNED_LEARNING_RATE_SCALE = 0.1
 #: fold on 4 of 36 against 5 (mean flipped 0.3 % both, median area 1.02 x the cloud's both).
 #: (Before the pinning, on unpinned starts at ten times this rate, 5 creased more than 30.)
 LEARNED_WARMUP_ITERATIONS = 5
+#: The smoothing of the learned start's least-squares solve (the relative weight of
+#: :func:`~nurbs_core.fitting.least_squares.least_squares_fit`'s second-difference penalty). On a
+#: round cloud the pinned map squeezes the square's corners onto smooth stretches of the outline,
+#: and an all but unsmoothed solve (the 1e-4 of other starts) sticks out there: on
+#: ``samples.bowl(700, seed=106)`` a horn 29 point spacings past the cloud (its surface-to-cloud
+#: maximum), 6 at 1e-3, 4 at 1e-2; over 16 held-out clouds of ``bench_learned.py`` 1e-2 left no
+#: start with flipped area (1e-4: 7 with up to 0.9 %) and cost at most 7 % of the start's RMS.
+LEARNED_START_SMOOTHING = 1e-2
 #: A pinned learned map may turn over at most this fraction of the cloud's mesh area (the
 #: parameter correction irons out a few noisy triangles; more is a map that folds).
 MAX_PINNED_FLIPPED = 0.01
@@ -134,7 +142,7 @@ def learned_start(problem: Problem, config: FitConfig) -> LearnedStart:
                             + fallback, sheet)
     (u0, u1), (v0, v1) = problem.domains
     parameters = np.stack([u0 + unit[:, 0] * (u1 - u0), v0 + unit[:, 1] * (v1 - v0)], -1)
-    geometry = least_squares_start(problem, config, parameters)
+    geometry = least_squares_start(problem, config, parameters, LEARNED_START_SMOOTHING)
     assert isinstance(geometry, NurbsSurface), "a surface fit starts from a surface"
     # a start that folds, overlaps itself or leaves the cloud uncovered keeps those flaws through
     # the fit: judge it as every fit is judged, and use only a clean one

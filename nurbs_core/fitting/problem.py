@@ -244,14 +244,15 @@ def initial_geometry(problem: Problem, config: FitConfig,
     return least_squares_start(problem, config, start_parameters(problem))
 
 
-def least_squares_start(problem: Problem, config: FitConfig,
-                        parameters: np.ndarray) -> NurbsCurve | NurbsSurface:
+def least_squares_start(problem: Problem, config: FitConfig, parameters: np.ndarray,
+                        smoothing: float | None = None) -> NurbsCurve | NurbsSurface:
     """The least-squares start at per-point ``parameters`` ((N, 2) for surfaces, (N,) for curves,
     inside ``problem.domains``): the config's degrees, control counts and knots (custom or clamped
-    uniform over the domains), normalised coordinates, a little smoothing (1e-4) unless the
-    parameters are the known ones."""
+    uniform over the domains), normalised coordinates, a little smoothing (``smoothing``, the
+    relative weight of :func:`least_squares_fit`'s; None: 1e-4, or 0 at known parameters)."""
     knots = _uniform_knots(problem, config)
-    smoothing = 0.0 if problem.known else 1e-4
+    if smoothing is None:
+        smoothing = 0.0 if problem.known else 1e-4
     kind_kw = dict(kind="curve") if config.kind == "curve" else {}
     geometry = least_squares_fit(problem.points.double().numpy(), parameters, config.degree_u,
                                  config.degree_v, config.control_points_u, config.control_points_v,
