@@ -302,6 +302,12 @@ class _Progress:
     def __call__(self, snapshot: FitSnapshot) -> None:
         if snapshot.losses:
             self.record = snapshot.losses[-1]
+        elif snapshot.message and not snapshot.done and snapshot.status == "running":
+            # a snapshot before any step says how the fit starts (the learned start, say)
+            if not self.quiet:
+                print(f"iteration {snapshot.iteration}: {snapshot.message}", file=sys.stderr,
+                      flush=True)
+            return
         # the final snapshot has no records when the previous one already carried the last
         # iteration: still print the last iteration's line
         if self.quiet or self.record is None or not (snapshot.losses or snapshot.done):

@@ -54,6 +54,19 @@ def test_fit_xyz_to_3dm_and_json(tmp_path, capsys):
     assert json.loads(out_json.read_text())  # valid JSON
 
 
+def test_the_learned_start_says_it_was_used_before_the_first_iteration(tmp_path, capsys):
+    source = tmp_path / "sheet.xyz"
+    np.savetxt(source, _sheet(700))
+    code = main([str(source), "--output", str(tmp_path / "fit.json"), "--init", "learned",
+                 "--iterations", "3"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    lines = captured.err.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("iteration 0: "))
+    assert "learned start (the shipped model" in lines[start], captured.err
+    assert any(line.startswith("iteration 3/3") for line in lines[start + 1:]), captured.err
+
+
 def test_fit_ply_curve_with_free_weights(tmp_path, capsys):
     t = np.linspace(0, 3, 400)
     points = np.column_stack([np.cos(t), np.sin(t), 0.2 * t])
