@@ -420,6 +420,8 @@ class _Run:
             self.schedule.learning_rate)
         if summary is not None:
             message = summary if message is None else f"{message}; {summary}"
+        if self.learned is not None:  # the result says how it started, as its first picture did
+            message = self.learned if message is None else f"{self.learned}; {message}"
         return self._snapshot(self.iteration, self.records, self.status, True, message)
 
 

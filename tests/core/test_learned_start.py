@@ -107,7 +107,9 @@ def test_the_start_is_a_solve_at_the_pinned_parameters_and_iteration_zero(monkey
                                  smoothing=learned.LEARNED_START_SMOOTHING)
     np.testing.assert_allclose(first.geometry.control_points,
                                expected.control_points.numpy(), atol=1e-6)
-    assert snapshots[-1].done and snapshots[-1].iteration == 20 and snapshots[-1].stage == "gradient"
+    final = snapshots[-1]
+    assert final.done and final.iteration == 20 and final.stage == "gradient"
+    assert final.message.startswith("learned start (the shipped model")  # the result says so
 
 
 def _round_cap(count: int = 700) -> np.ndarray:
