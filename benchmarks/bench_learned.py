@@ -235,13 +235,15 @@ def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, warm_ups: list
     for warm in warm_ups:
         engine.LEARNED_WARMUP_ITERATIONS = warm
         reached, worse, messages, finals = [], [], [], []
-        for (name, points), ref in zip(clouds, reference, strict=True):
+        for (name, points), ref, theirs in zip(clouds, reference, today_finals, strict=True):
             target = ref[min(100, len(ref) - 1)]
             curve = rms_by_iteration(points, learned, messages, finals)
             hit = next((i for i, r in enumerate(curve) if r <= target), None)
             reached.append(hit if hit is not None else budget + 1)
             if curve[-1] > ref[-1] * 1.01:
-                worse.append(f"{name} ({curve[-1]:.3g} vs {ref[-1]:.3g})")
+                worse.append(f"{name} ({curve[-1]:.3g} vs {ref[-1]:.3g}"
+                             + (", today's folds" if _folds(theirs) else "")
+                             + (", ours folds" if _folds(finals[-1]) else "") + ")")
         used = [m.startswith("learned start") for m in messages]
         fallbacks = sorted({m.split(" (")[0] + (": not a clean sheet" if "clean sheet" in m else "")
                             for m in messages if not m.startswith("learned start")})
@@ -256,11 +258,16 @@ def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, warm_ups: list
     return reference
 
 
+def _folds(quality: dict) -> bool:
+    """Whether a fit folds or overlaps itself by the fit's own quality warnings."""
+    return bool(quality["flipped_fraction"] > WARN_FLIPPED
+                or quality["overlap_fraction"] > WARN_OVERLAP)
+
+
 def _folded_count(finals: list[dict]) -> str:
     """How many final fits fold or overlap themselves by the fit's own quality warnings, and the
     mean flipped and overlapping fractions."""
-    bad = sum(q["flipped_fraction"] > WARN_FLIPPED or q["overlap_fraction"] > WARN_OVERLAP
-              for q in finals)
+    bad = sum(_folds(q) for q in finals)
     flipped = 100 * np.mean([q["flipped_fraction"] for q in finals])
     overlap = 100 * np.mean([q["overlap_fraction"] for q in finals])
     area = np.median([q["area_ratio"] for q in finals])
