@@ -136,30 +136,28 @@ def learned_start(problem: Problem, config: FitConfig) -> LearnedStart:
     started = time.perf_counter()
     prediction = predict(problem.points_input)
     seconds = time.perf_counter() - started
-    name = config.learned_model or "the shipped model"
-    said = f"the learned start ({name}, {seconds * 1e3:.0f} ms)"
+    which = f"({config.learned_model or 'the shipped model'}, {seconds * 1e3:.0f} ms)"
     try:
         unit = pinned_parameters(problem, sheet, prediction)
     except ValueError as exc:
-        return LearnedStart(None, f"{said} cannot be pinned to the cloud's outline: {exc}"
-                            + fallback, sheet)
-    (u0, u1), (v0, v1) = problem.domains
-    parameters = np.stack([u0 + unit[:, 0] * (u1 - u0), v0 + unit[:, 1] * (v1 - v0)], -1)
-    geometry = least_squares_start(problem, config, parameters, LEARNED_START_SMOOTHING)
+        return LearnedStart(None, f"the learned start {which} cannot be pinned to the cloud's "
+                            f"outline: {exc}" + fallback, sheet)
+    geometry = least_squares_start(problem, config, _in_domains(unit, problem.domains),
+                                   LEARNED_START_SMOOTHING)
     assert isinstance(geometry, NurbsSurface), "a surface fit starts from a surface"
     # a start that folds, overlaps itself or leaves the cloud uncovered keeps those flaws through
     # the fit: judge it as every fit is judged, and use only a clean one
     problems = quality_warnings(surface_quality(geometry.to(dtype=torch.float64),
                                                 problem.points.double().numpy()))
     if problems:
-        return LearnedStart(None, f"{said} is not a clean sheet: {'; '.join(problems)}"
-                            + fallback, sheet)
+        return LearnedStart(None, f"the learned start {which} is not a clean sheet: "
+                            f"{'; '.join(problems)}" + fallback, sheet)
     if resolved_solver(config) == "least_squares":
-        return LearnedStart(geometry, f"learned start ({name}, {seconds * 1e3:.0f} ms): the "
-                            "least-squares core starts from its parameters", sheet, unit, True)
+        return LearnedStart(geometry, f"learned start {which}: the least-squares core starts "
+                            "from its parameters", sheet, unit, True)
     rate = config.learning_rate * LEARNED_LEARNING_RATE_SCALE
-    return LearnedStart(geometry, f"learned start ({name}, {seconds * 1e3:.0f} ms); refined at "
-                        f"learning rate {rate:g}", sheet, unit)
+    return LearnedStart(geometry, f"learned start {which}; refined at learning rate {rate:g}",
+                        sheet, unit)
 
 
 def pinned_parameters(problem: Problem, sheet: SheetStart, prediction: NurbsSurface) -> np.ndarray:
@@ -187,8 +185,12 @@ def foot_parameters(problem: Problem, prediction: NurbsSurface) -> np.ndarray:
     directions; unlike :func:`pinned_parameters`, the border is not pinned."""
     feet = foot_points(prediction, np.asarray(problem.points_input, np.float64))
     low, high = feet.min(0), feet.max(0)
-    unit = (feet - low) / np.maximum(high - low, 1e-12)
-    (u0, u1), (v0, v1) = problem.domains
+    return _in_domains((feet - low) / np.maximum(high - low, 1e-12), problem.domains)
+
+
+def _in_domains(unit: np.ndarray, domains: list[tuple[float, float]]) -> np.ndarray:
+    """Parameters (N, 2) in [0, 1]^2 mapped linearly onto the fit's domains."""
+    (u0, u1), (v0, v1) = domains
     return np.stack([u0 + unit[:, 0] * (u1 - u0), v0 + unit[:, 1] * (v1 - v0)], -1)
 
 

@@ -65,3 +65,16 @@ def xyz(point):
 
 def normalized(value, knots):
     return (value - knots[0]) / (knots[-1] - knots[0])
+
+
+def square_symmetry(uv, k):
+    """(u, v) (N, 2) under the k-th (0..7) of the unit square's symmetries: bit 4 swaps u and v,
+    bit 1 mirrors u, bit 2 mirrors v (a map of a sheet is defined up to these)."""
+    u, v = uv[:, 0], uv[:, 1]
+    if k & 4:
+        u, v = v, u
+    if k & 1:
+        u = 1 - u
+    if k & 2:
+        v = 1 - v
+    return np.stack([u, v], -1)

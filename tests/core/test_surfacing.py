@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from surface_cases import square_symmetry
 
 from nurbs_core import samples
 from nurbs_core.fitting import FitConfig, StopToken, fit, iter_fit
@@ -61,19 +62,8 @@ def test_mean_value_map_has_linear_precision_on_a_planar_mesh():
     expected = np.stack([points[:, 0] / 2, points[:, 1]], -1)
     # the corners may be numbered from any of the rectangle's four corners: compare up to the
     # square's symmetries
-    best = min(np.abs(_symmetry(uv, k) - expected).max() for k in range(8))
+    best = min(np.abs(square_symmetry(uv, k) - expected).max() for k in range(8))
     assert best < 1e-9
-
-
-def _symmetry(uv, k):
-    u, v = uv[:, 0], uv[:, 1]
-    if k & 4:
-        u, v = v, u
-    if k & 1:
-        u = 1 - u
-    if k & 2:
-        v = 1 - v
-    return np.stack([u, v], -1)
 
 
 def test_mean_value_weights_are_positive_for_bad_triangles():
