@@ -7,8 +7,9 @@ on it, an overlap as two layers. Prints each fit's status and quality measures b
     xvfb-run -a .venv/bin/python benchmarks/render_fits.py [--out /tmp/renders] [--points 4000]
 
 ``--learned``: instead, the gradient fit (100 iterations, 12 x 12) of held-out clouds of
-``bench_learned.py`` (a 0.79-turn CAD extrusion face, a curled CAD B-spline face, a bowl) from
-the principal plane and from the learned start, side by side per cloud (plane left).
+``bench_learned.py`` (a 0.79-turn CAD extrusion face, a curled CAD B-spline face, a bowl), a
+curled sheet and a terrain from the principal plane and from the learned start, side by side per
+cloud (plane left); a sphere's learned fit is refused (one patch cannot hold it).
 """
 
 from __future__ import annotations
@@ -101,9 +102,17 @@ def _learned(out: Path) -> None:
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from bench_learned import held_out_clouds
 
+    from nurbs_core import samples
+
     clouds = held_out_clouds(24, 12)
     chosen = [c for c in clouds if c[0].startswith(("cad #7 ", "cad #8 ", "bowl seed 106"))]
+    chosen += [("curled sheet", samples.curled_sheet(700, seed=104).points),
+               ("terrain", samples.height_field(700, seed=102).points)]
     base = FitConfig(solver="gradient", iterations=100, threads=1)
+    try:  # a closed shape: one patch cannot hold it, learned or not
+        fit(samples.sphere(700).points, base.replace(init="learned"))
+    except ValueError as exc:
+        print(f"sphere from the learned start: refused ({exc})")
     for name, points in chosen:
         results = [fit(points, base.replace(init="pca", parameterization="plane")),
                    fit(points, base.replace(init="learned"))]
