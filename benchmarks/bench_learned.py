@@ -1,7 +1,8 @@
 """The learned start: the paper's reconstruction table, inference time, and fit iterations saved.
 
 Run: ``python benchmarks/bench_learned.py [--patches 24] [--cad 12] [--table 200] [--cad-table 100]
-[--model "supervised 20x20=/tmp/sup/best.pt" ...] [--warm-up 0 5 10 30] [--data SPLINES.h5]``
+[--model "supervised 20x20=/tmp/sup/best.pt" ...] [--warm-up 0 5 10 30] [--data SPLINES.h5]
+[--learning-rate-scale 0.3] [--starts] [--learned-model PATH]``
 
 Held-out data beside the patch generator's test split: ``nurbs_core.samples`` shapes (made by
 other means), and faces of random CAD solids (:mod:`nurbs_core.learn.cad_faces`, its ``test``
@@ -47,6 +48,10 @@ planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-ta
    parameters of the learned prediction (the learned start's iteration 0, whether or not it passes
    the start's quality check), beside the target of part 3: whether the prediction's
    parameterization is better than the closed-form start's.
+5. **The start** (``--starts``; ``--iterations 0`` skips parts 3-4): what the start is built
+   from, unpinned, pinned (:func:`nurbs_core.fitting.learned_start.pinned_parameters`) with two
+   smoothings, and from the least-squares core's mesh map; then the core from the pinned
+   parameters against ``nurbs-fit``'s default fit (see :func:`starts`).
 """
 
 from __future__ import annotations
@@ -61,10 +66,10 @@ import numpy as np
 import torch
 
 from nurbs_core import samples
-from nurbs_core.fitting import FitConfig, engine, fit, iter_fit
+from nurbs_core.fitting import FitConfig, engine, fit, iter_fit, learned_start
 from nurbs_core.fitting import statistics as fit_statistics
-from nurbs_core.fitting.learned_start import foot_parameters
 from nurbs_core.fitting.problem import least_squares_start, prepare
+from nurbs_core.fitting.sheet import sheet_start
 from nurbs_core.learn.data import PatchGenerator, load_spline_dataset
 from nurbs_core.learn.losses import folded_fraction, laplacian, nearest_squared
 from nurbs_core.learn.normalize import Normalization
@@ -291,8 +296,8 @@ def least_squares_starts(clouds: list[tuple[str, np.ndarray]], reference: list[l
         at_plane = fit_statistics(_surface(start.geometry), points)["rms"]
         config = FitConfig(solver="gradient", init="learned", learned_model=path, threads=1)
         problem = prepare(points, config)
-        solved = least_squares_start(problem, config,
-                                     foot_parameters(problem, predict_surface(points, model)))
+        feet = learned_start.foot_parameters(problem, predict_surface(points, model))
+        solved = least_squares_start(problem, config, feet)
         at_learned = fit_statistics(solved.to(dtype=torch.float64),
                                     problem.points.double().numpy())["rms"] * problem.scale
         beats_target += at_learned <= target
@@ -300,6 +305,56 @@ def least_squares_starts(clouds: list[tuple[str, np.ndarray]], reference: list[l
         print(f"{name:28s} {target:8.4f} {at_plane:8.4f} {at_learned:8.4f}")
     print(f"learned parameters: at or below the target on {beats_target}/{len(clouds)}, better "
           f"than the plane's on {beats_plane}/{len(clouds)}")
+
+
+def starts(clouds: list[tuple[str, np.ndarray]], path: str | None) -> None:
+    """Part 5 (``--starts``): the start itself, by what it is built from: the prediction's foot
+    points stretched over the domain (unpinned), pinned to the cloud's outline with the 1e-4
+    smoothing of other starts and with ``LEARNED_START_SMOOTHING``, and the least-squares core's
+    own mesh map (12 x 12, 1e-4): RMS, area against the cloud's, flipped area, and how far the
+    surface reaches past the cloud (its surface-to-cloud maximum in point spacings). Then the
+    least-squares core from the pinned parameters (``solver="least_squares"``) against
+    ``nurbs-fit``'s default fit: RMS ratio, passes, area."""
+    model = load_model(path)
+    config = FitConfig(solver="gradient", init="learned", learned_model=path, threads=1)
+    print(f"\n## 5. the start on {len(clouds)} held-out clouds: RMS / area ratio / flipped / "
+          "surface-to-cloud max in spacings")
+    print(f"{'cloud':28s} {'unpinned':>26s} {'pinned 1e-4':>26s} "
+          f"{f'pinned {learned_start.LEARNED_START_SMOOTHING:g}':>26s} {'mesh map':>26s}")
+    ratios, passes, areas = [], [], []
+    for name, points in clouds:
+        problem = prepare(points, config)
+        try:
+            sheet = sheet_start(problem, config.replace(single_patch=False))
+            prediction = predict_surface(problem.points_input, model)
+            pinned = learned_start.pinned_parameters(problem, sheet, prediction)
+        except ValueError as exc:
+            print(f"{name:28s} falls back: {exc}")
+            continue
+        cells = []
+        for parameters, smoothing in (
+                (learned_start.foot_parameters(problem, prediction), 1e-4),
+                (pinned, 1e-4), (pinned, learned_start.LEARNED_START_SMOOTHING),
+                (sheet.parameters, 1e-4)):
+            start = least_squares_start(problem, config, parameters, smoothing)
+            q = surface_quality(start.to(dtype=torch.float64), problem.points.double().numpy())
+            rms = fit_statistics(start, problem.points.double().numpy())["rms"] * problem.scale
+            cells.append(f"{rms:.5f}/{q['area_ratio']:.3f}/{q['flipped_fraction']:.3f}/"
+                         f"{q['s2c_max'] / q['spacing']:4.1f}")
+        print(f"{name:28s} " + " ".join(f"{c:>26s}" for c in cells))
+        ours = fit(points, config.replace(solver="least_squares"))
+        default = fit(points, FitConfig(threads=1))
+        if "learned start" in (ours.message or ""):
+            ratios.append(ours.statistics["rms"] / default.statistics["rms"] - 1)
+            passes.append((ours.iterations, default.iterations))
+            areas.append(ours.statistics["area_ratio"])
+    if ratios:
+        print(f"least-squares core from the pinned parameters on {len(ratios)} clouds, against "
+              f"nurbs-fit's default fit: RMS {100 * min(ratios):+.0f} % to "
+              f"{100 * max(ratios):+.0f} %, passes median "
+              f"{stats_lib.median(p for p, _ in passes):g} against "
+              f"{stats_lib.median(d for _, d in passes):g}, area {min(areas):.3f}-"
+              f"{max(areas):.3f} x the cloud's")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -314,6 +369,11 @@ def main(argv: list[str] | None = None) -> None:
                         "fit's default start (the least-squares core's)")
     parser.add_argument("--least-squares", action="store_true", help="part 4: one least-squares "
                         "solve at the plane's and at the learned surface's parameters")
+    parser.add_argument("--starts", action="store_true", help="part 5: the start unpinned, "
+                        "pinned and from the core's map, and the core from the pinned parameters")
+    parser.add_argument("--learning-rate-scale", type=float, default=None, help="part 3 with "
+                        "this fraction of the learning rate for learned starts (the engine's "
+                        "LEARNED_LEARNING_RATE_SCALE)")
     parser.add_argument("--data", help="a SplineDataset-format HDF5 file for the table")
     parser.add_argument("--cad", type=int, default=12, help="faces of random CAD solids added to "
                         "parts 2-4's clouds (OpenCASCADE, the cad extra; 0 without it)")
@@ -342,9 +402,15 @@ def main(argv: list[str] | None = None) -> None:
     milliseconds = inference_ms(clouds, args.learned_model)
     print(f"\n## 2. inference: {milliseconds:.1f} ms per patch (median; 700 points, one thread, "
           f"resampling and mapping back included)")
-    reference = iterations(clouds, args.iterations, args.warm_up, args.learned_model, args.today)
-    if args.least_squares:
-        least_squares_starts(clouds, reference, args.learned_model)
+    if args.learning_rate_scale is not None:
+        engine.LEARNED_LEARNING_RATE_SCALE = args.learning_rate_scale
+    if args.iterations > 0:
+        reference = iterations(clouds, args.iterations, args.warm_up, args.learned_model,
+                               args.today)
+        if args.least_squares:
+            least_squares_starts(clouds, reference, args.learned_model)
+    if args.starts:
+        starts(clouds, args.learned_model)
 
 
 if __name__ == "__main__":
