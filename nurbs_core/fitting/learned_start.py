@@ -50,9 +50,10 @@ from nurbs_core.surfacing.warp import pin_to_square
 #: with this scale set to 1, the shipped model): the start has RMS 0.00098 and no flipped area;
 #: after 100 iterations with the 30-iteration warm-up, lr 0.01 gave RMS 0.00112 and 22 % of the
 #: area flipped, 0.003 0.00114 and 4.4 %, 0.001 0.00109 and 0.6 %.
-#: Re-measured on the pinned, smoothed start (``bench_learned.py`` part 3, 36 held-out clouds,
-#: 200 iterations, 5-iteration warm-up): 0.3 left 6 final fits folding against 4 at 0.1, with
-#: the same 3 clouds ending above the plane start's RMS.
+#: Re-measured on the pinned, smoothed start (``bench_learned.py --table 0 --cad-table 0
+#: --learning-rate-scale 0.3``, part 3: 36 held-out clouds, 200 iterations, 5-iteration
+#: warm-up): 0.3 left 6 final fits folding against 4 at 0.1, with the same 3 clouds ending above
+#: the plane start's RMS.
 LEARNED_LEARNING_RATE_SCALE = 0.1
 #: Warm-up iterations of the learning rate after a learned start (the usual warm-up of starts
 #: that are already fits is :data:`~nurbs_core.fitting.schedule.WARMUP_ITERATIONS`). Measured on
@@ -65,10 +66,11 @@ LEARNED_WARMUP_ITERATIONS = 5
 #: The smoothing of the learned start's least-squares solve (the relative weight of
 #: :func:`~nurbs_core.fitting.least_squares.least_squares_fit`'s second-difference penalty). On a
 #: round cloud the pinned map squeezes the square's corners onto smooth stretches of the outline,
-#: and an all but unsmoothed solve (the 1e-4 of other starts) sticks out there: on
-#: ``samples.bowl(700, seed=106)`` a horn 29 point spacings past the cloud (its surface-to-cloud
-#: maximum), 6 at 1e-3, 4 at 1e-2; over 16 held-out clouds of ``bench_learned.py`` 1e-2 left no
-#: start with flipped area (1e-4: 7 with up to 0.9 %) and cost at most 7 % of the start's RMS.
+#: and an all but unsmoothed solve (the 1e-4 of other starts) sticks out there. Measured by
+#: ``bench_learned.py --table 0 --cad-table 0 --iterations 0 --starts`` (the 33 of 36 held-out
+#: clouds whose start is pinned): on ``bowl seed 106`` the surface-to-cloud maximum is 29.1 point
+#: spacings at 1e-4 and 4.0 at 1e-2; 1e-2 leaves 2 starts with flipped area (at most 1.0 %)
+#: against 12 (at most 1.3 %), for at most 7 % of the start's RMS.
 LEARNED_START_SMOOTHING = 1e-2
 #: A pinned learned map may turn over at most this fraction of the cloud's mesh area (the
 #: parameter correction irons out a few noisy triangles; more is a map that folds).
