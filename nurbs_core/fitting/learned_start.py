@@ -56,12 +56,11 @@ from nurbs_core.surfacing.warp import pin_to_square
 #: the plane start's RMS.
 LEARNED_LEARNING_RATE_SCALE = 0.1
 #: Warm-up iterations of the learning rate after a learned start (the usual warm-up of starts
-#: that are already fits is :data:`~nurbs_core.fitting.schedule.WARMUP_ITERATIONS`). Measured on
-#: the pinned start, ``bench_learned.py --table 0 --cad-table 0 --iterations 100 --warm-up 5 10``
-#: and 30 (36 held-out clouds, gradient fit, this scale): with 5 the plane start's RMS after 100
-#: iterations is reached in a median of 13.5 iterations against 33.5 with 30, and the final fits
-#: fold on 4 of 36 against 5 (mean flipped 0.3 % both, median area 1.02 x the cloud's both).
-#: (Before the pinning, on unpinned starts at ten times this rate, 5 creased more than 30.)
+#: that are already fits is :data:`~nurbs_core.fitting.schedule.WARMUP_ITERATIONS`). Measured by
+#: ``bench_learned.py --table 0 --cad-table 0 --warm-up 5 30`` (part 3: 36 held-out clouds,
+#: gradient fit, 200 iterations, this scale): with 5 the plane start's RMS after 100 iterations
+#: is reached in a median of 14 iterations against 34 with 30; the final fits fold on 4 of 36
+#: against 3 (mean flipped 0.3 % both, median area 1.02 x the cloud's both).
 LEARNED_WARMUP_ITERATIONS = 5
 #: The smoothing of the learned start's least-squares solve (the relative weight of
 #: :func:`~nurbs_core.fitting.least_squares.least_squares_fit`'s second-difference penalty). On a
