@@ -29,8 +29,9 @@ planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-ta
    made by other means: ``nurbs_core.samples`` saddles, bowls, terrains, leaflets, curled
    sheets), each fitted by the gradient fit (default loss, 12 x 12 control points) from today's
    start (``init="pca"``: the principal plane, ``parameterization="plane"``) and from the
-   learned one (``init="learned"``: one least-squares solve at the parameters the prediction
-   gives the points, :mod:`nurbs_core.fitting.learned_start`). The accuracy today's start
+   learned one (``init="learned"``: the least-squares core from the parameters the prediction
+   gives the points and from the mesh map's, the closer core fit refined by the gradient fit,
+   :mod:`nurbs_core.fitting.learned_start`). The accuracy today's start
    reaches after 100 iterations (RMS point-to-surface distance at foot points) is the target;
    printed: the iteration at which the learned start first reaches it (median and worst, and as
    a fraction of 100), and the final RMS of both after ``--iterations``. A learned start that

@@ -298,10 +298,14 @@ class _Progress:
     def __init__(self, total: int, quiet: bool):
         self.total, self.quiet, self.last = total, quiet, -math.inf
         self.record: dict[str, float] | None = None
+        #: the least-squares core's passes so far (the gradient fit's iterations count on)
+        self.passes = 0
 
     def __call__(self, snapshot: FitSnapshot) -> None:
         if snapshot.losses:
             self.record = snapshot.losses[-1]
+        if snapshot.stage == "least_squares":
+            self.passes = snapshot.iteration
         elif snapshot.message and not snapshot.done and snapshot.status == "running":
             # a snapshot before any step says how the fit starts (the learned start, say)
             if not self.quiet:
@@ -319,10 +323,9 @@ class _Progress:
         record = self.record
         terms = ", ".join(f"{k} {v:.3g}" for k, v in record.items()
                           if k not in ("iteration", "total"))
-        line = (f"iteration {snapshot.iteration}/{self.total}  loss {record['total']:.4g} "
-                if "fairing" not in record else
-                f"pass {snapshot.iteration}  loss {record['total']:.4g} "
-                f"({terms})  {snapshot.elapsed:.1f} s")
+        line = (f"pass {snapshot.iteration}" if snapshot.stage == "least_squares" else
+                f"iteration {snapshot.iteration - self.passes}/{self.total}")
+        line += f"  loss {record['total']:.4g} ({terms})  {snapshot.elapsed:.1f} s"
         if snapshot.message:
             line += f"  [{snapshot.message}]"
         print(line, file=sys.stderr, flush=True)

@@ -29,6 +29,8 @@ from nurbs_core.fitting.guard import DivergenceGuard
 from nurbs_core.fitting.learned_start import (
     LEARNED_LEARNING_RATE_SCALE,
     LEARNED_WARMUP_ITERATIONS,
+    LearnedStart,
+    core_race,
     learned_start,
 )
 from nurbs_core.fitting.model import TrainableGeometry
@@ -86,14 +88,8 @@ def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopTo
     note, sheet = None, None
     if config.init == "learned" and initial is None:
         learned = learned_start(problem, config)
-        if learned.geometry is not None and learned.for_core:
-            return _noted(_sheet_run(problem, config, learned.core_start(), loss, stop, started),
-                          learned.message)
-        if learned.geometry is not None:
-            gentle = config.replace(
-                learning_rate=config.learning_rate * LEARNED_LEARNING_RATE_SCALE)
-            return _gradient_run(problem, gentle, learned.geometry, loss, stop, True,
-                                 learned=learned.message)
+        if learned.geometry is not None:  # pinned to the cloud's mesh: the core applies
+            return _learned_sheet_run(problem, config, learned, loss, stop, started)
         config, note, sheet = config.replace(init="pca"), learned.message, learned.sheet
     if uses_core(problem, config, initial):
         # the fold-free start runs (and refuses shapes one patch cannot hold) before iterating
@@ -116,32 +112,79 @@ def _noted(snapshots: Iterator[FitSnapshot], note: str | None) -> Iterator[FitSn
 
 def _gradient_run(problem: Problem, config: FitConfig, geometry: Geometry,
                   loss: _losses.CompositeLoss, stop: StopToken,
-                  from_initial: bool, learned: str | None = None) -> Iterator[FitSnapshot]:
-    """The gradient fit from ``geometry`` (normalised coordinates) on ``config.threads`` threads.
-    ``learned``: the start is a learned prediction (this message says whose): it is shown as
-    iteration 0 and the warm-up is the one of a learned start."""
+                  from_initial: bool) -> Iterator[FitSnapshot]:
+    """The gradient fit from ``geometry`` (normalised coordinates) on ``config.threads`` threads."""
     saved_threads = torch.get_num_threads()
     if config.threads is not None:
         torch.set_num_threads(config.threads)
     try:
-        yield from _Run(problem, config, geometry, loss, stop, from_initial,
-                        learned=learned).loop()
+        yield from _Run(problem, config, geometry, loss, stop, from_initial).loop()
     finally:
         if config.threads is not None:
             torch.set_num_threads(saved_threads)
 
 
-def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _losses.CompositeLoss,
-               stop: StopToken, started: float) -> Iterator[FitSnapshot]:
-    """The least-squares core's passes, then (when the config asks for more than least squares)
-    the gradient fit from its result; the final snapshot carries the statistics."""
+def _gentle(config: FitConfig) -> FitConfig:
+    """The config of the gradient fit that refines a learned start (its learning rate scaled)."""
+    return config.replace(learning_rate=config.learning_rate * LEARNED_LEARNING_RATE_SCALE)
+
+
+def _learned_sheet_run(problem: Problem, config: FitConfig, learned: LearnedStart,
+                       loss: _losses.CompositeLoss, stop: StopToken,
+                       started: float) -> Iterator[FitSnapshot]:
+    """A learned start's fit of an unordered cloud: the start as iteration 0, the least-squares
+    core from its parameters and from the mesh map's (:func:`core_race`), then the run of
+    :func:`_sheet_run` from the better core fit: refined gently after a short warm-up when it is
+    the learned one, exactly as ``init="pca"`` would go on when it is not."""
+    assert learned.geometry is not None, "a learned start"
+    yield FitSnapshot(iteration=0, geometry=core_geometry_numpy(learned.geometry, problem),
+                      losses=[], elapsed=time.perf_counter() - started, done=False,
+                      status="running", message=learned.message)
+    race: dict = {}
     saved_threads = torch.get_num_threads()
     if config.threads is not None:
         torch.set_num_threads(config.threads)
     try:
-        result: dict = {}
+        yield from core_race(problem, config, learned, stop, started, race)
+    except Exception as exc:  # report to the app as a failed run instead of killing its thread
+        yield FitSnapshot(iteration=0, geometry={}, losses=[], done=True, status="failed",
+                          elapsed=time.perf_counter() - started,
+                          message=f"{type(exc).__name__}: {exc}")
+        return
+    finally:
+        if config.threads is not None:
+            torch.set_num_threads(saved_threads)
+    winner = race["result"]
+    if winner["status"] != "stopped":  # the race's outcome: the core fit the run goes on from
+        yield FitSnapshot(iteration=winner["iteration"],
+                          geometry=core_geometry_numpy(winner["geometry"], problem),
+                          losses=[], elapsed=time.perf_counter() - started, done=False,
+                          status="running", message=race["message"], stage="least_squares")
+    gentle = race["learned_won"] and resolved_solver(config) == "gradient"
+    note = f"{learned.message}; {race['message']}"
+    if gentle:
+        note += f"; refined at learning rate {_gentle(config).learning_rate:g}"
+    yield from _noted(_sheet_run(problem, _gentle(config) if gentle else config, race["start"],
+                                 loss, stop, started, core=race["result"],
+                                 warm_up_iterations=LEARNED_WARMUP_ITERATIONS if gentle
+                                 else WARMUP_ITERATIONS), note)
+
+
+def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _losses.CompositeLoss,
+               stop: StopToken, started: float, core: dict | None = None,
+               warm_up_iterations: int = WARMUP_ITERATIONS) -> Iterator[FitSnapshot]:
+    """The least-squares core's passes, then (when the config asks for more than least squares)
+    the gradient fit from its result, after ``warm_up_iterations`` of warm-up; the final snapshot
+    carries the statistics. ``core``: the result of core passes already run from ``start`` (see
+    :func:`~nurbs_core.fitting.sheet.core_snapshots`): the run goes on from it."""
+    saved_threads = torch.get_num_threads()
+    if config.threads is not None:
+        torch.set_num_threads(config.threads)
+    try:
+        result: dict = {} if core is None else core
         try:
-            yield from core_snapshots(problem, config, start, stop, started, result)
+            if core is None:
+                yield from core_snapshots(problem, config, start, stop, started, result)
         except Exception as exc:  # report to the app as a failed run instead of killing its thread
             yield FitSnapshot(iteration=0, geometry={}, losses=[], done=True, status="failed",
                               elapsed=time.perf_counter() - started,
@@ -153,7 +196,7 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _lo
                 loss = loss.with_term(config.stiffness * result["fairing_scale"], "fairing")
             run = _Run(problem, config, result["geometry"].to(dtype=problem.dtype), loss, stop,
                        True, start_params=result["parameters"], offset=result["iteration"],
-                       started=started)
+                       started=started, warm_up_iterations=warm_up_iterations)
             final = None
             for snapshot in run.loop():
                 if snapshot.done:
@@ -209,12 +252,12 @@ class _Run:
     def __init__(self, problem: Problem, config: FitConfig, geometry: Geometry,
                  loss: _losses.CompositeLoss, stop: StopToken, from_initial: bool,
                  start_params: np.ndarray | None = None, offset: int = 0,
-                 started: float | None = None, learned: str | None = None):
+                 started: float | None = None, warm_up_iterations: int = WARMUP_ITERATIONS):
         """``geometry``: the start (normalised coordinates); ``from_initial``: it is the caller's
         geometry (warm up); ``start_params``: foot-point parameters (N, 2) to start from (the
         least-squares core's); ``offset``: the iterations already done before this run (records
         and snapshots count on from there); ``started``: the run's ``perf_counter`` start;
-        ``learned``: the start is a learned prediction (the message of iteration 0's snapshot)."""
+        ``warm_up_iterations``: the first warm-up's length (a learned start's is shorter)."""
         self.problem, self.config, self.loss, self.stop = problem, config, loss, stop
         self.offset = offset
         self.generator = torch.Generator().manual_seed(config.seed)
@@ -234,10 +277,8 @@ class _Run:
         self.evaluation = self._evaluation(params)
         stage_length = max(1, math.ceil(config.iterations / (config.refinements + 1)))
         warm_up = from_initial or config.init == "least_squares" or problem.start_is_fit
-        self.learned = learned
         self.schedule = LearningRateSchedule(
-            config, stage_length, self._leaves(), warm_up,
-            LEARNED_WARMUP_ITERATIONS if learned is not None else WARMUP_ITERATIONS)
+            config, stage_length, self._leaves(), warm_up, warm_up_iterations)
         self.guard = DivergenceGuard(self.model.state())
         #: the loop's state: iterations done, records since the last snapshot, the outcome
         self.iteration, self.stage_start, self.quiet = 0, 0, 0
@@ -332,10 +373,6 @@ class _Run:
         a final one (``done=True``), or a "failed" one when something raises."""
         config, stop = self.config, self.stop
         last_yield = -math.inf
-        if self.learned is not None:
-            # the prediction itself, before the first step
-            yield self._snapshot(0, [], "running", False, self.learned)
-            last_yield = time.perf_counter()
         try:
             while self.iteration < config.iterations:
                 if stop.stopped:
@@ -420,8 +457,6 @@ class _Run:
             self.schedule.learning_rate)
         if summary is not None:
             message = summary if message is None else f"{message}; {summary}"
-        if self.learned is not None:  # the result says how it started, as its first picture did
-            message = self.learned if message is None else f"{self.learned}; {message}"
         return self._snapshot(self.iteration, self.records, self.status, True, message)
 
 

@@ -54,8 +54,8 @@ def uses_core(problem: Problem, config: FitConfig, initial: object) -> bool:
 
 def resolved_solver(config: FitConfig) -> str:
     """"least_squares" or "gradient" (see FitConfig.solver; custom knots need the gradient fit,
-    the core chooses its own knots; a learned start is refined by the gradient fit unless the
-    core is asked for: :mod:`nurbs_core.fitting.learned_start`)."""
+    the core chooses its own knots; the core's fit from a learned start is refined by the
+    gradient fit unless only the core is asked for: :mod:`nurbs_core.fitting.learned_start`)."""
     if config.solver != "auto":
         return config.solver
     if config.init == "learned":

@@ -64,6 +64,8 @@ def test_the_learned_start_says_it_was_used_before_the_first_iteration(tmp_path,
     lines = captured.err.splitlines()
     start = next(i for i, line in enumerate(lines) if line.startswith("iteration 0: "))
     assert "learned start (the shipped model" in lines[start], captured.err
+    # the core's passes (from the learned parameters and the mesh map's), then the 3 iterations
+    assert any(line.startswith("pass ") for line in lines[start + 1:]), captured.err
     assert any(line.startswith("iteration 3/3") for line in lines[start + 1:]), captured.err
 
 
