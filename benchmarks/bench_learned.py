@@ -197,7 +197,7 @@ def rms_by_iteration(points: np.ndarray, config: FitConfig,
     """RMS foot-point distance of the geometry after each iteration 0..config.iterations (the
     start first: the learned start's iteration-0 snapshot, or a zero-iteration run); the first
     snapshot's message is appended to ``messages``, the final fit's quality measures
-    (:func:`nurbs_core.quality.surface_quality`) to ``finals``."""
+    (:func:`nurbs_core.quality.surface_quality`) and its "message" to ``finals``."""
     curve: dict[int, float] = {}
     if config.init != "learned":
         start = next(iter(iter_fit(points, config.replace(iterations=0))))
@@ -209,7 +209,8 @@ def rms_by_iteration(points: np.ndarray, config: FitConfig,
         if snapshot.geometry:
             curve[snapshot.iteration] = fit_statistics(_surface(snapshot.geometry), points)["rms"]
         if snapshot.done and finals is not None:
-            finals.append(surface_quality(_surface(snapshot.geometry), points))
+            finals.append({**surface_quality(_surface(snapshot.geometry), points),
+                           "message": snapshot.message or ""})
     if 0 not in curve:  # a learned start that fell back: its start is the PCA plane's
         start = next(iter(iter_fit(points, config.replace(iterations=0))))
         curve[0] = fit_statistics(_surface(start.geometry), points)["rms"]
@@ -253,7 +254,10 @@ def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, warm_ups: list
         used = [m.startswith("learned start") for m in messages]
         fallbacks = sorted({m.split(" (")[0] + (": not a clean sheet" if "clean sheet" in m else "")
                             for m in messages if not m.startswith("learned start")})
-        print(f"learned start used on {sum(used)}/{len(used)} clouds; fell back on the others "
+        won = sum("core fit has RMS" in q["message"] and "going on from the mesh map's"
+                  not in q["message"] for q in finals)
+        print(f"learned start used on {sum(used)}/{len(used)} clouds (its core fit the closer "
+              f"on {won}, refined from it); fell back on the others "
               f"({'; '.join(fallbacks) or '-'})")
         median = stats_lib.median(reached)
         print(f"warm-up {warm:>2}: iterations to reach the target: median {median:g} "

@@ -298,18 +298,16 @@ class _Progress:
     def __init__(self, total: int, quiet: bool):
         self.total, self.quiet, self.last = total, quiet, -math.inf
         self.record: dict[str, float] | None = None
-        #: the least-squares core's passes so far (the gradient fit's iterations count on)
-        self.passes = 0
 
     def __call__(self, snapshot: FitSnapshot) -> None:
         if snapshot.losses:
             self.record = snapshot.losses[-1]
-        if snapshot.stage == "least_squares":
-            self.passes = snapshot.iteration
-        elif snapshot.message and not snapshot.done and snapshot.status == "running":
-            # a snapshot before any step says how the fit starts (the learned start, say)
+        stage = "pass" if snapshot.stage == "least_squares" else "iteration"
+        if (not snapshot.losses and snapshot.message and not snapshot.done
+                and snapshot.status == "running"):
+            # a snapshot without a step says how the fit starts or goes on (the learned start)
             if not self.quiet:
-                print(f"iteration {snapshot.iteration}: {snapshot.message}", file=sys.stderr,
+                print(f"{stage} {snapshot.iteration}: {snapshot.message}", file=sys.stderr,
                       flush=True)
             return
         # the final snapshot has no records when the previous one already carried the last
@@ -323,8 +321,9 @@ class _Progress:
         record = self.record
         terms = ", ".join(f"{k} {v:.3g}" for k, v in record.items()
                           if k not in ("iteration", "total"))
-        line = (f"pass {snapshot.iteration}" if snapshot.stage == "least_squares" else
-                f"iteration {snapshot.iteration - self.passes}/{self.total}")
+        line = f"{stage} {snapshot.iteration}"
+        if snapshot.stage != "least_squares":
+            line += f"/{snapshot.passes + self.total}"
         line += f"  loss {record['total']:.4g} ({terms})  {snapshot.elapsed:.1f} s"
         if snapshot.message:
             line += f"  [{snapshot.message}]"

@@ -241,7 +241,8 @@ class FitWorker(QObject):
                                                     statistics, dev)
             self.snapshot_ready.emit(DisplaySnapshot(
                 run_id=request.run_id, iteration=int(snapshot.iteration),
-                iterations=0 if snapshot.stage == "least_squares" else config.iterations,
+                iterations=(0 if snapshot.stage == "least_squares"
+                            else snapshot.passes + config.iterations),
                 geometry=snapshot.geometry,
                 display=display, losses=list(snapshot.losses),
                 elapsed=float(snapshot.elapsed), done=bool(snapshot.done),

@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike
 from nurbs_core import losses as _losses
 from nurbs_core.evaluate import SurfaceEvaluator, SurfaceGridEvaluator
 from nurbs_core.fitting.config import FitConfig, FitResult, FitSnapshot, StopToken
-from nurbs_core.fitting.engine import _Run, statistics
+from nurbs_core.fitting.engine import _Run, statistics, torch_threads
 from nurbs_core.fitting.exact import exact_geometries, exact_problem, exact_snapshot
 from nurbs_core.fitting.problem import initial_geometry, prepare
 from nurbs_core.geometry import geometry_from_numpy
@@ -79,18 +79,12 @@ def fit_batch(targets: Sequence[ArrayLike], config: FitConfig | None = None, *,
     reason = batch_problem(config, [run.problem.count for run in runs])
     if reason is not None:
         raise ValueError(f"these fits cannot run as one batch: {reason}")
-    saved_threads = torch.get_num_threads()
-    if config.threads is not None:
-        torch.set_num_threads(config.threads)
-    try:
+    with torch_threads(config.threads):
         groups: dict[tuple[int, ...], list[_Run]] = {}
         for run in runs:
             groups.setdefault(tuple(run.model.control_points.shape), []).append(run)
         for group in groups.values():
             _BatchedGroup(group).run()
-    finally:
-        if config.threads is not None:
-            torch.set_num_threads(saved_threads)
     return [_result(run, target, params, time.perf_counter() - started)
             for run, target, params in zip(runs, targets, parameters, strict=True)]
 

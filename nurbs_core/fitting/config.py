@@ -151,8 +151,9 @@ class FitConfig:
     for curves and uses PCA parameters for surfaces; "random" is the paper's Gaussian start;
     "learned" (unordered surface clouds of open patches) starts from the surface a trained encoder
     predicts (``learned_model``: a ``nurbs-train`` model file, None for the one shipped with the
-    package) and continues with the gradient fit (with ``solver="least_squares"``: the
-    least-squares core from the prediction's parameters); without a usable model, or for
+    package): the least-squares core runs from the prediction's parameters and from the mesh
+    map's, and the closer core fit goes on (with the gradient fit unless ``solver`` is
+    "least_squares"); without a usable model, or for
     a cloud that is not an open patch, it falls back to "pca" and the first message says why
     (:mod:`nurbs_core.fitting.learned_start`).
     For unordered clouds the pointwise
@@ -419,6 +420,9 @@ class FitSnapshot:
     #: "least_squares" for the passes of the least-squares core (their number is not known in
     #: advance), "gradient" for the iterations of the torch optimisation
     stage: str = "gradient"
+    #: the least-squares core's passes before the gradient fit began (its iteration counts on
+    #: from them: the run's whole budget is ``passes`` + the config's ``iterations``)
+    passes: int = 0
 
 
 @dataclass

@@ -11,6 +11,7 @@ core fits (:mod:`~nurbs_core.fitting.sheet`) go through :func:`_sheet_run`.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import time
@@ -29,6 +30,7 @@ from nurbs_core.fitting.guard import DivergenceGuard
 from nurbs_core.fitting.learned_start import (
     LEARNED_LEARNING_RATE_SCALE,
     LEARNED_WARMUP_ITERATIONS,
+    CoreRace,
     LearnedStart,
     core_race,
     learned_start,
@@ -110,23 +112,33 @@ def _noted(snapshots: Iterator[FitSnapshot], note: str | None) -> Iterator[FitSn
         yield snapshot
 
 
+@contextlib.contextmanager
+def torch_threads(count: int | None) -> Iterator[None]:
+    """torch's intra-op thread count set to ``count`` for the block (None: left as it is), then
+    restored."""
+    saved = torch.get_num_threads()
+    if count is not None:
+        torch.set_num_threads(count)
+    try:
+        yield
+    finally:
+        if count is not None:
+            torch.set_num_threads(saved)
+
+
+def _failed(exc: Exception, started: float) -> FitSnapshot:
+    """The done snapshot of a run that raised: the app shows it instead of losing its thread."""
+    return FitSnapshot(iteration=0, geometry={}, losses=[], done=True, status="failed",
+                       elapsed=time.perf_counter() - started,
+                       message=f"{type(exc).__name__}: {exc}")
+
+
 def _gradient_run(problem: Problem, config: FitConfig, geometry: Geometry,
                   loss: _losses.CompositeLoss, stop: StopToken,
                   from_initial: bool) -> Iterator[FitSnapshot]:
     """The gradient fit from ``geometry`` (normalised coordinates) on ``config.threads`` threads."""
-    saved_threads = torch.get_num_threads()
-    if config.threads is not None:
-        torch.set_num_threads(config.threads)
-    try:
+    with torch_threads(config.threads):
         yield from _Run(problem, config, geometry, loss, stop, from_initial).loop()
-    finally:
-        if config.threads is not None:
-            torch.set_num_threads(saved_threads)
-
-
-def _gentle(config: FitConfig) -> FitConfig:
-    """The config of the gradient fit that refines a learned start (its learning rate scaled)."""
-    return config.replace(learning_rate=config.learning_rate * LEARNED_LEARNING_RATE_SCALE)
 
 
 def _learned_sheet_run(problem: Problem, config: FitConfig, learned: LearnedStart,
@@ -134,40 +146,34 @@ def _learned_sheet_run(problem: Problem, config: FitConfig, learned: LearnedStar
                        started: float) -> Iterator[FitSnapshot]:
     """A learned start's fit of an unordered cloud: the start as iteration 0, the least-squares
     core from its parameters and from the mesh map's (:func:`core_race`), then the run of
-    :func:`_sheet_run` from the better core fit: refined gently after a short warm-up when it is
+    :func:`_sheet_run` from the closer core fit: refined gently after a short warm-up when it is
     the learned one, exactly as ``init="pca"`` would go on when it is not."""
-    assert learned.geometry is not None, "a learned start"
+    assert learned.geometry is not None and learned.sheet is not None, "a learned start"
     yield FitSnapshot(iteration=0, geometry=core_geometry_numpy(learned.geometry, problem),
                       losses=[], elapsed=time.perf_counter() - started, done=False,
                       status="running", message=learned.message)
-    race: dict = {}
-    saved_threads = torch.get_num_threads()
-    if config.threads is not None:
-        torch.set_num_threads(config.threads)
-    try:
-        yield from core_race(problem, config, learned, stop, started, race)
-    except Exception as exc:  # report to the app as a failed run instead of killing its thread
-        yield FitSnapshot(iteration=0, geometry={}, losses=[], done=True, status="failed",
-                          elapsed=time.perf_counter() - started,
-                          message=f"{type(exc).__name__}: {exc}")
-        return
-    finally:
-        if config.threads is not None:
-            torch.set_num_threads(saved_threads)
-    winner = race["result"]
+    race = CoreRace()
+    with torch_threads(config.threads):
+        try:
+            yield from core_race(problem, config, learned, stop, started, race)
+        except Exception as exc:  # report to the app as a failed run instead of killing its thread
+            yield _failed(exc, started)
+            return
+    winner = race.result
     if winner["status"] != "stopped":  # the race's outcome: the core fit the run goes on from
         yield FitSnapshot(iteration=winner["iteration"],
                           geometry=core_geometry_numpy(winner["geometry"], problem),
                           losses=[], elapsed=time.perf_counter() - started, done=False,
-                          status="running", message=race["message"], stage="least_squares")
-    gentle = race["learned_won"] and resolved_solver(config) == "gradient"
-    note = f"{learned.message}; {race['message']}"
-    if gentle:
-        note += f"; refined at learning rate {_gentle(config).learning_rate:g}"
-    yield from _noted(_sheet_run(problem, _gentle(config) if gentle else config, race["start"],
-                                 loss, stop, started, core=race["result"],
-                                 warm_up_iterations=LEARNED_WARMUP_ITERATIONS if gentle
-                                 else WARMUP_ITERATIONS), note)
+                          status="running", message=race.message, stage="least_squares")
+    note = f"{learned.message}; {race.message}"
+    warm_up = WARMUP_ITERATIONS
+    if race.learned_won and resolved_solver(config) == "gradient":
+        config = config.replace(learning_rate=config.learning_rate * LEARNED_LEARNING_RATE_SCALE)
+        note += f"; refined at learning rate {config.learning_rate:g}"
+        warm_up = LEARNED_WARMUP_ITERATIONS
+    # both cores fitted the same points over the same mesh: its quality measures serve either
+    yield from _noted(_sheet_run(problem, config, learned.sheet, loss, stop, started,
+                                 core=winner, warm_up_iterations=warm_up), note)
 
 
 def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _losses.CompositeLoss,
@@ -175,20 +181,15 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _lo
                warm_up_iterations: int = WARMUP_ITERATIONS) -> Iterator[FitSnapshot]:
     """The least-squares core's passes, then (when the config asks for more than least squares)
     the gradient fit from its result, after ``warm_up_iterations`` of warm-up; the final snapshot
-    carries the statistics. ``core``: the result of core passes already run from ``start`` (see
-    :func:`~nurbs_core.fitting.sheet.core_snapshots`): the run goes on from it."""
-    saved_threads = torch.get_num_threads()
-    if config.threads is not None:
-        torch.set_num_threads(config.threads)
-    try:
+    carries the statistics. ``core``: the result of core passes already run over ``start``'s
+    mesh (see :func:`~nurbs_core.fitting.sheet.core_snapshots`): the run goes on from it."""
+    with torch_threads(config.threads):
         result: dict = {} if core is None else core
         try:
             if core is None:
                 yield from core_snapshots(problem, config, start, stop, started, result)
         except Exception as exc:  # report to the app as a failed run instead of killing its thread
-            yield FitSnapshot(iteration=0, geometry={}, losses=[], done=True, status="failed",
-                              elapsed=time.perf_counter() - started,
-                              message=f"{type(exc).__name__}: {exc}")
+            yield _failed(exc, started)
             return
         if resolved_solver(config) == "gradient" and result["status"] != "stopped":
             if "fairing" not in loss.names and config.stiffness > 0:
@@ -226,9 +227,6 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _lo
                           done=True, status=result["status"],
                           message=_with_warnings(result["message"], stats), statistics=stats,
                           stage="least_squares")
-    finally:
-        if config.threads is not None:
-            torch.set_num_threads(saved_threads)
 
 
 def _with_warnings(message: str | None, stats: dict) -> str | None:
@@ -345,7 +343,7 @@ class _Run:
                   message: str | None = None) -> FitSnapshot:
         return FitSnapshot(iteration=iteration + self.offset, geometry=self._geometry_numpy(),
                            losses=list(records), elapsed=time.perf_counter() - self.started,
-                           done=done, status=status, message=message)
+                           done=done, status=status, message=message, passes=self.offset)
 
     def _step(self, batch: torch.Tensor | None) -> tuple[float, dict[str, torch.Tensor]]:
         """One optimizer step on the batch (K,) of point indices (None: all points): the loss

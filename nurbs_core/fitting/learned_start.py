@@ -157,42 +157,51 @@ def learned_start(problem: Problem, config: FitConfig) -> LearnedStart:
     return LearnedStart(geometry, f"learned start {which}", sheet, unit)
 
 
+@dataclass
+class CoreRace:
+    """What :func:`core_race` found: whether the learned core fit won, the winner's core result
+    (:func:`~nurbs_core.fitting.sheet.core_snapshots`'s, its "iteration" the passes of both
+    cores) and the line the run reports."""
+
+    learned_won: bool = False
+    result: dict[str, Any] = dataclasses.field(default_factory=dict)
+    message: str = ""
+
+
 def core_race(problem: Problem, config: FitConfig, start: LearnedStart, stop: StopToken,
-              started: float, race: dict[str, Any]) -> Iterator[FitSnapshot]:
+              started: float, race: CoreRace) -> Iterator[FitSnapshot]:
     """The least-squares core (:func:`~nurbs_core.fitting.sheet.core_snapshots`) from the learned
     parameters (its passes yielded live, numbered from 1), then from the mesh map's (today's
-    start: only its pauses are yielded; its passes count on). Fills ``race`` with "learned_won"
-    (the learned core fit's RMS over all points is below the mesh map's), the winner's "start"
-    (a :class:`SheetStart`) and "result" (its core result, "iteration" = the passes of both), and
-    a "message" with both RMS in the points' units. A stop during the first core ends the race
-    there, the learned fit kept.
+    start: only its pauses are yielded; its passes count on). Fills ``race``: the learned core
+    fit wins when its RMS over all points is below the mesh map's; the message gives both in
+    the points' units. A stop during either core keeps the learned fit (the one complete, or the
+    one shown).
 
     Why both: the prediction's parameters are better on most held-out clouds (the core then fits
     closer, and the gentle refinement gets there in few iterations), but not on all of them, and
     a learned start must never leave the user worse off than today's: where the mesh map's core
     fit is at least as close, the fit goes on from it exactly as ``init="pca"`` would."""
     assert start.sheet is not None, "a learned start that did not fall back"
-    learned_start_sheet = start.core_start()
     learned: dict[str, Any] = {}
-    yield from core_snapshots(problem, config, learned_start_sheet, stop, started, learned)
-    if learned["status"] == "stopped":
-        race.update(learned_won=True, start=learned_start_sheet, result=learned,
-                    message="stopped before today's start was compared")
-        return
+    yield from core_snapshots(problem, config, start.core_start(), stop, started, learned)
     today: dict[str, Any] = {}
-    for snapshot in core_snapshots(problem, config, start.sheet, stop, started, today):
-        if snapshot.status == "paused":
-            yield dataclasses.replace(snapshot, iteration=learned["iteration"])
+    if learned["status"] != "stopped":
+        for snapshot in core_snapshots(problem, config, start.sheet, stop, started, today):
+            if snapshot.status == "paused":
+                yield dataclasses.replace(snapshot, iteration=learned["iteration"])
+    if not today or today["status"] == "stopped":
+        race.learned_won, race.result = True, learned
+        learned["iteration"] += today.get("iteration", 0)
+        race.message = "stopped before its core fit was compared with the mesh map's"
+        return
     mine, theirs = (float(np.sqrt(np.mean(r["distances"] ** 2))) * problem.scale
                     for r in (learned, today))
-    won = mine < theirs and today["status"] != "stopped"
-    winner = learned if won else today
-    winner["iteration"] = learned["iteration"] + today["iteration"]
-    compared = f"its core fit has RMS {mine:.4g} against {theirs:.4g} from the cloud's mesh map"
-    race.update(learned_won=won, start=learned_start_sheet if won else start.sheet,
-                result=winner,
-                message=compared if won else f"{compared}: going on from the mesh map's, as "
-                "init 'pca' does")
+    race.learned_won = mine < theirs
+    race.result = learned if race.learned_won else today
+    race.result["iteration"] = learned["iteration"] + today["iteration"]
+    race.message = f"its core fit has RMS {mine:.4g} against {theirs:.4g} from the cloud's mesh map"
+    if not race.learned_won:
+        race.message += ": going on from the mesh map's, as init 'pca' does"
 
 
 def pinned_parameters(problem: Problem, sheet: SheetStart, prediction: NurbsSurface) -> np.ndarray:

@@ -217,3 +217,16 @@ def test_bad_file_leaves_the_document_untouched(qtbot, window, ply_cloud, tmp_pa
     assert "broken.ply" in window.last_error
     assert window.document.targets is targets and window.document.fitted is fitted
     assert window.scene._meshes["cloud"].n_points == len(ply_cloud[1])
+
+
+def test_the_status_bar_counts_the_cores_passes_into_the_budget(qtbot, window, ply_cloud):
+    """After the least-squares core, the gradient fit's iterations count on from its passes, and
+    the status bar's budget does too: a finished run reads "Iteration n/n", never past it."""
+    open_by_drop(qtbot, window, [ply_cloud[0]])
+    window.document.edit_settings("quick", **{**QUICK, "iterations": 5})
+    with qtbot.waitSignal(window.controller.fit_finished, timeout=60000) as blocker:
+        window.controller.start()
+    snapshot = blocker.args[0]
+    assert snapshot.status == "budget" and snapshot.iteration > 5  # passes, then 5 iterations
+    text = window.status_labels["iteration"].text()
+    assert text == f"Iteration {snapshot.iteration}/{snapshot.iteration}", text

@@ -64,9 +64,14 @@ def test_the_learned_start_says_it_was_used_before_the_first_iteration(tmp_path,
     lines = captured.err.splitlines()
     start = next(i for i, line in enumerate(lines) if line.startswith("iteration 0: "))
     assert "learned start (the shipped model" in lines[start], captured.err
-    # the core's passes (from the learned parameters and the mesh map's), then the 3 iterations
-    assert any(line.startswith("pass ") for line in lines[start + 1:]), captured.err
-    assert any(line.startswith("iteration 3/3") for line in lines[start + 1:]), captured.err
+    # the core's passes (from the learned parameters and the mesh map's), the outcome of their
+    # race, then 3 iterations that count on from the passes, to the budget
+    later = lines[start + 1:]
+    race = next(line for line in later if "its core fit has RMS" in line)
+    passes = int(race.split(":")[0].removeprefix("pass "))
+    assert any(line.startswith("pass ") and "loss" in line for line in later), captured.err
+    assert any(line.startswith(f"iteration {passes + 3}/{passes + 3}  loss")
+               for line in later), captured.err
 
 
 def test_fit_ply_curve_with_free_weights(tmp_path, capsys):

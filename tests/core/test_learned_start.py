@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from nurbs_core import samples
-from nurbs_core.fitting import FitConfig, fit, iter_fit, statistics
+from nurbs_core.fitting import FitConfig, StopToken, fit, iter_fit, statistics
 from nurbs_core.fitting import learned_start as learned
 from nurbs_core.fitting.least_squares import least_squares_fit
 from nurbs_core.fitting.problem import prepare
@@ -182,6 +182,25 @@ def test_where_the_mesh_maps_core_fit_is_closer_the_fit_goes_on_exactly_as_init_
                                       today.geometry.control_points.numpy())
         assert ours.statistics["rms"] == today.statistics["rms"]
         assert ours.iterations > today.iterations
+
+
+def test_a_stop_during_the_race_keeps_the_learned_core_fit(sheet):
+    """Stopped during the learned core's passes, the run ends there, stopped, with the last
+    pass's surface, as a core run from the mesh map stopped at the same pass does: no second
+    core and no gradient iteration run after it."""
+    finals = {}
+    for init in ("learned", "pca"):
+        stop = StopToken()
+        for snapshot in iter_fit(sheet.points, FitConfig(init=init, solver="gradient",
+                                                         iterations=50, threads=1), stop=stop):
+            if snapshot.stage == "least_squares" and not snapshot.done:
+                stop.stop()
+        finals[init] = snapshot
+    final = finals["learned"]
+    assert final.done and final.status == "stopped", final.message
+    assert "stopped before its core fit was compared" in final.message
+    assert final.stage == "least_squares" and final.iteration == finals["pca"].iteration
+    assert final.geometry.control_points.shape[-1] == 3
 
 
 def test_a_coarse_prediction_gives_a_close_start(monkeypatch, sheet):

@@ -170,6 +170,18 @@ def test_gradient_solver_continues_from_the_least_squares_core(one_torch_thread)
     assert torch.isfinite(surface.control_points).all()
 
 
+def test_the_gradient_fits_snapshots_say_how_many_core_passes_came_before(one_torch_thread):
+    shape = samples.height_field(800)
+    config = FitConfig(solver="gradient", iterations=6, snapshot_interval=0.0)
+    snapshots = list(iter_fit(shape.points, config))
+    core = [s for s in snapshots if s.stage == "least_squares"]
+    gradient = [s for s in snapshots if s.stage == "gradient"]
+    assert core and gradient and all(s.passes == 0 for s in core)
+    passes = core[-1].iteration
+    assert all(s.passes == passes for s in gradient)
+    assert snapshots[-1].iteration == passes + config.iterations
+
+
 def test_user_corners_become_the_patch_corners(one_torch_thread):
     # a flat 2 x 1 rectangle sampled on a grid: ask for the corners at a rotated position (the
     # midpoints of the long sides and the two right-hand corners): the patch's corners follow
