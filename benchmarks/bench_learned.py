@@ -1,8 +1,8 @@
 """The learned start: the paper's reconstruction table, inference time, and fit iterations saved.
 
 Run: ``python benchmarks/bench_learned.py [--patches 24] [--cad 12] [--table 200] [--cad-table 100]
-[--model "supervised 20x20=/tmp/sup/best.pt" ...] [--warm-up 0 5 10 30] [--data SPLINES.h5]
-[--learning-rate-scale 0.3] [--starts] [--learned-model PATH]``
+[--model "supervised 20x20=/tmp/sup/best.pt" ...] [--today default] [--data SPLINES.h5]
+[--starts] [--learned-model PATH]``
 
 Held-out data beside the patch generator's test split: ``nurbs_core.samples`` shapes (made by
 other means), and faces of random CAD solids (:mod:`nurbs_core.learn.cad_faces`, its ``test``
@@ -37,8 +37,7 @@ planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-ta
    a fraction of 100), and the final RMS of both after ``--iterations``. A learned start that
    falls back (its message says why) runs the config's own ``pca`` path: for these unordered
    clouds the least-squares core's start, not the plane, so its iteration counts then measure
-   the core, not the model. ``--warm-up`` repeats part 3 for other warm-up lengths of a learned
-   start (the engine's ``LEARNED_WARMUP_ITERATIONS``). ``--today default`` measures against the
+   the core, not the model. ``--today default`` measures against the
    gradient fit's own default start instead (the least-squares core's, on the cloud's mesh map).
    For both starts the final fits' quality is printed too: how many fold or overlap themselves
    by the fit's quality warnings, their area against the cloud's and how far the surface runs
@@ -67,7 +66,7 @@ import numpy as np
 import torch
 
 from nurbs_core import samples
-from nurbs_core.fitting import FitConfig, engine, fit, iter_fit, learned_start
+from nurbs_core.fitting import FitConfig, fit, iter_fit, learned_start
 from nurbs_core.fitting import statistics as fit_statistics
 from nurbs_core.fitting.problem import least_squares_start, prepare
 from nurbs_core.fitting.sheet import sheet_start
@@ -224,8 +223,8 @@ def _surface(arrays):
     return geometry_from_numpy(arrays, dtype=torch.float64)
 
 
-def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, warm_ups: list[int],
-               path: str | None, today_start: str = "plane") -> list[list[float]]:
+def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, path: str | None,
+               today_start: str = "plane") -> list[list[float]]:
     """Part 3; returns today's start's RMS curves (the targets of part 4). ``today_start``:
     "plane" (the principal plane, the start the learned one was first measured against) or
     "default" (the gradient fit's own start for unordered clouds: the least-squares core's)."""
@@ -239,32 +238,34 @@ def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, warm_ups: list
     today_finals: list[dict] = []
     reference = [rms_by_iteration(points, today, finals=today_finals) for _, points in clouds]
     print(f"today's start, final fits: {_folded_count(today_finals)}")
-    for warm in warm_ups:
-        engine.LEARNED_WARMUP_ITERATIONS = warm
-        reached, worse, messages, finals = [], [], [], []
-        for (name, points), ref, theirs in zip(clouds, reference, today_finals, strict=True):
-            target = ref[min(100, len(ref) - 1)]
-            curve = rms_by_iteration(points, learned, messages, finals)
-            hit = next((i for i, r in enumerate(curve) if r <= target), None)
-            reached.append(hit if hit is not None else budget + 1)
-            if curve[-1] > ref[-1] * 1.01:
-                worse.append(f"{name} ({curve[-1]:.3g} vs {ref[-1]:.3g}"
-                             + (", today's folds" if _folds(theirs) else "")
-                             + (", ours folds" if _folds(finals[-1]) else "") + ")")
-        used = [m.startswith("learned start") for m in messages]
-        fallbacks = sorted({m.split(" (")[0] + (": not a clean sheet" if "clean sheet" in m else "")
-                            for m in messages if not m.startswith("learned start")})
-        won = sum("core fit has RMS" in q["message"] and "going on from the mesh map's"
-                  not in q["message"] for q in finals)
-        print(f"learned start used on {sum(used)}/{len(used)} clouds (its core fit the closer "
-              f"on {won}, refined from it); fell back on the others "
-              f"({'; '.join(fallbacks) or '-'})")
-        median = stats_lib.median(reached)
-        print(f"warm-up {warm:>2}: iterations to reach the target: median {median:g} "
-              f"({median / 100:.0%} of 100), worst {max(reached)}, reached by "
-              f"{sum(r <= 100 for r in reached)}/{len(reached)}; final RMS worse than today's "
-              f"(>1%): {len(worse)}" + (f" [{'; '.join(worse)}]" if worse else ""))
-        print(f"warm-up {warm:>2}: learned start, final fits: {_folded_count(finals)}")
+    reached, worse, messages, finals, ratios = [], [], [], [], []
+    for (name, points), ref, theirs in zip(clouds, reference, today_finals, strict=True):
+        target = ref[min(100, len(ref) - 1)]
+        curve = rms_by_iteration(points, learned, messages, finals)
+        hit = next((i for i, r in enumerate(curve) if r <= target), None)
+        reached.append(hit if hit is not None else budget + 1)
+        ratios.append((curve[-1] / ref[-1] - 1, name))
+        if curve[-1] > ref[-1] * 1.01:
+            worse.append(f"{name} ({curve[-1]:.3g} vs {ref[-1]:.3g}"
+                         + (", today's folds" if _folds(theirs) else "")
+                         + (", ours folds" if _folds(finals[-1]) else "") + ")")
+    used = [m.startswith("learned start") for m in messages]
+    fallbacks = sorted({m.split(" (")[0] + (": not a clean sheet" if "clean sheet" in m else "")
+                        for m in messages if not m.startswith("learned start")})
+    won = sum("core fit has RMS" in q["message"] and "going on from the mesh map's"
+              not in q["message"] for q in finals)
+    print(f"learned start used on {sum(used)}/{len(used)} clouds (its core fit the closer "
+          f"on {won}, refined from it); fell back on the others "
+          f"({'; '.join(fallbacks) or '-'})")
+    median = stats_lib.median(reached)
+    print(f"learned start: iterations to reach the target: median {median:g} "
+          f"({median / 100:.0%} of 100), worst {max(reached)}, reached by "
+          f"{sum(r <= 100 for r in reached)}/{len(reached)}; final RMS worse than today's "
+          f"(>1%): {len(worse)}" + (f" [{'; '.join(worse)}]" if worse else "")
+          + f"; final RMS against today's: median "
+          f"{100 * stats_lib.median(r for r, _ in ratios):+.1f} %, worst "
+          f"{100 * max(ratios)[0]:+.1f} % ({max(ratios)[1]})")
+    print(f"learned start, final fits: {_folded_count(finals)}")
     return reference
 
 
@@ -368,7 +369,6 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--table", type=int, default=200)
     parser.add_argument("--iterations", type=int, default=200)
     parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH")
-    parser.add_argument("--warm-up", type=int, nargs="+", default=[engine.LEARNED_WARMUP_ITERATIONS])
     parser.add_argument("--today", choices=("plane", "default"), default="plane",
                         help="part 3's reference start: the principal plane, or the gradient "
                         "fit's default start (the least-squares core's)")
@@ -376,9 +376,6 @@ def main(argv: list[str] | None = None) -> None:
                         "solve at the plane's and at the learned surface's parameters")
     parser.add_argument("--starts", action="store_true", help="part 5: the start unpinned, "
                         "pinned and from the core's map, and the core from the pinned parameters")
-    parser.add_argument("--learning-rate-scale", type=float, default=None, help="part 3 with "
-                        "this fraction of the learning rate for learned starts (the engine's "
-                        "LEARNED_LEARNING_RATE_SCALE)")
     parser.add_argument("--data", help="a SplineDataset-format HDF5 file for the table")
     parser.add_argument("--cad", type=int, default=12, help="faces of random CAD solids added to "
                         "parts 2-4's clouds (OpenCASCADE, the cad extra; 0 without it)")
@@ -407,11 +404,8 @@ def main(argv: list[str] | None = None) -> None:
     milliseconds = inference_ms(clouds, args.learned_model)
     print(f"\n## 2. inference: {milliseconds:.1f} ms per patch (median; 700 points, one thread, "
           f"resampling and mapping back included)")
-    if args.learning_rate_scale is not None:
-        engine.LEARNED_LEARNING_RATE_SCALE = args.learning_rate_scale
     if args.iterations > 0:
-        reference = iterations(clouds, args.iterations, args.warm_up, args.learned_model,
-                               args.today)
+        reference = iterations(clouds, args.iterations, args.learned_model, args.today)
         if args.least_squares:
             least_squares_starts(clouds, reference, args.learned_model)
     if args.starts:

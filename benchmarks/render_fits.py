@@ -7,7 +7,7 @@ on it, an overlap as two layers. Prints each fit's status and quality measures b
     xvfb-run -a .venv/bin/python benchmarks/render_fits.py [--out /tmp/renders] [--points 4000]
 
 ``--learned``: instead, the gradient fit (100 iterations) of held-out clouds of
-``bench_learned.py`` (the CAD extrusion face where the learned fit ends 1.4 % above today's, a
+``bench_learned.py`` (the CAD extrusion face whose learned fit ends farthest above today's, a
 generated patch and a leaflet where its core fit wins), a curled sheet and a terrain from
 today's default start and from the learned start, side by side per cloud (today's left); a
 sphere's learned fit is refused (one patch cannot hold it).

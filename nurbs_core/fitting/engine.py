@@ -27,19 +27,12 @@ from nurbs_core.fitting.config import FitConfig, FitResult, FitSnapshot, StopTok
 from nurbs_core.fitting.evaluation import Evaluation, cloud_tree, draw_batch, uses_parameters
 from nurbs_core.fitting.exact import exact_geometry, exact_problem, exact_snapshot, uses_exact
 from nurbs_core.fitting.guard import DivergenceGuard
-from nurbs_core.fitting.learned_start import (
-    LEARNED_LEARNING_RATE_SCALE,
-    LEARNED_WARMUP_ITERATIONS,
-    CoreRace,
-    LearnedStart,
-    core_race,
-    learned_start,
-)
+from nurbs_core.fitting.learned_start import CoreRace, LearnedStart, core_race, learned_start
 from nurbs_core.fitting.model import TrainableGeometry
 from nurbs_core.fitting.problem import Problem, initial_geometry, prepare, start_parameters
 from nurbs_core.fitting.projection import project
 from nurbs_core.fitting.refinement import refine
-from nurbs_core.fitting.schedule import WARMUP_ITERATIONS, LearningRateSchedule
+from nurbs_core.fitting.schedule import LearningRateSchedule
 from nurbs_core.fitting.sheet import (
     SheetStart,
     core_geometry_numpy,
@@ -146,8 +139,8 @@ def _learned_sheet_run(problem: Problem, config: FitConfig, learned: LearnedStar
                        started: float) -> Iterator[FitSnapshot]:
     """A learned start's fit of an unordered cloud: the start as iteration 0, the least-squares
     core from its parameters and from the mesh map's (:func:`core_race`), then the run of
-    :func:`_sheet_run` from the closer core fit: refined gently after a short warm-up when it is
-    the learned one, exactly as ``init="pca"`` would go on when it is not."""
+    :func:`_sheet_run` from the closer core fit (the gradient fit goes on from either as it does
+    from the mesh map's: when the mesh map's wins, the run is ``init="pca"``'s)."""
     assert learned.geometry is not None and learned.sheet is not None, "a learned start"
     yield FitSnapshot(iteration=0, geometry=core_geometry_numpy(learned.geometry, problem),
                       losses=[], elapsed=time.perf_counter() - started, done=False,
@@ -165,24 +158,17 @@ def _learned_sheet_run(problem: Problem, config: FitConfig, learned: LearnedStar
                           geometry=core_geometry_numpy(winner["geometry"], problem),
                           losses=[], elapsed=time.perf_counter() - started, done=False,
                           status="running", message=race.message, stage="least_squares")
-    note = f"{learned.message}; {race.message}"
-    warm_up = WARMUP_ITERATIONS
-    if race.learned_won and resolved_solver(config) == "gradient":
-        config = config.replace(learning_rate=config.learning_rate * LEARNED_LEARNING_RATE_SCALE)
-        note += f"; refined at learning rate {config.learning_rate:g}"
-        warm_up = LEARNED_WARMUP_ITERATIONS
     # both cores fitted the same points over the same mesh: its quality measures serve either
     yield from _noted(_sheet_run(problem, config, learned.sheet, loss, stop, started,
-                                 core=winner, warm_up_iterations=warm_up), note)
+                                 core=winner), f"{learned.message}; {race.message}")
 
 
 def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _losses.CompositeLoss,
-               stop: StopToken, started: float, core: dict | None = None,
-               warm_up_iterations: int = WARMUP_ITERATIONS) -> Iterator[FitSnapshot]:
+               stop: StopToken, started: float, core: dict | None = None) -> Iterator[FitSnapshot]:
     """The least-squares core's passes, then (when the config asks for more than least squares)
-    the gradient fit from its result, after ``warm_up_iterations`` of warm-up; the final snapshot
-    carries the statistics. ``core``: the result of core passes already run over ``start``'s
-    mesh (see :func:`~nurbs_core.fitting.sheet.core_snapshots`): the run goes on from it."""
+    the gradient fit from its result; the final snapshot carries the statistics. ``core``: the
+    result of core passes already run over ``start``'s mesh (see
+    :func:`~nurbs_core.fitting.sheet.core_snapshots`): the run goes on from it."""
     with torch_threads(config.threads):
         result: dict = {} if core is None else core
         try:
@@ -197,7 +183,7 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _lo
                 loss = loss.with_term(config.stiffness * result["fairing_scale"], "fairing")
             run = _Run(problem, config, result["geometry"].to(dtype=problem.dtype), loss, stop,
                        True, start_params=result["parameters"], offset=result["iteration"],
-                       started=started, warm_up_iterations=warm_up_iterations)
+                       started=started)
             final = None
             for snapshot in run.loop():
                 if snapshot.done:
@@ -250,12 +236,11 @@ class _Run:
     def __init__(self, problem: Problem, config: FitConfig, geometry: Geometry,
                  loss: _losses.CompositeLoss, stop: StopToken, from_initial: bool,
                  start_params: np.ndarray | None = None, offset: int = 0,
-                 started: float | None = None, warm_up_iterations: int = WARMUP_ITERATIONS):
+                 started: float | None = None):
         """``geometry``: the start (normalised coordinates); ``from_initial``: it is the caller's
         geometry (warm up); ``start_params``: foot-point parameters (N, 2) to start from (the
         least-squares core's); ``offset``: the iterations already done before this run (records
-        and snapshots count on from there); ``started``: the run's ``perf_counter`` start;
-        ``warm_up_iterations``: the first warm-up's length (a learned start's is shorter)."""
+        and snapshots count on from there); ``started``: the run's ``perf_counter`` start."""
         self.problem, self.config, self.loss, self.stop = problem, config, loss, stop
         self.offset = offset
         self.generator = torch.Generator().manual_seed(config.seed)
@@ -276,7 +261,7 @@ class _Run:
         stage_length = max(1, math.ceil(config.iterations / (config.refinements + 1)))
         warm_up = from_initial or config.init == "least_squares" or problem.start_is_fit
         self.schedule = LearningRateSchedule(
-            config, stage_length, self._leaves(), warm_up, warm_up_iterations)
+            config, stage_length, self._leaves(), warm_up)
         self.guard = DivergenceGuard(self.model.state())
         #: the loop's state: iterations done, records since the last snapshot, the outcome
         self.iteration, self.stage_start, self.quiet = 0, 0, 0

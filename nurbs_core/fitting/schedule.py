@@ -47,17 +47,14 @@ class LearningRateSchedule:
     """
 
     def __init__(self, config: FitConfig, stage_length: int, leaves: list[torch.Tensor],
-                 warm_up: bool, warm_up_iterations: int = WARMUP_ITERATIONS):
+                 warm_up: bool):
         """``stage_length``: iterations per stage (the cosine's period); ``leaves``: the first
-        stage's leaf tensors; ``warm_up``: whether the start is already a fit;
-        ``warm_up_iterations``: the first warm-up's length (a learned start's is shorter; every
-        later warm-up, after a refinement or a roll-back, has the full length)."""
+        stage's leaf tensors; ``warm_up``: whether the start is already a fit."""
         self.config = config
         self.stage_length = stage_length
         #: the base rate: the config's, halved by every roll-back
         self.learning_rate = float(config.learning_rate)
         self.warm_up = warm_up
-        self.warm_up_iterations = max(int(warm_up_iterations), 0)
         self.leaves = leaves
         #: iterations of the stage (cosine) and since the optimizer was built (warm-up)
         self.stage_step = 0
@@ -74,7 +71,6 @@ class LearningRateSchedule:
         self.stage_step = 0
         self.plateau_factor, self.plateau_best, self.plateau_wait = 1.0, math.inf, 0
         self.warm_up = self.warm_up or warm_up
-        self.warm_up_iterations = WARMUP_ITERATIONS
         self.renew()
 
     def renew(self) -> None:
@@ -87,7 +83,6 @@ class LearningRateSchedule:
         """After a roll-back: half the base rate, warm up again, a fresh optimizer."""
         self.learning_rate *= 0.5
         self.warm_up = True
-        self.warm_up_iterations = WARMUP_ITERATIONS
         self.renew()
 
     def zero_grad(self) -> None:
@@ -130,8 +125,8 @@ class LearningRateSchedule:
         if config.lr_schedule == "cosine":
             length = max(self.stage_length, 1)
             lr *= 0.5 * (1 + math.cos(math.pi * min(self.stage_step, length) / length))
-        if self.warm_up and self.warm_step < self.warm_up_iterations:
-            lr *= 10.0 ** (-3.0 * (1.0 - self.warm_step / self.warm_up_iterations))
+        if self.warm_up and self.warm_step < WARMUP_ITERATIONS:
+            lr *= 10.0 ** (-3.0 * (1.0 - self.warm_step / WARMUP_ITERATIONS))
         for group in self.optimizer.param_groups:
             group["lr"] = lr
         self.warm_step += 1

@@ -1,5 +1,6 @@
 """init="learned": the engine's side (a solve at the prediction's parameters, pinned to the cloud's
-outline, as iteration 0; the gentle refinement; the core from those parameters; the fall-backs).
+outline, as iteration 0; the race of the cores from those parameters and the mesh map's; the
+fall-backs).
 The model itself is tested in test_learn.py."""
 
 from __future__ import annotations
@@ -226,30 +227,33 @@ def test_a_coarse_prediction_gives_a_close_start(monkeypatch, sheet):
     assert rms["coarse"] < 0.2 * statistics(coarse, sheet.points)["rms"]
 
 
-def test_a_learned_start_is_refined_gently(monkeypatch, sheet):
-    """After the core, when the learned core fit won, the learning rate warms up over
-    LEARNED_WARMUP_ITERATIONS to LEARNED_LEARNING_RATE_SCALE x the configured rate, and stays
-    there; the run's message says at which rate."""
+def test_the_gradient_fit_goes_on_from_the_learned_core_fit_as_from_todays(monkeypatch, sheet):
+    """Whichever core fit won the race, the gradient fit after it has today's schedule: the
+    learning rate warms up over WARMUP_ITERATIONS from 1e-3 x the configured rate and stays
+    there, step for step as after init "pca"'s core fit (the learned one wins on this saddle)."""
     from nurbs_core.fitting import schedule
 
-    rates = []
+    rates: list[float] = []
     original = schedule.LearningRateSchedule._apply_learning_rate
 
     def spy(self):
         original(self)
         rates.append(self.optimizer.param_groups[0]["lr"])
     monkeypatch.setattr(schedule.LearningRateSchedule, "_apply_learning_rate", spy)
-    warm_up = learned.LEARNED_WARMUP_ITERATIONS  # the shipped model's start on a noisy saddle
-    config = FitConfig(init="learned", iterations=warm_up + 10, threads=1, lr_schedule="none",
-                       learning_rate=0.02)
-    rates.clear()
-    result = fit(sheet.points, config)  # the learned core fit is the closer one here
-    gentle = config.learning_rate * learned.LEARNED_LEARNING_RATE_SCALE
-    assert learned.LEARNED_LEARNING_RATE_SCALE < 1
-    assert rates[0] == pytest.approx(gentle * 1e-3)
-    assert all(r < gentle for r in rates[:warm_up])
-    assert rates[warm_up:] == pytest.approx([gentle] * (len(rates) - warm_up))
-    assert len(rates) > warm_up and f"refined at learning rate {gentle:g}" in result.message
+    warm_up = schedule.WARMUP_ITERATIONS
+    config = FitConfig(solver="gradient", iterations=warm_up + 10, threads=1,
+                       lr_schedule="none", learning_rate=0.02)
+    seen, messages = {}, {}
+    for init in ("learned", "pca"):
+        rates.clear()
+        result = fit(sheet.points, config.replace(init=init))
+        assert result.status == "budget", result.message
+        seen[init], messages[init] = list(rates), result.message
+    assert "its core fit has RMS" in messages["learned"]
+    assert "going on from the mesh map's" not in messages["learned"]  # the learned one won
+    assert seen["learned"] == pytest.approx(seen["pca"])
+    assert seen["pca"][0] == pytest.approx(config.learning_rate * 1e-3)
+    assert seen["pca"][warm_up:] == pytest.approx([config.learning_rate] * 10)
 
 
 def _folded_start(points: np.ndarray) -> NurbsSurface:
