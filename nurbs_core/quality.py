@@ -388,17 +388,23 @@ WARN_OVERLAP = 0.01
 WARN_UNCOVERED = 0.10
 
 
+def quality_problems(stats: dict) -> dict[str, str]:
+    """The measures of :func:`surface_quality` that say the surface is not a clean sheet over
+    the cloud: {"folds" | "overlaps" | "uncovered": plain-language warning} (empty when it is)."""
+    problems = {}
+    if stats.get("flipped_fraction", 0.0) > WARN_FLIPPED:
+        problems["folds"] = (f"{stats['flipped_fraction']:.1%} of the surface faces the wrong "
+                             "way (it folds)")
+    if stats.get("overlap_fraction", 0.0) > WARN_OVERLAP:
+        problems["overlaps"] = (f"{stats['overlap_fraction']:.1%} of the cloud lies under more "
+                                "than one sheet")
+    if 1.0 - stats.get("coverage", 1.0) > WARN_UNCOVERED:
+        problems["uncovered"] = f"{1.0 - stats['coverage']:.1%} of the cloud is not covered"
+    return problems
+
+
 def quality_warnings(stats: dict) -> list[str]:
     """Plain-language warnings for the measures of :func:`surface_quality` that say the surface
     is not a clean sheet over the cloud (empty when it is)."""
-    warnings = []
-    if stats.get("flipped_fraction", 0.0) > WARN_FLIPPED:
-        warnings.append(f"{stats['flipped_fraction']:.1%} of the surface faces the wrong way "
-                        "(it folds)")
-    if stats.get("overlap_fraction", 0.0) > WARN_OVERLAP:
-        warnings.append(f"{stats['overlap_fraction']:.1%} of the cloud lies under more than one "
-                        "sheet")
-    if 1.0 - stats.get("coverage", 1.0) > WARN_UNCOVERED:
-        warnings.append(f"{1.0 - stats['coverage']:.1%} of the cloud is not covered")
-    return warnings
+    return list(quality_problems(stats).values())
 

@@ -23,7 +23,7 @@ import torch
 from numpy.typing import ArrayLike
 
 from nurbs_core import losses as _losses
-from nurbs_core.fitting.config import FitConfig, FitResult, FitSnapshot, StopToken
+from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, FitResult, FitSnapshot, Loss, StopToken
 from nurbs_core.fitting.evaluation import Evaluation, cloud_tree, draw_batch, uses_parameters
 from nurbs_core.fitting.exact import exact_geometry, exact_problem, exact_snapshot, uses_exact
 from nurbs_core.fitting.guard import DivergenceGuard
@@ -44,9 +44,13 @@ from nurbs_core.fitting.sheet import (
 )
 from nurbs_core.geometry import NurbsCurve, NurbsSurface, geometry_from_numpy
 from nurbs_core.geometry_arrays import CurveArrays, GeometryArrays, SurfaceArrays
-from nurbs_core.quality import quality_warnings
+from nurbs_core.quality import quality_problems, quality_warnings
 
 Geometry: TypeAlias = NurbsCurve | NurbsSurface
+
+#: A fit that goes back to its best state says so when its last state's loss was more than this
+#: fraction above the best one's (below it the two differ by the optimizer's jitter).
+KEPT_NOTE_MARGIN = 1e-2
 
 
 def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopToken | None = None,
@@ -64,7 +68,11 @@ def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopTo
     :class:`FitSnapshot` at most every ``config.snapshot_interval`` seconds and always a final one
     with ``done=True``. The run is deterministic for a given ``config.seed``. A step that makes the
     loss or parameters non-finite (or explode) is rolled back, the learning rate halved and the
-    snapshot message says so; the fit continues.
+    snapshot message says so; the fit continues. A gradient fit ends in the lowest-loss state of
+    its last stage (never above its start's loss, :meth:`_Run.keep_best`); with the default loss
+    a gradient fit that went on from the least-squares core ends with the core's fit when its own
+    is farther from the points or gained a fold, overlap or uncovered cloud (:func:`_closer_of`).
+    The final message says which was kept.
     """
     config = FitConfig() if config is None else config
     started = time.perf_counter()
@@ -197,22 +205,59 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _lo
                 stats = surface_statistics(surface, problem.points_input, mesh=start.mesh,
                                            scale=problem.scale)
                 final = dataclasses.replace(final, statistics=stats,
-                                            elapsed=time.perf_counter() - started,
-                                            message=_with_warnings(final.message, stats))
+                                            elapsed=time.perf_counter() - started)
+                if config.loss == Loss.parse(DEFAULT_LOSS):
+                    final = _closer_of(final, _core_final(problem, start, result, started))
+                assert final.statistics is not None  # set above
+                final = dataclasses.replace(
+                    final, message=_with_warnings(final.message, final.statistics))
             yield final
             return
-        geometry = result["geometry"]
-        snapshot_geometry = core_geometry_numpy(geometry, problem)
-        core_surface = cast(NurbsSurface, geometry_from_numpy(snapshot_geometry))
-        stats = surface_statistics(core_surface, problem.points_input, mesh=start.mesh,
-                                   scale=problem.scale, distances=result["distances"] * problem.scale)
-        stats.update(tolerance=result["tolerance"], noise=result["noise"],
-                     tolerance_met=float(result["tolerance_met"]))
-        yield FitSnapshot(iteration=result["iteration"], geometry=snapshot_geometry,
-                          losses=result["records"], elapsed=time.perf_counter() - started,
-                          done=True, status=result["status"],
-                          message=_with_warnings(result["message"], stats), statistics=stats,
-                          stage="least_squares")
+        yield _core_final(problem, start, result, started)
+
+
+def _core_final(problem: Problem, start: SheetStart, result: dict,
+                started: float) -> FitSnapshot:
+    """The done snapshot of the least-squares core's ``result`` (see
+    :func:`~nurbs_core.fitting.sheet.core_snapshots`), with its statistics."""
+    geometry = result["geometry"]
+    snapshot_geometry = core_geometry_numpy(geometry, problem)
+    core_surface = cast(NurbsSurface, geometry_from_numpy(snapshot_geometry))
+    stats = surface_statistics(core_surface, problem.points_input, mesh=start.mesh,
+                               scale=problem.scale, distances=result["distances"] * problem.scale)
+    stats.update(tolerance=result["tolerance"], noise=result["noise"],
+                 tolerance_met=float(result["tolerance_met"]))
+    return FitSnapshot(iteration=result["iteration"], geometry=snapshot_geometry,
+                       losses=result["records"], elapsed=time.perf_counter() - started,
+                       done=True, status=result["status"],
+                       message=_with_warnings(result["message"], stats), statistics=stats,
+                       stage="least_squares")
+
+
+#: What a gradient fit does when it gains a problem of :func:`quality_problems`
+_GAINED = {"folds": "folds", "overlaps": "overlaps itself over the cloud",
+           "uncovered": "leaves part of the cloud uncovered"}
+
+
+def _closer_of(final: FitSnapshot, core: FitSnapshot) -> FitSnapshot:
+    """The gradient fit's done snapshot ``final`` of the default loss, or the least-squares core's
+    fit it went on from (``core``) when that one is closer to the points (RMS over all of them)
+    or the gradient fit gained a quality warning (a fold, an overlap, uncovered cloud) that the
+    core's fit does not have: the default loss's objective is the distance to the points, and a
+    refinement that ends farther from them, or less clean, than its start is not one. The
+    gradient fit's losses, iterations and status stay (its message says what was kept)."""
+    assert final.statistics is not None and core.statistics is not None, "done snapshots"
+    farther = final.statistics["rms"] > core.statistics["rms"]
+    gained = set(quality_problems(final.statistics)) - set(quality_problems(core.statistics))
+    if not farther and not gained:
+        return final
+    why = (f"ended at RMS {final.statistics['rms']:.4g}, farther from the points than the "
+           f"least-squares core's fit ({core.statistics['rms']:.4g})" if farther
+           else f"{' and '.join(_GAINED[kind] for kind in sorted(gained))} where the "
+                "least-squares core's fit does not")
+    note = f"the gradient fit {why}: kept the core's fit"
+    return dataclasses.replace(final, geometry=core.geometry, statistics=core.statistics,
+                               message=note if not final.message else f"{final.message}; {note}")
 
 
 def _with_warnings(message: str | None, stats: dict) -> str | None:
@@ -291,8 +336,10 @@ class _Run:
         return leaves
 
     def _refine_stage(self, iteration: int) -> None:
-        """Insert a knot per direction where the error is largest and restart the optimizer."""
+        """Insert a knot per direction where the error is largest (in the stage's best state,
+        :meth:`keep_best`) and restart the optimizer."""
         self.stages_done += 1
+        kept = self.keep_best()
         problem = self.problem
         geometry = self.model.geometry().detach()
         params = None if problem.parameters is None else problem.parameters.double().numpy()
@@ -303,7 +350,8 @@ class _Run:
         self.schedule.start_stage(self._leaves(), warm_up=True)
         self.guard.start_stage(self.model.state())
         self.pending_message = (f"iteration {iteration}: refined by knot insertion to "
-                                f"{self._count_text()} control points")
+                                f"{self._count_text()} control points"
+                                + (f" ({kept})" if kept else ""))
 
     def _count_text(self) -> str:
         shape = tuple(self.model.control_points.shape[:-1])
@@ -405,7 +453,7 @@ class _Run:
                 return True
             self.previous_total = None
             return False
-        self.guard.accept(total_value, before)
+        self.guard.accept(total_value, before, iteration)
         record = {"iteration": iteration + self.offset, "total": total_value}
         record.update({k: float(v) for k, v in terms.items()})
         self.records.append(record)
@@ -425,10 +473,41 @@ class _Run:
             return True
         return False
 
+    def keep_best(self) -> str | None:
+        """Go back to the stage's best state when the current one is worse; what was kept (None
+        when the current state is the best).
+
+        The stage's losses were evaluated on all points at the states its steps started from
+        (the guard's best of them is ``guard.reference``); the current state's loss is evaluated
+        here the same way. A fit therefore never ends above the loss of the geometry it started
+        from (a least-squares core fit, a learned start, the caller's geometry). Mini-batch fits
+        (clouds above ``batch_size`` points) compare noisy batch losses: they keep the last state.
+        """
+        guard, problem = self.guard, self.problem
+        if guard.reference is None or guard.best_iteration is None:
+            return None
+        if problem.count > self.config.batch_size:
+            return None
+        with torch.no_grad():
+            total, _ = self.evaluation.evaluate(None)
+        current = float(total)
+        if math.isfinite(current) and current <= guard.reference:
+            return None
+        self.model.restore(guard.last_good)
+        if self.evaluation.variable_projection:
+            self.evaluation.solve_control_points()
+        if math.isfinite(current) and current <= guard.reference * (1 + KEPT_NOTE_MARGIN):
+            return None  # Adam's jitter about the minimum: not worth a line in the message
+        best = guard.best_iteration - 1 + self.offset
+        where = "the start" if guard.best_iteration == 1 else f"iteration {best}'s state"
+        return (f"kept {where}, the stage's lowest loss ({guard.reference:.4g}; "
+                f"the last state's {current:.4g})")
+
     def final_snapshot(self) -> FitSnapshot:
-        """The done snapshot of the run's current state and status. Its message does not depend
-        on which snapshots were sent before: a pending roll-back message gives way to the
-        guard's summary of all of them."""
+        """The done snapshot of the run's best state (:meth:`keep_best`) and its status. Its
+        message does not depend on which snapshots were sent before: a pending roll-back message
+        gives way to the guard's summary of all of them."""
+        kept = self.keep_best() if self.status != "diverged" else None
         message = self.message
         if self.status == "budget" and self.config.iterations == 0:
             message = "no iterations requested"
@@ -440,6 +519,8 @@ class _Run:
             self.schedule.learning_rate)
         if summary is not None:
             message = summary if message is None else f"{message}; {summary}"
+        if kept is not None:
+            message = kept if message is None else f"{message}; {kept}"
         return self._snapshot(self.iteration, self.records, self.status, True, message)
 
 

@@ -3,7 +3,9 @@
 A step whose loss is non-finite or explodes (above :data:`EXPLOSION_FACTOR` x the stage's best
 loss) is rolled back to the stage's best state; a step that leaves NaN or inf parameters behind is
 rolled back to the state before it. The engine then halves the learning rate; after more than
-:data:`MAX_ROLLBACKS` roll-backs in one fit it gives up with status ``"diverged"``.
+:data:`MAX_ROLLBACKS` roll-backs in one fit it gives up with status ``"diverged"``. The stage's best
+state is also where a fit ends when its last state is worse (:meth:`_Run.keep_best
+<nurbs_core.fitting.engine._Run.keep_best>`).
 """
 
 from __future__ import annotations
@@ -34,11 +36,14 @@ class DivergenceGuard:
         #: the stage's best loss so far (None before its first accepted step)
         self.reference: float | None = None
         self.last_good = state
+        #: the iteration whose step started from ``last_good`` (its loss is ``reference``)
+        self.best_iteration: int | None = None
 
     def start_stage(self, state: list[torch.Tensor]) -> None:
         """A new stage starting from ``state``: forget the previous stage's best loss."""
         self.reference = None
         self.last_good = state
+        self.best_iteration = None
 
     def check(self, model: TrainableGeometry, before: list[torch.Tensor], total: float) -> str | None:
         """After a step with loss ``total`` (evaluated at ``before``, the state the step started
@@ -55,10 +60,12 @@ class DivergenceGuard:
             return "the loss became non-finite or exploded"
         return "the step produced NaN or inf parameters"
 
-    def accept(self, total: float, before: list[torch.Tensor]) -> None:
-        """An accepted step with loss ``total`` evaluated at ``before``: the stage's new best?"""
+    def accept(self, total: float, before: list[torch.Tensor], iteration: int) -> None:
+        """An accepted step of ``iteration`` with loss ``total`` evaluated at ``before`` (the
+        state after iteration ``iteration - 1``): the stage's new best?"""
         if self.reference is None or total < self.reference:
             self.reference, self.last_good = max(total, 1e-300), before
+            self.best_iteration = iteration
 
     @property
     def exhausted(self) -> bool:

@@ -10,7 +10,15 @@ import pytest
 import torch
 
 from nurbs_core import NurbsSurface, geometry_from_numpy
-from nurbs_core.fitting import PAPER_POINT_CLOUD_LOSS, FitConfig, FitSnapshot, StopToken, fit, iter_fit
+from nurbs_core.fitting import (
+    PAPER_POINT_CLOUD_LOSS,
+    FitConfig,
+    FitSnapshot,
+    StopToken,
+    fit,
+    iter_fit,
+    least_squares_fit,
+)
 
 
 def _grid(count=20):
@@ -144,6 +152,24 @@ def test_the_final_message_sums_up_the_roll_backs_whatever_was_sent_on_the_way()
     rollbacks = int(every.message.split(" diverging step")[0].split("; ")[-1])
     assert rollbacks >= 2 and "rolled back (the last at iteration" in every.message
     assert f"halved to {config.learning_rate / 2 ** rollbacks:.3g}" in every.message
+
+
+def test_a_fit_never_ends_above_the_loss_of_its_start():
+    """Started at the exact least-squares fit of known parameters, every step of a large
+    learning rate moves away from the minimum: the fit ends where it started, and says so."""
+    points, params = _grid()
+    exact = least_squares_fit(points, params, 3, 3, 6, 6)
+    config = _small(loss="mse", learning_rate=0.05, iterations=40, lr_schedule="none")
+    result = fit(points, config, parameters=params, initial=exact)
+    history = [r["total"] for r in result.history]
+    assert max(history) > 10 * history[0]  # the steps did move away from the start
+    start = exact.numpy()["control_points"]
+    np.testing.assert_allclose(result.geometry.numpy()["control_points"], start, atol=1e-12)
+    assert "kept the start, the stage's lowest loss" in result.message
+    # a fit whose last state is its best keeps it (no note): the same start, a gentle rate
+    gentle = fit(points, config.replace(learning_rate=1e-6, iterations=3), parameters=params,
+                 initial=exact)
+    assert "kept" not in (gentle.message or "")
 
 
 def test_iter_fit_validates_before_returning():
