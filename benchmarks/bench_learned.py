@@ -41,7 +41,8 @@ planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-ta
    gradient fit's own default start instead (the least-squares core's, on the cloud's mesh map).
    For both starts the final fits' quality is printed too: how many fold or overlap themselves
    by the fit's quality warnings, their area against the cloud's and how far the surface runs
-   past the cloud (RMS alone sees neither).
+   past the cloud (RMS alone sees neither). Last, the learned start's final RMS against
+   ``nurbs-fit``'s default fit of the same cloud (the least-squares core alone, no gradient fit).
 4. **Least squares at fixed parameters** (``--least-squares``): for the same clouds, the RMS of
    one least-squares solve (12 x 12, the engine's start smoothing 1e-4) at the plane projection's
    parameters (``init="least_squares"``, ``parameterization="plane"``, 0 iterations) and at the
@@ -239,12 +240,14 @@ def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, path: str | No
     reference = [rms_by_iteration(points, today, finals=today_finals) for _, points in clouds]
     print(f"today's start, final fits: {_folded_count(today_finals)}")
     reached, worse, messages, finals, ratios = [], [], [], [], []
+    learned_finals: list[float] = []
     for (name, points), ref, theirs in zip(clouds, reference, today_finals, strict=True):
         target = ref[min(100, len(ref) - 1)]
         curve = rms_by_iteration(points, learned, messages, finals)
         hit = next((i for i, r in enumerate(curve) if r <= target), None)
         reached.append(hit if hit is not None else budget + 1)
         ratios.append((curve[-1] / ref[-1] - 1, name))
+        learned_finals.append(curve[-1])
         if curve[-1] > ref[-1] * 1.01:
             worse.append(f"{name} ({curve[-1]:.3g} vs {ref[-1]:.3g}"
                          + (", today's folds" if _folds(theirs) else "")
@@ -266,6 +269,14 @@ def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, path: str | No
           f"{100 * stats_lib.median(r for r, _ in ratios):+.1f} %, worst "
           f"{100 * max(ratios)[0]:+.1f} % ({max(ratios)[1]})")
     print(f"learned start, final fits: {_folded_count(finals)}")
+    # nurbs-fit's default fit (no --solver gradient): the least-squares core alone
+    core = base.replace(solver="auto", init="pca")
+    against = [(curve_final / fit_statistics(fit(points, core).geometry, points)["rms"] - 1, name)
+               for (name, points), curve_final in zip(clouds, learned_finals, strict=True)]
+    print(f"learned start's final RMS against nurbs-fit's default fit (the least-squares core "
+          f"alone): median {100 * stats_lib.median(r for r, _ in against):+.1f} %, worst "
+          f"{100 * max(against)[0]:+.1f} % ({max(against)[1]}), above it: "
+          f"{sum(r > 0 for r, _ in against)}/{len(against)}")
     return reference
 
 

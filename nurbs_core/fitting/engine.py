@@ -207,7 +207,8 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _lo
                 final = dataclasses.replace(final, statistics=stats,
                                             elapsed=time.perf_counter() - started)
                 if config.loss == Loss.parse(DEFAULT_LOSS):
-                    final = _closer_of(final, _core_final(problem, start, result, started))
+                    final = _closer_of(final, _core_final(problem, start, result, started),
+                                       run.kept_note)
                 assert final.statistics is not None  # set above
                 final = dataclasses.replace(
                     final, message=_with_warnings(final.message, final.statistics))
@@ -239,13 +240,14 @@ _GAINED = {"folds": "folds", "overlaps": "overlaps itself over the cloud",
            "uncovered": "leaves part of the cloud uncovered"}
 
 
-def _closer_of(final: FitSnapshot, core: FitSnapshot) -> FitSnapshot:
+def _closer_of(final: FitSnapshot, core: FitSnapshot, kept_note: str | None) -> FitSnapshot:
     """The gradient fit's done snapshot ``final`` of the default loss, or the least-squares core's
     fit it went on from (``core``) when that one is closer to the points (RMS over all of them)
     or the gradient fit gained a quality warning (a fold, an overlap, uncovered cloud) that the
     core's fit does not have: the default loss's objective is the distance to the points, and a
     refinement that ends farther from them, or less clean, than its start is not one. The
-    gradient fit's losses, iterations and status stay (its message says what was kept)."""
+    gradient fit's losses, iterations and status stay (its message says what was kept, in place
+    of ``kept_note``: the gradient fit's own note on the state it kept)."""
     assert final.statistics is not None and core.statistics is not None, "done snapshots"
     farther = final.statistics["rms"] > core.statistics["rms"]
     gained = set(quality_problems(final.statistics)) - set(quality_problems(core.statistics))
@@ -256,8 +258,11 @@ def _closer_of(final: FitSnapshot, core: FitSnapshot) -> FitSnapshot:
            else f"{' and '.join(_GAINED[kind] for kind in sorted(gained))} where the "
                 "least-squares core's fit does not")
     note = f"the gradient fit {why}: kept the core's fit"
+    message = final.message
+    if message and kept_note:  # the note ends the message (final_snapshot puts it last)
+        message = message.removesuffix(kept_note).removesuffix("; ") or None
     return dataclasses.replace(final, geometry=core.geometry, statistics=core.statistics,
-                               message=note if not final.message else f"{final.message}; {note}")
+                               message=note if not message else f"{message}; {note}")
 
 
 def _with_warnings(message: str | None, stats: dict) -> str | None:
@@ -313,6 +318,8 @@ class _Run:
         self.previous_total: float | None = None
         self.records: list[dict] = []
         self.status, self.message = "budget", cast(str | None, None)
+        #: what the final snapshot says about the state it went back to (None: the last one)
+        self.kept_note: str | None = None
 
     # ---------------------------------------------------------------------------------------
     def _model(self, geometry: Geometry) -> TrainableGeometry:
@@ -508,6 +515,7 @@ class _Run:
         message does not depend on which snapshots were sent before: a pending roll-back message
         gives way to the guard's summary of all of them."""
         kept = self.keep_best() if self.status != "diverged" else None
+        self.kept_note = kept
         message = self.message
         if self.status == "budget" and self.config.iterations == 0:
             message = "no iterations requested"

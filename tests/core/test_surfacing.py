@@ -179,6 +179,7 @@ def test_the_gradient_fit_never_ends_farther_from_the_points_than_the_core_fit(o
     refined = fit(points, FitConfig(solver="gradient", iterations=100))
     assert "farther from the points than the least-squares core's fit" in refined.message
     assert "kept the core's fit" in refined.message
+    assert "lowest loss" not in refined.message   # not the gradient fit's note on its own state
     assert refined.statistics["rms"] == pytest.approx(core.statistics["rms"], rel=1e-9)
     np.testing.assert_allclose(refined.geometry.control_points.numpy(),
                                core.geometry.control_points.numpy(), atol=1e-12)
