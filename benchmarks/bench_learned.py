@@ -60,6 +60,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import re
 import statistics as stats_lib
 import time
 
@@ -253,8 +254,7 @@ def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, path: str | No
                          + (", today's folds" if _folds(theirs) else "")
                          + (", ours folds" if _folds(finals[-1]) else "") + ")")
     used = [m.startswith("learned start") for m in messages]
-    fallbacks = sorted({m.split(" (")[0] + (": not a clean sheet" if "clean sheet" in m else "")
-                        for m in messages if not m.startswith("learned start")})
+    fallbacks = sorted({_reason(m) for m in messages if not m.startswith("learned start")})
     won = sum("core fit has RMS" in q["message"] and "going on from the mesh map's"
               not in q["message"] for q in finals)
     print(f"learned start used on {sum(used)}/{len(used)} clouds (its core fit the closer "
@@ -278,6 +278,14 @@ def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, path: str | No
           f"{100 * max(against)[0]:+.1f} % ({max(against)[1]}), above it: "
           f"{sum(r > 0 for r, _ in against)}/{len(against)}")
     return reference
+
+
+def _reason(message: str) -> str:
+    """Why a learned start fell back, from its message, without the model's name and time and
+    the details after the first colon: "the learned start cannot be pinned to the cloud's
+    outline"."""
+    plain = re.sub(r" \((?:the shipped model|[^()]*\.pt)[^()]*\)", "", message)
+    return plain.split(":")[0].split(";")[0]
 
 
 def _folds(quality: dict) -> bool:
