@@ -5,6 +5,12 @@ A fold shows as a red fleck on a blue side (or the reverse), a curtain as a shee
 on it, an overlap as two layers. Prints each fit's status and quality measures beside the image.
 
     xvfb-run -a .venv/bin/python benchmarks/render_fits.py [--out /tmp/renders] [--points 4000]
+        [--solver gradient] [--iterations 100]
+
+``--solver gradient``: the single patches (and a tube, closed in one direction, one patch cut
+open along a seam) go on from the least-squares core with the gradient fit, whose final state
+is the one the engine keeps (its best, or the core's fit when that is closer or cleaner; the
+printed message says which).
 
 ``--learned``: instead, the gradient fit (100 iterations) of held-out clouds of
 ``bench_learned.py`` (the CAD extrusion face whose learned fit ends farthest above today's, a
@@ -60,6 +66,8 @@ def main(argv=None) -> None:
     parser.add_argument("--out", default="renders")
     parser.add_argument("--points", type=int, default=4000)
     parser.add_argument("--learned", action="store_true", help="plane vs learned starts")
+    parser.add_argument("--solver", choices=("auto", "gradient"), default="auto")
+    parser.add_argument("--iterations", type=int, default=500)
     args = parser.parse_args(argv)
 
     import torch
@@ -75,9 +83,13 @@ def main(argv=None) -> None:
     if args.learned:
         _learned(out)
         return
-    for name, make in (("curled_sheet", samples.curled_sheet), ("terrain", samples.height_field)):
+    shapes = [("curled_sheet", samples.curled_sheet), ("terrain", samples.height_field)]
+    if args.solver == "gradient":
+        shapes.append(("tube", samples.tube))
+    config = FitConfig(solver=args.solver, iterations=args.iterations, threads=1)
+    for name, make in shapes:
         shape = make(args.points)
-        result = fit(shape.points, FitConfig())
+        result = fit(shape.points, config)
         measures = {k: round(float(result.statistics[k]), 4) for k in MEASURES
                     if k in result.statistics}
         print(f"{name}: {result.status} {measures} ({result.message})")
@@ -90,7 +102,7 @@ def main(argv=None) -> None:
           f"c2s rms {quality.c2s_rms:.4g}, area {quality.area:.4f} (4 pi = 12.566)")
     _render([_grid_mesh(s, 20) for s in network.network.surfaces()], shape.points,
             out / "sphere.png", [(20, 0), (20, 180)])
-    print(f"wrote {out}/curled_sheet.png, terrain.png, sphere.png")
+    print(f"wrote {out}: {', '.join(name for name, _ in shapes)}, sphere (png)")
 
 
 def _learned(out: Path) -> None:

@@ -19,6 +19,7 @@ from nurbs_core.fitting import (
     iter_fit,
     least_squares_fit,
 )
+from nurbs_core.fitting.engine import KEPT_NOTE_MARGIN
 
 
 def _grid(count=20):
@@ -166,9 +167,13 @@ def test_a_fit_never_ends_above_the_loss_of_its_start():
     start = exact.numpy()["control_points"]
     np.testing.assert_allclose(result.geometry.numpy()["control_points"], start, atol=1e-12)
     assert "kept the start, the stage's lowest loss" in result.message
-    # a fit whose last state is its best keeps it (no note): the same start, a gentle rate
+    # a rise within the optimizer's jitter (below KEPT_NOTE_MARGIN) goes back without a note
     gentle = fit(points, config.replace(learning_rate=1e-6, iterations=3), parameters=params,
                  initial=exact)
+    gentle_history = [r["total"] for r in gentle.history]
+    assert gentle_history[-1] > gentle_history[0]
+    assert gentle_history[-1] < (1 + KEPT_NOTE_MARGIN) * gentle_history[0]
+    np.testing.assert_allclose(gentle.geometry.numpy()["control_points"], start, atol=1e-12)
     assert "kept" not in (gentle.message or "")
 
 

@@ -176,18 +176,19 @@ def test_the_gradient_fit_never_ends_farther_from_the_points_than_the_core_fit(o
     the least-squares core's fit it started from: the run keeps the core's fit and says so."""
     points = samples.saddle(700, noise=0.0, seed=1).points
     core = fit(points, FitConfig(iterations=100))
-    refined = fit(points, FitConfig(solver="gradient", iterations=100))
+    snapshots = list(iter_fit(points, FitConfig(solver="gradient", iterations=100,
+                                                snapshot_interval=0.0)))
+    refined = snapshots[-1]
+    assert refined.done and refined.statistics is not None and refined.message is not None
     assert "farther from the points than the least-squares core's fit" in refined.message
     assert "kept the core's fit" in refined.message
     assert "lowest loss" not in refined.message   # not the gradient fit's note on its own state
     assert refined.statistics["rms"] == pytest.approx(core.statistics["rms"], rel=1e-9)
-    np.testing.assert_allclose(refined.geometry.control_points.numpy(),
+    np.testing.assert_allclose(refined.geometry.control_points,
                                core.geometry.control_points.numpy(), atol=1e-12)
-    assert refined.iterations == core.iterations + 100       # the iterations were run
+    assert refined.iteration == core.iterations + 100       # the iterations were run
     # the gradient fit's own last state (the snapshot before the final one) is the farther one
-    snapshots = list(iter_fit(points, FitConfig(solver="gradient", iterations=100,
-                                                snapshot_interval=0.0)))
-    assert snapshots[-2].stage == "gradient" and snapshots[-2].iteration == refined.iterations
+    assert snapshots[-2].stage == "gradient" and snapshots[-2].iteration == refined.iteration
     last = geometry_from_numpy(snapshots[-2].geometry)
     assert statistics(last, points)["rms"] > 1.2 * core.statistics["rms"]
 
