@@ -114,6 +114,8 @@ class MainWindow(QMainWindow):
         self._is_shut_down = False
         self._message_box: QMessageBox | None = None
         self.fit_as_patches_button: QAbstractButton | None = None
+        #: a refused single patch goes on as a network once its run has ended
+        self._network_after_refusal = False
         self.last_error = ""
 
         self.document = Document(self)
@@ -397,8 +399,30 @@ class MainWindow(QMainWindow):
         ctl.losses_received.connect(self.loss_plot.append)
         ctl.progress_changed.connect(self.fit_display.on_progress)
         ctl.fit_finished.connect(self.fit_display.on_fit_finished)
-        ctl.fit_failed.connect(lambda message: self.report(
-            message, error=True, offer_patches=self.controller.failure_needs_patches))
+        ctl.fit_failed.connect(self._on_fit_failed)
+        ctl.state_changed.connect(self._start_network_after_refusal)
+
+    @Slot(str)
+    def _on_fit_failed(self, message: str):
+        """A single-patch fit failed. A cloud one patch cannot hold (closed, handles) goes on
+        as a network of patches at once (the automatic route: no dead end; Undo returns to one
+        patch) unless the user forced a single patch; anything else is reported."""
+        if (self.controller.failure_needs_patches
+                and not self.document.settings.fit.single_patch):
+            self.report("One open patch cannot hold this cloud: fitting it as a network of "
+                        "patches (Patches mode; Undo returns to one patch).")
+            self.document.edit_settings("Fit mode", fit_mode="patches")
+            # the refused run's thread ends just after: the network starts when it has
+            self._network_after_refusal = True
+            self._start_network_after_refusal()
+            return
+        self.report(message, error=True, offer_patches=self.controller.failure_needs_patches)
+
+    @Slot(str)
+    def _start_network_after_refusal(self, *_state):
+        if self._network_after_refusal and not self.controller.is_busy():
+            self._network_after_refusal = False
+            self.start_fit()
 
     # --- messages --------------------------------------------------------------------------------
     def report(self, message: str, error: bool = False, offer_patches: bool = False,

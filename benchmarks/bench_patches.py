@@ -249,7 +249,8 @@ def orient_truth(shape: samples.SampledShape) -> tuple[np.ndarray, str, dict[str
 
 def _generated(fn: Callable, label: str, **kwargs) -> Callable[..., Case]:
     def build(count=COUNT, truth_count=TRUTH_COUNT, data=None) -> Case:
-        shape = fn(count=count, noise=NOISE, truth_count=truth_count, **kwargs)
+        # a case may fix its own count (head_4k: the sparse scan whatever --points says)
+        shape = fn(**{"count": count, "noise": NOISE, "truth_count": truth_count, **kwargs})
         shape.name = label
         normals, note, boundary = orient_truth(shape)
         options = ", ".join(f"{k}={v}" for k, v in kwargs.items())
@@ -258,7 +259,7 @@ def _generated(fn: Callable, label: str, **kwargs) -> Callable[..., Case]:
     return build
 
 
-def _model(label: str, files: list[str]) -> Callable[..., Case]:
+def _model(label: str, files: list[str], by_parameter: bool = False) -> Callable[..., Case]:
     def build(count=COUNT, truth_count=TRUTH_COUNT, data=None) -> Case:
         from nurbs_core.io import load
 
@@ -271,7 +272,7 @@ def _model(label: str, files: list[str]) -> Callable[..., Case]:
         model = samples._Shape([samples._nurbs_chart(surface) for surface in surfaces])
         shape = samples._make(label, model, count, NOISE, 0, closed=True, height_field=False,
                               kind="model", truth_count=truth_count,
-                              info={"patches": len(surfaces)})
+                              info={"patches": len(surfaces)}, by_parameter=by_parameter)
         normals, note, boundary = orient_truth(shape)
         degrees = sorted({(int(s.degree_u), int(s.degree_v)) for s in surfaces})
         source = (f"{len(files)} patches of degree "
@@ -292,9 +293,15 @@ def case_builders() -> dict[str, Callable[..., Case]]:
         "blob_s1": _generated(g.blob, "blob_s1", seed=1),
         "blob_s2": _generated(g.blob, "blob_s2", seed=2),
         "rounded_box": _generated(g.rounded_box, "rounded_box"),
+        # as scans come: uniform in the parameters of a closed NURBS (sparse where stretched)
+        "head": _generated(g.head, "head"),
+        "head_4k": _generated(g.head, "head_4k", count=4000),
+        "head_no_ears": _generated(g.head, "head_no_ears", ears=False),
     }
     for label, files in MODELS.items():
         builders[label] = _model(label, files)
+    builders["duck_body_by_parameter"] = _model("duck_body_by_parameter", MODELS["duck"][:1],
+                                                by_parameter=True)
     return builders
 
 

@@ -386,10 +386,18 @@ def _offset_path(path: Path) -> Path:
     return path.with_name(f"{path.stem}_offset{path.suffix}")
 
 
-def _patch_options(args: argparse.Namespace) -> PatchOptions:
-    """The PatchOptions of ``--patches`` (ValueError for options a network fit cannot take)."""
+def _patch_options(args: argparse.Namespace, automatic: bool = False) -> PatchOptions:
+    """The PatchOptions of ``--patches`` (ValueError for options a network fit cannot take), or
+    with ``automatic`` those of the automatic route's network (``--patches auto``; the
+    single-patch ``--stiffness`` has another scale and is not passed on)."""
     from nurbs_core.patches.options import PatchOptions
 
+    if automatic:
+        extra_auto = {} if args.seam_weight is None else {"seam_weight": args.seam_weight}
+        options = PatchOptions(patches="auto", size=args.patch_size, tolerance=args.tolerance,
+                               **extra_auto)
+        options.validate()
+        return options
     if args.curve or args.single_patch or args.grid is not None or args.initial is not None:
         raise ValueError("--patches fits a network of surface patches: it cannot be combined "
                          "with --curve, --single-patch, --grid or --initial")
@@ -424,15 +432,16 @@ def _check_outputs(args: argparse.Namespace) -> list[Path]:
     return outputs
 
 
-#: A closed mesh file with fewer vertices than this is fitted to this many points sampled
-#: uniformly over its area (its vertices alone are too few, or unevenly spread).
+#: A mesh file with fewer vertices than this is fitted to this many points sampled uniformly
+#: over its area (its vertices alone are too few, or unevenly spread: CAD meshes).
 FILE_MESH_SAMPLES = 10_000
 
 
-def _patch_input(path: str, quiet: bool) -> tuple[np.ndarray, ClosedMesh | None]:
-    """The points to fit with ``--patches`` (N, 3) and the input file's own closed mesh for the
-    layout, or None (a cloud, or a mesh that cannot serve: then it is rebuilt from the points,
-    and the reason is printed). A mesh file is read once."""
+def _surface_input(path: str, quiet: bool) -> tuple[np.ndarray, ClosedMesh | None, str]:
+    """The points to fit a surface or network to (N, 3), the input file's own closed mesh for a
+    network's layout or None, and why a mesh file's mesh cannot serve ("" for a cloud). A mesh
+    file (STL, OBJ, PLY with faces, ...) is read once with its triangles: a file with few
+    vertices is sampled uniformly over its area, never reduced to its vertices."""
     from nurbs_core.io import load_points
     from nurbs_core.io.cloud import check_points
     from nurbs_core.io.meshes import read_mesh_faces, sample_mesh_points
@@ -446,33 +455,39 @@ def _patch_input(path: str, quiet: bool) -> tuple[np.ndarray, ClosedMesh | None]
         if suffix != ".ply" or has_faces(path):  # (a PLY cloud is read by the fast PLY reader)
             arrays = read_mesh_faces(path, suffix)
     if arrays is None:
-        return load_points(path).points, None
+        return load_points(path).points, None, ""
     from nurbs_core.patches.closed_mesh import mesh_from_faces
 
     vertices, faces = arrays
     mesh, why = mesh_from_faces(vertices, faces)
     if not quiet:
-        print(f"using the file's closed mesh ({len(mesh.faces)} triangles) for the layout"
-              if mesh is not None else f"{why}: the closed mesh is rebuilt from its points",
-              file=sys.stderr)
-    if mesh is not None and len(vertices) < FILE_MESH_SAMPLES:
-        return sample_mesh_points(path, vertices, faces, FILE_MESH_SAMPLES).points, mesh
-    return check_points(path, vertices), mesh
+        print(f"{path}: a mesh of {len(faces)} triangles"
+              + (", closed: its own mesh lays out the patches" if mesh is not None
+                 else f" ({why})"), file=sys.stderr)
+    if len(vertices) < FILE_MESH_SAMPLES:
+        return sample_mesh_points(path, vertices, faces, FILE_MESH_SAMPLES).points, mesh, why
+    return check_points(path, vertices), mesh, why
+
+
+def _automatic(args: argparse.Namespace) -> bool:
+    """Whether the route is the automatic one (nothing forces a curve, one patch or a network,
+    and no option applies to one patch only)."""
+    return (args.patches is None and not args.curve and not args.single_patch
+            and args.grid is None and args.initial is None and args.offset is None)
 
 
 def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[Path],
-                points: np.ndarray | None = None) -> dict[str, Any]:
-    """``--patches``: the network fit (``options``: its PatchOptions), its report and files;
-    returns the statistics (``points``: the cloud when it is not read from ``args.input``)."""
+                points: np.ndarray | None = None, mesh: ClosedMesh | None = None) -> dict[str, Any]:
+    """``--patches`` (or the automatic route's network): the network fit (``options``: its
+    PatchOptions), its report and files; returns the statistics (``points``: the cloud when it
+    is not read from ``args.input``; ``mesh``: its closed mesh when already built)."""
     import torch
 
     from nurbs_core.io.dispatch import save_all
     from nurbs_core.patches.pipeline import iter_patch_fit
 
     if points is None:
-        points, mesh = _patch_input(args.input, quiet=args.quiet)
-    else:
-        mesh = None
+        points, mesh, _ = _surface_input(args.input, quiet=args.quiet)
     torch.set_num_threads(max(1, args.threads))
     print(f"{args.input}: {len(points)} points; fitting a network of bicubic patches "
           f"({options.patches} patches, stiffness {options.stiffness:g}, seam weight "
@@ -495,6 +510,7 @@ def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[P
     assert result is not None  # iter_patch_fit always ends with the "done" event
     quality = result.quality
     seam = quality.seam
+    print(f"status: {result.status}")
     print(f"patches: {quality.patches} ({quality.size}x{quality.size} control points each, "
           f"bicubic); {result.passes} passes in {sum(result.timings.values()):.2f} s "
           f"({', '.join(f'{k} {v:.1f} s' for k, v in result.timings.items())})")
@@ -504,7 +520,10 @@ def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[P
           f"{seam.max:.3f} degrees; corners: regular max {seam.regular_corner_max:.3f}, "
           f"irregular max {seam.irregular_corner_max:.3f} degrees")
     print(f"point-to-surface distance: mean {quality.c2s_mean:.6g}, rms {quality.c2s_rms:.6g}, "
-          f"99th percentile {quality.c2s_p99:.6g}; surface-to-cloud mean {quality.s2c_mean:.6g}")
+          f"99th percentile {quality.c2s_p99:.6g}")
+    print(f"surface-to-cloud distance: mean {quality.s2c_mean:.6g}, 99th percentile "
+          f"{quality.s2c_p99:.6g}, max {quality.s2c_max:.6g}; {quality.far_fraction:.2%} of the "
+          f"area farther than {quality.far_limit:.4g} from every point")
     print(f"flipped area: {quality.flipped_fraction:.2%}; area {quality.area:.6g}; "
           f"enclosed volume {quality.volume:.6g}")
     for warning in result.warnings:
@@ -512,7 +531,9 @@ def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[P
     save_all([(result.network, path, {}) for path in outputs])
     for path in outputs:
         print(f"wrote {path}")
-    return _plain({"kind": "network", "points": len(points), "patches": quality.patches,
+    return _plain({"kind": "network", "fit_status": result.status, "points": len(points),
+                   "patches": quality.patches, "s2c_max": quality.s2c_max,
+                   "far_fraction": quality.far_fraction,
                    "patch_size": quality.size, "passes": result.passes,
                    "fit_seconds": sum(result.timings.values()), "closed": result.network.closed,
                    "gap": seam.gap, "gap_relative": quality.gap_relative,
@@ -595,6 +616,23 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
     if args.patches is not None:
         outputs = _check_before_work(args)
         return run_patches(args, _patch_options(args), outputs, points=points)
+    if _automatic(args):
+        from nurbs_core.route import choose_route
+
+        outputs = _check_before_work(args)
+        file_mesh, note = None, ""
+        if points is None:
+            points, file_mesh, note = _surface_input(args.input, quiet=args.quiet)
+        route = choose_route(points, file_mesh, note)
+        if not args.quiet:
+            print(f"route: {route.reason}", file=sys.stderr)
+        if route.kind == "network":
+            from nurbs_core.io.dispatch import NETWORK_SUFFIXES
+            from nurbs_core.io.outputs import check_output_paths
+
+            check_output_paths(outputs, [args.input], suffixes=NETWORK_SUFFIXES)
+            return run_patches(args, _patch_options(args, automatic=True), outputs,
+                               points=points, mesh=route.mesh)
     prepared = prepare_fit(args, points)
     return finish_fit(prepared, run_fit(prepared, stoppable))
 
@@ -731,7 +769,11 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
     diagonal = float(np.linalg.norm(np.ptp(target, axis=0)))
     chamfer = _chamfer(geometry, target, np.random.default_rng(args.seed))
     stats = result.statistics
-    print(f"status: {result.status} after {result.iterations} iterations in "
+    from nurbs_core.quality import quality_warnings
+    from nurbs_core.status import reported_status
+
+    status = reported_status(result.status, quality_warnings(stats))
+    print(f"status: {status} after {result.iterations} iterations in "
           f"{result.elapsed:.2f} s" + (f" ({result.message})" if result.message else ""))
     print(f"point-to-{config.kind} distance: mean {stats['mean']:.6g}, rms {stats['rms']:.6g}, "
           f"max {stats['max']:.6g}  (bounding-box diagonal {diagonal:.6g})")
@@ -757,7 +799,7 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
         print(f"wrote {path}")
     counts = [int(n) for n in np.shape(geometry.control_points)[:-1]]
     return _plain({**stats, "kind": config.kind, "points": len(prepared.points),
-                   "fit_status": result.status, "iterations": result.iterations,
+                   "fit_status": status, "iterations": result.iterations,
                    "fit_seconds": result.elapsed, "fit_message": one_line(result.message or ""),
                    "diagonal": diagonal, "chamfer": chamfer, "control_points": counts})
 

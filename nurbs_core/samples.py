@@ -12,7 +12,8 @@ density does not depend on how the shape happens to be parameterised.
   :func:`saddle`, :func:`curled_sheet` (1.5 turns of a spiral), :func:`bowl`,
   :func:`leaflet_like`, :func:`half_cylinder`
 * shapes one open patch cannot hold: :func:`sphere`, :func:`torus`, :func:`tube` (both ends
-  open), :func:`rounded_box`
+  open), :func:`rounded_box`, :func:`capsule`, :func:`blob`, :func:`head` (uneven density: a
+  closed NURBS sampled uniformly in its parameters, as a scan comes)
 * variants: :func:`sparse` (500 points), :func:`with_outliers`
 * exact distances to the true surface: :meth:`SampledShape.distance_to_truth` (foot points on
   the shape's charts, started from nearby truth samples, e.g. from a KD-tree over ``truth``)
@@ -294,13 +295,18 @@ class _Shape:
         self.bounds = np.array(bounds) * _BOUND_MARGIN + 1e-300
         self.area = float(self.areas.sum())
 
-    def sample(self, count: int,
-               rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``count`` area-uniform samples: (points (count, 3), unit normals (count, 3),
-        parameters (count, 2), chart indices (count,))."""
+    def sample(self, count: int, rng: np.random.Generator, by_parameter: bool = False,
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``count`` area-uniform samples (``by_parameter``: uniform in each chart's parameters
+        instead, charts in proportion to their areas, so stretched regions are sparse, as a
+        scanner's grazing regions are): (points (count, 3), unit normals (count, 3), parameters
+        (count, 2), chart indices (count,))."""
         volumes = np.array([c.parameter_area for c in self.charts]) * self.bounds
         probability = volumes / volumes.sum()
         efficiency = max(self.area / volumes.sum(), 1e-3)
+        if by_parameter:
+            probability = self.areas / self.areas.sum()
+            efficiency = 1.0
         points, normals, params, which_chart, have = [], [], [], [], 0
         while have < count:
             tries = int(min(max((count - have) / efficiency * 1.1 + 256, 1024), 4_000_000))
@@ -315,7 +321,7 @@ class _Shape:
                 v = chart.v[0] + (chart.v[1] - chart.v[0]) * u01[mask, 1]
                 s, cross = chart.cross(u, v)
                 jac = np.linalg.norm(cross, axis=1)
-                keep = threshold[mask] * self.bounds[index] < jac
+                keep = (jac > 0) if by_parameter else threshold[mask] * self.bounds[index] < jac
                 points.append(s[keep])
                 normals.append(cross[keep] / jac[keep, None])
                 params.append(np.stack([u[keep], v[keep]], -1))
@@ -342,7 +348,7 @@ def _diagonal(points: np.ndarray) -> float:
 
 def _make(name: str, shape: _Shape, count: int, noise: float, seed: int, *, closed: bool,
           height_field: bool, kind: str, truth_count: int = TRUTH_COUNT, absolute: bool = False,
-          info: dict | None = None) -> SampledShape:
+          info: dict | None = None, by_parameter: bool = False) -> SampledShape:
     if count < 1:
         raise ValueError(f"count must be at least 1, got {count}")
     if not np.isfinite(noise) or noise < 0:
@@ -352,10 +358,11 @@ def _make(name: str, shape: _Shape, count: int, noise: float, seed: int, *, clos
     diagonal = _diagonal(truth)
     sigma = float(noise) if absolute else float(noise) * diagonal
     rng = np.random.default_rng([seed, 0])
-    clean = shape.sample(int(count), rng)[0]
+    clean = shape.sample(int(count), rng, by_parameter)[0]
     points = clean + rng.normal(scale=sigma, size=clean.shape) if sigma > 0 else clean.copy()
     order = rng.permutation(len(points))
-    details = {"seed": seed, "relative_noise": sigma / diagonal if diagonal > 0 else 0.0}
+    details = {"seed": seed, "relative_noise": sigma / diagonal if diagonal > 0 else 0.0,
+               "density": "by parameter" if by_parameter else "by area"}
     details.update(info or {})
     return SampledShape(name=name, points=points[order], clean=clean[order], truth=truth,
                         true_area=shape.area, noise=sigma, closed=closed,
@@ -392,17 +399,18 @@ def area_uniform_samples(surface: NurbsSurface, count: int, seed: int = 0) -> tu
 
 def sample_surface(surface: NurbsSurface, count: int, noise: float = 0.002, seed: int = 0,
                    name: str = "surface", *, truth_count: int = TRUTH_COUNT,
-                   absolute: bool = False) -> SampledShape:
+                   absolute: bool = False, by_parameter: bool = False) -> SampledShape:
     """Sample a NURBS patch uniformly by area, add isotropic Gaussian noise of standard deviation
     ``noise`` x the bounding-box diagonal (``absolute=True``: ``noise`` itself) and shuffle.
     ``truth`` is a dense area-uniform sampling (``truth_count`` points), ``true_area`` the
     quadrature area. ``kind`` is "sheet" unless the patch closes on itself (see
     :func:`patch_topology`): then "tube" or "closed" and ``closed`` is True (a cloud of it needs
-    more than one open patch)."""
+    more than one open patch). ``by_parameter``: the cloud (not the truth) uniform in the
+    patch's parameters instead, so its density is as uneven as the parameterisation."""
     kind = patch_topology(surface)
     shape = _Shape([_nurbs_chart(surface)])
     return _make(name, shape, count, noise, seed, closed=kind != "sheet", height_field=False,
-                 kind=kind, truth_count=truth_count, absolute=absolute,
+                 kind=kind, truth_count=truth_count, absolute=absolute, by_parameter=by_parameter,
                  info={"source": surface.metadata.get("path") or surface.metadata.get("name")})
 
 
@@ -689,6 +697,39 @@ def blob(count: int = 4000, noise: float = 0.002, seed: int = 0, *, bumps: float
                                      periodic=(False, True))])
     return _make("blob", shape, count, noise, seed, closed=True, height_field=False,
                  kind="closed", truth_count=truth_count, info={"bumps": bumps, "turn": turn})
+
+
+def head_surface(ears: bool = True) -> NurbsSurface:
+    """A closed, head-like bicubic NURBS patch (a 14 x 20 control net; poles at both ends of u,
+    its first and last v columns equal): an ellipsoid with a nose and, when ``ears``, two thin
+    ears. Its rows cluster at the poles, so a cloud uniform in its parameters is dense at the
+    top and bottom and sparse around the middle (as a scan is dense where it looks straight at
+    the surface and sparse where it grazes it)."""
+    from nurbs_core.geometry import NurbsSurface
+
+    t = np.linspace(0.0, 1.0, 14)
+    polar = np.pi * (0.5 - 0.5 * np.cos(np.pi * t))
+    around = np.linspace(0.0, 2 * np.pi, 20)
+    p, a = np.meshgrid(polar, around, indexing="ij")
+    radius = 1.0 + 0.25 * np.exp(-np.minimum(a, 2 * np.pi - a) ** 2 / 0.08 - (p - 1.7) ** 2 / 0.1)
+    if ears:
+        for centre in (np.pi / 2, 3 * np.pi / 2):
+            radius += 0.35 * np.exp(-(a - centre) ** 2 / 0.03 - (p - 1.5) ** 2 / 0.05)
+    net = np.stack([0.8 * radius * np.sin(p) * np.cos(a), 0.95 * radius * np.sin(p) * np.sin(a),
+                    1.2 * radius * np.cos(p)], -1)
+    net[0], net[-1] = net[0].mean(axis=0), net[-1].mean(axis=0)
+    return NurbsSurface(net, 3, 3, metadata={"name": "head"})
+
+
+def head(count: int = 4000, noise: float = 0.002, seed: int = 0, *, ears: bool = True,
+         by_parameter: bool = True, truth_count: int = TRUTH_COUNT) -> SampledShape:
+    """A cloud of :func:`head_surface`, uniform in its parameters by default (uneven density:
+    the middle band is several times sparser than the poles); ``by_parameter=False`` samples it
+    uniformly by area."""
+    shape = sample_surface(head_surface(ears), count, noise, seed, "head",
+                           truth_count=truth_count, by_parameter=by_parameter)
+    shape.info["ears"] = ears
+    return shape
 
 
 # --- variants ----------------------------------------------------------------------------------

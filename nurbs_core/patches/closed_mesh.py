@@ -1,13 +1,16 @@
 """A watertight, outward-oriented triangle mesh of a closed object's cloud.
 
-The cloud's own mesh (:func:`nurbs_core.surfacing.mesh.cloud_mesh`) gives oriented normals but
-may keep holes or a stray fan; a layout needs a closed 2-manifold of the right genus. So the
-surface is rebuilt as the zero set of a signed distance sampled on a voxel grid:
+The cloud's own mesh (:func:`nurbs_core.surfacing.mesh.cloud_mesh`) invents open ends and handles
+where a scan's sampling is uneven, and a layout needs a closed 2-manifold of the right genus. So
+the surface is rebuilt as the zero set of a signed distance sampled on a voxel grid, over the
+cloud's wrap (:mod:`nurbs_core.reconstruct.wrap`: each point blocks a ball as wide as its own
+neighbourhood; the free voxels reached from the border are outside; normals point to it):
 
-* near the cloud (within ``BAND`` cells of a point), Hoppe et al.'s tangent-plane distance
-  ``d(x) = sum_k w_k (x - p_k) . n_k / sum_k w_k`` over the k nearest points with oriented normals;
-* far from it, only the sign: the far voxels connected to the grid's border are outside, every
-  other far region is inside (a closed object encloses it), whatever the normals say;
+* in the blocked voxels, Hoppe et al.'s tangent-plane distance
+  ``d(x) = sum_k w_k (x - p_k) . n_k / sum_k w_k`` over the k nearest points with the wrap's
+  oriented normals;
+* in the free ones, only the sign: outside where the border reaches, inside elsewhere (a closed
+  object encloses it), whatever the normals say;
 
 then marching cubes (scikit-image) at level 0, the largest piece kept, faces oriented so the
 enclosed volume is positive (normals outward).
@@ -21,7 +24,8 @@ import numpy as np
 import scipy.ndimage
 from scipy.spatial import cKDTree
 
-from nurbs_core.surfacing.mesh import cloud_mesh, median_spacing, vertex_normals, voxel_subsample
+from nurbs_core.reconstruct.wrap import VoxelGrid, wrap
+from nurbs_core.surfacing.mesh import median_spacing, vertex_normals, voxel_subsample
 
 #: Cells per bounding-box diagonal at most (Instant Meshes fails on layouts of much denser
 #: meshes: 21k vertices broke every torus layout, 5k none), and the largest grid (cells in all).
@@ -29,8 +33,8 @@ CELLS_PER_DIAGONAL = 64
 MAX_CELLS = 900_000
 #: A cell is at least this many cloud spacings wide (finer cells see the noise as holes).
 MIN_CELL_SPACINGS = 1.4
-#: Voxels nearer a point than this many cells take the tangent-plane distance.
-BAND = 2.5
+#: Cells of margin around the cloud (room for the largest blocking balls and the blur).
+PAD = 6
 #: Gaussian blur of the sampled distance (cells).
 SMOOTHING = 1.0
 #: A closed cloud's surface passes through its points: at most MAX_AWAY of the marching-cubes
@@ -74,17 +78,25 @@ def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
 
 
 def oriented_normals(points: np.ndarray) -> np.ndarray:
-    """Unit normals (N, 3) of the cloud, consistently oriented over its mesh and outward (the
-    mesh's signed volume positive)."""
-    mesh = cloud_mesh(points)
-    normals = mesh.vertex_normals()
-    if signed_volume(mesh.vertices, mesh.faces) < 0:
-        normals = -normals
-    used = np.zeros(len(mesh.vertices), bool)
-    used[mesh.faces.ravel()] = True
-    tree = cKDTree(mesh.vertices[used])
-    nearest = np.flatnonzero(used)[tree.query(points)[1]]
-    return normals[nearest]
+    """Unit normals (N, 3) of a closed object's cloud, pointing out of it (oriented against the
+    cloud's wrap, :mod:`nurbs_core.reconstruct.wrap`, not over its mesh)."""
+    points = np.asarray(points, np.float64)
+    return wrap(points, _grid(points)).normals
+
+
+def _grid(points: np.ndarray) -> VoxelGrid:
+    """The voxel grid of the reconstruction: about CELLS_PER_DIAGONAL cells along the diagonal
+    (no finer than MIN_CELL_SPACINGS spacings, at most MAX_CELLS), a margin of PAD cells."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    diagonal = float(np.linalg.norm(hi - lo))
+    sample = points if len(points) <= 20_000 else points[voxel_subsample(points, 20_000)[0]]
+    cell = max(diagonal / CELLS_PER_DIAGONAL, MIN_CELL_SPACINGS * median_spacing(sample))
+    extent = hi - lo
+    while np.prod(np.ceil(extent / cell) + 2 * PAD + 1) > MAX_CELLS:
+        cell *= 1.15
+    origin = lo - PAD * cell
+    shape = tuple(int(n) for n in np.ceil((hi + PAD * cell - origin) / cell).astype(int) + 1)
+    return VoxelGrid(origin, cell, (shape[0], shape[1], shape[2]))
 
 
 def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None) -> ClosedMesh:
@@ -93,52 +105,41 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None) -> Closed
     from skimage.measure import marching_cubes
 
     points = np.asarray(points, np.float64)
-    if normals is None:
-        normals = oriented_normals(points)
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    diagonal = float(np.linalg.norm(hi - lo))
-    sample = points if len(points) <= 20_000 else points[voxel_subsample(points, 20_000)[0]]
-    cell = max(diagonal / CELLS_PER_DIAGONAL, MIN_CELL_SPACINGS * median_spacing(sample))
-    extent = hi - lo
-    while np.prod(np.ceil(extent / cell) + 2 * BAND + 4) > MAX_CELLS:
-        cell *= 1.15
-    pad = (BAND + 2) * cell
-    origin = lo - pad
-    shape = np.ceil((hi + pad - origin) / cell).astype(int) + 1
-    axes = [origin[k] + cell * np.arange(shape[k]) for k in range(3)]
-    grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    grid = _grid(points)
     tree = cKDTree(points)
-    distance, nearest = tree.query(grid, k=NEIGHBOURS)
-    offsets = grid[:, None, :] - points[nearest]
-    plane = np.einsum("gkc,gkc->gk", offsets, normals[nearest])
-    weights = 1.0 / np.maximum(distance, 1e-3 * cell) ** 2
-    signed = (plane * weights).sum(axis=1) / weights.sum(axis=1)
-    far = (distance[:, 0] > BAND * cell).reshape(shape)
-    labels, count = scipy.ndimage.label(far)
-    border = np.unique(np.concatenate([labels[[0, -1]].ravel(), labels[:, [0, -1]].ravel(),
-                                       labels[:, :, [0, -1]].ravel()]))
-    outside = np.isin(labels, border[border > 0])
-    if not (far & ~outside).any():
-        # every region away from the points reaches the border: nothing is enclosed (an open
-        # sheet or tube, or a closed one so thin or so sparsely sampled that it leaks)
+    wrapped = wrap(points, grid, tree)
+    if not wrapped.encloses:
+        # every free region reaches the border: nothing is enclosed (an open sheet or shell, or
+        # a closed one with openings wider than its sampling explains)
         raise NotClosedError("the cloud does not enclose a volume: it is an open surface (or its "
                              "sampling leaves holes); a patch network needs a closed object, and "
                              "an open sheet is fitted as one patch (the single-patch fit)")
-    volume = signed.reshape(shape)
-    volume = np.where(far & outside, BAND * cell, volume)
-    volume = np.where(far & ~outside, -BAND * cell, volume)
+    if normals is None:
+        normals = wrapped.normals
+    cell = grid.cell
+    centres = grid.centres()
+    near = wrapped.blocked.ravel()
+    distance, nearest = tree.query(centres[near], k=NEIGHBOURS)
+    offsets = centres[near][:, None, :] - points[nearest]
+    plane = np.einsum("gkc,gkc->gk", offsets, normals[nearest])
+    weights = 1.0 / np.maximum(distance, 1e-3 * cell) ** 2
+    reach = float(np.percentile(wrapped.radii, 90))
+    signed = np.where(wrapped.outside.ravel(), reach, -reach)
+    signed[near] = np.clip((plane * weights).sum(axis=1) / weights.sum(axis=1), -reach, reach)
+    volume = signed.reshape(grid.shape)
     # a one-cell blur closes the pin-holes and tiny handles that noisy normals leave in the band
     volume = scipy.ndimage.gaussian_filter(volume, SMOOTHING)
     if volume.min() >= 0 or volume.max() <= 0:
         raise NotClosedError("the cloud encloses no volume: it is not a closed surface")
     verts, faces, _, _ = marching_cubes(volume, level=0.0, spacing=(cell, cell, cell))
-    verts = verts + origin
+    verts = verts + grid.origin
     faces, pieces = _largest_piece(faces.astype(np.int64), len(verts))
     used = np.unique(faces)
     remap = np.full(len(verts), -1, np.int64)
     remap[used] = np.arange(len(used))
     verts, faces = verts[used], remap[faces]
-    away = float((tree.query(verts)[0] > AWAY * cell).mean())
+    gap, owner = tree.query(verts)
+    away = float((gap > np.maximum(AWAY * cell, wrapped.radii[owner])).mean())
     if away > MAX_AWAY:
         # walls of the zero set far from every point: the far field's sign had to close an
         # opening (an open tube or sheet whose rim the band sealed)

@@ -40,6 +40,7 @@ from scipy.spatial import cKDTree
 from nurbs_core.patches.defaults import SEAM_WEIGHT, STIFFNESS
 from nurbs_core.patches.evaluate import evaluate, foot_points, grid_samples, rows, unit
 from nurbs_core.patches.network import SIDES, PatchNetwork, build_network
+from nurbs_core.sparse_solve import solve_spd
 from nurbs_core.surfacing.fairing import fairing_matrices
 from nurbs_core.surfacing.neighbours import estimate_noise
 
@@ -244,7 +245,7 @@ def _resized(network: PatchNetwork, size: int) -> PatchNetwork:
     s, _, _ = evaluate(network, patches, uv[:, 0], uv[:, 1])
     a = rows(bigger, patches, uv[:, 0], uv[:, 1])
     normal = (a.T @ a).tocsc() + 1e-12 * scipy.sparse.identity(a.shape[1], format="csc")
-    control = scipy.sparse.linalg.splu(normal).solve(np.asarray(a.T @ s))
+    control = solve_spd(normal, np.asarray(a.T @ s))
     return bigger.with_control_points(control)
 
 
@@ -299,7 +300,7 @@ class _Solver:
             system = system + weight * (g.T @ g)
             rhs = rhs + weight * (g.T @ h)
         system = system + 1e-12 * scipy.sparse.identity(3 * k, format="csr")
-        solution = scipy.sparse.linalg.splu(system.tocsc()).solve(rhs)
+        solution = solve_spd(system, rhs)
         return network.with_control_points(solution.reshape(3, k).T), seam
 
 

@@ -54,6 +54,11 @@ class NetworkQuality:
     s2c_mean: float
     s2c_p99: float
     diagonal: float
+    #: the largest distance from the surface to the cloud, and the share of the area farther
+    #: from every point than ``far_limit`` (a flap or horn the scan does not hold)
+    s2c_max: float = 0.0
+    far_fraction: float = 0.0
+    far_limit: float = 0.0
 
     @property
     def gap_relative(self) -> float:
@@ -138,9 +143,27 @@ def network_quality(network: PatchNetwork, points: np.ndarray,
         flipped = float(area[against].sum() / total) if total > 0 else 0.0
     volume = float((s * normals).sum(1) @ area / 3.0)
     _, _, c2s = foot_points(network, points, resolution=24, steps=10)
-    s2c = cKDTree(points).query(s)[0]
+    tree = cKDTree(points)
+    s2c = tree.query(s)[0]
     diagonal = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    limit = far_limit(points, tree, diagonal)
+    far = float(area[s2c > limit].sum() / total) if total > 0 else 0.0
     return NetworkQuality(network.patch_count, network.size, seam, total, flipped, volume,
                           float(c2s.mean()), float(np.sqrt(np.mean(c2s ** 2))),
                           float(np.percentile(c2s, 99)), float(np.average(s2c, weights=area)),
-                          float(np.percentile(s2c, 99)), diagonal)
+                          float(np.percentile(s2c, 99)), diagonal, float(s2c.max()), far, limit)
+
+
+#: Surface farther from every point than FAR_DIAGONAL x the diagonal, and than FAR_SPACINGS x
+#: the cloud's sparse spacing (its 90th percentile: a sparse region's surface legitimately lies
+#: a few spacings from its points), is surface the scan does not hold.
+FAR_DIAGONAL = 0.015
+FAR_SPACINGS = 3.0
+
+
+def far_limit(points: np.ndarray, tree: cKDTree, diagonal: float) -> float:
+    """The distance from the cloud (N, 3) beyond which a fitted surface is not supported by it
+    (see ``FAR_DIAGONAL`` and ``FAR_SPACINGS``)."""
+    probe = points[:: max(1, len(points) // 20_000)]
+    spacing = tree.query(probe, k=2)[0][:, 1]
+    return max(FAR_DIAGONAL * diagonal, FAR_SPACINGS * float(np.percentile(spacing, 90)))

@@ -24,6 +24,7 @@ from nurbs_core.patches.layout import LayoutError, QuadLayout, quad_layout
 from nurbs_core.patches.measures import NetworkQuality, network_quality
 from nurbs_core.patches.network import PatchNetwork
 from nurbs_core.patches.options import PatchOptions
+from nurbs_core.status import reported_status
 
 #: The first patch count ``auto`` tries, how much finer each retry is, and the most it goes to.
 AUTO_START = 24
@@ -36,9 +37,12 @@ MIN_POINTS_PER_PATCH = 25
 #: Points the fit passes use at most (a random subset of larger clouds), and the quality.
 PASS_POINTS = 20_000
 QUALITY_POINTS = 200_000
-#: Seam angle 99th percentile (degrees) and flipped area fraction above which a warning is given.
+#: Seam angle 99th percentile (degrees), flipped area fraction and the share of the area far
+#: from every point (:func:`nurbs_core.patches.measures.far_limit`) above which a warning is
+#: given (and the status is not "converged").
 WARN_SEAM = 2.0
 WARN_FLIPPED = 0.01
+WARN_FAR = 0.005
 
 
 @dataclass
@@ -65,6 +69,11 @@ class PatchResult:
     timings: dict[str, float]
     warnings: list[str] = field(default_factory=list)
     passes: int = 0
+
+    @property
+    def status(self) -> str:
+        """"converged" when every quality check holds, else "fitted with warnings"."""
+        return reported_status("converged", self.warnings)
 
 
 def layout_turn(layout: QuadLayout) -> float:
@@ -163,6 +172,11 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
                         f"{quality.seam.p99:.1f} degrees")
     if quality.flipped_fraction > WARN_FLIPPED:
         warnings.append(f"{quality.flipped_fraction:.1%} of the area faces inward (folds)")
+    if quality.far_fraction > WARN_FAR:
+        warnings.append(f"{quality.far_fraction:.1%} of the surface lies farther than "
+                        f"{quality.far_limit:.3g} from every point (up to {quality.s2c_max:.3g}, "
+                        f"{quality.s2c_max / max(quality.diagonal, 1e-300):.1%} of the diagonal): "
+                        "a part the scan does not hold")
     result = PatchResult(last.network, quality, layout, mesh, timings, warnings, last.index + 1)
     yield PatchEvent("done", mesh=mesh, layout=layout, fit_pass=last, result=result)
 

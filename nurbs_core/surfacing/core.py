@@ -30,6 +30,7 @@ from nurbs_core.fitting.least_squares import collocation_matrix
 from nurbs_core.fitting.projection import surface_gauss_newton
 from nurbs_core.geometry import NurbsSurface
 from nurbs_core.knots import clamped_uniform
+from nurbs_core.sparse_solve import solve_spd
 from nurbs_core.surfacing.fairing import energy, fairing_matrices
 
 #: Relative weight of the membrane energy inside the fairing term.
@@ -187,7 +188,7 @@ class LeastSquaresCore:
             rhs = self.seam.T @ rhs
         # a whisper of ridge keeps control points with no data and no fairing well defined
         normal = normal + 1e-12 * scipy.sparse.eye(normal.shape[0])
-        control = scipy.sparse.linalg.splu(normal.tocsc()).solve(np.asarray(rhs))
+        control = solve_spd(normal, np.asarray(rhs))
         if self.seam is not None:
             control = self.seam @ control
         return NurbsSurface(control.reshape(n, m, 3), p, q, *self.knots)

@@ -261,23 +261,23 @@ def test_engine_refusals_show_a_message_not_a_traceback(qtbot, window, tmp_path,
     assert window.start_action.isEnabled()
 
 
-def test_the_closed_shape_refusal_offers_to_fit_patches(qtbot, window, tmp_path):
+def test_start_on_a_closed_cloud_goes_on_as_a_network(qtbot, window, tmp_path):
+    """The automatic route: one patch cannot hold a closed cloud, so Start fits a network at
+    once (no refusal, no dialog); Undo returns to one patch."""
     from nurbs_core import samples
 
     _open_cloud(qtbot, window, tmp_path, "sphere", samples.sphere(1500).points)
     assert window.document.settings.fit_mode == "single"
-    with qtbot.waitSignal(window.controller.fit_failed, timeout=FIT_TIMEOUT_MS):
-        window.start_action.trigger()
-    qtbot.waitUntil(lambda: not window.controller.is_busy(), timeout=FIT_TIMEOUT_MS)
-    button = window.fit_as_patches_button
-    assert button is not None and button.text() == "Fit as patches"
-    assert window._message_box.isVisible() and "Fit as patches" in window._message_box.text()
+    shown = []
+    window.error_shown.connect(shown.append)
     with qtbot.waitSignal(window.patch_controller.fit_finished, timeout=FIT_TIMEOUT_MS) as done:
-        button.click()
+        window.start_action.trigger()
+    assert shown == [] and window.fit_as_patches_button is None
     assert window.document.settings.fit_mode == "patches"
     assert window.mode_selector.currentData() == "patches"
-    assert not window._message_box.isVisible()
+    assert "network of patches" in window.log_panel.toPlainText()
     assert done.args[0].event == "done" and window.document.network is not None
+    assert window.document.network.closed
     window.undo_action.trigger()  # back to one patch: the network's layers are hidden
     assert window.document.settings.fit_mode == "single"
     assert not window.scene.network.actor("network").GetVisibility()

@@ -238,39 +238,19 @@ def test_quality_map_paints_a_folded_surface_and_not_a_clean_one(qtbot, window, 
     assert window.scene.quality_shown()
 
 
-def test_a_closed_cloud_is_refused_clearly_and_can_be_forced(qtbot, window, tmp_path):
+def test_a_closed_cloud_forced_to_one_patch_shows_its_folds(qtbot, window, tmp_path):
+    """Forced (Force single patch: the automatic route would fit a network), one patch covers
+    the sphere by folding: the readout and the map say so."""
     from app.workers.quality import FLIPPED
     from nurbs_core import samples
 
     path = _write_cloud(tmp_path / "sphere.xyz", samples.sphere(1500).points)
     open_by_drop(qtbot, window, [path])
-    settings, undo = window.document.settings, _undo_count(window)
-    shown = []
-    window.error_shown.connect(shown.append)
-    with qtbot.waitSignal(window.controller.fit_failed, timeout=FIT_TIMEOUT_MS) as blocker:
-        assert window.controller.start()
-    message = blocker.args[0]
-    assert "closed" in message and "multi-patch" in message and "Force single patch" in message
-    qtbot.waitUntil(lambda: window.controller.state == "idle" and
-                    not window.controller.is_busy(), timeout=FIT_TIMEOUT_MS)
-    assert shown == [message] and window._message_box.isVisible()
-    assert window._message_box.text() == message
-    log = window.log_panel.toPlainText()
-    assert "multi-patch" in log and "Traceback" not in log and "File \"" not in log
-    # the document is untouched: no fitted shape, same settings, nothing to undo
-    assert window.document.fitted is None and window.document.settings == settings
-    assert _undo_count(window) == undo
-    assert window.quality_panel.values["flipped"].text() == "-"
-    # (reject(), not close(): a QMessageBox without an escape button, here Ok and "Fit as
-    # patches", both accept-role buttons, ignores close() and stayed open after the test)
-    window._message_box.reject()
-    assert not window._message_box.isVisible()
-
-    # forced, one patch covers the sphere by folding: the readout and the map say so
     window.fit_panel.single_patch.setChecked(True)
     with qtbot.waitSignal(window.controller.fit_finished, timeout=FIT_TIMEOUT_MS) as blocker:
         window.start_action.trigger()
     snapshot = blocker.args[0]
+    assert window.document.settings.fit_mode == "single"
     assert snapshot.quality_cells is not None and (snapshot.quality_cells == FLIPPED).any()
     assert window.quality_panel.is_bad("flipped")
     assert "single patch" in window.quality_panel.status.text()

@@ -218,22 +218,26 @@ def test_progress_shows_the_last_iteration_when_the_final_snapshot_has_no_record
     assert capsys.readouterr().err.splitlines()[-1].startswith("iteration 60/60  loss 0.5")
 
 
-def test_closed_cloud_is_refused_with_a_reason_unless_forced(tmp_path, capsys):
+def test_closed_cloud_becomes_a_network_by_default_and_a_forced_patch_is_not_converged(
+        tmp_path, capsys):
     from nurbs_core import samples
+    from nurbs_core.io.network_io import read_network
 
     source = tmp_path / "sphere.xyz"
     np.savetxt(source, samples.sphere(1500).points)
     out = tmp_path / "sphere.json"
-    assert main([str(source), "-o", str(out)]) == 1
-    error = _error_line(capsys)
-    assert "closed surface" in error and "multi-patch" in error and "--single-patch" in error
-    assert not out.exists()
+    assert main([str(source), "-o", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert "route: the cloud encloses a volume" in captured.err
+    assert "status: converged" in captured.out
+    assert read_network(out).closed
     assert main([str(source), "-o", str(out), "--single-patch", "--control-points", "6", "6",
                  "-q"]) == 0
     report = capsys.readouterr().out
     flipped = float(report.split("flipped area: ")[1].split("%")[0])
     assert flipped > 5                       # the forced sheet folds, and the report says so
-    assert out.exists()
+    # ... and its status says so: "converged" promises that the quality checks hold
+    assert report.startswith("status: fitted with warnings")
 
 
 def test_surfacing_options_reach_the_fit(tmp_path):

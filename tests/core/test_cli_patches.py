@@ -80,9 +80,10 @@ def test_patches_refuses_bad_requests_and_protects_the_input(sphere_file, tmp_pa
     assert sphere_file.read_bytes() == before
 
 
-def test_single_patch_refusal_points_to_patches(sphere_file, tmp_path, capsys):
-    assert main([str(sphere_file), "-o", str(tmp_path / "one.json")]) == 1
-    assert "--patches auto" in _error_line(capsys)
+def test_a_forced_single_patch_on_a_closed_cloud_is_not_converged(sphere_file, tmp_path, capsys):
+    assert main([str(sphere_file), "-o", str(tmp_path / "one.json"), "--single-patch"]) == 0
+    captured = capsys.readouterr()
+    assert "status: fitted with warnings" in captured.out
 
 
 def test_a_closed_mesh_file_lays_out_on_its_own_mesh(tmp_path, capsys):
@@ -93,7 +94,7 @@ def test_a_closed_mesh_file_lays_out_on_its_own_mesh(tmp_path, capsys):
     out = tmp_path / "capsule.json"
     assert main([str(source), "-o", str(out), "--patches", "auto"]) == 0
     captured = capsys.readouterr()
-    assert "using the file's closed mesh" in captured.err
+    assert "closed: its own mesh lays out the patches" in captured.err
     assert "flipped area: 0.00%" in captured.out and "warning" not in captured.out
     network = read_network(out)
     assert network.closed
@@ -108,5 +109,5 @@ def test_a_mesh_file_with_a_small_hole_is_rebuilt_closed_from_its_points(tmp_pat
     holed.export(source)
     out = tmp_path / "holed.json"
     assert main([str(source), "-o", str(out), "--patches", "auto"]) == 0
-    assert "not watertight: the closed mesh is rebuilt" in capsys.readouterr().err
+    assert "(the file's mesh is not watertight)" in capsys.readouterr().err
     assert read_network(out).closed

@@ -1,0 +1,57 @@
+"""Which route fits a surface cloud: the one place that decides it.
+
+* ``network``: the object is closed: the input file's own watertight mesh, or the wrap of its
+  points encloses a volume (:func:`nurbs_core.patches.closed_mesh.closed_mesh`, robust to uneven
+  sampling). One open patch cannot hold a closed object without folding, so it becomes a
+  watertight network of tangent-continuous patches.
+* ``single_patch``: everything else (an open sheet, a shell, a tube): one patch, the fold-free
+  least-squares core (:mod:`nurbs_core.fitting.sheet`).
+
+A route forced by the caller (``--single-patch``, ``--patches``) is taken as it is. The decision
+carries its reason (printed by the CLI) and the closed mesh it built, so the network does not
+rebuild it. numpy + scipy + scikit-image only: deciding imports no torch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from nurbs_core.patches.closed_mesh import ClosedMesh, NotClosedError, closed_mesh
+
+RouteKind = Literal["single_patch", "network"]
+
+
+@dataclass
+class Route:
+    """kind: "single_patch" or "network"; reason: one line for the report; mesh: the closed
+    mesh of a network (the file's own or rebuilt from the points), None for a single patch."""
+
+    kind: RouteKind
+    reason: str
+    mesh: ClosedMesh | None = None
+
+
+def choose_route(points: np.ndarray, file_mesh: ClosedMesh | None = None,
+                 file_mesh_note: str = "") -> Route:
+    """The route for a surface cloud (N, 3) with no route forced. ``file_mesh``: the input
+    file's own closed mesh when it has a usable one (:func:`mesh_from_faces`); otherwise
+    ``file_mesh_note`` says why not (it goes into the reason)."""
+    if file_mesh is not None:
+        return Route("network", "the file's mesh is closed (watertight): a network of patches",
+                     file_mesh)
+    points = np.asarray(points, np.float64)
+    if len(points) < 100:
+        return Route("single_patch", f"{len(points)} points are too few for a network: one patch")
+    try:
+        mesh = closed_mesh(points)
+    except NotClosedError:
+        why = f"{file_mesh_note}; " if file_mesh_note else ""
+        return Route("single_patch", f"{why}the cloud encloses no volume (an open surface): "
+                                     "one patch")
+    return Route("network", ((f"{file_mesh_note}; " if file_mesh_note else "")
+                             + "the cloud encloses a volume (a closed object): a network of "
+                               "patches"), mesh)
+

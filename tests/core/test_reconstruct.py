@@ -1,0 +1,110 @@
+"""The wrap (nurbs_core.reconstruct.wrap) and the route it decides, on clouds as scans come:
+closed NURBS sampled uniformly in their parameters (sparse where stretched), thin ears, open
+sheets and tubes, a watertight mesh file."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse
+import scipy.sparse.linalg
+from scipy.spatial import cKDTree
+
+from nurbs_core import samples
+from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh, oriented_normals
+from nurbs_core.route import choose_route
+
+
+@pytest.fixture(scope="module")
+def sparse_head():
+    """4,000 points uniform in the parameters of a closed head-like NURBS: over a tenth of its
+    area lies more than 3 spacings from any point (the old mesh-based route refused it)."""
+    return samples.head(4000, truth_count=60_000)
+
+
+def test_the_sparse_head_is_as_uneven_as_a_real_scan(sparse_head):
+    tree = cKDTree(sparse_head.points)
+    spacing = np.median(tree.query(sparse_head.points, k=2)[0][:, 1])
+    empty = float((tree.query(sparse_head.truth)[0] > 3 * spacing).mean())
+    assert empty > 0.06, empty
+
+
+def test_normals_point_out_of_an_unevenly_sampled_head_with_ears(sparse_head):
+    normals = oriented_normals(sparse_head.points)
+    nearest = cKDTree(sparse_head.truth).query(sparse_head.points)[1]
+    truth = sparse_head.truth_normals[nearest]
+    # the truth normals of a NURBS patch point one way throughout: outward or inward
+    agreement = np.einsum("ij,ij->i", normals, truth)
+    outward = max((agreement > 0).mean(), (agreement < 0).mean())
+    assert outward > 0.995, outward
+
+
+def test_the_closed_mesh_of_a_sparse_head_is_one_sphere_on_the_truth(sparse_head):
+    mesh = closed_mesh(sparse_head.points)
+    vertices, faces = mesh.vertices, mesh.faces
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), 1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    assert (counts == 2).all()                                  # watertight, manifold edges
+    euler = len(vertices) - len(unique) + len(faces)
+    assert euler == 2 and mesh.pieces == 1                      # a sphere: no invented handles
+    away = cKDTree(sparse_head.truth).query(vertices)[0]
+    assert away.max() < 0.015 * sparse_head.diagonal, away.max() / sparse_head.diagonal
+    assert abs(mesh.area / sparse_head.true_area - 1) < 0.05
+
+
+@pytest.mark.parametrize("make", [samples.saddle, samples.curled_sheet, samples.tube,
+                                  samples.bowl])
+def test_open_surfaces_enclose_nothing_and_go_to_one_patch(make):
+    points = make(3000, truth_count=1000).points
+    with pytest.raises(NotClosedError):
+        closed_mesh(points)
+    assert choose_route(points).kind == "single_patch"
+
+
+def test_closed_clouds_go_to_a_network_with_their_mesh(sparse_head):
+    route = choose_route(sparse_head.points)
+    assert route.kind == "network" and route.mesh is not None
+    assert "encloses a volume" in route.reason
+
+
+def test_the_network_of_the_sparse_head_meets_the_quality_targets(sparse_head):
+    from nurbs_core.patches.pipeline import fit_patches
+
+    result = fit_patches(sparse_head.points)
+    quality = result.quality
+    assert result.status == "converged", result.warnings
+    assert result.network.closed and quality.gap_relative < 1e-9
+    assert quality.seam.p99 < 2.0 and quality.flipped_fraction < 0.01
+    assert abs(quality.area / sparse_head.true_area - 1) < 0.05
+    # no flap or horn: every part of the surface near the true head
+    s = result.network  # evaluated on a grid by the quality's own samples
+    from nurbs_core.patches.measures import surface_samples
+
+    positions, _, _ = surface_samples(s, 8)
+    away = cKDTree(sparse_head.truth).query(positions)[0]
+    assert away.max() < 0.015 * sparse_head.diagonal
+
+
+def test_a_network_far_from_its_cloud_is_reported_with_a_warning(sparse_head):
+    """The far-surface measure catches what the points do not hold: the same fit measured
+    against the cloud with its ears cut away."""
+    from nurbs_core.patches.measures import network_quality
+    from nurbs_core.patches.pipeline import fit_patches
+
+    points = sparse_head.points
+    result = fit_patches(points)
+    # drop every point of the ears (|y| beyond the head's own half-width)
+    kept = points[np.abs(points[:, 1]) < 0.9 * np.abs(points[:, 1]).max() - 0.25]
+    quality = network_quality(result.network, kept)
+    assert quality.far_fraction > 0.005 and quality.s2c_max > quality.far_limit
+
+
+def test_solve_spd_agrees_with_a_general_lu():
+    from nurbs_core.sparse_solve import solve_spd
+
+    rng = np.random.default_rng(0)
+    a = scipy.sparse.random(300, 200, density=0.02, random_state=1, format="csr")
+    matrix = (a.T @ a + 1e-3 * scipy.sparse.identity(200)).tocsc()
+    rhs = rng.normal(size=(200, 3))
+    expected = scipy.sparse.linalg.spsolve(matrix, rhs)
+    assert np.allclose(solve_spd(matrix, rhs), expected, rtol=1e-9, atol=1e-12)
