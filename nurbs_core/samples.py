@@ -701,8 +701,9 @@ def blob(count: int = 4000, noise: float = 0.002, seed: int = 0, *, bumps: float
 
 def head_surface(ears: bool = True) -> NurbsSurface:
     """A closed, head-like bicubic NURBS patch (a 14 x 20 control net; poles at both ends of u,
-    its first and last v columns equal): an ellipsoid with a nose and, when ``ears``, two thin
-    ears. Its rows cluster at the poles, so a cloud uniform in its parameters is dense at the
+    its first and last v columns equal): an ellipsoid with a nose and, when ``ears``, two
+    ear-like bumps (broad ones: the 20-column net smooths them; they are not thin parts). Its
+    rows cluster at the poles, so a cloud uniform in its parameters is dense at the
     top and bottom and sparse around the middle (as a scan is dense where it looks straight at
     the surface and sparse where it grazes it)."""
     from nurbs_core.geometry import NurbsSurface

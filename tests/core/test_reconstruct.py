@@ -1,5 +1,5 @@
 """The wrap (nurbs_core.reconstruct.wrap) and the route it decides, on clouds as scans come:
-closed NURBS sampled uniformly in their parameters (sparse where stretched), thin ears, open
+closed NURBS sampled uniformly in their parameters (sparse where stretched), open
 sheets and tubes, a watertight mesh file."""
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ def test_the_sparse_head_is_as_uneven_as_a_real_scan(sparse_head):
     assert empty > 0.06, empty
 
 
-def test_normals_point_out_of_an_unevenly_sampled_head_with_ears(sparse_head):
+def test_normals_point_out_of_an_unevenly_sampled_head(sparse_head):
     normals = oriented_normals(sparse_head.points)
     nearest = cKDTree(sparse_head.truth).query(sparse_head.points)[1]
     truth = sparse_head.truth_normals[nearest]
@@ -87,7 +87,7 @@ def test_the_network_of_the_sparse_head_meets_the_quality_targets(sparse_head):
 
 def test_a_network_far_from_its_cloud_is_reported_with_a_warning(sparse_head):
     """The far-surface measure catches what the points do not hold: the same fit measured
-    against the cloud with its ears cut away."""
+    against the cloud with the ear bumps' points cut away."""
     from nurbs_core.patches.measures import network_quality
     from nurbs_core.patches.pipeline import fit_patches
 
