@@ -15,6 +15,7 @@ from app.panels.network_quality_panel import NetworkQualityPanel
 from app.patch_controller import PatchController
 from app.viewport.scene import SceneView
 from app.workers.patch_worker import PatchSnapshot
+from nurbs_core.status import reported_status
 
 log = logging.getLogger("app")
 
@@ -82,6 +83,8 @@ class PatchView(QObject):
         what = "fitted" if snapshot.event == "done" else "stopped"
         headline = (f"{snapshot.patch_count} patches {what} in {snapshot.elapsed:.1f} s "
                     f"({snapshot.pass_index + 1} passes)")
+        if snapshot.event == "done":
+            headline += f": {reported_status('converged', snapshot.warnings)}"
         self._panel.show_result(headline[0].upper() + headline[1:], snapshot.quality,
                                 snapshot.warnings)
         text = f"Patch network {what}: {snapshot.patch_count} patches, {snapshot.size}x" \

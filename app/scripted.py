@@ -73,6 +73,9 @@ class ScriptedRun(QObject):
             return
         self.window.controller.fit_finished.connect(self._on_fit_finished)
         self.window.controller.fit_failed.connect(self._on_fit_failed)
+        # the automatic route: a cloud one patch cannot hold goes on as a network
+        self.window.patch_controller.fit_finished.connect(self._on_network_finished)
+        self.window.patch_controller.fit_failed.connect(self._on_network_failed)
         if not self.window.controller.start():
             self._finish(failed=self.window.last_error or "the fit did not start")
 
@@ -83,8 +86,18 @@ class ScriptedRun(QObject):
             return
         QTimer.singleShot(SETTLE_MS, self._done)
 
+    @Slot(object)
+    def _on_network_finished(self, _event: object):
+        QTimer.singleShot(SETTLE_MS, self._done)
+
+    @Slot(str)
+    def _on_network_failed(self, message: str):
+        self._finish(failed=message)
+
     @Slot(str)
     def _on_fit_failed(self, message: str):
+        if self.window.document.settings.fit_mode == "patches":
+            return  # the window went on as a network: its own end finishes the run
         self._finish(failed=message)
 
     @Slot()

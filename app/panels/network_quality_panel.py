@@ -29,6 +29,9 @@ ROWS = (
     ("area", "Area", "the network's surface area (cloud units squared)"),
     ("c2s", "Cloud to surface", "mean, RMS and 99th percentile distance of the cloud's points "
                                 "to the network"),
+    ("s2c", "Surface to cloud", "mean and largest distance from the network to the nearest "
+                                "point, and the share of its area farther from every point than "
+                                "the limit shown (a part the scan does not hold: a flap, a horn)"),
 )
 
 
@@ -85,6 +88,8 @@ class NetworkQualityPanel(QWidget):
 
     def show_result(self, headline: str, quality: dict | None, warnings: list[str]):
         self.status.setText(headline + ("" if quality else " (not measured)"))
+        # the headline in the warning colour when a quality check fails ("fitted with warnings")
+        self.status.setStyleSheet(f"QLabel {{ color: {WARNING_COLOR}; }}" if warnings else "")
         self.warnings.setText("\n".join(f"Warning: {w}" for w in warnings))
         if not quality:
             return
@@ -105,3 +110,9 @@ class NetworkQualityPanel(QWidget):
         self.values["area"].setText(_number(get("area")))
         self.values["c2s"].setText(f"mean {_number(get('c2s_mean'))}, RMS "
                                    f"{_number(get('c2s_rms'))}, p99 {_number(get('c2s_p99'))}")
+        far = get("far_fraction")
+        self.values["s2c"].setText(f"mean {_number(get('s2c_mean'))}, max "
+                                   f"{_number(get('s2c_max'))}; {far:.2%} farther than "
+                                   f"{_number(get('far_limit'))}")
+        self.values["s2c"].setStyleSheet(f"QLabel {{ color: {WARNING_COLOR}; }}" if far > 0.005
+                                         else "")

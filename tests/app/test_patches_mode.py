@@ -278,6 +278,9 @@ def test_start_on_a_closed_cloud_goes_on_as_a_network(qtbot, window, tmp_path):
     assert "network of patches" in window.log_panel.toPlainText()
     assert done.args[0].event == "done" and window.document.network is not None
     assert window.document.network.closed
+    panel = window.network_quality_panel
+    assert panel.status.text().endswith(": converged")
+    assert "0.00% farther than" in panel.values["s2c"].text()
     window.undo_action.trigger()  # back to one patch: the network's layers are hidden
     assert window.document.settings.fit_mode == "single"
     assert not window.scene.network.actor("network").GetVisibility()
