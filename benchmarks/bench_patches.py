@@ -259,6 +259,23 @@ def _generated(fn: Callable, label: str, **kwargs) -> Callable[..., Case]:
     return build
 
 
+def _holed(build: Callable[..., Case], label: str, holes: int = 3,
+           width: float = 0.1) -> Callable[..., Case]:
+    """A case with ``holes`` openings ``width`` x the diagonal wide cut into its cloud (a
+    scanner's occlusions); the truth stays the whole object (the holes should be sealed)."""
+    def holed(count=COUNT, truth_count=TRUTH_COUNT, data=None) -> Case:
+        case = build(count=count, truth_count=truth_count, data=data)
+        shape = case.shape
+        keep = np.ones(shape.count, bool)
+        for centre in shape.points[:holes]:
+            keep &= np.linalg.norm(shape.points - centre, axis=1) > 0.5 * width * shape.diagonal
+        shape.points, shape.clean = shape.points[keep], shape.clean[keep]
+        shape.name = case.name = label
+        case.source += f", {holes} holes {width:.0%} of the diagonal wide cut out"
+        return case
+    return holed
+
+
 def _model(label: str, files: list[str], by_parameter: bool = False) -> Callable[..., Case]:
     def build(count=COUNT, truth_count=TRUTH_COUNT, data=None) -> Case:
         from nurbs_core.io import load
@@ -297,6 +314,9 @@ def case_builders() -> dict[str, Callable[..., Case]]:
         "head": _generated(g.head, "head"),
         "head_4k": _generated(g.head, "head_4k", count=4000),
         "head_no_ears": _generated(g.head, "head_no_ears", ears=False),
+        # holes up to --max-hole (10% of the diagonal by default) are sealed
+        "blob_holes": _holed(_generated(g.blob, "blob_s0", seed=0), "blob_holes"),
+        "head_holes": _holed(_generated(g.head, "head"), "head_holes"),
     }
     for label, files in MODELS.items():
         builders[label] = _model(label, files)

@@ -152,6 +152,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "shape, N asks for about N patches (outputs: one joined B-rep in "
                              ".3dm, one sewn solid in .step/.iges, the network with its adjacency "
                              "in .json, a crack-free mesh in .obj/.stl/.ply)")
+    parser.add_argument("--max-hole", type=float, default=None, metavar="LENGTH",
+                        help="the widest opening of a scan that is sealed by a smooth cap to "
+                             "close an object (in the cloud's units; default 10%% of the "
+                             "diagonal; 0 keeps every opening open)")
     parser.add_argument("--patch-size", type=int, default=None, metavar="N",
                         help="control points per patch side with --patches (default: grown "
                              "while it pays, from 6)")
@@ -395,7 +399,7 @@ def _patch_options(args: argparse.Namespace, automatic: bool = False) -> PatchOp
     if automatic:
         extra_auto = {} if args.seam_weight is None else {"seam_weight": args.seam_weight}
         options = PatchOptions(patches="auto", size=args.patch_size, tolerance=args.tolerance,
-                               **extra_auto)
+                               max_hole=args.max_hole, **extra_auto)
         options.validate()
         return options
     if args.curve or args.single_patch or args.grid is not None or args.initial is not None:
@@ -414,7 +418,8 @@ def _patch_options(args: argparse.Namespace, automatic: bool = False) -> PatchOp
         extra["stiffness"] = args.stiffness
     if args.seam_weight is not None:
         extra["seam_weight"] = args.seam_weight
-    options = PatchOptions(patches=target, size=args.patch_size, tolerance=args.tolerance, **extra)
+    options = PatchOptions(patches=target, size=args.patch_size, tolerance=args.tolerance,
+                           max_hole=args.max_hole, **extra)
     options.validate()
     return options
 
@@ -526,6 +531,10 @@ def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[P
           f"area farther than {quality.far_limit:.4g} from every point")
     print(f"flipped area: {quality.flipped_fraction:.2%}; area {quality.area:.6g}; "
           f"enclosed volume {quality.volume:.6g}")
+    if result.mesh.filled_fraction > 0:
+        print(f"holes filled: {result.mesh.filled_fraction:.2%} of the surface lies on caps over "
+              f"the scan's openings (the widest sealed: {result.mesh.max_hole:.4g}; set with "
+              "--max-hole)")
     for warning in result.warnings:
         print(f"warning: {warning}")
     save_all([(result.network, path, {}) for path in outputs])
@@ -623,7 +632,9 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
         file_mesh, note = None, ""
         if points is None:
             points, file_mesh, note = _surface_input(args.input, quiet=args.quiet)
-        route = choose_route(points, file_mesh, note)
+        if args.max_hole is not None and not (math.isfinite(args.max_hole) and args.max_hole >= 0):
+            raise ValueError(f"--max-hole takes a non-negative length, got {args.max_hole}")
+        route = choose_route(points, file_mesh, note, max_hole=args.max_hole)
         if not args.quiet:
             print(f"route: {route.reason}", file=sys.stderr)
         if route.kind == "network":
@@ -633,6 +644,21 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
             check_output_paths(outputs, [args.input], suffixes=NETWORK_SUFFIXES)
             return run_patches(args, _patch_options(args, automatic=True), outputs,
                                points=points, mesh=route.mesh)
+        prepared = prepare_fit(args, points)
+        try:
+            result = run_fit(prepared, stoppable)
+        except ValueError as exc:
+            from nurbs_core.surfacing.parameterize import NotADiskError
+
+            if not isinstance(exc.__context__, NotADiskError):
+                raise
+            # neither route holds it: say so plainly, not "use --patches" (which would refuse)
+            raise ValueError(
+                f"{route.finding} and one patch cannot hold it "
+                f"({exc.__context__.topology.kind}: {str(exc.__context__).split(':')[0]}); it "
+                "needs an open network of patches, which nurbs-fit does not build yet. "
+                "--single-patch fits one patch anyway (the report shows its folds)") from None
+        return finish_fit(prepared, result)
     prepared = prepare_fit(args, points)
     return finish_fit(prepared, run_fit(prepared, stoppable))
 

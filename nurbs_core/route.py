@@ -26,32 +26,39 @@ RouteKind = Literal["single_patch", "network"]
 
 @dataclass
 class Route:
-    """kind: "single_patch" or "network"; reason: one line for the report; mesh: the closed
-    mesh of a network (the file's own or rebuilt from the points), None for a single patch."""
+    """kind: "single_patch" or "network"; finding: what decided it (one clause for the
+    report); mesh: the closed mesh of a network (the file's own or rebuilt from the points),
+    None for a single patch."""
 
     kind: RouteKind
-    reason: str
+    finding: str
     mesh: ClosedMesh | None = None
+
+    @property
+    def reason(self) -> str:
+        """The report's line: the finding and the route it leads to."""
+        return f"{self.finding}: " + ("a network of patches" if self.kind == "network"
+                                      else "one patch")
 
 
 def choose_route(points: np.ndarray, file_mesh: ClosedMesh | None = None,
-                 file_mesh_note: str = "") -> Route:
+                 file_mesh_note: str = "", max_hole: float | None = None) -> Route:
     """The route for a surface cloud (N, 3) with no route forced. ``file_mesh``: the input
     file's own closed mesh when it has a usable one (:func:`mesh_from_faces`); otherwise
-    ``file_mesh_note`` says why not (it goes into the reason)."""
+    ``file_mesh_note`` says why not (it goes into the reason). ``max_hole``: the widest opening
+    sealed to close an object (see :func:`closed_mesh`)."""
     if file_mesh is not None:
-        return Route("network", "the file's mesh is closed (watertight): a network of patches",
-                     file_mesh)
+        return Route("network", "the file's mesh is closed (watertight)", file_mesh)
     points = np.asarray(points, np.float64)
     if len(points) < 100:
-        return Route("single_patch", f"{len(points)} points are too few for a network: one patch")
+        return Route("single_patch", f"{len(points)} points are too few for a network")
     try:
-        mesh = closed_mesh(points)
+        mesh = closed_mesh(points, max_hole=max_hole)
     except NotClosedError:
         why = f"{file_mesh_note}; " if file_mesh_note else ""
-        return Route("single_patch", f"{why}the cloud encloses no volume (an open surface): "
-                                     "one patch")
+        return Route("single_patch", f"{why}the cloud encloses no volume (an open surface)")
+    holes = (f" once its openings up to {mesh.max_hole:.4g} wide are sealed"
+             if mesh.filled_fraction > 0 else "")
     return Route("network", ((f"{file_mesh_note}; " if file_mesh_note else "")
-                             + "the cloud encloses a volume (a closed object): a network of "
-                               "patches"), mesh)
+                             + f"the cloud encloses a volume{holes} (a closed object)"), mesh)
 

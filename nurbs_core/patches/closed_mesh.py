@@ -24,7 +24,7 @@ import numpy as np
 import scipy.ndimage
 from scipy.spatial import cKDTree
 
-from nurbs_core.reconstruct.wrap import VoxelGrid, wrap
+from nurbs_core.reconstruct.wrap import VoxelGrid, Wrap, wrap
 from nurbs_core.surfacing.mesh import median_spacing, vertex_normals, voxel_subsample
 
 #: Cells per bounding-box diagonal at most (Instant Meshes fails on layouts of much denser
@@ -41,6 +41,13 @@ SMOOTHING = 1.0
 #: vertices may lie farther than AWAY cells from every point.
 AWAY = 2.0
 MAX_AWAY = 0.1
+#: ... and caps over holes may make at most this share of the area; at most this share of the
+#: points may lie away from the closed surface.
+MAX_FILLED = 0.1
+MAX_UNCOVERED = 0.05
+#: a cap may be this much wider than max_hole (a cap spans the hole's rim, a little more than
+#: the hole)
+CAP_SLACK = 1.5
 #: Neighbours in the tangent-plane average.
 NEIGHBOURS = 8
 
@@ -59,6 +66,19 @@ class ClosedMesh:
     normals: np.ndarray
     cell: float
     pieces: int
+    #: (V,) bool: vertices on caps sealed over the scan's holes (None: nothing was filled), and
+    #: the widest opening that was sealed (0: none)
+    filled: np.ndarray | None = None
+    max_hole: float = 0.0
+
+    @property
+    def filled_fraction(self) -> float:
+        """The share of the mesh's area on caps over holes (0 when nothing was filled)."""
+        if self.filled is None or not self.filled.any():
+            return 0.0
+        tri = self.vertices[self.faces]
+        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        return float(area[self.filled[self.faces].all(axis=1)].sum() / max(area.sum(), 1e-300))
 
     def vertex_normals(self) -> np.ndarray:
         """(V, 3) outward unit normals of the mesh's vertices."""
@@ -84,36 +104,61 @@ def oriented_normals(points: np.ndarray) -> np.ndarray:
     return wrap(points, _grid(points)).normals
 
 
-def _grid(points: np.ndarray) -> VoxelGrid:
+def _grid(points: np.ndarray, margin: float = 0.0) -> VoxelGrid:
     """The voxel grid of the reconstruction: about CELLS_PER_DIAGONAL cells along the diagonal
-    (no finer than MIN_CELL_SPACINGS spacings, at most MAX_CELLS), a margin of PAD cells."""
+    (no finer than MIN_CELL_SPACINGS spacings, at most MAX_CELLS), a margin of PAD cells plus
+    ``margin`` (a length)."""
     lo, hi = points.min(axis=0), points.max(axis=0)
     diagonal = float(np.linalg.norm(hi - lo))
     sample = points if len(points) <= 20_000 else points[voxel_subsample(points, 20_000)[0]]
     cell = max(diagonal / CELLS_PER_DIAGONAL, MIN_CELL_SPACINGS * median_spacing(sample))
     extent = hi - lo
-    while np.prod(np.ceil(extent / cell) + 2 * PAD + 1) > MAX_CELLS:
+    while np.prod(np.ceil((extent + 2 * margin) / cell) + 2 * PAD + 1) > MAX_CELLS:
         cell *= 1.15
-    origin = lo - PAD * cell
-    shape = tuple(int(n) for n in np.ceil((hi + PAD * cell - origin) / cell).astype(int) + 1)
+    pad = PAD * cell + margin
+    origin = lo - pad
+    shape = tuple(int(n) for n in np.ceil((hi + pad - origin) / cell).astype(int) + 1)
     return VoxelGrid(origin, cell, (shape[0], shape[1], shape[2]))
 
 
-def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None) -> ClosedMesh:
+#: Holes narrower than this fraction of the diagonal are sealed by default (a bunny's base, a
+#: scanner's occlusions); wider openings stay open (a head without its base, a tube's ends).
+MAX_HOLE = 0.1
+
+
+def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
+                max_hole: float | None = None) -> ClosedMesh:
     """The watertight mesh (see the module docstring) of a closed object's cloud (N, 3), with
-    optional oriented unit normals (N, 3). Raises ValueError when no closed surface results."""
+    optional oriented unit normals (N, 3). ``max_hole``: the widest opening (a length) sealed
+    when the cloud alone encloses nothing (None: ``MAX_HOLE`` x the diagonal; 0: none). Raises
+    NotClosedError when no closed surface results."""
+    points = np.asarray(points, np.float64)
+    diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
+    max_hole = MAX_HOLE * diagonal if max_hole is None else float(max_hole)
+    tree = cKDTree(points)
+    grid = _grid(points)
+    wrapped = wrap(points, grid, tree)
+    if wrapped.encloses:
+        return _zero_set(points, normals, wrapped, tree, 0.0)
+    if max_hole > 0:
+        grid = _grid(points, max_hole)
+        sealed = wrap(points, grid, tree, hole_radius=0.5 * max_hole)
+        if sealed.encloses:
+            return _zero_set(points, normals, sealed, tree, max_hole)
+    # every free region reaches the border: nothing is enclosed (an open sheet or shell, or a
+    # closed one with openings wider than max_hole)
+    raise NotClosedError("the cloud does not enclose a volume: it is an open surface (or its "
+                         f"openings are wider than {max_hole:.4g}, the largest hole filled); a "
+                         "patch network needs a closed object, and an open sheet is fitted as "
+                         "one patch (the single-patch fit)")
+
+
+def _zero_set(points: np.ndarray, normals: np.ndarray | None, wrapped: Wrap, tree: cKDTree,
+              max_hole: float) -> ClosedMesh:
+    """Marching cubes of the signed field over the wrap (see the module docstring)."""
     from skimage.measure import marching_cubes
 
-    points = np.asarray(points, np.float64)
-    grid = _grid(points)
-    tree = cKDTree(points)
-    wrapped = wrap(points, grid, tree)
-    if not wrapped.encloses:
-        # every free region reaches the border: nothing is enclosed (an open sheet or shell, or
-        # a closed one with openings wider than its sampling explains)
-        raise NotClosedError("the cloud does not enclose a volume: it is an open surface (or its "
-                             "sampling leaves holes); a patch network needs a closed object, and "
-                             "an open sheet is fitted as one patch (the single-patch fit)")
+    grid = wrapped.grid
     if normals is None:
         normals = wrapped.normals
     cell = grid.cell
@@ -139,16 +184,65 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None) -> Closed
     remap[used] = np.arange(len(used))
     verts, faces = verts[used], remap[faces]
     gap, owner = tree.query(verts)
-    away = float((gap > np.maximum(AWAY * cell, wrapped.radii[owner])).mean())
+    away_vertices = gap > np.maximum(AWAY * cell, wrapped.radii[owner])
+    filled = None
+    if wrapped.filled is not None:
+        # the caps over holes: vertices in (or next to) the sealed voxels, away from the points
+        index = np.clip(np.rint(grid.index_of(verts)).astype(np.int64), 0,
+                        np.array(grid.shape) - 1)
+        grown = scipy.ndimage.binary_dilation(wrapped.filled, iterations=2)
+        filled = grown[index[:, 0], index[:, 1], index[:, 2]] & away_vertices
+        away_vertices = away_vertices & ~filled
+    away = float(away_vertices.mean())
     if away > MAX_AWAY:
         # walls of the zero set far from every point: the far field's sign had to close an
         # opening (an open tube or sheet whose rim the band sealed)
         raise NotClosedError(f"the cloud is not a closed surface: {away:.0%} of the surface that "
                              "would enclose it lies away from the points (an opening was sealed); "
                              "a patch network needs a closed object")
+    # the closed surface must pass by the whole cloud (not close a small pocket of a thin open
+    # shell, whose two skins the balls merged)
+    reach_points = np.maximum(AWAY * cell, wrapped.radii)
+    uncovered = float((cKDTree(verts).query(points)[0] > reach_points).mean())
+    if uncovered > MAX_UNCOVERED:
+        raise NotClosedError(f"the cloud is not a closed surface: the only closed surface found "
+                             f"misses {uncovered:.0%} of its points (an open shell, or a part "
+                             "thinner than its sampling)")
     if signed_volume(verts, faces) < 0:
         faces = faces[:, ::-1].copy()
-    return ClosedMesh(verts, faces, normals, cell, pieces)
+    if filled is not None and filled.any():
+        widest = _widest_cap(verts, faces, filled)
+        if widest > CAP_SLACK * max_hole:
+            raise NotClosedError(f"the cloud is not a closed surface: an opening about "
+                                 f"{widest:.4g} wide would have to be sealed (the widest hole "
+                                 f"filled is {max_hole:.4g}: --max-hole)")
+    mesh = ClosedMesh(verts, faces, normals, cell, pieces, filled, max_hole)
+    if mesh.filled_fraction > MAX_FILLED:
+        # an open shell (a bowl, a curled sheet) closed by a lid as large as itself is not an
+        # object with holes
+        raise NotClosedError(f"the cloud is not a closed surface: sealing its openings (up to "
+                             f"{max_hole:.4g} wide) would make {mesh.filled_fraction:.0%} of the "
+                             "surface; it is an open surface")
+    return mesh
+
+
+def _widest_cap(vertices: np.ndarray, faces: np.ndarray, filled: np.ndarray) -> float:
+    """The largest extent (bounding-box diagonal) of the connected caps over holes: the
+    vertices flagged ``filled`` (V,) joined by the mesh's edges."""
+    import scipy.sparse
+    import scipy.sparse.csgraph
+
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    edges = edges[filled[edges].all(axis=1)]
+    count = len(vertices)
+    graph = scipy.sparse.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])),
+                                    shape=(count, count))
+    _, label = scipy.sparse.csgraph.connected_components(graph, directed=False)
+    widest = 0.0
+    for component in np.unique(label[filled]):
+        members = vertices[(label == component) & filled]
+        widest = max(widest, float(np.linalg.norm(np.ptp(members, axis=0))))
+    return widest
 
 
 def _largest_piece(faces: np.ndarray, count: int) -> tuple[np.ndarray, int]:

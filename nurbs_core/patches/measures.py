@@ -127,10 +127,13 @@ def surface_samples(network: PatchNetwork, count: int = GAUSS_POINTS
 
 
 def network_quality(network: PatchNetwork, points: np.ndarray,
-                    reference: tuple[np.ndarray, np.ndarray] | None = None) -> NetworkQuality:
+                    reference: tuple[np.ndarray, np.ndarray] | None = None,
+                    support: np.ndarray | None = None) -> NetworkQuality:
     """All measures of ``network`` against the cloud ``points`` (N, 3); ``reference``:
     (positions (M, 3), outward unit normals (M, 3)) for the flipped area (None: not measured,
-    reported as NaN)."""
+    reported as NaN); ``support`` (K, 3): positions where the surface is meant to be without
+    points (caps over filled holes), counted with the points for the surface-to-cloud
+    distances."""
     points = np.asarray(points, np.float64)
     seam = seam_statistics(network)
     s, normals, area = surface_samples(network)
@@ -145,6 +148,8 @@ def network_quality(network: PatchNetwork, points: np.ndarray,
     _, _, c2s = foot_points(network, points, resolution=24, steps=10)
     tree = cKDTree(points)
     s2c = tree.query(s)[0]
+    if support is not None and len(support):
+        s2c = np.minimum(s2c, cKDTree(support).query(s)[0])
     diagonal = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
     limit = far_limit(points, tree, diagonal)
     far = float(area[s2c > limit].sum() / total) if total > 0 else 0.0

@@ -19,8 +19,9 @@ class PatchOptions:
     """Settings of a network fit. patches: "auto" or a target patch count (>= 4); size: control
     points per patch side (None: grow while Cp falls); degree: of every patch; stiffness:
     fairing weight relative to the data term; seam_weight: of tangent continuity; tolerance: RMS
-    distance to reach (cloud units, None: automatic); max_size: largest control grid per side.
-    Immutable: ``dataclasses.replace`` makes an edited copy."""
+    distance to reach (cloud units, None: automatic); max_size: largest control grid per side;
+    max_hole: the widest opening of the scan sealed by a smooth cap (cloud units; None: 10% of
+    the diagonal; 0: none). Immutable: ``dataclasses.replace`` makes an edited copy."""
 
     patches: int | str = "auto"
     size: int | None = None
@@ -29,6 +30,7 @@ class PatchOptions:
     seam_weight: float = SEAM_WEIGHT
     tolerance: float | None = None
     max_size: int = 16
+    max_hole: float | None = None
 
     def validate(self) -> None:
         """Raise ValueError naming the first bad setting."""
@@ -50,6 +52,11 @@ class PatchOptions:
         if self.tolerance is not None and not (math.isfinite(self.tolerance)
                                                and self.tolerance > 0):
             raise ValueError(f"tolerance must be positive, got {self.tolerance!r}")
+        if self.max_hole is not None and not (isinstance(self.max_hole, (int, float))
+                                              and math.isfinite(self.max_hole)
+                                              and self.max_hole >= 0):
+            raise ValueError(f"max_hole must be a finite non-negative length, got "
+                             f"{self.max_hole!r}")
 
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

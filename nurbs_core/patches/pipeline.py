@@ -140,7 +140,7 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     timings: dict[str, float] = {}
     start = time.perf_counter()
     if mesh is None:
-        mesh = closed_mesh(points)
+        mesh = closed_mesh(points, max_hole=options.max_hole)
     timings["mesh"] = time.perf_counter() - start
     yield PatchEvent("mesh", mesh=mesh)
     start = time.perf_counter()
@@ -164,7 +164,9 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     timings["fit"] = time.perf_counter() - start
     assert last is not None, "fit_network yields at least one pass"
     start = time.perf_counter()
-    quality = network_quality(last.network, measured, (mesh.vertices, mesh.vertex_normals()))
+    caps = None if mesh.filled is None else mesh.vertices[mesh.filled]
+    quality = network_quality(last.network, measured, (mesh.vertices, mesh.vertex_normals()),
+                              support=caps)
     timings["quality"] = time.perf_counter() - start
     warnings = [last.message] if last.message else []
     if quality.seam.p99 > WARN_SEAM:

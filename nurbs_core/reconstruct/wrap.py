@@ -11,7 +11,11 @@ grid: which voxels can be reached from the grid's border without passing near a 
   keeps thin features apart;
 * the free voxels connected to the border are the **outside**; free voxels that are not are
   enclosed (the inside, away from the points). A cloud whose wrap encloses nothing is not a
-  closed surface (an open sheet or shell, or holes wider than the sampling explains).
+  closed surface (an open sheet or shell, or holes wider than the sampling explains);
+* holes: with ``hole_radius`` > 0 the blocked voxels are first closed by a ball of that
+  radius (dilated, then eroded: a morphological closing), which seals every opening narrower
+  than twice the radius; the sealed voxels (``filled``) lie over the holes, and the surface
+  crosses them as a cap that a fit then fairs.
 
 Normals: PCA normals (sign arbitrary) get the sign that points to the outside, by comparing a
 blurred outside indicator at ``p + h n`` and ``p - h n`` (``h`` just beyond the point's blocking
@@ -78,11 +82,14 @@ class Wrap:
     radii: np.ndarray
     normals: np.ndarray
     voted: float
+    #: voxels sealed over holes by the closing (empty without ``hole_radius``)
+    filled: np.ndarray | None = None
 
     @property
     def encloses(self) -> bool:
         """Whether some free voxel is not reachable from the border (an inside exists)."""
-        return bool((~self.blocked & ~self.outside).any())
+        free = ~self.blocked if self.filled is None else ~(self.blocked | self.filled)
+        return bool((free & ~self.outside).any())
 
 
 def point_radii(points: np.ndarray, cell: float, tree: cKDTree | None = None) -> np.ndarray:
@@ -122,6 +129,16 @@ def blocked_voxels(points: np.ndarray, radii: np.ndarray, grid: VoxelGrid) -> np
     return blocked
 
 
+def close_holes(blocked: np.ndarray, radius: float) -> np.ndarray:
+    """The voxels a closing by a ball of ``radius`` cells adds to ``blocked`` (grid shape,
+    bool): the openings narrower than about twice the radius, sealed."""
+    if radius <= 0:
+        return np.zeros_like(blocked)
+    dilated = scipy.ndimage.distance_transform_edt(~blocked) <= radius
+    closed = scipy.ndimage.distance_transform_edt(dilated) > radius
+    return closed & ~blocked
+
+
 def outside_region(blocked: np.ndarray) -> np.ndarray:
     """The free voxels (``~blocked``) 6-connected to the grid's border."""
     labels, _ = scipy.ndimage.label(~blocked)
@@ -130,17 +147,20 @@ def outside_region(blocked: np.ndarray) -> np.ndarray:
     return np.isin(labels, border[border > 0])
 
 
-def wrap(points: np.ndarray, grid: VoxelGrid, tree: cKDTree | None = None) -> Wrap:
+def wrap(points: np.ndarray, grid: VoxelGrid, tree: cKDTree | None = None,
+         hole_radius: float = 0.0) -> Wrap:
     """The :class:`Wrap` of ``points`` (N, 3) on ``grid`` (which must hold the points with a
-    margin of a few radii)."""
+    margin of a few radii, and of ``hole_radius``); ``hole_radius``: seal openings narrower
+    than about twice this length (0: none)."""
     points = np.asarray(points, np.float64)
     tree = cKDTree(points) if tree is None else tree
     radii = point_radii(points, grid.cell, tree)
     blocked = blocked_voxels(points, radii, grid)
-    outside = outside_region(blocked)
+    filled = close_holes(blocked, hole_radius / grid.cell)
+    outside = outside_region(blocked | filled)
     frames = local_frames(points, NEIGHBOURS, tree)
     normals, voted = _orient(points, frames.normals, frames.neighbours, radii, outside, grid)
-    return Wrap(grid, outside, blocked, radii, normals, voted)
+    return Wrap(grid, outside, blocked, radii, normals, voted, filled if hole_radius > 0 else None)
 
 
 def _orient(points: np.ndarray, normals: np.ndarray, neighbours: np.ndarray, radii: np.ndarray,
