@@ -27,6 +27,14 @@ from scipy.spatial import cKDTree
 
 from nurbs_core.basis import basis_derivatives, dense_basis_matrix, find_span
 from nurbs_core.geometry import NurbsSurface
+
+# the limits and warnings of the measures live with the status they decide (torch-free, for the
+# app's GUI thread); re-exported here beside the measures
+from nurbs_core.status import WARN_FLIPPED as WARN_FLIPPED
+from nurbs_core.status import WARN_OVERLAP as WARN_OVERLAP
+from nurbs_core.status import WARN_UNCOVERED as WARN_UNCOVERED
+from nurbs_core.status import quality_problems as quality_problems
+from nurbs_core.status import quality_warnings as quality_warnings
 from nurbs_core.surfacing.neighbours import estimate_noise, local_frames
 from nurbs_core.surfacing.normals import oriented_normals
 
@@ -380,31 +388,3 @@ def quality_maps(surface: NurbsSurface, points: np.ndarray, *, normals: np.ndarr
     :func:`surface_quality`."""
     surface = _check_surface(surface)
     return _measure(surface, _as_points(points), normals, samples, max_points, seed).maps
-
-
-#: Limits above which :func:`quality_warnings` speaks up (fractions of area / of the cloud).
-WARN_FLIPPED = 0.01
-WARN_OVERLAP = 0.01
-WARN_UNCOVERED = 0.10
-
-
-def quality_problems(stats: dict) -> dict[str, str]:
-    """The measures of :func:`surface_quality` that say the surface is not a clean sheet over
-    the cloud: {"folds" | "overlaps" | "uncovered": plain-language warning} (empty when it is)."""
-    problems = {}
-    if stats.get("flipped_fraction", 0.0) > WARN_FLIPPED:
-        problems["folds"] = (f"{stats['flipped_fraction']:.1%} of the surface faces the wrong "
-                             "way (it folds)")
-    if stats.get("overlap_fraction", 0.0) > WARN_OVERLAP:
-        problems["overlaps"] = (f"{stats['overlap_fraction']:.1%} of the cloud lies under more "
-                                "than one sheet")
-    if 1.0 - stats.get("coverage", 1.0) > WARN_UNCOVERED:
-        problems["uncovered"] = f"{1.0 - stats['coverage']:.1%} of the cloud is not covered"
-    return problems
-
-
-def quality_warnings(stats: dict) -> list[str]:
-    """Plain-language warnings for the measures of :func:`surface_quality` that say the surface
-    is not a clean sheet over the cloud (empty when it is)."""
-    return list(quality_problems(stats).values())
-

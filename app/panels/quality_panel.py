@@ -106,9 +106,12 @@ class QualityPanel(QWidget):
                                f"max {_number(stats['max'])}")
 
     def show_result(self, status: str, message: str, statistics: dict[str, float] | None,
-                    automatic_tolerance: bool = True, kind: str = "surface"):
-        """The final snapshot's status, message and quality statistics (None: not measured)."""
+                    automatic_tolerance: bool = True, kind: str = "surface",
+                    warned: bool = False):
+        """The final snapshot's status, message and quality statistics (None: not measured);
+        ``warned``: a quality check failed (the headline takes the warning colour)."""
         headline = status.capitalize() + (f": {message}" if message else "")
+        self.status.setStyleSheet(f"QLabel {{ color: {BAD_COLOR}; }}" if warned else "")
         if kind != "surface":
             self.status.setText(headline + " (the quality measures apply to surfaces)")
             return

@@ -22,6 +22,7 @@ from app import loading
 from app.errors import describe
 from app.window.text import format_seconds
 from app.workers.fit_worker import DisplaySnapshot, deviation_stats
+from nurbs_core.status import quality_warnings, reported_status
 
 if TYPE_CHECKING:
     from app.main_window import MainWindow
@@ -138,7 +139,9 @@ class FitDisplay(QObject):
         document.set_fitted(snapshot.geometry, notify=False)
         window.rebuild_tree()
         window.knot_panel.show_state(document.settings.fit, snapshot.geometry)
-        text = f"Fit {snapshot.status} after {snapshot.iteration} iterations"
+        # "converged" only when the quality checks hold
+        status = reported_status(snapshot.status, quality_warnings(snapshot.statistics or {}))
+        text = f"Fit {status} after {snapshot.iteration} iterations"
         if snapshot.deviation is not None:
             stats = deviation_stats(snapshot.deviation)
             text += (f"; deviation mean {stats['mean']:.4g}, RMS {stats['rms']:.4g}, "
@@ -146,8 +149,9 @@ class FitDisplay(QObject):
         if snapshot.message:
             text += f" ({snapshot.message})"
         window.report(text)
-        window.quality_panel.show_result(snapshot.status, snapshot.message, snapshot.statistics,
+        window.quality_panel.show_result(status, snapshot.message, snapshot.statistics,
                                          document.settings.fit.tolerance is None,
-                                         snapshot.display.kind)
+                                         snapshot.display.kind,
+                                         warned=status != snapshot.status)
         if document.settings.show_offsets and not document.patches:
             window.offsets.request()

@@ -254,6 +254,9 @@ def test_a_closed_cloud_forced_to_one_patch_shows_its_folds(qtbot, window, tmp_p
     assert snapshot.quality_cells is not None and (snapshot.quality_cells == FLIPPED).any()
     assert window.quality_panel.is_bad("flipped")
     assert "single patch" in window.quality_panel.status.text()
+    # the headline does not promise what the checks deny: not "Converged"
+    assert window.quality_panel.status.text().startswith("Fitted with warnings")
+    assert "Fit fitted with warnings" in window.log_panel.toPlainText()
 
 
 def test_a_stopped_fit_is_measured(qtbot, window, ply_cloud):
