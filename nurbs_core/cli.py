@@ -482,10 +482,12 @@ def _automatic(args: argparse.Namespace) -> bool:
 
 
 def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[Path],
-                points: np.ndarray | None = None, mesh: ClosedMesh | None = None) -> dict[str, Any]:
+                points: np.ndarray | None = None, mesh: ClosedMesh | None = None,
+                mesh_seconds: float = 0.0) -> dict[str, Any]:
     """``--patches`` (or the automatic route's network): the network fit (``options``: its
     PatchOptions), its report and files; returns the statistics (``points``: the cloud when it
-    is not read from ``args.input``; ``mesh``: its closed mesh when already built)."""
+    is not read from ``args.input``; ``mesh``: its closed mesh when already built, in
+    ``mesh_seconds``, which the report's mesh time includes)."""
     import torch
 
     from nurbs_core.io.dispatch import save_all
@@ -513,6 +515,7 @@ def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[P
             print(f"{p.stage} pass {p.index}  {p.size}x{p.size} per patch  rms {p.rms:.4g}  "
                   f"seam max {p.seam:.2f} deg", file=sys.stderr, flush=True)
     assert result is not None  # iter_patch_fit always ends with the "done" event
+    result.timings["mesh"] += mesh_seconds
     quality = result.quality
     seam = quality.seam
     print(f"status: {result.status}")
@@ -636,14 +639,14 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
             raise ValueError(f"--max-hole takes a non-negative length, got {args.max_hole}")
         route = choose_route(points, file_mesh, note, max_hole=args.max_hole)
         if not args.quiet:
-            print(f"route: {route.reason}", file=sys.stderr)
+            print(f"route: {route.reason} ({route.seconds:.1f} s)", file=sys.stderr)
         if route.kind == "network":
             from nurbs_core.io.dispatch import NETWORK_SUFFIXES
             from nurbs_core.io.outputs import check_output_paths
 
             check_output_paths(outputs, [args.input], suffixes=NETWORK_SUFFIXES)
             return run_patches(args, _patch_options(args, automatic=True), outputs,
-                               points=points, mesh=route.mesh)
+                               points=points, mesh=route.mesh, mesh_seconds=route.seconds)
         prepared = prepare_fit(args, points)
         try:
             result = run_fit(prepared, stoppable)

@@ -14,6 +14,7 @@ rebuild it. numpy + scipy + scikit-image only: deciding imports no torch.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Literal
 
@@ -33,6 +34,8 @@ class Route:
     kind: RouteKind
     finding: str
     mesh: ClosedMesh | None = None
+    #: how long the decision took (building the closed mesh, most of it)
+    seconds: float = 0.0
 
     @property
     def reason(self) -> str:
@@ -43,6 +46,15 @@ class Route:
 
 def choose_route(points: np.ndarray, file_mesh: ClosedMesh | None = None,
                  file_mesh_note: str = "", max_hole: float | None = None) -> Route:
+    """The route for a surface cloud (N, 3) with no route forced (see :func:`_decide`), timed."""
+    started = time.perf_counter()
+    route = _decide(points, file_mesh, file_mesh_note, max_hole)
+    route.seconds = time.perf_counter() - started
+    return route
+
+
+def _decide(points: np.ndarray, file_mesh: ClosedMesh | None, file_mesh_note: str,
+            max_hole: float | None) -> Route:
     """The route for a surface cloud (N, 3) with no route forced. ``file_mesh``: the input
     file's own closed mesh when it has a usable one (:func:`mesh_from_faces`); otherwise
     ``file_mesh_note`` says why not (it goes into the reason). ``max_hole``: the widest opening
