@@ -165,3 +165,14 @@ def test_an_open_surface_with_a_handle_is_refused_saying_what_it_needs(tmp_path,
     error = capsys.readouterr().err.strip().splitlines()[-1]
     assert "encloses no volume" in error and "open network" in error
     assert "--single-patch" in error and "--patches auto" not in error
+
+
+def test_a_dense_scan_is_wrapped_on_its_voxel_centroids_as_accurately():
+    """Beyond WRAP_POINTS the wrap runs on voxel centroids: the mesh stays on the sphere."""
+    from nurbs_core.patches import closed_mesh as module
+
+    shape = samples.sphere(module.WRAP_POINTS + 50_000, noise=0.002, truth_count=1000)
+    mesh = closed_mesh(shape.points)
+    assert len(mesh.normals) <= 1.3 * module.WRAP_POINTS
+    radial = np.abs(np.linalg.norm(mesh.vertices, axis=1) - 1.0)
+    assert radial.max() < 4 * shape.noise
