@@ -12,6 +12,14 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
+# One torch (OpenMP) thread per test process, and for the processes the tests start: pytest-xdist
+# runs one worker per core ([tool.pytest.ini_options] addopts), so more threads would only make
+# the workers wait on each other. Set before torch is first imported (torch reads it then); a
+# value set by the caller is kept. Tests that need more threads set them explicitly
+# (``torch.set_num_threads``, ``nurbs-fit --threads``).
+for _variable in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_variable, "1")
+
 
 def _find_shared_data() -> Path | None:
     env = os.environ.get("NURBS_STUDIO_DATA")

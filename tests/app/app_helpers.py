@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import tempfile
+from collections.abc import Iterator
+
 import numpy as np
 from PySide6.QtCore import QMimeData, QPointF, Qt, QUrl
 from PySide6.QtGui import QDragEnterEvent, QDropEvent
@@ -11,6 +16,15 @@ from PySide6.QtWidgets import QApplication
 #: a long live run on a fixed 8 x 8 grid: the least-squares core's passes, then the gradient fit
 QUICK = {"control_points_u": 8, "control_points_v": 8, "iterations": 100000, "solver": "gradient",
          "max_control_points": 0}
+
+
+@contextlib.contextmanager
+def app_process_env() -> Iterator[dict[str, str]]:
+    """The environment of a child ``python -m app``: its own empty settings folder
+    (``XDG_CONFIG_HOME``, removed afterwards), so that children of tests running side by side
+    (pytest-xdist workers) never share a settings file or see each other's recent files."""
+    with tempfile.TemporaryDirectory(prefix="nurbs-studio-config-") as config:
+        yield dict(os.environ, QT_API="pyside6", XDG_CONFIG_HOME=config)
 
 
 def sin_cos_cloud(count: int = 1500, seed: int = 3) -> np.ndarray:

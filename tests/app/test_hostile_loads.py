@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from app_helpers import open_by_drop
+from app_helpers import app_process_env, open_by_drop
 from hang_guard import hang_guard
 from PySide6.QtCore import QCoreApplication, Qt
 
@@ -66,10 +66,10 @@ def _cloud(path: Path, points: np.ndarray) -> Path:
 
 
 def _run_app(arguments: list[str] | None = None, code: str | None = None, timeout: float = 180):
-    env = dict(os.environ, QT_API="pyside6", XDG_CONFIG_HOME=os.environ.get("TMPDIR", "/tmp"))
     command = [sys.executable, "-c", code] if code else [sys.executable, "-m", "app", *arguments]
-    return subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True,
-                          timeout=timeout)
+    with app_process_env() as env:
+        return subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True,
+                              timeout=timeout)
 
 
 def _deliver_posted_events():
@@ -306,9 +306,13 @@ sys.exit(main([{str(ply_cloud[0])!r}, "--quit", "--load-timeout", "1"]))
 
 def _interrupt(code: str | None, ready: str) -> tuple[int, str]:
     """Start the app, wait for ``ready`` on its stderr, send SIGINT; (status, stderr)."""
-    env = dict(os.environ, QT_API="pyside6", XDG_CONFIG_HOME=os.environ.get("TMPDIR", "/tmp"))
     command = [sys.executable, "-c", code] if code else [sys.executable, "-m", "app"]
-    process = subprocess.Popen(command, cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True)
+    with app_process_env() as env:
+        return _interrupted(subprocess.Popen(command, cwd=ROOT, env=env, stderr=subprocess.PIPE,
+                                             text=True), ready)
+
+
+def _interrupted(process: subprocess.Popen, ready: str) -> tuple[int, str]:
     seen: list[str] = []
     is_ready = threading.Event()
 

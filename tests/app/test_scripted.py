@@ -9,16 +9,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from app_helpers import app_process_env
 from PySide6.QtGui import QImage
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _run(arguments: list[str], timeout: float = 180.0, code: str | None = None):
-    env = dict(os.environ, QT_API="pyside6", XDG_CONFIG_HOME=os.environ.get("TMPDIR", "/tmp"))
     command = [sys.executable, "-c", code] if code else [sys.executable, "-m", "app", *arguments]
-    return subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True,
-                          timeout=timeout)
+    with app_process_env() as env:
+        return subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True,
+                              timeout=timeout)
 
 
 def test_scripted_fit_writes_a_screenshot_and_exits_zero(ply_cloud, tmp_path):

@@ -88,6 +88,7 @@ def _assert_same(out: Path, reference: dict) -> None:
 
 
 @pytest.mark.timeout(120)
+@pytest.mark.slow
 def test_folder_batch_matches_single_runs_and_reports_the_corrupt_files(tmp_path, reference,
                                                                         capsys):
     folder = _folder(tmp_path)
@@ -135,6 +136,7 @@ def test_folder_batch_matches_single_runs_and_reports_the_corrupt_files(tmp_path
 
 
 @pytest.mark.timeout(120)
+@pytest.mark.slow
 def test_globs_files_csv_summary_and_missing_inputs(tmp_path, reference, capsys):
     folder = _folder(tmp_path, corrupt=False)
     out = tmp_path / "fits"
@@ -174,6 +176,7 @@ def test_hdf5_dataset_items_match_single_runs_of_their_clouds(tmp_path):
 
 
 @pytest.mark.timeout(120)
+@pytest.mark.slow
 def test_ctrl_c_keeps_finished_results_and_a_rerun_finishes_the_rest(tmp_path, monkeypatch,
                                                                      reference):
     import nurbs_core.batch.worker as worker

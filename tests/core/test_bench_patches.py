@@ -31,6 +31,7 @@ def test_cases_are_listed(bench):
     assert set(bench.QUICK) <= set(names)
 
 
+@pytest.mark.slow
 def test_case_runner_on_a_small_sphere(bench):
     case = bench.case_builders()["sphere"](count=1500, truth_count=20_000)
     assert case.normals.shape == case.shape.truth.shape

@@ -138,6 +138,7 @@ def test_knot_gradients_curve():
     _check_knot_gradient(lambda k: (curve_points(control, weights, k, 2, u) * w).sum(), knots, 2)
 
 
+@pytest.mark.slow
 def test_free_knots_beat_fixed_knots_on_a_surface_that_needs_reparameterization():
     """Target: a spline whose u-knots crowd near one end. From uniform knots, Adam with knots free
     reaches a lower loss than the same fit with the knots fixed (whose optimum is > 0)."""

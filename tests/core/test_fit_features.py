@@ -64,6 +64,7 @@ def test_free_knots_with_a_joint_optimizer_stay_strictly_increasing():
     assert not np.allclose(first, last)  # the knots did move
 
 
+@pytest.mark.slow
 def test_free_weights_stay_positive_and_fit_a_circular_arc():
     # a quarter circle is exactly a rational quadratic; a polynomial one cannot match it
     angles = np.linspace(0, np.pi / 2, 200)
@@ -160,6 +161,7 @@ def test_continue_from_a_previous_result_does_not_start_over():
     assert second.history[0]["total"] <= first.history[-1]["total"] * 1.001
 
 
+@pytest.mark.slow
 def test_unordered_cloud_with_parameter_correction_beats_fixed_parameters():
     gen = np.random.default_rng(1)
     angle, height = gen.uniform(0, np.pi, 4000), gen.uniform(0, 2, 4000)
@@ -174,6 +176,7 @@ def test_unordered_cloud_with_parameter_correction_beats_fixed_parameters():
     assert corrected.statistics["rms"] < 0.01  # radius 1
 
 
+@pytest.mark.slow
 def test_unordered_default_loss_fits_a_shuffled_scan():
     gen = np.random.default_rng(2)
     xy = gen.uniform(-2, 2, (5000, 2))

@@ -19,6 +19,7 @@ def _chamfer(surface, points):
     return float(chamfer_distance(grid.reshape(-1, 3), torch.as_tensor(points)))
 
 
+@pytest.mark.slow
 def test_registered_scan_fits_closer_than_its_cad_surface(paper_data):
     from nurbs_core.io import load
 

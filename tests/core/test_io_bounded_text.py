@@ -96,6 +96,7 @@ def test_a_header_without_x_y_z_is_refused_before_the_data_is_read(tmp_path):
     _refused(path, line=1, match="x, y and z")
 
 
+@pytest.mark.slow
 def test_many_blocks_keep_their_line_numbers(tmp_path):
     rng = np.random.default_rng(3)
     table = rng.normal(size=(240_000, 3))

@@ -27,6 +27,10 @@ import fuzz_worker
 import numpy as np
 import pytest
 
+# the whole suite is long (the corpus, then every file loaded in bounded worker processes):
+# it runs in the default run, not in the quick subset of .ci/run's .venv-core job
+pytestmark = pytest.mark.slow
+
 FILE_SECONDS = 10.0
 MEMORY_SLACK = 500 * 10**6  # bytes of resident memory allowed above twice the file's size
 TYPED_ERRORS = ("FileFormatError", "MissingDependencyError")

@@ -289,6 +289,7 @@ def _free_port() -> int:
         return handle.getsockname()[1]
 
 
+@pytest.mark.slow
 def test_two_process_gloo_ddp_run(tmp_path):
     env = dict(os.environ, OMP_NUM_THREADS="1")
     command = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2",

@@ -167,6 +167,7 @@ def test_with_the_least_squares_solver_the_core_starts_from_the_learned_paramete
     assert final.statistics["area_ratio"] < 1.05 and final.statistics["flipped_fraction"] < 1e-3
 
 
+@pytest.mark.slow
 def test_where_the_mesh_maps_core_fit_is_closer_the_fit_goes_on_exactly_as_init_pca():
     """The race of the two cores: on a noise-free sheet the shipped model's parameters give a
     core fit farther from the points than the mesh map's, and the learned fit then is today's

@@ -25,6 +25,9 @@ from nurbs_core.io.outputs import check_output_paths
 GEOMETRY_SUFFIXES = [".json", ".3dm", ".step", ".iges", ".dat", ".obj", ".stl", ".ply", ".glb",
                      ".csv"]
 POINT_SUFFIXES = [".ply", ".xyz", ".csv", ".npy", ".npz"]
+# one writer of each kind on a full disk in the quick subset (ours, openNURBS, OpenCASCADE); the
+# others are marked slow (each test starts a child process that imports the engine)
+QUICK_FULL_DISK = (".json", ".3dm", ".step")
 
 
 def _surface(size: int = 6, seed: int = 0) -> NurbsSurface:
@@ -44,7 +47,9 @@ def _needs_ocp(suffix: str):
         pytest.importorskip("OCP")
 
 
-@pytest.mark.parametrize("suffix", GEOMETRY_SUFFIXES)
+@pytest.mark.parametrize("suffix", [
+    suffix if suffix in QUICK_FULL_DISK else pytest.param(suffix, marks=pytest.mark.slow)
+    for suffix in GEOMETRY_SUFFIXES])
 def test_full_disk_leaves_the_previous_file_intact(tmp_path, suffix):
     """A real failed write: the child process may not write files over 4 KiB (RLIMIT_FSIZE, as
     on a full disk the write calls fail with an OSError); every format's writer, including the
@@ -181,6 +186,7 @@ def _error_lines(stderr: str) -> list[str]:
     return [line for line in stderr.splitlines() if line.strip()]
 
 
+@pytest.mark.slow
 def test_cli_refuses_bad_outputs_before_reading_anything(tmp_path):
     source = _cloud(tmp_path / "scan.ply")
     before = source.read_bytes()
@@ -209,6 +215,7 @@ def test_cli_refuses_bad_outputs_before_reading_anything(tmp_path):
     assert not good.exists()
 
 
+@pytest.mark.slow
 def test_cli_errors_are_one_line_and_debug_shows_the_traceback(tmp_path):
     broken = tmp_path / "broken.json"
     broken.write_text('{"format": "nurbs-studio", "version": 1, "geometry": [{"kind": "surface", '
@@ -265,6 +272,7 @@ def test_ctrl_c_once_writes_the_result_reached_so_far(tmp_path):
     assert _leftovers(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_ctrl_c_twice_exits_130_and_writes_nothing(tmp_path):
     output = tmp_path / "fit.json"
     save(_surface(), output)

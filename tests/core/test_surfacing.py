@@ -41,6 +41,7 @@ def test_a_gridded_scan_meshes_as_one_disk_of_its_exact_area():
     assert mesh.orientable
 
 
+@pytest.mark.slow
 def test_closed_shapes_and_tubes_are_recognised():
     assert classify(*_mesh(samples.sphere(2000))).kind == "closed"
     assert classify(*_mesh(samples.torus(3000))).kind in ("closed", "complex")
@@ -158,6 +159,7 @@ def test_least_squares_passes_are_live_and_stoppable(one_torch_thread):
     assert last.status == "stopped" and last.iteration == 1
 
 
+@pytest.mark.slow
 def test_gradient_solver_continues_from_the_least_squares_core(one_torch_thread):
     shape = samples.height_field(2000)
     core = fit(shape.points, FitConfig())
