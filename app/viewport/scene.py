@@ -154,6 +154,7 @@ class SceneView(QObject):
         self._visible["control_net"] = False
         self._deviation_on = True
         self._has_deviation = False
+        self._deviation_mode = "single"  # the fit the cloud's deviation colours measure
         self._stats_text = ""
         self._quality_on = False
         self._quality_cells: np.ndarray | None = None
@@ -214,13 +215,16 @@ class SceneView(QObject):
             self._layer("cloud", mesh)
         self.set_deviation(None)
 
-    def set_deviation(self, deviation: np.ndarray | None, stats: dict | None = None):
-        """Colour the cloud by each point's distance to the fitted shape (None: plain)."""
+    def set_deviation(self, deviation: np.ndarray | None, stats: dict | None = None,
+                      mode: str = "single"):
+        """Colour the cloud by each point's distance to the fitted shape (None: plain); ``mode``:
+        the fit it measures ("single" or "patches": it shows in that mode only)."""
         mesh, actor = self._meshes.get("cloud"), self._actors.get("cloud")
         if mesh is None:
             return
         valid = deviation is not None and len(deviation) == mesh.n_points and mesh.n_points > 0
         self._has_deviation = bool(valid)
+        self._deviation_mode = mode
         if valid:
             mesh.point_data[DEVIATION_TITLE][:] = deviation
             mesh.point_data[DEVIATION_TITLE] = mesh.point_data[DEVIATION_TITLE]  # mark modified
@@ -246,7 +250,8 @@ class SceneView(QObject):
         self.request_render()
 
     def deviation_shown(self) -> bool:
-        return self._deviation_on and self._has_deviation and self._mode == "single"
+        return (self._deviation_on and self._has_deviation
+                and self._mode == self._deviation_mode)
 
     # --- fit mode --------------------------------------------------------------------------------
     def set_mode(self, mode: str):

@@ -100,6 +100,10 @@ class FitDisplay(QObject):
     def on_patch_snapshot(self, snapshot) -> None:
         if snapshot.network is not None and not self._window.tree.shows_network:
             self._window.rebuild_tree()  # the first network of a run: list it in the tree
+        if getattr(snapshot, "deviation", None) is not None:
+            # the deviation map of the network (View > Deviation Map in Patches mode)
+            self._window.scene.set_deviation(snapshot.deviation,
+                                             deviation_stats(snapshot.deviation), mode="patches")
 
     @Slot(object)
     def on_snapshot_shown(self, snapshot: DisplaySnapshot) -> None:

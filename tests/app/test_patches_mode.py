@@ -13,6 +13,8 @@ from hang_guard import hang_guard
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QFileDialog
 
+from app.viewport.scene import DEVIATION_TITLE
+
 FIT_TIMEOUT_MS = 180_000
 
 
@@ -281,9 +283,15 @@ def test_start_on_a_closed_cloud_goes_on_as_a_network(qtbot, window, tmp_path):
     panel = window.network_quality_panel
     assert panel.status.text().endswith(": converged")
     assert "0.00% farther than" in panel.values["s2c"].text()
+    # the deviation map works in Patches mode: the cloud coloured by its distance to the network
+    assert window.scene.deviation_shown()
+    deviation = window.scene._meshes["cloud"].point_data[DEVIATION_TITLE]
+    assert np.isfinite(deviation).all()
+    assert np.mean(deviation) == pytest.approx(done.args[0].quality["c2s_mean"], rel=0.05)
     window.undo_action.trigger()  # back to one patch: the network's layers are hidden
     assert window.document.settings.fit_mode == "single"
     assert not window.scene.network.actor("network").GetVisibility()
+    assert not window.scene.deviation_shown()  # it measured the network, not a single patch
 
 
 def test_patch_settings_are_undoable_and_reach_the_engine_options(qtbot, window):
