@@ -37,7 +37,8 @@ Distances to the truth are exact: foot points on the true surface's charts by Ga
 (:meth:`nurbs_core.samples.SampledShape.distance_to_truth`), started from the two nearest of the
 shape's 250k dense area-uniform truth samples (KD-tree).
 
-Cases (``--list``): every heart-valve leaflet ``valve_reconstruction/data.*.txt``, the registered
+Cases (``--list``): five of the shared patches again, sampled uniformly in their parameters
+(``*_by_parameter``: uneven density, as scans come); every heart-valve leaflet ``valve_reconstruction/data.*.txt``, the registered
 scan ``step_fitting/c5dataReg.txt``, 4,000-point clouds (noise 0.2 % of the diagonal) sampled by
 area from shared NURBS patches (stabilizer, aorta, roof, ducks, offset surfaces), the generated
 shapes of :mod:`nurbs_core.samples` (height field, saddle, curled sheet, bowl, leaflet-like,
@@ -157,7 +158,11 @@ def _kwargs_text(kwargs) -> str:
     return ", ".join(f"{k}={v}" for k, v in kwargs.items())
 
 
-def _patch(label: str, relative: str) -> Callable[..., Case]:
+#: the same patches sampled uniformly in their parameters (uneven density, as scans come)
+BY_PARAMETER = ("stabilizer_4", "stabilizer_20", "aorta_7", "duck2", "turbine_blade_patch0")
+
+
+def _patch(label: str, relative: str, by_parameter: bool = False) -> Callable[..., Case]:
     def build(count=None, truth_count=samples.TRUTH_COUNT, data=None):
         from nurbs_core.io import load
 
@@ -166,9 +171,11 @@ def _patch(label: str, relative: str) -> Callable[..., Case]:
             raise FileNotFoundError("the paper's data (shared/data/nurbsdiff_paper) is missing")
         surface = load(data / relative)[0]
         shape = samples.sample_surface(surface, count or COUNT, noise=NOISE, seed=0, name=label,
-                                       truth_count=truth_count)
+                                       truth_count=truth_count, by_parameter=by_parameter)
+        density = ", uniform in its parameters" if by_parameter else ""
         return Case(label, "closed" if shape.closed else "patch", shape.points, shape,
-                    source=f"{relative} ({shape.kind}), {count or COUNT} points, noise {NOISE}")
+                    source=f"{relative} ({shape.kind}), {count or COUNT} points{density}, "
+                           f"noise {NOISE}")
     return build
 
 
@@ -203,6 +210,10 @@ def case_builders(data: Path | None = None) -> dict[str, Callable[..., Case]]:
         for label, relative in PATCHES.items():
             if (data / relative).exists():
                 builders[label] = _patch(label, relative)
+        for label in BY_PARAMETER:
+            if (data / PATCHES[label]).exists():
+                builders[f"{label}_by_parameter"] = _patch(f"{label}_by_parameter",
+                                                           PATCHES[label], by_parameter=True)
     g = samples
     builders.update({
         "height_field": _generated(g.height_field, "height_field"),
@@ -395,7 +406,10 @@ def run_fit(case: Case, label: str, threads: int, repeats: int, truth: Truth | N
         row.status = f"error: {type(exc).__name__}"
         row.values["message"] = str(exc)
         return row
-    row.status = result.status
+    # the status a user reads: "converged" only when the quality checks hold
+    from nurbs_core.status import quality_warnings, reported_status
+
+    row.status = reported_status(result.status, quality_warnings(result.statistics))
     if case.closed and label != "forced":
         row.status += " (refusal expected)"
     row.values["time_s"] = seconds
