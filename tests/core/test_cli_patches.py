@@ -86,6 +86,7 @@ def test_a_forced_single_patch_on_a_closed_cloud_is_not_converged(sphere_file, t
     assert "status: fitted with warnings" in captured.out
 
 
+@pytest.mark.slow
 def test_a_closed_mesh_file_lays_out_on_its_own_mesh(tmp_path, capsys):
     import trimesh
 
@@ -100,6 +101,7 @@ def test_a_closed_mesh_file_lays_out_on_its_own_mesh(tmp_path, capsys):
     assert network.closed
 
 
+@pytest.mark.slow
 def test_a_mesh_file_with_a_small_hole_is_rebuilt_closed_from_its_points(tmp_path, capsys):
     import trimesh
 

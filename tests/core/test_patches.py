@@ -106,6 +106,7 @@ def _truth_measures(shape, result):
 
 
 @pytest.mark.slow
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["sphere", "torus", "capsule"])
 def test_closed_shapes_fit_watertight_tangent_and_outward(name):
     shape = samples.GENERATORS[name](4000, noise=0.002, truth_count=60000)
@@ -127,6 +128,7 @@ def test_closed_shapes_fit_watertight_tangent_and_outward(name):
     assert not result.warnings
 
 
+@pytest.mark.slow
 def test_genus_is_in_the_layout_of_a_torus_fit():
     shape = samples.torus(3000, noise=0.002, truth_count=20000)
     result = fit_patches(shape.points, PatchOptions(size=4))
@@ -161,6 +163,7 @@ def test_options_are_checked():
         fit_patches(np.full((200, 3), np.nan))
 
 
+@pytest.mark.slow
 def test_normals_of_a_fit_point_outward_on_a_blob():
     shape = samples.blob(4000, noise=0.002, truth_count=40000)
     result = fit_patches(shape.points)

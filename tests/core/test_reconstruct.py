@@ -135,6 +135,7 @@ def test_holes_up_to_max_hole_are_sealed_and_wider_ones_stay_open(holed_blob):
         closed_mesh(points, max_hole=0.0)
 
 
+@pytest.mark.slow
 def test_nurbs_fit_seals_the_holes_of_a_scan_and_says_so(holed_blob, tmp_path, capsys):
     from nurbs_core.cli import main
     from nurbs_core.io.network_io import read_network
@@ -167,6 +168,7 @@ def test_an_open_surface_with_a_handle_is_refused_saying_what_it_needs(tmp_path,
     assert "--single-patch" in error and "--patches auto" not in error
 
 
+@pytest.mark.slow
 def test_a_dense_scan_is_wrapped_on_its_voxel_centroids_as_accurately():
     """Beyond WRAP_POINTS the wrap runs on voxel centroids: the mesh stays on the sphere."""
     from nurbs_core.patches import closed_mesh as module
