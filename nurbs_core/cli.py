@@ -396,25 +396,19 @@ def _patch_options(args: argparse.Namespace, automatic: bool = False) -> PatchOp
     single-patch ``--stiffness`` has another scale and is not passed on)."""
     from nurbs_core.patches.options import PatchOptions
 
-    if automatic:
-        extra_auto = {} if args.seam_weight is None else {"seam_weight": args.seam_weight}
-        options = PatchOptions(patches="auto", size=args.patch_size, tolerance=args.tolerance,
-                               max_hole=args.max_hole, **extra_auto)
-        options.validate()
-        return options
-    if args.curve or args.single_patch or args.grid is not None or args.initial is not None:
-        raise ValueError("--patches fits a network of surface patches: it cannot be combined "
-                         "with --curve, --single-patch, --grid or --initial")
-    target: int | str
-    if args.patches == "auto":
-        target = "auto"
-    else:
-        try:
-            target = int(args.patches)
-        except ValueError:
-            raise ValueError(f"--patches takes 'auto' or a patch count, got {args.patches!r}") from None
+    target: int | str = "auto"
+    if not automatic:
+        if args.curve or args.single_patch or args.grid is not None or args.initial is not None:
+            raise ValueError("--patches fits a network of surface patches: it cannot be combined "
+                             "with --curve, --single-patch, --grid or --initial")
+        if args.patches != "auto":
+            try:
+                target = int(args.patches)
+            except ValueError:
+                raise ValueError(f"--patches takes 'auto' or a patch count, got "
+                                 f"{args.patches!r}") from None
     extra: dict[str, Any] = {}  # the defaults stay PatchOptions's own
-    if args.stiffness is not None:
+    if args.stiffness is not None and not automatic:
         extra["stiffness"] = args.stiffness
     if args.seam_weight is not None:
         extra["seam_weight"] = args.seam_weight
@@ -635,9 +629,8 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
         file_mesh, note = None, ""
         if points is None:
             points, file_mesh, note = _surface_input(args.input, quiet=args.quiet)
-        if args.max_hole is not None and not (math.isfinite(args.max_hole) and args.max_hole >= 0):
-            raise ValueError(f"--max-hole takes a non-negative length, got {args.max_hole}")
-        route = choose_route(points, file_mesh, note, max_hole=args.max_hole)
+        options = _patch_options(args, automatic=True)  # checked before the route is decided
+        route = choose_route(points, file_mesh, note, max_hole=options.max_hole)
         if not args.quiet:
             print(f"route: {route.reason} ({route.seconds:.1f} s)", file=sys.stderr)
         if route.kind == "network":
@@ -645,8 +638,8 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
             from nurbs_core.io.outputs import check_output_paths
 
             check_output_paths(outputs, [args.input], suffixes=NETWORK_SUFFIXES)
-            return run_patches(args, _patch_options(args, automatic=True), outputs,
-                               points=points, mesh=route.mesh, mesh_seconds=route.seconds)
+            return run_patches(args, options, outputs, points=points, mesh=route.mesh,
+                               mesh_seconds=route.seconds)
         prepared = prepare_fit(args, points)
         try:
             result = run_fit(prepared, stoppable)

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from PySide6.QtCore import QObject, Signal, Slot
 
-from app.workers.fit_worker import FINAL_DEVIATION_POINTS, enter_worker_thread, sampled_deviation
+from app.workers.fit_worker import enter_worker_thread
 from app.workers.network_display import NetworkDisplay, mesh_display, network_display
 
 #: At least this long (s) between two pass snapshots, and at most this share of the worker's time
@@ -68,21 +68,9 @@ class PatchSnapshot:
     warnings: list[str] = field(default_factory=list)
     done: bool = False
     losses: list[dict] = field(default_factory=list)
-    #: (N,) distance of each cloud point to the network (done and stopped; NaN for points
-    #: outside the measured sample of a large cloud), for the deviation map
+    #: (N,) distance of each cloud point to the network, as its quality measured it (done and
+    #: stopped; NaN where a large cloud's quality sample left a point out): the deviation map
     deviation: np.ndarray | None = None
-
-
-def network_deviation(network, points: np.ndarray) -> np.ndarray:
-    """(N,) distance of each point (N, 3) to the network (foot points), measured on at most
-    FINAL_DEVIATION_POINTS of them (NaN for the others)."""
-    from nurbs_core.patches.evaluate import foot_points
-
-    def distances(net, target: np.ndarray) -> np.ndarray:
-        return foot_points(net, target, resolution=24, steps=10)[2]  # as network_quality
-
-    return sampled_deviation(distances, network, np.asarray(points, np.float64),
-                             FINAL_DEVIATION_POINTS)
 
 
 class PatchWorker(QObject):
@@ -170,7 +158,7 @@ class PatchWorker(QObject):
                         rms=float(event.fit_pass.rms), seam=float(event.fit_pass.seam),
                         elapsed=time.monotonic() - started, quality=result.quality.as_dict(),
                         warnings=list(result.warnings), done=True,
-                        deviation=network_deviation(result.network, request.points)))
+                        deviation=result.deviation))
                     return
                 self._wait_while_paused()
         finally:
@@ -193,8 +181,8 @@ class PatchWorker(QObject):
 
         snapshot = self._pass_snapshot(request.run_id, fit_pass, fit_pass.stage, 0, elapsed)
         snapshot.event, snapshot.done = "stopped", True
-        snapshot.quality = network_quality(fit_pass.network, request.points).as_dict()
-        snapshot.deviation = network_deviation(fit_pass.network, request.points)
+        quality = network_quality(fit_pass.network, request.points)
+        snapshot.quality, snapshot.deviation = quality.as_dict(), quality.distances
         return snapshot
 
     def _wait_while_paused(self):

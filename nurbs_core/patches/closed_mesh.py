@@ -24,8 +24,10 @@ import numpy as np
 import scipy.ndimage
 from scipy.spatial import cKDTree
 
+from nurbs_core.reconstruct.wrap import NEIGHBOURS as NORMAL_NEIGHBOURS
 from nurbs_core.reconstruct.wrap import VoxelGrid, Wrap, wrap
 from nurbs_core.surfacing.mesh import median_spacing, vertex_normals, voxel_subsample
+from nurbs_core.surfacing.neighbours import local_frames
 
 #: Cells per bounding-box diagonal at most (Instant Meshes fails on layouts of much denser
 #: meshes: 21k vertices broke every torus layout, 5k none), and the largest grid (cells in all).
@@ -80,8 +82,7 @@ class ClosedMesh:
         """The share of the mesh's area on caps over holes (0 when nothing was filled)."""
         if self.filled is None or not self.filled.any():
             return 0.0
-        tri = self.vertices[self.faces]
-        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        area = self.face_areas()
         return float(area[self.filled[self.faces].all(axis=1)].sum() / max(area.sum(), 1e-300))
 
     def vertex_normals(self) -> np.ndarray:
@@ -90,9 +91,12 @@ class ClosedMesh:
 
     @property
     def area(self) -> float:
+        return float(self.face_areas().sum())
+
+    def face_areas(self) -> np.ndarray:
+        """(F,) triangle areas."""
         tri = self.vertices[self.faces]
-        return float(0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
-                                          axis=1).sum())
+        return 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
 
 
 def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
@@ -145,13 +149,14 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
         index, points, _ = voxel_subsample(points, WRAP_POINTS)
         normals = None if normals is None else np.asarray(normals)[index]
     tree = cKDTree(points)
+    frames = local_frames(points, NORMAL_NEIGHBOURS, tree)  # shared by both wraps below
     grid = _grid(points)
-    wrapped = wrap(points, grid, tree)
+    wrapped = wrap(points, grid, tree, frames=frames)
     if wrapped.encloses:
         return _zero_set(points, normals, wrapped, tree, 0.0)
     if max_hole > 0:
         grid = _grid(points, max_hole)
-        sealed = wrap(points, grid, tree, hole_radius=0.5 * max_hole)
+        sealed = wrap(points, grid, tree, hole_radius=0.5 * max_hole, frames=frames)
         if sealed.encloses:
             return _zero_set(points, normals, sealed, tree, max_hole)
     # every free region reaches the border: nothing is enclosed (an open sheet or shell, or a

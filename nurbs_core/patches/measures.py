@@ -13,7 +13,7 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -59,13 +59,17 @@ class NetworkQuality:
     s2c_max: float = 0.0
     far_fraction: float = 0.0
     far_limit: float = 0.0
+    #: (N,) foot-point distance of each measured point (left out of :meth:`as_dict`)
+    distances: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def gap_relative(self) -> float:
         return self.seam.gap / self.diagonal if self.diagonal > 0 else 0.0
 
     def as_dict(self) -> dict:
-        out = asdict(self)
+        """Every scalar measure (and the seam statistics) as plain values."""
+        out = asdict(replace(self, distances=None))
+        del out["distances"]
         out["gap_relative"] = self.gap_relative
         return out
 
@@ -156,7 +160,8 @@ def network_quality(network: PatchNetwork, points: np.ndarray,
     return NetworkQuality(network.patch_count, network.size, seam, total, flipped, volume,
                           float(c2s.mean()), float(np.sqrt(np.mean(c2s ** 2))),
                           float(np.percentile(c2s, 99)), float(np.average(s2c, weights=area)),
-                          float(np.percentile(s2c, 99)), diagonal, float(s2c.max()), far, limit)
+                          float(np.percentile(s2c, 99)), diagonal, float(s2c.max()), far, limit,
+                          c2s)
 
 
 #: Surface farther from every point than FAR_DIAGONAL x the diagonal, and than FAR_SPACINGS x

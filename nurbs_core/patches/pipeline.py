@@ -24,7 +24,7 @@ from nurbs_core.patches.layout import LayoutError, QuadLayout, quad_layout
 from nurbs_core.patches.measures import NetworkQuality, network_quality
 from nurbs_core.patches.network import PatchNetwork
 from nurbs_core.patches.options import PatchOptions
-from nurbs_core.status import reported_status
+from nurbs_core.status import WARN_FLIPPED, reported_status
 
 #: The first patch count ``auto`` tries, how much finer each retry is, and the most it goes to.
 AUTO_START = 24
@@ -37,11 +37,10 @@ MIN_POINTS_PER_PATCH = 25
 #: Points the fit passes use at most (a random subset of larger clouds), and the quality.
 PASS_POINTS = 20_000
 QUALITY_POINTS = 200_000
-#: Seam angle 99th percentile (degrees), flipped area fraction and the share of the area far
-#: from every point (:func:`nurbs_core.patches.measures.far_limit`) above which a warning is
-#: given (and the status is not "converged").
+#: Seam angle 99th percentile (degrees) and the share of the area far from every point
+#: (:func:`nurbs_core.patches.measures.far_limit`) above which a warning is given (and the
+#: status is not "converged"); folds: :data:`nurbs_core.status.WARN_FLIPPED`.
 WARN_SEAM = 2.0
-WARN_FLIPPED = 0.01
 WARN_FAR = 0.005
 
 
@@ -69,6 +68,9 @@ class PatchResult:
     timings: dict[str, float]
     warnings: list[str] = field(default_factory=list)
     passes: int = 0
+    #: (N,) each cloud point's distance to the network (NaN where a large cloud's quality
+    #: sample left it out): the deviation map
+    deviation: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def status(self) -> str:
@@ -154,8 +156,9 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     rng = np.random.default_rng(0)
     fitted = points if len(points) <= PASS_POINTS else \
         points[rng.choice(len(points), PASS_POINTS, replace=False)]
-    measured = points if len(points) <= QUALITY_POINTS else \
-        points[rng.choice(len(points), QUALITY_POINTS, replace=False)]
+    sample = np.arange(len(points)) if len(points) <= QUALITY_POINTS else \
+        np.sort(rng.choice(len(points), QUALITY_POINTS, replace=False))
+    measured = points[sample]
     for last in fit_network(fitted, layout.vertices, layout.quads, mesh.vertices,
                             size=options.size, stiffness=options.stiffness,
                             seam_weight=options.seam_weight, tolerance=options.tolerance,
@@ -179,7 +182,11 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
                         f"{quality.far_limit:.3g} from every point (up to {quality.s2c_max:.3g}, "
                         f"{quality.s2c_max / max(quality.diagonal, 1e-300):.1%} of the diagonal): "
                         "a part the scan does not hold")
-    result = PatchResult(last.network, quality, layout, mesh, timings, warnings, last.index + 1)
+    deviation = np.full(len(points), np.nan)
+    assert quality.distances is not None, "network_quality keeps the point distances"
+    deviation[sample] = quality.distances
+    result = PatchResult(last.network, quality, layout, mesh, timings, warnings, last.index + 1,
+                         deviation)
     yield PatchEvent("done", mesh=mesh, layout=layout, fit_pass=last, result=result)
 
 

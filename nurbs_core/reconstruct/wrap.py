@@ -34,7 +34,7 @@ import numpy as np
 import scipy.ndimage
 from scipy.spatial import cKDTree
 
-from nurbs_core.surfacing.neighbours import local_frames
+from nurbs_core.surfacing.neighbours import LocalFrames, local_frames
 
 #: a point blocks voxels within GAP x the distance to its GAP_NEIGHBOUR-th nearest neighbour
 GAP = 1.5
@@ -148,17 +148,18 @@ def outside_region(blocked: np.ndarray) -> np.ndarray:
 
 
 def wrap(points: np.ndarray, grid: VoxelGrid, tree: cKDTree | None = None,
-         hole_radius: float = 0.0) -> Wrap:
+         hole_radius: float = 0.0, frames: LocalFrames | None = None) -> Wrap:
     """The :class:`Wrap` of ``points`` (N, 3) on ``grid`` (which must hold the points with a
     margin of a few radii, and of ``hole_radius``); ``hole_radius``: seal openings narrower
-    than about twice this length (0: none)."""
+    than about twice this length (0: none); ``frames``: the points' ``NEIGHBOURS``-nearest
+    frames when already computed."""
     points = np.asarray(points, np.float64)
     tree = cKDTree(points) if tree is None else tree
     radii = point_radii(points, grid.cell, tree)
     blocked = blocked_voxels(points, radii, grid)
     filled = close_holes(blocked, hole_radius / grid.cell)
     outside = outside_region(blocked | filled)
-    frames = local_frames(points, NEIGHBOURS, tree)
+    frames = local_frames(points, NEIGHBOURS, tree) if frames is None else frames
     normals, voted = _orient(points, frames.normals, frames.neighbours, radii, outside, grid)
     return Wrap(grid, outside, blocked, radii, normals, voted, filled if hole_radius > 0 else None)
 
