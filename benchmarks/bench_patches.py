@@ -276,6 +276,28 @@ def _holed(build: Callable[..., Case], label: str, holes: int = 3,
     return holed
 
 
+def _cut(build: Callable[..., Case], label: str, below: float = -0.5) -> Callable[..., Case]:
+    """An open shell: the case's cloud and truth above ``z = below`` only (a head scanned
+    without its base); the true area is the kept truth's share of it."""
+    def cut(count=COUNT, truth_count=TRUTH_COUNT, data=None) -> Case:
+        case = build(count=count, truth_count=truth_count, data=data)
+        shape = case.shape
+        keep = shape.points[:, 2] > below
+        shape.points, shape.clean = shape.points[keep], shape.clean[keep]
+        truth = shape.truth[:, 2] > below
+        shape.true_area *= float(truth.mean())
+        shape.truth = shape.truth[truth]
+        for name in ("truth_normals", "truth_parameters", "truth_charts"):
+            if getattr(shape, name) is not None:
+                setattr(shape, name, getattr(shape, name)[truth])
+        case.normals = case.normals[truth]
+        shape.closed = False
+        shape.name = case.name = label
+        case.source += f", cut below z = {below:g} (open: no base)"
+        return case
+    return cut
+
+
 def _model(label: str, files: list[str], by_parameter: bool = False) -> Callable[..., Case]:
     def build(count=COUNT, truth_count=TRUTH_COUNT, data=None) -> Case:
         from nurbs_core.io import load
@@ -317,6 +339,9 @@ def case_builders() -> dict[str, Callable[..., Case]]:
         # holes up to --max-hole (10% of the diagonal by default) are sealed
         "blob_holes": _holed(_generated(g.blob, "blob_s0", seed=0), "blob_holes"),
         "head_holes": _holed(_generated(g.head, "head"), "head_holes"),
+        # open shells: an open network whose border follows where the scan ends
+        "head_no_base": _cut(_generated(g.head, "head"), "head_no_base"),
+        "sphere_cut": _cut(_generated(g.sphere, "sphere"), "sphere_cut"),
     }
     for label, files in MODELS.items():
         builders[label] = _model(label, files)

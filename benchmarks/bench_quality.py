@@ -38,7 +38,8 @@ Distances to the truth are exact: foot points on the true surface's charts by Ga
 shape's 250k dense area-uniform truth samples (KD-tree).
 
 Cases (``--list``): five of the shared patches again, sampled uniformly in their parameters
-(``*_by_parameter``: uneven density, as scans come); every heart-valve leaflet ``valve_reconstruction/data.*.txt``, the registered
+(``*_by_parameter``: uneven density, as scans come); every heart-valve leaflet
+``valve_reconstruction/data.*.txt``, the registered
 scan ``step_fitting/c5dataReg.txt``, 4,000-point clouds (noise 0.2 % of the diagonal) sampled by
 area from shared NURBS patches (stabilizer, aorta, roof, ducks, offset surfaces), the generated
 shapes of :mod:`nurbs_core.samples` (height field, saddle, curled sheet, bowl, leaflet-like,

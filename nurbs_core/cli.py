@@ -39,8 +39,9 @@ if TYPE_CHECKING:
 
     from nurbs_core.fitting.config import FitConfig, FitResult, FitSnapshot, StopToken
     from nurbs_core.geometry import NurbsCurve, NurbsSurface
-    from nurbs_core.patches.closed_mesh import ClosedMesh
     from nurbs_core.patches.options import PatchOptions
+    from nurbs_core.patches.scan_mesh import ScanMesh
+    from nurbs_core.route import Route
 
 # Nothing heavy at module level: numpy, the engine and torch load inside main(), where Ctrl-C
 # during start-up is caught (status 130, no traceback); --help and bad outputs never load torch.
@@ -436,7 +437,7 @@ def _check_outputs(args: argparse.Namespace) -> list[Path]:
 FILE_MESH_SAMPLES = 10_000
 
 
-def _surface_input(path: str, quiet: bool) -> tuple[np.ndarray, ClosedMesh | None, str]:
+def _surface_input(path: str, quiet: bool) -> tuple[np.ndarray, ScanMesh | None, str]:
     """The points to fit a surface or network to (N, 3), the input file's own closed mesh for a
     network's layout or None, and why a mesh file's mesh cannot serve ("" for a cloud). A mesh
     file (STL, OBJ, PLY with faces, ...) is read once with its triangles: a file with few
@@ -476,7 +477,7 @@ def _automatic(args: argparse.Namespace) -> bool:
 
 
 def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[Path],
-                points: np.ndarray | None = None, mesh: ClosedMesh | None = None,
+                points: np.ndarray | None = None, mesh: ScanMesh | None = None,
                 mesh_seconds: float = 0.0) -> dict[str, Any]:
     """``--patches`` (or the automatic route's network): the network fit (``options``: its
     PatchOptions), its report and files; returns the statistics (``points``: the cloud when it
@@ -499,7 +500,8 @@ def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[P
         if args.quiet:
             continue
         if event.kind == "mesh" and event.mesh is not None:
-            print(f"closed mesh: {len(event.mesh.faces)} triangles", file=sys.stderr)
+            kind = "closed" if event.mesh.closed else "open"
+            print(f"{kind} mesh: {len(event.mesh.faces)} triangles", file=sys.stderr)
         elif event.kind == "layout" and event.layout is not None:
             layout = event.layout
             print(f"layout: {len(layout.quads)} patches, {len(layout.irregular)} irregular "
@@ -640,23 +642,57 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
             check_output_paths(outputs, [args.input], suffixes=NETWORK_SUFFIXES)
             return run_patches(args, options, outputs, points=points, mesh=route.mesh,
                                mesh_seconds=route.seconds)
-        prepared = prepare_fit(args, points)
-        try:
-            result = run_fit(prepared, stoppable)
-        except ValueError as exc:
-            from nurbs_core.surfacing.parameterize import NotADiskError
-
-            if not isinstance(exc.__context__, NotADiskError):
-                raise
-            # neither route holds it: say so plainly, not "use --patches" (which would refuse)
-            raise ValueError(
-                f"{route.finding} and one patch cannot hold it "
-                f"({exc.__context__.topology.kind}: {str(exc.__context__).split(':')[0]}); it "
-                "needs an open network of patches, which nurbs-fit does not build yet. "
-                "--single-patch fits one patch anyway (the report shows its folds)") from None
-        return finish_fit(prepared, result)
+        return _single_patch_or_open_network(args, options, outputs, points, route, stoppable)
     prepared = prepare_fit(args, points)
     return finish_fit(prepared, run_fit(prepared, stoppable))
+
+
+def _single_patch_or_open_network(args: argparse.Namespace, options: PatchOptions,
+                                  outputs: list[Path], points: np.ndarray, route: Route,
+                                  stoppable: bool) -> dict[str, Any]:
+    """The automatic route of an open surface: one patch when it holds the surface cleanly,
+    else an open network (:func:`nurbs_core.route.open_network_instead`); the single patch,
+    with its warnings, when no open network can be built."""
+    from nurbs_core.patches.layout import LayoutError
+    from nurbs_core.route import open_network_instead, single_patch_problems
+    from nurbs_core.surfacing.parameterize import NotADiskError
+
+    prepared = prepare_fit(args, points)
+    result, refusal = None, None
+    try:
+        result = run_fit(prepared, stoppable)
+    except ValueError as exc:
+        if not isinstance(exc.__context__, NotADiskError):
+            raise
+        refusal = exc.__context__
+    problems = single_patch_problems(result.status if result else "",
+                                     result.statistics if result else None)
+    if refusal is not None:
+        problems = f"{refusal.topology.kind}: {str(refusal).split(':')[0]}"
+    network = open_network_instead(points, problems, options.max_hole) if problems else None
+    if network is not None:
+        from nurbs_core.io.dispatch import NETWORK_SUFFIXES
+        from nurbs_core.io.outputs import check_output_paths
+
+        if not args.quiet:
+            print(f"route: {network.reason} ({network.seconds:.1f} s)", file=sys.stderr)
+        check_output_paths(outputs, [args.input], suffixes=NETWORK_SUFFIXES)
+        try:
+            return run_patches(args, options, outputs, points=points, mesh=network.mesh,
+                               mesh_seconds=network.seconds)
+        except LayoutError as error:
+            if result is None:
+                raise ValueError(f"{route.finding}; one patch cannot hold it ({problems}) and "
+                                 f"no open network could be laid out ({error}). --single-patch "
+                                 "fits one patch anyway (the report shows its folds)") from None
+            print(f"no open network could be laid out ({error}); keeping the single patch",
+                  file=sys.stderr)
+    if result is None:
+        assert refusal is not None
+        raise ValueError(f"{route.finding} and one patch cannot hold it ({problems}); no open "
+                         "mesh could be built from the scan. --single-patch fits one patch "
+                         "anyway (the report shows its folds)") from None
+    return finish_fit(prepared, result)
 
 
 @dataclass

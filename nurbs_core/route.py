@@ -5,7 +5,11 @@
   sampling). One open patch cannot hold a closed object without folding, so it becomes a
   watertight network of tangent-continuous patches.
 * ``single_patch``: everything else (an open sheet, a shell, a tube): one patch, the fold-free
-  least-squares core (:mod:`nurbs_core.fitting.sheet`).
+  least-squares core (:mod:`nurbs_core.fitting.sheet`), **when it holds the surface cleanly**.
+  When one patch is refused (the surface is not a disk or a tube) or fails a quality check
+  (folds, overlapping sheets, an uncovered part: a bowl too deep for one map, a head without its
+  base), :func:`open_network_instead` turns to an *open* network over the scan's bounded mesh
+  (:func:`nurbs_core.patches.open_mesh.open_mesh`), whose border follows where the scan ends.
 
 A route forced by the caller (``--single-patch``, ``--patches``) is taken as it is. The decision
 carries its reason (printed by the CLI) and the closed mesh it built, so the network does not
@@ -20,7 +24,9 @@ from typing import Literal
 
 import numpy as np
 
-from nurbs_core.patches.closed_mesh import ClosedMesh, NotClosedError, closed_mesh
+from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
+from nurbs_core.patches.scan_mesh import ScanMesh
+from nurbs_core.status import quality_problems
 
 RouteKind = Literal["single_patch", "network"]
 
@@ -33,18 +39,21 @@ class Route:
 
     kind: RouteKind
     finding: str
-    mesh: ClosedMesh | None = None
+    mesh: ScanMesh | None = None
     #: how long the decision took (building the closed mesh, most of it)
     seconds: float = 0.0
 
     @property
     def reason(self) -> str:
         """The report's line: the finding and the route it leads to."""
-        return f"{self.finding}: " + ("a network of patches" if self.kind == "network"
-                                      else "one patch")
+        if self.kind == "single_patch":
+            return f"{self.finding}: one patch"
+        closed = self.mesh is None or self.mesh.closed
+        return f"{self.finding}: " + ("a network of patches" if closed
+                                      else "an open network of patches")
 
 
-def choose_route(points: np.ndarray, file_mesh: ClosedMesh | None = None,
+def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
                  file_mesh_note: str = "", max_hole: float | None = None) -> Route:
     """The route for a surface cloud (N, 3) with no route forced (see :func:`_decide`), timed."""
     started = time.perf_counter()
@@ -53,7 +62,7 @@ def choose_route(points: np.ndarray, file_mesh: ClosedMesh | None = None,
     return route
 
 
-def _decide(points: np.ndarray, file_mesh: ClosedMesh | None, file_mesh_note: str,
+def _decide(points: np.ndarray, file_mesh: ScanMesh | None, file_mesh_note: str,
             max_hole: float | None) -> Route:
     """The route for a surface cloud (N, 3) with no route forced. ``file_mesh``: the input
     file's own closed mesh when it has a usable one (:func:`mesh_from_faces`); otherwise
@@ -74,3 +83,32 @@ def _decide(points: np.ndarray, file_mesh: ClosedMesh | None, file_mesh_note: st
     return Route("network", ((f"{file_mesh_note}; " if file_mesh_note else "")
                              + f"the cloud encloses a volume{holes} (a closed object)"), mesh)
 
+
+
+def single_patch_problems(status: str, statistics: dict | None) -> str:
+    """Why a single patch's result is not clean ("" when it is, or when it was stopped before
+    its end): its quality problems, one clause. ``statistics``: the fit's statistics (None: one
+    patch was refused)."""
+    if statistics is None:
+        return "one patch cannot hold it"
+    if status != "converged":
+        return ""
+    return "; ".join(quality_problems(statistics).values())
+
+
+def open_network_instead(points: np.ndarray, problems: str,
+                         max_hole: float | None = None) -> Route | None:
+    """The open-network route for an open surface that one patch does not hold cleanly
+    (``problems``: why, from :func:`single_patch_problems`), with the scan's bounded mesh; None
+    when no such mesh can be built (then the single patch stays, with its warnings). Timed."""
+    from nurbs_core.patches.open_mesh import NotASurfaceError, open_mesh
+
+    started = time.perf_counter()
+    try:
+        mesh = open_mesh(points, max_hole=max_hole)
+    except NotASurfaceError:
+        return None
+    loops = len(mesh.border)
+    finding = (f"an open surface that one patch does not hold cleanly ({problems}); its mesh "
+               f"ends at {loops} border loop{'s' if loops > 1 else ''}")
+    return Route("network", finding, mesh, time.perf_counter() - started)

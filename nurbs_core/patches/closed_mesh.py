@@ -18,15 +18,14 @@ enclosed volume is positive (normals outward).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import scipy.ndimage
 from scipy.spatial import cKDTree
 
+from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.reconstruct.wrap import NEIGHBOURS as NORMAL_NEIGHBOURS
 from nurbs_core.reconstruct.wrap import VoxelGrid, Wrap, wrap
-from nurbs_core.surfacing.mesh import median_spacing, vertex_normals, voxel_subsample
+from nurbs_core.surfacing.mesh import median_spacing, voxel_subsample
 from nurbs_core.surfacing.neighbours import local_frames
 
 #: Cells per bounding-box diagonal at most (Instant Meshes fails on layouts of much denser
@@ -58,45 +57,6 @@ NEIGHBOURS = 8
 
 class NotClosedError(ValueError):
     """The cloud does not sample a closed surface."""
-
-
-@dataclass
-class ClosedMesh:
-    """vertices (V, 3), faces (F, 3) outward; normals (N, 3): the oriented normals of the
-    points it was built from (the cloud, or its voxel centroids when the cloud is larger than
-    ``WRAP_POINTS``); cell: the voxel size; pieces: how many separate closed pieces marching
-    cubes found."""
-
-    vertices: np.ndarray
-    faces: np.ndarray
-    normals: np.ndarray
-    cell: float
-    pieces: int
-    #: (V,) bool: vertices on caps sealed over the scan's holes (None: nothing was filled), and
-    #: the widest opening that was sealed (0: none)
-    filled: np.ndarray | None = None
-    max_hole: float = 0.0
-
-    @property
-    def filled_fraction(self) -> float:
-        """The share of the mesh's area on caps over holes (0 when nothing was filled)."""
-        if self.filled is None or not self.filled.any():
-            return 0.0
-        area = self.face_areas()
-        return float(area[self.filled[self.faces].all(axis=1)].sum() / max(area.sum(), 1e-300))
-
-    def vertex_normals(self) -> np.ndarray:
-        """(V, 3) outward unit normals of the mesh's vertices."""
-        return vertex_normals(self.vertices, self.faces)
-
-    @property
-    def area(self) -> float:
-        return float(self.face_areas().sum())
-
-    def face_areas(self) -> np.ndarray:
-        """(F,) triangle areas."""
-        tri = self.vertices[self.faces]
-        return 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
 
 
 def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
@@ -135,7 +95,7 @@ MAX_HOLE = 0.1
 
 
 def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
-                max_hole: float | None = None) -> ClosedMesh:
+                max_hole: float | None = None) -> ScanMesh:
     """The watertight mesh (see the module docstring) of a closed object's cloud (N, 3), with
     optional oriented unit normals (N, 3). ``max_hole``: the widest opening (a length) sealed
     when the cloud alone encloses nothing (None: ``MAX_HOLE`` x the diagonal; 0: none). Raises
@@ -168,7 +128,7 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
 
 
 def _zero_set(points: np.ndarray, normals: np.ndarray | None, wrapped: Wrap, tree: cKDTree,
-              max_hole: float) -> ClosedMesh:
+              max_hole: float) -> ScanMesh:
     """Marching cubes of the signed field over the wrap (see the module docstring)."""
     from skimage.measure import marching_cubes
 
@@ -230,7 +190,7 @@ def _zero_set(points: np.ndarray, normals: np.ndarray | None, wrapped: Wrap, tre
             raise NotClosedError(f"the cloud is not a closed surface: an opening about "
                                  f"{widest:.4g} wide would have to be sealed (the widest hole "
                                  f"filled is {max_hole:.4g}: --max-hole)")
-    mesh = ClosedMesh(verts, faces, normals, cell, pieces, filled, max_hole)
+    mesh = ScanMesh(verts, faces, normals, cell, pieces, filled, max_hole)
     if mesh.filled_fraction > MAX_FILLED:
         # an open shell (a bowl, a curled sheet) closed by a lid as large as itself is not an
         # object with holes
@@ -281,7 +241,7 @@ MAX_FILE_MESH_VERTICES = 12_000
 FILE_MESH_EDGES = 48
 
 
-def mesh_from_faces(vertices: np.ndarray, faces: np.ndarray) -> tuple[ClosedMesh | None, str]:
+def mesh_from_faces(vertices: np.ndarray, faces: np.ndarray) -> tuple[ScanMesh | None, str]:
     """A file's own triangle mesh (V, 3), (F, 3) as the closed mesh of a network fit, oriented
     outward, or None and why it cannot serve (not watertight, inconsistent winding, too dense)."""
     import trimesh
@@ -305,5 +265,5 @@ def mesh_from_faces(vertices: np.ndarray, faces: np.ndarray) -> tuple[ClosedMesh
     faces = np.asarray(mesh.faces, np.int64)
     if mesh.volume < 0:
         faces = faces[:, ::-1].copy()
-    return ClosedMesh(np.asarray(mesh.vertices, np.float64), faces,
+    return ScanMesh(np.asarray(mesh.vertices, np.float64), faces,
                       np.asarray(mesh.vertex_normals, np.float64), 0.0, int(mesh.body_count)), ""

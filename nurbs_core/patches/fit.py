@@ -19,6 +19,11 @@ It couples x, y and z, so the normal equations are one sparse (3K, 3K) system. T
 moves to its foot point on the new network (Gauss-Newton from where it was, and the nearest of a
 dense grid of samples, so a point may change patch), and the normals are taken again.
 
+On an open network (a scan with a border) every free patch side is also drawn to the scan's
+border: ``w_border (1 / B) sum_b ((S_b - nearest border point) . m_b)^2`` at samples b along
+the free sides, m_b the direction across the side in the tangent plane, so the network ends
+where the scan ends instead of running on past it (and may slide along it).
+
 Before the cloud, a few *wrap* passes fit the network to the nearest points of the closed mesh
 from a grid on each patch (the layout's bilinear quads lie inside convex parts, so foot points
 from the cloud would pile up along its edges). After the passes settle, the control grid of
@@ -70,6 +75,10 @@ POINTS_PER_CONTROL = 4
 EDGE_HOLD = 0.2
 #: Seam samples per edge per control point of a side.
 SEAM_SAMPLES = 2
+#: Weight of the border term (relative to the whole data term), and its samples per free side
+#: per control point of a side.
+BORDER_WEIGHT = 2.0
+BORDER_SAMPLES = 2
 
 
 @dataclass
@@ -114,11 +123,14 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
                 reference: np.ndarray, *, size: int | None = None, stiffness: float = STIFFNESS,
                 seam_weight: float = SEAM_WEIGHT, tolerance: float | None = None,
                 max_size: int = SIZES[-1], passes_per_grid: int = PASSES_PER_GRID,
-                noise: float | None = None) -> Iterator[NetworkPass]:
+                noise: float | None = None,
+                border: np.ndarray | None = None) -> Iterator[NetworkPass]:
     """Fit a network over the layout (``vertices`` (V, 3), ``quads`` (P, 4)) to ``points``
     (N, 3), passes as they finish; the last has ``done``. ``reference`` (M, 3): points of the
-    closed mesh for the wrap passes. ``size``: control points per patch side (None: grow while
-    Cp falls, from 6); ``tolerance``: grow until the RMS distance is below it (cloud units)."""
+    scan's mesh for the wrap passes. ``size``: control points per patch side (None: grow while
+    Cp falls, from 6); ``tolerance``: grow until the RMS distance is below it (cloud units);
+    ``border`` (B, 3): points along the scan's border, densely (an open network's free sides
+    are drawn to them)."""
     points = np.asarray(points, np.float64)
     lo, hi = points.min(axis=0), points.max(axis=0)
     frame = _Frame(0.5 * (lo + hi), float(np.linalg.norm(hi - lo)) or 1.0)
@@ -135,7 +147,8 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
         first = max([s for s in fits if s <= START_SIZE], default=SIZES[0])
         sizes = [s for s in SIZES if first <= s <= max_size] or [first]
     network = build_network(frame.inward(vertices), quads, size=sizes[0])
-    solver = _Solver(stiffness, seam_weight)
+    solver = _Solver(stiffness, seam_weight,
+                     None if border is None or not len(border) else frame.inward(border))
     count = 0
     ref_tree = cKDTree(ref)
     for _ in range(WRAP_PASSES):
@@ -266,9 +279,11 @@ class _Solver:
     """The pass's sparse solve (see the module docstring); remembers the fairing matrix per
     network size and the last seam angle it saw."""
 
-    def __init__(self, stiffness: float, seam_weight: float) -> None:
+    def __init__(self, stiffness: float, seam_weight: float,
+                 border: np.ndarray | None = None) -> None:
         self.stiffness = stiffness
         self.seam_weight = seam_weight
+        self.border = None if border is None else cKDTree(border)
         self._fairing: dict[tuple[int, int], scipy.sparse.csr_matrix] = {}
         self.last_seam = math.nan
 
@@ -299,9 +314,31 @@ class _Solver:
             weight = self.seam_weight * _patch_area(network) / g.shape[0]
             system = system + weight * (g.T @ g)
             rhs = rhs + weight * (g.T @ h)
+        if self.border is not None and not network.closed:
+            g, h = self.border_rows(network)
+            weight = BORDER_WEIGHT / max(g.shape[0], 1)
+            system = system + weight * (g.T @ g)
+            rhs = rhs + weight * (g.T @ h)
         system = system + 1e-12 * scipy.sparse.identity(3 * k, format="csr")
         solution = solve_spd(system, rhs)
         return network.with_control_points(solution.reshape(3, k).T), seam
+
+
+    def border_rows(self, network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarray]:
+        """Rows (M, 3K) and targets (M,) drawing samples of the free sides to the border: each
+        sample's offset to its nearest border point, measured across the side in the surface's
+        tangent plane (along the side it may slide, so samples do not bunch up on the border's
+        nearest points and fold the patch)."""
+        assert self.border is not None
+        m = BORDER_SAMPLES * network.size
+        patch, uv = network.free_side_samples((np.arange(m) + 0.5) / m)
+        s, su, sv = evaluate(network, patch, uv[:, 0], uv[:, 1])
+        along_u = np.isin(uv[:, 1], (0.0, 1.0))         # a v0 / v1 side runs along u
+        across = unit(np.cross(np.where(along_u[:, None], su, sv), unit(np.cross(su, sv))))
+        nearest = self.border.data[self.border.query(s)[1]]
+        b = rows(network, patch, uv[:, 0], uv[:, 1])
+        g = scipy.sparse.hstack([b.multiply(across[:, [c]]) for c in range(3)], format="csr")
+        return g, (across * nearest).sum(axis=1)
 
 
 def _fairing_share(network: PatchNetwork) -> float:

@@ -5,8 +5,9 @@ orientation field and a 4-PoSy position field on the mesh and extracts a quad-do
 split once into pure quads. Its in-memory call returns triangles, so the layout goes through
 ``remesh_file`` and the OBJ it writes (which keeps the quads). The raw layout is then cleaned:
 
-* a vertex of valence 2 (two quads folded onto each other along two edges) is removed and its
-  two quads merged into one;
+* an interior vertex of valence 2 (two quads folded onto each other along two edges) is removed
+  and its two quads merged into one (on an open mesh's border, two quads at a vertex are
+  regular);
 * the layout must be an oriented 2-manifold with the input's Euler characteristic (same genus,
   nothing torn), oriented like the input mesh (outward on a closed, outward mesh), with no
   quad turned over and no reflex corner (a dart folds its patch).
@@ -148,13 +149,16 @@ def _read_obj(path: str | os.PathLike[str]) -> tuple[np.ndarray, list[list[int]]
 
 
 def _clean(vertices: np.ndarray, faces: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
-    """Pure quads without valence-2 vertices, unused vertices dropped."""
+    """Pure quads without interior valence-2 vertices, unused vertices dropped."""
     if not faces or any(len(f) != 4 for f in faces):
         raise LayoutError("the layout is not made of quads only")
     faces = [list(f) for f in faces]
     for _ in range(len(faces)):
         uses = Counter(v for f in faces for v in f)
-        twos = [v for v, c in uses.items() if c == 2]
+        # on an open layout a border vertex of two quads is regular: leave it
+        sides = Counter(tuple(sorted((f[k], f[(k + 1) % 4]))) for f in faces for k in range(4))
+        border = {v for side, c in sides.items() if c == 1 for v in side}
+        twos = [v for v, c in uses.items() if c == 2 and v not in border]
         if not twos:
             break
         v = twos[0]

@@ -142,6 +142,22 @@ class PatchNetwork:
                                np.where(flip, 1.0 - tt, tt))
         return pa, uva, pb, uvb
 
+    def free_sides(self) -> list[tuple[int, str]]:
+        """(patch, side) of every patch side no other patch shares: the border of an open
+        network (empty when closed)."""
+        shared = {(e.a, e.side_a) for e in self.edges} | {(e.b, e.side_b) for e in self.edges}
+        return [(p, side) for p in range(self.patch_count) for side, _ in SIDES
+                if (p, side) not in shared]
+
+    def free_side_samples(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every free side at side parameters t (T,): (patch (S T,), uv (S T, 2)), side-major."""
+        t = np.asarray(t, np.float64)
+        free = self.free_sides()
+        patch = np.repeat([p for p, _ in free], len(t)).astype(np.int64)
+        uv = sides_parameters(np.repeat([side for _, side in free], len(t)),
+                              np.tile(t, len(free)))
+        return patch, uv
+
     def corner_samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every patch's four corners: (patch (4P,), uv (4P, 2), layout vertex (4P,))."""
         patch, slot = np.divmod(np.arange(4 * self.patch_count), 4)

@@ -18,12 +18,13 @@ from typing import Any
 
 import numpy as np
 
-from nurbs_core.patches.closed_mesh import ClosedMesh, closed_mesh
+from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
 from nurbs_core.patches.fit import NetworkPass, fit_network
 from nurbs_core.patches.layout import LayoutError, QuadLayout, quad_layout
 from nurbs_core.patches.measures import NetworkQuality, network_quality
 from nurbs_core.patches.network import PatchNetwork
 from nurbs_core.patches.options import PatchOptions
+from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import WARN_FLIPPED, reported_status
 
 #: The first patch count ``auto`` tries, how much finer each retry is, and the most it goes to.
@@ -50,7 +51,7 @@ class PatchEvent:
     "done" (result set)."""
 
     kind: str
-    mesh: ClosedMesh | None = None
+    mesh: ScanMesh | None = None
     layout: QuadLayout | None = None
     fit_pass: NetworkPass | None = None
     result: PatchResult | None = None
@@ -64,7 +65,7 @@ class PatchResult:
     network: PatchNetwork
     quality: NetworkQuality
     layout: QuadLayout
-    mesh: ClosedMesh
+    mesh: ScanMesh
     timings: dict[str, float]
     warnings: list[str] = field(default_factory=list)
     passes: int = 0
@@ -96,7 +97,7 @@ def layout_turn(layout: QuadLayout) -> float:
     return worst
 
 
-def choose_layout(mesh: ClosedMesh, patches: int | str, points: int | None = None) -> QuadLayout:
+def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None) -> QuadLayout:
     """The layout for a target count; for "auto" the coarsest that turns by at most
     ``MAX_LAYOUT_TURN`` between neighbours, or, when finer layouts stop turning less (a sharp
     edge turns whatever the size), the one that turned least. ``points``: the cloud's size,
@@ -128,9 +129,35 @@ def choose_layout(mesh: ClosedMesh, patches: int | str, points: int | None = Non
     raise LayoutError(f"no layout of up to {most} patches fits the shape: {last_error}")
 
 
+#: The border's points are this many per mesh edge along it (the fit's border term draws the
+#: free sides to the nearest of them).
+BORDER_DENSITY = 4
+
+
+def border_points(mesh: ScanMesh) -> np.ndarray | None:
+    """(B, 3) points along every loop of the mesh's border, densely (None on a closed mesh)."""
+    if not mesh.border:
+        return None
+    t = np.arange(BORDER_DENSITY)[:, None, None] / BORDER_DENSITY
+    return np.concatenate([((1 - t) * loop + t * np.roll(loop, -1, axis=0)).reshape(-1, 3)
+                           for loop in mesh.border])
+
+
+def scan_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
+    """The mesh a network is laid out on: the closed mesh of a closed object (holes up to
+    ``max_hole`` sealed), else the bounded mesh of an open shell."""
+    from nurbs_core.patches.open_mesh import open_mesh
+
+    try:
+        return closed_mesh(points, max_hole=max_hole)
+    except NotClosedError:
+        return open_mesh(points, max_hole=max_hole)
+
+
 def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
-                   mesh: ClosedMesh | None = None) -> Iterator[PatchEvent]:
-    """The steps of fitting a patch network to a closed object's cloud (N, 3)."""
+                   mesh: ScanMesh | None = None) -> Iterator[PatchEvent]:
+    """The steps of fitting a patch network to a cloud (N, 3): a closed object's or an open
+    shell's (its mesh built by :func:`scan_mesh` unless given)."""
     options = options or PatchOptions()
     options.validate()
     points = np.asarray(points, np.float64)
@@ -142,7 +169,7 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     timings: dict[str, float] = {}
     start = time.perf_counter()
     if mesh is None:
-        mesh = closed_mesh(points, max_hole=options.max_hole)
+        mesh = scan_mesh(points, options.max_hole)
     timings["mesh"] = time.perf_counter() - start
     yield PatchEvent("mesh", mesh=mesh)
     start = time.perf_counter()
@@ -162,7 +189,7 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     for last in fit_network(fitted, layout.vertices, layout.quads, mesh.vertices,
                             size=options.size, stiffness=options.stiffness,
                             seam_weight=options.seam_weight, tolerance=options.tolerance,
-                            max_size=options.max_size):
+                            max_size=options.max_size, border=border_points(mesh)):
         yield PatchEvent("pass", layout=layout, fit_pass=last)
     timings["fit"] = time.perf_counter() - start
     assert last is not None, "fit_network yields at least one pass"

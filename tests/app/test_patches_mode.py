@@ -238,11 +238,10 @@ def test_closing_mid_fit_stops_the_worker_at_once(qtbot, window, tmp_path):
     assert not window.patch_controller.is_busy() and window.live_timers() == 0
 
 
-@pytest.mark.parametrize("cloud", ["few points", "open sheet"])
-def test_engine_refusals_show_a_message_not_a_traceback(qtbot, window, tmp_path, cloud):
+def test_engine_refusals_show_a_message_not_a_traceback(qtbot, window, tmp_path):
     from nurbs_core import samples
 
-    points = samples.sphere(60).points if cloud == "few points" else samples.saddle(1500).points
+    points = samples.sphere(60).points
     _open_cloud(qtbot, window, tmp_path, "cloud", points)
     _patches_mode(window)
     shown = []
@@ -251,8 +250,7 @@ def test_engine_refusals_show_a_message_not_a_traceback(qtbot, window, tmp_path,
         assert window.start_fit()
     message = blocker.args[0]
     assert message.startswith("Cannot fit patches: ") and len(message) > 40  # the engine's why
-    if cloud == "few points":
-        assert "at least 100 points" in message
+    assert "at least 100 points" in message
     qtbot.waitUntil(lambda: not window.patch_controller.is_busy(), timeout=FIT_TIMEOUT_MS)
     assert shown == [message] and window._message_box.isVisible()
     assert window.fit_as_patches_button is None  # already patches: nothing more to offer
@@ -347,3 +345,16 @@ def test_network_display_matches_the_engine_tessellation_and_seams():
     assert stage_text(snapshot) == "Polish pass 2"
     assert stage_text(PatchSnapshot(1, "layout", display, "layout", patch_count=42)) == (
         "Layout: 42 patches")
+
+
+def test_patches_mode_fits_an_open_sheet_as_an_open_network(qtbot, window, tmp_path):
+    """An open sheet in Patches mode is no longer refused: the network ends at its border."""
+    from nurbs_core import samples
+
+    _open_cloud(qtbot, window, tmp_path, "sheet", samples.saddle(1500).points)
+    _patches_mode(window)
+    with qtbot.waitSignal(window.patch_controller.fit_finished, timeout=FIT_TIMEOUT_MS):
+        assert window.start_fit()
+    qtbot.waitUntil(lambda: not window.patch_controller.is_busy(), timeout=FIT_TIMEOUT_MS)
+    network = window.document.network
+    assert network is not None and not network.closed and network.free_sides()

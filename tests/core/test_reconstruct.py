@@ -152,20 +152,26 @@ def test_nurbs_fit_seals_the_holes_of_a_scan_and_says_so(holed_blob, tmp_path, c
     assert read_network(out).closed
 
 
-def test_an_open_surface_with_a_handle_is_refused_saying_what_it_needs(tmp_path, capsys):
-    """A torus with an opening wider than --max-hole: not closed, not a disk. Neither route
-    holds it, and the message says so (not "use --patches", which would refuse too)."""
+@pytest.mark.slow
+def test_an_open_surface_with_a_handle_becomes_an_open_network(tmp_path, capsys):
+    """A torus with an opening wider than --max-hole: not closed, and one patch cannot hold it
+    (a handle). The automatic route turns to an open network, whose border follows the opening
+    and whose area is the kept part's."""
     from nurbs_core.cli import main
+    from nurbs_core.io.network_io import read_network
 
     shape = samples.torus(4000, truth_count=1000)
-    points = shape.points[np.linalg.norm(shape.points - shape.points[0], axis=1)
-                          > 0.15 * shape.diagonal]
-    source = tmp_path / "open_torus.xyz"
-    np.savetxt(source, points)
-    assert main([str(source), "-o", str(tmp_path / "t.json")]) == 1
-    error = capsys.readouterr().err.strip().splitlines()[-1]
-    assert "encloses no volume" in error and "open network" in error
-    assert "--single-patch" in error and "--patches auto" not in error
+    kept = np.linalg.norm(shape.points - shape.points[0], axis=1) > 0.15 * shape.diagonal
+    source, out = tmp_path / "open_torus.xyz", tmp_path / "t.json"
+    np.savetxt(source, shape.points[kept])
+    assert main([str(source), "-o", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert "one patch does not hold cleanly" in captured.err and "handle" in captured.err
+    assert "an open network of patches" in captured.err
+    area = float(captured.out.split("; area ")[1].split(";")[0])
+    assert abs(area / (shape.true_area * kept.mean()) - 1) < 0.05
+    network = read_network(out)
+    assert not network.closed and network.free_sides()
 
 
 @pytest.mark.slow

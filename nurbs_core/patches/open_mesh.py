@@ -1,0 +1,228 @@
+"""A bounded mesh of an open shell's cloud (a head without its base, a vessel, a stabiliser).
+
+An open shell's wrap encloses nothing (:mod:`nurbs_core.reconstruct.wrap`), so no side of it is
+"outside" and the closed mesh's signs do not exist. The open mesh keeps what does:
+
+* normals oriented by propagation: PCA normals flipped along the minimum spanning tree of the
+  k-nearest-neighbour graph weighted by ``1 - |n_i . n_j|`` (Hoppe et al. 1992), so the sign
+  travels over the smoothest path; the first point (the farthest from the centroid) faces away
+  from it;
+* Hoppe's tangent-plane distance ``d(x) = sum_k w_k (x - p_k) . n_k / sum_k w_k`` sampled only
+  in the band of voxels the points block (each point's ball as wide as its neighbourhood, as in
+  the wrap) and blurred inside that band;
+* marching cubes (scikit-image) of its zero set, masked by the band: the surface ends where the
+  band ends, about one point spacing beyond the scan's border.
+
+Then the mesh is made a clean 2-manifold for a layout: the largest piece, the faces at a vertex
+where two fans touch removed, holes narrower than ``max_hole`` (and pin-holes) capped
+(``filled``; the widest opening always stays). The mesh runs on past the last points by about a
+point spacing (the band's reach); the network's border term draws the fit back to the border. The openings
+that stay are the scan's **border**: each loop pulled onto the cloud's outermost points and
+smoothed along itself, which the network's free sides then follow.
+
+numpy + scipy + scikit-image only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.ndimage
+import scipy.sparse
+import scipy.sparse.csgraph
+from scipy.spatial import cKDTree
+
+from nurbs_core.patches.closed_mesh import (
+    MAX_HOLE,
+    NEIGHBOURS,
+    SMOOTHING,
+    WRAP_POINTS,
+    _grid,
+    _largest_piece,
+)
+from nurbs_core.patches.scan_mesh import ScanMesh
+from nurbs_core.reconstruct.wrap import NEIGHBOURS as NORMAL_NEIGHBOURS
+from nurbs_core.reconstruct.wrap import blocked_voxels, point_radii
+from nurbs_core.surfacing.mesh import voxel_subsample
+from nurbs_core.surfacing.neighbours import local_frames
+
+#: The band the distance is sampled in: the blocked voxels grown by this many cells (the blur
+#: needs room), and the marching-cubes mask: grown by MASK_GROWTH.
+BAND_GROWTH = 2
+MASK_GROWTH = 1
+#: Openings narrower than this many cells are pin-holes of the band, always capped.
+PIN_HOLE = 2.0
+#: The border is smoothed along itself by a Gaussian of this many of its own vertices.
+BORDER_SMOOTHING = 3.0
+
+
+class NotASurfaceError(ValueError):
+    """The cloud holds no surface a mesh can be built on."""
+
+
+def open_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
+    """The bounded mesh (see the module docstring) of an open shell's cloud (N, 3). ``max_hole``:
+    openings up to this wide (a length) are capped (None: ``MAX_HOLE`` x the diagonal; 0:
+    none); wider ones are the border. Raises :class:`NotASurfaceError` when nothing is left."""
+    points = np.asarray(points, np.float64)
+    if len(points) < 20:
+        raise NotASurfaceError(f"{len(points)} points hold no surface")
+    diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
+    max_hole = MAX_HOLE * diagonal if max_hole is None else float(max_hole)
+    if len(points) > WRAP_POINTS:
+        points = voxel_subsample(points, WRAP_POINTS)[1]
+    tree = cKDTree(points)
+    frames = local_frames(points, NORMAL_NEIGHBOURS, tree)
+    normals = propagated_normals(points, frames.normals, frames.neighbours)
+    grid = _grid(points)
+    radii = point_radii(points, grid.cell, tree)
+    blocked = blocked_voxels(points, radii, grid)
+    band = scipy.ndimage.binary_dilation(blocked, iterations=BAND_GROWTH)
+    centres = grid.centres()[band.ravel()]
+    distance, nearest = tree.query(centres, k=NEIGHBOURS)
+    offsets = centres[:, None, :] - points[nearest]
+    plane = np.einsum("gkc,gkc->gk", offsets, normals[nearest])
+    weights = 1.0 / np.maximum(distance, 1e-3 * grid.cell) ** 2
+    field = np.zeros(grid.shape)
+    field[band] = (plane * weights).sum(axis=1) / weights.sum(axis=1)
+    # blurred inside the band only (a normalised convolution: the zeros outside do not leak in)
+    inside = band.astype(np.float64)
+    field = (scipy.ndimage.gaussian_filter(field * inside, SMOOTHING)
+             / np.maximum(scipy.ndimage.gaussian_filter(inside, SMOOTHING), 1e-12))
+    mask = scipy.ndimage.binary_dilation(blocked, iterations=MASK_GROWTH)
+    if field[mask].min() >= 0 or field[mask].max() <= 0:
+        raise NotASurfaceError("the cloud's distance field has no zero set")
+    from skimage.measure import marching_cubes
+
+    vertices, faces, _, _ = marching_cubes(field, 0.0, spacing=(grid.cell,) * 3, mask=mask)
+    vertices = vertices + grid.origin
+    faces, pieces = _largest_piece(faces.astype(np.int64), len(vertices))
+    faces = _without_pinches(faces)
+    faces, _ = _largest_piece(faces, len(vertices))
+    vertices, faces = _compacted(vertices, faces)
+    # faces turned like the points' normals
+    centroid = vertices[faces].mean(axis=1)
+    face_normal = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
+                           vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    agree = np.einsum("ij,ij->i", face_normal, normals[tree.query(centroid)[1]])
+    if (agree < 0).sum() > (agree > 0).sum():
+        faces = faces[:, ::-1].copy()
+    loops = boundary_loops(faces)
+    widths = [float(np.linalg.norm(np.ptp(vertices[loop], axis=0))) for loop in loops]
+    filled = np.zeros(len(vertices), bool)
+    border: list[np.ndarray] = []
+    new_vertices, new_faces = [vertices], [faces]
+    count = len(vertices)
+    for number, (loop, width) in enumerate(zip(loops, widths)):
+        ring = vertices[loop]
+        if width <= max(max_hole, PIN_HOLE * grid.cell) and number != int(np.argmax(widths)):
+            # a hole: a fan from its centroid (the fit fairs it)
+            new_vertices.append(ring.mean(axis=0)[None])
+            new_faces.append(np.column_stack([np.roll(loop, -1), loop, np.full(len(loop), count)]))
+            filled = np.append(filled, True)
+            filled[loop] = True
+            count += 1
+        else:
+            border.append(_border_curve(ring, points, tree))
+    if not border:
+        raise NotASurfaceError("the cloud's mesh has no border: it is closed")
+    vertices, faces = np.concatenate(new_vertices), np.concatenate(new_faces)
+    return ScanMesh(vertices, faces, normals, grid.cell, pieces, filled if filled.any() else None,
+                    max_hole, border)
+
+
+def propagated_normals(points: np.ndarray, normals: np.ndarray,
+                       neighbours: np.ndarray) -> np.ndarray:
+    """Unit normals (N, 3) of ``normals`` (N, 3) with consistent signs: flipped along the
+    minimum spanning tree of the ``neighbours`` (N, k) graph weighted by ``1 - |n_i . n_j|``,
+    from the point farthest from the centroid (turned away from it) in each connected part."""
+    count = len(points)
+    rows = np.repeat(np.arange(count), neighbours.shape[1])
+    cols = neighbours.ravel()
+    keep = rows != cols
+    rows, cols = rows[keep], cols[keep]
+    weight = 1.0 - np.abs(np.einsum("ij,ij->i", normals[rows], normals[cols])) + 1e-6
+    graph = scipy.sparse.coo_matrix((weight, (rows, cols)), shape=(count, count)).tocsr()
+    tree = scipy.sparse.csgraph.minimum_spanning_tree(graph.maximum(graph.T))
+    tree = (tree + tree.T).tocsr()
+    parts, label = scipy.sparse.csgraph.connected_components(tree, directed=False)
+    oriented = np.array(normals, np.float64)
+    centre = points.mean(axis=0)
+    reach = np.linalg.norm(points - centre, axis=1)
+    for part in range(parts):
+        members = np.flatnonzero(label == part)
+        seed = int(members[np.argmax(reach[members])])
+        if oriented[seed] @ (points[seed] - centre) < 0:
+            oriented[seed] = -oriented[seed]
+        order, parent = scipy.sparse.csgraph.breadth_first_order(tree, seed, directed=False)
+        for i in order[1:]:
+            if oriented[i] @ oriented[parent[i]] < 0:
+                oriented[i] = -oriented[i]
+    return oriented
+
+
+def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
+    """The boundary of a consistently oriented manifold triangle mesh (F, 3): one ordered loop
+    of vertex indices per opening, walked the way its faces turn."""
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    edges = set(map(tuple, directed.tolist()))
+    following = {a: b for a, b in edges if (b, a) not in edges}
+    loops, seen = [], set()
+    for start in following:
+        if start in seen:
+            continue
+        loop, current = [start], following[start]
+        seen.add(start)
+        while current != start and current in following and current not in seen:
+            loop.append(current)
+            seen.add(current)
+            current = following[current]
+        loops.append(np.asarray(loop, np.int64))
+    return loops
+
+
+def _without_pinches(faces: np.ndarray) -> np.ndarray:
+    """The faces without those around a vertex where separate fans of faces touch (a bowtie:
+    not a manifold), repeated until none is left."""
+    for _ in range(8):
+        wedges: dict[int, list[tuple[int, int]]] = {}
+        for a, b, c in faces.tolist():
+            wedges.setdefault(a, []).append((b, c))
+            wedges.setdefault(b, []).append((c, a))
+            wedges.setdefault(c, []).append((a, b))
+        pinched = []
+        for vertex, fan in wedges.items():
+            forward = dict(fan)
+            backward = {b: a for a, b in fan}
+            start = fan[0][0]
+            reached, current = {start}, start
+            while current in forward and forward[current] not in reached:
+                current = forward[current]
+                reached.add(current)
+            current = start
+            while current in backward and backward[current] not in reached:
+                current = backward[current]
+                reached.add(current)
+            closed = all(a in backward for a in forward)
+            if len(forward) != len(fan) or len(reached) < len(fan) + (0 if closed else 1):
+                pinched.append(vertex)
+        if not pinched:
+            break
+        bad = np.zeros(int(faces.max()) + 1, bool)
+        bad[pinched] = True
+        faces = faces[~bad[faces].any(axis=1)]
+    return faces
+
+
+def _compacted(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    used = np.unique(faces)
+    remap = np.full(len(vertices), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return vertices[used], remap[faces]
+
+
+def _border_curve(ring: np.ndarray, points: np.ndarray, tree: cKDTree) -> np.ndarray:
+    """A border loop (L, 3) of the mesh moved onto the scan: each vertex to its nearest cloud
+    point (the band ends about a spacing beyond the last points), then smoothed along the loop
+    (a circular Gaussian) so the voxel staircase and the point spacing do not show."""
+    pulled = points[tree.query(ring)[1]]
+    return scipy.ndimage.gaussian_filter1d(pulled, BORDER_SMOOTHING, axis=0, mode="wrap")

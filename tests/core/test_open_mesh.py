@@ -1,0 +1,129 @@
+"""Open shells (a head scanned without its base, a torus with an opening): the bounded mesh of
+:mod:`nurbs_core.patches.open_mesh` and the open network the automatic route fits over it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from nurbs_core import samples
+from nurbs_core.patches.layout import euler_characteristic
+from nurbs_core.patches.open_mesh import NotASurfaceError, boundary_loops, open_mesh
+from nurbs_core.route import open_network_instead, single_patch_problems
+
+#: the head is cut here (its base, below the chin, is not scanned)
+CUT = -0.5
+
+
+@pytest.fixture(scope="module")
+def open_head():
+    """A head sampled uniformly in its parameters (uneven density, as a scan), without its base;
+    the truth kept with it."""
+    shape = samples.head(6000, truth_count=20_000)
+    kept = shape.points[:, 2] > CUT
+    truth = shape.truth[:, 2] > CUT
+    return shape, shape.points[kept], truth
+
+
+def test_the_open_head_is_one_disk_bounded_where_the_scan_ends(open_head):
+    shape, points, _ = open_head
+    mesh = open_mesh(points)
+    assert not mesh.closed and len(mesh.border) == 1
+    assert euler_characteristic(mesh.faces.tolist()) == 1          # a disk: no handle, no hole
+    assert len(boundary_loops(mesh.faces)) == 1
+    # where the scan is, the mesh lies on the head (no web, no flap; past the last points it may
+    # run on for a spacing or two, which the network's border term draws back)
+    scanned = mesh.vertices[:, 2] > CUT
+    tree = cKDTree(shape.truth)
+    distance = shape.distance_to_truth(mesh.vertices[scanned],
+                                       tree.query(mesh.vertices[scanned], k=4)[1])
+    assert scanned.mean() > 0.9 and distance.max() < 0.01 * shape.diagonal
+    # the border runs along the cut (within the sparse band's spacing)
+    off = np.abs(mesh.border[0][:, 2] - CUT)
+    assert off.max() < 0.02 * shape.diagonal and off.mean() < 0.01 * shape.diagonal
+
+
+def test_propagated_normals_are_consistent_over_uneven_sampling(open_head):
+    shape, points, _ = open_head
+    mesh = open_mesh(points)
+    nearest = cKDTree(shape.truth).query(points)[1]
+    agree = np.einsum("ij,ij->i", mesh.normals, shape.truth_normals[nearest]) > 0
+    assert max(agree.mean(), 1 - agree.mean()) > 0.995
+
+
+def test_holes_narrower_than_max_hole_are_capped_in_an_open_mesh(open_head):
+    """A hole 0.2 x the diagonal wide in the side of the open head: wider than the default
+    max_hole (0.1 x the diagonal), it stays a second border loop; with max_hole above its width
+    it is capped (and only the base stays open)."""
+    shape, points, _ = open_head
+    centre = points[np.argmax(points[:, 1] + points[:, 2])]        # high on the side of the head
+    holed = points[np.linalg.norm(points - centre, axis=1) > 0.1 * shape.diagonal]
+    kept = open_mesh(holed)
+    assert len(kept.border) == 2
+    capped = open_mesh(holed, max_hole=0.3 * shape.diagonal)
+    assert len(capped.border) == 1 and capped.filled is not None and capped.filled.any()
+    assert np.abs(capped.border[0][:, 2] - CUT).max() < 0.02 * shape.diagonal
+
+
+def test_too_few_points_hold_no_surface():
+    with pytest.raises(NotASurfaceError, match="no surface"):
+        open_mesh(np.random.default_rng(0).normal(size=(10, 3)))
+
+
+def test_a_clean_single_patch_stays_and_a_poor_one_turns_to_the_open_network(open_head):
+    assert single_patch_problems("converged", {"flipped_fraction": 0.0, "coverage": 1.0}) == ""
+    assert single_patch_problems("stopped", {"coverage": 0.5}) == ""   # the user stopped it
+    assert "not covered" in single_patch_problems("converged", {"coverage": 0.8})
+    assert single_patch_problems("", None) == "one patch cannot hold it"
+    _, points, _ = open_head
+    route = open_network_instead(points, "20.0% of the cloud is not covered")
+    assert route is not None and route.kind == "network"
+    assert route.mesh is not None and not route.mesh.closed
+    assert "an open network of patches" in route.reason and "not covered" in route.reason
+
+
+@pytest.mark.slow
+def test_nurbs_fit_turns_an_open_head_into_an_open_network_that_meets_the_targets(
+        open_head, tmp_path, capsys):
+    """The head without its base, as a user runs it: one patch leaves part of the head
+    uncovered, so the route fits an open network; it meets the issue's targets against the
+    truth, and OpenCASCADE reads its STEP back as one valid open shell."""
+    from nurbs_core.cli import main
+    from nurbs_core.io.network_io import read_network
+    from nurbs_core.patches.measures import surface_samples
+
+    shape, points, truth_kept = open_head
+    source, out, step = tmp_path / "head.xyz", tmp_path / "head.json", tmp_path / "head.step"
+    np.savetxt(source, points)
+    assert main([str(source), "-o", str(out), str(step)]) == 0
+    captured = capsys.readouterr()
+    assert "an open network of patches" in captured.err
+    # the status is honest: converged, or its warning names the seams (a border corner of the
+    # layout can crease: the known limit of open networks today)
+    status = captured.out.split("status: ")[1].splitlines()[0]
+    assert status == "converged" or (status == "fitted with warnings"
+                                     and "seams are not tangent" in captured.out)
+    network = read_network(out)
+    assert not network.closed
+    s, normals, area = surface_samples(network)
+    kept_area = shape.true_area * truth_kept.mean()
+    assert abs(area.sum() / kept_area - 1) < 0.05
+    nearest = cKDTree(shape.truth).query(s)[1]
+    # no part farther than 1.5% of the diagonal from the true head, and no fold
+    assert shape.distance_to_truth(s, nearest).max() < 0.015 * shape.diagonal
+    against = np.einsum("ij,ij->i", normals, shape.truth_normals[nearest]) < 0
+    flipped = area[against].sum() / area.sum()
+    assert min(flipped, 1 - flipped) < 0.01
+    pytest.importorskip("OCP")
+    from OCP.BRepCheck import BRepCheck_Analyzer
+    from OCP.STEPControl import STEPControl_Reader
+    from OCP.TopAbs import TopAbs_SHELL
+    from OCP.TopExp import TopExp_Explorer
+
+    reader = STEPControl_Reader()
+    assert reader.ReadFile(str(step)) == 1
+    reader.TransferRoots()
+    shape_read = reader.OneShape()
+    assert BRepCheck_Analyzer(shape_read).IsValid()
+    assert TopExp_Explorer(shape_read, TopAbs_SHELL).More()
