@@ -638,10 +638,19 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
         if route.kind == "network":
             from nurbs_core.io.dispatch import NETWORK_SUFFIXES
             from nurbs_core.io.outputs import check_output_paths
+            from nurbs_core.patches.layout import LayoutError
+            from nurbs_core.route import without_layout
 
             check_output_paths(outputs, [args.input], suffixes=NETWORK_SUFFIXES)
-            return run_patches(args, options, outputs, points=points, mesh=route.mesh,
-                               mesh_seconds=route.seconds)
+            try:
+                return run_patches(args, options, outputs, points=points, mesh=route.mesh,
+                                   mesh_seconds=route.seconds)
+            except LayoutError as error:
+                # a closed mesh no layout reproduces (handles a sparse scan invented): the
+                # cloud is fitted as an open surface instead, not refused
+                route = without_layout(route, error)
+                if not args.quiet:
+                    print(f"route: {route.reason}", file=sys.stderr)
         return _single_patch_or_open_network(args, options, outputs, points, route, stoppable)
     prepared = prepare_fit(args, points)
     return finish_fit(prepared, run_fit(prepared, stoppable))
@@ -685,8 +694,8 @@ def _single_patch_or_open_network(args: argparse.Namespace, options: PatchOption
                 raise ValueError(f"{route.finding}; one patch cannot hold it ({problems}) and "
                                  f"no open network could be laid out ({error}). --single-patch "
                                  "fits one patch anyway (the report shows its folds)") from None
-            print(f"no open network could be laid out ({error}); keeping the single patch",
-                  file=sys.stderr)
+            print(f"no open network could be laid out ({str(error).split(':')[0]}); keeping "
+                  "the single patch", file=sys.stderr)
     if result is None:
         assert refusal is not None
         raise ValueError(f"{route.finding} and one patch cannot hold it ({problems}); no open "

@@ -85,6 +85,23 @@ def _decide(points: np.ndarray, file_mesh: ScanMesh | None, file_mesh_note: str,
 
 
 
+def without_layout(route: Route, error: Exception) -> Route:
+    """The route after a closed object's network found no quad layout (its mesh has a genus a
+    layout cannot reproduce, often handles that a sparse scan's wrap invented): the open
+    surface's route (one patch, else an open network), with the reason."""
+    from nurbs_core.failures import one_line
+
+    mesh = route.mesh
+    genus = ""
+    if mesh is not None:
+        from nurbs_core.patches.layout import euler_characteristic
+
+        genus = f" (its mesh has Euler characteristic {euler_characteristic(mesh.faces.tolist())})"
+    why = one_line(str(error)).split(":")[0]
+    return Route("single_patch", f"{route.finding}, but no quad layout fits it{genus}: {why}; "
+                 "fitted as an open surface")
+
+
 def single_patch_problems(status: str, statistics: dict | None) -> str:
     """Why a single patch's result is not clean ("" when it is, or when it was stopped before
     its end): its quality problems, one clause. ``statistics``: the fit's statistics (None: one

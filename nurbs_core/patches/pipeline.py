@@ -108,14 +108,16 @@ def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None)
     target, last_error = AUTO_START, None
     best: tuple[float, QuadLayout] | None = None
     stalled = 0
-    while target <= most:
+    # a small cloud bounds the count; when no layout exists under that bound (a thin tube of a
+    # few hundred points), the first finer layout that exists is better than none
+    while target <= most or (best is None and target <= AUTO_MAX):
         try:
             layout = quad_layout(mesh.vertices, mesh.faces, target)
         except LayoutError as error:
             last_error = error
         else:
             turn = layout_turn(layout)
-            if turn <= MAX_LAYOUT_TURN:
+            if turn <= MAX_LAYOUT_TURN or target > most:
                 return layout
             if best is None or turn < best[0] - 2.0:
                 best, stalled = (turn, layout), 0
