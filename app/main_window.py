@@ -400,6 +400,7 @@ class MainWindow(QMainWindow):
         ctl.progress_changed.connect(self.fit_display.on_progress)
         ctl.fit_finished.connect(self.fit_display.on_fit_finished)
         ctl.fit_failed.connect(self._on_fit_failed)
+        ctl.fit_finished.connect(self._on_fit_finished)
         ctl.state_changed.connect(self._start_network_after_refusal)
 
     @Slot(str)
@@ -417,6 +418,26 @@ class MainWindow(QMainWindow):
             self._start_network_after_refusal()
             return
         self.report(message, error=True, offer_patches=self.controller.failure_needs_patches)
+
+    @Slot(object)
+    def _on_fit_finished(self, snapshot) -> None:
+        """A single patch finished. When it does not hold the surface cleanly (folds, overlaps,
+        an uncovered part: :func:`nurbs_core.route.single_patch_problems`, the route's own
+        test) and the user did not force one patch, the cloud goes on as a network of patches
+        (open or closed), as the command line's automatic route does; Undo returns to it."""
+        from nurbs_core.route import single_patch_problems
+
+        if (snapshot.display.kind != "surface" or self.document.settings.fit.single_patch
+                or self.document.settings.fit_mode != "single"):
+            return
+        problems = single_patch_problems(snapshot.status, snapshot.statistics)
+        if not problems:
+            return
+        self.report(f"One patch does not hold this cloud cleanly ({problems}): fitting it as "
+                    "a network of patches (Patches mode; Undo returns to one patch).")
+        self.document.edit_settings("Fit mode", fit_mode="patches")
+        self._network_after_refusal = True
+        self._start_network_after_refusal()
 
     @Slot(str)
     def _start_network_after_refusal(self, *_state):

@@ -20,10 +20,12 @@ from nurbs_core.patches.options import PatchOptions
 AUTO_COUNT, AUTO_SIZE = 3, 3
 MAX_COUNT, MAX_SIZE = 400, 40
 
-NOTE = ("Patches fits a closed object (a part, a sphere, a torus) with a network of bicubic "
-        "patches over a quad layout: shared boundary control points (no gaps) and tangent "
-        "seams. Choose it in the toolbar's Mode box; Start, Pause, Stop, Reset and File > "
-        "Export then work on the network.")
+NOTE = ("Patches fits a network of bicubic patches over a quad layout of the scan: shared "
+        "boundary control points (no gaps) and tangent seams; watertight on a closed object (a "
+        "part, a sphere, a torus), open on an open shell (a head without its base, a vessel), "
+        "ending where the scan ends. Start goes on here by itself when one patch cannot hold "
+        "the cloud cleanly. Start, Pause, Stop, Reset and File > Export then work on the "
+        "network.")
 
 HELP = {
     "patch_count": "patches the quad layout aims for (the layout may differ a little); auto: "

@@ -358,3 +358,36 @@ def test_patches_mode_fits_an_open_sheet_as_an_open_network(qtbot, window, tmp_p
     qtbot.waitUntil(lambda: not window.patch_controller.is_busy(), timeout=FIT_TIMEOUT_MS)
     network = window.document.network
     assert network is not None and not network.closed and network.free_sides()
+
+
+def test_start_on_an_open_head_goes_on_as_an_open_network_when_one_patch_is_poor(
+        qtbot, window, tmp_path):
+    """A head scanned without its base: one patch leaves part of it uncovered (the route's own
+    quality test), so the app goes on as an open network, as nurbs-fit does; Undo returns to
+    one patch."""
+    from nurbs_core import samples
+
+    shape = samples.head(6000)
+    _open_cloud(qtbot, window, tmp_path, "head", shape.points[shape.points[:, 2] > -0.5])
+    with qtbot.waitSignal(window.patch_controller.fit_finished, timeout=FIT_TIMEOUT_MS) as done:
+        window.start_action.trigger()
+    assert window.document.settings.fit_mode == "patches"
+    log = window.log_panel.toPlainText()
+    assert "One patch does not hold this cloud cleanly" in log and "not covered" in log
+    network = window.document.network
+    assert done.args[0].event == "done" and network is not None and not network.closed
+    window.undo_action.trigger()
+    assert window.document.settings.fit_mode == "single"
+
+
+def test_a_forced_single_patch_stays_one_patch_whatever_its_quality(qtbot, window, tmp_path):
+    from nurbs_core import samples
+
+    shape = samples.head(6000)
+    _open_cloud(qtbot, window, tmp_path, "head", shape.points[shape.points[:, 2] > -0.5])
+    window.document.edit_settings("Single patch", single_patch=True)
+    with qtbot.waitSignal(window.controller.fit_finished, timeout=FIT_TIMEOUT_MS):
+        window.start_action.trigger()
+    qtbot.waitUntil(lambda: not window.controller.is_busy(), timeout=FIT_TIMEOUT_MS)
+    assert window.document.settings.fit_mode == "single"
+    assert not window.patch_controller.is_busy()
