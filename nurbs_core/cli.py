@@ -518,8 +518,11 @@ def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[P
     print(f"patches: {quality.patches} ({quality.size}x{quality.size} control points each, "
           f"bicubic); {result.passes} passes in {sum(result.timings.values()):.2f} s "
           f"({', '.join(f'{k} {v:.1f} s' for k, v in result.timings.items())})")
-    print(f"watertight: largest gap {seam.gap:.3g} ({quality.gap_relative:.2g} of the diagonal "
-          f"{quality.diagonal:.6g}); closed: {result.network.closed}")
+    free = len(result.network.free_sides())
+    shape = ("closed (watertight)" if result.network.closed
+             else f"open: {free} patch sides on the scan's border")
+    print(f"seams: largest gap {seam.gap:.3g} ({quality.gap_relative:.2g} of the diagonal "
+          f"{quality.diagonal:.6g}); {shape}")
     print(f"seam angle: median {seam.median:.3f}, 99th percentile {seam.p99:.3f}, max "
           f"{seam.max:.3f} degrees; corners: regular max {seam.regular_corner_max:.3f}, "
           f"irregular max {seam.irregular_corner_max:.3f} degrees")

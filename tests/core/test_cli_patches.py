@@ -27,7 +27,8 @@ def test_patches_auto_writes_one_closed_solid_everywhere(sphere_file, tmp_path, 
     outputs = [tmp_path / f"net{s}" for s in (".json", ".3dm", ".obj")]
     assert main([str(sphere_file), "-o", *map(str, outputs), "--patches", "auto", "-q"]) == 0
     report = capsys.readouterr().out
-    assert "watertight: largest gap" in report and "seam angle" in report
+    assert "seams: largest gap" in report and "closed (watertight)" in report
+    assert "seam angle" in report
     assert "warning" not in report
     network = read_network(outputs[0])
     assert network.closed and network.patch_count >= 6

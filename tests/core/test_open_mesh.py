@@ -99,6 +99,7 @@ def test_nurbs_fit_turns_an_open_head_into_an_open_network_that_meets_the_target
     assert main([str(source), "-o", str(out), str(step)]) == 0
     captured = capsys.readouterr()
     assert "an open network of patches" in captured.err
+    assert "patch sides on the scan's border" in captured.out
     # the status is honest: converged, or its warning names the seams (a border corner of the
     # layout can crease: the known limit of open networks today)
     status = captured.out.split("status: ")[1].splitlines()[0]
