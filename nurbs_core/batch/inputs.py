@@ -91,8 +91,8 @@ def _error(label: str, message: str) -> Item:
 
 def expand(inputs: list[str], exclude: tuple[Path, ...] = ()) -> list[Item]:
     """The items of ``inputs`` in order (a folder's point-cloud files sorted by name, a glob's
-    matches sorted), each file once; ``exclude``: files never taken from a folder or glob (the
-    summary)."""
+    matches sorted), each file once; ``exclude``: files never taken from a folder or glob (an
+    earlier run's summary)."""
     suffixes = _cloud_suffixes()
     excluded = {os.path.realpath(p) for p in exclude}
     items: list[Item] = []
@@ -129,20 +129,56 @@ def expand(inputs: list[str], exclude: tuple[Path, ...] = ()) -> list[Item]:
 def name_outputs(items: list[Item], directory: Path, suffix: str, offset: bool) -> None:
     """Give each item its result path(s) in ``directory``: ``<stem><suffix>`` (HDF5 items:
     ``<stem>_<k><suffix>``); inputs whose stems collide keep their whole name
-    (``scan.ply.json``), then a counter; ``offset``: the ``<name>_offset<suffix>`` companion."""
+    (``scan.ply.json``), then a counter; ``offset``: the ``<name>_offset<suffix>`` companion. A
+    name is never one already given in this run (main or companion, letter case aside) nor an
+    input file's: the counter goes on past those."""
     stems: dict[str, int] = {}
     for item in items:
         stems[item.name] = stems.get(item.name, 0) + 1
+    inputs = {os.path.normcase(os.path.realpath(item.path)) for item in items}
     used: set[str] = set()
+
+    def free(paths: list[Path]) -> bool:
+        return not any(p.name.lower() in used or os.path.normcase(os.path.realpath(p)) in inputs
+                       for p in paths)
+
     for item in items:
         name = item.name
         if stems[name] > 1 and item.index is None:
             name = Path(item.path).name
         base, k = name, 2
-        while name.lower() in used:
+
+        def planned(stem: str) -> list[Path]:
+            paths = [directory / f"{stem}{suffix}"]
+            return paths + [directory / f"{stem}_offset{suffix}"] if offset else paths
+
+        while not free(planned(name)):
             name, k = f"{base}_{k}", k + 1
-        used.add(name.lower())
-        main = directory / f"{name}{suffix}"
-        item.outputs = [os.fspath(main)]
-        if offset:
-            item.outputs.append(os.fspath(directory / f"{name}_offset{suffix}"))
+        item.outputs = [os.fspath(p) for p in planned(name)]
+        used.update(Path(p).name.lower() for p in item.outputs)
+
+
+def check_planned_writes(items: list[Item], summary: Path) -> None:
+    """Every file the batch will write (each item's results, the summary) against every input
+    and against each other, by file identity (symbolic and hard links, ``..``, letter case on a
+    case-insensitive file system), before any work: OutputPathError naming both."""
+    from nurbs_core.io.errors import OutputPathError
+    from nurbs_core.io.outputs import same_file
+
+    sources: dict[str, str] = {}
+    for item in items:
+        if item.error is None:
+            sources.setdefault(os.path.realpath(item.path), item.path)
+    writes = [(Path(p), f"the result of {item.label}") for item in items for p in item.outputs]
+    writes.append((summary, "the summary"))
+    for path, what in writes:
+        for source in sources.values():
+            if same_file(path, Path(source)):
+                raise OutputPathError(path, f"{what} would overwrite the input {source}; choose "
+                                            "another name or folder")
+    seen: dict[str, tuple[Path, str]] = {}
+    for path, what in writes:
+        key = os.path.normcase(os.path.realpath(path)).lower()
+        if key in seen:
+            raise OutputPathError(path, f"{what} and {seen[key][1]} would both be written here")
+        seen[key] = (path, what)

@@ -93,6 +93,19 @@ def write_summary(path: Path, records: list[dict]) -> None:
         handle.write(content)
 
 
+def _is_summary(path: Path) -> bool:
+    """Whether ``path`` holds a summary this tool wrote (its first line names the summary's
+    columns), so that a folder's expansion may leave it out."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as handle:
+            first = handle.readline(4096)
+    except OSError:
+        return False
+    if path.suffix.lower() == ".csv":
+        return first.startswith(",".join(SUMMARY_COLUMNS))
+    return first.startswith('{"input": ') and '"status": ' in first
+
+
 def _check(args, directory: Path, summary: Path) -> None:
     """Options that would fail every input fail the run before any work (status 1)."""
     from nurbs_core.cli import _config, _field_settings, _patch_options
@@ -121,7 +134,7 @@ def _check(args, directory: Path, summary: Path) -> None:
 
 def run_batch(args) -> int:
     from nurbs_core.batch.executors import DaskExecutor, serial
-    from nurbs_core.batch.inputs import expand, name_outputs
+    from nurbs_core.batch.inputs import check_planned_writes, expand, name_outputs
     from nurbs_core.cli import INTERRUPTED_STATUS, SOME_FAILED_STATUS
 
     if not args.format.startswith("."):
@@ -130,8 +143,11 @@ def run_batch(args) -> int:
     directory.mkdir(parents=True, exist_ok=True)
     summary = Path(args.summary) if args.summary else directory / "summary.jsonl"
     _check(args, directory, summary)
-    items = expand(args.input, exclude=(summary,))
+    # an earlier run's summary in an input folder is not a cloud; any other file named as the
+    # summary is an input, and the check below refuses to overwrite it
+    items = expand(args.input, exclude=(summary,) if _is_summary(summary) else ())
     name_outputs(items, directory, args.format.lower(), offset=args.offset is not None)
+    check_planned_writes(items, summary)
     records: list[dict | None] = [None] * len(items)
     todo = []
     for position, item in enumerate(items):

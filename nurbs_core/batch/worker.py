@@ -52,7 +52,9 @@ def pin_worker(cpu: int) -> None:
 def _item_args(options: dict[str, Any], item: dict[str, Any]) -> argparse.Namespace:
     """The command line's options for one item: its input and outputs, no report on stderr."""
     args = argparse.Namespace(**options)
-    args.input, args.output, args.quiet = item["path"], list(item["outputs"]), True
+    # the result only: its --offset companion (the item's second output) is named from it by
+    # the fit itself, as in a single run
+    args.input, args.output, args.quiet = item["path"], [item["outputs"][0]], True
     return args
 
 

@@ -11,7 +11,7 @@ from nurbs_core.io.errors import OutputPathError, StrPath
 from nurbs_core.io.points import suffix_of
 
 
-def _same_file(first: Path, second: Path) -> bool:
+def same_file(first: Path, second: Path) -> bool:
     """True when both names reach one file: through symbolic links, ``..``, hard links or a
     case-insensitive file system."""
     if os.path.realpath(first) == os.path.realpath(second):
@@ -36,7 +36,7 @@ def check_output_paths(outputs: Iterable[StrPath], inputs: Iterable[StrPath | No
     for raw in outputs:
         path = Path(os.fspath(raw))
         for source in sources:
-            if _same_file(path, source):
+            if same_file(path, source):
                 raise OutputPathError(path, f"it is the input file {source}: writing it would "
                                             f"destroy the input; choose another name")
         if path.is_dir():
@@ -51,7 +51,7 @@ def check_output_paths(outputs: Iterable[StrPath], inputs: Iterable[StrPath | No
         if not os.access(folder, os.W_OK | os.X_OK):
             raise OutputPathError(path, f"the folder {path.parent} is not writable")
         for earlier in paths:
-            if _same_file(path, earlier):
+            if same_file(path, earlier):
                 raise OutputPathError(path, f"it is named twice among the outputs "
                                             f"({earlier})")
         paths.append(path)

@@ -503,3 +503,76 @@ def test_grid_batch_on_a_local_dask_cluster(tmp_path, grid_reference):
     rows = _summary(out / "summary.jsonl")
     assert rows["broken.ply"]["status"] == rows["short.xyz"]["status"] == "failed"
     assert sum(row["status"] == "ok" for row in rows.values()) == GRIDS
+
+
+# --- no output ever replaces an input or another output of the same run ----------------------
+
+
+def _cloud_file(path: Path, seed: int) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    save_points(samples.saddle(200, seed=seed).points, path)
+    return path
+
+
+def test_a_summary_named_like_an_input_is_refused_before_any_work(tmp_path, capsys):
+    """The summary named as one of the clouds (``--summary scans/c03.csv``): refused in one line
+    naming both, the cloud untouched, nothing fitted."""
+    clouds = [_cloud_file(tmp_path / "scans" / f"c0{k}.csv", k) for k in (1, 2, 3)]
+    before = clouds[2].read_bytes()
+    out = tmp_path / "out"
+    code = main([str(tmp_path / "scans"), "--output-dir", str(out), "--summary",
+                 str(clouds[2]), "-q", *FIT])
+    assert code == 1
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "the summary would overwrite the input" in error[0]
+    assert "c03.csv" in error[0]
+    assert clouds[2].read_bytes() == before
+    assert not list(out.glob("*.json"))                # checked before any work
+
+
+def test_results_never_take_the_name_of_an_input_or_of_another_result(tmp_path):
+    """a.xyz, a.ply and a.xyz.ply in one folder, results written into that folder as .ply: the
+    result of a.xyz would be a.xyz.ply, an input; every input stays byte for byte, each result
+    gets its own file (offset companions included)."""
+    folder = tmp_path / "d"
+    inputs = [_cloud_file(folder / name, k) for k, name in
+              enumerate(("a.xyz", "a.ply", "a.xyz.ply", "a_offset.xyz"))]
+    before = {p: p.read_bytes() for p in inputs}
+    summary = tmp_path / "summary.jsonl"
+    code = main([str(folder), "--output-dir", str(folder), "--format", ".ply", "--offset",
+                 "0.01", "--summary", str(summary), "-q", *FIT])
+    assert code == 0
+    assert {p: p.read_bytes() for p in inputs} == before
+    rows = [json.loads(line) for line in summary.read_text().splitlines()]
+    outputs = [Path(row["output"]) for row in rows]
+    assert len(rows) == 4 and all(row["status"] == "ok" for row in rows)
+    companions = [p.with_name(p.stem + "_offset" + p.suffix) for p in outputs]
+    written = outputs + companions
+    assert len({p.name.lower() for p in written}) == 8          # no result replaced another
+    assert not {p.resolve() for p in written} & {p.resolve() for p in inputs}
+    assert all(p.is_file() for p in written)
+
+
+def test_a_result_that_is_a_hard_link_to_an_input_is_refused(tmp_path, capsys):
+    """By identity, not spelling: the result's name is free, but an earlier file of that name is
+    a hard link to an input."""
+    folder = tmp_path / "scans"
+    cloud = _cloud_file(folder / "part.xyz", 0)
+    out = tmp_path / "out"
+    out.mkdir()
+    os.link(cloud, out / "part.json")
+    before = cloud.read_bytes()
+    code = main([str(cloud), "--output-dir", str(out), "-q", *FIT])
+    assert code == 1
+    assert "would overwrite the input" in capsys.readouterr().err
+    assert cloud.read_bytes() == before
+
+
+def test_an_earlier_summary_in_the_input_folder_is_not_an_input(tmp_path):
+    folder = tmp_path / "scans"
+    _cloud_file(folder / "part.xyz", 0)
+    arguments = [str(folder), "--output-dir", str(tmp_path / "out"), "--summary",
+                 str(folder / "summary.csv"), "-q", *FIT]
+    assert main(arguments) == 0
+    assert main(arguments) == 0                          # a rerun: the summary is not a cloud
+    assert list(_summary(folder / "summary.csv")) == ["part.xyz"]
