@@ -915,6 +915,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGINT, on_interrupt)
+    # SIGTERM (a scheduler, a shutdown) is handled like Ctrl-C: a batch keeps its results and
+    # writes its summary; a single fit leaves its outputs untouched
+    previous_term = signal.signal(signal.SIGTERM, on_interrupt)
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
@@ -935,6 +938,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return INTERRUPTED_STATUS
     finally:
         signal.signal(signal.SIGINT, previous)
+        signal.signal(signal.SIGTERM, previous_term)
 
 
 if __name__ == "__main__":

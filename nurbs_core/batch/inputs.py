@@ -108,7 +108,9 @@ def expand(inputs: list[str], exclude: tuple[Path, ...] = ()) -> list[Item]:
     for text in inputs:
         path = Path(text)
         if path.is_dir():
-            files = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in suffixes)
+            # hidden files are not inputs (a killed save's temporary ".name.1a2b.tmp.ply")
+            files = sorted(p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")
+                           and p.suffix.lower() in suffixes)
             if not files:
                 items.append(_error(text, f"{text}: the folder holds no point-cloud files "
                                           f"({', '.join(suffixes)})"))
@@ -116,7 +118,8 @@ def expand(inputs: list[str], exclude: tuple[Path, ...] = ()) -> list[Item]:
                 add(file, listed=False)
         elif not path.exists() and _is_glob(text):
             matches = sorted(glob.glob(text, recursive=True))
-            files = [Path(m) for m in matches if Path(m).is_file()]
+            files = [Path(m) for m in matches
+                     if Path(m).is_file() and not Path(m).name.startswith(".")]
             if not files:
                 items.append(_error(text, f"{text}: no file matches"))
             for file in files:

@@ -93,6 +93,48 @@ def write_summary(path: Path, records: list[dict]) -> None:
         handle.write(content)
 
 
+def _complete(path: str) -> bool:
+    """Whether an earlier result can be read back whole (``--skip-existing`` skips only those:
+    an empty file, or one a killed run cut short, is fitted again)."""
+    try:
+        if os.path.getsize(path) == 0:
+            return False
+        from nurbs_core.io.dispatch import load_any
+
+        if path.lower().endswith(".json") and "nurbs-studio-network" in _head(path, 200):
+            from nurbs_core.io.network_io import read_network
+
+            return read_network(path).patch_count > 0
+        content = load_any(path)
+        return len(getattr(content, "points", content)) > 0
+    except Exception:  # noqa: BLE001 - unreadable for any reason: not a finished result
+        return False
+
+
+def _head(path: str, size: int = 4096) -> str:
+    with open(path, encoding="utf-8", errors="replace") as handle:
+        return handle.read(size)
+
+
+def _earlier_rows(summary: Path) -> dict[str, dict]:
+    """The rows of an earlier run's summary by their output path (empty when there is none or
+    it cannot be read)."""
+    if not _is_summary(summary):
+        return {}
+    try:
+        if summary.suffix.lower() == ".csv":
+            with open(summary, newline="", encoding="utf-8") as handle:
+                rows = list(csv.DictReader(handle))
+        else:
+            rows = [json.loads(line) for line in summary.read_text(encoding="utf-8").splitlines()
+                    if line.strip()]
+    except (OSError, ValueError):
+        return {}
+    return {row["output"]: {k: v for k, v in row.items() if v not in ("", None)}
+            for row in rows if isinstance(row, dict) and row.get("output")
+            and row.get("status") in ("ok", "skipped")}
+
+
 def _is_summary(path: Path) -> bool:
     """Whether ``path`` holds a summary this tool wrote (its first line names the summary's
     columns), so that a folder's expansion may leave it out."""
@@ -149,14 +191,16 @@ def run_batch(args) -> int:
     name_outputs(items, directory, args.format.lower(), offset=args.offset is not None)
     check_planned_writes(items, summary)
     records: list[dict | None] = [None] * len(items)
+    earlier = _earlier_rows(summary) if args.skip_existing else {}
     todo = []
     for position, item in enumerate(items):
         if item.error is not None:
             records[position] = {"input": item.label, "output": None, "status": "failed",
                                  "seconds": 0.0, "error": item.error}
-        elif args.skip_existing and all(os.path.exists(p) for p in item.outputs):
-            records[position] = {"input": item.label, "output": item.outputs[0],
-                                 "status": "skipped", "seconds": 0.0, "error": ""}
+        elif args.skip_existing and all(_complete(p) for p in item.outputs):
+            # a resume keeps what the earlier run measured of it
+            records[position] = {**earlier.get(item.outputs[0], {}), "input": item.label,
+                                 "output": item.outputs[0], "status": "skipped", "error": ""}
         else:
             todo.append((position, item.plain()))
     skipped = sum(r is not None and r["status"] == "skipped" for r in records)
@@ -169,6 +213,9 @@ def run_batch(args) -> int:
         print(f"nurbs-fit: {len(items)} inputs ({len(todo)} to fit, {skipped} skipped) on {where}; "
               f"results in {directory}", file=sys.stderr, flush=True)
     interrupted = False
+    # the summary is rewritten (atomically) as each result arrives: a run killed at any moment
+    # leaves an accurate one
+    write_summary(summary, [r for r in records if r is not None])
     try:
         if todo and (args.jobs > 1 or args.scheduler is not None):
             with DaskExecutor(args.jobs, args.scheduler, args.threads) as executor:
@@ -176,10 +223,12 @@ def run_batch(args) -> int:
                 for position, record in executor.run(options, todo):
                     records[position] = {**record, "output": items[position].outputs[0]}
                     progress.update(record)
+                    write_summary(summary, [r for r in records if r is not None])
         else:
             for position, record in serial(options, todo):
                 records[position] = record
                 progress.update(record)
+                write_summary(summary, [r for r in records if r is not None])
     except KeyboardInterrupt:
         interrupted = True
     progress.show(final=True)

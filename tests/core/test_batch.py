@@ -576,3 +576,79 @@ def test_an_earlier_summary_in_the_input_folder_is_not_an_input(tmp_path):
     assert main(arguments) == 0
     assert main(arguments) == 0                          # a rerun: the summary is not a cloud
     assert list(_summary(folder / "summary.csv")) == ["part.xyz"]
+
+
+# --- batches that survive a kill, a resume and a killed save --------------------------------
+
+
+def test_the_summary_is_accurate_when_the_run_dies_mid_way(tmp_path, monkeypatch):
+    """The summary is rewritten as each result arrives: a run that dies after two results (here
+    an uncatchable exit, as SIGKILL would be) leaves a summary of exactly those two."""
+    import nurbs_core.batch.worker as worker
+
+    folder = _folder(tmp_path, corrupt=False)
+    out = tmp_path / "fits"
+    real, calls = worker.fit_item, []
+
+    def dying_on_the_third(options, item, **kwargs):
+        calls.append(item["input"])
+        if len(calls) == 3:
+            raise SystemExit(137)                      # no summary code runs after this
+        return real(options, item, **kwargs)
+
+    monkeypatch.setattr(worker, "fit_item", dying_on_the_third)
+    with pytest.raises(SystemExit):
+        main([str(folder), "--output-dir", str(out), "-q", *FIT])
+    rows = _summary(out / "summary.jsonl")
+    assert sorted(rows) == ["part0.xyz", "part1.ply"]
+    assert all(row["status"] == "ok" and row["rms"] > 0 for row in rows.values())
+
+
+def test_a_resume_refits_cut_short_results_and_keeps_the_earlier_statistics(tmp_path):
+    folder = _folder(tmp_path, corrupt=False)
+    out = tmp_path / "fits"
+    arguments = [str(folder), "--output-dir", str(out), "-q", *FIT]
+    assert main(arguments) == 0
+    first = _summary(out / "summary.jsonl")
+    cut = out / "part2.json"
+    cut.write_bytes(cut.read_bytes()[:200])            # a result a killed run cut short
+    (out / "part3.json").write_bytes(b"")              # and an empty one
+    assert main([*arguments, "--skip-existing"]) == 0
+    rows = _summary(out / "summary.jsonl")
+    assert rows["part2.xyz"]["status"] == rows["part3.ply"]["status"] == "ok"
+    assert rows["part0.xyz"]["status"] == "skipped"
+    assert rows["part0.xyz"]["rms"] == first["part0.xyz"]["rms"]    # kept, not blank
+    assert json.loads(cut.read_text())                               # whole again
+
+
+def test_hidden_files_of_a_killed_save_are_not_inputs(tmp_path):
+    folder = _folder(tmp_path, corrupt=False)
+    (folder / ".part0.xyz.1a2b3c4d.tmp.xyz").write_text("0 0 0\n1 0")  # a killed save's file
+    out = tmp_path / "fits"
+    assert main([str(folder), "--output-dir", str(out), "-q", *FIT]) == 0
+    assert len(_summary(out / "summary.jsonl")) == GOOD
+
+
+@pytest.mark.timeout(120)
+def test_sigterm_stops_a_batch_like_ctrl_c_with_its_summary(tmp_path):
+    """SIGTERM (a scheduler's, a shutdown's): the batch stops, keeps its results, writes its
+    summary and exits 130, without a traceback."""
+    import signal
+
+    folder = _folder(tmp_path, corrupt=False)
+    for k in range(GOOD, GOOD + 20):                   # enough work to be stopped mid-way
+        np.savetxt(folder / f"part{k:02d}.xyz", _cloud(k))
+    out = tmp_path / "fits"
+    process = subprocess.Popen([sys.executable, "-m", "nurbs_core.cli", str(folder),
+                                "--output-dir", str(out), "-q", *FIT],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 90
+    while time.monotonic() < deadline and len(list(out.glob("*.json"))) < 2:
+        time.sleep(0.05)
+    process.send_signal(signal.SIGTERM)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130 and "Traceback" not in stderr
+    rows = _summary(out / "summary.jsonl")
+    written = {p.name for p in out.glob("*.json")}
+    assert 2 <= len(rows) < GOOD + 20
+    assert {Path(row["output"]).name for row in rows.values()} == written
