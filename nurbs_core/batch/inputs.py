@@ -66,9 +66,15 @@ def hdf5_points(path: str, index: int):
     import numpy as np
 
     from nurbs_core.io.cloud import check_points
+    from nurbs_core.io.limits import check_decompressed_size
 
     with h5py.File(path, "r") as handle:
-        points = np.asarray(handle[HDF5_DATASET][index], dtype=np.float64)
+        dataset = handle[HDF5_DATASET]
+        # a small file may declare a huge dataset (chunked, compressed or never written):
+        # capped like the other compressed formats before anything is allocated
+        claimed = int(np.prod(dataset.shape[1:])) * 8
+        check_decompressed_size(path, claimed, os.path.getsize(path), f"cloud {index}")
+        points = np.asarray(dataset[index], dtype=np.float64)
     return check_points(f"{path}[{index}]", points)
 
 

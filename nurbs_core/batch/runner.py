@@ -207,6 +207,14 @@ def run_batch(args) -> int:
     progress = Progress(len(items), skipped, args.quiet,
                         failed=sum(r is not None and r["status"] == "failed" for r in records))
     options = {key: value for key, value in vars(args).items()}
+    if args.scheduler is None and args.jobs > 1:
+        # a local cluster never starts more workers than CPUs or inputs to fit (each worker is
+        # a process of several hundred MB)
+        jobs = max(1, min(args.jobs, os.cpu_count() or 1, len(todo)))
+        if jobs < args.jobs and not args.quiet:
+            print(f"nurbs-fit: --jobs {args.jobs}: {jobs} worker{'s' if jobs > 1 else ''} "
+                  f"({os.cpu_count()} CPUs, {len(todo)} inputs to fit)", file=sys.stderr)
+        args.jobs = jobs
     where = ("this process" if args.jobs == 1 and args.scheduler is None else
              f"{args.scheduler}" if args.scheduler else f"a local Dask cluster of {args.jobs} workers")
     if not args.quiet:

@@ -13,6 +13,21 @@ from typing import Any
 
 from nurbs_core.patches.defaults import SEAM_WEIGHT, STIFFNESS
 
+#: The most patches a network may ask for (memory grows with the count: 100,000 reached 8.6 GB),
+#: and the fewest cloud points each patch needs (:func:`check_patch_count`).
+MAX_PATCHES = 2000
+POINTS_PER_PATCH = 4
+
+
+def check_patch_count(patches: int | str, points: int) -> None:
+    """ValueError when an explicit patch count asks for more patches than the cloud's
+    ``points`` can support (``POINTS_PER_PATCH`` each)."""
+    if patches != "auto" and int(patches) * POINTS_PER_PATCH > points:
+        raise ValueError(f"patches: {patches} patches need at least "
+                         f"{int(patches) * POINTS_PER_PATCH} points ({POINTS_PER_PATCH} each); "
+                         f"the cloud has {points}: ask for at most "
+                         f"{max(4, points // POINTS_PER_PATCH)} or 'auto'")
+
 
 @dataclass(frozen=True)
 class PatchOptions:
@@ -39,6 +54,10 @@ class PatchOptions:
                                        or self.patches < 4):
             raise ValueError(f"patches must be 'auto' or an integer of at least 4, got "
                              f"{self.patches!r}")
+        if isinstance(self.patches, numbers.Integral) and self.patches > MAX_PATCHES:
+            raise ValueError(f"patches: at most {MAX_PATCHES} patches, got {self.patches} (each "
+                             "patch holds a grid of control points; a finer network needs a "
+                             "finer control grid per patch: size)")
         if self.degree != 3:
             raise ValueError(f"patch networks are bicubic for now (degree 3), got {self.degree}")
         if self.size is not None and not (isinstance(self.size, numbers.Integral)

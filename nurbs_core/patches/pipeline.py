@@ -23,7 +23,7 @@ from nurbs_core.patches.fit import NetworkPass, fit_network
 from nurbs_core.patches.layout import LayoutError, QuadLayout, quad_layout
 from nurbs_core.patches.measures import NetworkQuality, network_quality
 from nurbs_core.patches.network import PatchNetwork
-from nurbs_core.patches.options import PatchOptions
+from nurbs_core.patches.options import PatchOptions, check_patch_count
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import WARN_FLIPPED, reported_status
 
@@ -168,6 +168,7 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
                          f"{points.shape}")
     if not np.isfinite(points).all():
         raise ValueError("the cloud has NaN or infinite coordinates")
+    check_patch_count(options.patches, len(points))
     timings: dict[str, float] = {}
     start = time.perf_counter()
     if mesh is None:

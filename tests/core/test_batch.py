@@ -652,3 +652,34 @@ def test_sigterm_stops_a_batch_like_ctrl_c_with_its_summary(tmp_path):
     written = {p.name for p in out.glob("*.json")}
     assert 2 <= len(rows) < GOOD + 20
     assert {Path(row["output"]).name for row in rows.values()} == written
+
+
+# --- bounds on what a setting or a file can claim ---------------------------------------------
+
+
+def test_jobs_never_exceed_the_inputs_or_the_cpus(tmp_path, capsys):
+    folder = tmp_path / "scans"
+    _cloud_file(folder / "one.xyz", 0)
+    code = main([str(folder), "--output-dir", str(tmp_path / "out"), "--jobs", "64", *FIT])
+    assert code == 0
+    err = capsys.readouterr().err
+    assert "--jobs 64: 1 worker" in err and "on this process" in err
+
+
+def test_an_hdf5_file_declaring_a_huge_cloud_is_refused_before_allocating(tmp_path):
+    """27 KB on disk declaring 100,000,000 points per cloud (3 GB when read): one failed item
+    with the cap's message, at once, like the other compressed formats."""
+    h5py = pytest.importorskip("h5py")
+    path = tmp_path / "bomb.h5"
+    with h5py.File(path, "w") as handle:
+        handle.create_dataset("points", shape=(2, 100_000_000, 3), dtype="f8",
+                              chunks=(1, 100_000, 3), compression="gzip")
+    assert path.stat().st_size < 100_000
+    summary = tmp_path / "summary.jsonl"
+    started = time.perf_counter()
+    code = main([str(path), "--output-dir", str(tmp_path / "out"), "--summary", str(summary),
+                 "-q", *FIT])
+    assert time.perf_counter() - started < 30
+    assert code == SOME_FAILED_STATUS
+    rows = [json.loads(line) for line in summary.read_text().splitlines()]
+    assert len(rows) == 2 and all("decompress" in row["error"] for row in rows)

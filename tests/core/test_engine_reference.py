@@ -184,3 +184,30 @@ def test_roof_smesh_matches_geomdl(paper_data):
         [(normalized(a, knots_u), normalized(b, knots_v)) for a, b in zip(u, v)]))
     ours = NurbsSurface(**data).evaluate(u, v).numpy()
     assert np.abs(ours - reference).max() / np.abs(reference).max() < 1e-12
+
+
+@pytest.mark.parametrize("extra", [1, -1])
+def test_the_functional_api_refuses_a_knot_vector_of_the_wrong_length(extra):
+    """surface_points, surface_grid_points, surface_derivatives, curve_points and
+    curve_derivatives with a knot vector one entry too long or short: ValueError naming the
+    counts (they used to evaluate it silently; the NurbsSurface constructor refused it)."""
+    from nurbs_core.evaluate import (
+        curve_derivatives,
+        curve_points,
+        surface_derivatives,
+        surface_grid_points,
+        surface_points,
+    )
+    from nurbs_core.knots import clamped_uniform
+
+    net = torch.randn(5, 6, 3, dtype=torch.float64)
+    weights = torch.ones(5, 6, dtype=torch.float64)
+    knots_u, knots_v = clamped_uniform(5, 3).double(), clamped_uniform(6, 3).double()
+    wrong = torch.cat([knots_u, knots_u[-1:]]) if extra > 0 else knots_u[1:]
+    t = torch.linspace(0.1, 0.9, 4, dtype=torch.float64)
+    for call in (surface_points, surface_grid_points, surface_derivatives):
+        with pytest.raises(ValueError, match="need 9 knots"):
+            call(net, weights, wrong, knots_v, 3, 3, t, t)
+    for call in (curve_points, curve_derivatives):
+        with pytest.raises(ValueError, match="need 9 knots"):
+            call(net[:, 0], weights[:, 0], wrong, 3, t)

@@ -207,3 +207,13 @@ def test_gradient_path_straightens_seams_without_losing_the_fit():
     after = network_quality(last.network, shape.points)
     assert after.seam.gap <= 1e-9 * after.diagonal     # still one curve per shared edge
     assert after.volume > 0
+
+
+def test_patch_counts_are_bounded_by_the_machine_and_the_cloud():
+    from nurbs_core.patches.options import MAX_PATCHES, PatchOptions
+
+    with pytest.raises(ValueError, match=f"at most {MAX_PATCHES} patches"):
+        PatchOptions(patches=100_000).validate()
+    points = samples.sphere(300, truth_count=100).points
+    with pytest.raises(ValueError, match="need at least 800 points"):
+        fit_patches(points, PatchOptions(patches=200))
