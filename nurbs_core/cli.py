@@ -27,6 +27,7 @@ import argparse
 import math
 import signal
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -478,11 +479,13 @@ def _automatic(args: argparse.Namespace) -> bool:
 
 def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[Path],
                 points: np.ndarray | None = None, mesh: ScanMesh | None = None,
-                mesh_seconds: float = 0.0) -> dict[str, Any]:
+                mesh_seconds: float = 0.0, stoppable: bool = True) -> dict[str, Any]:
     """``--patches`` (or the automatic route's network): the network fit (``options``: its
     PatchOptions), its report and files; returns the statistics (``points``: the cloud when it
-    is not read from ``args.input``; ``mesh``: its closed mesh when already built, in
-    ``mesh_seconds``, which the report's mesh time includes)."""
+    is not read from ``args.input``; ``mesh``: its mesh when already built, in
+    ``mesh_seconds``, which the report's mesh time includes). ``stoppable``: the first Ctrl-C
+    ends the fit after the pass under way and writes the network as it stands (status
+    "stopped"); a second one, or one before the first pass, quits without writing."""
     import torch
 
     from nurbs_core.io.dispatch import save_all
@@ -495,21 +498,28 @@ def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[P
           f"({options.patches} patches, stiffness {options.stiffness:g}, seam weight "
           f"{options.seam_weight:g})", file=sys.stderr)
     result = None
-    for event in iter_patch_fit(points, options, mesh=mesh):
-        result = event.result or result
-        if args.quiet:
-            continue
-        if event.kind == "mesh" and event.mesh is not None:
-            kind = "closed" if event.mesh.closed else "open"
-            print(f"{kind} mesh: {len(event.mesh.faces)} triangles", file=sys.stderr)
-        elif event.kind == "layout" and event.layout is not None:
-            layout = event.layout
-            print(f"layout: {len(layout.quads)} patches, {len(layout.irregular)} irregular "
-                  f"corners", file=sys.stderr)
-        elif event.kind == "pass" and event.fit_pass is not None and event.fit_pass.stage != "wrap":
-            p = event.fit_pass
-            print(f"{p.stage} pass {p.index}  {p.size}x{p.size} per patch  rms {p.rms:.4g}  "
-                  f"seam max {p.seam:.2f} deg", file=sys.stderr, flush=True)
+    requested: list[bool] = []
+    passes: list[int] = []
+
+    def on_interrupt(*_: object) -> None:
+        if requested or not passes:
+            raise KeyboardInterrupt
+        requested.append(True)
+        print("nurbs-fit: stopping after this pass (Ctrl-C again to quit without writing)",
+              file=sys.stderr, flush=True)
+
+    handle = stoppable and threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, on_interrupt) if handle else None
+    try:
+        for event in iter_patch_fit(points, options, mesh=mesh, stop=lambda: bool(requested)):
+            result = event.result or result
+            if event.kind == "pass":
+                passes.append(1)
+            if not args.quiet:
+                _print_patch_event(event)
+    finally:
+        if handle:
+            signal.signal(signal.SIGINT, previous)
     assert result is not None  # iter_patch_fit always ends with the "done" event
     result.timings["mesh"] += mesh_seconds
     quality = result.quality
@@ -553,6 +563,21 @@ def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[P
                    "p99": quality.c2s_p99, "s2c_mean": quality.s2c_mean,
                    "flipped_fraction": quality.flipped_fraction, "area": quality.area,
                    "volume": quality.volume, "warnings": list(result.warnings)})
+
+
+def _print_patch_event(event: Any) -> None:
+    """A network fit's progress line on stderr (the mesh, the layout, each pass)."""
+    if event.kind == "mesh" and event.mesh is not None:
+        kind = "closed" if event.mesh.closed else "open"
+        print(f"{kind} mesh: {len(event.mesh.faces)} triangles", file=sys.stderr)
+    elif event.kind == "layout" and event.layout is not None:
+        layout = event.layout
+        print(f"layout: {len(layout.quads)} patches, {len(layout.irregular)} irregular "
+              f"corners", file=sys.stderr)
+    elif event.kind == "pass" and event.fit_pass is not None and event.fit_pass.stage != "wrap":
+        p = event.fit_pass
+        print(f"{p.stage} pass {p.index}  {p.size}x{p.size} per patch  rms {p.rms:.4g}  "
+              f"seam max {p.seam:.2f} deg", file=sys.stderr, flush=True)
 
 
 class FitFailed(ValueError):
@@ -626,7 +651,8 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
     apart (a batch fits many prepared inputs at once with ``fit_batch``)."""
     if args.patches is not None:
         outputs = _check_before_work(args)
-        return run_patches(args, _patch_options(args), outputs, points=points)
+        return run_patches(args, _patch_options(args), outputs, points=points,
+                           stoppable=stoppable)
     if _automatic(args):
         from nurbs_core.route import choose_route
 
@@ -647,7 +673,7 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
             check_output_paths(outputs, [args.input], suffixes=NETWORK_SUFFIXES)
             try:
                 return run_patches(args, options, outputs, points=points, mesh=route.mesh,
-                                   mesh_seconds=route.seconds)
+                                   mesh_seconds=route.seconds, stoppable=stoppable)
             except LayoutError as error:
                 # a closed mesh no layout reproduces (handles a sparse scan invented): the
                 # cloud is fitted as an open surface instead, not refused
@@ -691,7 +717,7 @@ def _single_patch_or_open_network(args: argparse.Namespace, options: PatchOption
         check_output_paths(outputs, [args.input], suffixes=NETWORK_SUFFIXES)
         try:
             return run_patches(args, options, outputs, points=points, mesh=network.mesh,
-                               mesh_seconds=network.seconds)
+                               mesh_seconds=network.seconds, stoppable=stoppable)
         except LayoutError as error:
             if result is None:
                 raise ValueError(f"{route.finding}; one patch cannot hold it ({problems}) and "

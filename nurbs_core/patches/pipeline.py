@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -72,11 +72,14 @@ class PatchResult:
     #: (N,) each cloud point's distance to the network (NaN where a large cloud's quality
     #: sample left it out): the deviation map
     deviation: np.ndarray | None = field(default=None, repr=False)
+    #: the caller stopped the fit (``stop``): the network as it stood, measured
+    stopped: bool = False
 
     @property
     def status(self) -> str:
-        """"converged" when every quality check holds, else "fitted with warnings"."""
-        return reported_status("converged", self.warnings)
+        """"converged" when every quality check holds, else "fitted with warnings"; "stopped"
+        when the caller stopped the fit."""
+        return "stopped" if self.stopped else reported_status("converged", self.warnings)
 
 
 def layout_turn(layout: QuadLayout) -> float:
@@ -157,9 +160,12 @@ def scan_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
 
 
 def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
-                   mesh: ScanMesh | None = None) -> Iterator[PatchEvent]:
+                   mesh: ScanMesh | None = None,
+                   stop: Callable[[], bool] | None = None) -> Iterator[PatchEvent]:
     """The steps of fitting a patch network to a cloud (N, 3): a closed object's or an open
-    shell's (its mesh built by :func:`scan_mesh` unless given)."""
+    shell's (its mesh built by :func:`scan_mesh` unless given). ``stop``: asked after every
+    pass; when it returns True the fit ends there and the network as it stands is measured and
+    returned (status "stopped")."""
     options = options or PatchOptions()
     options.validate()
     points = np.asarray(points, np.float64)
@@ -181,6 +187,7 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     yield PatchEvent("layout", mesh=mesh, layout=layout)
     start = time.perf_counter()
     last: NetworkPass | None = None
+    stopped = False
     # large scans: the passes run on a random subset (the noise averages out long before);
     # the quality is measured on (up to QUALITY_POINTS of) all points
     rng = np.random.default_rng(0)
@@ -194,6 +201,9 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
                             seam_weight=options.seam_weight, tolerance=options.tolerance,
                             max_size=options.max_size, border=border_points(mesh)):
         yield PatchEvent("pass", layout=layout, fit_pass=last)
+        if stop is not None and stop():
+            stopped = True
+            break
     timings["fit"] = time.perf_counter() - start
     assert last is not None, "fit_network yields at least one pass"
     start = time.perf_counter()
@@ -202,6 +212,8 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
                               support=caps)
     timings["quality"] = time.perf_counter() - start
     warnings = [last.message] if last.message else []
+    if stopped:
+        warnings.insert(0, f"stopped after {last.index + 1} passes: the network as it stood")
     if quality.seam.p99 > WARN_SEAM:
         warnings.append(f"seams are not tangent everywhere: 99th percentile angle "
                         f"{quality.seam.p99:.1f} degrees")
@@ -216,7 +228,7 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     assert quality.distances is not None, "network_quality keeps the point distances"
     deviation[sample] = quality.distances
     result = PatchResult(last.network, quality, layout, mesh, timings, warnings, last.index + 1,
-                         deviation)
+                         deviation, stopped)
     yield PatchEvent("done", mesh=mesh, layout=layout, fit_pass=last, result=result)
 
 

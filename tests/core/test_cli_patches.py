@@ -114,3 +114,30 @@ def test_a_mesh_file_with_a_small_hole_is_rebuilt_closed_from_its_points(tmp_pat
     assert main([str(source), "-o", str(out), "--patches", "auto"]) == 0
     assert "(the file's mesh is not watertight)" in capsys.readouterr().err
     assert read_network(out).closed
+
+
+def test_ctrl_c_during_a_network_fit_writes_the_network_as_it_stands(sphere_file, tmp_path,
+                                                                       capsys, monkeypatch):
+    """The README's promise for networks too: the first Ctrl-C ends the fit after the pass under
+    way; the network so far is measured, reported as "stopped" and written."""
+    import os
+    import signal
+
+    import nurbs_core.patches.pipeline as pipeline
+
+    real = pipeline.fit_network
+
+    def interrupted_after_the_fourth_pass(*args, **kwargs):
+        for number, fit_pass in enumerate(real(*args, **kwargs)):
+            if number == 4:
+                os.kill(os.getpid(), signal.SIGINT)        # the user's Ctrl-C
+            yield fit_pass
+
+    monkeypatch.setattr(pipeline, "fit_network", interrupted_after_the_fourth_pass)
+    out = tmp_path / "net.json"
+    assert main([str(sphere_file), "-o", str(out), "--patches", "auto"]) == 0
+    captured = capsys.readouterr()
+    assert "stopping after this pass" in captured.err
+    assert "status: stopped" in captured.out and "stopped after 5 passes" in captured.out
+    network = read_network(out)
+    assert network.closed and network.patch_count >= 6
