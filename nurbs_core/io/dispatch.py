@@ -37,10 +37,22 @@ def _load_json(path: StrPath) -> list[NurbsCurve | NurbsSurface]:
             return json_format.read_shared_json(path, document)
         if geomdl_json.is_geomdl_document(document):
             return geomdl_json.read_geomdl_json(path, document)
+        from nurbs_core.io import network_io
+
+        if document.get("format") == network_io.NETWORK_FORMAT:
+            # a patch network (what nurbs-fit --patches and the app's Patches mode write): its
+            # patches as surfaces; read_network gives the network itself
+            network, metadata = network_io.read_network_with_metadata(path)
+            surfaces: list[NurbsCurve | NurbsSurface] = []
+            for number, surface in enumerate(network.surfaces()):
+                surface.metadata = {**metadata, "name": f"patch {number}", "network": True}
+                surfaces.append(surface)
+            return surfaces
     found = "" if isinstance(document, dict) else \
         f" (the file holds {json_format.json_kind(document)}, not an object)"
     raise FileFormatError(path, f"unrecognised JSON{found}: expected a nurbs-studio document "
-                                "(\"format\": \"nurbs-studio\"), a nurbs-surface-json-v1 surface "
+                                "(\"format\": \"nurbs-studio\"), a patch network (\"format\": "
+                                "\"nurbs-studio-network-v1\"), a nurbs-surface-json-v1 surface "
                                 "or a geomdl export ({\"shape\": {\"data\": ...}})")
 
 

@@ -162,6 +162,9 @@ def test_patch_fit_is_drawn_measured_and_exported(qtbot, window, tmp_path, monke
     # Reset drops the network and its drawing
     window.reset_action.trigger()
     assert window.document.network is None and layers.mesh("network").n_points == 0
+    # every file the app exports, it opens again: the network .json as its patches
+    open_by_drop(qtbot, window, [written[".json"]])
+    assert f"Opened {network.patch_count} NURBS shape" in window.log_panel.toPlainText()
 
 
 def test_pause_and_stop_mid_fit_keep_the_window_responsive(qtbot, window, tmp_path):
