@@ -174,6 +174,26 @@ class _SettingsCommand(QUndoCommand):
         self._document._apply_settings(self._old)
 
 
+def _session_target(number: int, item: Any) -> Target:
+    """A session's point cloud, checked like a cloud file (an (N, 3) array of finite numbers;
+    never regrouped from another shape); ValueError naming it."""
+    if not isinstance(item, dict) or not isinstance(item.get("name"), str):
+        raise ValueError(f"targets[{number}] needs a name")
+    points = np.asarray(item["points"], dtype=np.float64)
+    if points.size == 0:
+        points = points.reshape(0, 3)
+    where = f"targets[{number}] ({item['name']})"
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"{where}: expected (N, 3) coordinates, got an array of shape "
+                         f"{points.shape}")
+    finite = np.isfinite(points).all(axis=1)
+    if not finite.all():
+        raise ValueError(f"{where}: {int((~finite).sum())} point(s) have NaN or infinite "
+                         f"coordinates; the first is point {int(np.argmin(finite))}")
+    return Target(item["name"], points, str(item.get("path", "")),
+                  bool(item.get("visible", True)))
+
+
 class Document(QObject):
     """What the window shows and saves. Signals fire in the GUI thread only."""
 
@@ -299,12 +319,12 @@ class Document(QObject):
             settings.fit.validate()
             settings.patches.validate()
             targets = []
-            for item in data.get("targets", []):
-                points = np.asarray(item["points"], dtype=np.float64).reshape(-1, 3)
-                targets.append(Target(item["name"], points, item.get("path", ""),
-                                      bool(item.get("visible", True))))
+            for number, item in enumerate(data.get("targets", [])):
+                targets.append(_session_target(number, item))
             patches = [from_mapping(p["geometry"]) for p in data.get("patches", [])]
             names = [p["name"] for p in data.get("patches", [])]
+            if not all(isinstance(name, str) for name in names):
+                raise ValueError("patch names must be text")
             fitted = data.get("fitted")
             fitted = None if fitted is None else from_mapping(fitted)
         except (KeyError, TypeError, ValueError) as exc:

@@ -93,7 +93,8 @@ GeometryArrays = CurveArrays | SurfaceArrays
 def from_mapping(data: Mapping[str, Any]) -> GeometryArrays:
     """The twin of a ``{"kind": ..., ...}`` mapping (a former ``.numpy()`` dict, a session entry
     or a twin itself). Missing weights are ones; missing knots are not allowed here. Raises
-    ValueError for an unknown kind or a missing field."""
+    ValueError for an unknown kind, a missing field, or arrays that do not make a valid NURBS
+    (:func:`check_arrays`: shapes, finiteness, knot counts, degrees, positive weights)."""
     if isinstance(data, (CurveArrays, SurfaceArrays)):
         return data
     kind = data.get("kind")
@@ -101,17 +102,57 @@ def from_mapping(data: Mapping[str, Any]) -> GeometryArrays:
         if kind == "curve":
             control = _array(data["control_points"])
             weights = data.get("weights")
-            return CurveArrays(int(data["degree"]), control,
-                               np.ones(control.shape[:-1]) if weights is None else _array(weights),
-                               _array(data["knots"]))
+            return check_arrays(CurveArrays(
+                int(data["degree"]), control,
+                np.ones(control.shape[:-1]) if weights is None else _array(weights),
+                _array(data["knots"])))
         if kind == "surface":
             control = _array(data["control_points"])
             weights = data.get("weights")
-            return SurfaceArrays(int(data["degree_u"]), int(data["degree_v"]), control,
-                                 np.ones(control.shape[:-1]) if weights is None
-                                 else _array(weights),
-                                 _array(data["knots_u"]), _array(data["knots_v"]))
+            return check_arrays(SurfaceArrays(
+                int(data["degree_u"]), int(data["degree_v"]), control,
+                np.ones(control.shape[:-1]) if weights is None else _array(weights),
+                _array(data["knots_u"]), _array(data["knots_v"])))
     except KeyError as exc:
         raise ValueError(f"a {kind} needs {exc.args[0]!r}") from None
     raise ValueError(f"unknown geometry kind {kind!r} (expected 'curve' or 'surface')")
+
+
+def _check_direction(name: str, knots: np.ndarray, count: int, degree: int) -> None:
+    if not 1 <= degree < count:
+        raise ValueError(f"{name}: degree {degree} must be at least 1 and less than the "
+                         f"{count} control points")
+    if knots.shape[-1] != count + degree + 1:
+        raise ValueError(f"{name}: {count} control points of degree {degree} need "
+                         f"{count + degree + 1} knots, got {knots.shape[-1]}")
+    if not np.isfinite(knots).all() or (np.diff(knots, axis=-1) < 0).any():
+        raise ValueError(f"{name} must be finite and non-decreasing")
+
+
+def check_arrays(arrays: GeometryArrays) -> GeometryArrays:
+    """``arrays`` when they make a valid NURBS, else ValueError naming the problem: control
+    points (*B, n, d) (d 2 or 3) or (*B, n, m, 3), finite; weights of their shape less the last
+    axis, finite and positive; knot vectors of n + p + 1 finite, non-decreasing values; degrees
+    from 1 to n - 1."""
+    control, weights = np.asarray(arrays.control_points), np.asarray(arrays.weights)
+    surface = isinstance(arrays, SurfaceArrays)
+    net_dims = 3 if surface else 2
+    if control.ndim < net_dims or control.shape[-1] not in ((3,) if surface else (2, 3)):
+        raise ValueError(f"control_points of shape {control.shape} do not make a "
+                         f"{'surface (n, m, 3)' if surface else 'curve (n, 2|3)'}")
+    if not np.isfinite(control).all():
+        raise ValueError("control_points must be finite (NaN or infinity found)")
+    if weights.shape != control.shape[:-1]:
+        raise ValueError(f"weights of shape {weights.shape} do not match control points "
+                         f"{control.shape}")
+    if not (np.isfinite(weights).all() and (weights > 0).all()):
+        raise ValueError("weights must be finite and positive")
+    if isinstance(arrays, SurfaceArrays):
+        _check_direction("knots_u", np.asarray(arrays.knots_u), control.shape[-3],
+                         arrays.degree_u)
+        _check_direction("knots_v", np.asarray(arrays.knots_v), control.shape[-2],
+                         arrays.degree_v)
+    else:
+        _check_direction("knots", np.asarray(arrays.knots), control.shape[-2], arrays.degree)
+    return arrays
 

@@ -242,3 +242,37 @@ def test_geometry_enters_the_document_as_the_engines_numpy_twin(tmp_path):
     other.load_session(path)
     assert isinstance(other.fitted, SurfaceArrays)
     np.testing.assert_array_equal(other.fitted.control_points, fitted.control_points)
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"targets": [{"name": "a", "points": [[0, 0, 0], [1, float("nan"), 0], [0, 1, 0]]}]},
+     "NaN or infinite"),
+    ({"targets": [{"name": "a", "points": [[0, 0], [1, 0], [0, 1]]}]},   # never regrouped
+     r"expected \(N, 3\) coordinates, got an array of shape \(3, 2\)"),
+    ({"targets": [{"points": [[0, 0, 0]]}]}, "needs a name"),
+    ({"fitted": {"kind": "surface", "degree_u": 3, "degree_v": 3,
+                 "control_points": [[[0.0, 0.0, 0.0]] * 4] * 4,
+                 "knots_u": [0, 0, 0, 0, 1, 1, 1, 1, 1], "knots_v": [0, 0, 0, 0, 1, 1, 1, 1]}},
+     "knots_u: 4 control points of degree 3 need 8 knots, got 9"),
+    ({"fitted": {"kind": "surface", "degree_u": 3, "degree_v": 3,
+                 "control_points": [[[float("nan"), 0.0, 0.0]] * 4] * 4,
+                 "knots_u": [0, 0, 0, 0, 1, 1, 1, 1], "knots_v": [0, 0, 0, 0, 1, 1, 1, 1]}},
+     "control_points must be finite"),
+    ({"fitted": {"kind": "curve", "degree": 0, "control_points": [[0, 0], [1, 1]],
+                 "knots": [0, 0.5, 1]}}, "degree 0 must be at least 1"),
+    ({"fitted": {"kind": "curve", "degree": 1, "control_points": [[0, 0], [1, 1]],
+                 "weights": [1, -1], "knots": [0, 0, 1, 1]}}, "weights must be finite and positive"),
+    ({"patches": [{"name": "p", "geometry": {"kind": "curve", "degree": 1,
+                                             "control_points": [[0, 0], [1, 1]],
+                                             "knots": [0, 1, 0, 1]}}]}, "non-decreasing"),
+])
+def test_damaged_sessions_are_refused_before_the_document_changes(tmp_path, change, message):
+    from app.state import SESSION_FORMAT
+
+    path = tmp_path / "damaged.json"
+    path.write_text(json.dumps({"format": SESSION_FORMAT, **change}))
+    document = Document()
+    before = (document.targets, document.patches, document.fitted)
+    with pytest.raises(ValueError, match="damaged session.*" + message):
+        document.load_session(path)
+    assert (document.targets, document.patches, document.fitted) == before
