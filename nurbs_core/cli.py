@@ -900,8 +900,28 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
                    "diagonal": diagonal, "chamfer": chamfer, "control_points": counts})
 
 
+#: The largest evaluation grid ``--samples`` may ask for (samples in all; 4096 x 4096 takes
+#: about 1.6 GB in the set losses' float64 tensors).
+MAX_SAMPLES = 4096 * 4096
+
+
+def _check_resources(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Settings that would claim more than the machine has, refused before anything runs."""
+    import os
+
+    cpus = os.cpu_count() or 1
+    if args.threads < 1 or args.threads > 4 * cpus:
+        parser.error(f"--threads {args.threads}: this machine has {cpus} CPUs; give 1 to "
+                     f"{4 * cpus} (1 is fastest for typical fits)")
+    if any(s < 1 for s in args.samples) or math.prod(args.samples) * (
+            1 if len(args.samples) > 1 else args.samples[0]) > MAX_SAMPLES:
+        parser.error(f"--samples {' '.join(map(str, args.samples))}: the evaluation grid takes "
+                     f"1 to {MAX_SAMPLES} samples in all (4096 x 4096)")
+
+
 def _check_mode(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """One input with ``-o``, or any inputs with ``--output-dir`` (argparse error otherwise)."""
+    _check_resources(parser, args)
     if args.output_dir is None:
         if not args.output:
             parser.error("the following arguments are required: --output/-o (or --output-dir "

@@ -278,3 +278,22 @@ def test_set_reaches_any_fit_config_field(tmp_path, capsys):
     code = main([str(missing), "-o", str(tmp_path / "out.json"), "--set", "degree=3"])
     assert code == 1
     assert "--set 'degree=3': expected FIELD=VALUE with a FitConfig field" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("option, message", [
+    (["--threads", "10000"], "--threads 10000: this machine has"),
+    (["--threads", "0"], "--threads 0: this machine has"),
+    (["--samples", "100000", "100000"], "--samples 100000 100000: the evaluation grid takes"),
+    (["--samples", "0"], "--samples 0: the evaluation grid takes"),
+])
+def test_settings_beyond_the_machine_are_one_clear_line(tmp_path, capsys, option, message):
+    """Refused before anything runs (they used to end in raw libgomp or allocator errors)."""
+    from nurbs_core.samples import saddle
+
+    cloud = tmp_path / "c.xyz"
+    np.savetxt(cloud, saddle(200).points)
+    with pytest.raises(SystemExit) as stopped:
+        main([str(cloud), "-o", str(tmp_path / "o.json"), *option])
+    assert stopped.value.code == 2
+    error = capsys.readouterr().err.strip().splitlines()[-1]
+    assert message in error and "Traceback" not in error
