@@ -168,7 +168,7 @@ def _check(args, directory: Path, summary: Path) -> None:
 
         set_decompression_limit(args.max_decompressed)
     check_output_paths([summary], suffixes=(".jsonl", ".csv"))
-    if args.jobs > 1 or args.scheduler is not None:
+    if args.scheduler is not None:
         from nurbs_core.batch.executors import check_available
 
         check_available()
@@ -215,6 +215,10 @@ def run_batch(args) -> int:
             print(f"nurbs-fit: --jobs {args.jobs}: {jobs} worker{'s' if jobs > 1 else ''} "
                   f"({os.cpu_count()} CPUs, {len(todo)} inputs to fit)", file=sys.stderr)
         args.jobs = jobs
+        if jobs > 1:
+            from nurbs_core.batch.executors import check_available
+
+            check_available()  # still before any work
     where = ("this process" if args.jobs == 1 and args.scheduler is None else
              f"{args.scheduler}" if args.scheduler else f"a local Dask cluster of {args.jobs} workers")
     if not args.quiet:

@@ -219,8 +219,14 @@ def test_usage_errors_and_help(tmp_path, capsys, monkeypatch):
     assert main([str(source), "--output-dir", str(tmp_path / "o"), "--format", ".xyz"]) == 1
     assert "--format .xyz" in capsys.readouterr().err
     monkeypatch.setitem(sys.modules, "distributed", None)  # Dask not installed
-    assert main([str(source), "--output-dir", str(tmp_path / "o"), "--jobs", "2"]) == 1
-    assert "nurbs-studio[batch]" in capsys.readouterr().err
+    second = tmp_path / "b.xyz"                        # two inputs: two workers are worth it
+    np.savetxt(second, _cloud(1))
+    monkeypatch.setattr(os, "cpu_count", lambda: 4)
+    assert main([str(source), str(second), "--output-dir", str(tmp_path / "o"), "--jobs",
+                 "2"]) == 1
+    err = capsys.readouterr().err
+    assert "nurbs-studio[batch]" in err
+    assert not (tmp_path / "o" / "a.json").exists()    # refused before any work
     with pytest.raises(SystemExit):
         main(["--help"])
     assert "3 a batch in which some inputs failed" in " ".join(capsys.readouterr().out.split())
