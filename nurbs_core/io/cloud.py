@@ -52,6 +52,12 @@ class PointCloud:
         return self.attributes.get("colors")
 
 
+#: Coordinates beyond this (in magnitude), or a cloud narrower than MIN_EXTENT, leave float64
+#: squared distances overflowing or underflowing (1e154 squared is the largest double).
+MAX_COORDINATE = 1e150
+MIN_EXTENT = 1e-150
+
+
 def check_points(path: StrPath | None, points: np.ndarray,
                  line_of_row: Callable[[int], int] | None = None) -> np.ndarray:
     """Raise FileFormatError unless points is a non-empty (N, 3) array of finite numbers.
@@ -71,6 +77,16 @@ def check_points(path: StrPath | None, points: np.ndarray,
         line = line_of_row(row) if line_of_row is not None else None
         raise FileFormatError(path, f"{bad} point(s) have NaN or infinite coordinates; the first "
                                     f"is point {row} ({points[row].tolist()})", line=line)
+    largest = float(np.abs(points).max())
+    if largest > MAX_COORDINATE:
+        raise FileFormatError(path, f"coordinates reach {largest:.3g}: beyond {MAX_COORDINATE:g} "
+                                    "squared distances overflow; rescale the cloud (a unit "
+                                    "error?)")
+    extent = float(np.ptp(points, axis=0).max()) if len(points) > 1 else 0.0
+    if 0.0 < extent < MIN_EXTENT:
+        raise FileFormatError(path, f"the cloud spans only {extent:.3g}: below {MIN_EXTENT:g} "
+                                    "squared distances underflow; rescale the cloud (a unit "
+                                    "error?)")
     return points
 
 

@@ -4,6 +4,7 @@ cannot be written, and an input is never overwritten by an output."""
 from __future__ import annotations
 
 import os
+import secrets
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -20,6 +21,22 @@ def same_file(first: Path, second: Path) -> bool:
         return os.path.samefile(first, second)
     except OSError:  # one of them does not exist (yet)
         return False
+
+
+def _probe(path: Path, folder: Path) -> None:
+    """Create and remove a file in ``folder`` (permission bits do not tell: /proc, a read-only
+    mount, a full quota), so an output that cannot be written fails before the work, naming the
+    output, not the hidden temporary file a save would have used."""
+    probe = folder / f".nurbs-fit-probe-{os.getpid()}-{secrets.token_hex(4)}"
+    try:
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+    except OSError as exc:
+        raise OutputPathError(path, f"files cannot be created in {path.parent} "
+                                    f"({exc.strerror or exc})") from None
+    try:
+        os.unlink(probe)
+    except OSError:
+        pass
 
 
 def check_output_paths(outputs: Iterable[StrPath], inputs: Iterable[StrPath | None] = (), *,
@@ -50,6 +67,7 @@ def check_output_paths(outputs: Iterable[StrPath], inputs: Iterable[StrPath | No
             raise OutputPathError(path, f"the folder {path.parent} does not exist")
         if not os.access(folder, os.W_OK | os.X_OK):
             raise OutputPathError(path, f"the folder {path.parent} is not writable")
+        _probe(path, folder)
         for earlier in paths:
             if same_file(path, earlier):
                 raise OutputPathError(path, f"it is named twice among the outputs "

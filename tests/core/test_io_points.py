@@ -424,3 +424,18 @@ def test_unknown_suffix_and_missing_file(tmp_path):
         load_points(tmp_path / "x.docx")
     with pytest.raises(FileNotFoundError):
         load_points(tmp_path / "missing.ply")
+
+
+@pytest.mark.parametrize("scale, message", [(1e200, r"coordinates reach [0-9.]+e\+200"),
+                                            (1e-200, "the cloud spans only")])
+def test_clouds_whose_squared_distances_overflow_are_refused_clearly(tmp_path, scale, message):
+    """A cloud at 1e200 (or 1e-200) scale: one clear message at reading, not an internal error
+    (an IndexError, "Eigenvalues did not converge") deep in the fit."""
+    points = np.random.default_rng(0).normal(size=(50, 3)) * scale
+    path = tmp_path / "scaled.xyz"
+    np.savetxt(path, points)
+    with pytest.raises(FileFormatError, match=message + ".*rescale"):
+        load_points(path)
+    big_but_fine = tmp_path / "fine.xyz"
+    np.savetxt(big_but_fine, points / scale * 1e100)
+    assert load_points(big_but_fine).points.shape == (50, 3)

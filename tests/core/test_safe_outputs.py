@@ -337,3 +337,21 @@ def test_decompression_limit_option(tmp_path):
     assert reply.returncode == 1 and len(lines) == 1, reply.stderr
     assert str(source) in lines[0] and "NURBS_STUDIO_MAX_DECOMPRESSED" in lines[0]
     assert json.loads(json.dumps(load_points(source).points.shape)) == [3000, 3]
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc"), reason="needs a /proc file system")
+def test_an_output_where_no_file_can_be_created_fails_before_the_fit(tmp_path, capsys):
+    """/proc passes the permission bits (as root) but holds no new files: refused before any
+    work, naming the output (not the hidden temporary file a save would have used)."""
+    from nurbs_core.cli import main
+
+    source = tmp_path / "cloud.xyz"
+    np.savetxt(source, np.random.default_rng(0).normal(size=(200, 3)))
+    with pytest.raises(OutputPathError, match="files cannot be created in /proc"):
+        check_output_paths(["/proc/result.json"])
+    started = time.perf_counter()
+    assert main([str(source), "-o", "/proc/result.json", "-q"]) == 1
+    error = capsys.readouterr().err
+    assert "/proc/result.json" in error and ".tmp" not in error
+    assert time.perf_counter() - started < 5
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".nurbs-fit-probe")]
