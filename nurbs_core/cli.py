@@ -665,12 +665,10 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
         if not args.quiet:
             print(f"route: {route.reason} ({route.seconds:.1f} s)", file=sys.stderr)
         if route.kind == "network":
-            from nurbs_core.io.dispatch import NETWORK_SUFFIXES
-            from nurbs_core.io.outputs import check_output_paths
             from nurbs_core.patches.layout import LayoutError
             from nurbs_core.route import without_layout
 
-            check_output_paths(outputs, [args.input], suffixes=NETWORK_SUFFIXES)
+            _check_network_outputs(args, outputs)
             try:
                 return run_patches(args, options, outputs, points=points, mesh=route.mesh,
                                    mesh_seconds=route.seconds, stoppable=stoppable)
@@ -683,6 +681,15 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
         return _single_patch_or_open_network(args, options, outputs, points, route, stoppable)
     prepared = prepare_fit(args, points)
     return finish_fit(prepared, run_fit(prepared, stoppable))
+
+
+def _check_network_outputs(args: argparse.Namespace, outputs: list[Path]) -> None:
+    """The automatic route's outputs, checked again once it is a network (fewer formats hold
+    one) before the network fit starts."""
+    from nurbs_core.io.dispatch import NETWORK_SUFFIXES
+    from nurbs_core.io.outputs import check_output_paths
+
+    check_output_paths(outputs, [args.input], suffixes=NETWORK_SUFFIXES)
 
 
 def _single_patch_or_open_network(args: argparse.Namespace, options: PatchOptions,
@@ -703,18 +710,14 @@ def _single_patch_or_open_network(args: argparse.Namespace, options: PatchOption
         if not isinstance(exc.__context__, NotADiskError):
             raise
         refusal = exc.__context__
-    problems = single_patch_problems(result.status if result else "",
-                                     result.statistics if result else None)
-    if refusal is not None:
-        problems = f"{refusal.topology.kind}: {str(refusal).split(':')[0]}"
+    problems = (single_patch_problems(result.status, result.statistics) if result is not None
+                else f"{refusal.topology.kind}: {str(refusal).split(':')[0]}" if refusal
+                else "")
     network = open_network_instead(points, problems, options.max_hole) if problems else None
     if network is not None:
-        from nurbs_core.io.dispatch import NETWORK_SUFFIXES
-        from nurbs_core.io.outputs import check_output_paths
-
         if not args.quiet:
             print(f"route: {network.reason} ({network.seconds:.1f} s)", file=sys.stderr)
-        check_output_paths(outputs, [args.input], suffixes=NETWORK_SUFFIXES)
+        _check_network_outputs(args, outputs)
         try:
             return run_patches(args, options, outputs, points=points, mesh=network.mesh,
                                mesh_seconds=network.seconds, stoppable=stoppable)

@@ -84,7 +84,6 @@ def _decide(points: np.ndarray, file_mesh: ScanMesh | None, file_mesh_note: str,
                              + f"the cloud encloses a volume{holes} (a closed object)"), mesh)
 
 
-
 def without_layout(route: Route, error: Exception) -> Route:
     """The route after a closed object's network found no quad layout (its mesh has a genus a
     layout cannot reproduce, often handles that a sparse scan's wrap invented): the open

@@ -127,6 +127,26 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
                          "one patch (the single-patch fit)")
 
 
+def tangent_plane_distance(query: np.ndarray, points: np.ndarray, normals: np.ndarray,
+                           tree: cKDTree, cell: float) -> np.ndarray:
+    """Hoppe et al.'s signed distance (Q,) of ``query`` (Q, 3) to the cloud ``points`` (N, 3)
+    with oriented unit ``normals`` (N, 3): ``sum_k w_k (x - p_k) . n_k / sum_k w_k`` over the
+    ``NEIGHBOURS`` nearest points (``tree``), ``w_k`` the inverse squared distance (floored at a
+    thousandth of ``cell``)."""
+    distance, nearest = tree.query(query, k=NEIGHBOURS)
+    plane = np.einsum("gkc,gkc->gk", query[:, None, :] - points[nearest], normals[nearest])
+    weights = 1.0 / np.maximum(distance, 1e-3 * cell) ** 2
+    return (plane * weights).sum(axis=1) / weights.sum(axis=1)
+
+
+def compacted(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh without the vertices no face uses, faces renumbered."""
+    used = np.unique(faces)
+    remap = np.full(len(vertices), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return vertices[used], remap[faces]
+
+
 def _zero_set(points: np.ndarray, normals: np.ndarray | None, wrapped: Wrap, tree: cKDTree,
               max_hole: float) -> ScanMesh:
     """Marching cubes of the signed field over the wrap (see the module docstring)."""
@@ -136,15 +156,11 @@ def _zero_set(points: np.ndarray, normals: np.ndarray | None, wrapped: Wrap, tre
     if normals is None:
         normals = wrapped.normals
     cell = grid.cell
-    centres = grid.centres()
     near = wrapped.blocked.ravel()
-    distance, nearest = tree.query(centres[near], k=NEIGHBOURS)
-    offsets = centres[near][:, None, :] - points[nearest]
-    plane = np.einsum("gkc,gkc->gk", offsets, normals[nearest])
-    weights = 1.0 / np.maximum(distance, 1e-3 * cell) ** 2
     reach = float(np.percentile(wrapped.radii, 90))
     signed = np.where(wrapped.outside.ravel(), reach, -reach)
-    signed[near] = np.clip((plane * weights).sum(axis=1) / weights.sum(axis=1), -reach, reach)
+    signed[near] = np.clip(tangent_plane_distance(grid.centres()[near], points, normals, tree,
+                                                  cell), -reach, reach)
     volume = signed.reshape(grid.shape)
     # a one-cell blur closes the pin-holes and tiny handles that noisy normals leave in the band
     volume = scipy.ndimage.gaussian_filter(volume, SMOOTHING)
@@ -153,10 +169,7 @@ def _zero_set(points: np.ndarray, normals: np.ndarray | None, wrapped: Wrap, tre
     verts, faces, _, _ = marching_cubes(volume, level=0.0, spacing=(cell, cell, cell))
     verts = verts + grid.origin
     faces, pieces = _largest_piece(faces.astype(np.int64), len(verts))
-    used = np.unique(faces)
-    remap = np.full(len(verts), -1, np.int64)
-    remap[used] = np.arange(len(used))
-    verts, faces = verts[used], remap[faces]
+    verts, faces = compacted(verts, faces)
     gap, owner = tree.query(verts)
     away_vertices = gap > np.maximum(AWAY * cell, wrapped.radii[owner])
     filled = None

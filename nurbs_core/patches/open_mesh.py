@@ -33,11 +33,12 @@ from scipy.spatial import cKDTree
 
 from nurbs_core.patches.closed_mesh import (
     MAX_HOLE,
-    NEIGHBOURS,
     SMOOTHING,
     WRAP_POINTS,
     _grid,
     _largest_piece,
+    compacted,
+    tangent_plane_distance,
 )
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.reconstruct.wrap import NEIGHBOURS as NORMAL_NEIGHBOURS
@@ -77,13 +78,9 @@ def open_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
     radii = point_radii(points, grid.cell, tree)
     blocked = blocked_voxels(points, radii, grid)
     band = scipy.ndimage.binary_dilation(blocked, iterations=BAND_GROWTH)
-    centres = grid.centres()[band.ravel()]
-    distance, nearest = tree.query(centres, k=NEIGHBOURS)
-    offsets = centres[:, None, :] - points[nearest]
-    plane = np.einsum("gkc,gkc->gk", offsets, normals[nearest])
-    weights = 1.0 / np.maximum(distance, 1e-3 * grid.cell) ** 2
     field = np.zeros(grid.shape)
-    field[band] = (plane * weights).sum(axis=1) / weights.sum(axis=1)
+    field[band] = tangent_plane_distance(grid.centres()[band.ravel()], points, normals, tree,
+                                         grid.cell)
     # blurred inside the band only (a normalised convolution: the zeros outside do not leak in)
     inside = band.astype(np.float64)
     field = (scipy.ndimage.gaussian_filter(field * inside, SMOOTHING)
@@ -98,7 +95,7 @@ def open_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
     faces, pieces = _largest_piece(faces.astype(np.int64), len(vertices))
     faces = _without_pinches(faces)
     faces, _ = _largest_piece(faces, len(vertices))
-    vertices, faces = _compacted(vertices, faces)
+    vertices, faces = compacted(vertices, faces)
     # faces turned like the points' normals
     centroid = vertices[faces].mean(axis=1)
     face_normal = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
@@ -211,13 +208,6 @@ def _without_pinches(faces: np.ndarray) -> np.ndarray:
         bad[pinched] = True
         faces = faces[~bad[faces].any(axis=1)]
     return faces
-
-
-def _compacted(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    used = np.unique(faces)
-    remap = np.full(len(vertices), -1, np.int64)
-    remap[used] = np.arange(len(used))
-    return vertices[used], remap[faces]
 
 
 def _border_curve(ring: np.ndarray, points: np.ndarray, tree: cKDTree) -> np.ndarray:

@@ -175,6 +175,23 @@ def test_hdf5_dataset_items_match_single_runs_of_their_clouds(tmp_path):
                                    _control_points(tmp_path / f"c{k}.json"), atol=1e-9, rtol=0)
 
 
+def _stop_on_the_third(monkeypatch, exception: BaseException | type[BaseException]):
+    """Make the batch's third fit raise ``exception`` (Ctrl-C, a dying process); returns the
+    real ``fit_item``."""
+    import nurbs_core.batch.worker as worker
+
+    real, calls = worker.fit_item, []
+
+    def stopping_on_the_third(options, item, **kwargs):
+        calls.append(item["input"])
+        if len(calls) == 3:
+            raise exception
+        return real(options, item, **kwargs)
+
+    monkeypatch.setattr(worker, "fit_item", stopping_on_the_third)
+    return real
+
+
 @pytest.mark.timeout(120)
 @pytest.mark.slow
 def test_ctrl_c_keeps_finished_results_and_a_rerun_finishes_the_rest(tmp_path, monkeypatch,
@@ -183,15 +200,7 @@ def test_ctrl_c_keeps_finished_results_and_a_rerun_finishes_the_rest(tmp_path, m
 
     folder = _folder(tmp_path, corrupt=False)
     out = tmp_path / "fits"
-    real, calls = worker.fit_item, []
-
-    def interrupted_on_the_third(options, item, **kwargs):
-        calls.append(item["input"])
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return real(options, item, **kwargs)
-
-    monkeypatch.setattr(worker, "fit_item", interrupted_on_the_third)
+    real = _stop_on_the_third(monkeypatch, KeyboardInterrupt)
     assert main([str(folder), "--output-dir", str(out), "-q", *FIT]) == 130
     assert sorted(p.name for p in out.glob("*.json")) == ["part0.json", "part1.json"]
     assert [row["status"] for row in _summary(out / "summary.jsonl").values()] == ["ok", "ok"]
@@ -590,19 +599,9 @@ def test_an_earlier_summary_in_the_input_folder_is_not_an_input(tmp_path):
 def test_the_summary_is_accurate_when_the_run_dies_mid_way(tmp_path, monkeypatch):
     """The summary is rewritten as each result arrives: a run that dies after two results (here
     an uncatchable exit, as SIGKILL would be) leaves a summary of exactly those two."""
-    import nurbs_core.batch.worker as worker
-
     folder = _folder(tmp_path, corrupt=False)
     out = tmp_path / "fits"
-    real, calls = worker.fit_item, []
-
-    def dying_on_the_third(options, item, **kwargs):
-        calls.append(item["input"])
-        if len(calls) == 3:
-            raise SystemExit(137)                      # no summary code runs after this
-        return real(options, item, **kwargs)
-
-    monkeypatch.setattr(worker, "fit_item", dying_on_the_third)
+    _stop_on_the_third(monkeypatch, SystemExit(137))   # no summary code runs after this
     with pytest.raises(SystemExit):
         main([str(folder), "--output-dir", str(out), "-q", *FIT])
     rows = _summary(out / "summary.jsonl")
