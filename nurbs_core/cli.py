@@ -154,6 +154,12 @@ def build_parser() -> argparse.ArgumentParser:
                              "shape, N asks for about N patches (outputs: one joined B-rep in "
                              ".3dm, one sewn solid in .step/.iges, the network with its adjacency "
                              "in .json, a crack-free mesh in .obj/.stl/.ply)")
+    parser.add_argument("--part", action=argparse.BooleanOptionalAction, default=None,
+                        help="a scanned machined part as a valid solid with exact planes, "
+                             "cylinders, cones and spheres and sharp edges (outputs .step, "
+                             ".iges, .brep, .stl/.obj/.ply; needs the cad extra): by default "
+                             "when a closed scan lies mostly on analytic surfaces; --part "
+                             "forces it on a closed scan, --no-part turns it off")
     parser.add_argument("--max-hole", type=float, default=None, metavar="LENGTH",
                         help="the widest opening of a scan that is sealed by a smooth cap to "
                              "close an object (in the cloud's units; default 10%% of the "
@@ -427,6 +433,8 @@ def _check_outputs(args: argparse.Namespace) -> list[Path]:
     from nurbs_core.io.outputs import check_output_paths
 
     suffixes = NETWORK_SUFFIXES if args.patches is not None else EXPORT_SUFFIXES
+    if args.part is not False and _automatic(args):
+        suffixes = (*suffixes, ".brep")  # a solid's own format, when the route makes one
     outputs = [Path(p) for p in args.output]
     named = outputs + ([_offset_path(p) for p in outputs] if args.offset is not None else [])
     check_output_paths(named, [args.input, args.initial], suffixes=suffixes)
@@ -649,21 +657,37 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
 
     The three steps, :func:`prepare_fit`, :func:`run_fit` and :func:`finish_fit`, are also run
     apart (a batch fits many prepared inputs at once with ``fit_batch``)."""
+    if args.part and not _automatic(args):
+        raise ValueError("--part fits a solid: it cannot be combined with --patches, "
+                         "--single-patch, --curve, --grid, --initial or --offset")
     if args.patches is not None:
         outputs = _check_before_work(args)
         return run_patches(args, _patch_options(args), outputs, points=points,
                            stoppable=stoppable)
     if _automatic(args):
-        from nurbs_core.route import choose_route
+        from nurbs_core.route import choose_route, without_solid
 
         outputs = _check_before_work(args)
         file_mesh, note = None, ""
         if points is None:
             points, file_mesh, note = _surface_input(args.input, quiet=args.quiet)
         options = _patch_options(args, automatic=True)  # checked before the route is decided
-        route = choose_route(points, file_mesh, note, max_hole=options.max_hole)
+        route = choose_route(points, file_mesh, note, max_hole=options.max_hole,
+                             part=_part_allowed(args, outputs))
         if not args.quiet:
             print(f"route: {route.reason} ({route.seconds:.1f} s)", file=sys.stderr)
+        if route.kind == "part":
+            from nurbs_core.brep.solid import SolidError
+
+            try:
+                return run_part(args, outputs, points, route)
+            except SolidError as error:
+                if args.part:
+                    raise
+                route = without_solid(route, error)
+                if not args.quiet:
+                    print(f"route: {route.reason}", file=sys.stderr)
+        _check_no_solid_outputs(outputs, route)
         if route.kind == "network":
             from nurbs_core.patches.layout import LayoutError
             from nurbs_core.route import without_layout
@@ -681,6 +705,85 @@ def fit_one(args: argparse.Namespace, points: np.ndarray | None = None,
         return _single_patch_or_open_network(args, options, outputs, points, route, stoppable)
     prepared = prepare_fit(args, points)
     return finish_fit(prepared, run_fit(prepared, stoppable))
+
+
+def _part_allowed(args: argparse.Namespace, outputs: list[Path]) -> bool | None:
+    """``choose_route``'s ``part``: --part / --no-part, else False when an output cannot hold a
+    solid (a .json network, a .3dm) and None (decided by the scan) otherwise."""
+    from nurbs_core.io.points import suffix_of
+    from nurbs_core.io.solid_io import SOLID_SUFFIXES, check_solid_suffix
+
+    if args.part:
+        for path in outputs:
+            check_solid_suffix(path)
+        return True
+    if args.part is False or any(suffix_of(p) not in SOLID_SUFFIXES for p in outputs):
+        return False
+    return None
+
+
+def _check_no_solid_outputs(outputs: list[Path], route: Route) -> None:
+    """A .brep output needs the part route: refused before a surface or network fit."""
+    from nurbs_core.io.errors import FileFormatError
+    from nurbs_core.io.points import suffix_of
+
+    for path in outputs:
+        if suffix_of(path) == ".brep":
+            raise FileFormatError(path, f"a .brep file holds a solid, but the scan is not fitted "
+                                        f"as one ({route.finding})")
+
+
+def run_part(args: argparse.Namespace, outputs: list[Path], points: np.ndarray,
+             route: Route) -> dict[str, Any]:
+    """The part route: the solid with analytic faces (:func:`nurbs_core.brep.part.fit_part`),
+    its report (per face its type, parameters, points and deviation) and files."""
+    import numpy as np
+
+    from nurbs_core.brep.part import fit_part
+    from nurbs_core.io.solid_io import save_solid
+
+    assert route.mesh is not None and route.segmentation is not None
+    result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation)
+    result.timings["route"] = route.seconds - result.timings["segmentation"]
+    statistics = result.statistics()
+    noise = result.noise
+    print(f"status: {result.status}")
+    kinds = ", ".join(f"{n} {k}{'s' if n > 1 else ''}"
+                      for k, n in statistics["face_types"].items())
+    print(f"solid: {len(result.faces)} faces ({kinds}); "
+          f"{'valid' if result.valid else 'INVALID'}, "
+          f"{'closed' if result.closed else 'NOT closed'}; volume {result.volume:.6g}; "
+          f"{sum(result.timings.values()):.2f} s "
+          f"({', '.join(f'{k} {v:.1f} s' for k, v in result.timings.items())})")
+    print(f"segmentation: {result.segmentation.coverage:.1%} of the points on analytic "
+          f"surfaces; noise sigma {noise:.4g} (tolerance {result.segmentation.tolerance:.4g})")
+    d = result.distances
+    print(f"point-to-solid distance: mean {d.mean():.6g} ({d.mean() / noise:.2f} sigma), rms "
+          f"{np.sqrt((d ** 2).mean()):.6g}, 99th percentile {np.percentile(d, 99):.6g} "
+          f"({np.percentile(d, 99) / noise:.2f} sigma), max {d.max():.6g}")
+    for index, face in enumerate(result.faces):
+        print(f"face {index}: {_describe_face(face.parameters)}; {face.points} points, mean "
+              f"{face.mean:.4g}, 99th percentile {face.p99:.4g}")
+    for warning in result.problems.values():
+        print(f"warning: {warning}")
+    save_solid(result.solid, outputs, result.segmentation.tolerance / 3)
+    for path in outputs:
+        print(f"wrote {path}")
+    return _plain(statistics)
+
+
+def _describe_face(parameters: dict[str, Any]) -> str:
+    import numpy as np
+
+    from nurbs_core.brep.primitives import Primitive
+
+    if "origin" not in parameters:
+        return str(parameters["type"])
+    return Primitive(parameters["type"], np.array(parameters["origin"]),
+                     np.array(parameters.get("axis", (0.0, 0.0, 1.0))),
+                     radius=float(parameters.get("radius", 0.0)),
+                     angle=float(np.radians(parameters.get("half_angle_degrees", 0.0)))
+                     ).describe()
 
 
 def _check_network_outputs(args: argparse.Namespace, outputs: list[Path]) -> None:

@@ -4,6 +4,11 @@
   points encloses a volume (:func:`nurbs_core.patches.closed_mesh.closed_mesh`, robust to uneven
   sampling). One open patch cannot hold a closed object without folding, so it becomes a
   watertight network of tangent-continuous patches.
+* ``part``: a closed object most of whose scan lies on a few large analytic surfaces (planes,
+  cylinders, cones, spheres: :func:`nurbs_core.brep.part.part_like`) becomes a valid solid with
+  those exact faces and sharp edges (:mod:`nurbs_core.brep`), when OpenCASCADE (the ``cad``
+  extra) is installed and the outputs can hold a solid. ``part=False`` turns it off,
+  ``part=True`` forces it on a closed object.
 * ``single_patch``: everything else (an open sheet, a shell, a tube): one patch, the fold-free
   least-squares core (:mod:`nurbs_core.fitting.sheet`), **when it holds the surface cleanly**.
   When one patch is refused (the surface is not a disk or a tube) or fails a quality check
@@ -20,7 +25,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -28,7 +33,7 @@ from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import quality_problems
 
-RouteKind = Literal["single_patch", "network"]
+RouteKind = Literal["single_patch", "network", "part"]
 
 
 @dataclass
@@ -42,23 +47,64 @@ class Route:
     mesh: ScanMesh | None = None
     #: how long the decision took (building the closed mesh, most of it)
     seconds: float = 0.0
+    #: a part's analytic regions (:class:`nurbs_core.brep.segment.Segmentation`)
+    segmentation: Any = None
 
     @property
     def reason(self) -> str:
         """The report's line: the finding and the route it leads to."""
         if self.kind == "single_patch":
             return f"{self.finding}: one patch"
+        if self.kind == "part":
+            return f"{self.finding}: a solid with analytic faces"
         closed = self.mesh is None or self.mesh.closed
         return f"{self.finding}: " + ("a network of patches" if closed
                                       else "an open network of patches")
 
 
 def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
-                 file_mesh_note: str = "", max_hole: float | None = None) -> Route:
-    """The route for a surface cloud (N, 3) with no route forced (see :func:`_decide`), timed."""
+                 file_mesh_note: str = "", max_hole: float | None = None,
+                 part: bool | None = None) -> Route:
+    """The route for a surface cloud (N, 3) with no route forced (see :func:`_decide`), timed.
+    ``part``: None tries the part route on a closed object, False skips it, True takes it
+    whatever the segmentation finds (ValueError when the cloud is not a closed object or
+    OpenCASCADE is missing)."""
     started = time.perf_counter()
     route = _decide(points, file_mesh, file_mesh_note, max_hole)
+    if route.kind == "network" and part is not False:
+        route = _part_or(route, points, forced=bool(part))
+    elif part:
+        raise ValueError(f"a solid needs a closed object, but {route.finding}")
     route.seconds = time.perf_counter() - started
+    return route
+
+
+def cad_available() -> bool:
+    """Whether OpenCASCADE (OCP, the ``cad`` extra) can be imported."""
+    import importlib.util
+
+    return importlib.util.find_spec("OCP") is not None
+
+
+def _part_or(route: Route, points: np.ndarray, forced: bool) -> Route:
+    """The part route when the closed object's scan is part-like (or ``forced``), else
+    ``route`` unchanged."""
+    if not cad_available():
+        if forced:
+            from nurbs_core.io.errors import require_ocp
+
+            require_ocp("A solid with analytic faces")
+        return route
+    from nurbs_core.brep.part import MIN_COVERAGE, part_like
+    from nurbs_core.brep.segment import segment
+
+    segmentation = segment(points, give_up=0.0 if forced else 0.02)
+    share = f"{segmentation.coverage:.0%} of the points on {len(segmentation.surfaces)} analytic"
+    if part_like(segmentation) or forced:
+        return Route("part", f"{route.finding}; {share} surfaces", route.mesh,
+                     segmentation=segmentation)
+    route.finding += (f"; not a machined part ({share} surfaces, under "
+                      f"{MIN_COVERAGE:.0%})")
     return route
 
 
@@ -82,6 +128,13 @@ def _decide(points: np.ndarray, file_mesh: ScanMesh | None, file_mesh_note: str,
              if mesh.filled_fraction > 0 else "")
     return Route("network", ((f"{file_mesh_note}; " if file_mesh_note else "")
                              + f"the cloud encloses a volume{holes} (a closed object)"), mesh)
+
+
+def without_solid(route: Route, error: Exception) -> Route:
+    """The closed object's network after its part route built no valid solid, with the
+    reason."""
+    return Route("network", f"{route.finding}, but no valid solid results ({error})",
+                 route.mesh)
 
 
 def without_layout(route: Route, error: Exception) -> Route:

@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from nurbs_core.brep.occ import subshapes
+
 #: OpenCASCADE objects (OCP ships no type information)
 OccObject = Any
 
@@ -59,19 +61,6 @@ def _box(rng: np.random.Generator) -> tuple[OccObject, np.ndarray]:
 
     sides = rng.uniform(0.6, 2.0, 3)
     return BRepPrimAPI_MakeBox(_pnt(-sides / 2), *map(float, sides)).Shape(), sides
-
-
-def subshapes(shape: OccObject, kind: str) -> list[OccObject]:
-    """The distinct faces or edges (``kind`` "FACE" or "EDGE") of a shape, in a fixed order."""
-    from OCP.collections import IndexedMap_TopoDS_Shape_TopTools_ShapeMapHasher as ShapeMap
-    from OCP.TopAbs import TopAbs_ShapeEnum
-    from OCP.TopExp import TopExp
-    from OCP.TopoDS import TopoDS
-
-    found = ShapeMap()
-    TopExp.MapShapes_s(shape, getattr(TopAbs_ShapeEnum, "TopAbs_" + kind), found)
-    cast = TopoDS.Face if kind == "FACE" else TopoDS.Edge
-    return [cast(found.FindKey(k)) for k in range(1, found.Size() + 1)]
 
 
 def _blend(shape: OccObject, rng: np.random.Generator, radius: tuple[float, float],
@@ -138,12 +127,12 @@ def _smooth_profile(rng: np.random.Generator, count: int, amplitude: float) -> n
     return values
 
 
-def _filleted_box(rng: np.random.Generator) -> OccObject | None:
+def filleted_box(rng: np.random.Generator) -> OccObject | None:
     box, sides = _box(rng)
     return _blend(box, rng, (0.1 * sides.min(), 0.35 * sides.min()), rng.uniform(0.3, 1.0))
 
 
-def _primitive(rng: np.random.Generator) -> tuple[str, OccObject]:
+def primitive(rng: np.random.Generator) -> tuple[str, OccObject]:
     from OCP.BRepPrimAPI import (
         BRepPrimAPI_MakeCone,
         BRepPrimAPI_MakeCylinder,
@@ -164,7 +153,7 @@ def _primitive(rng: np.random.Generator) -> tuple[str, OccObject]:
     return kind, BRepPrimAPI_MakeTorus(major, rng.uniform(0.2, 0.6) * major).Shape()
 
 
-def _cut_box(rng: np.random.Generator) -> OccObject | None:
+def cut_box(rng: np.random.Generator) -> OccObject | None:
     from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
     from OCP.BRepPrimAPI import BRepPrimAPI_MakeCylinder, BRepPrimAPI_MakeSphere
     from OCP.gp import gp_Ax2
@@ -304,12 +293,12 @@ def random_solid(rng: np.random.Generator) -> tuple[str, OccObject | None]:
     family = SOLIDS[rng.integers(len(SOLIDS))]
     try:
         if family == "filleted_box":
-            return family, _filleted_box(rng)
+            return family, filleted_box(rng)
         if family == "primitive":
-            kind, shape = _primitive(rng)
+            kind, shape = primitive(rng)
             return f"{family}:{kind}", shape
         if family == "cut_box":
-            return family, _cut_box(rng)
+            return family, cut_box(rng)
         if family == "loft":
             return family, _loft(rng)
         if family == "height_field":

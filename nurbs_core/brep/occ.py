@@ -1,0 +1,147 @@
+"""OpenCASCADE helpers for solids (through OCP, the ``cad`` extra): the faces of a shape, their
+surface types, a triangulation that keeps each triangle's face, validity and volume.
+
+OCP is imported inside the functions (:func:`nurbs_core.learn.cad_solids.require_ocp` gives the
+install hint when it is missing).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+#: OpenCASCADE objects (OCP ships no type information)
+OccShape = Any
+
+#: OpenCASCADE's surface types by the names the report uses
+_SURFACE_KINDS = {"GeomAbs_Plane": "plane", "GeomAbs_Cylinder": "cylinder",
+                  "GeomAbs_Cone": "cone", "GeomAbs_Sphere": "sphere", "GeomAbs_Torus": "torus"}
+
+
+def subshapes(shape: OccShape, kind: str) -> list[OccShape]:
+    """The distinct faces or edges (``kind`` "FACE" or "EDGE") of a shape, in a fixed order."""
+    from OCP.collections import IndexedMap_TopoDS_Shape_TopTools_ShapeMapHasher as ShapeMap
+    from OCP.TopAbs import TopAbs_ShapeEnum
+    from OCP.TopExp import TopExp
+    from OCP.TopoDS import TopoDS
+
+    found = ShapeMap()
+    TopExp.MapShapes_s(shape, getattr(TopAbs_ShapeEnum, "TopAbs_" + kind), found)
+    cast = TopoDS.Face if kind == "FACE" else TopoDS.Edge
+    return [cast(found.FindKey(k)) for k in range(1, found.Size() + 1)]
+
+
+def faces(shape: OccShape) -> list[OccShape]:
+    """The distinct faces of a shape, in a fixed order."""
+    return subshapes(shape, "FACE")
+
+
+def face_kind(face: OccShape) -> str:
+    """A face's surface type: plane, cylinder, cone, sphere, torus, or freeform."""
+    from OCP.BRepAdaptor import BRepAdaptor_Surface
+
+    name = BRepAdaptor_Surface(face).GetType().name
+    return _SURFACE_KINDS.get(name, "freeform")
+
+
+def triangulate(shape: OccShape, deflection: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The shape's triangles within ``deflection`` of its faces: vertices (V, 3), triangles
+    (T, 3) oriented outwards, and each triangle's face index (T,) into :func:`faces`."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepMesh import BRepMesh_IncrementalMesh
+    from OCP.TopAbs import TopAbs_Orientation
+    from OCP.TopLoc import TopLoc_Location
+
+    BRepMesh_IncrementalMesh(shape, deflection, False, 0.3, False)
+    vertices, triangles, owners = [], [], []
+    offset = 0
+    for index, face in enumerate(faces(shape)):
+        location = TopLoc_Location()
+        mesh = BRep_Tool.Triangulation_s(face, location)
+        if mesh is None:
+            continue
+        transform = location.Transformation()
+        nodes = np.array([mesh.Node(k).Transformed(transform).Coord()
+                          for k in range(1, mesh.NbNodes() + 1)])
+        tris = np.array([mesh.Triangle(k).Get() for k in range(1, mesh.NbTriangles() + 1)]) - 1
+        if face.Orientation() == TopAbs_Orientation.TopAbs_REVERSED:
+            tris = tris[:, ::-1]
+        vertices.append(nodes)
+        triangles.append(tris + offset)
+        owners.append(np.full(len(tris), index))
+        offset += len(nodes)
+    if not triangles:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    return (np.concatenate(vertices), np.concatenate(triangles).astype(np.int64),
+            np.concatenate(owners))
+
+
+def sample_triangles(vertices: np.ndarray, triangles: np.ndarray, owners: np.ndarray,
+                     count: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` points (count, 3) drawn uniformly by area on triangles (V, 3), (T, 3), and the
+    owner (T,) of each one's triangle (count,)."""
+    corners = vertices[triangles]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                         corners[:, 2] - corners[:, 0]), axis=1)
+    pick = rng.choice(len(triangles), count, p=area / area.sum())
+    a, b = rng.random((2, count))
+    flip = a + b > 1
+    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
+    c = corners[pick]
+    points = c[:, 0] + a[:, None] * (c[:, 1] - c[:, 0]) + b[:, None] * (c[:, 2] - c[:, 0])
+    return points, owners[pick]
+
+
+def sample_shape(shape: OccShape, count: int, noise: float, rng: np.random.Generator
+                 ) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """``count`` points drawn uniformly by area on a shape's faces (a fine triangulation,
+    within 1e-4 of the bounding-box diagonal), Gaussian ``noise`` (a standard deviation) added
+    in every direction. Returns the points (count, 3), each point's face index (count,) and the
+    faces' types (:func:`face_kind`)."""
+    vertices, triangles, owners = triangulate(shape, 1e-4 * bounding_diagonal(shape))
+    points, face = sample_triangles(vertices, triangles, owners, count, rng)
+    points += rng.normal(scale=noise, size=points.shape)
+    return points, face, [face_kind(f) for f in faces(shape)]
+
+
+def bounding_diagonal(shape: OccShape) -> float:
+    """The length of the shape's bounding box diagonal."""
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepBndLib import BRepBndLib
+
+    box = Bnd_Box()
+    BRepBndLib.Add_s(shape, box)
+    return float(np.linalg.norm(np.subtract(box.CornerMax().Coord(), box.CornerMin().Coord())))
+
+
+def is_valid(shape: OccShape) -> bool:
+    """OpenCASCADE's checker (BRepCheck_Analyzer) finds the shape valid."""
+    from OCP.BRepCheck import BRepCheck_Analyzer
+
+    return bool(BRepCheck_Analyzer(shape).IsValid())
+
+
+def volume(shape: OccShape) -> float:
+    """The enclosed volume of a solid (OpenCASCADE's volume properties)."""
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    properties = GProp_GProps()
+    BRepGProp.VolumeProperties_s(shape, properties)
+    return float(properties.Mass())
+
+
+def count(shape: OccShape, kind: str) -> int:
+    """How many distinct sub-shapes of ``kind`` (FACE, EDGE, SHELL, SOLID, ...) the shape has."""
+    if kind in ("FACE", "EDGE"):
+        return len(subshapes(shape, kind))
+    from OCP.TopAbs import TopAbs_ShapeEnum
+    from OCP.TopExp import TopExp_Explorer
+
+    explorer = TopExp_Explorer(shape, getattr(TopAbs_ShapeEnum, "TopAbs_" + kind))
+    found = 0
+    while explorer.More():
+        found += 1
+        explorer.Next()
+    return found

@@ -1,0 +1,178 @@
+"""A scanned machined part as a valid solid with exact analytic faces: segmentation
+(:mod:`nurbs_core.brep.segment`), the solid of the surfaces' arrangement
+(:mod:`nurbs_core.brep.solid`) and the measures that say whether it holds the scan.
+
+:func:`part_like` is the cheap test the route asks first (most of the scan on a few large
+analytic regions); :func:`fit_part` builds and measures the solid. Its status is ``converged``
+only when the quality checks hold (:func:`part_problems`): one valid closed solid, and the
+points at most :data:`MEAN_LIMIT` noise sigmas from it on average.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from nurbs_core.brep.occ import (
+    OccShape,
+    count,
+    face_kind,
+    faces,
+    is_valid,
+    sample_triangles,
+    triangulate,
+    volume,
+)
+from nurbs_core.brep.primitives import Primitive
+from nurbs_core.brep.segment import Segmentation, segment
+
+#: a part-like scan has at least this share of its points on analytic surfaces
+MIN_COVERAGE = 0.9
+#: the points' mean distance to the solid may be at most this many noise sigmas
+MEAN_LIMIT = 1.25
+#: at least this many samples of the solid's faces decide which face is nearest to a point
+SAMPLES = 200_000
+
+
+@dataclass
+class PartFace:
+    """One face of the solid: its surface type and parameters, how many scan points are
+    nearest to it and their distances to it (mean, 99th percentile, max)."""
+
+    kind: str
+    parameters: dict[str, Any]
+    points: int
+    mean: float
+    p99: float
+    max: float
+
+
+@dataclass
+class PartResult:
+    """The solid (an OpenCASCADE shape), its faces, the segmentation, the points' distances to
+    the solid (N,), its validity, closedness, volume and the timings (seconds per stage)."""
+
+    solid: OccShape
+    faces: list[PartFace]
+    segmentation: Segmentation
+    distances: np.ndarray
+    valid: bool
+    closed: bool
+    volume: float
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def noise(self) -> float:
+        return self.segmentation.noise
+
+    @property
+    def problems(self) -> dict[str, str]:
+        return part_problems(self)
+
+    @property
+    def status(self) -> str:
+        return "converged" if not self.problems else "warnings"
+
+    def statistics(self) -> dict[str, Any]:
+        """Plain values for the report, the batch summary and tests."""
+        d = self.distances
+        kinds = [face.kind for face in self.faces]
+        return {"kind": "solid", "fit_status": self.status, "points": len(d),
+                "faces": len(self.faces),
+                "face_types": {k: kinds.count(k) for k in sorted(set(kinds))},
+                "valid": self.valid, "closed": self.closed, "volume": self.volume,
+                "noise": self.noise, "coverage": self.segmentation.coverage,
+                "mean": float(d.mean()), "rms": float(np.sqrt((d ** 2).mean())),
+                "p99": float(np.percentile(d, 99)), "max": float(d.max()),
+                "fit_seconds": sum(self.timings.values()),
+                "warnings": list(self.problems.values())}
+
+
+def part_problems(result: PartResult) -> dict[str, str]:
+    """Which quality checks the solid fails, each with its one-clause reason (empty: none)."""
+    problems = {}
+    if not result.valid:
+        problems["valid"] = "OpenCASCADE's checker finds the solid invalid"
+    if not result.closed:
+        problems["closed"] = "the solid's shell is not closed"
+    mean = float(result.distances.mean())
+    if mean > MEAN_LIMIT * result.noise:
+        problems["distance"] = (f"the points lie {mean / result.noise:.2f} noise sigmas from the "
+                                f"solid on average (limit {MEAN_LIMIT:g}): some of the scan is "
+                                "not on its analytic faces")
+    return problems
+
+
+def part_like(segmentation: Segmentation) -> bool:
+    """Whether the scan is a part: most of its points (:data:`MIN_COVERAGE`) on analytic
+    surfaces."""
+    return bool(segmentation.surfaces) and segmentation.coverage >= MIN_COVERAGE
+
+
+def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarray,
+                    tolerance: float) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Each point's (N, 3) distance to the solid (N,) and nearest face (N,), and each face's
+    surface index: the nearest face by a fine triangulation, the distance to that face's exact
+    surface (to the triangulation when the face lies on none of ``surfaces``)."""
+    from nurbs_core.brep.solid import face_surfaces
+
+    vertices, triangles, owners = triangulate(solid, tolerance / 4)
+    on_surface = face_surfaces(solid, surfaces, tolerance)
+    # the nearest of dense samples of the faces decides a point's face (the triangulation's
+    # vertices lie on the faces' edges only where they are flat)
+    samples, sample_face = sample_triangles(vertices, triangles, owners,
+                                            max(SAMPLES, 10 * len(points)),
+                                            np.random.default_rng(0))
+    mesh_distance, nearest = cKDTree(samples).query(points)
+    face = sample_face[nearest]
+    distance = np.array(mesh_distance, np.float64)
+    for index, surface_index in enumerate(on_surface):
+        if surface_index < 0:
+            continue
+        mine = face == index
+        distance[mine] = surfaces[surface_index].distance(points[mine])
+    return distance, face, on_surface
+
+
+def fit_part(points: np.ndarray, mesh_vertices: np.ndarray, mesh_triangles: np.ndarray,
+             segmentation: Segmentation | None = None) -> PartResult:
+    """The solid of a scanned part (N, 3) whose closed mesh is (V, 3), (T, 3) (see the
+    module); ``segmentation``: when already computed. Raises SolidError when no valid solid
+    results."""
+    from nurbs_core.brep.solid import build_solid, spans
+
+    points = np.asarray(points, np.float64)
+    timings = {}
+    started = time.perf_counter()
+    if segmentation is None:
+        segmentation = segment(points)
+    timings["segmentation"] = segmentation.seconds
+    started = time.perf_counter()
+    low, high = points.min(axis=0), points.max(axis=0)
+    extents = spans(segmentation.surfaces, points, segmentation.labels,
+                    float(np.linalg.norm(high - low)))
+    solid = build_solid(segmentation.surfaces, mesh_vertices, mesh_triangles, (low, high),
+                        extents)
+    timings["solid"] = time.perf_counter() - started
+    started = time.perf_counter()
+    distance, nearest, on_surface = solid_distances(solid, segmentation.surfaces, points,
+                                                    segmentation.tolerance)
+    part_faces = []
+    for index, face in enumerate(faces(solid)):
+        mine = distance[nearest == index]
+        kind = face_kind(face)
+        surface = on_surface[index]
+        parameters = (segmentation.surfaces[surface].parameters() if surface >= 0
+                      else {"type": kind})
+        part_faces.append(PartFace(kind, parameters, int(len(mine)),
+                                   float(mine.mean()) if len(mine) else 0.0,
+                                   float(np.percentile(mine, 99)) if len(mine) else 0.0,
+                                   float(mine.max()) if len(mine) else 0.0))
+    timings["measure"] = time.perf_counter() - started
+    closed = count(solid, "SHELL") == 1 and count(solid, "SOLID") == 1
+    return PartResult(solid, part_faces, segmentation, distance, is_valid(solid), closed,
+                      volume(solid), timings)

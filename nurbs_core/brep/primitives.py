@@ -1,0 +1,247 @@
+"""Analytic surfaces of machined parts: planes, spheres, cylinders and cones.
+
+Each type gives the unsigned distance and the surface normal at points (N, 3), a candidate from
+a few points with normals (the minimal samples of efficient RANSAC, Schnabel et al. 2007) and a
+least-squares refinement of its exact parameters on its points (geometric distances, scipy's
+``least_squares``). :data:`SIMPLICITY` orders the types: a region takes the simplest type that
+fits it within the tolerance. numpy + scipy only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.optimize
+
+#: the types from simplest to most complex (by parameter count)
+SIMPLICITY = ("plane", "sphere", "cylinder", "cone")
+
+#: least-squares refinement runs on at most this many of a region's points (random, fixed seed)
+REFINE_POINTS = 4000
+
+#: a cone narrower than this half-angle (degrees) is a cylinder, wider than 90 minus it a plane
+CONE_LIMIT = 2.0
+
+
+def _unit(vectors: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    return vectors / np.maximum(norm, 1e-300)
+
+
+def _frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors (3,) that make ``axis`` (3,) a right-handed orthonormal frame."""
+    helper = np.eye(3)[int(np.argmin(np.abs(axis)))]
+    first = _unit(np.cross(axis, helper))
+    return first, np.cross(axis, first)
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """An analytic surface. ``kind``: one of :data:`SIMPLICITY`. ``origin`` (3,): a point of the
+    plane, the sphere's centre, a point of the cylinder's axis, the cone's apex. ``axis`` (3,):
+    the plane's normal, the cylinder's axis, the cone's axis pointing into its opening (unused
+    by a sphere). ``radius``: of the sphere or cylinder; ``angle``: the cone's half-angle in
+    radians."""
+
+    kind: str
+    origin: np.ndarray
+    axis: np.ndarray
+    radius: float = 0.0
+    angle: float = 0.0
+
+    def signed(self, points: np.ndarray) -> np.ndarray:
+        """Signed distances (N,) of points (N, 3), positive on the side the normal points to."""
+        v = np.asarray(points, np.float64) - self.origin
+        if self.kind == "plane":
+            return v @ self.axis
+        if self.kind == "sphere":
+            return np.linalg.norm(v, axis=1) - self.radius
+        height = v @ self.axis
+        radial = np.linalg.norm(v - height[:, None] * self.axis, axis=1)
+        if self.kind == "cylinder":
+            return radial - self.radius
+        cos, sin = np.cos(self.angle), np.sin(self.angle)
+        along = height * cos + radial * sin  # position along the cone's generating line
+        return np.where(along >= 0, radial * cos - height * sin,
+                        np.linalg.norm(v, axis=1))
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """Unsigned distances (N,) of points (N, 3) to the surface."""
+        return np.abs(self.signed(points))
+
+    def normals(self, points: np.ndarray) -> np.ndarray:
+        """Unit normals (N, 3) of the surface at the points' feet (N, 3)."""
+        v = np.asarray(points, np.float64) - self.origin
+        if self.kind == "plane":
+            return np.broadcast_to(self.axis, v.shape).copy()
+        if self.kind == "sphere":
+            return _unit(v)
+        height = v @ self.axis
+        outward = _unit(v - height[:, None] * self.axis)
+        if self.kind == "cylinder":
+            return outward
+        return np.cos(self.angle) * outward - np.sin(self.angle) * self.axis
+
+    def describe(self) -> str:
+        """Its parameters, one clause (for the report)."""
+        o = ", ".join(f"{c:.5g}" for c in self.origin)
+        a = ", ".join(f"{c:.4f}" for c in self.axis)
+        if self.kind == "plane":
+            return f"plane through ({o}), normal ({a})"
+        if self.kind == "sphere":
+            return f"sphere centre ({o}), radius {self.radius:.5g}"
+        if self.kind == "cylinder":
+            return f"cylinder radius {self.radius:.5g}, axis ({a}) through ({o})"
+        return f"cone half-angle {np.degrees(self.angle):.3f} deg, apex ({o}), axis ({a})"
+
+    def parameters(self) -> dict[str, object]:
+        """Plain JSON values: type, origin, axis, radius, half-angle in degrees."""
+        values: dict[str, object] = {"type": self.kind, "origin": self.origin.tolist()}
+        if self.kind != "sphere":
+            values["axis"] = self.axis.tolist()
+        if self.kind in ("sphere", "cylinder"):
+            values["radius"] = self.radius
+        if self.kind == "cone":
+            values["half_angle_degrees"] = float(np.degrees(self.angle))
+        return values
+
+
+# --- candidates from minimal samples --------------------------------------------------------------
+
+
+def plane_through(points: np.ndarray) -> Primitive:
+    """The total-least-squares plane of points (N >= 3, 3)."""
+    points = np.asarray(points, np.float64)
+    centre = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - centre, full_matrices=False)
+    return Primitive("plane", centre, vt[2])
+
+
+def sphere_from(p: np.ndarray, n: np.ndarray) -> Primitive | None:
+    """The sphere through two points p (2, 3) whose normals n (2, 3) meet near one centre."""
+    centre = _closest_between_lines(p[0], n[0], p[1], n[1])
+    if centre is None:
+        return None
+    radius = float(np.linalg.norm(p - centre, axis=1).mean())
+    return Primitive("sphere", centre, np.array([0.0, 0.0, 1.0]), radius=radius)
+
+
+def cylinder_from(p: np.ndarray, n: np.ndarray) -> Primitive | None:
+    """The cylinder through two points p (2, 3) with normals n (2, 3): the axis is across both
+    normals, the centre where the normals' lines cross in the plane across the axis."""
+    axis = np.cross(n[0], n[1])
+    if np.linalg.norm(axis) < np.sin(np.radians(1.0)):
+        return None
+    axis = _unit(axis)
+    first, second = _frame(axis)
+    flat = np.stack([p @ first, p @ second], -1)
+    direction = np.stack([n @ first, n @ second], -1)
+    matrix = np.stack([direction[0], -direction[1]], -1)
+    if abs(np.linalg.det(matrix)) < 1e-9:
+        return None
+    t = np.linalg.solve(matrix, flat[1] - flat[0])
+    centre2 = flat[0] + t[0] * direction[0]
+    radius = float(np.linalg.norm(flat - centre2, axis=1).mean())
+    origin = centre2[0] * first + centre2[1] * second
+    return Primitive("cylinder", origin, axis, radius=radius)
+
+
+def cone_from(p: np.ndarray, n: np.ndarray) -> Primitive | None:
+    """The cone through three points p (3, 3) with normals n (3, 3): the apex where the three
+    tangent planes meet, the axis across the three unit directions from the apex."""
+    if abs(np.linalg.det(n)) < 1e-6:
+        return None
+    apex = np.linalg.solve(n, np.einsum("ij,ij->i", n, p))
+    directions = _unit(p - apex)
+    axis = np.cross(directions[1] - directions[0], directions[2] - directions[0])
+    if np.linalg.norm(axis) < 1e-9:
+        return None
+    axis = _unit(axis)
+    if (directions @ axis).mean() < 0:
+        axis = -axis
+    angle = float(np.arccos(np.clip(directions @ axis, -1, 1)).mean())
+    if not np.radians(CONE_LIMIT) < angle < np.radians(90 - CONE_LIMIT):
+        return None
+    return Primitive("cone", apex, axis, angle=angle)
+
+
+def _closest_between_lines(p0: np.ndarray, d0: np.ndarray, p1: np.ndarray,
+                           d1: np.ndarray) -> np.ndarray | None:
+    """The midpoint (3,) of the shortest segment between two lines (None when parallel)."""
+    cross = np.cross(d0, d1)
+    denominator = cross @ cross
+    if denominator < 1e-8:
+        return None
+    w = p1 - p0
+    s = np.cross(w, d1) @ cross / denominator
+    t = np.cross(w, d0) @ cross / denominator
+    return 0.5 * (p0 + s * d0 + p1 + t * d1)
+
+
+# --- least-squares refinement ----------------------------------------------------------------------
+
+
+def refine(primitive: Primitive, points: np.ndarray) -> Primitive:
+    """``primitive`` with its parameters refined by least squares on points (N, 3): the sum of
+    squared geometric distances is minimised (a plane in closed form)."""
+    points = np.asarray(points, np.float64)
+    if len(points) > REFINE_POINTS:
+        pick = np.random.default_rng(0).choice(len(points), REFINE_POINTS, replace=False)
+        points = points[pick]
+    if primitive.kind == "plane":
+        plane = plane_through(points)
+        axis = plane.axis if plane.axis @ primitive.axis >= 0 else -plane.axis
+        return Primitive("plane", plane.origin, axis)
+    if primitive.kind == "sphere":
+        def sphere(x: np.ndarray) -> np.ndarray:
+            return np.linalg.norm(points - x[:3], axis=1) - x[3]
+        x = scipy.optimize.least_squares(
+            sphere, np.r_[primitive.origin, primitive.radius], method="lm").x
+        return Primitive("sphere", x[:3], primitive.axis, radius=abs(float(x[3])))
+    first, second = _frame(primitive.axis)
+
+    def axis_of(x: np.ndarray) -> np.ndarray:
+        return _unit(primitive.axis + x[0] * first + x[1] * second)
+
+    def origin_of(x: np.ndarray) -> np.ndarray:
+        return primitive.origin + x[2] * first + x[3] * second + (
+            x[5] * primitive.axis if len(x) > 5 else 0.0)
+
+    if primitive.kind == "cylinder":
+        def cylinder(x: np.ndarray) -> np.ndarray:
+            return Primitive("cylinder", origin_of(x), axis_of(x), radius=x[4]).signed(points)
+        x = scipy.optimize.least_squares(
+            cylinder, np.r_[0.0, 0.0, 0.0, 0.0, primitive.radius], method="lm").x
+        return Primitive("cylinder", origin_of(x), axis_of(x), radius=abs(float(x[4])))
+
+    def cone(x: np.ndarray) -> np.ndarray:
+        return Primitive("cone", origin_of(x), axis_of(x), angle=x[4]).signed(points)
+    x = scipy.optimize.least_squares(
+        cone, np.r_[0.0, 0.0, 0.0, 0.0, primitive.angle, 0.0], method="lm").x
+    return Primitive("cone", origin_of(x), axis_of(x), angle=float(x[4]))
+
+
+def fit_kind(kind: str, points: np.ndarray, normals: np.ndarray) -> Primitive | None:
+    """A primitive of ``kind`` fitted to a region's points (N, 3) with unit normals (N, 3) (the
+    candidate from the normals, then refined), or None when the normals do not define one."""
+    points = np.asarray(points, np.float64)
+    if kind == "plane":
+        return refine(plane_through(points), points)
+    rng = np.random.default_rng(1)
+    best, best_error = None, np.inf
+    for _ in range(12):  # candidates from spread samples; the best is refined
+        pick = rng.choice(len(points), 3 if kind == "cone" else 2, replace=False)
+        maker = {"sphere": sphere_from, "cylinder": cylinder_from, "cone": cone_from}[kind]
+        candidate = maker(points[pick], normals[pick])
+        if candidate is None:
+            continue
+        error = float(np.median(candidate.distance(points)))
+        if error < best_error:
+            best, best_error = candidate, error
+    if best is None:
+        return None
+    try:
+        return refine(best, points)
+    except (ValueError, np.linalg.LinAlgError):
+        return best

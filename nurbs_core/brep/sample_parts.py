@@ -1,0 +1,147 @@
+"""Machined parts made with OpenCASCADE, sampled as scans with exact face labels: for tests, the
+parts benchmark and users who want to try the part route.
+
+:data:`PARTS` names five: a plate with a through hole, an L bracket with a fillet in its inner
+corner, a turned part (two cylinders and a cone), a block with every edge rounded (cylinders and
+corner spheres) and a countersunk block (a cone). :func:`random_part` draws from the families of
+:mod:`nurbs_core.learn.cad_solids` that make parts (a box with filleted edges, a box cut by holes
+and dents, a cylinder, cone or sphere). :func:`scan_part` samples one as a noisy cloud.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from nurbs_core.brep.occ import OccShape, bounding_diagonal, sample_shape
+
+
+def _pnt(x: float, y: float, z: float) -> OccShape:
+    from OCP.gp import gp_Pnt
+
+    return gp_Pnt(x, y, z)
+
+
+def _axis(x: float, y: float, z: float, direction: tuple[float, float, float]) -> OccShape:
+    from OCP.gp import gp_Ax2, gp_Dir
+
+    return gp_Ax2(_pnt(x, y, z), gp_Dir(*direction))
+
+
+def _unified(shape: OccShape) -> OccShape:
+    from OCP.ShapeUpgrade import ShapeUpgrade_UnifySameDomain
+
+    unify = ShapeUpgrade_UnifySameDomain(shape, True, True, True)
+    unify.Build()
+    return unify.Shape()
+
+
+def plate() -> OccShape:
+    """A 2 x 1.5 x 0.3 plate with a through hole of radius 0.3 (6 planes, 1 cylinder)."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox, BRepPrimAPI_MakeCylinder
+
+    box = BRepPrimAPI_MakeBox(_pnt(0, 0, 0), 2.0, 1.5, 0.3).Shape()
+    hole = BRepPrimAPI_MakeCylinder(_axis(1.0, 0.75, -1.0, (0, 0, 1)), 0.3, 3.0).Shape()
+    return BRepAlgoAPI_Cut(box, hole).Shape()
+
+
+def bracket() -> OccShape:
+    """An L bracket (legs 2 and 1.5 long, 0.25 thick, 1 wide) with a fillet of radius 0.15 in
+    its inner corner (8 planes, 1 cylinder)."""
+    from OCP.BRepAdaptor import BRepAdaptor_Curve
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Fuse
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    from nurbs_core.brep.occ import subshapes
+
+    base = BRepPrimAPI_MakeBox(_pnt(0, 0, 0), 2.0, 1.0, 0.25).Shape()
+    wall = BRepPrimAPI_MakeBox(_pnt(0, 0, 0), 0.25, 1.0, 1.5).Shape()
+    shape = _unified(BRepAlgoAPI_Fuse(base, wall).Shape())
+    fillet = BRepFilletAPI_MakeFillet(shape)
+    for edge in subshapes(shape, "EDGE"):
+        curve = BRepAdaptor_Curve(edge)
+        middle = curve.Value(0.5 * (curve.FirstParameter() + curve.LastParameter()))
+        if abs(middle.X() - 0.25) < 1e-9 and abs(middle.Z() - 0.25) < 1e-9:
+            fillet.Add(0.15, edge)
+    fillet.Build()
+    return fillet.Shape()
+
+
+def turned() -> OccShape:
+    """A turned part: a cylinder (radius 0.8), a cone (0.6 to 0.35) and a cylinder (0.35) on one
+    axis (3 planes, 2 cylinders, 1 cone)."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Fuse
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCone, BRepPrimAPI_MakeCylinder
+
+    base = BRepPrimAPI_MakeCylinder(_axis(0, 0, 0, (0, 0, 1)), 0.8, 0.5).Shape()
+    cone = BRepPrimAPI_MakeCone(_axis(0, 0, 0.5, (0, 0, 1)), 0.6, 0.35, 0.6).Shape()
+    shaft = BRepPrimAPI_MakeCylinder(_axis(0, 0, 1.1, (0, 0, 1)), 0.35, 0.8).Shape()
+    return _unified(BRepAlgoAPI_Fuse(BRepAlgoAPI_Fuse(base, cone).Shape(), shaft).Shape())
+
+
+def rounded_block() -> OccShape:
+    """A 1.6 x 1 x 0.7 block with every edge rounded (radius 0.15): 6 planes, 12 cylinders and
+    8 corner spheres."""
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    from nurbs_core.brep.occ import subshapes
+
+    box = BRepPrimAPI_MakeBox(_pnt(0, 0, 0), 1.6, 1.0, 0.7).Shape()
+    fillet = BRepFilletAPI_MakeFillet(box)
+    for edge in subshapes(box, "EDGE"):
+        fillet.Add(0.15, edge)
+    fillet.Build()
+    return fillet.Shape()
+
+
+def countersunk() -> OccShape:
+    """A 1.5 x 1.5 x 0.5 block with a countersunk hole: a 90-degree cone (radius 0.45 at the
+    top) over a cylinder of radius 0.2 (6 planes, 1 cone, 1 cylinder)."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut, BRepAlgoAPI_Fuse
+    from OCP.BRepPrimAPI import (
+        BRepPrimAPI_MakeBox,
+        BRepPrimAPI_MakeCone,
+        BRepPrimAPI_MakeCylinder,
+    )
+
+    box = BRepPrimAPI_MakeBox(_pnt(0, 0, 0), 1.5, 1.5, 0.5).Shape()
+    hole = BRepPrimAPI_MakeCylinder(_axis(0.75, 0.75, -0.5, (0, 0, 1)), 0.2, 2.0).Shape()
+    sink = BRepPrimAPI_MakeCone(_axis(0.75, 0.75, 0.05, (0, 0, 1)), 0.0, 0.5, 0.5).Shape()
+    return _unified(BRepAlgoAPI_Cut(box, BRepAlgoAPI_Fuse(hole, sink).Shape()).Shape())
+
+
+#: the named parts
+PARTS: dict[str, Callable[[], OccShape]] = {
+    "plate": plate, "bracket": bracket, "turned": turned, "rounded_block": rounded_block,
+    "countersunk": countersunk}
+
+
+def random_part(rng: np.random.Generator) -> tuple[str, OccShape | None]:
+    """(family, shape or None when OpenCASCADE failed) from the part families of
+    :func:`nurbs_core.learn.cad_solids.random_solid`: a box with filleted edges, a box cut by
+    holes and dents, or a cylinder, cone or sphere."""
+    from nurbs_core.learn import cad_solids
+
+    family = ("filleted_box", "cut_box", "primitive")[int(rng.integers(3))]
+    try:
+        if family == "filleted_box":
+            return family, cad_solids.filleted_box(rng)
+        if family == "cut_box":
+            return family, cad_solids.cut_box(rng)
+        kind, shape = cad_solids.primitive(rng)
+        return f"primitive:{kind}", shape
+    except Exception:  # OpenCASCADE's Standard_Failure family
+        return family, None
+
+
+def scan_part(shape: OccShape, count: int = 20_000, noise: float = 0.002,
+              seed: int = 0) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """A scan of a part: ``count`` points uniform by area with Gaussian noise of ``noise`` x
+    its bounding-box diagonal (sigma); returns the points (count, 3), each point's face (count,)
+    and the faces' types (see :func:`nurbs_core.brep.occ.sample_shape`)."""
+    rng = np.random.default_rng(seed)
+    return sample_shape(shape, count, noise * bounding_diagonal(shape), rng)

@@ -1,0 +1,344 @@
+"""A scan split into regions that each lie on one analytic surface (efficient RANSAC).
+
+The classical route (Schnabel, Wahl and Klein 2007, "Efficient RANSAC for point-cloud shape
+detection"), written for numpy:
+
+1. **Scale**: the point spacing (median distance to the 6th neighbour) and the noise (the
+   median RMS distance of 16-neighbourhoods to their best plane, unbiased for the 3 fitted
+   parameters). The tolerance is 3 noise sigmas, at least :data:`MIN_TOLERANCE` of the diagonal.
+2. **Detection**, one surface per round among the points not yet taken: candidates of every type
+   of :data:`~nurbs_core.brep.primitives.SIMPLICITY` from minimal samples with normals drawn near
+   a random seed (a plane from the seed's neighbourhood, a sphere or cylinder from two points, a
+   cone from three), scored on a random subset by the points within the tolerance whose normals
+   agree (within :data:`NORMAL_ANGLE`); the best few are refined by least squares on their
+   inliers and kept by their largest connected piece (the k-nearest-neighbour graph), so a
+   plane does not take distant coplanar points across a gap. A region takes the simplest type
+   that explains as many of its points (within 3%). Rounds stop when no surface explains
+   :func:`min_region` points.
+3. **Merge**: two surfaces of one type that one surface fits within the tolerance become one.
+4. **Labels**: each point goes to the nearest surface within the tolerance whose normal agrees
+   within 45 degrees, else -1 (a point that is left over: freeform, an outlier, a sharp edge's
+   blurred normal).
+
+numpy + scipy only.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.csgraph
+from scipy.spatial import cKDTree
+
+from nurbs_core.brep.primitives import (
+    SIMPLICITY,
+    Primitive,
+    cone_from,
+    cylinder_from,
+    fit_kind,
+    plane_through,
+    refine,
+    sphere_from,
+)
+
+#: the tolerance is at least this fraction of the bounding-box diagonal (noise-free scans)
+MIN_TOLERANCE = 2e-4
+#: a point's normal must agree with a surface's within this angle (degrees) to be its inlier
+NORMAL_ANGLE = 12.0
+#: a surface's RMS distance to its points may be at most this fraction of the tolerance (3
+#: sigmas): a surface that spans the tolerance band (a huge cylinder over a plane and the starts
+#: of its fillets, a cone over a rounded corner) is biased, not noise
+MAX_RMS = 0.45
+#: candidates drawn per type and round
+CANDIDATES = 40
+#: candidates scored on at most this many points
+SCORE_POINTS = 3000
+#: at most this many surfaces
+MAX_REGIONS = 60
+
+
+@dataclass
+class Segmentation:
+    """The analytic surfaces found in a cloud. ``surfaces``: one per region; ``labels`` (N,):
+    each point's region (its surface index), -1 for points no surface explains; ``normals``
+    (N, 3): the points' unit PCA normals (unoriented); ``noise``: the estimated noise sigma;
+    ``tolerance``: the inlier distance (3 sigmas); ``spacing``: the median point spacing."""
+
+    surfaces: list[Primitive]
+    labels: np.ndarray
+    normals: np.ndarray
+    noise: float
+    tolerance: float
+    spacing: float
+    seconds: float = 0.0
+    rounds: int = 0
+    region_sizes: list[int] = field(default_factory=list)
+
+    @property
+    def coverage(self) -> float:
+        """The fraction of the points on some analytic surface."""
+        return float((self.labels >= 0).mean()) if len(self.labels) else 0.0
+
+
+def min_region(count: int) -> int:
+    """The fewest points a region may have: 0.1% of the cloud, at least 20 (a rounded corner
+    of a block is a sphere's octant, about 0.5% of its area)."""
+    return max(20, int(0.001 * count))
+
+
+def _neighbourhoods(points: np.ndarray, tree: cKDTree, k: int = 16
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """PCA normals (N, 3), RMS plane residuals (N,) and the neighbour indices (N, k)."""
+    _, neighbours = tree.query(points, k=min(k, len(points)))
+    local = points[neighbours] - points[neighbours].mean(axis=1, keepdims=True)
+    covariance = np.einsum("nki,nkj->nij", local, local) / neighbours.shape[1]
+    values, vectors = np.linalg.eigh(covariance)
+    return vectors[:, :, 0], np.sqrt(np.maximum(values[:, 0], 0.0)), neighbours
+
+
+def _graph(neighbours: np.ndarray) -> scipy.sparse.csr_matrix:
+    count, k = neighbours.shape
+    rows = np.repeat(np.arange(count), k)
+    graph = scipy.sparse.coo_matrix((np.ones(rows.size, bool), (rows, neighbours.ravel())),
+                                    shape=(count, count)).tocsr()
+    return (graph + graph.T).tocsr()
+
+
+def _largest_piece(graph: scipy.sparse.csr_matrix, members: np.ndarray) -> np.ndarray:
+    """The indices of the largest connected piece of ``members`` (indices) in the graph."""
+    if len(members) == 0:
+        return members
+    sub = graph[members][:, members]
+    _, label = scipy.sparse.csgraph.connected_components(sub, directed=False)
+    return members[label == np.bincount(label).argmax()]
+
+
+def _inliers(surface: Primitive, points: np.ndarray, normals: np.ndarray,
+             tolerance: float, angle: float = NORMAL_ANGLE) -> np.ndarray:
+    """Which points (N, 3) with normals (N, 3) lie on the surface: a boolean mask (N,)."""
+    near = surface.distance(points) < tolerance
+    agree = np.zeros(len(points), bool)
+    if near.any():
+        agree[near] = np.abs(np.einsum("ij,ij->i", surface.normals(points[near]),
+                                       normals[near])) > np.cos(np.radians(angle))
+    return near & agree
+
+
+def _candidates(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np.ndarray,
+                neighbours: np.ndarray, rng: np.random.Generator, reach: float
+                ) -> list[Primitive]:
+    """Candidates of every type from minimal samples near random seeds among ``free`` (mask)."""
+    found: list[Primitive] = []
+    free_index = np.flatnonzero(free)
+    for _ in range(CANDIDATES):
+        seed = int(free_index[rng.integers(len(free_index))])
+        near = neighbours[seed][free[neighbours[seed]]]
+        if len(near) >= 3:
+            found.append(plane_through(points[near]))
+        ball = np.asarray(tree.query_ball_point(points[seed], rng.uniform(0.1, 1.0) * reach))
+        ball = ball[free[ball]]
+        if len(ball) < 3:
+            continue
+        pick = np.r_[seed, rng.choice(ball, 2, replace=False)]
+        p, n = points[pick], normals[pick]
+        for candidate in (sphere_from(p[:2], n[:2]), cylinder_from(p[:2], n[:2]),
+                          cone_from(p, n)):
+            if candidate is not None and _plausible(candidate, points[seed], reach):
+                found.append(candidate)
+    return found
+
+
+def _plausible(surface: Primitive, seed: np.ndarray, reach: float) -> bool:
+    """A curved candidate whose radius (a cone's apex distance) is within 4 ``reach`` (a
+    quarter of the diagonal): wider ones are planes seen through noisy normals."""
+    if surface.kind == "cone":
+        return float(np.linalg.norm(seed - surface.origin)) < 4 * reach
+    return surface.radius < 4 * reach
+
+
+def _simplest(surface: Primitive, points: np.ndarray, normals: np.ndarray,
+              tolerance: float) -> Primitive:
+    """The simplest type that explains as many of the region's points (within 3%)."""
+    explained = _inliers(surface, points, normals, tolerance).sum()
+    for kind in SIMPLICITY[:SIMPLICITY.index(surface.kind)]:
+        simpler = fit_kind(kind, points, normals)
+        if simpler is not None and (_inliers(simpler, points, normals, tolerance).sum()
+                                    >= 0.97 * explained):
+            return simpler
+    return surface
+
+
+def scale(points: np.ndarray, tree: cKDTree | None = None
+          ) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """(spacing, noise sigma, normals (N, 3), neighbours (N, 16)) of a cloud (N, 3)."""
+    tree = tree or cKDTree(points)
+    distances, _ = tree.query(points, k=min(7, len(points)))
+    spacing = float(np.median(distances[:, -1]))
+    normals, residual, neighbours = _neighbourhoods(points, tree)
+    k = neighbours.shape[1]
+    noise = float(np.median(residual) * np.sqrt(k / max(k - 3, 1)))
+    return spacing, noise, normals, neighbours
+
+
+def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
+            time_limit: float = 30.0, give_up: float = 0.0) -> Segmentation:
+    """Regions of a cloud (N, 3) on analytic surfaces (see the module). ``noise``: the scan's
+    noise sigma when known (estimated otherwise); ``time_limit``: seconds after which no new
+    round starts; ``give_up``: stop after the first round when its region holds less than this
+    share of the points (a freeform scan: no surface explains much of it)."""
+    started = time.perf_counter()
+    points = np.asarray(points, np.float64)
+    count = len(points)
+    tree = cKDTree(points)
+    spacing, estimated, normals, neighbours = scale(points, tree)
+    noise = estimated if noise is None else float(noise)
+    diagonal = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    tolerance = max(3.0 * noise, MIN_TOLERANCE * diagonal)
+    graph = _graph(neighbours[:, :8])
+    rng = np.random.default_rng(seed)
+    free = np.ones(count, bool)
+    surfaces: list[Primitive] = []
+    smallest = min_region(count)
+    rounds = 0
+    while (free.sum() >= smallest and len(surfaces) < MAX_REGIONS
+           and time.perf_counter() - started < time_limit):
+        rounds += 1
+        found = _detect_one(points, normals, tree, free, neighbours, graph, rng, tolerance,
+                            0.25 * diagonal)
+        if found is None or len(found[1]) < smallest:
+            break
+        surface, members = found
+        if rounds == 1 and len(members) < give_up * count:
+            break
+        surfaces.append(surface)
+        free[members] = False
+    surfaces = _merged(surfaces, points, normals, tolerance)
+    surfaces = _without_redundant(surfaces, points, normals, tolerance)
+    labels = _labels(surfaces, points, normals, tolerance)
+    sizes = [int((labels == k).sum()) for k in range(len(surfaces))]
+    keep = [k for k, size in enumerate(sizes) if size >= smallest]
+    surfaces = [surfaces[k] for k in keep]
+    labels = _labels(surfaces, points, normals, tolerance)
+    return Segmentation(surfaces, labels, normals, noise, tolerance, spacing,
+                        time.perf_counter() - started, rounds,
+                        [int((labels == k).sum()) for k in range(len(surfaces))])
+
+
+def _detect_one(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np.ndarray,
+                neighbours: np.ndarray, graph: scipy.sparse.csr_matrix,
+                rng: np.random.Generator, tolerance: float, reach: float
+                ) -> tuple[Primitive, np.ndarray] | None:
+    """The surface of one round and its points (indices), or None."""
+    free_index = np.flatnonzero(free)
+    candidates = _candidates(points, normals, tree, free, neighbours, rng, reach)
+    if not candidates:
+        return None
+    subset = free_index
+    if len(subset) > SCORE_POINTS:
+        subset = rng.choice(free_index, SCORE_POINTS, replace=False)
+    scores = [_inliers(c, points[subset], normals[subset], 2 * tolerance).sum()
+              for c in candidates]
+    best: tuple[Primitive, np.ndarray] | None = None
+    for index in np.argsort(scores)[::-1][:4]:
+        surface = candidates[index]
+        members = np.array([], np.int64)
+        for step in range(3):  # refine on the inliers, collect them again
+            mask = _inliers(surface, points[free_index], normals[free_index],
+                            (2 - step / 2) * tolerance)
+            members = _largest_piece(graph, free_index[mask])
+            if len(members) < 3 + (surface.kind == "cone"):
+                break
+            try:
+                surface = refine(surface, points[members])
+            except (ValueError, np.linalg.LinAlgError):
+                break
+        if len(members) < 4:
+            continue
+        mask = _inliers(surface, points[free_index], normals[free_index], tolerance)
+        members = _largest_piece(graph, free_index[mask])
+        if not _unbiased(surface, points[members], tolerance):
+            continue
+        if best is None or len(members) > len(best[1]):
+            best = (surface, members)
+    if best is None or len(best[1]) < 8:
+        return best
+    surface = _simplest(best[0], points[best[1]], normals[best[1]], tolerance)
+    if surface is not best[0]:
+        mask = _inliers(surface, points[free_index], normals[free_index], tolerance)
+        best = (surface, _largest_piece(graph, free_index[mask]))
+    return best
+
+
+def _unbiased(surface: Primitive, points: np.ndarray, tolerance: float) -> bool:
+    """Whether the surface's RMS distance to its points (N, 3) is at most :data:`MAX_RMS`
+    tolerances."""
+    return len(points) > 0 and float(np.sqrt(np.mean(surface.signed(points) ** 2))) <= (
+        MAX_RMS * tolerance)
+
+
+def _merged(surfaces: list[Primitive], points: np.ndarray, normals: np.ndarray,
+            tolerance: float) -> list[Primitive]:
+    """Surfaces with those of one type that one refitted surface explains merged."""
+    members = [_inliers(s, points, normals, tolerance) for s in surfaces]
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(surfaces)):
+            for j in range(i + 1, len(surfaces)):
+                if surfaces[i].kind != surfaces[j].kind:
+                    continue
+                union = members[i] | members[j]
+                try:
+                    joint = refine(surfaces[i], points[union])
+                except (ValueError, np.linalg.LinAlgError):
+                    continue
+                inside = _inliers(joint, points, normals, tolerance)
+                if (inside & union).sum() >= 0.97 * union.sum():
+                    surfaces[i], members[i] = joint, inside
+                    del surfaces[j], members[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return surfaces
+
+
+def _without_redundant(surfaces: list[Primitive], points: np.ndarray, normals: np.ndarray,
+                       tolerance: float) -> list[Primitive]:
+    """Surfaces without those whose points another surface explains (90% within the
+    tolerance): a sphere found on a band of a cone before the cone itself, smallest first."""
+    kept = list(surfaces)
+    labels = _labels(kept, points, normals, tolerance)
+    sizes = np.bincount(labels[labels >= 0], minlength=len(kept))
+    for index in np.argsort(sizes):
+        surface = surfaces[int(index)]
+        mine = labels == index
+        if not mine.any():
+            continue
+        for other in kept:
+            if other is surface:
+                continue
+            if _inliers(other, points[mine], normals[mine], tolerance).mean() >= 0.9:
+                kept = [s for s in kept if s is not surface]
+                break
+    return kept
+
+
+def _labels(surfaces: list[Primitive], points: np.ndarray, normals: np.ndarray,
+            tolerance: float) -> np.ndarray:
+    """Each point's nearest surface within the tolerance with a normal within 45 degrees."""
+    labels = np.full(len(points), -1)
+    if not surfaces:
+        return labels
+    distance = np.stack([s.distance(points) for s in surfaces])
+    for k, surface in enumerate(surfaces):
+        agree = np.abs(np.einsum("ij,ij->i", surface.normals(points), normals)) > np.cos(
+            np.radians(45.0))
+        distance[k, ~agree] = np.inf
+    nearest = distance.argmin(axis=0)
+    within = distance[nearest, np.arange(len(points))] < tolerance
+    labels[within] = nearest[within]
+    return labels

@@ -1,0 +1,172 @@
+"""Scanned machined parts to valid solids with exact analytic faces (nurbs_core.brep), judged
+against the parts OpenCASCADE built: their face types, volumes and validity, OpenCASCADE's
+checker and its STEP reader on our files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+pytest.importorskip("OCP")
+
+from nurbs_core.brep.occ import face_kind, faces, is_valid, volume  # noqa: E402
+from nurbs_core.brep.part import fit_part, part_like  # noqa: E402
+from nurbs_core.brep.primitives import Primitive, fit_kind, refine  # noqa: E402
+from nurbs_core.brep.sample_parts import PARTS, scan_part  # noqa: E402
+from nurbs_core.brep.segment import segment  # noqa: E402
+from nurbs_core.brep.solid import winding_numbers  # noqa: E402
+from nurbs_core.cli import main  # noqa: E402
+from nurbs_core.patches.closed_mesh import closed_mesh  # noqa: E402
+
+NOISE = 0.002  # of the diagonal, as a sigma
+COUNT = 12_000
+
+
+def _unit(v):
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+@pytest.mark.parametrize("kind", ["sphere", "cylinder", "cone"])
+def test_least_squares_recovers_exact_parameters_from_noisy_points(kind):
+    rng = np.random.default_rng(3)
+    axis = _unit([0.3, -0.2, 1.0])
+    first = _unit(np.cross(axis, [1.0, 0, 0]))
+    second = np.cross(axis, first)
+    theta = rng.uniform(0, 1.5 * np.pi, 3000)
+    height = rng.uniform(0.5, 1.5, 3000)
+    origin = np.array([0.2, -0.1, 0.4])
+    ring = np.cos(theta)[:, None] * first + np.sin(theta)[:, None] * second
+    if kind == "sphere":
+        points = origin + 0.7 * _unit(rng.normal(size=(3000, 3)))
+        truth = Primitive("sphere", origin, axis, radius=0.7)
+    elif kind == "cylinder":
+        points = origin + 0.6 * ring + height[:, None] * axis
+        truth = Primitive("cylinder", origin, axis, radius=0.6)
+    else:
+        angle = np.radians(25.0)
+        points = origin + height[:, None] * (axis + np.tan(angle) * ring)
+        truth = Primitive("cone", origin, axis, angle=angle)
+    assert truth.distance(points).max() < 1e-12  # the samples are on the true surface
+    noisy = points + rng.normal(scale=0.003, size=points.shape)
+    normals = truth.normals(points) + rng.normal(scale=0.02, size=points.shape)
+    fitted = fit_kind(kind, noisy, normals / np.linalg.norm(normals, axis=1, keepdims=True))
+    assert fitted is not None and fitted.kind == kind
+    # the fitted surface is the true one: exact points lie on it within a tenth of the noise
+    assert fitted.distance(points).max() < 5e-4
+    if kind != "sphere":
+        assert abs(fitted.axis @ axis) > 1 - 1e-5
+    # refining an exact surface on exact points keeps it
+    assert refine(truth, points).distance(points).max() < 1e-9
+
+
+def test_winding_number_of_a_closed_mesh_is_one_inside_and_zero_outside():
+    import trimesh
+
+    box = trimesh.creation.box(extents=(2.0, 1.0, 0.5))
+    queries = np.array([[0, 0, 0], [0.9, 0.4, 0.2], [1.1, 0, 0], [0, 0, 0.3], [5, 5, 5]])
+    numbers = winding_numbers(box.vertices, box.faces, queries)
+    np.testing.assert_allclose(numbers, [1, 1, 0, 0, 0], atol=1e-9)
+
+
+@pytest.fixture(scope="module", params=["plate", "bracket", "turned", "countersunk"])
+def scanned(request):
+    shape = PARTS[request.param]()
+    points, owner, kinds = scan_part(shape, COUNT, NOISE, seed=1)
+    return request.param, shape, points, owner, kinds
+
+
+@pytest.fixture(scope="module")
+def fitted(scanned):
+    _, _, points, _, _ = scanned
+    mesh = closed_mesh(points)
+    return fit_part(points, mesh.vertices, mesh.faces)
+
+
+def test_segmentation_finds_every_face_type(scanned, fitted):
+    name, shape, points, owner, kinds = scanned
+    segmentation = fitted.segmentation
+    assert part_like(segmentation)
+    true = np.array(kinds)[owner]
+    found = np.array([segmentation.surfaces[k].kind if k >= 0 else "none"
+                      for k in segmentation.labels])
+    assert (true == found).mean() >= 0.9, name
+    sigma = NOISE * np.linalg.norm(np.ptp(points, axis=0))
+    assert abs(segmentation.noise / sigma - 1) < 0.15
+
+
+def test_the_solid_is_the_part(scanned, fitted):
+    """One valid closed solid with the part's face types, volume and sharp edges."""
+    name, shape, points, owner, kinds = scanned
+    assert fitted.valid and fitted.closed and is_valid(fitted.solid)
+    assert fitted.status == "converged", fitted.problems
+    assert sorted(face_kind(f) for f in faces(fitted.solid)) == sorted(kinds), name
+    assert abs(volume(fitted.solid) / volume(shape) - 1) < 0.02
+    sigma = NOISE * np.linalg.norm(np.ptp(points, axis=0))
+    assert fitted.distances.mean() <= 1.25 * sigma
+    # at the sharp edges (points whose neighbours lie on another face of the part) the
+    # points stay within 4 sigmas: the edges are kept, not rounded
+    _, near = cKDTree(points).query(points, k=10)
+    at_edge = (owner[near] != owner[:, None]).any(axis=1)
+    assert at_edge.sum() > 100
+    assert np.percentile(fitted.distances[at_edge], 99) <= 4 * sigma
+
+
+def test_step_keeps_analytic_faces_and_reads_back_as_one_valid_solid(scanned, tmp_path,
+                                                                      capsys):
+    from OCP.IFSelect import IFSelect_ReturnStatus
+    from OCP.STEPControl import STEPControl_Reader
+
+    name, shape, points, owner, kinds = scanned
+    cloud = tmp_path / f"{name}.xyz"
+    np.savetxt(cloud, points)
+    step = tmp_path / f"{name}.step"
+    assert main([str(cloud), "-o", str(step), str(tmp_path / f"{name}.stl")]) == 0
+    out = capsys.readouterr()
+    assert "a solid with analytic faces" in out.err
+    assert "status: converged" in out.out and "valid, closed" in out.out
+    reader = STEPControl_Reader()
+    assert reader.ReadFile(str(step)) == IFSelect_ReturnStatus.IFSelect_RetDone
+    reader.TransferRoots()
+    read = reader.OneShape()
+    assert is_valid(read)
+    assert sorted(face_kind(f) for f in faces(read)) == sorted(kinds)
+    assert abs(volume(read) / volume(shape) - 1) < 0.02
+
+
+def test_no_part_and_outputs_that_hold_no_solid_keep_the_network(tmp_path, capsys):
+    points, _, _ = scan_part(PARTS["plate"](), 6000, NOISE, seed=2)
+    cloud = tmp_path / "plate.xyz"
+    np.savetxt(cloud, points)
+    assert main([str(cloud), "-o", str(tmp_path / "a.step"), "--no-part", "-q"]) == 0
+    assert "seams:" in capsys.readouterr().out
+    assert main([str(cloud), "-o", str(tmp_path / "b.json"), "-q"]) == 0
+    assert "seams:" in capsys.readouterr().out
+
+
+def test_bad_part_requests_are_refused_before_any_fit(tmp_path, capsys):
+    from nurbs_core import samples
+
+    sheet = tmp_path / "sheet.xyz"
+    np.savetxt(sheet, samples.saddle(2000).points)
+    assert main([str(sheet), "-o", str(tmp_path / "a.step"), "--part"]) == 1
+    assert "needs a closed object" in capsys.readouterr().err
+    assert main([str(sheet), "-o", str(tmp_path / "a.json"), "--part"]) == 1
+    assert "cannot save a solid as '.json'" in capsys.readouterr().err
+    assert main([str(sheet), "-o", str(tmp_path / "a.step"), "--part", "--patches", "auto"]) == 1
+    assert "--part fits a solid" in capsys.readouterr().err
+    assert main([str(sheet), "-o", str(tmp_path / "a.brep")]) == 1
+    assert "a .brep file holds a solid" in capsys.readouterr().err
+    assert not list(tmp_path.glob("a.*"))
+
+
+def test_a_freeform_closed_scan_is_not_taken_for_a_part():
+    from nurbs_core import samples
+    from nurbs_core.route import choose_route
+
+    head = samples.head(6000).points
+    route = choose_route(head)
+    assert route.kind == "network"
+    assert "not a machined part" in route.finding
+    assert segment(head, give_up=0.02).coverage < 0.9
