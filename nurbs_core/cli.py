@@ -781,9 +781,9 @@ def _describe_face(parameters: dict[str, Any]) -> str:
         return str(parameters["type"])
     return Primitive(parameters["type"], np.array(parameters["origin"]),
                      np.array(parameters.get("axis", (0.0, 0.0, 1.0))),
-                     radius=float(parameters.get("radius", 0.0)),
-                     angle=float(np.radians(parameters.get("half_angle_degrees", 0.0)))
-                     ).describe()
+                     radius=float(parameters.get("radius", parameters.get("major_radius", 0.0))),
+                     angle=float(np.radians(parameters.get("half_angle_degrees", 0.0))),
+                     minor=float(parameters.get("minor_radius", 0.0))).describe()
 
 
 def _check_network_outputs(args: argparse.Namespace, outputs: list[Path]) -> None:

@@ -132,6 +132,16 @@ def volume(shape: OccShape) -> float:
     return float(properties.Mass())
 
 
+def face_area(face: OccShape) -> float:
+    """The area of a face (OpenCASCADE's surface properties)."""
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    properties = GProp_GProps()
+    BRepGProp.SurfaceProperties_s(face, properties)
+    return float(properties.Mass())
+
+
 def count(shape: OccShape, kind: str) -> int:
     """How many distinct sub-shapes of ``kind`` (FACE, EDGE, SHELL, SOLID, ...) the shape has."""
     if kind in ("FACE", "EDGE"):

@@ -20,6 +20,7 @@ from scipy.spatial import cKDTree
 from nurbs_core.brep.occ import (
     OccShape,
     count,
+    face_area,
     face_kind,
     faces,
     is_valid,
@@ -36,12 +37,17 @@ MIN_COVERAGE = 0.9
 MEAN_LIMIT = 1.25
 #: at least this many samples of the solid's faces decide which face is nearest to a point
 SAMPLES = 200_000
+#: a face with at least this share of the area and under UNSEEN_SHARE of the points its area
+#: would hold is not in the scan (an extension of a surface the cells kept by mistake)
+UNSEEN_AREA = 0.01
+UNSEEN_SHARE = 0.1
 
 
 @dataclass
 class PartFace:
     """One face of the solid: its surface type and parameters, how many scan points are
-    nearest to it and their distances to it (mean, 99th percentile, max)."""
+    nearest to it and their distances to it (mean, 99th percentile, max), its area and the
+    share of the points its area would hold on an evenly sampled scan (``expected``)."""
 
     kind: str
     parameters: dict[str, Any]
@@ -49,6 +55,8 @@ class PartFace:
     mean: float
     p99: float
     max: float
+    area: float = 0.0
+    expected: float = 0.0
 
 
 @dataclass
@@ -99,6 +107,14 @@ def part_problems(result: PartResult) -> dict[str, str]:
         problems["valid"] = "OpenCASCADE's checker finds the solid invalid"
     if not result.closed:
         problems["closed"] = "the solid's shell is not closed"
+    unseen = [k for k, face in enumerate(result.faces)
+              if face.area >= UNSEEN_AREA * sum(f.area for f in result.faces)
+              and face.points < UNSEEN_SHARE * face.expected]
+    if unseen:
+        problems["unseen"] = (f"{len(unseen)} face{'s' if len(unseen) > 1 else ''} "
+                              f"({', '.join(map(str, unseen[:8]))}"
+                              f"{', ...' if len(unseen) > 8 else ''}) hold almost no scan "
+                              "points: surface the scan does not show")
     mean = float(result.distances.mean())
     if mean > MEAN_LIMIT * result.noise:
         problems["distance"] = (f"the points lie {mean / result.noise:.2f} noise sigmas from the "
@@ -155,13 +171,17 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray, mesh_triangles: np.n
     low, high = points.min(axis=0), points.max(axis=0)
     extents = spans(segmentation.surfaces, points, segmentation.labels,
                     float(np.linalg.norm(high - low)))
-    solid = build_solid(segmentation.surfaces, mesh_vertices, mesh_triangles, (low, high),
-                        extents)
+    from nurbs_core.brep.tangency import crossing
+
+    surfaces = crossing(segmentation.surfaces, segmentation.tolerance)
+    solid = build_solid(surfaces, mesh_vertices, mesh_triangles, (low, high), extents,
+                        segmentation.tolerance)
     timings["solid"] = time.perf_counter() - started
     started = time.perf_counter()
     distance, nearest, on_surface = solid_distances(solid, segmentation.surfaces, points,
                                                     segmentation.tolerance)
     part_faces = []
+    areas = [face_area(face) for face in faces(solid)]
     for index, face in enumerate(faces(solid)):
         mine = distance[nearest == index]
         kind = face_kind(face)
@@ -171,7 +191,8 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray, mesh_triangles: np.n
         part_faces.append(PartFace(kind, parameters, int(len(mine)),
                                    float(mine.mean()) if len(mine) else 0.0,
                                    float(np.percentile(mine, 99)) if len(mine) else 0.0,
-                                   float(mine.max()) if len(mine) else 0.0))
+                                   float(mine.max()) if len(mine) else 0.0, areas[index],
+                                   len(points) * areas[index] / max(sum(areas), 1e-300)))
     timings["measure"] = time.perf_counter() - started
     closed = count(solid, "SHELL") == 1 and count(solid, "SOLID") == 1
     return PartResult(solid, part_faces, segmentation, distance, is_valid(solid), closed,

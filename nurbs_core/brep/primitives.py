@@ -1,7 +1,9 @@
-"""Analytic surfaces of machined parts: planes, spheres, cylinders and cones.
+"""Analytic surfaces of machined parts: planes, spheres, cylinders, cones and tori.
 
 Each type gives the unsigned distance and the surface normal at points (N, 3), a candidate from
-a few points with normals (the minimal samples of efficient RANSAC, Schnabel et al. 2007) and a
+a few points with normals (the minimal samples of efficient RANSAC, Schnabel et al. 2007; a
+torus from a patch of points whose normal lines all meet its axis, Pottmann and Randrup 1998)
+and a
 least-squares refinement of its exact parameters on its points (geometric distances, scipy's
 ``least_squares``). :data:`SIMPLICITY` orders the types: a region takes the simplest type that
 fits it within the tolerance. numpy + scipy only.
@@ -15,7 +17,7 @@ import numpy as np
 import scipy.optimize
 
 #: the types from simplest to most complex (by parameter count)
-SIMPLICITY = ("plane", "sphere", "cylinder", "cone")
+SIMPLICITY = ("plane", "sphere", "cylinder", "cone", "torus")
 
 #: least-squares refinement runs on at most this many of a region's points (random, fixed seed)
 REFINE_POINTS = 4000
@@ -40,15 +42,17 @@ def _frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class Primitive:
     """An analytic surface. ``kind``: one of :data:`SIMPLICITY`. ``origin`` (3,): a point of the
     plane, the sphere's centre, a point of the cylinder's axis, the cone's apex. ``axis`` (3,):
-    the plane's normal, the cylinder's axis, the cone's axis pointing into its opening (unused
-    by a sphere). ``radius``: of the sphere or cylinder; ``angle``: the cone's half-angle in
-    radians."""
+    the plane's normal, the cylinder's axis, the cone's axis pointing into its opening, the
+    torus's axis through its centre ``origin`` (unused by a sphere). ``radius``: of the sphere
+    or cylinder, the torus's major radius; ``angle``: the cone's half-angle in radians;
+    ``minor``: the torus's minor radius."""
 
     kind: str
     origin: np.ndarray
     axis: np.ndarray
     radius: float = 0.0
     angle: float = 0.0
+    minor: float = 0.0
 
     def signed(self, points: np.ndarray) -> np.ndarray:
         """Signed distances (N,) of points (N, 3), positive on the side the normal points to."""
@@ -61,6 +65,8 @@ class Primitive:
         radial = np.linalg.norm(v - height[:, None] * self.axis, axis=1)
         if self.kind == "cylinder":
             return radial - self.radius
+        if self.kind == "torus":
+            return np.hypot(radial - self.radius, height) - self.minor
         cos, sin = np.cos(self.angle), np.sin(self.angle)
         along = height * cos + radial * sin  # position along the cone's generating line
         return np.where(along >= 0, radial * cos - height * sin,
@@ -81,6 +87,8 @@ class Primitive:
         outward = _unit(v - height[:, None] * self.axis)
         if self.kind == "cylinder":
             return outward
+        if self.kind == "torus":
+            return _unit(v - self.radius * outward)
         return np.cos(self.angle) * outward - np.sin(self.angle) * self.axis
 
     def describe(self) -> str:
@@ -93,6 +101,9 @@ class Primitive:
             return f"sphere centre ({o}), radius {self.radius:.5g}"
         if self.kind == "cylinder":
             return f"cylinder radius {self.radius:.5g}, axis ({a}) through ({o})"
+        if self.kind == "torus":
+            return (f"torus radii {self.radius:.5g} and {self.minor:.5g}, centre ({o}), "
+                    f"axis ({a})")
         return f"cone half-angle {np.degrees(self.angle):.3f} deg, apex ({o}), axis ({a})"
 
     def parameters(self) -> dict[str, object]:
@@ -104,6 +115,9 @@ class Primitive:
             values["radius"] = self.radius
         if self.kind == "cone":
             values["half_angle_degrees"] = float(np.degrees(self.angle))
+        if self.kind == "torus":
+            values["major_radius"] = self.radius
+            values["minor_radius"] = self.minor
         return values
 
 
@@ -166,6 +180,38 @@ def cone_from(p: np.ndarray, n: np.ndarray) -> Primitive | None:
     return Primitive("cone", apex, axis, angle=angle)
 
 
+def torus_from(p: np.ndarray, n: np.ndarray) -> Primitive | None:
+    """The torus through points p (m >= 7, 3) with unit normals n (m, 3): the axis is the line
+    that every normal line meets (the least-squares null vector of their Pluecker coordinates),
+    the meridian circle is fitted to the points in (distance from the axis, height)."""
+    moments = np.cross(p, n)
+    _, _, vt = np.linalg.svd(np.c_[moments, n], full_matrices=False)
+    axis, moment = vt[-1, :3], vt[-1, 3:]
+    length = np.linalg.norm(axis)
+    if length < 1e-9:
+        return None
+    axis, moment = axis / length, moment / length
+    centre = np.cross(axis, moment)  # the axis's point nearest to the origin
+    v = p - centre
+    height = v @ axis
+    radial = np.linalg.norm(v - height[:, None] * axis, axis=1)
+    # the meridian circle (rho - R)^2 + (h - h0)^2 = r^2, algebraically
+    matrix = np.c_[radial, height, np.ones(len(p))]
+    rhs = radial ** 2 + height ** 2
+    try:
+        solution = np.linalg.lstsq(matrix, rhs, rcond=None)[0]
+    except np.linalg.LinAlgError:
+        return None
+    major, level = solution[0] / 2, solution[1] / 2
+    squared = solution[2] + major ** 2 + level ** 2
+    if squared <= 0:
+        return None
+    minor = float(np.sqrt(squared))
+    if not minor < major:
+        return None
+    return Primitive("torus", centre + level * axis, axis, radius=float(major), minor=minor)
+
+
 def _closest_between_lines(p0: np.ndarray, d0: np.ndarray, p1: np.ndarray,
                            d1: np.ndarray) -> np.ndarray | None:
     """The midpoint (3,) of the shortest segment between two lines (None when parallel)."""
@@ -215,6 +261,16 @@ def refine(primitive: Primitive, points: np.ndarray) -> Primitive:
             cylinder, np.r_[0.0, 0.0, 0.0, 0.0, primitive.radius], method="lm").x
         return Primitive("cylinder", origin_of(x), axis_of(x), radius=abs(float(x[4])))
 
+    if primitive.kind == "torus":
+        def torus(x: np.ndarray) -> np.ndarray:
+            return Primitive("torus", origin_of(x), axis_of(x), radius=x[4],
+                             minor=x[6]).signed(points)
+        x = scipy.optimize.least_squares(
+            torus, np.r_[0.0, 0.0, 0.0, 0.0, primitive.radius, 0.0, primitive.minor],
+            method="lm").x
+        return Primitive("torus", origin_of(x), axis_of(x), radius=abs(float(x[4])),
+                         minor=abs(float(x[6])))
+
     def cone(x: np.ndarray) -> np.ndarray:
         return Primitive("cone", origin_of(x), axis_of(x), angle=x[4]).signed(points)
     x = scipy.optimize.least_squares(
@@ -230,9 +286,11 @@ def fit_kind(kind: str, points: np.ndarray, normals: np.ndarray) -> Primitive | 
         return refine(plane_through(points), points)
     rng = np.random.default_rng(1)
     best, best_error = None, np.inf
+    sizes = {"sphere": 2, "cylinder": 2, "cone": 3, "torus": min(len(points), 40)}
     for _ in range(12):  # candidates from spread samples; the best is refined
-        pick = rng.choice(len(points), 3 if kind == "cone" else 2, replace=False)
-        maker = {"sphere": sphere_from, "cylinder": cylinder_from, "cone": cone_from}[kind]
+        pick = rng.choice(len(points), sizes[kind], replace=False)
+        maker = {"sphere": sphere_from, "cylinder": cylinder_from, "cone": cone_from,
+                 "torus": torus_from}[kind]
         candidate = maker(points[pick], normals[pick])
         if candidate is None:
             continue

@@ -42,6 +42,7 @@ from nurbs_core.brep.primitives import (
     plane_through,
     refine,
     sphere_from,
+    torus_from,
 )
 
 #: the tolerance is at least this fraction of the bounding-box diagonal (noise-free scans)
@@ -144,8 +145,10 @@ def _candidates(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np
             continue
         pick = np.r_[seed, rng.choice(ball, 2, replace=False)]
         p, n = points[pick], normals[pick]
+        patch = rng.choice(ball, min(len(ball), 30), replace=False)
+        torus = torus_from(points[patch], normals[patch]) if len(patch) >= 10 else None
         for candidate in (sphere_from(p[:2], n[:2]), cylinder_from(p[:2], n[:2]),
-                          cone_from(p, n)):
+                          cone_from(p, n), torus):
             if candidate is not None and _plausible(candidate, points[seed], reach):
                 found.append(candidate)
     return found
@@ -156,6 +159,8 @@ def _plausible(surface: Primitive, seed: np.ndarray, reach: float) -> bool:
     quarter of the diagonal): wider ones are planes seen through noisy normals."""
     if surface.kind == "cone":
         return float(np.linalg.norm(seed - surface.origin)) < 4 * reach
+    if surface.kind == "torus":
+        return surface.radius + surface.minor < 4 * reach
     return surface.radius < 4 * reach
 
 
@@ -255,8 +260,8 @@ def _detect_one(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np
                 surface = refine(surface, points[members])
             except (ValueError, np.linalg.LinAlgError):
                 break
-        if len(members) < 4:
-            continue
+        if len(members) < 4 or not _plausible(surface, points[members].mean(axis=0), reach):
+            continue  # refinement may stretch a candidate into a huge cylinder over a plane
         mask = _inliers(surface, points[free_index], normals[free_index], tolerance)
         members = _largest_piece(graph, free_index[mask])
         if not _unbiased(surface, points[members], tolerance):

@@ -3,14 +3,14 @@ arrangement that lie inside the scan, fused (OpenCASCADE, the ``cad`` extra).
 
 Every face of a part lies on one of its surfaces, so the part is a union of the cells into which
 those surfaces cut space. Each surface is made a face large enough to cross the scan's box (a
-plane, a cylinder, a cone or a sphere, exact: ``gp_Pln``, ``gp_Cylinder``, ``gp_Cone``,
-``gp_Sphere``); ``BOPAlgo_MakerVolume`` builds the cells of these faces and the box; a cell is
-inside when most of a few points inside it are inside the scan's closed mesh (its generalised
-winding number above one half, Jacobson et al. 2013). The faces between a kept and a dropped
-cell bound the solid; ``ShapeUpgrade_UnifySameDomain`` joins the pieces of one surface into one
-face, and ``BRepCheck_Analyzer`` checks the result. A surface that bounds nothing (found on a
-region by mistake) leaves no face; the edges are the surfaces' exact intersections, so sharp
-edges stay sharp.
+plane, a cylinder, a cone, a sphere or a torus, exact: ``gp_Pln``, ``gp_Cylinder``,
+``gp_Cone``, ``gp_Sphere``, ``gp_Torus``); ``BOPAlgo_MakerVolume`` builds the cells of these
+faces and the box; a cell is inside when most of a few points inside it are inside the scan's
+closed mesh (its generalised winding number above one half, Jacobson et al. 2013). The faces
+between a kept and a dropped cell bound the solid; ``ShapeUpgrade_UnifySameDomain`` joins the
+pieces of one surface into one face, and ``BRepCheck_Analyzer`` checks the result. A surface
+that bounds nothing (found on a region by mistake) leaves no face; the edges are the surfaces'
+exact intersections, so sharp edges stay sharp.
 """
 
 from __future__ import annotations
@@ -22,6 +22,8 @@ from nurbs_core.brep.primitives import Primitive
 
 #: points tried per cell to classify it
 CELL_SAMPLES = 3
+#: an arrangement of more cells is refused (each takes OpenCASCADE tens of milliseconds)
+MAX_CELLS = 1500
 
 
 class SolidError(ValueError):
@@ -46,7 +48,7 @@ def surface_face(surface: Primitive, centre: np.ndarray, reach: float,
     every direction the surface extends (a whole sphere; a cone from its apex); a cylinder or a
     cone only over ``span`` (heights along its axis from its origin) when given."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
-    from OCP.gp import gp_Cone, gp_Cylinder, gp_Pln, gp_Sphere
+    from OCP.gp import gp_Cone, gp_Cylinder, gp_Pln, gp_Sphere, gp_Torus
 
     if surface.kind == "plane":
         foot = centre - ((centre - surface.origin) @ surface.axis) * surface.axis
@@ -55,6 +57,9 @@ def surface_face(surface: Primitive, centre: np.ndarray, reach: float,
     if surface.kind == "sphere":
         return BRepBuilderAPI_MakeFace(gp_Sphere(_ax3(surface.origin, surface.axis),
                                                  surface.radius)).Face()
+    if surface.kind == "torus":
+        return BRepBuilderAPI_MakeFace(gp_Torus(_ax3(surface.origin, surface.axis),
+                                                surface.radius, surface.minor)).Face()
     middle = float((centre - surface.origin) @ surface.axis)
     low, high = span if span is not None else (middle - reach, middle + reach)
     if surface.kind == "cylinder":
@@ -228,13 +233,15 @@ def _boundary(cells: list[OccShape], inside: list[bool]) -> OccShape:
 
 def build_solid(surfaces: list[Primitive], mesh_vertices: np.ndarray,
                 mesh_triangles: np.ndarray, box: tuple[np.ndarray, np.ndarray],
-                extents: list[tuple[float, float] | None] | None = None) -> OccShape:
+                extents: list[tuple[float, float] | None] | None = None,
+                tolerance: float = 0.0) -> OccShape:
     """The solid bounded by ``surfaces`` that the closed mesh (V, 3), (T, 3) of the scan
     encloses (see the module); ``box``: the scan's bounding box (low (3,), high (3,));
-    ``extents``: the cylinders' and cones' spans (:func:`spans`; None: across the box).
+    ``extents``: the cylinders' and cones' spans (:func:`spans`; None: across the box);
+    ``tolerance``: cells thinner than this are slivers (see :func:`_classify`).
     SolidError when no single valid closed solid results (OpenCASCADE's failures included)."""
     try:
-        return _build_solid(surfaces, mesh_vertices, mesh_triangles, box, extents)
+        return _build_solid(surfaces, mesh_vertices, mesh_triangles, box, extents, tolerance)
     except SolidError:
         raise
     except Exception as exc:  # OpenCASCADE's Standard_Failure family
@@ -242,9 +249,64 @@ def build_solid(surfaces: list[Primitive], mesh_vertices: np.ndarray,
                          f"{exc})") from None
 
 
+def _classify(arrangement: OccShape, cells: list[OccShape], mesh_vertices: np.ndarray,
+              mesh_triangles: np.ndarray, tolerance: float) -> list[bool]:
+    """Which cells lie inside the scan's closed mesh. A cell thinner than ``tolerance`` (twice
+    its volume over its area) is a sliver between two surfaces that cross at a small angle (a
+    fillet nudged to cross a face): the mesh cannot tell its side, so it takes the side of the
+    neighbour it shares the most area with, which adds no face."""
+    from OCP.BRepGProp import BRepGProp
+    from OCP.collections import (
+        IndexedDataMap_TopoDS_Shape_List_TopoDS_Shape_TopTools_ShapeMapHasher as Ancestors,  # noqa: E501
+    )
+    from OCP.GProp import GProp_GProps
+    from OCP.TopAbs import TopAbs_ShapeEnum
+    from OCP.TopExp import TopExp, TopExp_Explorer
+
+    from nurbs_core.brep.occ import face_area
+
+    decided: dict[int, bool] = {}
+    slivers = []
+    for index, cell in enumerate(cells):
+        properties = GProp_GProps()
+        BRepGProp.SurfaceProperties_s(cell, properties)
+        if 2 * volume(cell) < tolerance * properties.Mass():
+            slivers.append(index)
+            continue
+        samples = _points_inside(cell, CELL_SAMPLES)
+        if len(samples) == 0:
+            decided[index] = False
+            continue
+        winding = np.abs(winding_numbers(mesh_vertices, mesh_triangles, samples))
+        decided[index] = bool(np.mean(winding > 0.5) > 0.5)
+    if slivers:
+        ancestors = Ancestors()
+        TopExp.MapShapesAndAncestors_s(arrangement, TopAbs_ShapeEnum.TopAbs_FACE,
+                                       TopAbs_ShapeEnum.TopAbs_SOLID, ancestors)
+        shared: dict[int, dict[int, float]] = {k: {} for k in slivers}
+        for index in slivers:
+            explorer = TopExp_Explorer(cells[index], TopAbs_ShapeEnum.TopAbs_FACE)
+            while explorer.More():
+                face = explorer.Current()
+                for other in ancestors.FindFromKey(face):
+                    for k, cell in enumerate(cells):
+                        if k != index and cell.IsSame(other):
+                            shared[index][k] = shared[index].get(k, 0.0) + face_area(face)
+                explorer.Next()
+        for _ in range(len(slivers)):  # slivers next to slivers follow once those are decided
+            for index in slivers:
+                known = {k: a for k, a in shared[index].items() if k in decided}
+                if index not in decided and known:
+                    decided[index] = decided[max(known, key=known.__getitem__)]
+        for index in slivers:
+            decided.setdefault(index, False)
+    return [decided[k] for k in range(len(cells))]
+
+
 def _build_solid(surfaces: list[Primitive], mesh_vertices: np.ndarray,
-                mesh_triangles: np.ndarray, box: tuple[np.ndarray, np.ndarray],
-                extents: list[tuple[float, float] | None] | None = None) -> OccShape:
+                 mesh_triangles: np.ndarray, box: tuple[np.ndarray, np.ndarray],
+                 extents: list[tuple[float, float] | None] | None = None,
+                 tolerance: float = 0.0) -> OccShape:
     """The solid bounded by ``surfaces`` that the closed mesh (V, 3), (T, 3) of the scan
     encloses (see the module); ``box``: the scan's bounding box (low (3,), high (3,));
     ``extents``: the cylinders' and cones' spans (:func:`spans`; None: across the box).
@@ -276,20 +338,20 @@ def _build_solid(surfaces: list[Primitive], mesh_vertices: np.ndarray,
     if maker.HasErrors():
         raise SolidError("OpenCASCADE could not intersect the surfaces")
     cells = _cells(maker.Shape())
-    inside = []
-    for cell in cells:
-        samples = _points_inside(cell, CELL_SAMPLES)
-        if len(samples) == 0:
-            inside.append(False)
-            continue
-        winding = np.abs(winding_numbers(mesh_vertices, mesh_triangles, samples))
-        inside.append(bool(np.mean(winding > 0.5) > 0.5))
+    if len(cells) > MAX_CELLS:
+        raise SolidError(f"the surfaces cut the scan's box into {len(cells)} cells (at most "
+                         f"{MAX_CELLS}): too many surfaces cross each other")
+    inside = _classify(maker.Shape(), cells, mesh_vertices, mesh_triangles, tolerance)
     if not any(inside):
         raise SolidError("no cell of the surfaces' arrangement lies inside the scan")
     solid = _boundary(cells, inside)
-    unify = ShapeUpgrade_UnifySameDomain(solid, True, True, True)
-    unify.Build()
-    solid = unify.Shape()
+    try:  # the pieces of one surface joined into one face
+        unify = ShapeUpgrade_UnifySameDomain(solid, True, True, True)
+        unify.Build()
+        if is_valid(unify.Shape()):
+            solid = unify.Shape()
+    except Exception:  # OpenCASCADE's Standard_Failure family: the pieces stay apart
+        pass
     if not is_valid(solid):
         raise SolidError("OpenCASCADE's checker finds the solid invalid")
     if volume(solid) <= 0:

@@ -28,7 +28,7 @@ def _unit(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-@pytest.mark.parametrize("kind", ["sphere", "cylinder", "cone"])
+@pytest.mark.parametrize("kind", ["sphere", "cylinder", "cone", "torus"])
 def test_least_squares_recovers_exact_parameters_from_noisy_points(kind):
     rng = np.random.default_rng(3)
     axis = _unit([0.3, -0.2, 1.0])
@@ -44,10 +44,15 @@ def test_least_squares_recovers_exact_parameters_from_noisy_points(kind):
     elif kind == "cylinder":
         points = origin + 0.6 * ring + height[:, None] * axis
         truth = Primitive("cylinder", origin, axis, radius=0.6)
-    else:
+    elif kind == "cone":
         angle = np.radians(25.0)
         points = origin + height[:, None] * (axis + np.tan(angle) * ring)
         truth = Primitive("cone", origin, axis, angle=angle)
+    else:
+        tube = rng.uniform(-0.5 * np.pi, np.pi, 3000)
+        points = (origin + (1.0 + 0.3 * np.cos(tube))[:, None] * ring
+                  + (0.3 * np.sin(tube))[:, None] * axis)
+        truth = Primitive("torus", origin, axis, radius=1.0, minor=0.3)
     assert truth.distance(points).max() < 1e-12  # the samples are on the true surface
     noisy = points + rng.normal(scale=0.003, size=points.shape)
     normals = truth.normals(points) + rng.normal(scale=0.02, size=points.shape)
@@ -59,6 +64,23 @@ def test_least_squares_recovers_exact_parameters_from_noisy_points(kind):
         assert abs(fitted.axis @ axis) > 1 - 1e-5
     # refining an exact surface on exact points keeps it
     assert refine(truth, points).distance(points).max() < 1e-9
+
+
+def test_a_fillet_that_misses_the_faces_it_rounds_is_made_to_cross_them():
+    from nurbs_core.brep.tangency import OVERLAP, crossing
+
+    floor = Primitive("plane", np.zeros(3), np.array([0.0, 0, 1]))
+    wall = Primitive("plane", np.zeros(3), np.array([1.0, 0, 0]))
+    # a fillet of radius 0.2 in the corner, fitted 0.004 too small: it touches neither plane
+    fillet = Primitive("cylinder", np.array([0.2, 0, 0.2]), np.array([0, 1.0, 0]),
+                       radius=0.196)
+    hole = Primitive("cylinder", np.array([5.0, 0, 5.0]), np.array([0, 0, 1.0]), radius=0.3)
+    nudged = crossing([floor, wall, fillet, hole], tolerance=0.01)
+    assert nudged[:2] == [floor, wall] and nudged[3] == hole  # planes and far surfaces stay
+    assert nudged[2].radius == pytest.approx(0.2 + OVERLAP * 0.01)
+    # a corner sphere on the fillet's axis grows past the fillet and the planes as well
+    corner = Primitive("sphere", np.array([0.2, 0, 0.2]), np.zeros(3), radius=0.197)
+    assert crossing([fillet, corner, floor], 0.01)[1].radius > 0.2
 
 
 def test_winding_number_of_a_closed_mesh_is_one_inside_and_zero_outside():
