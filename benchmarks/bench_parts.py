@@ -9,7 +9,8 @@ Gaussian noise of 0.2 % of the diagonal (sigma), one torch thread.
 
 Each scan goes the default way (``choose_route``: a closed object, part-like or not), then
 ``fit_part`` when it is a part; a scan whose solid fails falls back to a network (as
-``nurbs-fit`` does) and counts as no solid. Measured per part, independently of our labels:
+``nurbs-fit`` does) and counts as no solid. Measured per part, independently of our labels
+(status: the part route's own verdict, ``converged`` only when its quality checks hold):
 
 * solid: one closed shell that OpenCASCADE's checker (BRepCheck_Analyzer) finds valid;
 * type accuracy: of the points sampled from the true part's analytic faces, the share whose
@@ -131,8 +132,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"# {platform.node()} {platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} CPUs, one torch thread; {args.points} points, noise "
           f"{args.noise:g} x diagonal")
-    header = (f"{'part':24s} {'faces':>9s} {'route':>7s} {'solid':>5s} {'types':>6s} "
-              f"{'mean/s':>7s} {'edge99/s':>8s} {'sec':>6s}")
+    header = (f"{'part':24s} {'faces':>9s} {'route':>7s} {'solid':>5s} {'status':>10s} "
+              f"{'types':>6s} {'mean/s':>7s} {'edge99/s':>8s} {'sec':>6s}")
     print(header)
     rows = []
     for index, (name, shape, baseline) in enumerate(cases):
@@ -142,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(row)
         faces_text = f"{row.get('faces', '-')}/{row['true_faces']}"
         print(f"{name:24s} {faces_text:>9s} {row['route']:>7s} "
-              f"{'yes' if row['solid'] else 'NO':>5s} "
+              f"{'yes' if row['solid'] else 'NO':>5s} {row.get('status', '-'):>10s} "
               f"{row.get('type_accuracy', float('nan')):6.3f} "
               f"{row.get('mean_sigma', float('nan')):7.2f} "
               f"{row.get('edge_p99_sigma', float('nan')):8.2f} {row['seconds']:6.1f}"
@@ -152,6 +153,9 @@ def main(argv: list[str] | None = None) -> int:
                  f", {row['network_seconds']:.1f} s" if "network_patches" in row else ""),
               flush=True)
     solid = [r for r in rows if r["solid"]]
+    good = [r for r in solid if r.get("status") == "converged"]
+    print(f"# converged (valid closed solid, every quality check holds): {len(good)}/{len(rows)} "
+          f"({len(good) / len(rows):.0%})")
     print(f"# valid closed solids: {len(solid)}/{len(rows)} ({len(solid) / len(rows):.0%}); "
           f"routes: " + ", ".join(f"{k} {sum(r['route'] == k for r in rows)}"
                                   for k in ("part", "network", "single_patch")))

@@ -736,7 +736,9 @@ def _check_no_solid_outputs(outputs: list[Path], route: Route) -> None:
 def run_part(args: argparse.Namespace, outputs: list[Path], points: np.ndarray,
              route: Route) -> dict[str, Any]:
     """The part route: the solid with analytic faces (:func:`nurbs_core.brep.part.fit_part`),
-    its report (per face its type, parameters, points and deviation) and files."""
+    its report (per face its type, parameters, points and deviation) and files. SolidError when
+    no valid solid results or, unless --part forced the route, when the solid fails a quality
+    check (the automatic route then fits the network)."""
     import numpy as np
 
     from nurbs_core.brep.part import fit_part
@@ -744,6 +746,12 @@ def run_part(args: argparse.Namespace, outputs: list[Path], points: np.ndarray,
 
     assert route.mesh is not None and route.segmentation is not None
     result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation)
+    if result.problems and not args.part:
+        from nurbs_core.brep.solid import SolidError
+
+        # the automatic route promises a clean result: a solid that fails its checks gives
+        # way to the network (--part keeps it, with its warnings)
+        raise SolidError("the solid fails its checks: " + "; ".join(result.problems.values()))
     result.timings["route"] = route.seconds - result.timings["segmentation"]
     statistics = result.statistics()
     noise = result.noise

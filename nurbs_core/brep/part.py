@@ -41,6 +41,8 @@ SAMPLES = 200_000
 #: would hold is not in the scan (an extension of a surface the cells kept by mistake)
 UNSEEN_AREA = 0.01
 UNSEEN_SHARE = 0.1
+#: a solid with more than this many faces per surface (and 4) has faces split into pieces
+FRAGMENTS = 2
 
 
 @dataclass
@@ -115,6 +117,10 @@ def part_problems(result: PartResult) -> dict[str, str]:
                               f"({', '.join(map(str, unseen[:8]))}"
                               f"{', ...' if len(unseen) > 8 else ''}) hold almost no scan "
                               "points: surface the scan does not show")
+    surfaces = len(result.segmentation.surfaces)
+    if len(result.faces) > FRAGMENTS * surfaces + 4:
+        problems["fragmented"] = (f"the solid has {len(result.faces)} faces on {surfaces} "
+                                  "surfaces: OpenCASCADE could not join the pieces of a surface")
     mean = float(result.distances.mean())
     if mean > MEAN_LIMIT * result.noise:
         problems["distance"] = (f"the points lie {mean / result.noise:.2f} noise sigmas from the "
@@ -170,7 +176,7 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray, mesh_triangles: np.n
     started = time.perf_counter()
     low, high = points.min(axis=0), points.max(axis=0)
     extents = spans(segmentation.surfaces, points, segmentation.labels,
-                    float(np.linalg.norm(high - low)))
+                    float(np.linalg.norm(high - low)), segmentation.tolerance)
     from nurbs_core.brep.tangency import crossing
 
     surfaces = crossing(segmentation.surfaces, segmentation.tolerance)

@@ -31,7 +31,7 @@ def _unit(vectors: np.ndarray) -> np.ndarray:
     return vectors / np.maximum(norm, 1e-300)
 
 
-def _frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def axis_frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors (3,) that make ``axis`` (3,) a right-handed orthonormal frame."""
     helper = np.eye(3)[int(np.argmin(np.abs(axis)))]
     first = _unit(np.cross(axis, helper))
@@ -148,7 +148,7 @@ def cylinder_from(p: np.ndarray, n: np.ndarray) -> Primitive | None:
     if np.linalg.norm(axis) < np.sin(np.radians(1.0)):
         return None
     axis = _unit(axis)
-    first, second = _frame(axis)
+    first, second = axis_frame(axis)
     flat = np.stack([p @ first, p @ second], -1)
     direction = np.stack([n @ first, n @ second], -1)
     matrix = np.stack([direction[0], -direction[1]], -1)
@@ -245,7 +245,7 @@ def refine(primitive: Primitive, points: np.ndarray) -> Primitive:
         x = scipy.optimize.least_squares(
             sphere, np.r_[primitive.origin, primitive.radius], method="lm").x
         return Primitive("sphere", x[:3], primitive.axis, radius=abs(float(x[3])))
-    first, second = _frame(primitive.axis)
+    first, second = axis_frame(primitive.axis)
 
     def axis_of(x: np.ndarray) -> np.ndarray:
         return _unit(primitive.axis + x[0] * first + x[1] * second)

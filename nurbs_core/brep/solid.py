@@ -43,17 +43,26 @@ def _ax3(origin: np.ndarray, axis: np.ndarray) -> OccShape:
 
 
 def surface_face(surface: Primitive, centre: np.ndarray, reach: float,
-                 span: tuple[float, float] | None = None) -> OccShape:
+                 span: Span | None = None) -> OccShape:
     """An OpenCASCADE face on the exact surface, reaching ``reach`` from ``centre`` (3,) in
-    every direction the surface extends (a whole sphere; a cone from its apex); a cylinder or a
-    cone only over ``span`` (heights along its axis from its origin) when given."""
+    every direction the surface extends (a whole sphere or torus; a cone from its apex), or
+    over ``span`` when given (see :func:`spans`)."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
     from OCP.gp import gp_Cone, gp_Cylinder, gp_Pln, gp_Sphere, gp_Torus
 
     if surface.kind == "plane":
-        foot = centre - ((centre - surface.origin) @ surface.axis) * surface.axis
-        return BRepBuilderAPI_MakeFace(gp_Pln(_ax3(foot, surface.axis)),
-                                       -reach, reach, -reach, reach).Face()
+        from OCP.gp import gp_Ax3, gp_Dir
+
+        first, _ = plane_frame(surface)
+        if span is None:
+            foot = surface.origin + (centre - surface.origin) - (
+                (centre - surface.origin) @ surface.axis) * surface.axis
+            offset = float((foot - surface.origin) @ first), float(
+                (foot - surface.origin) @ np.cross(surface.axis, first))
+            span = (offset[0] - reach, offset[0] + reach, offset[1] - reach, offset[1] + reach)
+        frame = gp_Ax3(_pnt(surface.origin), gp_Dir(*map(float, surface.axis)),
+                       gp_Dir(*map(float, first)))
+        return BRepBuilderAPI_MakeFace(gp_Pln(frame), *span).Face()
     if surface.kind == "sphere":
         return BRepBuilderAPI_MakeFace(gp_Sphere(_ax3(surface.origin, surface.axis),
                                                  surface.radius)).Face()
@@ -72,17 +81,31 @@ def surface_face(surface: Primitive, centre: np.ndarray, reach: float,
                                    high / np.cos(surface.angle)).Face()
 
 
+#: a tuple of bounds for one surface's face in the arrangement (see :func:`spans`)
+Span = tuple[float, ...]
+
+
 def spans(surfaces: list[Primitive], points: np.ndarray, labels: np.ndarray,
-          reach: float) -> list[tuple[float, float] | None]:
-    """Each cylinder's and cone's heights along its axis (from its origin) where its region's
-    points (N, 3) with ``labels`` (N,) lie, widened by its radius (at the region's far end for a
-    cone) and a tenth of the region's length, at most ``reach``; None for other surfaces. A
-    fillet's cylinder then ends past the faces that end it, instead of cutting the whole box."""
-    found: list[tuple[float, float] | None] = []
+          reach: float, tolerance: float) -> list[Span | None]:
+    """Where each surface's face in the arrangement ends, from its region's points (N, 3) with
+    ``labels`` (N,): a cylinder's or cone's heights along its axis (from its origin), widened by
+    its radius (at the region's far end for a cone) and a tenth of the region's length; a
+    plane's (u0, u1, v0, v1) in the frame of :func:`plane_frame`, widened by a tenth of the
+    region's size and 5 ``tolerance``; at most ``reach``; None for spheres and tori (whole). A
+    fillet's cylinder ends past the faces that end it and a face's plane past its edges,
+    instead of cutting the whole box into pieces that OpenCASCADE must join again."""
+    found: list[Span | None] = []
     for index, surface in enumerate(surfaces):
         mine = points[labels == index]
-        if surface.kind not in ("cylinder", "cone") or len(mine) == 0:
+        if surface.kind not in ("cylinder", "cone", "plane") or len(mine) == 0:
             found.append(None)
+            continue
+        if surface.kind == "plane":
+            first, second = plane_frame(surface)
+            u, v = (mine - surface.origin) @ first, (mine - surface.origin) @ second
+            margin = min(0.1 * max(np.ptp(u), np.ptp(v)) + 5 * tolerance, reach)
+            found.append((float(u.min()) - margin, float(u.max()) + margin,
+                          float(v.min()) - margin, float(v.max()) + margin))
             continue
         height = (mine - surface.origin) @ surface.axis
         low, high = float(height.min()), float(height.max())
@@ -90,6 +113,13 @@ def spans(surfaces: list[Primitive], points: np.ndarray, labels: np.ndarray,
         margin = min(radius + 0.1 * (high - low), reach)
         found.append((low - margin, high + margin))
     return found
+
+
+def plane_frame(plane: Primitive) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors (3,) across a plane's normal: its u and v directions."""
+    from nurbs_core.brep.primitives import axis_frame
+
+    return axis_frame(plane.axis)
 
 
 def winding_numbers(vertices: np.ndarray, triangles: np.ndarray, queries: np.ndarray
@@ -233,7 +263,7 @@ def _boundary(cells: list[OccShape], inside: list[bool]) -> OccShape:
 
 def build_solid(surfaces: list[Primitive], mesh_vertices: np.ndarray,
                 mesh_triangles: np.ndarray, box: tuple[np.ndarray, np.ndarray],
-                extents: list[tuple[float, float] | None] | None = None,
+                extents: list[Span | None] | None = None,
                 tolerance: float = 0.0) -> OccShape:
     """The solid bounded by ``surfaces`` that the closed mesh (V, 3), (T, 3) of the scan
     encloses (see the module); ``box``: the scan's bounding box (low (3,), high (3,));
@@ -305,7 +335,7 @@ def _classify(arrangement: OccShape, cells: list[OccShape], mesh_vertices: np.nd
 
 def _build_solid(surfaces: list[Primitive], mesh_vertices: np.ndarray,
                  mesh_triangles: np.ndarray, box: tuple[np.ndarray, np.ndarray],
-                 extents: list[tuple[float, float] | None] | None = None,
+                 extents: list[Span | None] | None = None,
                  tolerance: float = 0.0) -> OccShape:
     """The solid bounded by ``surfaces`` that the closed mesh (V, 3), (T, 3) of the scan
     encloses (see the module); ``box``: the scan's bounding box (low (3,), high (3,));

@@ -63,16 +63,21 @@ def touching_sizes(surface: Primitive, other: Primitive) -> list[float]:
 
 def crossing(surfaces: list[Primitive], tolerance: float) -> list[Primitive]:
     """The surfaces with every curved one that nearly touches another (within ``tolerance``)
-    enlarged to cross it by :data:`OVERLAP` x ``tolerance`` (see the module)."""
-    result = []
-    for surface in surfaces:
-        size = surface.minor if surface.kind == "torus" else surface.radius
-        touching = [t for other in surfaces if other is not surface
-                    for t in touching_sizes(surface, other) if abs(t - size) < tolerance]
-        if not touching:
-            result.append(surface)
-            continue
-        wanted = max(size, max(touching) + OVERLAP * tolerance)
-        result.append(replace(surface, minor=wanted) if surface.kind == "torus"
-                      else replace(surface, radius=wanted))
+    enlarged to cross it by :data:`OVERLAP` x ``tolerance`` (see the module). Cylinders go
+    first, then tori, then spheres, each against the surfaces as already enlarged: a corner
+    sphere on the axes of three fillet cylinders grows past their new radius, instead of
+    touching them again."""
+    result = list(surfaces)
+    for kind in ("cylinder", "torus", "sphere"):
+        for index, surface in enumerate(result):
+            if surface.kind != kind:
+                continue
+            size = surface.minor if kind == "torus" else surface.radius
+            touching = [t for k, other in enumerate(result) if k != index
+                        for t in touching_sizes(surface, other) if abs(t - size) < tolerance]
+            if not touching:
+                continue
+            wanted = max(size, max(touching) + OVERLAP * tolerance)
+            result[index] = (replace(surface, minor=wanted) if kind == "torus"
+                             else replace(surface, radius=wanted))
     return result
