@@ -95,7 +95,7 @@ def _part_or(route: Route, points: np.ndarray, forced: bool) -> Route:
 
             require_ocp("A solid with analytic faces")
         return route
-    from nurbs_core.brep.part import MIN_COVERAGE, part_like
+    from nurbs_core.brep.part import MAX_CURVED, MIN_COVERAGE, part_like
     from nurbs_core.brep.segment import segment
 
     segmentation = segment(points, give_up=0.0 if forced else 0.02)
@@ -103,8 +103,9 @@ def _part_or(route: Route, points: np.ndarray, forced: bool) -> Route:
     if part_like(segmentation) or forced:
         return Route("part", f"{route.finding}; {share} surfaces", route.mesh,
                      segmentation=segmentation)
-    route.finding += (f"; not a machined part ({share} surfaces, under "
-                      f"{MIN_COVERAGE:.0%})")
+    why = (f"under {MIN_COVERAGE:.0%}" if segmentation.coverage < MIN_COVERAGE
+           else f"mostly spheres, cones and tori, over {MAX_CURVED:.0%}: a freeform shape")
+    route.finding += f"; not a machined part ({share} surfaces, {why})"
     return route
 
 

@@ -33,6 +33,8 @@ from nurbs_core.brep.segment import Segmentation, segment
 
 #: a part-like scan has at least this share of its points on analytic surfaces
 MIN_COVERAGE = 0.9
+#: and at most this share on spheres, cones and tori (unless it is a primitive)
+MAX_CURVED = 0.5
 #: the points' mean distance to the solid may be at most this many noise sigmas
 MEAN_LIMIT = 1.25
 #: at least this many samples of the solid's faces decide which face is nearest to a point
@@ -131,8 +133,17 @@ def part_problems(result: PartResult) -> dict[str, str]:
 
 def part_like(segmentation: Segmentation) -> bool:
     """Whether the scan is a part: most of its points (:data:`MIN_COVERAGE`) on analytic
-    surfaces."""
-    return bool(segmentation.surfaces) and segmentation.coverage >= MIN_COVERAGE
+    surfaces, and either a primitive (at most 3 surfaces: a ball, a torus, a capsule) or
+    mostly planes and cylinders (at most :data:`MAX_CURVED` of the points on spheres, cones and
+    tori). Organic shapes pass the first test when the noise is large: a sparse head's scan lies
+    within 3 sigmas of a dozen spheres and cones, which no machined part is made of."""
+    if not segmentation.surfaces or segmentation.coverage < MIN_COVERAGE:
+        return False
+    if len(segmentation.surfaces) <= 3:
+        return True
+    curved = [k for k, s in enumerate(segmentation.surfaces)
+              if s.kind in ("sphere", "cone", "torus")]
+    return float(np.isin(segmentation.labels, curved).mean()) <= MAX_CURVED
 
 
 def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarray,

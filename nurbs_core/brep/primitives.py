@@ -228,12 +228,15 @@ def _closest_between_lines(p0: np.ndarray, d0: np.ndarray, p1: np.ndarray,
 # --- least-squares refinement ----------------------------------------------------------------------
 
 
-def refine(primitive: Primitive, points: np.ndarray) -> Primitive:
-    """``primitive`` with its parameters refined by least squares on points (N, 3): the sum of
-    squared geometric distances is minimised (a plane in closed form)."""
+def refine(primitive: Primitive, points: np.ndarray, at_most: int = REFINE_POINTS,
+           evaluations: int | None = None) -> Primitive:
+    """``primitive`` with its parameters refined by least squares on points (N, 3) (``at_most``
+    of them, drawn with a fixed seed): the sum of squared geometric distances is minimised (a
+    plane in closed form); ``evaluations``: at most this many residual evaluations (None:
+    scipy's default, to convergence)."""
     points = np.asarray(points, np.float64)
-    if len(points) > REFINE_POINTS:
-        pick = np.random.default_rng(0).choice(len(points), REFINE_POINTS, replace=False)
+    if len(points) > at_most:
+        pick = np.random.default_rng(0).choice(len(points), at_most, replace=False)
         points = points[pick]
     if primitive.kind == "plane":
         plane = plane_through(points)
@@ -243,7 +246,7 @@ def refine(primitive: Primitive, points: np.ndarray) -> Primitive:
         def sphere(x: np.ndarray) -> np.ndarray:
             return np.linalg.norm(points - x[:3], axis=1) - x[3]
         x = scipy.optimize.least_squares(
-            sphere, np.r_[primitive.origin, primitive.radius], method="lm").x
+            sphere, np.r_[primitive.origin, primitive.radius], method="lm", max_nfev=evaluations).x
         return Primitive("sphere", x[:3], primitive.axis, radius=abs(float(x[3])))
     first, second = axis_frame(primitive.axis)
 
@@ -258,7 +261,7 @@ def refine(primitive: Primitive, points: np.ndarray) -> Primitive:
         def cylinder(x: np.ndarray) -> np.ndarray:
             return Primitive("cylinder", origin_of(x), axis_of(x), radius=x[4]).signed(points)
         x = scipy.optimize.least_squares(
-            cylinder, np.r_[0.0, 0.0, 0.0, 0.0, primitive.radius], method="lm").x
+            cylinder, np.r_[0.0, 0.0, 0.0, 0.0, primitive.radius], method="lm", max_nfev=evaluations).x
         return Primitive("cylinder", origin_of(x), axis_of(x), radius=abs(float(x[4])))
 
     if primitive.kind == "torus":
@@ -267,14 +270,14 @@ def refine(primitive: Primitive, points: np.ndarray) -> Primitive:
                              minor=x[6]).signed(points)
         x = scipy.optimize.least_squares(
             torus, np.r_[0.0, 0.0, 0.0, 0.0, primitive.radius, 0.0, primitive.minor],
-            method="lm").x
+            method="lm", max_nfev=evaluations).x
         return Primitive("torus", origin_of(x), axis_of(x), radius=abs(float(x[4])),
                          minor=abs(float(x[6])))
 
     def cone(x: np.ndarray) -> np.ndarray:
         return Primitive("cone", origin_of(x), axis_of(x), angle=x[4]).signed(points)
     x = scipy.optimize.least_squares(
-        cone, np.r_[0.0, 0.0, 0.0, 0.0, primitive.angle, 0.0], method="lm").x
+        cone, np.r_[0.0, 0.0, 0.0, 0.0, primitive.angle, 0.0], method="lm", max_nfev=evaluations).x
     return Primitive("cone", origin_of(x), axis_of(x), angle=float(x[4]))
 
 

@@ -59,6 +59,13 @@ CANDIDATES = 40
 SCORE_POINTS = 3000
 #: at most this many surfaces
 MAX_REGIONS = 60
+#: a region under this share of the points is small (see _without_redundant)
+SMALL_REGION = 0.02
+#: candidates are refined within a round on at most this many of their points
+ROUND_REFINE_POINTS = 1000
+#: a candidate's points count this much less per step along SIMPLICITY (a torus needs about
+#: 1.5 times the points of a plane to win a round)
+COMPLEXITY = 0.9
 
 
 @dataclass
@@ -139,7 +146,10 @@ def _candidates(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np
         near = neighbours[seed][free[neighbours[seed]]]
         if len(near) >= 3:
             found.append(plane_through(points[near]))
-        ball = np.asarray(tree.query_ball_point(points[seed], rng.uniform(0.1, 1.0) * reach))
+        # half the candidates from a small ball (its points likely share the seed's face), half
+        # from a wide one (curvature measured over a longer base)
+        width = rng.uniform(0.03, 0.2) if rng.random() < 0.5 else rng.uniform(0.2, 1.0)
+        ball = np.asarray(tree.query_ball_point(points[seed], width * reach))
         ball = ball[free[ball]]
         if len(ball) < 3:
             continue
@@ -177,15 +187,34 @@ def _simplest(surface: Primitive, points: np.ndarray, normals: np.ndarray,
 
 
 def scale(points: np.ndarray, tree: cKDTree | None = None
-          ) -> tuple[float, float, np.ndarray, np.ndarray]:
-    """(spacing, noise sigma, normals (N, 3), neighbours (N, 16)) of a cloud (N, 3)."""
+          ) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray]:
+    """(spacing, noise sigma, normals (N, 3), neighbours (N, 16), each neighbourhood's RMS
+    distance to its plane (N,)) of a cloud (N, 3)."""
     tree = tree or cKDTree(points)
     distances, _ = tree.query(points, k=min(7, len(points)))
     spacing = float(np.median(distances[:, -1]))
     normals, residual, neighbours = _neighbourhoods(points, tree)
-    k = neighbours.shape[1]
-    noise = float(np.median(residual) * np.sqrt(k / max(k - 3, 1)))
-    return spacing, noise, normals, neighbours
+    return spacing, _quadric_noise(points, tree), normals, neighbours, residual
+
+
+def _quadric_noise(points: np.ndarray, tree: cKDTree, k: int = 24) -> float:
+    """The noise sigma of a cloud (N, 3): the median RMS residual of a quadratic height field
+    fitted to each point's k neighbours in their PCA frame, unbiased for its 6 parameters. A
+    plane's residual would count the surface's curvature as noise on a sparse or curved scan
+    (and let spheres pass for a head)."""
+    k = min(k, len(points))
+    if k < 10:
+        return 0.0
+    _, neighbours = tree.query(points, k=k)
+    local = points[neighbours] - points[neighbours].mean(axis=1, keepdims=True)
+    _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", local, local))
+    x, y, z = (np.einsum("nki,ni->nk", local, vectors[:, :, c]) for c in (2, 1, 0))
+    design = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], axis=-1)
+    normal = np.einsum("nki,nkj->nij", design, design) + 1e-12 * np.eye(6)
+    coefficients = np.linalg.solve(normal, np.einsum("nki,nk->ni", design, z)[..., None])
+    fitted = np.einsum("nki,ni->nk", design, coefficients[..., 0])
+    rms = np.sqrt(np.mean((z - fitted) ** 2, axis=1))
+    return float(np.median(rms) * np.sqrt(k / (k - 6)))
 
 
 def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
@@ -198,7 +227,10 @@ def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
     points = np.asarray(points, np.float64)
     count = len(points)
     tree = cKDTree(points)
-    spacing, estimated, normals, neighbours = scale(points, tree)
+    spacing, estimated, normals, neighbours, residual = scale(points, tree)
+    # seeds and samples come from smooth neighbourhoods: a point beside a sharp edge has a
+    # blurred normal and spoils every candidate drawn from it
+    smooth = residual <= 2.0 * np.median(residual)
     noise = estimated if noise is None else float(noise)
     diagonal = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
     tolerance = max(3.0 * noise, MIN_TOLERANCE * diagonal)
@@ -211,7 +243,8 @@ def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
     while (free.sum() >= smallest and len(surfaces) < MAX_REGIONS
            and time.perf_counter() - started < time_limit):
         rounds += 1
-        found = _detect_one(points, normals, tree, free, neighbours, graph, rng, tolerance,
+        found = _detect_one(points, normals, tree, free, free & smooth if (
+            free & smooth).sum() >= smallest else free, neighbours, graph, rng, tolerance,
                             0.25 * diagonal)
         if found is None or len(found[1]) < smallest:
             break
@@ -233,12 +266,13 @@ def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
 
 
 def _detect_one(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np.ndarray,
-                neighbours: np.ndarray, graph: scipy.sparse.csr_matrix,
+                samples: np.ndarray, neighbours: np.ndarray, graph: scipy.sparse.csr_matrix,
                 rng: np.random.Generator, tolerance: float, reach: float
                 ) -> tuple[Primitive, np.ndarray] | None:
-    """The surface of one round and its points (indices), or None."""
+    """The surface of one round and its points (indices), or None. ``free``: the points not
+    yet taken (mask); ``samples``: those that candidates are drawn from (mask)."""
     free_index = np.flatnonzero(free)
-    candidates = _candidates(points, normals, tree, free, neighbours, rng, reach)
+    candidates = _candidates(points, normals, tree, samples, neighbours, rng, reach)
     if not candidates:
         return None
     subset = free_index
@@ -247,7 +281,13 @@ def _detect_one(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np
     scores = [_inliers(c, points[subset], normals[subset], 2 * tolerance).sum()
               for c in candidates]
     best: tuple[Primitive, np.ndarray] | None = None
-    for index in np.argsort(scores)[::-1][:4]:
+    order = np.argsort(scores)[::-1]
+    # the two best of every type are refined: one type's many near-misses (tori bending over
+    # a junction) must not crowd out the one right candidate of another
+    chosen = [i for kind in SIMPLICITY
+              for i in [j for j in order if candidates[j].kind == kind][:2]
+              if scores[i] >= 0.3 * scores[order[0]]]  # hopeless ones are not refined
+    for index in chosen:
         surface = candidates[index]
         members = np.array([], np.int64)
         for step in range(3):  # refine on the inliers, collect them again
@@ -257,7 +297,7 @@ def _detect_one(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np
             if len(members) < 3 + (surface.kind == "cone"):
                 break
             try:
-                surface = refine(surface, points[members])
+                surface = refine(surface, points[members], ROUND_REFINE_POINTS, 120)
             except (ValueError, np.linalg.LinAlgError):
                 break
         if len(members) < 4 or not _plausible(surface, points[members].mean(axis=0), reach):
@@ -266,15 +306,25 @@ def _detect_one(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np
         members = _largest_piece(graph, free_index[mask])
         if not _unbiased(surface, points[members], tolerance):
             continue
-        if best is None or len(members) > len(best[1]):
+        if best is None or _weighted(surface, members) > _weighted(*best):
             best = (surface, members)
     if best is None or len(best[1]) < 8:
         return best
+    try:  # the winner refined on all its points (up to REFINE_POINTS)
+        best = (refine(best[0], points[best[1]]), best[1])
+    except (ValueError, np.linalg.LinAlgError):
+        pass
     surface = _simplest(best[0], points[best[1]], normals[best[1]], tolerance)
     if surface is not best[0]:
         mask = _inliers(surface, points[free_index], normals[free_index], tolerance)
         best = (surface, _largest_piece(graph, free_index[mask]))
     return best
+
+
+def _weighted(surface: Primitive, members: np.ndarray) -> float:
+    """A candidate's score: its points, discounted by :data:`COMPLEXITY` per step of type
+    complexity (a torus or cone bends to bridge a junction of simpler faces)."""
+    return len(members) * COMPLEXITY ** SIMPLICITY.index(surface.kind)
 
 
 def _unbiased(surface: Primitive, points: np.ndarray, tolerance: float) -> bool:
@@ -314,7 +364,9 @@ def _merged(surfaces: list[Primitive], points: np.ndarray, normals: np.ndarray,
 def _without_redundant(surfaces: list[Primitive], points: np.ndarray, normals: np.ndarray,
                        tolerance: float) -> list[Primitive]:
     """Surfaces without those whose points another surface explains (90% within the
-    tolerance): a sphere found on a band of a cone before the cone itself, smallest first."""
+    tolerance): a sphere found on a band of a cone before the cone itself, smallest first; and
+    small regions (under :data:`SMALL_REGION` of the points) 80% of whose points lie within
+    the tolerance of other surfaces."""
     kept = list(surfaces)
     labels = _labels(kept, points, normals, tolerance)
     sizes = np.bincount(labels[labels >= 0], minlength=len(kept))
@@ -323,6 +375,14 @@ def _without_redundant(surfaces: list[Primitive], points: np.ndarray, normals: n
         mine = labels == index
         if not mine.any():
             continue
+        others = [other for other in kept if other is not surface]
+        if others and sizes[index] < SMALL_REGION * len(points):
+            # a small region of points that lie on other surfaces anyway (their normals
+            # blurred beside an edge): leftovers, not a face
+            near = np.min([other.distance(points[mine]) for other in others], axis=0)
+            if (near < tolerance).mean() >= 0.8:
+                kept = others
+                continue
         for other in kept:
             if other is surface:
                 continue

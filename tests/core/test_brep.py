@@ -192,4 +192,6 @@ def test_a_freeform_closed_scan_is_not_taken_for_a_part():
     route = choose_route(head)
     assert route.kind == "network"
     assert "not a machined part" in route.finding
-    assert segment(head, give_up=0.02).coverage < 0.9
+    # with noise of 0.2% of the diagonal a dozen spheres and cones hold a sparse head within
+    # 3 sigmas; a part is made mostly of planes and cylinders
+    assert not part_like(segment(head, give_up=0.02))
