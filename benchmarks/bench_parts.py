@@ -18,7 +18,8 @@ Each scan goes the default way (``choose_route``: a closed object, part-like or 
 * mean / sigma: the points' mean distance to the solid over the noise sigma (target 1.25);
 * edge p99 / sigma: the 99th percentile at the sharp edges (points with a neighbour among their
   10 nearest on another face of the true part) over sigma (target 4);
-* seconds: route decision plus solid, wall, one thread.
+* sec, cpu s: route decision plus solid, wall and CPU seconds of this process, one thread (the
+  machine is shared: CPU over wall says how much it was).
 
 ``--baseline`` also fits the named parts as a network of patches (``--patches auto``, the route
 closed objects took before) in the same run and gives its mean and edge p99 over sigma.
@@ -133,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{os.cpu_count()} CPUs, one torch thread; {args.points} points, noise "
           f"{args.noise:g} x diagonal")
     header = (f"{'part':24s} {'faces':>9s} {'route':>7s} {'solid':>5s} {'status':>10s} "
-              f"{'types':>6s} {'mean/s':>7s} {'edge99/s':>8s} {'sec':>6s}")
+              f"{'types':>6s} {'mean/s':>7s} {'edge99/s':>8s} {'sec':>6s} {'cpu s':>6s}")
     print(header)
     rows = []
     for index, (name, shape, baseline) in enumerate(cases):
@@ -146,7 +147,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{'yes' if row['solid'] else 'NO':>5s} {row.get('status', '-'):>10s} "
               f"{row.get('type_accuracy', float('nan')):6.3f} "
               f"{row.get('mean_sigma', float('nan')):7.2f} "
-              f"{row.get('edge_p99_sigma', float('nan')):8.2f} {row['seconds']:6.1f}"
+              f"{row.get('edge_p99_sigma', float('nan')):8.2f} {row['seconds']:6.1f} "
+              f"{row['cpu_seconds']:6.1f}"
               + (f"  ({row['error']})" if "error" in row else "")
               + (f"  network: {row['network_patches']} patches, mean/s "
                  f"{row['network_mean_sigma']:.2f}, edge99/s {row['network_edge_p99_sigma']:.2f}"
