@@ -61,6 +61,8 @@ SCORE_POINTS = 3000
 MAX_REGIONS = 60
 #: a region under this share of the points is small (see _without_redundant)
 SMALL_REGION = 0.02
+#: a torus's points must reach this far around its tube (radians; 30 degrees)
+MIN_TUBE_ARC = 0.52
 #: candidates are refined within a round on at most this many of their points
 ROUND_REFINE_POINTS = 1000
 #: a candidate's points count this much less per step along SIMPLICITY (a torus needs about
@@ -302,6 +304,8 @@ def _detect_one(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np
                 break
         if len(members) < 4 or not _plausible(surface, points[members].mean(axis=0), reach):
             continue  # refinement may stretch a candidate into a huge cylinder over a plane
+        if surface.kind == "torus" and _tube_arc(surface, points[members]) < MIN_TUBE_ARC:
+            continue  # a torus bent over a straight profile is a cone or cylinder
         mask = _inliers(surface, points[free_index], normals[free_index], tolerance)
         members = _largest_piece(graph, free_index[mask])
         if not _unbiased(surface, points[members], tolerance):
@@ -319,6 +323,17 @@ def _detect_one(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np
         mask = _inliers(surface, points[free_index], normals[free_index], tolerance)
         best = (surface, _largest_piece(graph, free_index[mask]))
     return best
+
+
+def _tube_arc(torus: Primitive, points: np.ndarray) -> float:
+    """How far around its tube (radians) a torus's points (M, 3) reach: a fillet's covers a
+    quarter turn or more."""
+    v = points - torus.origin
+    height = v @ torus.axis
+    radial = np.linalg.norm(v - height[:, None] * torus.axis, axis=1)
+    angles = np.sort(np.arctan2(height, radial - torus.radius))
+    gaps = np.diff(np.r_[angles, angles[0] + 2 * np.pi])  # the arc is the widest gap's complement
+    return float(2 * np.pi - gaps.max())
 
 
 def _weighted(surface: Primitive, members: np.ndarray) -> float:
