@@ -52,6 +52,51 @@ def distinct_knots(knots: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
 _QUIETED = False
 
 
+def subshapes(shape: OccObject, kind: str) -> list[OccObject]:
+    """The distinct faces or edges (``kind`` "FACE" or "EDGE") of a shape, in a fixed order."""
+    from OCP.collections import IndexedMap_TopoDS_Shape_TopTools_ShapeMapHasher as ShapeMap
+    from OCP.TopAbs import TopAbs_ShapeEnum
+    from OCP.TopExp import TopExp
+    from OCP.TopoDS import TopoDS
+
+    found = ShapeMap()
+    TopExp.MapShapes_s(shape, getattr(TopAbs_ShapeEnum, "TopAbs_" + kind), found)
+    cast = TopoDS.Face if kind == "FACE" else TopoDS.Edge
+    return [cast(found.FindKey(k)) for k in range(1, found.Size() + 1)]
+
+
+def triangulate(shape: OccObject, deflection: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The shape's triangles within ``deflection`` of its faces: vertices (V, 3), triangles
+    (T, 3) oriented outwards, and each triangle's face index (T,) into ``subshapes(shape, "FACE")``."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepMesh import BRepMesh_IncrementalMesh
+    from OCP.TopAbs import TopAbs_Orientation
+    from OCP.TopLoc import TopLoc_Location
+
+    BRepMesh_IncrementalMesh(shape, deflection, False, 0.3, False)
+    vertices, triangles, owners = [], [], []
+    offset = 0
+    for index, face in enumerate(subshapes(shape, "FACE")):
+        location = TopLoc_Location()
+        mesh = BRep_Tool.Triangulation_s(face, location)
+        if mesh is None:
+            continue
+        transform = location.Transformation()
+        nodes = np.array([mesh.Node(k).Transformed(transform).Coord()
+                          for k in range(1, mesh.NbNodes() + 1)])
+        tris = np.array([mesh.Triangle(k).Get() for k in range(1, mesh.NbTriangles() + 1)]) - 1
+        if face.Orientation() == TopAbs_Orientation.TopAbs_REVERSED:
+            tris = tris[:, ::-1]
+        vertices.append(nodes)
+        triangles.append(tris + offset)
+        owners.append(np.full(len(tris), index))
+        offset += len(nodes)
+    if not triangles:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    return (np.concatenate(vertices), np.concatenate(triangles).astype(np.int64),
+            np.concatenate(owners))
+
+
 def quiet_occ() -> None:
     """Stop OpenCASCADE's default messenger from printing transfer statistics to stdout."""
     global _QUIETED

@@ -43,7 +43,7 @@ def _brep_bytes(shape: Any, path: StrPath) -> bytes:
 def _mesh_bytes(shape: Any, suffix: str, tolerance: float) -> bytes:
     import trimesh
 
-    from nurbs_core.brep.occ import triangulate
+    from nurbs_core.io.cad import triangulate
 
     vertices, triangles, _ = triangulate(shape, tolerance)
     mesh = trimesh.Trimesh(vertices, triangles, process=True)
