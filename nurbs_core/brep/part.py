@@ -79,7 +79,9 @@ class PartResult:
 
     @property
     def noise(self) -> float:
-        return self.segmentation.noise
+        """The noise sigma the distances are measured in: the scan's, at least a third of the
+        tolerance (a noise-free scan, a mesh file's samples, has a sigma of 0)."""
+        return max(self.segmentation.noise, self.segmentation.tolerance / 3)
 
     @property
     def problems(self) -> dict[str, str]:

@@ -195,3 +195,29 @@ def test_a_freeform_closed_scan_is_not_taken_for_a_part():
     # with noise of 0.2% of the diagonal a dozen spheres and cones hold a sparse head within
     # 3 sigmas; a part is made mostly of planes and cylinders
     assert not part_like(segment(head, give_up=0.02))
+
+
+def test_an_stl_mesh_of_a_machined_part_becomes_its_exact_solid(tmp_path, capsys):
+    """A noise-free mesh (the part's coarse triangulation, 184 triangles) back to its exact
+    faces: the noise is zero, the tolerance's floor measures the distances."""
+    from OCP.IFSelect import IFSelect_ReturnStatus
+    from OCP.STEPControl import STEPControl_Reader
+
+    from nurbs_core.brep.occ import faces as shape_faces
+    from nurbs_core.io.solid_io import save_solid
+
+    part = PARTS["plate"]()
+    mesh_file = tmp_path / "plate.stl"
+    save_solid(part, [mesh_file], 0.002)
+    step = tmp_path / "plate.step"
+    assert main([str(mesh_file), "-o", str(step)]) == 0
+    out = capsys.readouterr()
+    assert "a solid with analytic faces" in out.err and "status: converged" in out.out
+    reader = STEPControl_Reader()
+    assert reader.ReadFile(str(step)) == IFSelect_ReturnStatus.IFSelect_RetDone
+    reader.TransferRoots()
+    read = reader.OneShape()
+    assert is_valid(read)
+    assert sorted(face_kind(f) for f in shape_faces(read)) == sorted(
+        face_kind(f) for f in shape_faces(part))
+    assert abs(volume(read) / volume(part) - 1) < 0.005
