@@ -173,16 +173,28 @@ def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarr
     return distance, face, on_surface
 
 
-def fit_part(points: np.ndarray, mesh_vertices: np.ndarray, mesh_triangles: np.ndarray,
+def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
+             mesh_triangles: np.ndarray | None = None,
              segmentation: Segmentation | None = None) -> PartResult:
-    """The solid of a scanned part (N, 3) whose closed mesh is (V, 3), (T, 3) (see the
-    module); ``segmentation``: when already computed. Raises SolidError when no valid solid
-    results."""
-    from nurbs_core.brep.solid import build_solid, spans
+    """The solid of a scanned part (N, 3) (see the module). ``mesh_vertices`` (V, 3) and
+    ``mesh_triangles`` (T, 3): the scan's closed mesh that decides which cells are inside (None:
+    built from the points, :func:`nurbs_core.patches.closed_mesh.closed_mesh`);
+    ``segmentation``: when already computed. Raises SolidError when no valid solid results
+    (also when the points enclose no volume). ``result.solid`` is written by
+    :func:`nurbs_core.io.solid_io.save_solid`."""
+    from nurbs_core.brep.solid import SolidError, build_solid, spans
+    from nurbs_core.brep.tangency import crossing
 
     points = np.asarray(points, np.float64)
+    if mesh_vertices is None or mesh_triangles is None:
+        from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
+
+        try:
+            mesh = closed_mesh(points)
+        except NotClosedError as error:
+            raise SolidError(f"a solid needs a closed scan: {error}") from None
+        mesh_vertices, mesh_triangles = mesh.vertices, mesh.faces
     timings = {}
-    started = time.perf_counter()
     if segmentation is None:
         segmentation = segment(points)
     timings["segmentation"] = segmentation.seconds
@@ -190,8 +202,6 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray, mesh_triangles: np.n
     low, high = points.min(axis=0), points.max(axis=0)
     extents = spans(segmentation.surfaces, points, segmentation.labels,
                     float(np.linalg.norm(high - low)), segmentation.tolerance)
-    from nurbs_core.brep.tangency import crossing
-
     surfaces = crossing(segmentation.surfaces, segmentation.tolerance)
     solid = build_solid(surfaces, mesh_vertices, mesh_triangles, (low, high), extents,
                         segmentation.tolerance)

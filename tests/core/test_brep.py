@@ -221,3 +221,18 @@ def test_an_stl_mesh_of_a_machined_part_becomes_its_exact_solid(tmp_path, capsys
     assert sorted(face_kind(f) for f in shape_faces(read)) == sorted(
         face_kind(f) for f in shape_faces(part))
     assert abs(volume(read) / volume(part) - 1) < 0.005
+
+
+def test_the_python_api_builds_the_closed_mesh_itself_and_refuses_an_open_scan(tmp_path):
+    from nurbs_core import samples
+    from nurbs_core.brep.solid import SolidError
+    from nurbs_core.io.solid_io import save_solid
+
+    points, _, kinds = scan_part(PARTS["plate"](), 6000, NOISE, seed=4)
+    result = fit_part(points)
+    assert result.status == "converged", result.problems
+    assert sorted(face.kind for face in result.faces) == sorted(kinds)
+    save_solid(result.solid, [tmp_path / "plate.brep"], result.segmentation.tolerance)
+    assert (tmp_path / "plate.brep").stat().st_size > 1000
+    with pytest.raises(SolidError, match="needs a closed scan"):
+        fit_part(samples.saddle(2000).points)
