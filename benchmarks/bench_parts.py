@@ -52,7 +52,7 @@ def _edge_points(points: np.ndarray, owner: np.ndarray) -> np.ndarray:
 
 def _measure(name: str, shape: Any, count: int, noise: float, seed: int,
              baseline: bool) -> dict[str, Any]:
-    from nurbs_core.brep.part import fit_part, solid_distances
+    from nurbs_core.brep.part import fit_part
     from nurbs_core.brep.solid import SolidError
     from nurbs_core.route import choose_route
 
@@ -75,8 +75,7 @@ def _measure(name: str, shape: Any, count: int, noise: float, seed: int,
             row["seconds"] = time.perf_counter() - started
             row["solid"] = result.valid and result.closed
             row["status"] = result.status
-            distance, nearest, _ = solid_distances(result.solid, result.segmentation.surfaces,
-                                                   points, result.segmentation.tolerance)
+            distance, nearest = result.distances, result.point_faces
             out_kinds = np.array([face_kind(f) for f in faces(result.solid)])
             true_kind = np.array(kinds)[owner]
             analytic = true_kind != "freeform"

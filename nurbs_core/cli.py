@@ -770,7 +770,7 @@ def run_part(args: argparse.Namespace, outputs: list[Path], points: np.ndarray,
           f"{np.sqrt((d ** 2).mean()):.6g}, 99th percentile {np.percentile(d, 99):.6g} "
           f"({np.percentile(d, 99) / noise:.2f} sigma), max {d.max():.6g}")
     for index, face in enumerate(result.faces):
-        print(f"face {index}: {_describe_face(face.parameters)}; {face.points} points, mean "
+        print(f"face {index}: {face.description}; {face.points} points, mean "
               f"{face.mean:.4g}, 99th percentile {face.p99:.4g}")
     for warning in result.problems.values():
         print(f"warning: {warning}")
@@ -778,20 +778,6 @@ def run_part(args: argparse.Namespace, outputs: list[Path], points: np.ndarray,
     for path in outputs:
         print(f"wrote {path}")
     return _plain(statistics)
-
-
-def _describe_face(parameters: dict[str, Any]) -> str:
-    import numpy as np
-
-    from nurbs_core.brep.primitives import Primitive
-
-    if "origin" not in parameters:
-        return str(parameters["type"])
-    return Primitive(parameters["type"], np.array(parameters["origin"]),
-                     np.array(parameters.get("axis", (0.0, 0.0, 1.0))),
-                     radius=float(parameters.get("radius", parameters.get("major_radius", 0.0))),
-                     angle=float(np.radians(parameters.get("half_angle_degrees", 0.0))),
-                     minor=float(parameters.get("minor_radius", 0.0))).describe()
 
 
 def _check_network_outputs(args: argparse.Namespace, outputs: list[Path]) -> None:

@@ -101,14 +101,4 @@ def face_area(face: OccShape) -> float:
 
 def count(shape: OccShape, kind: str) -> int:
     """How many distinct sub-shapes of ``kind`` (FACE, EDGE, SHELL, SOLID, ...) the shape has."""
-    if kind in ("FACE", "EDGE"):
-        return len(subshapes(shape, kind))
-    from OCP.TopAbs import TopAbs_ShapeEnum
-    from OCP.TopExp import TopExp_Explorer
-
-    explorer = TopExp_Explorer(shape, getattr(TopAbs_ShapeEnum, "TopAbs_" + kind))
-    found = 0
-    while explorer.More():
-        found += 1
-        explorer.Next()
-    return found
+    return len(subshapes(shape, kind))

@@ -55,6 +55,7 @@ class PartFace:
 
     kind: str
     parameters: dict[str, Any]
+    description: str
     points: int
     mean: float
     p99: float
@@ -66,12 +67,14 @@ class PartFace:
 @dataclass
 class PartResult:
     """The solid (an OpenCASCADE shape), its faces, the segmentation, the points' distances to
-    the solid (N,), its validity, closedness, volume and the timings (seconds per stage)."""
+    the solid (N,) and nearest faces (N,, indices into ``faces``), its validity, closedness,
+    volume and the timings (seconds per stage)."""
 
     solid: OccShape
     faces: list[PartFace]
     segmentation: Segmentation
     distances: np.ndarray
+    point_faces: np.ndarray
     valid: bool
     closed: bool
     volume: float
@@ -156,7 +159,7 @@ def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarr
     from nurbs_core.brep.solid import face_surfaces
 
     vertices, triangles, owners = triangulate(solid, tolerance / 4)
-    on_surface = face_surfaces(solid, surfaces, tolerance)
+    on_surface = face_surfaces(solid, surfaces, tolerance, (vertices, triangles, owners))
     # the nearest of dense samples of the faces decides a point's face (the triangulation's
     # vertices lie on the faces' edges only where they are flat)
     samples, sample_face = sample_triangles(vertices, triangles, owners,
@@ -207,7 +210,8 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
                         segmentation.tolerance)
     timings["solid"] = time.perf_counter() - started
     started = time.perf_counter()
-    distance, nearest, on_surface = solid_distances(solid, segmentation.surfaces, points,
+    # measured against the surfaces the solid is made of (fillets as enlarged to cross)
+    distance, nearest, on_surface = solid_distances(solid, surfaces, points,
                                                     segmentation.tolerance)
     part_faces = []
     areas = [face_area(face) for face in faces(solid)]
@@ -215,14 +219,14 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
         mine = distance[nearest == index]
         kind = face_kind(face)
         surface = on_surface[index]
-        parameters = (segmentation.surfaces[surface].parameters() if surface >= 0
-                      else {"type": kind})
-        part_faces.append(PartFace(kind, parameters, int(len(mine)),
+        parameters = surfaces[surface].parameters() if surface >= 0 else {"type": kind}
+        description = surfaces[surface].describe() if surface >= 0 else kind
+        part_faces.append(PartFace(kind, parameters, description, int(len(mine)),
                                    float(mine.mean()) if len(mine) else 0.0,
                                    float(np.percentile(mine, 99)) if len(mine) else 0.0,
                                    float(mine.max()) if len(mine) else 0.0, areas[index],
                                    len(points) * areas[index] / max(sum(areas), 1e-300)))
     timings["measure"] = time.perf_counter() - started
     closed = count(solid, "SHELL") == 1 and count(solid, "SOLID") == 1
-    return PartResult(solid, part_faces, segmentation, distance, is_valid(solid), closed,
+    return PartResult(solid, part_faces, segmentation, distance, nearest, is_valid(solid), closed,
                       volume(solid), timings)

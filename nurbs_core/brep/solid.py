@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbs_core.brep.occ import OccShape, faces, is_valid, volume
+from nurbs_core.brep.occ import OccShape, faces, is_valid, subshapes, volume
 from nurbs_core.brep.primitives import Primitive
 
 #: points tried per cell to classify it
@@ -140,19 +140,6 @@ def winding_numbers(vertices: np.ndarray, triangles: np.ndarray, queries: np.nda
     return result
 
 
-def _cells(shape: OccShape) -> list[OccShape]:
-    from OCP.TopAbs import TopAbs_ShapeEnum
-    from OCP.TopExp import TopExp_Explorer
-    from OCP.TopoDS import TopoDS
-
-    found = []
-    explorer = TopExp_Explorer(shape, TopAbs_ShapeEnum.TopAbs_SOLID)
-    while explorer.More():
-        found.append(TopoDS.Solid(explorer.Current()))
-        explorer.Next()
-    return found
-
-
 def _points_inside(cell: OccShape, wanted: int) -> np.ndarray:
     """Up to ``wanted`` points (M, 3) strictly inside a cell: its centre of mass when inside,
     and points stepped inwards from the centres of its largest triangles (a few of
@@ -192,19 +179,6 @@ def _points_inside(cell: OccShape, wanted: int) -> np.ndarray:
                 found.append(point)
                 break
     return np.array(found).reshape(-1, 3)
-
-
-def _shells(shape: OccShape) -> list[OccShape]:
-    from OCP.TopAbs import TopAbs_ShapeEnum
-    from OCP.TopExp import TopExp_Explorer
-    from OCP.TopoDS import TopoDS
-
-    found = []
-    explorer = TopExp_Explorer(shape, TopAbs_ShapeEnum.TopAbs_SHELL)
-    while explorer.More():
-        found.append(TopoDS.Shell(explorer.Current()))
-        explorer.Next()
-    return found
 
 
 def _shell_volume(shell: OccShape) -> float:
@@ -248,7 +222,7 @@ def _boundary(cells: list[OccShape], inside: list[bool]) -> OccShape:
             builder.Add(shell, face)
     fix = ShapeFix_Shell(shell)
     fix.Perform()
-    pieces = [fix.Shell()] if fix.NbShells() == 1 else _shells(fix.Shape())
+    pieces = [fix.Shell()] if fix.NbShells() == 1 else subshapes(fix.Shape(), "SHELL")
     if not pieces:
         raise SolidError("the kept cells bound no closed shell")
     # a stray cell kept apart from the part (a misjudged sliver) is dropped: the largest piece
@@ -289,9 +263,10 @@ def _classify(arrangement: OccShape, cells: list[OccShape], mesh_vertices: np.nd
     from OCP.collections import (
         IndexedDataMap_TopoDS_Shape_List_TopoDS_Shape_TopTools_ShapeMapHasher as Ancestors,  # noqa: E501
     )
+    from OCP.collections import IndexedMap_TopoDS_Shape_TopTools_ShapeMapHasher as ShapeMap
     from OCP.GProp import GProp_GProps
     from OCP.TopAbs import TopAbs_ShapeEnum
-    from OCP.TopExp import TopExp, TopExp_Explorer
+    from OCP.TopExp import TopExp
 
     from nurbs_core.brep.occ import face_area
 
@@ -314,15 +289,15 @@ def _classify(arrangement: OccShape, cells: list[OccShape], mesh_vertices: np.nd
         TopExp.MapShapesAndAncestors_s(arrangement, TopAbs_ShapeEnum.TopAbs_FACE,
                                        TopAbs_ShapeEnum.TopAbs_SOLID, ancestors)
         shared: dict[int, dict[int, float]] = {k: {} for k in slivers}
+        numbered = ShapeMap()  # a cell's index: numbered.FindIndex(cell) - 1
+        for cell in cells:
+            numbered.Add(cell)
         for index in slivers:
-            explorer = TopExp_Explorer(cells[index], TopAbs_ShapeEnum.TopAbs_FACE)
-            while explorer.More():
-                face = explorer.Current()
+            for face in faces(cells[index]):
                 for other in ancestors.FindFromKey(face):
-                    for k, cell in enumerate(cells):
-                        if k != index and cell.IsSame(other):
-                            shared[index][k] = shared[index].get(k, 0.0) + face_area(face)
-                explorer.Next()
+                    k = numbered.FindIndex(other) - 1
+                    if k != index and k >= 0:
+                        shared[index][k] = shared[index].get(k, 0.0) + face_area(face)
         for _ in range(len(slivers)):  # slivers next to slivers follow once those are decided
             for index in slivers:
                 known = {k: a for k, a in shared[index].items() if k in decided}
@@ -367,7 +342,7 @@ def _build_solid(surfaces: list[Primitive], mesh_vertices: np.ndarray,
     maker.Perform()
     if maker.HasErrors():
         raise SolidError("OpenCASCADE could not intersect the surfaces")
-    cells = _cells(maker.Shape())
+    cells = subshapes(maker.Shape(), "SOLID")
     if len(cells) > MAX_CELLS:
         raise SolidError(f"the surfaces cut the scan's box into {len(cells)} cells (at most "
                          f"{MAX_CELLS}): too many surfaces cross each other")
@@ -389,13 +364,14 @@ def _build_solid(surfaces: list[Primitive], mesh_vertices: np.ndarray,
     return solid
 
 
-def face_surfaces(solid: OccShape, surfaces: list[Primitive], tolerance: float) -> list[int]:
+def face_surfaces(solid: OccShape, surfaces: list[Primitive], tolerance: float,
+                  triangulation: tuple[np.ndarray, np.ndarray, np.ndarray]) -> list[int]:
     """For each face of the solid (:func:`~nurbs_core.brep.occ.faces` order), the index of the
-    surface of its type it lies on (the nearest to points spread over its triangulation; -1 when
-    none is within ``tolerance``)."""
-    from nurbs_core.brep.occ import face_kind, sample_triangles, triangulate
+    surface of its type it lies on (the nearest to points spread over its ``triangulation``,
+    :func:`~nurbs_core.brep.occ.triangulate`'s; -1 when none is within ``tolerance``)."""
+    from nurbs_core.brep.occ import face_kind, sample_triangles
 
-    vertices, triangles, owners = triangulate(solid, tolerance)
+    vertices, triangles, owners = triangulation
     rng = np.random.default_rng(0)
     result = []
     for index, face in enumerate(faces(solid)):

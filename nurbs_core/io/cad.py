@@ -53,7 +53,8 @@ _QUIETED = False
 
 
 def subshapes(shape: OccObject, kind: str) -> list[OccObject]:
-    """The distinct faces or edges (``kind`` "FACE" or "EDGE") of a shape, in a fixed order."""
+    """The distinct sub-shapes of ``kind`` ("FACE", "EDGE", "SHELL", "SOLID", ...) of a shape,
+    in a fixed order."""
     from OCP.collections import IndexedMap_TopoDS_Shape_TopTools_ShapeMapHasher as ShapeMap
     from OCP.TopAbs import TopAbs_ShapeEnum
     from OCP.TopExp import TopExp
@@ -61,7 +62,7 @@ def subshapes(shape: OccObject, kind: str) -> list[OccObject]:
 
     found = ShapeMap()
     TopExp.MapShapes_s(shape, getattr(TopAbs_ShapeEnum, "TopAbs_" + kind), found)
-    cast = TopoDS.Face if kind == "FACE" else TopoDS.Edge
+    cast = getattr(TopoDS, kind.capitalize())
     return [cast(found.FindKey(k)) for k in range(1, found.Size() + 1)]
 
 

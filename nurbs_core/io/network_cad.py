@@ -40,15 +40,9 @@ def _faces(network: PatchNetwork) -> list[OccShape]:
 
 
 def _count(shape: OccShape, kind: str) -> int:
-    from OCP.TopAbs import TopAbs_ShapeEnum
-    from OCP.TopExp import TopExp_Explorer
+    from nurbs_core.io.cad import subshapes
 
-    explorer = TopExp_Explorer(shape, getattr(TopAbs_ShapeEnum, f"TopAbs_{kind}"))
-    count = 0
-    while explorer.More():
-        count += 1
-        explorer.Next()
-    return count
+    return len(subshapes(shape, kind))
 
 
 def _sew(network: PatchNetwork) -> OccShape:

@@ -28,6 +28,17 @@ def _unit(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
+def _read_step(path):
+    """The shape OpenCASCADE's STEP reader makes of our file."""
+    from OCP.IFSelect import IFSelect_ReturnStatus
+    from OCP.STEPControl import STEPControl_Reader
+
+    reader = STEPControl_Reader()
+    assert reader.ReadFile(str(path)) == IFSelect_ReturnStatus.IFSelect_RetDone
+    reader.TransferRoots()
+    return reader.OneShape()
+
+
 @pytest.mark.parametrize("kind", ["sphere", "cylinder", "cone", "torus"])
 def test_least_squares_recovers_exact_parameters_from_noisy_points(kind):
     rng = np.random.default_rng(3)
@@ -138,9 +149,6 @@ def test_the_solid_is_the_part(scanned, fitted):
 
 def test_step_keeps_analytic_faces_and_reads_back_as_one_valid_solid(scanned, tmp_path,
                                                                       capsys):
-    from OCP.IFSelect import IFSelect_ReturnStatus
-    from OCP.STEPControl import STEPControl_Reader
-
     name, shape, points, owner, kinds = scanned
     cloud = tmp_path / f"{name}.xyz"
     np.savetxt(cloud, points)
@@ -149,10 +157,7 @@ def test_step_keeps_analytic_faces_and_reads_back_as_one_valid_solid(scanned, tm
     out = capsys.readouterr()
     assert "a solid with analytic faces" in out.err
     assert "status: converged" in out.out and "valid, closed" in out.out
-    reader = STEPControl_Reader()
-    assert reader.ReadFile(str(step)) == IFSelect_ReturnStatus.IFSelect_RetDone
-    reader.TransferRoots()
-    read = reader.OneShape()
+    read = _read_step(step)
     assert is_valid(read)
     assert sorted(face_kind(f) for f in faces(read)) == sorted(kinds)
     assert abs(volume(read) / volume(shape) - 1) < 0.02
@@ -200,9 +205,6 @@ def test_a_freeform_closed_scan_is_not_taken_for_a_part():
 def test_an_stl_mesh_of_a_machined_part_becomes_its_exact_solid(tmp_path, capsys):
     """A noise-free mesh (the part's coarse triangulation, 184 triangles) back to its exact
     faces: the noise is zero, the tolerance's floor measures the distances."""
-    from OCP.IFSelect import IFSelect_ReturnStatus
-    from OCP.STEPControl import STEPControl_Reader
-
     from nurbs_core.brep.occ import faces as shape_faces
     from nurbs_core.io.solid_io import save_solid
 
@@ -213,10 +215,7 @@ def test_an_stl_mesh_of_a_machined_part_becomes_its_exact_solid(tmp_path, capsys
     assert main([str(mesh_file), "-o", str(step)]) == 0
     out = capsys.readouterr()
     assert "a solid with analytic faces" in out.err and "status: converged" in out.out
-    reader = STEPControl_Reader()
-    assert reader.ReadFile(str(step)) == IFSelect_ReturnStatus.IFSelect_RetDone
-    reader.TransferRoots()
-    read = reader.OneShape()
+    read = _read_step(step)
     assert is_valid(read)
     assert sorted(face_kind(f) for f in shape_faces(read)) == sorted(
         face_kind(f) for f in shape_faces(part))
