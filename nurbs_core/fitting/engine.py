@@ -214,7 +214,53 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _lo
                     final, message=_with_warnings(final.message, final.statistics))
             yield final
             return
-        yield _core_final(problem, start, result, started)
+        final = _core_final(problem, start, result, started)
+        if result["status"] != "stopped":
+            final = yield from _unfolded(problem, config, start, stop, started, final)
+        yield final
+
+
+#: A least-squares fit that folds is fitted again up to MAX_STIFFENINGS times, each STIFFEN x
+#: stiffer, while it folds; a stiffer fit is kept when it folds less and stays within
+#: STIFFER_RMS x the first fit's RMS distance to the points.
+STIFFEN = 3.0
+MAX_STIFFENINGS = 3
+STIFFER_RMS = 1.25
+
+
+def _unfolded(problem: Problem, config: FitConfig, start: SheetStart, stop: StopToken,
+              started: float, final: FitSnapshot) -> Iterator[FitSnapshot]:
+    """The core's done snapshot ``final``, or, when it folds, a stiffer fit of the same start
+    that folds less (a sparse or rough cloud bends a soft surface over itself where the points
+    thin out; stiffer fairing keeps it a sheet at a small cost in distance). Yields the stiffer
+    fits' passes; returns the done snapshot to keep, its message saying what was done."""
+    assert final.statistics is not None, "a done snapshot"
+    first = final.statistics
+    stiffness = config.stiffness if config.stiffness > 0 else FitConfig().stiffness
+    kept, kept_stiffness = final, stiffness
+    for _ in range(MAX_STIFFENINGS):
+        assert kept.statistics is not None
+        if "folds" not in quality_problems(kept.statistics) or stop.stopped:
+            break
+        stiffness *= STIFFEN
+        retry: dict = {}
+        yield from core_snapshots(problem, config.replace(stiffness=stiffness), start, stop,
+                                  started, retry)
+        if retry["status"] == "stopped":
+            break
+        candidate = _core_final(problem, start, retry, started)
+        assert candidate.statistics is not None
+        if (candidate.statistics["flipped_fraction"] < kept.statistics["flipped_fraction"]
+                and candidate.statistics["rms"] <= STIFFER_RMS * first["rms"]):
+            kept, kept_stiffness = candidate, stiffness
+    if kept is final:
+        return final
+    assert kept.statistics is not None
+    note = (f"the fit at stiffness {config.stiffness:g} folded ({first['flipped_fraction']:.1%} "
+            f"of the area): refitted at stiffness {kept_stiffness:g} "
+            f"({kept.statistics['flipped_fraction']:.1%} folded, RMS {kept.statistics['rms']:.4g} "
+            f"against {first['rms']:.4g})")
+    return dataclasses.replace(kept, message=f"{kept.message}; {note}" if kept.message else note)
 
 
 def _core_final(problem: Problem, start: SheetStart, result: dict,

@@ -198,16 +198,22 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
                             closed=start.closed)
     last: CorePass | None = None
     note = start.message
+    shown = 0
     for report in core.passes(stop):
         last = report
-        if report.done:
+        # the pass that ends the run is shown too, unless it is the kept earlier grid (the
+        # pass that measured it was shown already) or the user stopped the run
+        if report.done and (report.index == shown or report.stopped):
             break
+        shown = report.index
         geometry = core_geometry_numpy(report.geometry, problem)
         yield FitSnapshot(iteration=report.index, geometry=geometry,
                           losses=[_record(report, core.fairing_scale)],
                           elapsed=time.perf_counter() - started, done=False, status="running",
                           message=note, stage="least_squares")
         note = None
+        if report.done:
+            break
         if stop.paused and not stop.stopped:
             # between passes: report the pause once, then wait without spinning
             yield FitSnapshot(iteration=report.index, geometry=geometry, losses=[],

@@ -303,6 +303,20 @@ class LeastSquaresCore:
                             for w, p, g, cap in
                             zip(wanted, self.degrees, self.grid, self.max_grid, strict=True))
         grown = (grown_u, grown_v)
+        if grown_u * grown_v > self.max_controls:
+            # growing both directions overshoots the points' bound (a sparse cloud): the bound's
+            # control points are shared out in the surface's proportions instead (a short
+            # direction may give some up; Cp keeps the better grid)
+            scale = math.sqrt(self.max_controls / (wanted[0] * wanted[1]))
+            short = 0 if wanted[0] <= wanted[1] else 1
+            counts = [0, 0]
+            counts[short] = int(min(max(math.floor(wanted[short] * scale),
+                                        self.degrees[short] + 1), self.max_grid[short]))
+            counts[1 - short] = int(min(self.max_controls // counts[short],
+                                        self.max_grid[1 - short]))
+            if counts[1 - short] <= self.degrees[1 - short]:
+                return None
+            grown = (counts[0], counts[1])
         if grown[0] * grown[1] <= self.grid[0] * self.grid[1] or grown == self.grid:
             return None
         return grown
