@@ -115,9 +115,17 @@ def countersunk() -> OccShape:
 
 
 #: the named parts
+def thin_plate() -> OccShape:
+    """A 2 x 1.2 x 0.08 sheet (6 planes, two sides closer than a few point spacings of a scan):
+    a thin part, whose rims are narrow faces."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    return BRepPrimAPI_MakeBox(_pnt(0, 0, 0), 2.0, 1.2, 0.08).Shape()
+
+
 PARTS: dict[str, Callable[[], OccShape]] = {
     "plate": plate, "bracket": bracket, "turned": turned, "rounded_block": rounded_block,
-    "countersunk": countersunk}
+    "countersunk": countersunk, "thin_plate": thin_plate}
 
 
 def random_part(rng: np.random.Generator) -> tuple[str, OccShape | None]:

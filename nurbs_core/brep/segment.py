@@ -45,6 +45,12 @@ from nurbs_core.brep.primitives import (
     torus_from,
 )
 
+#: planes tried per leftover narrow face (:func:`_narrow_planes`), and the share of its points
+#: whose normals must agree with it within 30 degrees
+NARROW_TRIALS = 60
+NARROW_AGREE = 0.35
+#: rejected candidates after which the search for narrow planes ends
+NARROW_FAILURES = 4
 #: the tolerance is at least this fraction of the bounding-box diagonal (noise-free scans)
 MIN_TOLERANCE = 2e-4
 #: a point's normal must agree with a surface's within this angle (degrees) to be its inlier
@@ -255,6 +261,9 @@ def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
             break
         surfaces.append(surface)
         free[members] = False
+    if len(surfaces) < MAX_REGIONS and free.sum() >= smallest:
+        surfaces += _narrow_planes(points, normals, free, graph, rng, tolerance, smallest,
+                                   MAX_REGIONS - len(surfaces))
     surfaces = _merged(surfaces, points, normals, tolerance)
     surfaces = _without_redundant(surfaces, points, normals, tolerance)
     labels = _labels(surfaces, points, normals, tolerance)
@@ -265,6 +274,78 @@ def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
     return Segmentation(surfaces, labels, normals, noise, tolerance, spacing,
                         time.perf_counter() - started, rounds,
                         [int((labels == k).sum()) for k in range(len(surfaces))])
+
+
+def _narrow_planes(points: np.ndarray, normals: np.ndarray, free: np.ndarray,
+                   graph: scipy.sparse.csr_matrix, rng: np.random.Generator, tolerance: float,
+                   smallest: int, most: int) -> list[Primitive]:
+    """Planes among the points left over (``free``, a mask updated in place): faces a few
+    spacings wide (the rim of a thin plate, a chamfer), on which every neighbourhood reaches
+    over an edge, so no normal there is the face's own and no smooth seed lies on it. Planes
+    through three nearby leftover points, scored by their inliers by distance alone (largest
+    connected piece), fitted again on those whose normals agree with it within 30 degrees; a
+    plane is kept when :data:`NARROW_AGREE` of its points agree, its RMS distance is unbiased
+    (:func:`_unbiased`) and its points spread across it by more than the tolerance (a line of
+    points along a blurred edge lies on every plane through it)."""
+    found: list[Primitive] = []
+    searched = free.copy()   # a rejected candidate's points are not searched again
+    failures = 0
+    while len(found) < most and searched.sum() >= smallest and failures < NARROW_FAILURES:
+        candidate = _narrow_plane(points, normals, searched, graph, rng, tolerance)
+        if candidate is None:
+            break
+        plane, members, accepted = candidate
+        searched[members] = False
+        if accepted and len(members) >= smallest:
+            found.append(plane)
+            free[members] = False
+        else:
+            failures += 1
+    return found
+
+
+def _narrow_plane(points: np.ndarray, normals: np.ndarray, searched: np.ndarray,
+                  graph: scipy.sparse.csr_matrix, rng: np.random.Generator, tolerance: float
+                  ) -> tuple[Primitive, np.ndarray, bool] | None:
+    """One round of :func:`_narrow_planes` among the ``searched`` points (mask): (plane, its
+    points (indices), whether it is kept), or None when no plane holds three points."""
+    index = np.flatnonzero(searched)
+
+    def inliers(plane: Primitive) -> np.ndarray:
+        return _largest_piece(graph, index[plane.distance(points[index]) < tolerance])
+
+    best: tuple[Primitive, np.ndarray] | None = None
+    for _ in range(NARROW_TRIALS):
+        seed = int(index[rng.integers(len(index))])
+        near = graph.indices[graph.indptr[seed]:graph.indptr[seed + 1]]
+        near = near[searched[near]]
+        if len(near) < 2:
+            continue
+        plane = plane_through(points[np.r_[seed, rng.choice(near, 2, replace=False)]])
+        members = inliers(plane)
+        if best is None or len(members) > len(best[1]):
+            best = plane, members
+    if best is None or len(best[1]) < 3:
+        return None
+    plane = plane_through(points[best[1]])
+    members = inliers(plane)
+    if len(members) < 3:
+        return plane, best[1], False
+    plane = plane_through(points[members])
+    agree = np.abs(normals[members] @ plane.axis) > np.cos(np.radians(30.0))
+    if agree.mean() < NARROW_AGREE or agree.sum() < 3:
+        return plane, members, False
+    # fitted again on the points whose normals agree (the middle of the face): the points
+    # beside its edges, whose normals are blurred, tilt it
+    plane = plane_through(points[members[agree]])
+    members = inliers(plane)
+    if len(members) < 3:
+        return plane, best[1], False
+    # a face, not a line of points along a blurred edge (any plane through a line fits it)
+    spread = np.linalg.svd(points[members] - points[members].mean(axis=0),
+                           compute_uv=False)[1] / np.sqrt(len(members))
+    return plane, members, bool(_unbiased(plane, points[members], tolerance)
+                                and spread >= tolerance)
 
 
 def _detect_one(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np.ndarray,
@@ -351,7 +432,8 @@ def _unbiased(surface: Primitive, points: np.ndarray, tolerance: float) -> bool:
 
 def _merged(surfaces: list[Primitive], points: np.ndarray, normals: np.ndarray,
             tolerance: float) -> list[Primitive]:
-    """Surfaces with those of one type that one refitted surface explains merged."""
+    """Surfaces with those of one type that one refitted surface explains (97% of the inliers
+    of each) merged."""
     members = [_inliers(s, points, normals, tolerance) for s in surfaces]
     merged = True
     while merged:
@@ -366,7 +448,10 @@ def _merged(surfaces: list[Primitive], points: np.ndarray, normals: np.ndarray,
                 except (ValueError, np.linalg.LinAlgError):
                     continue
                 inside = _inliers(joint, points, normals, tolerance)
-                if (inside & union).sum() >= 0.97 * union.sum():
+                # the joint surface explains each of the two (a narrow face's few inliers must
+                # not vanish into a large neighbour's 3%)
+                if all((inside & own).sum() >= 0.97 * own.sum()
+                       for own in (members[i], members[j])):
                     surfaces[i], members[i] = joint, inside
                     del surfaces[j], members[j]
                     merged = True

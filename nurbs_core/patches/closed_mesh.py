@@ -26,7 +26,7 @@ from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.reconstruct.wrap import NEIGHBOURS as NORMAL_NEIGHBOURS
 from nurbs_core.reconstruct.wrap import VoxelGrid, Wrap, wrap
 from nurbs_core.surfacing.mesh import median_spacing, voxel_subsample
-from nurbs_core.surfacing.neighbours import local_frames
+from nurbs_core.surfacing.neighbours import LocalFrames, local_frames
 
 #: Cells per bounding-box diagonal at most (Instant Meshes fails on layouts of much denser
 #: meshes: 21k vertices broke every torus layout, 5k none), and the largest grid (cells in all).
@@ -72,14 +72,15 @@ def oriented_normals(points: np.ndarray) -> np.ndarray:
     return wrap(points, _grid(points)).normals
 
 
-def _grid(points: np.ndarray, margin: float = 0.0) -> VoxelGrid:
-    """The voxel grid of the reconstruction: about CELLS_PER_DIAGONAL cells along the diagonal
-    (no finer than MIN_CELL_SPACINGS spacings, at most MAX_CELLS), a margin of PAD cells plus
-    ``margin`` (a length)."""
+def _grid(points: np.ndarray, margin: float = 0.0,
+          cells: int = CELLS_PER_DIAGONAL) -> VoxelGrid:
+    """The voxel grid of the reconstruction: about ``cells`` cells along the diagonal (no finer
+    than MIN_CELL_SPACINGS spacings, at most MAX_CELLS), a margin of PAD cells plus ``margin``
+    (a length)."""
     lo, hi = points.min(axis=0), points.max(axis=0)
     diagonal = float(np.linalg.norm(hi - lo))
     sample = points if len(points) <= 20_000 else points[voxel_subsample(points, 20_000)[0]]
-    cell = max(diagonal / CELLS_PER_DIAGONAL, MIN_CELL_SPACINGS * median_spacing(sample))
+    cell = max(diagonal / cells, MIN_CELL_SPACINGS * median_spacing(sample))
     extent = hi - lo
     while np.prod(np.ceil((extent + 2 * margin) / cell) + 2 * PAD + 1) > MAX_CELLS:
         cell *= 1.15
@@ -87,6 +88,36 @@ def _grid(points: np.ndarray, margin: float = 0.0) -> VoxelGrid:
     origin = lo - pad
     shape = tuple(int(n) for n in np.ceil((hi + pad - origin) / cell).astype(int) + 1)
     return VoxelGrid(origin, cell, (shape[0], shape[1], shape[2]))
+
+
+#: A cloud of which more than TWO_SIDED of the points see another side of the object across
+#: them (a thin part) is wrapped again on a grid of THIN_CELLS_PER_DIAGONAL cells when the
+#: default grid's balls fill its inside.
+TWO_SIDED = 0.5
+THIN_CELLS_PER_DIAGONAL = 128
+#: Points whose other side is sought (a random subset), and how far (cells of the default grid).
+TWO_SIDED_SAMPLE = 2000
+TWO_SIDED_REACH = 3.0
+
+
+def _two_sided_share(points: np.ndarray, frames: LocalFrames, cell: float) -> float:
+    """The share of (a random subset of) the points that have another point across them: within
+    ``TWO_SIDED_REACH`` cells, farther than half a cell along the normal and farther along it
+    than across it (the far side of a thin part; the neighbours on a curved open sheet lie
+    along it, and the noise is within the half cell)."""
+    count = len(points)
+    rng = np.random.default_rng(0)
+    chosen = rng.choice(count, min(count, TWO_SIDED_SAMPLE), replace=False)
+    tree = cKDTree(points)
+    reach = TWO_SIDED_REACH * cell
+    across = np.zeros(len(chosen), bool)
+    for row, (index, near) in enumerate(zip(chosen, tree.query_ball_point(points[chosen], reach),
+                                            strict=True)):
+        offset = points[near] - points[index]
+        height = np.abs(offset @ frames.normals[index])
+        side = np.sqrt(np.maximum((offset ** 2).sum(axis=1) - height ** 2, 0.0))
+        across[row] = bool(((height > 0.5 * cell) & (height > side)).any())
+    return float(across.mean())
 
 
 #: Holes narrower than this fraction of the diagonal are sealed by default (a bunny's base, a
@@ -114,6 +145,14 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
     wrapped = wrap(points, grid, tree, frames=frames)
     if wrapped.encloses:
         return _zero_set(points, normals, wrapped, tree, 0.0)
+    if _two_sided_share(points, frames, grid.cell) > TWO_SIDED:
+        # a thin part (a plate, a fin) whose two sides lie closer than the balls of this grid:
+        # a finer grid keeps an inside between them
+        finer = _grid(points, cells=THIN_CELLS_PER_DIAGONAL)
+        if finer.cell < 0.8 * grid.cell:
+            thin = wrap(points, finer, tree, frames=frames)
+            if thin.encloses:
+                return _zero_set(points, normals, thin, tree, 0.0)
     if max_hole > 0:
         grid = _grid(points, max_hole)
         sealed = wrap(points, grid, tree, hole_radius=0.5 * max_hole, frames=frames)

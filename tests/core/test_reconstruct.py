@@ -52,6 +52,22 @@ def test_the_closed_mesh_of_a_sparse_head_is_one_sphere_on_the_truth(sparse_head
     assert abs(mesh.area / sparse_head.true_area - 1) < 0.05
 
 
+def test_a_thin_part_keeps_an_inside_between_its_two_sides():
+    # a 2 x 1.2 x 0.08 sheet: its sides lie 4 point spacings apart, closer than the balls of
+    # the default grid, which used to fill its inside ("the cloud does not enclose a volume")
+    import trimesh
+
+    box = trimesh.creation.box([2.0, 1.2, 0.08])
+    points, _ = trimesh.sample.sample_surface_even(box, 12_000, seed=0)
+    points = points + np.random.default_rng(0).normal(0.0, 0.002, points.shape)
+    mesh = closed_mesh(points)
+    closed = trimesh.Trimesh(mesh.vertices, mesh.faces)
+    assert closed.is_watertight and closed.euler_number == 2
+    assert abs(closed.volume / box.volume - 1) < 0.05
+    # on the scan, within two cells of the finer grid (a box's corners are rounded by a cell)
+    assert cKDTree(points).query(mesh.vertices)[0].max() < 2 * mesh.cell
+
+
 @pytest.mark.parametrize("make", [samples.saddle, samples.curled_sheet, samples.tube,
                                   samples.bowl])
 def test_open_surfaces_enclose_nothing_and_go_to_one_patch(make):
