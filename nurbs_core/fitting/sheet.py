@@ -38,6 +38,10 @@ from nurbs_core.surfacing.parameterize import (
 #: voxel centroids; clouds larger than PASS_POINTS are fitted on a seeded random subset of that
 #: many points. Every point is measured against the final surface.
 PASS_POINTS = 30_000
+#: ... and then solved once more on every point, or on a seeded random FINAL_POINTS of them: on
+#: a height field the truth error falls from 0.11 to 0.046 noise sigmas at 300,000 points (2x
+#: the time); 1,000,000 points would reach 0.041 at 5x the time (0: no final solve)
+FINAL_POINTS = 300_000
 MESH_POINTS = 6_000
 #: The automatic tolerance, in estimated noise standard deviations (99% of Gaussian noise lies
 #: within 2.6 of them), and its floor relative to the bounding-box diagonal.
@@ -230,6 +234,17 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
         parameters, distances = last.parameters, last.distances
     else:
         parameters, distances = None, sampled_distances(surface, points)
+        if FINAL_POINTS > 0 and not last.stopped and not config.custom_knots:
+            # the passes ran on a subset: one more solve on every point (at most FINAL_POINTS
+            # of them), kept when closer to them
+            final = points
+            if len(points) > FINAL_POINTS:
+                final = points[np.random.default_rng(config.seed + 1).choice(
+                    len(points), FINAL_POINTS, replace=False)]
+            dense = core.on_every_point(last, final)
+            if (np.mean(sampled_distances(dense, final) ** 2)
+                    < np.mean(sampled_distances(surface, final) ** 2)):
+                surface, distances = dense, sampled_distances(dense, points)
     stopped = last.stopped
     result.update(geometry=surface, parameters=parameters, distances=distances,
                   iteration=last.index, status="stopped" if stopped else "converged",

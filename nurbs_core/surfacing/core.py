@@ -321,6 +321,28 @@ class LeastSquaresCore:
             return None
         return grown
 
+    def on_every_point(self, report: CorePass, points: np.ndarray) -> NurbsSurface:
+        """The kept pass's surface solved again on ``points`` (N, 3), the whole cloud of which
+        the passes fitted a subset (``self.points``): on the kept grid and knots, each point
+        starting from the parameters of its nearest fitted point, moved to its foot point on the
+        kept surface. More points average the noise further down on the same grid (the grid
+        itself was chosen on the subset). The core then holds the whole cloud (its tree, for
+        :meth:`surface_to_cloud`, still the subset's)."""
+        surface = report.geometry
+        (p, q), (n, m) = self.degrees, report.grid
+        nearest = self.tree.query(points)[1]
+        self.points = np.asarray(points, np.float64)
+        self.parameters = report.parameters[nearest].copy()
+        self.neighbourhood = None      # the corrections of so many points average themselves
+        self.correct(surface)
+        self.grid = (n, m)
+        self.knots = (surface.knots_u.detach().double().numpy(),
+                      surface.knots_v.detach().double().numpy())
+        self.seam = None if self.closed is None else seam_matrix(n, m, self.closed)
+        thin_plate, membrane = fairing_matrices(self.knots[0], p, self.knots[1], q)
+        self.fairing_matrix = (thin_plate + MEMBRANE_RATIO * membrane).tocsc()
+        return self.solve(report.fairing)
+
     def _summary(self, report: CorePass, what: str) -> str:
         return (f"{what} after {report.index} least-squares passes on a "
                 f"{report.grid[0]} x {report.grid[1]} control grid")

@@ -245,3 +245,23 @@ def test_a_tube_becomes_one_patch_closed_along_a_tangent_continuous_seam(one_tor
     d0 = surface.derivatives(*args)[1 if closed == "u" else 2]
     d1 = surface.derivatives(*back)[1 if closed == "u" else 2]
     assert torch.allclose(d0, d1, atol=1e-9 * float(d0.norm(dim=-1).max()))
+
+
+def test_a_cloud_fitted_on_a_subset_is_solved_once_more_on_every_point(monkeypatch,
+                                                                       one_torch_thread):
+    """The passes of a large cloud run on a random subset; the final solve on every point
+    averages the noise further down on the same grid: closer to the truth than the passes
+    alone (measured by the noise-free samples), and every point is measured."""
+    from nurbs_core.fitting import sheet
+    from nurbs_core.fitting.sheet import sampled_distances
+
+    shape = samples.height_field(24_000, noise=0.002, seed=3, truth_count=1000)
+    monkeypatch.setattr(sheet, "PASS_POINTS", 3000)
+    errors = {}
+    for final in (0, 100_000):
+        monkeypatch.setattr(sheet, "FINAL_POINTS", final)
+        result = fit(shape.points, FitConfig(threads=1))
+        assert result.status == "converged" and len(result.statistics) > 0
+        surface = result.geometry.detach().to(dtype=torch.float64)
+        errors[final] = float(np.sqrt(np.mean(sampled_distances(surface, shape.clean) ** 2)))
+    assert errors[100_000] < errors[0] / 1.2, errors     # 0.25 against 0.33 sigmas
