@@ -15,7 +15,7 @@ import contextlib
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from typing import TypeAlias, cast
 
 import numpy as np
@@ -229,7 +229,7 @@ STIFFER_RMS = 1.25
 
 
 def _unfolded(problem: Problem, config: FitConfig, start: SheetStart, stop: StopToken,
-              started: float, final: FitSnapshot) -> Iterator[FitSnapshot]:
+              started: float, final: FitSnapshot) -> Generator[FitSnapshot, None, FitSnapshot]:
     """The core's done snapshot ``final``, or, when it folds, a stiffer fit of the same start
     that folds less (a sparse or rough cloud bends a soft surface over itself where the points
     thin out; stiffer fairing keeps it a sheet at a small cost in distance). Yields the stiffer
