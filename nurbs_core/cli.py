@@ -494,14 +494,13 @@ def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[P
     ``mesh_seconds``, which the report's mesh time includes). ``stoppable``: the first Ctrl-C
     ends the fit after the pass under way and writes the network as it stands (status
     "stopped"); a second one, or one before the first pass, quits without writing."""
-    import torch
-
     from nurbs_core.io.dispatch import save_all
     from nurbs_core.patches.pipeline import iter_patch_fit
 
     if points is None:
         points, mesh, _ = _surface_input(args.input, quiet=args.quiet)
-    torch.set_num_threads(max(1, args.threads))
+    if "torch" in sys.modules:   # the network route itself runs on numpy and scipy
+        sys.modules["torch"].set_num_threads(max(1, args.threads))
     print(f"{args.input}: {len(points)} points; fitting a network of bicubic patches "
           f"({options.patches} patches, stiffness {options.stiffness:g}, seam weight "
           f"{options.seam_weight:g})", file=sys.stderr)

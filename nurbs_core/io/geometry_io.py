@@ -4,12 +4,14 @@ and flattening what the caller passes to ``save`` into single numpy curves/surfa
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any, TypeAlias, TypeVar
+from typing import TYPE_CHECKING, Any, TypeAlias, TypeVar
 
 import numpy as np
 
-from nurbs_core.geometry import NurbsCurve, NurbsSurface
 from nurbs_core.io.errors import FileFormatError, StrPath
+
+if TYPE_CHECKING:   # the geometry (and torch) load only where a file's geometry is built
+    from nurbs_core.geometry import NurbsCurve, NurbsSurface
 
 #: One curve or surface (possibly batched), as the readers return and the writers take.
 Geometry: TypeAlias = "NurbsCurve | NurbsSurface"
@@ -107,6 +109,8 @@ def make_surface(path: StrPath, control_points: object, weights: object, knots_u
     ku = file_array(path, knots_u, "knots_u", what, 1, line)
     kv = file_array(path, knots_v, "knots_v", what, 1, line)
     w = None if weights is None else file_array(path, weights, "weights", what, 2, line)
+    from nurbs_core.geometry import NurbsSurface
+
     return _build(path, NurbsSurface, (control, degree_u, degree_v, ku, kv, w), what, line)
 
 
@@ -125,11 +129,15 @@ def make_curve(path: StrPath, control_points: object, weights: object, knots: ob
                                     f"{len(control) - 1})", line=line)
     k = file_array(path, knots, "knots", what, 1, line)
     w = None if weights is None else file_array(path, weights, "weights", what, 1, line)
+    from nurbs_core.geometry import NurbsCurve
+
     return _build(path, NurbsCurve, (control, degree, k, w), what, line)
 
 
 def as_geometry_list(geometry_or_list: GeometryInput) -> list[NurbsCurve | NurbsSurface]:
     """A list of single (unbatched) curves and surfaces; batched geometry is split per item."""
+    from nurbs_core.geometry import NurbsCurve, NurbsSurface
+
     items = list(geometry_or_list) if isinstance(geometry_or_list, (list, tuple)) else \
         [geometry_or_list]
     result: list[NurbsCurve | NurbsSurface] = []

@@ -18,9 +18,8 @@ from __future__ import annotations
 
 import json
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from nurbs_core.geometry import NurbsCurve, NurbsSurface
 from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.geometry_io import (
     GeometryInput,
@@ -31,6 +30,9 @@ from nurbs_core.io.geometry_io import (
     numpy_of,
 )
 from nurbs_core.io.limits import format_size, sniff_text
+
+if TYPE_CHECKING:
+    from nurbs_core.geometry import NurbsCurve, NurbsSurface
 
 FORMAT_NAME = "nurbs-studio"
 FORMAT_VERSION = 1

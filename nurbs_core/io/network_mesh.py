@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from nurbs_core.io.errors import StrPath
-from nurbs_core.io.tessellate import MESH_EXPORT_SUFFIXES, grid_faces, tessellate_surface
+from nurbs_core.io.tessellate import MESH_EXPORT_SUFFIXES, grid_faces
 
 if TYPE_CHECKING:
     import trimesh
@@ -29,6 +29,7 @@ def network_mesh_arrays(network: PatchNetwork, resolution: int = 32) -> tuple[np
     """Vertices (N, 3) float64 and triangles (2 P (r - 1)^2, 3) of the welded mesh; r =
     ``resolution`` samples per patch side (at least 2). Shared samples come from the first patch
     (in patch order) that has them."""
+    from nurbs_core.patches.evaluate import rows
     from nurbs_core.patches.network import build_network
 
     resolution = int(resolution)
@@ -38,10 +39,15 @@ def network_mesh_arrays(network: PatchNetwork, resolution: int = 32) -> tuple[np
     vertices = np.zeros((int(weld.max()) + 1, 3))
     local_faces = grid_faces(resolution, resolution)
     pieces: list[np.ndarray] = []
-    surfaces = network.surfaces()
-    for p in reversed(range(network.patch_count)):  # so the first patch's samples stay
-        grid, _ = tessellate_surface(surfaces[p], resolution)
-        vertices[weld[p].ravel()] = grid
+    # every patch on the uniform (r, r) grid, u-major, in one sparse product (numpy: no torch)
+    t = np.linspace(0.0, 1.0, resolution)
+    u, v = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
+    count = network.patch_count
+    patch = np.repeat(np.arange(count), len(u))
+    grids = (rows(network, patch, np.tile(u, count), np.tile(v, count))
+             @ network.control_points).reshape(count, len(u), 3)
+    for p in reversed(range(count)):  # so the first patch's samples stay
+        vertices[weld[p].ravel()] = grids[p]
     for p in range(network.patch_count):
         pieces.append(weld[p].ravel()[local_faces])
     faces = np.concatenate(pieces)

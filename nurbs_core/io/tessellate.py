@@ -5,14 +5,14 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, cast
 
 import numpy as np
-import torch
 
-from nurbs_core.geometry import NurbsSurface
 from nurbs_core.io.errors import StrPath
 from nurbs_core.io.geometry_io import GeometryInput, as_geometry_list
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:   # torch loads only where a surface is evaluated (a network's mesh needs none)
     import trimesh
+
+    from nurbs_core.geometry import NurbsSurface
 
 #: Grid points per direction: one count for both, or (r_u, r_v).
 Resolution = int | tuple[int, int]
@@ -39,6 +39,8 @@ def tessellate_surface(surface: NurbsSurface, resolution: Resolution = 64
     count_u, count_v = int(count_u), int(count_v)
     if count_u < 2 or count_v < 2:
         raise ValueError(f"resolution must be at least 2 per direction, got {resolution}")
+    import torch
+
     surface = surface.detach().to(dtype=torch.float64, device="cpu")
     u, v = surface.grid_parameters(count_u, count_v)
     with torch.no_grad():
@@ -50,6 +52,8 @@ def tessellate(geometry_or_list: GeometryInput, resolution: Resolution = 64) -> 
     """One trimesh.Trimesh holding every surface (curves cannot be meshed: ValueError): vertices
     (sum of r_u r_v, 3) float64, faces (sum of 2 (r_u - 1)(r_v - 1), 3)."""
     import trimesh
+
+    from nurbs_core.geometry import NurbsSurface
 
     vertices: list[np.ndarray] = []
     faces: list[np.ndarray] = []

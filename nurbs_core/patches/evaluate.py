@@ -12,9 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse
-import torch
 
-from nurbs_core.basis import basis_derivatives, find_span
+from nurbs_core.basis_arrays import basis_and_derivative
 from nurbs_core.patches.network import PatchNetwork
 
 
@@ -31,11 +30,8 @@ class Basis1D:
 def basis_1d(knots: np.ndarray, degree: int, t: np.ndarray) -> Basis1D:
     """The non-zero basis functions and first derivatives at t (M,) in [0, 1]."""
     t = np.clip(np.asarray(t, np.float64), 0.0, 1.0)
-    U = torch.as_tensor(np.asarray(knots, np.float64)).unsqueeze(0)
-    tt = torch.as_tensor(t).unsqueeze(0)
-    span = find_span(U, degree, tt)
-    ders = basis_derivatives(U, degree, tt, span, 1)[:, 0].numpy()
-    return Basis1D(span[0].numpy() - degree, ders[0], ders[1])
+    span, values, derivative = basis_and_derivative(knots, degree, t)
+    return Basis1D(span - degree, values, derivative)
 
 
 def rows(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.ndarray,

@@ -26,7 +26,7 @@ import numpy as np
 if TYPE_CHECKING:
     import torch
 
-from nurbs_core.knots import clamped_uniform
+from nurbs_core.knot_vectors import uniform
 
 #: The four sides of a patch: (name, (first corner, second corner)) with the corner slots of
 #: ``quads[p]``; a side's parameter t runs from its first corner to its second.
@@ -100,7 +100,7 @@ class PatchNetwork:
     @property
     def knots(self) -> np.ndarray:
         """The clamped uniform knot vector (size + degree + 1,) shared by every patch and direction."""
-        return clamped_uniform(self.size, self.degree).numpy()
+        return uniform(self.size, self.degree)
 
     def patch_control_points(self, control_points: np.ndarray | None = None) -> np.ndarray:
         """(P, size, size, 3) control nets (of ``control_points`` (K, 3), default the network's)."""

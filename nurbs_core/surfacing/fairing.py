@@ -17,9 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse
-import torch
 
-from nurbs_core.basis import basis_derivatives, find_span
+from nurbs_core.basis_arrays import basis_derivatives
 
 
 def derivative_gram(knots: np.ndarray, degree: int, order: int) -> np.ndarray:
@@ -35,11 +34,9 @@ def derivative_gram(knots: np.ndarray, degree: int, order: int) -> np.ndarray:
     lo, hi = breaks[:-1], breaks[1:]
     u = (0.5 * (hi - lo)[:, None] * (nodes[None, :] + 1) + lo[:, None]).ravel()
     w = (0.5 * (hi - lo)[:, None] * weights[None, :]).ravel()
-    U = torch.as_tensor(knots).unsqueeze(0)
-    t = torch.as_tensor(u).unsqueeze(0)
-    span = find_span(U, degree, t)
-    ders = basis_derivatives(U, degree, t, span, order)[order, 0].numpy()   # (Q, p + 1)
-    cols = span[0].numpy()[:, None] - degree + np.arange(degree + 1)        # (Q, p + 1)
+    span, all_ders = basis_derivatives(knots, degree, u, order)
+    ders = all_ders[order]                                                  # (Q, p + 1)
+    cols = span[:, None] - degree + np.arange(degree + 1)                   # (Q, p + 1)
     weighted = ders * w[:, None]
     rows = np.repeat(cols, degree + 1, axis=1).ravel()
     columns = np.tile(cols, (1, degree + 1)).ravel()

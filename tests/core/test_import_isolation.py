@@ -23,3 +23,28 @@ def test_import_nurbs_core_loads_no_qt_or_vtk():
                             timeout=300)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "", f"nurbs_core imported GUI modules: {result.stdout}"
+
+
+def test_closed_networks_and_parts_fit_and_save_without_torch(tmp_path):
+    """The routes that never differentiate (the closed network on numpy and scipy, the part on
+    OpenCASCADE) and their writers do not load torch: its import is seconds of a fit."""
+    import numpy as np
+
+    from nurbs_core import samples
+
+    head = tmp_path / "head.xyz"
+    np.savetxt(head, samples.head(3000, seed=1).points)
+    import importlib.util
+
+    suffixes = [".json", ".3dm", ".stl"] + ([".step"] if importlib.util.find_spec("OCP") else [])
+    outputs = [str(tmp_path / f"head{suffix}") for suffix in suffixes]
+    code = (
+        "import sys\n"
+        "from nurbs_core.cli import main\n"
+        f"status = main([{str(head)!r}, '-o', *{outputs!r}, '-q'])\n"
+        "print(status, 'torch' in sys.modules)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split()[-2:] == ["0", "False"], result.stdout
