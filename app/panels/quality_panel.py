@@ -13,11 +13,16 @@ import math
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QGridLayout, QLabel, QVBoxLayout, QWidget
 
-#: Display limits (how bad a value must be to be drawn red). A well-fitted sheet has no flipped
-#: or overlapping area, covers its cloud, and its area is the cloud mesh's within a few percent.
-FLIPPED_LIMIT = 0.01
-OVERLAP_LIMIT = 0.01
-COVERAGE_LIMIT = 0.95
+from nurbs_core.status import WARN_FLIPPED, WARN_OVERLAP, WARN_UNCOVERED
+
+#: Display limits (how bad a value must be to be drawn red). Folds, overlaps and coverage use
+#: the limits of the headline's warnings (:mod:`nurbs_core.status`): the dock marks red what
+#: makes a fit "fitted with warnings", no more and no less (it drew 93.6% coverage red under a
+#: "Converged" headline). The area ratio is a hint only: a sparse cloud's mesh under-measures
+#: the area, so no status depends on it.
+FLIPPED_LIMIT = WARN_FLIPPED
+OVERLAP_LIMIT = WARN_OVERLAP
+COVERAGE_LIMIT = 1.0 - WARN_UNCOVERED
 AREA_RATIO_LIMIT = 0.10  # |area / reference area - 1|
 BAD_COLOR = "#b00020"
 GOOD_COLOR = "#1b7f3b"

@@ -276,3 +276,25 @@ def test_a_stopped_fit_is_measured(qtbot, window, ply_cloud):
     assert snapshot.statistics is not None and snapshot.quality_cells is not None
     assert window.quality_panel.values["flipped"].text().endswith("%")
     assert window.quality_panel.status.text().startswith("Stopped")
+
+
+@pytest.mark.parametrize("coverage, flipped, overlap", [
+    (0.936, 0.0035, 0.0), (0.85, 0.0, 0.0), (1.0, 0.011, 0.0), (1.0, 0.009, 0.02)])
+def test_the_dock_marks_red_exactly_what_the_headline_warns_about(qtbot, coverage, flipped,
+                                                                  overlap):
+    # a valve ring fitted as one tube covers 93.6% of its cloud: "converged", and the dock drew
+    # that coverage red beside the green headline
+    from app.panels.quality_panel import QualityPanel
+    from nurbs_core.status import quality_problems
+
+    panel = QualityPanel()
+    qtbot.addWidget(panel)
+    stats = {"coverage": coverage, "flipped_fraction": flipped, "overlap_fraction": overlap,
+             "mean": 0.01, "rms": 0.02, "max": 0.1, "s2c_p95": 0.01, "allowance": 0.1,
+             "spacing": 0.01, "area_ratio": 1.0, "bending_energy": 1.0, "max_curvature": 1.0,
+             "tolerance": 0.03, "tolerance_met": 1.0}
+    problems = quality_problems(stats)
+    panel.show_result("converged", "", stats, warned=bool(problems))
+    assert panel.is_bad("coverage") == ("uncovered" in problems)
+    assert panel.is_bad("flipped") == ("folds" in problems)
+    assert panel.is_bad("overlap") == ("overlaps" in problems)
