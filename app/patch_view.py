@@ -72,7 +72,9 @@ class PatchView(QObject):
         labels["iteration"].setText(self.stage)
         labels["loss"].setText(f"RMS {snapshot.rms:.4g}" if math.isfinite(snapshot.rms)
                                else "RMS -")
-        labels["rate"].setText(f"seam {snapshot.seam:.2f}\N{DEGREE SIGN}"
+        # the pass's own largest seam angle while it runs; the final quality's (what the Patch
+        # quality dock shows) once measured
+        labels["rate"].setText(f"seam max {snapshot.seam:.2f}\N{DEGREE SIGN}"
                                if math.isfinite(snapshot.seam) else "seam -")
         labels["remaining"].setText(f"{snapshot.elapsed:.1f} s")
         if not snapshot.done:
@@ -93,6 +95,8 @@ class PatchView(QObject):
             seam = snapshot.quality["seam"]
             text += (f"; seam angle p99 {seam['p99']:.2f}\N{DEGREE SIGN}, cloud to surface mean "
                      f"{snapshot.quality['c2s_mean']:.4g}")
+            self._labels["rate"].setText(f"seam p99 {seam['p99']:.2f}\N{DEGREE SIGN}, max "
+                                         f"{seam['max']:.2f}\N{DEGREE SIGN}")
         self._report(text)
         for warning in snapshot.warnings:
             log.warning("patch network: %s", warning)

@@ -118,6 +118,8 @@ def test_patch_fit_is_drawn_measured_and_exported(qtbot, window, tmp_path, monke
     panel, quality = window.network_quality_panel, snapshot.quality
     assert panel.values["patches"].text().startswith(f"{network.patch_count} (")
     assert f"p99 {quality['seam']['p99']:.2f}" in panel.values["seam"].text()
+    # the status bar says the same (it showed the last pass's max beside the dock's p99)
+    assert f"p99 {quality['seam']['p99']:.2f}" in window.status_labels["rate"].text()
     assert f"{quality['gap_relative']:.4g} of the diagonal" in panel.values["gap"].text()
     assert panel.values["flipped"].text() == f"{100 * quality['flipped_fraction']:.2f}%"
     assert panel.values["area"].text() == f"{quality['area']:.4g}"
