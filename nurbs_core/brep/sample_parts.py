@@ -123,9 +123,22 @@ def thin_plate() -> OccShape:
     return BRepPrimAPI_MakeBox(_pnt(0, 0, 0), 2.0, 1.2, 0.08).Shape()
 
 
+def bent_plate() -> OccShape:
+    """A 120-degree sector of a tube, radii 0.96 and 1.04, height 1: a bent sheet 0.08 thick (2
+    cylinders, 4 planes)."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCylinder
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+
+    frame = gp_Ax2(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1))
+    outer = BRepPrimAPI_MakeCylinder(frame, 1.04, 1.0, np.radians(120.0)).Shape()
+    inner = BRepPrimAPI_MakeCylinder(frame, 0.96, 1.0, np.radians(120.0)).Shape()
+    return _unified(BRepAlgoAPI_Cut(outer, inner).Shape())
+
+
 PARTS: dict[str, Callable[[], OccShape]] = {
     "plate": plate, "bracket": bracket, "turned": turned, "rounded_block": rounded_block,
-    "countersunk": countersunk, "thin_plate": thin_plate}
+    "countersunk": countersunk, "thin_plate": thin_plate, "bent_plate": bent_plate}
 
 
 def random_part(rng: np.random.Generator) -> tuple[str, OccShape | None]:
