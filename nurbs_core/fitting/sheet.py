@@ -39,8 +39,8 @@ from nurbs_core.surfacing.parameterize import (
 #: many points. Every point is measured against the final surface.
 PASS_POINTS = 30_000
 #: ... and then solved once more on every point, or on a seeded random FINAL_POINTS of them: on
-#: a height field the truth error falls from 0.11 to 0.046 noise sigmas at 300,000 points (2x
-#: the time); 1,000,000 points would reach 0.041 at 5x the time (0: no final solve)
+#: a height field the truth error falls from 0.11 to about 0.06 noise sigmas from 100,000
+#: points on, at 1.4-2.4x the time (``benchmarks/bench_dense.py``; 0: no final solve)
 FINAL_POINTS = 300_000
 MESH_POINTS = 6_000
 #: The automatic tolerance, in estimated noise standard deviations (99% of Gaussian noise lies

@@ -13,7 +13,9 @@ neighbourhood; the free voxels reached from the border are outside; normals poin
   object encloses it), whatever the normals say;
 
 then marching cubes (scikit-image) at level 0, the largest piece kept, faces oriented so the
-enclosed volume is positive (normals outward).
+enclosed volume is positive (normals outward). A thin part (a sheet whose two sides lie closer
+than the balls of the default grid, which then fill its inside) is wrapped again on a finer grid
+when most of its points see another side across them.
 """
 
 from __future__ import annotations
@@ -100,7 +102,8 @@ TWO_SIDED_SAMPLE = 2000
 TWO_SIDED_REACH = 3.0
 
 
-def _two_sided_share(points: np.ndarray, frames: LocalFrames, cell: float) -> float:
+def _two_sided_share(points: np.ndarray, frames: LocalFrames, tree: cKDTree,
+                     cell: float) -> float:
     """The share of (a random subset of) the points that have another point across them: within
     ``TWO_SIDED_REACH`` cells, farther than half a cell along the normal and farther along it
     than across it (the far side of a thin part; the neighbours on a curved open sheet lie
@@ -108,7 +111,6 @@ def _two_sided_share(points: np.ndarray, frames: LocalFrames, cell: float) -> fl
     count = len(points)
     rng = np.random.default_rng(0)
     chosen = rng.choice(count, min(count, TWO_SIDED_SAMPLE), replace=False)
-    tree = cKDTree(points)
     reach = TWO_SIDED_REACH * cell
     across = np.zeros(len(chosen), bool)
     for row, (index, near) in enumerate(zip(chosen, tree.query_ball_point(points[chosen], reach),
@@ -145,7 +147,7 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
     wrapped = wrap(points, grid, tree, frames=frames)
     if wrapped.encloses:
         return _zero_set(points, normals, wrapped, tree, 0.0)
-    if _two_sided_share(points, frames, grid.cell) > TWO_SIDED:
+    if _two_sided_share(points, frames, tree, grid.cell) > TWO_SIDED:
         # a thin part (a plate, a fin) whose two sides lie closer than the balls of this grid:
         # a finer grid keeps an inside between them
         finer = _grid(points, cells=THIN_CELLS_PER_DIAGONAL)
