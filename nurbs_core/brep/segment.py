@@ -15,7 +15,11 @@ detection"), written for numpy:
    plane does not take distant coplanar points across a gap. A region takes the simplest type
    that explains as many of its points (within 3%). Rounds stop when no surface explains
    :func:`min_region` points.
-3. **Merge**: two surfaces of one type that one surface fits within the tolerance become one.
+   **Narrow faces** (a thin plate's rims, a few spacings wide, where no normal is the face's
+   own): planes through three nearby leftover points, scored by distance alone
+   (:func:`_narrow_planes`).
+3. **Merge**: two surfaces of one type that one surface fits within the tolerance become one;
+   so do planes within 3 degrees that one plane holds (:func:`_coplanar_merged`).
 4. **Labels**: each point goes to the nearest surface within the tolerance whose normal agrees
    within 45 degrees, else -1 (a point that is left over: freeform, an outlier, a sharp edge's
    blurred normal).
