@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from collections.abc import Iterator
 from typing import Any, TypeAlias
 
@@ -15,6 +16,9 @@ from nurbs_core.batch.inputs import BATCH_EXTRA_HINT
 from nurbs_core.batch.worker import chunk_size, fit_chunk, iter_chunk, pin_worker, prepare_worker
 
 WORKER_WAIT_S = 60  # --scheduler: how long to wait for the first worker
+#: with no worker left for this long, the inputs still waiting fail (checked every POLL_S)
+WORKERLESS_S = 60.0
+POLL_S = 1.0
 UNSET_TRIM = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
 
 
@@ -108,7 +112,8 @@ class DaskExecutor:
     def run(self, options: dict, items: PositionedItems) -> Iterator[tuple[int, dict]]:
         """Fit the items on the cluster, one task per chunk (chunks no larger than keeps every
         worker busy); each record as its chunk finishes. A chunk whose worker died fails its
-        items."""
+        items; when no worker is left for :data:`WORKERLESS_S`, every item still waiting fails
+        (a cluster keeps its tasks waiting for a worker: the batch would hang)."""
         distributed = _distributed()
         futures = {}
         if options.get("initial"):
@@ -122,19 +127,49 @@ class DaskExecutor:
             future = self.client.submit(fit_chunk, options, [item for _, item in chunk],
                                         pure=False, key=f"nurbs-fit-{chunk[0][0]}-{os.getpid()}")
             futures[future] = chunk
+        pending = set(futures)
+        workerless_since: float | None = None
         try:
-            for future in distributed.as_completed(futures):
-                chunk = futures[future]
+            while pending:
                 try:
-                    records = future.result()
-                except Exception as exc:  # the worker died (memory, a crash): these inputs failed
-                    from nurbs_core.cli import error_line
-
-                    error = error_line(RuntimeError(f"the worker failed: {exc}"))
-                    records = [{"input": item["input"], "output": item["outputs"][0],
-                                "status": "failed", "seconds": None, "error": error}
-                               for _, item in chunk]
-                for (position, _), record in zip(chunk, records, strict=True):
-                    yield position, record
+                    done, pending = distributed.wait(list(pending), timeout=POLL_S,
+                                                     return_when="FIRST_COMPLETED")
+                except TimeoutError:
+                    done = set()
+                if not done:
+                    # a cluster whose last worker died keeps its tasks waiting for one: after
+                    # WORKERLESS_S with none, the inputs still waiting fail instead of hanging
+                    if self.workers > 0:
+                        workerless_since = None
+                        continue
+                    workerless_since = workerless_since or time.monotonic()
+                    if time.monotonic() - workerless_since < WORKERLESS_S:
+                        continue
+                    where = self.scheduler or "the local cluster"
+                    for future in pending:
+                        yield from _failed(futures[future], f"no Dask worker left on {where} "
+                                           f"for {WORKERLESS_S:g} s (start workers, then "
+                                           "resume with --skip-existing)")
+                    return
+                workerless_since = None
+                for future in done:
+                    chunk = futures[future]
+                    try:
+                        records = future.result()
+                    except Exception as exc:  # the worker died (memory, a crash): they failed
+                        yield from _failed(chunk, f"the worker failed: {exc}")
+                        continue
+                    for (position, _), record in zip(chunk, records, strict=True):
+                        yield position, record
         finally:
             self.client.cancel(list(futures))
+
+
+def _failed(chunk: PositionedItems, why: str) -> Iterator[tuple[int, dict]]:
+    """A failed record for each item of ``chunk``, saying ``why``."""
+    from nurbs_core.cli import error_line
+
+    error = error_line(RuntimeError(why))
+    for position, item in chunk:
+        yield position, {"input": item["input"], "output": item["outputs"][0],
+                         "status": "failed", "seconds": None, "error": error}

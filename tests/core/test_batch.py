@@ -6,6 +6,7 @@ clouds, few iterations; no durations are asserted."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import os
@@ -265,8 +266,10 @@ def _free_port() -> int:
         return sock.getsockname()[1]
 
 
-@pytest.mark.timeout(180)
-def test_scheduler_option_runs_on_a_cluster_started_with_dask_commands(tmp_path, reference):
+@contextlib.contextmanager
+def _dask_cluster(tmp_path: Path, workers: int, nanny: bool = True):
+    """A scheduler and ``workers`` single-thread workers started with Dask's own commands:
+    yields (address, the worker processes); all of them are stopped on exit."""
     pytest.importorskip("distributed", reason="the batch extra (dask[distributed]) is not installed")
     if not DASK_BIN.exists():
         pytest.skip(f"no {DASK_BIN} (the batch extra is not installed in this environment)")
@@ -278,7 +281,8 @@ def test_scheduler_option_runs_on_a_cluster_started_with_dask_commands(tmp_path,
     commands = [[str(DASK_BIN), "scheduler", "--host", "127.0.0.1", "--port", str(port),
                  "--no-dashboard"]]
     commands += [[str(DASK_BIN), "worker", address, "--nthreads", "1", "--nworkers", "1",
-                  "--no-dashboard", "--local-directory", str(tmp_path / f"w{k}")] for k in range(2)]
+                  "--no-dashboard", "--local-directory", str(tmp_path / f"w{k}")]
+                 + ([] if nanny else ["--no-nanny"]) for k in range(workers)]
     processes = []
     try:
         for k, command in enumerate(commands):
@@ -295,15 +299,7 @@ def test_scheduler_option_runs_on_a_cluster_started_with_dask_commands(tmp_path,
                         assert processes[0].poll() is None, (logs / "0.log").read_text()
                         assert time.monotonic() < deadline, "the scheduler did not start"
                         time.sleep(0.2)
-        folder = _folder(tmp_path)
-        out = tmp_path / "fits"
-        done = _nurbs_fit(folder, "--output-dir", out, "--scheduler", address, *FIT)
-        assert done.returncode == 3, done.stderr
-        assert "on tcp://127.0.0.1:" in done.stderr
-        _assert_same(out, reference)
-        rows = _summary(out / "summary.jsonl")
-        assert sum(row["status"] == "ok" for row in rows.values()) == GOOD
-        assert rows["nan.xyz"]["status"] == "failed"
+        yield address, processes[1:]
     finally:
         for process in reversed(processes):
             process.terminate()
@@ -313,6 +309,52 @@ def test_scheduler_option_runs_on_a_cluster_started_with_dask_commands(tmp_path,
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.wait()
+
+
+@pytest.mark.timeout(180)
+def test_scheduler_option_runs_on_a_cluster_started_with_dask_commands(tmp_path, reference):
+    with _dask_cluster(tmp_path, 2) as (address, _):
+        folder = _folder(tmp_path)
+        out = tmp_path / "fits"
+        done = _nurbs_fit(folder, "--output-dir", out, "--scheduler", address, *FIT)
+        assert done.returncode == 3, done.stderr
+        assert "on tcp://127.0.0.1:" in done.stderr
+        _assert_same(out, reference)
+        rows = _summary(out / "summary.jsonl")
+        assert sum(row["status"] == "ok" for row in rows.values()) == GOOD
+        assert rows["nan.xyz"]["status"] == "failed"
+
+
+@pytest.mark.timeout(180)
+@pytest.mark.slow
+def test_a_batch_whose_last_worker_dies_ends_with_the_waiting_inputs_failed(tmp_path):
+    """--scheduler, and the cluster's only worker is killed mid-batch: the cluster keeps the
+    tasks waiting for a worker, and the batch used to wait with them, forever and silently.
+    Now, after WORKERLESS_S (3 s here) with no worker, the waiting inputs fail with a message
+    and the batch ends with its summary."""
+    folder = tmp_path / "scans"
+    _write_clouds(folder, "part", [samples.height_field(6000, seed=k).points for k in range(8)])
+    out = tmp_path / "fits"
+    with _dask_cluster(tmp_path, 1, nanny=False) as (address, (worker,)):
+        code = ("import sys\n"
+                "import nurbs_core.batch.executors as executors\n"
+                "executors.WORKERLESS_S = 3.0\n"
+                "from nurbs_core.cli import main\n"
+                "sys.exit(main(sys.argv[1:]))\n")
+        batch = subprocess.Popen([sys.executable, "-c", code, str(folder), "--output-dir",
+                                  str(out), "--scheduler", address, "-q"],
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 120
+        while not list(out.glob("*.json")):   # the worker has started fitting
+            assert batch.poll() is None and time.monotonic() < deadline, batch.communicate()
+            time.sleep(0.2)
+        worker.kill()
+        stdout, stderr = batch.communicate(timeout=60)
+    assert batch.returncode == SOME_FAILED_STATUS, stderr
+    rows = _summary(out / "summary.jsonl")
+    assert len(rows) == 8
+    waited = [row for row in rows.values() if row["status"] == "failed"]
+    assert waited and all("no Dask worker left" in row["error"] for row in waited), rows
 
 
 @pytest.mark.timeout(120)
