@@ -44,6 +44,9 @@ if TYPE_CHECKING:
     from nurbs_core.patches.scan_mesh import ScanMesh
     from nurbs_core.route import Route
 
+#: --units (as nurbs_core.io.units.UNITS, which is not imported at start-up)
+UNITS_CHOICES = ("mm", "cm", "m", "in", "ft")
+
 # Nothing heavy at module level: numpy, the engine and torch load inside main(), where Ctrl-C
 # during start-up is caught (status 130, no traceback); --help and bad outputs never load torch.
 
@@ -160,6 +163,11 @@ def build_parser() -> argparse.ArgumentParser:
                              ".iges, .brep, .stl/.obj/.ply; needs the cad extra): by default "
                              "when a closed scan lies mostly on analytic surfaces; --part "
                              "forces it on a closed scan, --no-part turns it off")
+    parser.add_argument("--units", choices=UNITS_CHOICES, default=None,
+                        help="the length unit of the cloud's coordinates, declared in .3dm, "
+                             "STEP and IGES outputs and the JSON metadata (never a scaling; "
+                             "default: the input's own where its format states one, E57: m; "
+                             "else none: .3dm says no unit, STEP/IGES millimetres)")
     parser.add_argument("--max-hole", type=float, default=None, metavar="LENGTH",
                         help="the widest opening of a scan that is sealed by a smooth cap to "
                              "close an object (in the cloud's units; default 10%% of the "
@@ -556,7 +564,9 @@ def run_patches(args: argparse.Namespace, options: PatchOptions, outputs: list[P
               "--max-hole)")
     for warning in result.warnings:
         print(f"warning: {warning}")
-    save_all([(result.network, path, {}) for path in outputs])
+    units = _units(args)
+    save_all([(result.network, path, {"units": units}) for path in outputs])
+    _print_units(units, outputs)
     for path in outputs:
         print(f"wrote {path}")
     return _plain({"kind": "network", "fit_status": result.status, "points": len(points),
@@ -605,6 +615,25 @@ def _plain(values: dict[str, Any]) -> dict[str, Any]:
             continue
         plain[key] = value
     return plain
+
+
+def _units(args: argparse.Namespace) -> str | None:
+    """The model's length unit: ``--units``, else the one the input's format states."""
+    from nurbs_core.io.units import units_of_file
+
+    return args.units or units_of_file(getattr(args, "input", ""))
+
+
+def _print_units(units: str | None, outputs: Sequence[Path]) -> None:
+    """What the outputs that carry a unit declare."""
+    carrying = [p for p in outputs if p.suffix.lower() in (".3dm", ".step", ".stp", ".iges",
+                                                            ".igs")]
+    if not carrying:
+        return
+    if units is not None:
+        print(f"units: {units} (declared in {', '.join(p.name for p in carrying)})")
+    else:
+        print("units: not given (--units): .3dm files say none, STEP and IGES millimetres")
 
 
 def error_line(exc: BaseException) -> str:
@@ -773,7 +802,9 @@ def run_part(args: argparse.Namespace, outputs: list[Path], points: np.ndarray,
               f"{face.mean:.4g}, 99th percentile {face.p99:.4g}")
     for warning in result.problems.values():
         print(f"warning: {warning}")
-    save_solid(result.solid, outputs, result.segmentation.tolerance / 3)
+    units = _units(args)
+    save_solid(result.solid, outputs, result.segmentation.tolerance / 3, units)
+    _print_units(units, outputs)
     for path in outputs:
         print(f"wrote {path}")
     return _plain(statistics)
@@ -985,11 +1016,13 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
         from nurbs_core.offset import offset_surface
 
         offset = offset_surface(geometry, args.offset)
+    units = _units(args)
     jobs: list[tuple[NurbsCurve | NurbsSurface, Path, dict[str, Any]]] = [
-        (geometry, path, {}) for path in prepared.outputs]
+        (geometry, path, {"units": units}) for path in prepared.outputs]
     if offset is not None:
-        jobs += [(offset, _offset_path(path), {}) for path in prepared.outputs]
+        jobs += [(offset, _offset_path(path), {"units": units}) for path in prepared.outputs]
     save_all(jobs)  # all or nothing: no output is replaced unless every one was written
+    _print_units(units, [path for _, path, _ in jobs])
     for _, path, _ in jobs:
         print(f"wrote {path}")
     counts = [int(n) for n in np.shape(geometry.control_points)[:-1]]

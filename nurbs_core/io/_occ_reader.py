@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 from typing import TYPE_CHECKING, Any, TextIO
 
@@ -75,11 +76,35 @@ class ReadError(Exception):
     pass
 
 
+#: A STEP file's length unit (OpenCASCADE's name) by the unit entities it holds: a
+#: conversion-based unit (inch, foot) before the SI unit it is defined by.
+_STEP_UNITS = (
+    (re.compile(r"CONVERSION_BASED_UNIT\s*\(\s*'INCH'"), "INCH"),
+    (re.compile(r"CONVERSION_BASED_UNIT\s*\(\s*'FOOT'"), "FT"),
+    (re.compile(r"SI_UNIT\s*\(\s*\.MILLI\.\s*,\s*\.METRE\.\s*\)"), "MM"),
+    (re.compile(r"SI_UNIT\s*\(\s*\.CENTI\.\s*,\s*\.METRE\.\s*\)"), "CM"),
+    (re.compile(r"SI_UNIT\s*\(\s*\$\s*,\s*\.METRE\.\s*\)"), "M"),
+)
+
+
+def _step_length_unit(path: str) -> str | None:
+    """The length unit a STEP file states (None when it states none this reader knows)."""
+    with open(path, "rb") as handle:
+        text = handle.read().decode("latin-1")
+    return next((unit for pattern, unit in _STEP_UNITS if pattern.search(text)), None)
+
+
 def _read_shape(path: str, kind: str) -> OccObject:
     from OCP.IFSelect import IFSelect_ReturnStatus
     from OCP.IGESControl import IGESControl_Reader
+    from OCP.Interface import Interface_Static
     from OCP.STEPControl import STEPControl_Reader
 
+    if kind == "step":
+        # the coordinates as the file has them, in its own unit (OpenCASCADE would convert them
+        # to millimetres: a model written in metres came back 1000 x larger)
+        # (the reader serves many files: every read sets it, millimetres when none is stated)
+        Interface_Static.SetCVal_s("xstep.cascade.unit", _step_length_unit(path) or "MM")
     reader = STEPControl_Reader() if kind == "step" else IGESControl_Reader()
     status = reader.ReadFile(path)
     if status != IFSelect_ReturnStatus.IFSelect_RetDone:

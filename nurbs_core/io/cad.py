@@ -12,6 +12,7 @@ Reals are written with 17 significant digits, so float64 geometry round-trips ex
 from __future__ import annotations
 
 import atexit
+import contextlib
 import importlib
 import io
 import json
@@ -22,7 +23,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -193,9 +194,11 @@ def _compound(items: Iterable[NurbsCurve | NurbsSurface]) -> OccObject:
     return compound
 
 
-def step_bytes(shape: OccObject, path: StrPath) -> bytes:
-    """The STEP (AP214, millimetres) text of an OCP shape, every real written as %.16E (17
-    significant digits, exact for float64); ``path`` names the file in errors (OSError).
+def step_bytes(shape: OccObject, path: StrPath, units: str | None = None) -> bytes:
+    """The STEP (AP214) text of an OCP shape, every real written as %.16E (17 significant
+    digits, exact for float64), its length unit ``units`` (:mod:`nurbs_core.io.units`;
+    millimetres when None; the coordinates are not scaled); ``path`` names the file in errors
+    (OSError).
 
     STEPControl_Writer's own Write keeps 13 significant digits (a few 1e-9 off at coordinates
     of 1e4), so the model is printed here with a finer FloatWriter.
@@ -203,13 +206,12 @@ def step_bytes(shape: OccObject, path: StrPath) -> bytes:
     require_ocp("Writing STEP")
     quiet_occ()
     from OCP.IFSelect import IFSelect_ReturnStatus
-    from OCP.Interface import Interface_Static
     from OCP.STEPControl import STEPControl_StepModelType, STEPControl_Writer
     from OCP.StepData import StepData_StepWriter
 
     writer = STEPControl_Writer()
-    Interface_Static.SetCVal_s("write.step.unit", "MM")
-    status = writer.Transfer(shape, STEPControl_StepModelType.STEPControl_AsIs)
+    with _occ_units(units, "write.step.unit"):
+        status = writer.Transfer(shape, STEPControl_StepModelType.STEPControl_AsIs)
     if status != IFSelect_ReturnStatus.IFSelect_RetDone:
         raise OSError(f"{path}: OpenCASCADE could not translate the geometry to STEP ({status})")
     printer = StepData_StepWriter(writer.Model())
@@ -221,9 +223,29 @@ def step_bytes(shape: OccObject, path: StrPath) -> bytes:
     return stream.getvalue()
 
 
-def iges_bytes(shape: OccObject, path: StrPath, brep: bool = False) -> bytes:
-    """The IGES (millimetres) text of an OCP shape, every real written as %.16E (17 significant
-    digits, exact for float64); ``path`` names the file in errors (OSError). Faces are trimmed
+@contextlib.contextmanager
+def _occ_units(units: str | None, key: str) -> Iterator[None]:
+    """OpenCASCADE's session unit and the writer's unit (``key``) both set to ``units`` for the
+    block (equal, so no coordinate is scaled), then the session unit restored."""
+    from OCP.Interface import Interface_Static
+
+    from nurbs_core.io.units import occ_unit
+
+    unit = occ_unit(units)
+    session = Interface_Static.CVal_s("xstep.cascade.unit")
+    Interface_Static.SetCVal_s("xstep.cascade.unit", unit)
+    Interface_Static.SetCVal_s(key, unit)
+    try:
+        yield
+    finally:
+        Interface_Static.SetCVal_s("xstep.cascade.unit", session)
+
+
+def iges_bytes(shape: OccObject, path: StrPath, brep: bool = False,
+               units: str | None = None) -> bytes:
+    """The IGES text of an OCP shape in ``units`` (millimetres when None; not scaled), every
+    real written as %.16E (17 significant digits, exact for float64); ``path`` names the file
+    in errors (OSError). Faces are trimmed
     surfaces (entities 128 + 144), or with ``brep`` IGES 5.3 B-rep entities (shells 514 of faces
     510, solids 186), which keep the shared-edge topology.
 
@@ -236,10 +258,13 @@ def iges_bytes(shape: OccObject, path: StrPath, brep: bool = False) -> bytes:
     from OCP.IGESData import IGESData_IGESWriter
     from OCP.IGESSelect import IGESSelect_WorkLibrary
 
-    writer = IGESControl_Writer("MM", 1 if brep else 0)
-    if not writer.AddShape(shape):
-        raise OSError(f"{path}: OpenCASCADE could not translate the geometry to IGES")
-    writer.ComputeModel()
+    from nurbs_core.io.units import occ_unit
+
+    with _occ_units(units, "write.iges.unit"):
+        writer = IGESControl_Writer(occ_unit(units), 1 if brep else 0)
+        if not writer.AddShape(shape):
+            raise OSError(f"{path}: OpenCASCADE could not translate the geometry to IGES")
+        writer.ComputeModel()
     printer = IGESData_IGESWriter(writer.Model())
     printer.FloatWriter().SetFormat("%.16E", True)
     printer.SendModel(IGESSelect_WorkLibrary.DefineProtocol_s())
@@ -249,22 +274,22 @@ def iges_bytes(shape: OccObject, path: StrPath, brep: bool = False) -> bytes:
     return stream.getvalue()
 
 
-def write_step(geometry_or_list: GeometryInput, path: StrPath) -> None:
+def write_step(geometry_or_list: GeometryInput, path: StrPath, units: str | None = None) -> None:
     """STEP (AP214): the geometry as one compound of faces and edges (see :func:`step_bytes`)."""
     require_ocp("Writing STEP")
     from nurbs_core.io.geometry_io import as_geometry_list
 
-    data = step_bytes(_compound(as_geometry_list(geometry_or_list)), path)
+    data = step_bytes(_compound(as_geometry_list(geometry_or_list)), path, units)
     with open(path, "wb") as handle:
         handle.write(data)
 
 
-def write_iges(geometry_or_list: GeometryInput, path: StrPath) -> None:
+def write_iges(geometry_or_list: GeometryInput, path: StrPath, units: str | None = None) -> None:
     """IGES: the geometry as trimmed surfaces and curves (see :func:`iges_bytes`)."""
     require_ocp("Writing IGES")
     from nurbs_core.io.geometry_io import as_geometry_list
 
-    data = iges_bytes(_compound(as_geometry_list(geometry_or_list)), path)
+    data = iges_bytes(_compound(as_geometry_list(geometry_or_list)), path, units=units)
     with open(path, "wb") as handle:
         handle.write(data)
 

@@ -108,6 +108,9 @@ def save(geometry_or_list: GeometryInput | PatchNetwork, path: StrPath, **option
     Curves have control points (*B, n, d) with d 2 or 3, surfaces (*B, n_u, n_v, 3); a batch
     shape B gives one item per entry.
 
+    Option ``units`` (:mod:`nurbs_core.io.units`, any format): the length unit .3dm, STEP and
+    IGES declare and JSON's metadata holds (the coordinates are never scaled).
+
     .3dm (rhino3dm; option ``version``), .step/.stp and .iges/.igs (OCP extra), .json (ours,
     lossless; option ``metadata`` for the document, ``indent``), .obj/.stl/.ply/.glb (surfaces
     tessellated on a uniform grid; option ``resolution``, int or (r_u, r_v), default 64), .csv
@@ -169,21 +172,25 @@ def _write(geometry_or_list: GeometryInput | PatchNetwork, path: StrPath, suffix
         write_network_file(geometry_or_list, path, suffix, **options)
         return
     geometry = cast("GeometryInput", geometry_or_list)  # not a network: curves and surfaces
+    # the model's length unit: declared by the formats that carry one, ignored by the others
+    units = options.pop("units", None)
     if suffix == ".3dm":
         from nurbs_core.io.rhino import write_3dm
 
-        write_3dm(geometry, path, **options)
+        write_3dm(geometry, path, units=units, **options)
     elif suffix in (".step", ".stp"):
         from nurbs_core.io.cad import write_step
 
-        write_step(geometry, path, **options)
+        write_step(geometry, path, units=units, **options)
     elif suffix in (".iges", ".igs"):
         from nurbs_core.io.cad import write_iges
 
-        write_iges(geometry, path, **options)
+        write_iges(geometry, path, units=units, **options)
     elif suffix == ".json":
         from nurbs_core.io.json_format import write_json
 
+        if units is not None:
+            options["metadata"] = {**(options.get("metadata") or {}), "units": units}
         write_json(geometry, path, **options)
     elif suffix in (".obj", ".stl", ".ply", ".glb"):
         from nurbs_core.io.tessellate import write_mesh

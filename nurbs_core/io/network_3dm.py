@@ -128,13 +128,17 @@ def network_brep(network: PatchNetwork) -> rhino3dm.Brep:
 
 
 def write_network_3dm(network: PatchNetwork, path: StrPath, metadata: dict[str, Any] | None = None,
-                      version: int = 7) -> None:
+                      version: int = 7, units: str | None = None) -> None:
     """Write the network as one B-rep object (a closed polysurface when the network is closed).
     ``metadata['name']`` names the object; every metadata entry is also stored as a user string
-    of the object (strings as they are, other values as JSON)."""
+    of the object (strings as they are, other values as JSON). The model's unit system is
+    ``units`` (:mod:`nurbs_core.io.units`; "None" when unknown)."""
     import rhino3dm
 
+    from nurbs_core.io.units import rhino_unit_system
+
     model = rhino3dm.File3dm()
+    model.Settings.ModelUnitSystem = rhino_unit_system(units)  # type: ignore[misc]  # writable
     attributes = rhino3dm.ObjectAttributes()
     for key, value in (metadata or {}).items():
         text = value if isinstance(value, str) else json.dumps(value)

@@ -108,17 +108,17 @@ def network_shape(network: PatchNetwork) -> OccShape:
     return shape
 
 
-def write_network_step(network: PatchNetwork, path: StrPath) -> None:
+def write_network_step(network: PatchNetwork, path: StrPath, units: str | None = None) -> None:
     """STEP (AP214, 17 significant digits): a MANIFOLD_SOLID_BREP for a closed network, a
     SHELL_BASED_SURFACE_MODEL for an open one."""
     shape = network_shape(network)
     with open(path, "wb") as handle:
-        handle.write(step_bytes(shape, path))
+        handle.write(step_bytes(shape, path, units))
 
 
-def write_network_iges(network: PatchNetwork, path: StrPath) -> None:
+def write_network_iges(network: PatchNetwork, path: StrPath, units: str | None = None) -> None:
     """IGES (17 significant digits) in B-rep mode: one shell (entity 514; in a solid, 186, when
     the network is closed) of faces 510 sharing their edges."""
     shape = network_shape(network)
     with open(path, "wb") as handle:
-        handle.write(iges_bytes(shape, path, brep=True))
+        handle.write(iges_bytes(shape, path, brep=True, units=units))

@@ -117,21 +117,26 @@ def write_network(network: PatchNetwork, path: StrPath, *, metadata: dict[str, A
 def write_network_file(network: PatchNetwork, path: StrPath, suffix: str, *,
                        metadata: dict[str, Any] | None = None, **options: Any) -> None:
     """Write ``network`` to ``path`` as it stands (no temporary file: the caller makes the write
-    atomic) in the format of ``suffix``, one of NETWORK_SUFFIXES."""
+    atomic) in the format of ``suffix``, one of NETWORK_SUFFIXES. Option ``units``
+    (:mod:`nurbs_core.io.units`): the unit .3dm, STEP and IGES declare and JSON's metadata
+    holds (meshes carry none)."""
+    units = options.pop("units", None)
     if suffix == ".json":
+        if units is not None:
+            metadata = {**(metadata or {}), "units": units}
         write_network_json(network, path, metadata, **options)
     elif suffix == ".3dm":
         from nurbs_core.io.network_3dm import write_network_3dm
 
-        write_network_3dm(network, path, metadata, **options)
+        write_network_3dm(network, path, metadata, units=units, **options)
     elif suffix in (".step", ".stp"):
         from nurbs_core.io.network_cad import write_network_step
 
-        write_network_step(network, path, **options)
+        write_network_step(network, path, units=units, **options)
     elif suffix in (".iges", ".igs"):
         from nurbs_core.io.network_cad import write_network_iges
 
-        write_network_iges(network, path, **options)
+        write_network_iges(network, path, units=units, **options)
     elif suffix in (".obj", ".ply", ".stl", ".glb"):
         from nurbs_core.io.network_mesh import write_network_mesh
 

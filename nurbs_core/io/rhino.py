@@ -76,13 +76,17 @@ def _curve_to_rhino(data: dict[str, Any]) -> rhino3dm.NurbsCurve:
     return curve
 
 
-def write_3dm(geometry_or_list: GeometryInput, path: StrPath, version: int = 7) -> None:
-    """Write surfaces and curves as rational NURBS objects (names from ``.metadata['name']``)."""
+def write_3dm(geometry_or_list: GeometryInput, path: StrPath, version: int = 7,
+              units: str | None = None) -> None:
+    """Write surfaces and curves as rational NURBS objects (names from ``.metadata['name']``),
+    the model's unit system ``units`` (:mod:`nurbs_core.io.units`; "None" when unknown)."""
     import rhino3dm
 
     from nurbs_core.io.geometry_io import as_geometry_list, metadata_of, numpy_of
+    from nurbs_core.io.units import rhino_unit_system
 
     model = rhino3dm.File3dm()
+    model.Settings.ModelUnitSystem = rhino_unit_system(units)  # type: ignore[misc]  # writable
     for item in as_geometry_list(geometry_or_list):
         data = numpy_of(item)
         attributes = rhino3dm.ObjectAttributes()

@@ -51,30 +51,32 @@ def _mesh_bytes(shape: Any, suffix: str, tolerance: float) -> bytes:
     return data.encode() if isinstance(data, str) else bytes(data)
 
 
-def solid_bytes(shape: Any, path: StrPath, tolerance: float) -> bytes:
+def solid_bytes(shape: Any, path: StrPath, tolerance: float, units: str | None = None) -> bytes:
     """The file's bytes for a solid in the format of ``path``'s suffix; meshes within
-    ``tolerance`` of the faces."""
+    ``tolerance`` of the faces; STEP and IGES say ``units`` (:mod:`nurbs_core.io.units`)."""
     check_solid_suffix(path)
     require_ocp("Writing a solid")
     from nurbs_core.io.cad import iges_bytes, step_bytes
 
     suffix = suffix_of(path)
     if suffix in (".step", ".stp"):
-        return step_bytes(shape, path)
+        return step_bytes(shape, path, units)
     if suffix in (".iges", ".igs"):
-        return iges_bytes(shape, path, brep=True)
+        return iges_bytes(shape, path, brep=True, units=units)
     if suffix == ".brep":
         return _brep_bytes(shape, path)
     return _mesh_bytes(shape, suffix, tolerance)
 
 
-def save_solid(shape: Any, paths: Sequence[StrPath], tolerance: float) -> None:
-    """Write the solid to every path, all or nothing (see the module)."""
+def save_solid(shape: Any, paths: Sequence[StrPath], tolerance: float,
+               units: str | None = None) -> None:
+    """Write the solid to every path, all or nothing (see the module), STEP and IGES in
+    ``units``."""
     from nurbs_core.io.atomic import atomic_paths
 
     for path in paths:
         check_solid_suffix(path)
-    contents = [solid_bytes(shape, path, tolerance) for path in paths]
+    contents = [solid_bytes(shape, path, tolerance, units) for path in paths]
     with atomic_paths(list(paths)) as temporaries:
         for data, temporary in zip(contents, temporaries, strict=True):
             with open(temporary, "wb") as handle:

@@ -297,3 +297,18 @@ def test_settings_beyond_the_machine_are_one_clear_line(tmp_path, capsys, option
     assert stopped.value.code == 2
     error = capsys.readouterr().err.strip().splitlines()[-1]
     assert message in error and "Traceback" not in error
+
+
+def test_units_reach_the_files_that_carry_them(tmp_path, capsys):
+    from nurbs_core import samples
+
+    cloud = tmp_path / "sheet.xyz"
+    np.savetxt(cloud, samples.saddle(400, seed=2).points)
+    assert main([str(cloud), "-o", str(tmp_path / "a.3dm"), str(tmp_path / "a.obj"), "-q",
+                 "--units", "in"]) == 0
+    assert "units: in (declared in a.3dm)" in capsys.readouterr().out
+    assert rhino3dm.File3dm.Read(str(tmp_path / "a.3dm")).Settings.ModelUnitSystem.name == \
+        "Inches"
+    assert main([str(cloud), "-o", str(tmp_path / "b.3dm"), "-q"]) == 0
+    assert "units: not given (--units)" in capsys.readouterr().out
+    assert rhino3dm.File3dm.Read(str(tmp_path / "b.3dm")).Settings.ModelUnitSystem.name == "None"

@@ -562,3 +562,26 @@ def test_opencascade_refusal_is_a_clear_value_error(tmp_path):
     surface = NurbsSurface(np.random.default_rng(0).normal(size=(6, 4, 3)), 3, 3, knots_u)
     with pytest.raises(ValueError, match="OpenCASCADE rejects item 0"):
         save(surface, tmp_path / "close_knots.step")
+
+
+@pytest.mark.parametrize("units, millimetres", [(None, 1.0), ("mm", 1.0), ("m", 1000.0),
+                                                ("in", 25.4), ("ft", 304.8)])
+def test_units_are_declared_never_scaled(tmp_path, units, millimetres):
+    """A model in metres used to be written as millimetres (Rhino showed a scanned bunny 0.15 mm
+    long). The unit is declared: OpenCASCADE, converting to its millimetres, scales by it;
+    rhino3dm reads the model's unit system; our own reading keeps the file's numbers."""
+    rhino3dm = pytest.importorskip("rhino3dm")
+    pytest.importorskip("OCP")
+    surface = _random_surface()
+    step, model, document = (tmp_path / "fit.step", tmp_path / "fit.3dm", tmp_path / "fit.json")
+    for path in (step, model, document):
+        save(surface, path, units=units)
+    u, v = _parameters(surface)
+    occ = _occ_first_bspline_surface(step, "step")   # OpenCASCADE's session unit: millimetres
+    np.testing.assert_allclose(_occ_points(occ, u, v), millimetres * _ours(surface, u, v),
+                               rtol=1e-9, atol=1e-9)
+    (back,) = load(step)
+    np.testing.assert_allclose(_ours(back, u, v), _ours(surface, u, v), rtol=0, atol=TOLERANCE)
+    names = {None: "None", "mm": "Millimeters", "m": "Meters", "in": "Inches", "ft": "Feet"}
+    assert rhino3dm.File3dm.Read(str(model)).Settings.ModelUnitSystem.name == names[units]
+    assert json.loads(document.read_text())["metadata"].get("units") == units

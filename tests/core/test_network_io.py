@@ -339,7 +339,7 @@ def _interrupt_step(monkeypatch):
     pytest.importorskip("OCP")
     import nurbs_core.io.network_cad as network_cad
 
-    def step_bytes(shape, path):  # fails while the temporary file is open
+    def step_bytes(shape, path, units=None):  # fails while the temporary file is open
         raise Interrupted
 
     monkeypatch.setattr(network_cad, "step_bytes", step_bytes)
@@ -364,6 +364,7 @@ def _interrupt_3dm(monkeypatch):
         def __init__(self):
             self.model = real()
             self.Objects = self.model.Objects
+            self.Settings = self.model.Settings
 
         def Write(self, path, version):  # noqa: N802 - rhino3dm's name
             with open(path, "wb") as handle:

@@ -1,0 +1,52 @@
+"""Length units of a model, as the formats that carry them write them.
+
+A scan's coordinates are numbers; the unit says what they measure. The CAD formats carry it
+(.3dm's model unit system, STEP's and IGES's length unit); without one a CAD tool assumes its
+own, so a scan in metres arrived in Rhino 1000 x too small. ``units`` is one of :data:`UNITS`,
+or None when unknown: .3dm then says so ("None": no unit, no scaling on import), STEP and IGES
+(which must name one) say millimetres. The coordinates are never scaled.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+#: The length units a model may declare (the CLI's ``--units``).
+UNITS = ("mm", "cm", "m", "in", "ft")
+_OCC = {"mm": "MM", "cm": "CM", "m": "M", "in": "INCH", "ft": "FT"}
+_RHINO = {"mm": "Millimeters", "cm": "Centimeters", "m": "Meters", "in": "Inches",
+          "ft": "Feet"}
+#: The unit STEP and IGES are written in when none is known.
+DEFAULT_CAD_UNITS = "mm"
+
+
+def check_units(units: str | None) -> str | None:
+    """``units`` itself when it is one of :data:`UNITS` or None; ValueError otherwise."""
+    if units is not None and units not in UNITS:
+        raise ValueError(f"unknown units {units!r}: one of {', '.join(UNITS)}")
+    return units
+
+
+def occ_unit(units: str | None) -> str:
+    """OpenCASCADE's name of the unit (``write.step.unit``, ``xstep.cascade.unit``)."""
+    return _OCC[check_units(units) or DEFAULT_CAD_UNITS]
+
+
+def rhino_unit_system(units: str | None) -> Any:
+    """``rhino3dm.UnitSystem`` of the unit (``None`` when unknown)."""
+    import rhino3dm
+
+    checked = check_units(units)
+    return getattr(rhino3dm.UnitSystem, "None" if checked is None else _RHINO[checked])
+
+
+def units_of_rhino(system: Any) -> str | None:
+    """The unit of a ``rhino3dm.UnitSystem`` (None for none or one outside :data:`UNITS`)."""
+    name = getattr(system, "name", str(system).split(".")[-1])
+    return next((units for units, rhino in _RHINO.items() if rhino == name), None)
+
+
+def units_of_file(path: object) -> str | None:
+    """The length unit a point-cloud file states by its format: E57 coordinates are metres
+    (ASTM E2807); the other cloud formats carry none (None)."""
+    return "m" if str(path).lower().endswith(".e57") else None
