@@ -46,6 +46,8 @@ ROWS = (
     ("bending_energy", "Bending energy", "integral of k1^2 + k2^2 over the surface (0 for a "
                                          "plane)"),
     ("max_curvature", "Max curvature", "largest principal curvature on the surface (1 / units)"),
+    ("grid", "Control grid", "the fitted surface's control points per direction and degrees: "
+                            "what ran (the fit grows or trims the grid the settings start from)"),
 )
 
 
@@ -112,10 +114,13 @@ class QualityPanel(QWidget):
 
     def show_result(self, status: str, message: str, statistics: dict[str, float] | None,
                     automatic_tolerance: bool = True, kind: str = "surface",
-                    warned: bool = False):
+                    warned: bool = False, grid: tuple[int, int, int, int] | None = None):
         """The final snapshot's status, message and quality statistics (None: not measured);
-        ``warned``: a quality check failed (the headline takes the warning colour)."""
+        ``warned``: a quality check failed (the headline takes the warning colour); ``grid``:
+        the fitted surface's (control points u, v, degree u, v)."""
         headline = status.capitalize() + (f": {message}" if message else "")
+        self._set("grid", "-" if grid is None else
+                  f"{grid[0]} x {grid[1]} (degree {grid[2]} x {grid[3]})")
         self.status.setStyleSheet(f"QLabel {{ color: {BAD_COLOR}; }}" if warned else "")
         if kind != "surface":
             self.status.setText(headline + " (the quality measures apply to surfaces)")

@@ -153,9 +153,14 @@ class FitDisplay(QObject):
         if snapshot.message:
             text += f" ({snapshot.message})"
         window.report(text)
+        geometry = snapshot.geometry
+        grid = None
+        if getattr(geometry, "kind", None) == "surface":   # what ran, beside the settings' start
+            count_u, count_v = (int(n) for n in geometry.control_points.shape[-3:-1])
+            grid = (count_u, count_v, int(geometry.degree_u), int(geometry.degree_v))
         window.quality_panel.show_result(status, snapshot.message, snapshot.statistics,
                                          document.settings.fit.tolerance is None,
                                          snapshot.display.kind,
-                                         warned=status != snapshot.status)
+                                         warned=status != snapshot.status, grid=grid)
         if document.settings.show_offsets and not document.patches:
             window.offsets.request()

@@ -129,6 +129,9 @@ def test_default_fit_converges_and_the_readout_shows_its_quality(qtbot, window, 
     assert not (snapshot.quality_cells == FLIPPED).any()
 
     assert panel.values["flipped"].text() == "0.00%" and not panel.is_bad("flipped")
+    # the grid that ran (the settings hold the one the fit started from)
+    count_u, count_v = snapshot.geometry.control_points.shape[:2]
+    assert panel.values["grid"].text() == f"{count_u} x {count_v} (degree 3 x 3)"
     assert panel.values["overlap"].text() == "0.00%" and not panel.is_bad("overlap")
     assert not panel.is_bad("coverage") and not panel.is_bad("area_ratio")
     stats = snapshot.statistics
