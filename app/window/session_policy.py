@@ -52,7 +52,13 @@ class SessionPolicy(QObject):
             window.report(f"Cannot save the session to {path}: {describe(exc)}{kept}",
                           error=True, exc=exc)
             return False
-        window.report(f"Session saved to {path}")
+        message = f"Session saved to {path}"
+        if window.document.network is not None:
+            # said, not silent: sessions hold single surfaces only so far (issue 28)
+            message += (f"; the patch network ({window.document.network.patch_count} patches) "
+                        "is not kept in sessions yet: export it (File > Export, .json keeps it "
+                        "whole) to keep it")
+        window.report(message)
         return True
 
     def open(self, path: str) -> bool:

@@ -193,3 +193,23 @@ def test_export_menu_says_how_to_install_the_cad_extra(qtbot, tmp_path, monkeypa
         assert "pip install" not in window.export_actions[".3dm"].text()
     finally:
         window.close()
+
+
+def test_saving_a_session_says_the_patch_network_is_not_kept(qtbot, window, tmp_path, caplog):
+    # a saved session silently dropped the network; until sessions hold networks, it says so
+    import logging
+
+    from nurbs_core.patches.network import build_network
+
+    corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    quads = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4],
+                      [1, 5, 7, 3]])
+    window.document.set_network(build_network(corners, quads, size=4, degree=3))
+    with caplog.at_level(logging.INFO):
+        assert window.save_session(str(tmp_path / "work.json"))
+    assert "the patch network (6 patches) is not kept in sessions yet" in caplog.text
+    window.document.set_network(None)
+    caplog.clear()
+    with caplog.at_level(logging.INFO):
+        assert window.save_session(str(tmp_path / "plain.json"))
+    assert "Session saved" in caplog.text and "patch network" not in caplog.text
