@@ -44,9 +44,6 @@ if TYPE_CHECKING:
     from nurbs_core.patches.scan_mesh import ScanMesh
     from nurbs_core.route import Route
 
-#: --units (as nurbs_core.io.units.UNITS, which is not imported at start-up)
-UNITS_CHOICES = ("mm", "cm", "m", "in", "ft")
-
 # Nothing heavy at module level: numpy, the engine and torch load inside main(), where Ctrl-C
 # during start-up is caught (status 130, no traceback); --help and bad outputs never load torch.
 
@@ -72,6 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
         PARAMETERIZATIONS,
         SOLVERS,
     )
+    from nurbs_core.io.units import UNITS
 
     parser = argparse.ArgumentParser(
         prog="nurbs-fit", description="Fit a NURBS surface (or curve) to a point cloud, or to "
@@ -163,7 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
                              ".iges, .brep, .stl/.obj/.ply; needs the cad extra): by default "
                              "when a closed scan lies mostly on analytic surfaces; --part "
                              "forces it on a closed scan, --no-part turns it off")
-    parser.add_argument("--units", choices=UNITS_CHOICES, default=None,
+    parser.add_argument("--units", choices=UNITS, default=None,
                         help="the length unit of the cloud's coordinates, declared in .3dm, "
                              "STEP and IGES outputs and the JSON metadata (never a scaling; "
                              "default: the input's own where its format states one, E57: m; "

@@ -29,6 +29,7 @@ numpy + scipy only.
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass, field
 
@@ -476,32 +477,32 @@ def _coplanar_merged(surfaces: list[Primitive], points: np.ndarray, normals: np.
     the noise across its width) have too few points with agreeing normals for :func:`_merged`
     to see that one plane holds both."""
     result = list(surfaces)
-    merged = True
-    while merged:
-        merged = False
+    while True:
         planes = [k for k, surface in enumerate(result) if surface.kind == "plane"]
-        for a in planes:
-            for b in planes:
-                if b <= a:
-                    continue
-                first, second = result[a], result[b]
-                if abs(float(first.axis @ second.axis)) < np.cos(np.radians(COPLANAR_ANGLE)):
-                    continue
-                near = (first.distance(points) < tolerance) | (second.distance(points) < tolerance)
-                near &= np.abs(normals @ first.axis) > np.cos(np.radians(45.0))
-                if near.sum() < 3:
-                    continue
-                joint = plane_through(points[near])
-                held = joint.distance(points[near]) < tolerance
-                if held.mean() < 0.95 or not _unbiased(joint, points[near][held], tolerance):
-                    continue
-                result[a] = joint
-                del result[b]
-                merged = True
-                break
-            if merged:
-                break
-    return result
+        found = next(((a, b, joint) for a, b in itertools.combinations(planes, 2)
+                      if (joint := _joint_plane(result[a], result[b], points, normals,
+                                                tolerance)) is not None), None)
+        if found is None:
+            return result
+        a, b, joint = found
+        result[a] = joint
+        del result[b]
+
+
+def _joint_plane(first: Primitive, second: Primitive, points: np.ndarray, normals: np.ndarray,
+                 tolerance: float) -> Primitive | None:
+    """The one plane of two (see :func:`_coplanar_merged`), or None when they are two."""
+    if abs(float(first.axis @ second.axis)) < np.cos(np.radians(COPLANAR_ANGLE)):
+        return None
+    near = (first.distance(points) < tolerance) | (second.distance(points) < tolerance)
+    near &= np.abs(normals @ first.axis) > np.cos(np.radians(45.0))
+    if near.sum() < 3:
+        return None
+    joint = plane_through(points[near])
+    held = joint.distance(points[near]) < tolerance
+    if held.mean() < 0.95 or not _unbiased(joint, points[near][held], tolerance):
+        return None
+    return joint
 
 
 def _without_redundant(surfaces: list[Primitive], points: np.ndarray, normals: np.ndarray,

@@ -188,9 +188,9 @@ def _write(geometry_or_list: GeometryInput | PatchNetwork, path: StrPath, suffix
         write_iges(geometry, path, units=units, **options)
     elif suffix == ".json":
         from nurbs_core.io.json_format import write_json
+        from nurbs_core.io.units import units_metadata
 
-        if units is not None:
-            options["metadata"] = {**(options.get("metadata") or {}), "units": units}
+        options["metadata"] = units_metadata(options.get("metadata"), units)
         write_json(geometry, path, **options)
     elif suffix in (".obj", ".stl", ".ply", ".glb"):
         from nurbs_core.io.tessellate import write_mesh

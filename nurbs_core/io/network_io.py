@@ -120,11 +120,11 @@ def write_network_file(network: PatchNetwork, path: StrPath, suffix: str, *,
     atomic) in the format of ``suffix``, one of NETWORK_SUFFIXES. Option ``units``
     (:mod:`nurbs_core.io.units`): the unit .3dm, STEP and IGES declare and JSON's metadata
     holds (meshes carry none)."""
+    from nurbs_core.io.units import units_metadata
+
     units = options.pop("units", None)
     if suffix == ".json":
-        if units is not None:
-            metadata = {**(metadata or {}), "units": units}
-        write_network_json(network, path, metadata, **options)
+        write_network_json(network, path, units_metadata(metadata, units), **options)
     elif suffix == ".3dm":
         from nurbs_core.io.network_3dm import write_network_3dm
 

@@ -40,10 +40,9 @@ def rhino_unit_system(units: str | None) -> Any:
     return getattr(rhino3dm.UnitSystem, "None" if checked is None else _RHINO[checked])
 
 
-def units_of_rhino(system: Any) -> str | None:
-    """The unit of a ``rhino3dm.UnitSystem`` (None for none or one outside :data:`UNITS`)."""
-    name = getattr(system, "name", str(system).split(".")[-1])
-    return next((units for units, rhino in _RHINO.items() if rhino == name), None)
+def units_metadata(metadata: dict | None, units: str | None) -> dict | None:
+    """JSON metadata with the ``units`` entry (the metadata as it was when ``units`` is None)."""
+    return metadata if units is None else {**(metadata or {}), "units": units}
 
 
 def units_of_file(path: object) -> str | None:

@@ -157,13 +157,15 @@ class LeastSquaresCore:
         self.fairing_scale: float | None = None
         self._setup_grid()
 
-    def _setup_grid(self) -> None:
+    def _setup_grid(self, knots: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """Knots (``knots``, or from the parameters' density), seam and fairing for the grid."""
         (p, q), (n, m) = self.degrees, self.grid
         # a closed direction keeps uniform knots: equal end spans make the seam's tangent
         # continuity a linear constraint (P_1 - P_0 = P_{n-1} - P_{n-2})
-        self.knots = tuple(clamped_uniform(c, d).numpy() if self.closed == name
-                           else density_knots(self.parameters[:, k], c, d)
-                           for k, (name, c, d) in enumerate((("u", n, p), ("v", m, q))))
+        self.knots = knots if knots is not None else tuple(
+            clamped_uniform(c, d).numpy() if self.closed == name
+            else density_knots(self.parameters[:, k], c, d)
+            for k, (name, c, d) in enumerate((("u", n, p), ("v", m, q))))
         self.seam = None if self.closed is None else seam_matrix(n, m, self.closed)
         thin_plate, membrane = fairing_matrices(self.knots[0], p, self.knots[1], q)
         self.fairing_matrix = (thin_plate + MEMBRANE_RATIO * membrane).tocsc()
@@ -329,18 +331,14 @@ class LeastSquaresCore:
         itself was chosen on the subset). The core then holds the whole cloud (its tree, for
         :meth:`surface_to_cloud`, still the subset's)."""
         surface = report.geometry
-        (p, q), (n, m) = self.degrees, report.grid
         nearest = self.tree.query(points)[1]
         self.points = np.asarray(points, np.float64)
         self.parameters = report.parameters[nearest].copy()
         self.neighbourhood = None      # the corrections of so many points average themselves
         self.correct(surface)
-        self.grid = (n, m)
-        self.knots = (surface.knots_u.detach().double().numpy(),
-                      surface.knots_v.detach().double().numpy())
-        self.seam = None if self.closed is None else seam_matrix(n, m, self.closed)
-        thin_plate, membrane = fairing_matrices(self.knots[0], p, self.knots[1], q)
-        self.fairing_matrix = (thin_plate + MEMBRANE_RATIO * membrane).tocsc()
+        self.grid = report.grid
+        self._setup_grid((surface.knots_u.detach().double().numpy(),
+                          surface.knots_v.detach().double().numpy()))
         return self.solve(report.fairing)
 
     def _summary(self, report: CorePass, what: str) -> str:

@@ -9,6 +9,14 @@ FORBIDDEN = ("PySide6", "PyQt5", "PyQt6", "qtpy", "vtk", "vtkmodules", "pyvista"
              "superqt", "pyqtgraph", "app")
 
 
+def _run(code: str, timeout: float) -> str:
+    """The stdout of ``code`` run in a fresh interpreter (which must exit 0)."""
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=timeout)
+    assert result.returncode == 0, result.stderr
+    return result.stdout
+
+
 def test_import_nurbs_core_loads_no_qt_or_vtk():
     code = (
         "import importlib, pkgutil, sys\n"
@@ -19,10 +27,8 @@ def test_import_nurbs_core_loads_no_qt_or_vtk():
         f"bad = sorted(m for m in sys.modules if m.split('.')[0] in {FORBIDDEN!r})\n"
         "print(','.join(bad))\n"
     )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                            timeout=300)
-    assert result.returncode == 0, result.stderr
-    assert result.stdout.strip() == "", f"nurbs_core imported GUI modules: {result.stdout}"
+    imported = _run(code, 300).strip()
+    assert imported == "", f"nurbs_core imported GUI modules: {imported}"
 
 
 def test_closed_networks_and_parts_fit_and_save_without_torch(tmp_path):
@@ -44,7 +50,5 @@ def test_closed_networks_and_parts_fit_and_save_without_torch(tmp_path):
         f"status = main([{str(head)!r}, '-o', *{outputs!r}, '-q'])\n"
         "print(status, 'torch' in sys.modules)\n"
     )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                            timeout=600)
-    assert result.returncode == 0, result.stderr
-    assert result.stdout.split()[-2:] == ["0", "False"], result.stdout
+    printed = _run(code, 600)
+    assert printed.split()[-2:] == ["0", "False"], printed
