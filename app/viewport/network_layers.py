@@ -15,6 +15,7 @@ import numpy as np
 import pyvista as pv
 
 from app.display_types import NetworkDisplay
+from app.viewport.color_scale import label_count, nice_ceiling
 
 SEAM_ARRAY = "Seam angle"
 SEAM_TITLE = "Seam angle\n(degrees)"
@@ -32,17 +33,9 @@ LAYERS = ("network", "layout")
 
 def seam_range_top(seam: np.ndarray) -> float:
     """The colour bar's top (degrees) for per-vertex seam values (N,)."""
-    from app.viewport.scene import nice_ceiling
-
     on_seams = seam[seam > 0]
     value = float(np.percentile(on_seams, SEAM_PERCENTILE)) if on_seams.size else 0.0
     return nice_ceiling(max(SEAM_MIN_TOP, value))
-
-
-def label_count(top: float) -> int:
-    """Labels for a bar from 0 to ``top`` (1, 2, 2.5 or 5 times a power of ten) at round steps."""
-    mantissa = top / 10.0 ** np.floor(np.log10(top))
-    return 6 if round(mantissa, 6) in (2.5, 5.0) else 5
 
 
 class NetworkLayers:

@@ -23,6 +23,7 @@ from PySide6.QtWidgets import QWidget
 from pyvistaqt import QtInteractor
 
 from app.display_types import FAR, FINE, FLIPPED, OVERLAP, DisplayGeometry
+from app.viewport.color_scale import nice_ceiling
 from app.viewport.network_layers import NetworkLayers
 
 RENDER_INTERVAL_MS = 33
@@ -61,20 +62,6 @@ LAYERS = ("cloud", "surface", "curve", "control_net", "knot_lines", "patches", "
 #: Layers of the single-patch fit (hidden in Patches mode) and of the network (shown only then).
 SINGLE_FIT_LAYERS = ("surface", "curve", "control_net", "knot_lines")
 NETWORK_LAYERS = ("network", "layout")
-
-
-def nice_ceiling(value: float) -> float:
-    """Smallest of 1, 2, 2.5, 5 (times a power of ten) not below ``value`` (1.0 for <= 0).
-
-    The colour scale's top: round numbers label well and change rarely while a fit converges.
-    """
-    if not np.isfinite(value) or value <= 0:
-        return 1.0
-    power = 10.0 ** np.floor(np.log10(value))
-    for step in (1.0, 2.0, 2.5, 5.0, 10.0):
-        if step * power >= value * (1 - 1e-12):
-            return float(step * power)
-    return float(10.0 * power)
 
 
 def quad_faces(rows: int, columns: int) -> np.ndarray:

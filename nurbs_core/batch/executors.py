@@ -10,10 +10,13 @@ import math
 import os
 import time
 from collections.abc import Iterator
-from typing import Any, TypeAlias
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 from nurbs_core.batch.inputs import BATCH_EXTRA_HINT
 from nurbs_core.batch.worker import chunk_size, fit_chunk, iter_chunk, pin_worker, prepare_worker
+
+if TYPE_CHECKING:
+    from nurbs_core.jobs import FitJob
 
 WORKER_WAIT_S = 60  # --scheduler: how long to wait for the first worker
 #: with no worker left for this long, the inputs still waiting fail (checked every POLL_S)
@@ -31,14 +34,16 @@ def chunks(items: PositionedItems, size: int) -> list[PositionedItems]:
     return [items[k:k + size] for k in range(0, len(items), size)]
 
 
-def serial(options: dict, items: PositionedItems) -> Iterator[tuple[int, dict]]:
-    """Fit the items in this process, a chunk at a time; each record as it is settled."""
-    for chunk in chunks(items, chunk_size(options)):
-        for index, record in iter_chunk(options, [item for _, item in chunk]):
+def serial(job: FitJob, items: PositionedItems,
+           batch_fits: int = 1) -> Iterator[tuple[int, dict]]:
+    """Fit the items with the settings ``job`` in this process, a chunk (of up to
+    ``batch_fits``) at a time; each record as it is settled."""
+    for chunk in chunks(items, chunk_size(job, batch_fits)):
+        for index, record in iter_chunk(job, [item for _, item in chunk]):
             yield chunk[index][0], record
 
 
-def _distributed():
+def _distributed() -> Any:
     try:
         import distributed
     except ImportError:
@@ -61,7 +66,7 @@ class DaskExecutor:
         self.cluster: Any = None
         self.client: Any = None
 
-    def __enter__(self):
+    def __enter__(self) -> DaskExecutor:
         distributed = _distributed()
         if self.scheduler is None:
             single = {name: "1" for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS",
@@ -97,7 +102,7 @@ class DaskExecutor:
             for address, cpu in zip(workers, cpus):
                 self.client.run(pin_worker, cpu, workers=[address])
 
-    def __exit__(self, *_):
+    def __exit__(self, *_: object) -> None:
         try:
             if self.client is not None:
                 self.client.close()
@@ -109,22 +114,24 @@ class DaskExecutor:
     def workers(self) -> int:
         return len(self.client.scheduler_info().get("workers", {}))
 
-    def run(self, options: dict, items: PositionedItems) -> Iterator[tuple[int, dict]]:
-        """Fit the items on the cluster, one task per chunk (chunks no larger than keeps every
-        worker busy); each record as its chunk finishes. A chunk whose worker died fails its
-        items; when no worker is left for :data:`WORKERLESS_S`, every item still waiting fails
-        (a cluster keeps its tasks waiting for a worker: the batch would hang)."""
+    def run(self, job: FitJob, items: PositionedItems,
+            batch_fits: int = 1) -> Iterator[tuple[int, dict]]:
+        """Fit the items with the settings ``job`` on the cluster, one task per chunk (of up to
+        ``batch_fits``, and no larger than keeps every worker busy); each record as its chunk
+        finishes. A chunk whose worker died fails its items; when no worker is left for
+        :data:`WORKERLESS_S`, every item still waiting fails (a cluster keeps its tasks waiting
+        for a worker: the batch would hang)."""
         distributed = _distributed()
         futures = {}
-        if options.get("initial"):
-            options = {**options, "initial": os.path.abspath(options["initial"])}
+        if job.initial:
+            job = job.replace(initial=os.path.abspath(job.initial))
         # the workers may run elsewhere: absolute paths (they must see the same files)
         items = [(position, {**item, "path": os.path.abspath(item["path"]),
                              "outputs": [os.path.abspath(p) for p in item["outputs"]]})
                  for position, item in items]
-        size = min(chunk_size(options), math.ceil(len(items) / max(1, self.workers)))
+        size = min(chunk_size(job, batch_fits), math.ceil(len(items) / max(1, self.workers)))
         for chunk in chunks(items, max(1, size)):
-            future = self.client.submit(fit_chunk, options, [item for _, item in chunk],
+            future = self.client.submit(fit_chunk, job, [item for _, item in chunk],
                                         pure=False, key=f"nurbs-fit-{chunk[0][0]}-{os.getpid()}")
             futures[future] = chunk
         pending = set(futures)
@@ -167,7 +174,7 @@ class DaskExecutor:
 
 def _failed(chunk: PositionedItems, why: str) -> Iterator[tuple[int, dict]]:
     """A failed record for each item of ``chunk``, saying ``why``."""
-    from nurbs_core.cli import error_line
+    from nurbs_core.jobs import error_line
 
     error = error_line(RuntimeError(why))
     for position, item in chunk:

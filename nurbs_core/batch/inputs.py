@@ -8,6 +8,10 @@ import glob
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
 
 #: Suffixes read as HDF5 datasets of clouds (SplineDataset layout: ``points`` (N, n, 3)).
 HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf")
@@ -60,7 +64,7 @@ def hdf5_count(path: str) -> int:
     return int(shape[0])
 
 
-def hdf5_points(path: str, index: int):
+def hdf5_points(path: str, index: int) -> np.ndarray:
     """Cloud ``index`` of an HDF5 file as a float64 (n, 3) array, checked like a cloud file."""
     import h5py
     import numpy as np
@@ -82,7 +86,7 @@ def _file_items(path: Path) -> list[Item]:
     text = os.fspath(path)
     if path.suffix.lower() not in HDF5_SUFFIXES:
         return [Item(os.fspath(path), text, path.stem)]
-    from nurbs_core.cli import error_line
+    from nurbs_core.jobs import error_line
 
     try:
         count = hdf5_count(text)
@@ -104,7 +108,7 @@ def expand(inputs: list[str], exclude: tuple[Path, ...] = ()) -> list[Item]:
     items: list[Item] = []
     seen: set[str] = set()
 
-    def add(path: Path, listed: bool):
+    def add(path: Path, listed: bool) -> None:
         real = os.path.realpath(path)
         if real in seen or (not listed and real in excluded):
             return

@@ -1,6 +1,6 @@
 """``nurbs-fit IN... --output-dir DIR``: expand the inputs, skip the finished ones, fit the rest
 (here or on Dask), show progress, write the summary and return the exit status: 0 when every
-input succeeded (or was skipped), 3 (:data:`nurbs_core.cli.SOME_FAILED_STATUS`) when some failed,
+input succeeded (or was skipped), 3 (:data:`nurbs_core.jobs.SOME_FAILED_STATUS`) when some failed,
 130 after Ctrl-C (the finished results stay; rerun with ``--skip-existing`` for the rest)."""
 
 from __future__ import annotations
@@ -13,6 +13,10 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
+
+if TYPE_CHECKING:
+    from nurbs_core.batch.settings import BatchSettings
 
 #: The first columns of the summary, in this order; the statistics follow.
 SUMMARY_COLUMNS = ("input", "output", "status", "seconds", "error")
@@ -31,7 +35,8 @@ class Progress:
     """``nurbs-fit: 12/200 (1 failed, 3 skipped)  2.41 inputs/s  ETA 01:18`` on stderr, at most
     every PROGRESS_INTERVAL seconds (in place on a terminal); nothing when ``quiet``."""
 
-    def __init__(self, total: int, skipped: int, quiet: bool, failed: int = 0, stream=None):
+    def __init__(self, total: int, skipped: int, quiet: bool, failed: int = 0,
+                 stream: TextIO | None = None) -> None:
         """``skipped``, ``failed``: inputs settled before any fit (counted as finished)."""
         self.total, self.skipped, self.quiet = total, skipped, quiet
         self.stream = stream or sys.stderr
@@ -63,7 +68,7 @@ class Progress:
         print(("\r" if self.tty else "") + line, end=end, file=self.stream, flush=True)
 
 
-def _cell(value) -> str:
+def _cell(value: object) -> str:
     if value is None:
         return ""
     if isinstance(value, (list, dict)):
@@ -148,80 +153,85 @@ def _is_summary(path: Path) -> bool:
     return first.startswith('{"input": ') and '"status": ' in first
 
 
-def _check(args, directory: Path, summary: Path) -> None:
-    """Options that would fail every input fail the run before any work (status 1)."""
-    from nurbs_core.cli import _config, _field_settings, _patch_options
-    from nurbs_core.io.dispatch import EXPORT_SUFFIXES, NETWORK_SUFFIXES
+def _check(batch: BatchSettings, summary: Path) -> None:
+    """Settings that would fail every input fail the run before any work (status 1)."""
     from nurbs_core.io.outputs import check_output_paths
+    from nurbs_core.io.suffixes import EXPORT_SUFFIXES, NETWORK_SUFFIXES
+    from nurbs_core.jobs.settings import field_settings, fit_config, patch_options
 
-    suffixes = NETWORK_SUFFIXES if args.patches is not None else EXPORT_SUFFIXES
-    if args.format.lower() not in suffixes:
-        raise ValueError(f"--format {args.format}: the results can be written as "
+    job = batch.job
+    suffixes = NETWORK_SUFFIXES if job.patches is not None else EXPORT_SUFFIXES
+    if batch.format.lower() not in suffixes:
+        raise ValueError(f"--format {batch.format}: the results can be written as "
                          f"{', '.join(suffixes)}")
-    _field_settings(args.settings)
-    if args.patches is not None:
-        _patch_options(args)
+    field_settings(job.settings)
+    if job.patches is not None:
+        patch_options(job)
     else:
-        _config(args, 3)
-    if args.max_decompressed is not None:
+        fit_config(job, 3)
+    if job.max_decompressed is not None:
         from nurbs_core.io.limits import set_decompression_limit
 
-        set_decompression_limit(args.max_decompressed)
+        set_decompression_limit(job.max_decompressed)
     check_output_paths([summary], suffixes=(".jsonl", ".csv"))
-    if args.scheduler is not None:
+    if batch.scheduler is not None:
         from nurbs_core.batch.executors import check_available
 
         check_available()
 
 
-def run_batch(args) -> int:
+def run_batch(batch: BatchSettings) -> int:
+    """Fit every input of ``batch``, write the results and the summary, return the exit status
+    (see the module's docstring)."""
+    import dataclasses
+
     from nurbs_core.batch.executors import DaskExecutor, serial
     from nurbs_core.batch.inputs import check_planned_writes, expand, name_outputs
-    from nurbs_core.cli import INTERRUPTED_STATUS, SOME_FAILED_STATUS
+    from nurbs_core.jobs import INTERRUPTED_STATUS, SOME_FAILED_STATUS
 
-    if not args.format.startswith("."):
-        args.format = "." + args.format
-    directory = Path(args.output_dir)
+    if not batch.format.startswith("."):
+        batch = dataclasses.replace(batch, format="." + batch.format)
+    job = batch.job
+    directory = Path(batch.output_dir)
     directory.mkdir(parents=True, exist_ok=True)
-    summary = Path(args.summary) if args.summary else directory / "summary.jsonl"
-    _check(args, directory, summary)
+    summary = Path(batch.summary) if batch.summary else directory / "summary.jsonl"
+    _check(batch, summary)
     # an earlier run's summary in an input folder is not a cloud; any other file named as the
     # summary is an input, and the check below refuses to overwrite it
-    items = expand(args.input, exclude=(summary,) if _is_summary(summary) else ())
-    name_outputs(items, directory, args.format.lower(), offset=args.offset is not None)
+    items = expand(batch.inputs, exclude=(summary,) if _is_summary(summary) else ())
+    name_outputs(items, directory, batch.format.lower(), offset=job.offset is not None)
     check_planned_writes(items, summary)
     records: list[dict | None] = [None] * len(items)
-    earlier = _earlier_rows(summary) if args.skip_existing else {}
+    earlier = _earlier_rows(summary) if batch.skip_existing else {}
     todo = []
     for position, item in enumerate(items):
         if item.error is not None:
             records[position] = {"input": item.label, "output": None, "status": "failed",
                                  "seconds": 0.0, "error": item.error}
-        elif args.skip_existing and all(_complete(p) for p in item.outputs):
+        elif batch.skip_existing and all(_complete(p) for p in item.outputs):
             # a resume keeps what the earlier run measured of it
             records[position] = {**earlier.get(item.outputs[0], {}), "input": item.label,
                                  "output": item.outputs[0], "status": "skipped", "error": ""}
         else:
             todo.append((position, item.plain()))
     skipped = sum(r is not None and r["status"] == "skipped" for r in records)
-    progress = Progress(len(items), skipped, args.quiet,
+    progress = Progress(len(items), skipped, job.quiet,
                         failed=sum(r is not None and r["status"] == "failed" for r in records))
-    options = {key: value for key, value in vars(args).items()}
-    if args.scheduler is None and args.jobs > 1:
+    jobs = batch.jobs
+    if batch.scheduler is None and jobs > 1:
         # a local cluster never starts more workers than CPUs or inputs to fit (each worker is
         # a process of several hundred MB)
-        jobs = max(1, min(args.jobs, os.cpu_count() or 1, len(todo)))
-        if jobs < args.jobs and not args.quiet:
-            print(f"nurbs-fit: --jobs {args.jobs}: {jobs} worker{'s' if jobs > 1 else ''} "
+        jobs = max(1, min(batch.jobs, os.cpu_count() or 1, len(todo)))
+        if jobs < batch.jobs and not job.quiet:
+            print(f"nurbs-fit: --jobs {batch.jobs}: {jobs} worker{'s' if jobs > 1 else ''} "
                   f"({os.cpu_count()} CPUs, {len(todo)} inputs to fit)", file=sys.stderr)
-        args.jobs = jobs
         if jobs > 1:
             from nurbs_core.batch.executors import check_available
 
             check_available()  # still before any work
-    where = ("this process" if args.jobs == 1 and args.scheduler is None else
-             f"{args.scheduler}" if args.scheduler else f"a local Dask cluster of {args.jobs} workers")
-    if not args.quiet:
+    where = ("this process" if jobs == 1 and batch.scheduler is None else
+             f"{batch.scheduler}" if batch.scheduler else f"a local Dask cluster of {jobs} workers")
+    if not job.quiet:
         print(f"nurbs-fit: {len(items)} inputs ({len(todo)} to fit, {skipped} skipped) on {where}; "
               f"results in {directory}", file=sys.stderr, flush=True)
     interrupted = False
@@ -229,15 +239,15 @@ def run_batch(args) -> int:
     # leaves an accurate one
     write_summary(summary, [r for r in records if r is not None])
     try:
-        if todo and (args.jobs > 1 or args.scheduler is not None):
-            with DaskExecutor(args.jobs, args.scheduler, args.threads) as executor:
+        if todo and (jobs > 1 or batch.scheduler is not None):
+            with DaskExecutor(jobs, batch.scheduler, job.threads) as executor:
                 progress.start = time.perf_counter()  # the rate counts fitting, not start-up
-                for position, record in executor.run(options, todo):
+                for position, record in executor.run(job, todo, batch.batch_fits):
                     records[position] = {**record, "output": items[position].outputs[0]}
                     progress.update(record)
                     write_summary(summary, [r for r in records if r is not None])
         else:
-            for position, record in serial(options, todo):
+            for position, record in serial(job, todo, batch.batch_fits):
                 records[position] = record
                 progress.update(record)
                 write_summary(summary, [r for r in records if r is not None])

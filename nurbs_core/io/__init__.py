@@ -12,7 +12,7 @@ The ``*_SUFFIXES`` tuples are what the app offers in its file dialogs.
 from __future__ import annotations
 
 from nurbs_core.io.cloud import PointCloud
-from nurbs_core.io.dispatch import EXPORT_SUFFIXES, NURBS_SUFFIXES, load, load_any, save
+from nurbs_core.io.dispatch import load, load_any, save
 from nurbs_core.io.errors import FileFormatError, MissingDependencyError
 from nurbs_core.io.points import (
     POINT_CLOUD_SUFFIXES,
@@ -20,6 +20,7 @@ from nurbs_core.io.points import (
     load_points,
     save_points,
 )
+from nurbs_core.io.suffixes import EXPORT_SUFFIXES, NURBS_SUFFIXES
 
 __all__ = [
     "EXPORT_SUFFIXES",

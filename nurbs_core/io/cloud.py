@@ -1,18 +1,14 @@
-"""PointCloud value object, the checks every point reader shares, and the bounded reader of the
-numeric text rows of PCD and PLY files."""
+"""PointCloud value object and the checks every point reader shares."""
 
 from __future__ import annotations
 
 import os
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import BinaryIO
 
 import numpy as np
 
 from nurbs_core.io.errors import FileFormatError, StrPath
-from nurbs_core.io.limits import MAX_LINE_BYTES, check_claimed_size, line_too_long
 
 
 @dataclass
@@ -182,84 +178,3 @@ def classify_extra_columns(extra: np.ndarray) -> dict[str, np.ndarray]:
             return {"colors": first.astype(np.uint8), "normals": second.copy()}
         return generic
     return generic
-
-
-#: Bytes of a text file :func:`read_text_rows` reads and parses at a time.
-TEXT_CHUNK_BYTES = 1 << 20
-
-
-def _skip_lines(path: StrPath, handle: BinaryIO, skip: int, line: int, what: str) -> tuple[bytes, int]:
-    """Read past ``skip`` lines (counting line breaks a block at a time, never splitting them);
-    return what follows the last skipped line break in the block and the next line number."""
-    while skip:
-        block = handle.read(TEXT_CHUNK_BYTES)
-        if not block:
-            raise FileFormatError(path, f"truncated: the file ends before its {what}", line=line)
-        breaks = block.count(b"\n")
-        if breaks < skip:
-            skip, line = skip - breaks, line + breaks
-            continue
-        end = int(np.flatnonzero(np.frombuffer(block, dtype=np.uint8) == 10)[skip - 1])
-        return block[end + 1:], line + skip
-    return b"", line
-
-
-def read_text_rows(path: StrPath, offset: int, first_line: int, count: int, width: int, *,
-                   skip: int = 0, what: str = "rows", header_line: int | None = None) -> np.ndarray:
-    """(count, width) float64 from the whitespace-separated lines of ``path`` that start at
-    byte ``offset`` (file line ``first_line``), after ``skip`` lines that are not parsed.
-
-    Bounded whatever the header claims: ``count`` lines must fit in the bytes present (at least
-    two bytes each), the table is allocated for at most the rows the bytes can hold (a row of
-    ``width`` numbers takes at least ``2 * width`` bytes: a header claiming more fails at the
-    first bad or missing line, and that line is named), the file is read and parsed a block of
-    lines at a time (never split whole), only the lines needed are read, and a line longer
-    than ``limits.MAX_LINE_BYTES`` is refused.
-    """
-    from nurbs_core.io.text_points import parse_table
-
-    available = os.path.getsize(path) - offset - skip + 1  # the last line may lack its break
-    check_claimed_size(path, count, 2, available, what=what, line=header_line)
-    table = np.empty((min(count, available // (2 * max(width, 1))), width), dtype=np.float64)
-    filled = 0
-    with open(path, "rb") as handle:
-        handle.seek(offset)
-        carry, line = _skip_lines(path, handle, skip, first_line, what)
-        at_end = False
-        while filled < count:
-            block = b"" if at_end else handle.read(TEXT_CHUNK_BYTES)
-            at_end = at_end or not block
-            data = carry + block if carry else block
-            if at_end:
-                if not data:
-                    raise FileFormatError(path, f"truncated: the header declares {count} {what}, "
-                                                f"the file has {filled}", line=line)
-                cut, carry = len(data), b""  # the last line, without a line break
-            else:
-                cut = data.rfind(b"\n")
-                if cut < 0:  # no line break in the block: keep reading, within bounds
-                    if len(data) > MAX_LINE_BYTES:
-                        raise line_too_long(path, len(data), line)
-                    carry = data
-                    continue
-                carry = data[cut + 1:]
-                if len(carry) > MAX_LINE_BYTES:
-                    raise line_too_long(path, len(carry), line + data.count(b"\n", 0, cut) + 1)
-            rows = data[:cut].decode("ascii", errors="replace").split("\n")[: count - filled]
-            lengths = [len(row) for row in rows]
-            if max(lengths) > MAX_LINE_BYTES:
-                longest = int(np.argmax(lengths))
-                raise line_too_long(path, lengths[longest], line + longest)
-            def line_of(k: int, start: int = line) -> int:
-                return start + k
-
-            with warnings.catch_warnings():  # numpy warns about empty lines: they are errors
-                warnings.simplefilter("ignore", UserWarning)
-                parsed = parse_table(path, rows, width, line_of)
-            if filled + len(rows) > len(table):  # not once they parse: 2 * width bytes a row
-                raise FileFormatError(path, f"the header declares {count} {what}, more than "
-                                            "the file can hold", line=line)
-            table[filled: filled + len(rows)] = parsed
-            filled += len(rows)
-            line += len(rows)
-    return table

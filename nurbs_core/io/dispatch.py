@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any, TypeAlias, TypeGuard, cast
 from nurbs_core.io.cloud import PointCloud
 from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.points import POINT_CLOUD_SUFFIXES, _check_file, load_points, suffix_of
+from nurbs_core.io.suffixes import EXPORT_SUFFIXES, NETWORK_SUFFIXES, NURBS_SUFFIXES
 
 if TYPE_CHECKING:
     from nurbs_core.geometry import NurbsCurve, NurbsSurface
@@ -17,13 +18,6 @@ if TYPE_CHECKING:
 #: One file for :func:`save_all`: (geometry or a patch network, path, options for the writer).
 SaveJob: TypeAlias = "tuple[GeometryInput | PatchNetwork, StrPath, Mapping[str, Any] | None]"
 
-CAD_SUFFIXES = (".step", ".stp", ".iges", ".igs")
-NURBS_SUFFIXES = (".3dm", ".json", ".dat", ".smesh", *CAD_SUFFIXES)
-#: What a patch network can be saved as (:func:`nurbs_core.io.network_io.write_network`).
-NETWORK_SUFFIXES = (".json", ".3dm", ".step", ".stp", ".iges", ".igs", ".obj", ".ply", ".stl",
-                    ".glb")
-EXPORT_SUFFIXES = (".3dm", ".step", ".stp", ".iges", ".igs", ".json", ".obj", ".stl", ".ply",
-                   ".glb", ".csv", ".dat")
 
 
 def _load_json(path: StrPath) -> list[NurbsCurve | NurbsSurface]:

@@ -38,8 +38,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from nurbs_core.io.atomic import atomic_path
-from nurbs_core.io.dispatch import NETWORK_SUFFIXES
 from nurbs_core.io.errors import FileFormatError, StrPath
+from nurbs_core.io.suffixes import NETWORK_SUFFIXES
 
 if TYPE_CHECKING:
     from nurbs_core.patches.network import PatchNetwork

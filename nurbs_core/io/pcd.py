@@ -18,9 +18,10 @@ from typing import TypeAlias
 
 import numpy as np
 
-from nurbs_core.io.cloud import PointCloud, check_points, read_text_rows, split_named_columns
+from nurbs_core.io.cloud import PointCloud, check_points, split_named_columns
 from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.limits import check_claimed_size, check_decompressed_size, format_size
+from nurbs_core.io.text_points import read_text_rows
 
 _HEADER_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT",
                 "POINTS", "DATA")

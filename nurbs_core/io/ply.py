@@ -22,9 +22,10 @@ from typing import BinaryIO, TypeAlias
 
 import numpy as np
 
-from nurbs_core.io.cloud import NAMED_COLUMNS, PointCloud, check_points, read_text_rows
+from nurbs_core.io.cloud import NAMED_COLUMNS, PointCloud, check_points
 from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.limits import check_claimed_size, format_size
+from nurbs_core.io.text_points import read_text_rows
 
 _TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",

@@ -208,10 +208,10 @@ def test_console_script_entry_point(tmp_path):
 def test_progress_shows_the_last_iteration_when_the_final_snapshot_has_no_records(capsys):
     # the throttled engine may yield the last iteration in a "running" snapshot, leaving the final
     # (done) snapshot without records; the progress must still end on the last iteration
-    from nurbs_core.cli import _Progress
     from nurbs_core.fitting import FitSnapshot
+    from nurbs_core.jobs.report import Progress
 
-    progress = _Progress(60, quiet=False)
+    progress = Progress(60, quiet=False)
     progress(FitSnapshot(1, {}, [{"iteration": 1, "total": 1.0}], 0.1, False, "running"))
     progress(FitSnapshot(60, {}, [{"iteration": 60, "total": 0.5}], 0.2, False, "running"))
     progress(FitSnapshot(60, {}, [], 0.2, True, "budget"))
@@ -240,8 +240,34 @@ def test_closed_cloud_becomes_a_network_by_default_and_a_forced_patch_is_not_con
     assert report.startswith("status: fitted with warnings")
 
 
+def _config(args, dimensions):
+    """The FitConfig a parsed command line gives, through the job layer (as nurbs-fit builds
+    it)."""
+    from nurbs_core.jobs import FitJob, fit_config
+
+    return fit_config(FitJob.of(args, input=args.input[0]), dimensions)
+
+
+def test_job_defaults_are_the_command_lines():
+    """A FitJob built in Python fits as nurbs-fit with the same options does: every field's
+    default is the parser's, and every parser option that is not about a batch is a field."""
+    import dataclasses
+
+    from nurbs_core.cli import build_parser
+    from nurbs_core.jobs import FitJob
+
+    parsed = vars(build_parser().parse_args(["in.xyz", "-o", "o.json"]))
+    job = FitJob(input="in.xyz", output=["o.json"])
+    batch_only = {"output_dir", "format", "summary", "skip_existing", "jobs", "scheduler",
+                  "batch_fits"}
+    fields = {f.name for f in dataclasses.fields(FitJob)}
+    assert set(parsed) - batch_only == fields
+    for name in fields - {"input"}:
+        assert getattr(job, name) == parsed[name], name
+
+
 def test_surfacing_options_reach_the_fit(tmp_path):
-    from nurbs_core.cli import _config, build_parser
+    from nurbs_core.cli import build_parser
 
     args = build_parser().parse_args(["in.xyz", "-o", "o.json", "--stiffness", "0.02",
                                       "--tolerance", "0.5", "--parameterization", "plane",
@@ -262,7 +288,7 @@ def test_set_reaches_any_fit_config_field(tmp_path, capsys):
     """--set FIELD=VALUE edits the FitConfig the command builds: every field is reachable from
     the command line without a flag of its own; a bad field is refused before the cloud is
     read."""
-    from nurbs_core.cli import _config, build_parser
+    from nurbs_core.cli import build_parser
 
     args = build_parser().parse_args(["cloud.xyz", "-o", "out.json", "--set", "refinements=2",
                                       "--set", "lr_schedule=cosine", "--set",

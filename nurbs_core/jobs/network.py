@@ -1,0 +1,146 @@
+"""A patch network: the input read as a surface (a mesh file keeps its triangles), the network
+fit with its progress lines (Ctrl-C ends it after the pass under way and writes the network as it
+stands), its report and its files."""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from nurbs_core.jobs.report import plain, print_patch_event, print_units, units_of
+from nurbs_core.jobs.settings import FitJob
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from nurbs_core.patches.options import PatchOptions
+    from nurbs_core.patches.scan_mesh import ScanMesh
+
+
+#: A mesh file with fewer vertices than this is fitted to this many points sampled uniformly
+#: over its area (its vertices alone are too few, or unevenly spread: CAD meshes).
+FILE_MESH_SAMPLES = 10_000
+
+
+def surface_input(path: str, quiet: bool) -> tuple[np.ndarray, ScanMesh | None, str]:
+    """The points to fit a surface or network to (N, 3), the input file's own closed mesh for a
+    network's layout or None, and why a mesh file's mesh cannot serve ("" for a cloud). A mesh
+    file (STL, OBJ, PLY with faces, ...) is read once with its triangles: a file with few
+    vertices is sampled uniformly over its area, never reduced to its vertices."""
+    from nurbs_core.io import load_points
+    from nurbs_core.io.cloud import check_points
+    from nurbs_core.io.meshes import read_mesh_faces, sample_mesh_points
+    from nurbs_core.io.points import MESH_SUFFIXES, suffix_of
+
+    suffix = suffix_of(path)
+    arrays = None
+    if suffix in MESH_SUFFIXES or suffix == ".ply":
+        from nurbs_core.io.ply import has_faces
+
+        if suffix != ".ply" or has_faces(path):  # (a PLY cloud is read by the fast PLY reader)
+            arrays = read_mesh_faces(path, suffix)
+    if arrays is None:
+        return load_points(path).points, None, ""
+    from nurbs_core.patches.closed_mesh import mesh_from_faces
+
+    vertices, faces = arrays
+    mesh, why = mesh_from_faces(vertices, faces)
+    if not quiet:
+        print(f"{path}: a mesh of {len(faces)} triangles"
+              + (", closed: its own mesh lays out the patches" if mesh is not None
+                 else f" ({why})"), file=sys.stderr)
+    if len(vertices) < FILE_MESH_SAMPLES:
+        return sample_mesh_points(path, vertices, faces, FILE_MESH_SAMPLES).points, mesh, why
+    return check_points(path, vertices), mesh, why
+
+
+def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
+                points: np.ndarray | None = None, mesh: ScanMesh | None = None,
+                mesh_seconds: float = 0.0, stoppable: bool = True) -> dict[str, Any]:
+    """``--patches`` (or the automatic route's network): the network fit (``options``: its
+    PatchOptions), its report and files; returns the statistics (``points``: the cloud when it
+    is not read from ``job.input``; ``mesh``: its mesh when already built, in
+    ``mesh_seconds``, which the report's mesh time includes). ``stoppable``: the first Ctrl-C
+    ends the fit after the pass under way and writes the network as it stands (status
+    "stopped"); a second one, or one before the first pass, quits without writing."""
+    from nurbs_core.io.dispatch import save_all
+    from nurbs_core.patches.pipeline import iter_patch_fit
+
+    if points is None:
+        points, mesh, _ = surface_input(job.input, quiet=job.quiet)
+    if "torch" in sys.modules:   # the network route itself runs on numpy and scipy
+        sys.modules["torch"].set_num_threads(max(1, job.threads))
+    print(f"{job.input}: {len(points)} points; fitting a network of bicubic patches "
+          f"({options.patches} patches, stiffness {options.stiffness:g}, seam weight "
+          f"{options.seam_weight:g})", file=sys.stderr)
+    result = None
+    requested: list[bool] = []
+    passes: list[int] = []
+
+    def on_interrupt(*_: object) -> None:
+        if requested or not passes:
+            raise KeyboardInterrupt
+        requested.append(True)
+        print("nurbs-fit: stopping after this pass (Ctrl-C again to quit without writing)",
+              file=sys.stderr, flush=True)
+
+    handle = stoppable and threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, on_interrupt) if handle else None
+    try:
+        for event in iter_patch_fit(points, options, mesh=mesh, stop=lambda: bool(requested)):
+            result = event.result or result
+            if event.kind == "pass":
+                passes.append(1)
+            if not job.quiet:
+                print_patch_event(event)
+    finally:
+        if handle:
+            signal.signal(signal.SIGINT, previous)
+    assert result is not None  # iter_patch_fit always ends with the "done" event
+    result.timings["mesh"] += mesh_seconds
+    quality = result.quality
+    seam = quality.seam
+    print(f"status: {result.status}")
+    print(f"patches: {quality.patches} ({quality.size}x{quality.size} control points each, "
+          f"bicubic); {result.passes} passes in {sum(result.timings.values()):.2f} s "
+          f"({', '.join(f'{k} {v:.1f} s' for k, v in result.timings.items())})")
+    free = len(result.network.free_sides())
+    shape = ("closed (watertight)" if result.network.closed
+             else f"open: {free} patch sides on the scan's border")
+    print(f"seams: largest gap {seam.gap:.3g} ({quality.gap_relative:.2g} of the diagonal "
+          f"{quality.diagonal:.6g}); {shape}")
+    print(f"seam angle: median {seam.median:.3f}, 99th percentile {seam.p99:.3f}, max "
+          f"{seam.max:.3f} degrees; corners: regular max {seam.regular_corner_max:.3f}, "
+          f"irregular max {seam.irregular_corner_max:.3f} degrees")
+    print(f"point-to-surface distance: mean {quality.c2s_mean:.6g}, rms {quality.c2s_rms:.6g}, "
+          f"99th percentile {quality.c2s_p99:.6g}")
+    print(f"surface-to-cloud distance: mean {quality.s2c_mean:.6g}, 99th percentile "
+          f"{quality.s2c_p99:.6g}, max {quality.s2c_max:.6g}; {quality.far_fraction:.2%} of the "
+          f"area farther than {quality.far_limit:.4g} from every point")
+    print(f"flipped area: {quality.flipped_fraction:.2%}; area {quality.area:.6g}; "
+          f"enclosed volume {quality.volume:.6g}")
+    if result.mesh.filled_fraction > 0:
+        print(f"holes filled: {result.mesh.filled_fraction:.2%} of the surface lies on caps over "
+              f"the scan's openings (the widest sealed: {result.mesh.max_hole:.4g}; set with "
+              "--max-hole)")
+    for warning in result.warnings:
+        print(f"warning: {warning}")
+    units = units_of(job)
+    save_all([(result.network, path, {"units": units}) for path in outputs])
+    print_units(units, outputs)
+    for path in outputs:
+        print(f"wrote {path}")
+    return plain({"kind": "network", "fit_status": result.status, "points": len(points),
+                   "patches": quality.patches, "s2c_max": quality.s2c_max,
+                   "far_fraction": quality.far_fraction,
+                   "patch_size": quality.size, "passes": result.passes,
+                   "fit_seconds": sum(result.timings.values()), "closed": result.network.closed,
+                   "gap": seam.gap, "gap_relative": quality.gap_relative,
+                   "diagonal": quality.diagonal, "seam_median": seam.median, "seam_p99": seam.p99,
+                   "seam_max": seam.max, "mean": quality.c2s_mean, "rms": quality.c2s_rms,
+                   "p99": quality.c2s_p99, "s2c_mean": quality.s2c_mean,
+                   "flipped_fraction": quality.flipped_fraction, "area": quality.area,
+                   "volume": quality.volume, "warnings": list(result.warnings)})

@@ -1,0 +1,126 @@
+"""One input from its settings to its written files: :func:`fit_one` follows the route
+(:mod:`nurbs_core.route` decides the automatic one: a solid, a closed network, one patch or an
+open network) and falls back where a route fails (no valid solid, no layout, one patch that
+folds)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from nurbs_core.jobs.checks import check_before_work, check_network_outputs, check_no_solid_outputs
+from nurbs_core.jobs.network import run_patches, surface_input
+from nurbs_core.jobs.part import part_allowed, run_part
+from nurbs_core.jobs.settings import FitJob, is_automatic, patch_options
+from nurbs_core.jobs.single import finish_fit, prepare_fit, run_fit
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from nurbs_core.patches.options import PatchOptions
+    from nurbs_core.route import Route
+
+
+def fit_one(job: FitJob, points: np.ndarray | None = None,
+            stoppable: bool = True) -> dict[str, Any]:
+    """Fit ``job.input`` (or the given ``points``, an (N, 3) cloud read from it) as the options
+    say, print the report, write every ``job.output`` file and return the statistics as a plain
+    dict (the distances, the quality measures, the Chamfer distance, ...). Raises on a bad input
+    (FitFailed when the fit itself failed). ``stoppable``: the first Ctrl-C stops the fit and
+    writes the result so far (single runs); otherwise Ctrl-C raises KeyboardInterrupt.
+
+    The three steps, :func:`prepare_fit`, :func:`run_fit` and :func:`finish_fit`, are also run
+    apart (a batch fits many prepared inputs at once with ``fit_batch``)."""
+    if job.part and not is_automatic(job):
+        raise ValueError("--part fits a solid: it cannot be combined with --patches, "
+                         "--single-patch, --curve, --grid, --initial or --offset")
+    if job.patches is not None:
+        outputs = check_before_work(job)
+        return run_patches(job, patch_options(job), outputs, points=points,
+                           stoppable=stoppable)
+    if is_automatic(job):
+        from nurbs_core.route import choose_route, without_solid
+
+        outputs = check_before_work(job)
+        file_mesh, note = None, ""
+        if points is None:
+            points, file_mesh, note = surface_input(job.input, quiet=job.quiet)
+        options = patch_options(job, automatic=True)  # checked before the route is decided
+        route = choose_route(points, file_mesh, note, max_hole=options.max_hole,
+                             part=part_allowed(job, outputs))
+        if not job.quiet:
+            print(f"route: {route.reason} ({route.seconds:.1f} s)", file=sys.stderr)
+        if route.kind == "part":
+            from nurbs_core.brep.solid import SolidError
+
+            try:
+                return run_part(job, outputs, points, route)
+            except SolidError as error:
+                if job.part:
+                    raise
+                route = without_solid(route, error)
+                if not job.quiet:
+                    print(f"route: {route.reason}", file=sys.stderr)
+        check_no_solid_outputs(outputs, route)
+        if route.kind == "network":
+            from nurbs_core.patches.layout import LayoutError
+            from nurbs_core.route import without_layout
+
+            check_network_outputs(job, outputs)
+            try:
+                return run_patches(job, options, outputs, points=points, mesh=route.mesh,
+                                   mesh_seconds=route.seconds, stoppable=stoppable)
+            except LayoutError as error:
+                # a closed mesh no layout reproduces (handles a sparse scan invented): the
+                # cloud is fitted as an open surface instead, not refused
+                route = without_layout(route, error)
+                if not job.quiet:
+                    print(f"route: {route.reason}", file=sys.stderr)
+        return _single_patch_or_open_network(job, options, outputs, points, route, stoppable)
+    prepared = prepare_fit(job, points)
+    return finish_fit(prepared, run_fit(prepared, stoppable))
+
+
+def _single_patch_or_open_network(job: FitJob, options: PatchOptions,
+                                  outputs: list[Path], points: np.ndarray, route: Route,
+                                  stoppable: bool) -> dict[str, Any]:
+    """The automatic route of an open surface: one patch when it holds the surface cleanly,
+    else an open network (:func:`nurbs_core.route.open_network_instead`); the single patch,
+    with its warnings, when no open network can be built."""
+    from nurbs_core.patches.layout import LayoutError
+    from nurbs_core.route import open_network_instead, single_patch_problems
+    from nurbs_core.surfacing.parameterize import NotADiskError
+
+    prepared = prepare_fit(job, points)
+    result, refusal = None, None
+    try:
+        result = run_fit(prepared, stoppable)
+    except ValueError as exc:
+        if not isinstance(exc.__context__, NotADiskError):
+            raise
+        refusal = exc.__context__
+    problems = (single_patch_problems(result.status, result.statistics) if result is not None
+                else f"{refusal.topology.kind}: {str(refusal).split(':')[0]}" if refusal
+                else "")
+    network = open_network_instead(points, problems, options.max_hole) if problems else None
+    if network is not None:
+        if not job.quiet:
+            print(f"route: {network.reason} ({network.seconds:.1f} s)", file=sys.stderr)
+        check_network_outputs(job, outputs)
+        try:
+            return run_patches(job, options, outputs, points=points, mesh=network.mesh,
+                               mesh_seconds=network.seconds, stoppable=stoppable)
+        except LayoutError as error:
+            if result is None:
+                raise ValueError(f"{route.finding}; one patch cannot hold it ({problems}) and "
+                                 f"no open network could be laid out ({error}). --single-patch "
+                                 "fits one patch anyway (the report shows its folds)") from None
+            print(f"no open network could be laid out ({str(error).split(':')[0]}); keeping "
+                  "the single patch", file=sys.stderr)
+    if result is None:
+        assert refusal is not None
+        raise ValueError(f"{route.finding} and one patch cannot hold it ({problems}); no open "
+                         "mesh could be built from the scan. --single-patch fits one patch "
+                         "anyway (the report shows its folds)") from None
+    return finish_fit(prepared, result)

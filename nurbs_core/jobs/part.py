@@ -1,0 +1,79 @@
+"""A machined part as a solid (:mod:`nurbs_core.brep`): whether the route may make one, the
+solid's fit, its report (per face its type, parameters, points and deviation) and its files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from nurbs_core.jobs.report import plain, print_units, units_of
+from nurbs_core.jobs.settings import FitJob
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from nurbs_core.route import Route
+
+
+def part_allowed(job: FitJob, outputs: list[Path]) -> bool | None:
+    """``choose_route``'s ``part``: --part / --no-part, else False when an output cannot hold a
+    solid (a .json network, a .3dm) and None (decided by the scan) otherwise."""
+    from nurbs_core.io.points import suffix_of
+    from nurbs_core.io.solid_io import SOLID_SUFFIXES, check_solid_suffix
+
+    if job.part:
+        for path in outputs:
+            check_solid_suffix(path)
+        return True
+    if job.part is False or any(suffix_of(p) not in SOLID_SUFFIXES for p in outputs):
+        return False
+    return None
+
+
+def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
+             route: Route) -> dict[str, Any]:
+    """The part route: the solid with analytic faces (:func:`nurbs_core.brep.part.fit_part`),
+    its report (per face its type, parameters, points and deviation) and files. SolidError when
+    no valid solid results or, unless --part forced the route, when the solid fails a quality
+    check (the automatic route then fits the network)."""
+    import numpy as np
+
+    from nurbs_core.brep.part import fit_part
+    from nurbs_core.io.solid_io import save_solid
+
+    assert route.mesh is not None and route.segmentation is not None
+    result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation)
+    if result.problems and not job.part:
+        from nurbs_core.brep.solid import SolidError
+
+        # the automatic route promises a clean result: a solid that fails its checks gives
+        # way to the network (--part keeps it, with its warnings)
+        raise SolidError("the solid fails its checks: " + "; ".join(result.problems.values()))
+    result.timings["route"] = route.seconds - result.timings["segmentation"]
+    statistics = result.statistics()
+    noise = result.noise
+    print(f"status: {result.status}")
+    kinds = ", ".join(f"{n} {k}{'s' if n > 1 else ''}"
+                      for k, n in statistics["face_types"].items())
+    print(f"solid: {len(result.faces)} faces ({kinds}); "
+          f"{'valid' if result.valid else 'INVALID'}, "
+          f"{'closed' if result.closed else 'NOT closed'}; volume {result.volume:.6g}; "
+          f"{sum(result.timings.values()):.2f} s "
+          f"({', '.join(f'{k} {v:.1f} s' for k, v in result.timings.items())})")
+    print(f"segmentation: {result.segmentation.coverage:.1%} of the points on analytic "
+          f"surfaces; noise sigma {noise:.4g} (tolerance {result.segmentation.tolerance:.4g})")
+    d = result.distances
+    print(f"point-to-solid distance: mean {d.mean():.6g} ({d.mean() / noise:.2f} sigma), rms "
+          f"{np.sqrt((d ** 2).mean()):.6g}, 99th percentile {np.percentile(d, 99):.6g} "
+          f"({np.percentile(d, 99) / noise:.2f} sigma), max {d.max():.6g}")
+    for index, face in enumerate(result.faces):
+        print(f"face {index}: {face.description}; {face.points} points, mean "
+              f"{face.mean:.4g}, 99th percentile {face.p99:.4g}")
+    for warning in result.problems.values():
+        print(f"warning: {warning}")
+    units = units_of(job)
+    save_solid(result.solid, outputs, result.segmentation.tolerance / 3, units)
+    print_units(units, outputs)
+    for path in outputs:
+        print(f"wrote {path}")
+    return plain(statistics)

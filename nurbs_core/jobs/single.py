@@ -1,0 +1,235 @@
+"""One curve or one surface patch, in three steps: :func:`prepare_fit` (read and check the input,
+build the FitConfig, print the plan), :func:`run_fit` (the engine's fit, with progress lines;
+Ctrl-C stops it and keeps the result so far) and :func:`finish_fit` (the report, the
+``--offset`` surface, every output written all or nothing). A batch runs the middle step for many
+prepared inputs at once (``fit_batch``)."""
+
+from __future__ import annotations
+
+import signal
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from nurbs_core.jobs.checks import check_before_work, offset_path
+from nurbs_core.jobs.report import FitFailed, Progress, plain, print_units, quality_text, units_of
+from nurbs_core.jobs.settings import FitJob, fit_config
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from nurbs_core.fitting.config import FitConfig, FitResult, StopToken
+    from nurbs_core.geometry import NurbsCurve, NurbsSurface
+
+
+@dataclass
+class PreparedFit:
+    """One input ready to fit (:func:`prepare_fit`): its options, its checked outputs, the cloud
+    as read (N, 3), the ``target`` fitted (the cloud; its xy for a curve whose points share one
+    z: ``flat_z``), the FitConfig, the known parameters of ``--grid`` (N, 2) and the ``--initial``
+    start."""
+
+    job: FitJob
+    outputs: list[Path]
+    points: np.ndarray
+    target: np.ndarray
+    flat_z: bool
+    config: FitConfig
+    parameters: np.ndarray | None
+    initial: NurbsCurve | NurbsSurface | None
+
+
+def prepare_fit(job: FitJob, points: np.ndarray | None = None) -> PreparedFit:
+    """The first step of :func:`fit_one` (a curve or surface; not ``--patches``): check the
+    outputs and options, read ``job.input`` (unless ``points``, the (N, 3) cloud read from it,
+    are given), build the FitConfig, the ``--grid`` parameters and the ``--initial`` start, and
+    print the report's first line (stderr). Raises on a bad input or option."""
+    import numpy as np
+
+    from nurbs_core.io import load_points
+
+    outputs = check_before_work(job)
+    if points is None:
+        points = load_points(job.input).points
+    flat_z = bool(job.curve and len(points) and np.ptp(points[:, 2]) == 0)
+    target = points[:, :2] if flat_z else points
+    config = fit_config(job, target.shape[1])
+    parameters = None
+    if job.grid is not None:
+        if job.curve:
+            raise ValueError("--grid applies to surfaces only")
+        count_u, count_v = job.grid
+        parameters = _grid_parameters(count_u, count_v, len(points))
+    if job.offset is not None and job.curve:
+        raise ValueError("--offset applies to surfaces only")
+    _print_plan(job, config, len(points), known_parameters=parameters is not None)
+    return PreparedFit(job, outputs, points, target, flat_z, config, parameters,
+                       _initial(job, flat_z))
+
+
+def _grid_parameters(count_u: int, count_v: int, points: int) -> np.ndarray:
+    """The known (u, v) (N, 2) of ``--grid NU NV``: uniform on the unit square, u-major."""
+    import numpy as np
+
+    if count_u * count_v != points:
+        raise ValueError(f"--grid {count_u} {count_v} needs {count_u * count_v} points, the file "
+                         f"has {points}")
+    uu, vv = np.meshgrid(np.linspace(0, 1, count_u), np.linspace(0, 1, count_v), indexing="ij")
+    return np.stack([uu.ravel(), vv.ravel()], -1)
+
+
+def _print_plan(job: FitJob, config: FitConfig, count: int,
+                known_parameters: bool) -> None:
+    """The report's first line (stderr): the input, its size and how it is fitted."""
+    from nurbs_core.fitting.sheet import resolved_solver
+
+    core = (not job.curve and not known_parameters and job.initial is None
+            and resolved_solver(config) == "least_squares")
+    if known_parameters and config.solver == "least_squares":
+        how = "by exact least squares at the known parameters"
+    elif core:
+        how = (f"by fairing least squares (stiffness {config.stiffness:g}"
+               + (f", grid growing to at most {config.max_control_points} per direction"
+                  if config.max_control_points else "") + ")")
+    else:
+        how = f"with {config.optimizer}, loss {config.loss}"
+    print(f"{job.input}: {count} points; fitting a {config.kind} "
+          f"(degree {config.degree_u}" + ("" if job.curve else f"x{config.degree_v}")
+          + f", {config.control_points_u}" + ("" if job.curve else f"x{config.control_points_v}")
+          + f" control points) {how}", file=sys.stderr)
+
+
+def _initial(job: FitJob, flat_z: bool) -> NurbsCurve | NurbsSurface | None:
+    """The start of ``--initial`` (the file's first curve or surface; a 3-D curve in the plane
+    when the points are: ``flat_z``), or None."""
+    if job.initial is None:
+        return None
+    from nurbs_core.geometry import NurbsCurve
+    from nurbs_core.io import load
+
+    shapes = load(job.initial)
+    if not shapes:
+        raise ValueError(f"{job.initial} holds no curve or surface")
+    initial = shapes[0]
+    if flat_z and isinstance(initial, NurbsCurve) and initial.dimension == 3:
+        initial = NurbsCurve(initial.control_points[:, :2], initial.degree, initial.knots,
+                             initial.weights)
+    return initial
+
+
+def _interrupt_handler(stop: StopToken) -> Callable[..., None]:
+    """SIGINT during the fit: the first stops it (the result so far is still written), the
+    second aborts (KeyboardInterrupt: status 130, the outputs untouched)."""
+    def handler(*_: object) -> None:
+        if stop.stopped:
+            raise KeyboardInterrupt
+        stop.stop()
+        print("nurbs-fit: stopping after this iteration (Ctrl-C again to quit without writing)",
+              file=sys.stderr, flush=True)
+    return handler
+
+
+def run_fit(prepared: PreparedFit, stoppable: bool = True) -> FitResult:
+    """The second step of :func:`fit_one`: the fit, with progress lines on stderr (unless
+    ``--quiet``). ``stoppable``: the first Ctrl-C stops the fit (its result so far is returned),
+    a second raises KeyboardInterrupt; otherwise Ctrl-C raises at once."""
+    from nurbs_core.fitting import StopToken, fit
+
+    stop = StopToken()
+    if stoppable:
+        previous = signal.signal(signal.SIGINT, _interrupt_handler(stop))
+    try:
+        return fit(prepared.target, prepared.config, stop=stop, parameters=prepared.parameters,
+                   initial=prepared.initial,
+                   on_snapshot=Progress(prepared.config.iterations, prepared.job.quiet))
+    finally:
+        if stoppable:
+            signal.signal(signal.SIGINT, previous)
+
+
+def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
+    """The last step of :func:`fit_one`: the rest of the report (status, distances, Chamfer,
+    quality), the ``--offset`` surface, every output written (all or nothing, each atomically)
+    and the statistics as a plain dict. Raises FitFailed when the fit failed."""
+    import numpy as np
+    import torch
+
+    from nurbs_core.failures import one_line
+    from nurbs_core.io.dispatch import save_all
+
+    if result.status == "failed":
+        raise FitFailed(f"the fit failed: {one_line(str(result.message))}")
+    job, config, target = prepared.job, prepared.config, prepared.target
+    geometry = result.geometry.to(dtype=torch.float64)
+    diagonal = float(np.linalg.norm(np.ptp(target, axis=0)))
+    chamfer = _chamfer(geometry, target, np.random.default_rng(job.seed))
+    stats = result.statistics
+    from nurbs_core.quality import quality_warnings
+    from nurbs_core.status import reported_status
+
+    status = reported_status(result.status, quality_warnings(stats))
+    print(f"status: {status} after {result.iterations} iterations in "
+          f"{result.elapsed:.2f} s" + (f" ({result.message})" if result.message else ""))
+    print(f"point-to-{config.kind} distance: mean {stats['mean']:.6g}, rms {stats['rms']:.6g}, "
+          f"max {stats['max']:.6g}  (bounding-box diagonal {diagonal:.6g})")
+    if "paired_mean" in stats:
+        print(f"at the known parameters: mean {stats['paired_mean']:.6g}, "
+              f"rms {stats['paired_rms']:.6g}, max {stats['paired_max']:.6g}")
+    print(f"chamfer distance: {chamfer:.6g} ({chamfer / diagonal:.3%} of the diagonal)")
+    if "flipped_fraction" in stats:
+        print(quality_text(stats, diagonal))
+    if prepared.flat_z:
+        geometry = _lift(geometry, float(prepared.points[0, 2]))
+    offset = None
+    if job.offset is not None:
+        from nurbs_core.offset import offset_surface
+
+        offset = offset_surface(geometry, job.offset)
+    units = units_of(job)
+    jobs: list[tuple[NurbsCurve | NurbsSurface, Path, dict[str, Any]]] = [
+        (geometry, path, {"units": units}) for path in prepared.outputs]
+    if offset is not None:
+        jobs += [(offset, offset_path(path), {"units": units}) for path in prepared.outputs]
+    save_all(jobs)  # all or nothing: no output is replaced unless every one was written
+    print_units(units, [path for _, path, _ in jobs])
+    for _, path, _ in jobs:
+        print(f"wrote {path}")
+    counts = [int(n) for n in np.shape(geometry.control_points)[:-1]]
+    return plain({**stats, "kind": config.kind, "points": len(prepared.points),
+                   "fit_status": status, "iterations": result.iterations,
+                   "fit_seconds": result.elapsed, "fit_message": one_line(result.message or ""),
+                   "diagonal": diagonal, "chamfer": chamfer, "control_points": counts})
+
+
+def _chamfer(geometry: NurbsCurve | NurbsSurface, points: np.ndarray,
+             gen: np.random.Generator) -> float:
+    """Two-sided Chamfer between dense samples of the result and (up to 200k of) the points."""
+    import torch
+
+    from nurbs_core.geometry import NurbsCurve
+    from nurbs_core.losses import chamfer_distance
+
+    with torch.no_grad():
+        if isinstance(geometry, NurbsCurve):
+            samples = geometry.sample(2000)
+        else:
+            (u0, u1), (v0, v1) = geometry.domain
+            grid = geometry.evaluate_grid(torch.linspace(u0, u1, 200, dtype=geometry.dtype),
+                                          torch.linspace(v0, v1, 200, dtype=geometry.dtype))
+            samples = grid.reshape(-1, 3)
+    if len(points) > 200_000:
+        points = points[gen.choice(len(points), 200_000, replace=False)]
+    return float(chamfer_distance(samples.double(), torch.as_tensor(points)))
+
+
+def _lift(curve: NurbsCurve, z: float) -> NurbsCurve:
+    """A 2-D NurbsCurve fitted in the xy-plane back in 3-D at height z (for the file writers)."""
+    import torch
+
+    from nurbs_core.geometry import NurbsCurve
+
+    control = curve.control_points
+    lifted = torch.cat([control, torch.full_like(control[:, :1], z)], dim=-1)
+    return NurbsCurve(lifted, curve.degree, curve.knots, curve.weights)
