@@ -87,7 +87,8 @@ def _single_patch_or_open_network(job: FitJob, options: PatchOptions,
                                   stoppable: bool) -> dict[str, Any]:
     """The automatic route of an open surface: one patch when it holds the surface cleanly,
     else an open network (:func:`nurbs_core.route.open_network_instead`); the single patch,
-    with its warnings, when no open network can be built."""
+    with its warnings, when no open network can be built (forced over the cloud when it was
+    refused: no input that holds a surface is refused)."""
     from nurbs_core.patches.layout import LayoutError
     from nurbs_core.route import open_network_instead, single_patch_problems
     from nurbs_core.surfacing.parameterize import NotADiskError
@@ -112,15 +113,15 @@ def _single_patch_or_open_network(job: FitJob, options: PatchOptions,
             return run_patches(job, options, outputs, points=points, mesh=network.mesh,
                                mesh_seconds=network.seconds, stoppable=stoppable)
         except LayoutError as error:
-            if result is None:
-                raise ValueError(f"{route.finding}; one patch cannot hold it ({problems}) and "
-                                 f"no open network could be laid out ({error}). --single-patch "
-                                 "fits one patch anyway (the report shows its folds)") from None
-            print(f"no open network could be laid out ({str(error).split(':')[0]}); keeping "
-                  "the single patch", file=sys.stderr)
+            print(f"no open network could be laid out ({str(error).split(':')[0]})"
+                  + ("; keeping the single patch" if result is not None else ""),
+                  file=sys.stderr)
     if result is None:
-        assert refusal is not None
-        raise ValueError(f"{route.finding} and one patch cannot hold it ({problems}); no open "
-                         "mesh could be built from the scan. --single-patch fits one patch "
-                         "anyway (the report shows its folds)") from None
+        # the last resort, never a dead end: one patch forced over the cloud, its folds and
+        # gaps in the report and its status "fitted with warnings"
+        print(f"route: {route.finding}; one patch cannot hold it cleanly ({problems}) and no "
+              "network could be built: fitting one patch anyway (see the report's warnings)",
+              file=sys.stderr)
+        prepared = prepare_fit(job.replace(single_patch=True), points)
+        result = run_fit(prepared, stoppable)
     return finish_fit(prepared, result)

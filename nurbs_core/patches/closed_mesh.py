@@ -94,9 +94,12 @@ def _grid(points: np.ndarray, margin: float = 0.0,
 
 #: A cloud of which more than TWO_SIDED of the points see another side of the object across
 #: them (a thin part) is wrapped again on a grid of THIN_CELLS_PER_DIAGONAL cells when the
-#: default grid's balls fill its inside.
+#: default grid's balls fill its inside; a closed object whose zero set passes a thin part by
+#: (a fin thinner than two cells) on the grids of FIN_CELLS_PER_DIAGONAL cells, coarsest first
+#: (the layout is faster on fewer triangles).
 TWO_SIDED = 0.5
-THIN_CELLS_PER_DIAGONAL = 128
+THIN_CELLS_PER_DIAGONAL = (128,)
+FIN_CELLS_PER_DIAGONAL = (96, 128)
 #: Points whose other side is sought (a random subset), and how far (cells of the default grid).
 TWO_SIDED_SAMPLE = 2000
 TWO_SIDED_REACH = 3.0
@@ -146,15 +149,23 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
     grid = _grid(points)
     wrapped = wrap(points, grid, tree, frames=frames)
     if wrapped.encloses:
-        return _zero_set(points, normals, wrapped, tree, 0.0)
+        try:
+            return _zero_set(points, normals, wrapped, tree, 0.0)
+        except NotClosedError:
+            # a thin part (a fin) thinner than two cells: the zero set passes it by and misses
+            # its points; finer grids may resolve it
+            thin = _on_finer_grids(points, normals, tree, frames, grid.cell,
+                                   FIN_CELLS_PER_DIAGONAL)
+            if thin is None:
+                raise
+            return thin
     if _two_sided_share(points, frames, tree, grid.cell) > TWO_SIDED:
         # a thin part (a plate, a fin) whose two sides lie closer than the balls of this grid:
         # a finer grid keeps an inside between them
-        finer = _grid(points, cells=THIN_CELLS_PER_DIAGONAL)
-        if finer.cell < 0.8 * grid.cell:
-            thin = wrap(points, finer, tree, frames=frames)
-            if thin.encloses:
-                return _zero_set(points, normals, thin, tree, 0.0)
+        thin = _on_finer_grids(points, normals, tree, frames, grid.cell,
+                               THIN_CELLS_PER_DIAGONAL)
+        if thin is not None:
+            return thin
     if max_hole > 0:
         grid = _grid(points, max_hole)
         sealed = wrap(points, grid, tree, hole_radius=0.5 * max_hole, frames=frames)
@@ -166,6 +177,26 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
                          f"openings are wider than {max_hole:.4g}, the largest hole filled); a "
                          "patch network needs a closed object, and an open sheet is fitted as "
                          "one patch (the single-patch fit)")
+
+
+def _on_finer_grids(points: np.ndarray, normals: np.ndarray | None, tree: cKDTree,
+                    frames: LocalFrames, cell: float,
+                    cells_per_diagonal: tuple[int, ...]) -> ScanMesh | None:
+    """The closed mesh of a cloud with a thin part on the first of the grids of
+    ``cells_per_diagonal`` cells (each finer than ``cell``, the last grid's) whose wrap encloses
+    and whose zero set holds, or None."""
+    for cells in cells_per_diagonal:
+        finer = _grid(points, cells=cells)
+        if finer.cell >= 0.8 * cell:
+            continue  # no finer than the last (the cloud's spacing bounds the cells)
+        cell = finer.cell
+        thin = wrap(points, finer, tree, frames=frames)
+        if thin.encloses:
+            try:
+                return _zero_set(points, normals, thin, tree, 0.0)
+            except NotClosedError:
+                continue
+    return None
 
 
 def tangent_plane_distance(query: np.ndarray, points: np.ndarray, normals: np.ndarray,
