@@ -27,7 +27,8 @@ def parse_arguments(argv: list[str] | None = None) -> argparse.Namespace:
         prog="nurbs-studio",
         description="Fit NURBS curves and surfaces to point clouds, live.")
     parser.add_argument("files", nargs="*", metavar="FILE",
-                        help="point clouds or NURBS files to open (default: the built-in demo)")
+                        help="point clouds or NURBS files to open, or one session (.nstudio) "
+                             "(default: the built-in demo)")
     parser.add_argument("--fit", action="store_true", help="start fitting once the files are open")
     parser.add_argument("--iterations", type=int, default=None, metavar="N",
                         help="iteration budget of the fit (default: the settings' 500)")

@@ -9,6 +9,7 @@ paused run restarts paused); when idle it applies to the next Start. Reset drops
 from __future__ import annotations
 
 import logging
+import math
 
 from PySide6.QtCore import QObject, QThread, QTimer, Signal, Slot
 
@@ -132,6 +133,46 @@ class PatchController(QObject):
         self._document.set_network(None)
         self._set_state("idle")
 
+    def network_report(self) -> dict | None:
+        """What a session keeps of the fit that made the network shown: its quality, warnings,
+        pass count, time, how it ended and the per-point ``deviation`` (N,); None when the
+        network shown is not a finished fit's."""
+        shown = self.latest_shown
+        if (shown is None or not shown.done or shown.network is None
+                or shown.network is not self._document.network):
+            return None
+        return {"event": shown.event, "quality": _json_ready(shown.quality),
+                "warnings": list(shown.warnings), "passes": shown.pass_index + 1,
+                "elapsed": shown.elapsed, "deviation": shown.deviation}
+
+    def show_saved(self, network, report: dict | None) -> None:
+        """Show a network read from a session as a finished fit: the viewport, the Patch
+        quality dock (its stored report, checked: a malformed one is left out) and the
+        deviation map (when it has one value per point), through the signals a run ends with."""
+        from app.workers.network_display import network_display
+
+        report = report or {}
+        self.reset()
+        quality = _quality_of(report.get("quality"))
+        warnings = [w for w in report.get("warnings", []) if isinstance(w, str)] \
+            if isinstance(report.get("warnings"), list) else []
+        deviation = report.get("deviation")
+        points = self._document.target_points()
+        if deviation is not None and (points is None or len(deviation) != len(points)):
+            deviation = None
+        passes, elapsed = report.get("passes", 0), report.get("elapsed", 0.0)
+        snapshot = PatchSnapshot(
+            run_id=self._run_id, event="stopped" if report.get("event") == "stopped" else "done",
+            display=network_display(network), stage="final", network=network,
+            pass_index=(passes if isinstance(passes, int) else 0) - 1, size=network.size,
+            patch_count=network.patch_count,
+            elapsed=float(elapsed) if isinstance(elapsed, (int, float)) else 0.0,
+            quality=quality, warnings=warnings, done=True, deviation=deviation)
+        self.latest_shown = snapshot
+        self._document.set_network(network)
+        self.snapshot_shown.emit(snapshot)
+        self.fit_finished.emit(snapshot)
+
     def schedule_restart(self):
         if self._state in ("running", "paused", "stopping") and not self._is_shut_down:
             self._restart_timer.start()
@@ -219,3 +260,35 @@ class PatchController(QObject):
         if state != self._state:
             self._state = state
             self.state_changed.emit(state)
+
+
+def _json_ready(value):
+    """``value`` with every NaN as None (JSON has no NaN), recursively."""
+    if isinstance(value, dict):
+        return {key: _json_ready(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_ready(item) for item in value]
+    if isinstance(value, float) and math.isnan(value):
+        return None
+    return value
+
+
+def _quality_of(value) -> dict | None:
+    """A stored network quality (NetworkQuality.as_dict(), NaN stored as None) as the dock
+    shows it, or None when it is not a mapping of numbers (and of such mappings)."""
+    if not isinstance(value, dict):
+        return None
+    out: dict = {}
+    for key, item in value.items():
+        if isinstance(item, dict):
+            inner = _quality_of(item)
+            if inner is None:
+                return None
+            out[key] = inner
+        elif item is None:
+            out[key] = math.nan
+        elif isinstance(item, (bool, int, float)):
+            out[key] = item
+        else:
+            return None
+    return out

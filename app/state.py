@@ -10,10 +10,8 @@ converted once, on the way in.
 from __future__ import annotations
 
 import dataclasses
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -28,8 +26,9 @@ from nurbs_core.fitting.config import SOLVERS as _SOLVERS
 from nurbs_core.geometry_arrays import GeometryArrays, from_mapping
 from nurbs_core.patches.options import PatchOptions
 
-SESSION_FORMAT = "nurbs-studio-session-v2"
-#: sessions of the first format (flat settings) are still read
+#: Sessions are zip archives (:mod:`app.session_file`); the JSON sessions written before them
+#: are still read: this format (nested settings) and the first one (flat settings).
+JSON_SESSION_FORMAT = "nurbs-studio-session-v2"
 OLD_SESSION_FORMATS = ("nurbs-studio-session-v1",)
 
 #: The choices the panels offer, in display order: the engine's own lists (FitConfig validates
@@ -174,26 +173,6 @@ class _SettingsCommand(QUndoCommand):
         self._document._apply_settings(self._old)
 
 
-def _session_target(number: int, item: Any) -> Target:
-    """A session's point cloud, checked like a cloud file (an (N, 3) array of finite numbers;
-    never regrouped from another shape); ValueError naming it."""
-    if not isinstance(item, dict) or not isinstance(item.get("name"), str):
-        raise ValueError(f"targets[{number}] needs a name")
-    points = np.asarray(item["points"], dtype=np.float64)
-    if points.size == 0:
-        points = points.reshape(0, 3)
-    where = f"targets[{number}] ({item['name']})"
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"{where}: expected (N, 3) coordinates, got an array of shape "
-                         f"{points.shape}")
-    finite = np.isfinite(points).all(axis=1)
-    if not finite.all():
-        raise ValueError(f"{where}: {int((~finite).sum())} point(s) have NaN or infinite "
-                         f"coordinates; the first is point {int(np.argmin(finite))}")
-    return Target(item["name"], points, str(item.get("path", "")),
-                  bool(item.get("visible", True)))
-
-
 class Document(QObject):
     """What the window shows and saves. Signals fire in the GUI thread only."""
 
@@ -273,68 +252,13 @@ class Document(QObject):
         items = [self.fitted] if self.fitted is not None else []
         return items + list(self.patches) + list(self.offsets.surfaces)
 
-    # --- sessions --------------------------------------------------------------------------------
-    def to_session(self) -> dict[str, Any]:
-        return {
-            "format": SESSION_FORMAT,
-            "settings": self.settings.to_json(),
-            "targets": [{"name": t.name, "path": t.path, "visible": t.visible,
-                         "points": t.points.tolist()} for t in self.targets],
-            "patches": [{"name": name, "geometry": g.to_json()}
-                        for name, g in zip(self.patch_names, self.patches, strict=True)],
-            "fitted": None if self.fitted is None else self.fitted.to_json(),
-        }
-
-    def save_session(self, path: str | Path):
-        """Write the session atomically: ``path`` is replaced only by a complete file (a failed
-        write raises and leaves an existing file as it was)."""
-        from nurbs_core.io.atomic import atomic_write
-
-        text = json.dumps(self.to_session())  # before touching the disk: a failure writes nothing
-        with atomic_write(path, "w") as handle:
-            handle.write(text)
-
-    def load_session(self, path: str | Path):
-        """Read a session file and apply it; raises ValueError naming the problem (document
-        untouched)."""
-        self.apply_session(self.read_session(path))
-
-    @staticmethod
-    def read_session(path: str | Path) -> dict[str, Any]:
-        """Parse and check a session file without touching any document; raises ValueError."""
-        path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{path}: not a readable session file ({exc})") from None
-        if not isinstance(data, dict) or data.get("format") not in (SESSION_FORMAT,
-                                                                     *OLD_SESSION_FORMATS):
-            raise ValueError(f"{path}: not a NURBS Studio session (expected format "
-                             f"{SESSION_FORMAT!r})")
-        try:
-            if data["format"] == SESSION_FORMAT:
-                settings = Settings.from_json(data.get("settings", {}))
-            else:
-                settings = Settings.from_flat_json(data.get("settings", {}))
-            settings.fit.validate()
-            settings.patches.validate()
-            targets = []
-            for number, item in enumerate(data.get("targets", [])):
-                targets.append(_session_target(number, item))
-            patches = [from_mapping(p["geometry"]) for p in data.get("patches", [])]
-            names = [p["name"] for p in data.get("patches", [])]
-            if not all(isinstance(name, str) for name in names):
-                raise ValueError("patch names must be text")
-            fitted = data.get("fitted")
-            fitted = None if fitted is None else from_mapping(fitted)
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"{path}: damaged session ({exc})") from None
-        return {"settings": settings, "targets": targets, "patches": patches, "names": names,
-                "fitted": fitted}
-
+    # --- sessions (the file format: app.session_file) -------------------------------------
     def apply_session(self, session: dict[str, Any]):
-        """Replace the document with a session from :meth:`read_session`."""
+        """Replace the document with a session read by :func:`app.session_file.read_session`
+        (its network is shown by the window's patch controller, which hands it to
+        :meth:`set_network`)."""
         self.replace_content(session["targets"], session["patches"], session["names"])
         self.undo_stack.clear()
         self._apply_settings(session["settings"])
         self.set_fitted(session["fitted"])
+

@@ -1,9 +1,11 @@
 """The session policy: saving the document to a session file and opening one.
 
-It decides: a session is written atomically (a failed save leaves an existing file as it was
-and says so); a session file is read and checked before anything changes, so a bad file leaves
-the document and a running fit untouched; opening one resets both fits and the loss plot before
-the document takes the session. The file format is :class:`app.state.Document`'s.
+It decides: a session keeps everything shown (the clouds, the fitted surface, loaded patches,
+the patch network with its quality report and deviation map, the settings); it is written
+atomically (a failed save leaves an existing file as it was and says so); a session file is
+read and checked before anything changes, so a bad file leaves the document and a running fit
+untouched; opening one resets both fits and the loss plot before the document takes the session,
+and shows its network as a finished fit. The file format is :mod:`app.session_file`'s.
 """
 
 from __future__ import annotations
@@ -15,11 +17,13 @@ from PySide6.QtCore import QObject
 from PySide6.QtWidgets import QFileDialog
 
 from app.errors import describe
+from app.session_file import SESSION_SUFFIX, read_session, save_session
 
 if TYPE_CHECKING:
     from app.main_window import MainWindow
 
-SESSION_FILTER = "NURBS Studio session (*.json)"
+SESSION_FILTER = "NURBS Studio session (*.nstudio)"
+OPEN_FILTER = "NURBS Studio sessions (*.nstudio *.json)"
 
 
 class SessionPolicy(QObject):
@@ -33,11 +37,13 @@ class SessionPolicy(QObject):
         path, _ = QFileDialog.getSaveFileName(self._window, "Save session",
                                               self._window.recent.last_directory(), SESSION_FILTER)
         if path:
+            if not Path(path).suffix:
+                path += SESSION_SUFFIX
             self._window.save_session(path)
 
     def open_dialog(self) -> None:
         path, _ = QFileDialog.getOpenFileName(self._window, "Open session",
-                                              self._window.recent.last_directory(), SESSION_FILTER)
+                                              self._window.recent.last_directory(), OPEN_FILTER)
         if path:
             self._window.open_session(path)
 
@@ -46,7 +52,7 @@ class SessionPolicy(QObject):
         ``path`` is left byte for byte as it was."""
         window = self._window
         try:
-            window.document.save_session(path)
+            save_session(window.document, path, window.patch_controller.network_report())
         except Exception as exc:  # noqa: BLE001 - told to the user (a bug also logs its trace)
             kept = "; the existing file was left as it was" if Path(path).exists() else ""
             window.report(f"Cannot save the session to {path}: {describe(exc)}{kept}",
@@ -54,10 +60,7 @@ class SessionPolicy(QObject):
             return False
         message = f"Session saved to {path}"
         if window.document.network is not None:
-            # said, not silent: sessions hold single surfaces only so far (issue 28)
-            message += (f"; the patch network ({window.document.network.patch_count} patches) "
-                        "is not kept in sessions yet: export it (File > Export, .json keeps it "
-                        "whole) to keep it")
+            message += f" (with the patch network: {window.document.network.patch_count} patches)"
         window.report(message)
         return True
 
@@ -66,7 +69,7 @@ class SessionPolicy(QObject):
         nothing."""
         window = self._window
         try:  # read and check first: a bad file must not stop or discard the current fit
-            session = window.document.read_session(path)
+            session = read_session(path)
         except Exception as exc:  # noqa: BLE001 - told to the user (a bug also logs its trace)
             window.report(f"{describe(exc)}\nThe document was left unchanged.", error=True,
                           exc=exc)
@@ -75,5 +78,7 @@ class SessionPolicy(QObject):
         window.reset_patch_network()
         window.loss_plot.clear()
         window.document.apply_session(session)
+        if session["network"] is not None:
+            window.patch_controller.show_saved(session["network"], session["network_report"])
         window.report(f"Session opened from {path}")
         return True

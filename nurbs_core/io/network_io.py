@@ -247,6 +247,12 @@ def _check_derived(path: StrPath, document: dict[str, Any], network: PatchNetwor
             raise FileFormatError(path, f"{where}degree_u/degree_v must be {network.degree}")
 
 
+def network_from_document(where: StrPath, document: object) -> PatchNetwork:
+    """The network of a parsed network JSON ``document`` (as :func:`network_document` makes
+    it), checked as a file is; ``where`` names it in a FileFormatError."""
+    return _network_from(where, document)
+
+
 def read_network_with_metadata(path: StrPath) -> tuple[PatchNetwork, dict[str, Any]]:
     """(network, the document's metadata dict) of a network written as ``.json`` by
     :func:`write_network`, exactly (float64 bits); ``network.info`` is the stored info.

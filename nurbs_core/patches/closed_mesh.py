@@ -148,29 +148,42 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
     frames = local_frames(points, NORMAL_NEIGHBOURS, tree)  # shared by both wraps below
     grid = _grid(points)
     wrapped = wrap(points, grid, tree, frames=frames)
+    missed = None
     if wrapped.encloses:
         try:
             return _zero_set(points, normals, wrapped, tree, 0.0)
-        except NotClosedError:
-            # a thin part (a fin) thinner than two cells: the zero set passes it by and misses
-            # its points; finer grids may resolve it
-            thin = _on_finer_grids(points, normals, tree, frames, grid.cell,
-                                   FIN_CELLS_PER_DIAGONAL)
-            if thin is None:
-                raise
-            return thin
-    if _two_sided_share(points, frames, tree, grid.cell) > TWO_SIDED:
+        except NotClosedError as error:
+            # what the wrap enclosed misses points: a pocket (holes let the outside into the
+            # object: sealed below) or a thin fin the zero set passed by (finer grids below)
+            missed = error
+    elif _two_sided_share(points, frames, tree, grid.cell) > TWO_SIDED:
         # a thin part (a plate, a fin) whose two sides lie closer than the balls of this grid:
         # a finer grid keeps an inside between them
         thin = _on_finer_grids(points, normals, tree, frames, grid.cell,
                                THIN_CELLS_PER_DIAGONAL)
         if thin is not None:
             return thin
+    sealed_mesh = None
     if max_hole > 0:
         grid = _grid(points, max_hole)
         sealed = wrap(points, grid, tree, hole_radius=0.5 * max_hole, frames=frames)
         if sealed.encloses:
-            return _zero_set(points, normals, sealed, tree, max_hole)
+            try:
+                sealed_mesh = _zero_set(points, normals, sealed, tree, max_hole)
+            except NotClosedError:
+                if missed is None:
+                    raise
+            if missed is None and sealed_mesh is not None:
+                return sealed_mesh
+    if missed is not None:
+        # holes or a fin: the sealed mesh and the one on finer grids, whichever follows the
+        # points better (a sealed fin loses its tip; finer grids punch handles through holes)
+        thin = _on_finer_grids(points, normals, tree, frames, _grid(points).cell,
+                               FIN_CELLS_PER_DIAGONAL)
+        candidates = [mesh for mesh in (sealed_mesh, thin) if mesh is not None]
+        if not candidates:
+            raise missed
+        return min(candidates, key=lambda mesh: _closeness(mesh, points))
     # every free region reaches the border: nothing is enclosed (an open sheet or shell, or a
     # closed one with openings wider than max_hole)
     raise NotClosedError("the cloud does not enclose a volume: it is an open surface (or its "
@@ -197,6 +210,17 @@ def _on_finer_grids(points: np.ndarray, normals: np.ndarray | None, tree: cKDTre
             except NotClosedError:
                 continue
     return None
+
+
+def _closeness(mesh: ScanMesh, points: np.ndarray) -> tuple[int, float]:
+    """How a candidate closed mesh of the cloud ranks (smaller is better): first its handles
+    (a larger Euler characteristic: finer grids punch handles through a scan's holes), then the
+    99.5th percentile of the points' distances to its vertices (a sealed fin loses its tip)."""
+    faces = mesh.faces
+    edges = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]],
+                                              faces[:, [2, 0]]]), axis=1), axis=0)
+    euler = len(mesh.vertices) - len(edges) + len(faces)
+    return -euler, float(np.percentile(cKDTree(mesh.vertices).query(points)[0], 99.5))
 
 
 def tangent_plane_distance(query: np.ndarray, points: np.ndarray, normals: np.ndarray,

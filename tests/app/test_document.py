@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 from app_helpers import QUICK, open_by_drop
@@ -24,10 +22,13 @@ def test_session_round_trip(qtbot, window, ply_cloud, tmp_path):
     _fit_briefly(qtbot, window)
     fitted = window.document.fitted
     points = window.document.targets[0].points.copy()
-    session = tmp_path / "work.json"
+    session = tmp_path / "work.nstudio"
     assert window.save_session(str(session))
-    data = json.loads(session.read_text())
-    assert data["settings"]["fit"]["optimizer"] == "sgd"
+    from app.session_file import MANIFEST, SessionArchive
+
+    with SessionArchive(session) as archive:  # one archive: JSON plus the points as .npy
+        assert archive.document(MANIFEST)["settings"]["fit"]["optimizer"] == "sgd"
+        np.testing.assert_array_equal(archive.array("targets/0"), points)
 
     window.reset_fit()
     window.document.edit_settings("Optimizer", optimizer="adam")
@@ -195,8 +196,10 @@ def test_export_menu_says_how_to_install_the_cad_extra(qtbot, tmp_path, monkeypa
         window.close()
 
 
-def test_saving_a_session_says_the_patch_network_is_not_kept(qtbot, window, tmp_path, caplog):
-    # a saved session silently dropped the network; until sessions hold networks, it says so
+def test_a_session_keeps_the_patch_network_and_shows_it_again(qtbot, window, tmp_path,
+                                                              caplog):
+    # a saved session silently dropped the network (issue 28): now it is stored whole and shown
+    # again as a finished fit, with its report in the Patch quality dock
     import logging
 
     from nurbs_core.patches.network import build_network
@@ -204,12 +207,16 @@ def test_saving_a_session_says_the_patch_network_is_not_kept(qtbot, window, tmp_
     corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
     quads = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4],
                       [1, 5, 7, 3]])
-    window.document.set_network(build_network(corners, quads, size=4, degree=3))
+    network = build_network(corners, quads, size=4, degree=3)
+    window.document.set_network(network)
     with caplog.at_level(logging.INFO):
-        assert window.save_session(str(tmp_path / "work.json"))
-    assert "the patch network (6 patches) is not kept in sessions yet" in caplog.text
-    window.document.set_network(None)
-    caplog.clear()
-    with caplog.at_level(logging.INFO):
-        assert window.save_session(str(tmp_path / "plain.json"))
-    assert "Session saved" in caplog.text and "patch network" not in caplog.text
+        assert window.save_session(str(tmp_path / "work.nstudio"))
+    assert "with the patch network: 6 patches" in caplog.text
+    window.reset_patch_network()
+    assert window.document.network is None
+    assert window.open_session(str(tmp_path / "work.nstudio"))
+    opened = window.document.network
+    assert opened is not None and opened.patch_count == 6 and opened.closed
+    np.testing.assert_array_equal(opened.control_points, network.control_points)
+    assert window.patch_controller.latest_shown.network is opened  # shown as a finished fit
+    assert window.tree.shows_network

@@ -97,10 +97,13 @@ def test_surfacing_controls_edit_settings_undoably_and_reach_the_fit_config(qtbo
             config.single_patch, config.tolerance) == ("least_squares", "plane", 24, True, 0.05)
 
     # sessions keep them; undoing every edit brings the defaults back, widgets included
-    session = tmp_path / "surfacing.json"
+    session = tmp_path / "surfacing.nstudio"
     assert window.save_session(str(session))
     saved = window.document.settings
-    assert json.loads(session.read_text())["settings"]["fit"]["tolerance"] == 0.05
+    from app.session_file import MANIFEST, SessionArchive
+
+    with SessionArchive(session) as archive:
+        assert archive.document(MANIFEST)["settings"]["fit"]["tolerance"] == 0.05
     while window.document.undo_stack.canUndo():
         window.document.undo_stack.undo()
     assert window.document.settings == Settings()
@@ -174,9 +177,9 @@ def _saddle_sheet(x_path: np.ndarray) -> dict:
 
 
 def _session_with_fit(path, points, fitted):
-    from app.state import SESSION_FORMAT, Settings
+    from app.state import JSON_SESSION_FORMAT, Settings
 
-    data = {"format": SESSION_FORMAT, "settings": Settings().to_json(), "patches": [],
+    data = {"format": JSON_SESSION_FORMAT, "settings": Settings().to_json(), "patches": [],
             "targets": [{"name": "saddle", "path": "", "visible": True,
                          "points": points.tolist()}],
             "fitted": {k: v.tolist() if isinstance(v, np.ndarray) else v

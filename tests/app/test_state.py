@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from app.session_file import load_session, save_session
 from app.state import Document, Settings, with_changes
 
 
@@ -89,7 +90,7 @@ def test_first_format_sessions_are_still_read(tmp_path):
     path.write_text(json.dumps({"format": "nurbs-studio-session-v1", "settings": flat,
                                 "targets": [], "patches": [], "fitted": None}))
     document = Document()
-    document.load_session(path)
+    load_session(document, path)
     fit, patches = document.settings.fit, document.settings.patches
     assert (fit.degree_u, fit.control_points_u, str(fit.loss), fit.optimizer, fit.tolerance,
             fit.parameterization, fit.free_weights) == (2, 5, "chamfer+0.1*laplacian", "sgd",
@@ -101,7 +102,7 @@ def test_first_format_sessions_are_still_read(tmp_path):
     bad = dict(flat, knots_u=[0, 1, 0.5])  # a damaged session is refused, the document kept
     path.write_text(json.dumps({"format": "nurbs-studio-session-v1", "settings": bad}))
     with pytest.raises(ValueError, match="damaged session.*knots_u"):
-        document.load_session(path)
+        load_session(document, path)
     assert document.settings.fit == fit
 
 
@@ -236,10 +237,10 @@ def test_geometry_enters_the_document_as_the_engines_numpy_twin(tmp_path):
     assert isinstance(fitted, SurfaceArrays) and fitted.weights.shape == (2, 2)
     document.set_fitted(fitted)
     assert document.fitted is fitted  # a twin is kept as it is
-    path = tmp_path / "session.json"
-    document.save_session(path)
+    path = tmp_path / "session.nstudio"
+    save_session(document, path)
     other = Document()
-    other.load_session(path)
+    load_session(other, path)
     assert isinstance(other.fitted, SurfaceArrays)
     np.testing.assert_array_equal(other.fitted.control_points, fitted.control_points)
 
@@ -267,12 +268,12 @@ def test_geometry_enters_the_document_as_the_engines_numpy_twin(tmp_path):
                                              "knots": [0, 1, 0, 1]}}]}, "non-decreasing"),
 ])
 def test_damaged_sessions_are_refused_before_the_document_changes(tmp_path, change, message):
-    from app.state import SESSION_FORMAT
+    from app.state import JSON_SESSION_FORMAT
 
     path = tmp_path / "damaged.json"
-    path.write_text(json.dumps({"format": SESSION_FORMAT, **change}))
+    path.write_text(json.dumps({"format": JSON_SESSION_FORMAT, **change}))
     document = Document()
     before = (document.targets, document.patches, document.fitted)
     with pytest.raises(ValueError, match="damaged session.*" + message):
-        document.load_session(path)
+        load_session(document, path)
     assert (document.targets, document.patches, document.fitted) == before
