@@ -9,6 +9,7 @@ shell is made a solid with outward normals (positive volume). The shape is check
 
 from __future__ import annotations
 
+import warnings
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -39,6 +40,10 @@ def _faces(network: PatchNetwork) -> list[OccShape]:
     return faces
 
 
+class OpenShellsWarning(UserWarning):
+    """An open network's CAD shape holds several shells (its patches did not all sew)."""
+
+
 def _count(shape: OccShape, kind: str) -> int:
     from nurbs_core.io.cad import subshapes
 
@@ -47,7 +52,8 @@ def _count(shape: OccShape, kind: str) -> int:
 
 def _sew(network: PatchNetwork) -> OccShape:
     """The sewn shell; ValueError unless it is one shell of every patch, closed iff the network
-    is closed."""
+    is closed. An open network whose patches do not all sew gives a compound of its shells (an
+    OpenShellsWarning says so): every patch is written, never none."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_Sewing
     from OCP.TopAbs import TopAbs_ShapeEnum
     from OCP.TopExp import TopExp_Explorer
@@ -60,13 +66,52 @@ def _sew(network: PatchNetwork) -> OccShape:
     sewing.Perform()
     sewn = sewing.SewedShape()
     shells = _count(sewn, "SHELL")
-    if shells != 1 or _count(sewn, "FACE") != network.patch_count:
+    if not network.closed and shells != 1 and _count(sewn, "FACE") == network.patch_count:
+        sewn, shells = _shells_of(sewn)
+    if _count(sewn, "FACE") != network.patch_count or shells < 1 or (
+            shells > 1 and network.closed):
         raise ValueError(f"sewing the {network.patch_count} patches gave {shells} shells and "
                          f"{_count(sewn, 'FACE')} faces, not one shell of every patch")
     if sewing.NbMultipleEdges() or (network.closed and sewing.NbFreeEdges()):
         raise ValueError(f"the sewn shell has {sewing.NbFreeEdges()} free and "
                          f"{sewing.NbMultipleEdges()} multiple edges")
+    if shells > 1:
+        # an open network whose patches do not all sew along their shared sides (a seam folded
+        # back on itself): every patch is kept, in several shells, and the user is told
+        warnings.warn(OpenShellsWarning(
+            f"the {network.patch_count} patches sew into {shells} shells, not one (some shared "
+            "sides do not meet within the sewing tolerance): the STEP/IGES holds them all, as "
+            "separate shells"), stacklevel=2)
+        return sewn
     return TopoDS.Shell(TopExp_Explorer(sewn, TopAbs_ShapeEnum.TopAbs_SHELL).Current())
+
+
+def _shells_of(sewn: OccShape) -> tuple[OccShape, int]:
+    """A compound of the sewn shape's shells, each face that sewed to none in a shell of its
+    own, and how many shells it holds."""
+    from OCP.BRep import BRep_Builder
+    from OCP.TopAbs import TopAbs_ShapeEnum
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Shell
+
+    builder = BRep_Builder()
+    compound = TopoDS_Compound()
+    builder.MakeCompound(compound)
+    count = 0
+    explorer = TopExp_Explorer(sewn, TopAbs_ShapeEnum.TopAbs_SHELL)
+    while explorer.More():
+        builder.Add(compound, explorer.Current())
+        count += 1
+        explorer.Next()
+    loose = TopExp_Explorer(sewn, TopAbs_ShapeEnum.TopAbs_FACE, TopAbs_ShapeEnum.TopAbs_SHELL)
+    while loose.More():
+        shell = TopoDS_Shell()
+        builder.MakeShell(shell)
+        builder.Add(shell, TopoDS.Face(loose.Current()))
+        builder.Add(compound, shell)
+        count += 1
+        loose.Next()
+    return compound, count
 
 
 def _volume(shape: OccShape) -> float:

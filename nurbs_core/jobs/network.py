@@ -7,6 +7,7 @@ from __future__ import annotations
 import signal
 import sys
 import threading
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -129,7 +130,11 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
     for warning in result.warnings:
         print(f"warning: {warning}")
     units = units_of(job)
-    save_all([(result.network, path, {"units": units}) for path in outputs])
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        save_all([(result.network, path, {"units": units}) for path in outputs])
+    for record in said:  # what a writer had to do differently (an open network in shells)
+        print(f"warning: {record.message}")
     print_units(units, outputs)
     for path in outputs:
         print(f"wrote {path}")

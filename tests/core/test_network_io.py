@@ -221,6 +221,31 @@ def test_closed_network_is_one_valid_solid(tmp_path, ball, suffix):
 
 
 @pytest.mark.parametrize("suffix", [".step", ".iges"])
+def test_an_open_network_that_does_not_sew_into_one_shell_is_written_whole(tmp_path, suffix):
+    # an open network of the scanned bunny's head sewed into 2 shells and nurbs-fit wrote
+    # nothing after the whole fit; every patch is written, in as many shells, and it says so
+    pytest.importorskip("OCP")
+    from OCP.BRepCheck import BRepCheck_Analyzer
+
+    from nurbs_core.io.network_cad import OpenShellsWarning
+    from nurbs_core.patches.network import build_network
+
+    corners = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [3, 0, 0], [4, 0, 0],
+                        [4, 1, 0.5], [3, 1, 0]], float)
+    apart = build_network(corners, np.array([[0, 1, 2, 3], [4, 5, 6, 7]]), size=4, degree=3)
+    path = tmp_path / f"apart{suffix}"
+    with pytest.warns(OpenShellsWarning, match="2 patches sew into 2 shells"):
+        write_network(apart, path)
+    shape = _read_occ(path)
+    assert _unique(shape, "FACE") == 2 and _unique(shape, "SOLID") == 0
+    assert BRepCheck_Analyzer(shape).IsValid()
+    items = load(path)
+    nets = apart.patch_control_points()
+    for item in items:
+        assert min(np.abs(item.numpy()["control_points"] - net).max() for net in nets) == 0.0
+
+
+@pytest.mark.parametrize("suffix", [".step", ".iges"])
 def test_open_network_is_an_open_shell(tmp_path, open_ball, suffix):
     pytest.importorskip("OCP")
     from OCP.BRep import BRep_Tool
