@@ -19,13 +19,13 @@ from app import loading
 from app.errors import describe
 
 if TYPE_CHECKING:
-    from app.main_window import MainWindow
+    from app.window.hosts import ExportHost
 
 
 class ExportPolicy(QObject):
     """Writes the window's geometry, patch network or picture (see the module docstring)."""
 
-    def __init__(self, window: MainWindow):
+    def __init__(self, window: ExportHost):
         super().__init__(window)
         self._window = window
 

@@ -25,14 +25,14 @@ from app.workers.fit_worker import DisplaySnapshot, deviation_stats
 from nurbs_core.status import quality_warnings, reported_status
 
 if TYPE_CHECKING:
-    from app.main_window import MainWindow
+    from app.window.hosts import FitDisplayHost
 
 
 class FitDisplay(QObject):
     """Follows the document's and the fit controller's signals for the window (see the module
     docstring)."""
 
-    def __init__(self, window: MainWindow):
+    def __init__(self, window: FitDisplayHost):
         super().__init__(window)
         self._window = window
         self._quality_run = 0  # the run whose snapshots the quality readout follows

@@ -27,7 +27,7 @@ from app.state import control_grid_for
 from app.window.text import format_seconds, names
 
 if TYPE_CHECKING:
-    from app.main_window import MainWindow
+    from app.window.hosts import LoadHost
 
 MAX_RECENT = 10
 #: a load that ends sooner shows no progress indicator (no flicker for small files)
@@ -81,7 +81,7 @@ class LoadPolicy(QObject):
     """Opens files for the window: the load job, its indicator and Cancel, and what a load that
     ends changes in the document, the settings and the window (see the module docstring)."""
 
-    def __init__(self, window: MainWindow, recent: RecentFiles):
+    def __init__(self, window: LoadHost, recent: RecentFiles):
         super().__init__(window)
         self._window = window
         self.recent = recent

@@ -20,7 +20,7 @@ from app.errors import describe
 from app.session_file import SESSION_SUFFIX, read_session, save_session
 
 if TYPE_CHECKING:
-    from app.main_window import MainWindow
+    from app.window.hosts import SessionHost
 
 SESSION_FILTER = "NURBS Studio session (*.nstudio)"
 OPEN_FILTER = "NURBS Studio sessions (*.nstudio *.json)"
@@ -29,7 +29,7 @@ OPEN_FILTER = "NURBS Studio sessions (*.nstudio *.json)"
 class SessionPolicy(QObject):
     """Saves and opens sessions for the window (see the module docstring)."""
 
-    def __init__(self, window: MainWindow):
+    def __init__(self, window: SessionHost):
         super().__init__(window)
         self._window = window
 

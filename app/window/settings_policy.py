@@ -17,7 +17,7 @@ from app.patch_controller import PatchController
 from app.state import FIT_MODES, Settings
 
 if TYPE_CHECKING:
-    from app.main_window import MainWindow
+    from app.window.hosts import SettingsHost
 
 #: the settings whose change recomputes the offsets
 OFFSET_FIELDS = {"offset_distance", "constrain_shared_edges", "show_offsets"}
@@ -26,7 +26,7 @@ OFFSET_FIELDS = {"offset_distance", "constrain_shared_edges", "show_offsets"}
 class SettingsPolicy(QObject):
     """Follows ``Document.settings_changed`` for the window (see the module docstring)."""
 
-    def __init__(self, window: MainWindow):
+    def __init__(self, window: SettingsHost):
         super().__init__(window)
         self._window = window
 

@@ -220,3 +220,19 @@ def test_a_session_keeps_the_patch_network_and_shows_it_again(qtbot, window, tmp
     np.testing.assert_array_equal(opened.control_points, network.control_points)
     assert window.patch_controller.latest_shown.network is opened  # shown as a finished fit
     assert window.tree.shows_network
+
+
+def test_the_window_gives_each_of_its_parts_what_the_part_declares(window):
+    # the parts take narrow protocols (app.window.hosts) instead of importing the window: the
+    # real window must still have every member each protocol names
+    from app.window import hosts
+
+    for host in (hosts.ExportHost, hosts.LoadHost, hosts.SessionHost, hosts.SettingsHost,
+                 hosts.FitDisplayHost):
+        names = {name for base in host.__mro__ if base.__module__ == hosts.__name__
+                 for name in (*base.__dict__.get("__annotations__", {}), *vars(base))
+                 if not name.startswith("_")}
+        assert names  # the protocol names members
+        missing = sorted(name for name in names if not hasattr(window, name))
+        assert not missing, (host.__name__, missing)
+        assert isinstance(window, host)

@@ -49,3 +49,12 @@ def test_the_contracts_hold_and_break_on_a_forbidden_import(tmp_path, module, li
         handle.write(f"\n{line}\n")
     result = _lint(tree)
     assert result.returncode != 0 and broken in result.stdout, result.stdout[-2000:]
+
+
+def test_no_module_of_the_app_or_the_engine_imports_itself_back():
+    # the window's parts take protocols (app.window.hosts), not the window
+    pytest.importorskip("grimp")
+    from import_cycles import import_cycles
+
+    cycles = import_cycles("app", "nurbs_core")
+    assert not cycles, "\n".join(cycles)

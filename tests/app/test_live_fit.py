@@ -192,9 +192,11 @@ def test_twenty_start_stop_cycles_leave_nothing_behind(qtbot, window, ply_cloud)
         qtbot.waitUntil(lambda: window.controller.state == "idle", timeout=20000)
         assert not window.controller.is_busy()
         counts.append(os_threads())
-    # torch, llvmpipe and Qt start helper threads lazily during the first runs; after that the
-    # count must stay flat (a thread left behind per cycle would add 17 here)
-    assert counts[-1] <= max(counts[:3]), counts
+    # torch, llvmpipe and Qt start helper threads lazily (a pool thread may first be needed in a
+    # later cycle, under load); a thread left behind per cycle would add 17 here, 10 over the
+    # last ten cycles
+    assert counts[-1] <= max(counts[:3]) + 1, counts
+    assert counts[-1] - counts[9] <= 1, counts
     assert window.controller.live_timers() == 0
     assert window.jobs.active_count() == 0
     assert len([w for w in QApplication.topLevelWidgets() if w.isVisible()]) == windows_before

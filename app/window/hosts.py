@@ -1,0 +1,125 @@
+"""What each of the window's parts may reach of the window: one narrow protocol per part.
+
+The parts (:mod:`app.window.export_policy`, ``load_policy``, ``session_policy``,
+``settings_policy``, ``fit_display``) are owned by :class:`app.main_window.MainWindow`, which
+satisfies every protocol here (a test checks it on the real window); they never import it. A
+part that needs more of the window says so here first.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+if TYPE_CHECKING:
+    from PySide6.QtCore import SignalInstance
+    from PySide6.QtGui import QAction
+    from PySide6.QtWidgets import QDockWidget, QLabel, QProgressBar, QStatusBar, QWidget
+
+    from app.controller import FitController
+    from app.offsets import OffsetController
+    from app.panels.document_tree import DocumentTree
+    from app.panels.fit_panel import FitSettingsPanel
+    from app.panels.knot_panel import KnotPanel
+    from app.panels.loss_plot import LossPlot
+    from app.panels.offset_panel import OffsetPanel
+    from app.panels.patches_panel import ModeSelector, PatchesPanel
+    from app.panels.quality_panel import QualityPanel
+    from app.patch_controller import PatchController
+    from app.state import Document
+    from app.viewport.scene import SceneView
+    from app.workers.jobs import JobRunner
+
+
+@runtime_checkable
+class RecentDirectories(Protocol):
+    def last_directory(self) -> str: ...
+
+
+@runtime_checkable
+class Reporter(Protocol):
+    """Tells the user: the log, the status bar and, for errors, a dialog."""
+
+    def report(self, message: str, error: bool = False, offer_patches: bool = False,
+               exc: BaseException | None = None) -> Any: ...
+
+
+@runtime_checkable
+class ExportHost(Reporter, Protocol):
+    document: Document
+    recent: RecentDirectories
+    jobs: JobRunner
+    scene: SceneView
+    loss_plot: LossPlot
+    export_finished: SignalInstance
+
+    def grab(self) -> Any: ...
+    def export_to(self, path: str) -> bool: ...
+    def export_network(self, path: str) -> bool: ...
+    def save_screenshot(self, path: str) -> bool: ...
+
+
+@runtime_checkable
+class LoadHost(Reporter, Protocol):
+    document: Document
+    controller: FitController
+    jobs: JobRunner
+    loss_plot: LossPlot
+    files_loaded: SignalInstance
+    status_labels: dict[str, QLabel]
+    load_progress: QProgressBar
+    load_indicator: QWidget
+    cancel_load_action: QAction
+
+    def statusBar(self) -> QStatusBar: ...  # noqa: N802 (Qt's name)
+    def setWindowTitle(self, title: str) -> None: ...  # noqa: N802 (Qt's name)
+    def reset_patch_network(self) -> None: ...
+    def open_files(self, paths: list[str]) -> bool: ...
+
+
+@runtime_checkable
+class SessionHost(Reporter, Protocol):
+    document: Document
+    controller: FitController
+    patch_controller: PatchController
+    loss_plot: LossPlot
+    recent: RecentDirectories
+
+    def reset_patch_network(self) -> None: ...
+    def save_session(self, path: str) -> bool: ...
+    def open_session(self, path: str) -> bool: ...
+
+
+@runtime_checkable
+class SettingsHost(Protocol):
+    document: Document
+    controller: FitController
+    patch_controller: PatchController
+    scene: SceneView
+    offsets: OffsetController
+    fit_panel: FitSettingsPanel
+    knot_panel: KnotPanel
+    offset_panel: OffsetPanel
+    patches_panel: PatchesPanel
+    mode_selector: ModeSelector
+    fit_dock: QDockWidget
+    patches_dock: QDockWidget
+    quality_dock: QDockWidget
+    network_quality_dock: QDockWidget
+    def statusBar(self) -> QStatusBar: ...  # noqa: N802 (Qt's name)
+    def rebuild_tree(self) -> None: ...
+    def update_fit_actions(self, *_state: object) -> None: ...
+
+
+@runtime_checkable
+class FitDisplayHost(Reporter, Protocol):
+    document: Document
+    scene: SceneView
+    jobs: JobRunner
+    offsets: OffsetController
+    quality_panel: QualityPanel
+    knot_panel: KnotPanel
+    loss_plot: LossPlot
+    tree: DocumentTree
+    status_labels: dict[str, QLabel]
+
+    def rebuild_tree(self) -> None: ...
