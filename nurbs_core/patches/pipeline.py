@@ -26,6 +26,7 @@ from nurbs_core.patches.network import PatchNetwork
 from nurbs_core.patches.options import PatchOptions, check_patch_count
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import WARN_FLIPPED, reported_status
+from nurbs_core.surfacing.neighbours import estimate_noise
 
 #: The first patch count ``auto`` tries, how much finer each retry is, and the most it goes to.
 AUTO_START = 24
@@ -43,6 +44,11 @@ QUALITY_POINTS = 200_000
 #: status is not "converged"); folds: :data:`nurbs_core.status.WARN_FLIPPED`.
 WARN_SEAM = 2.0
 WARN_FAR = 0.005
+#: Mean point-to-network distance, in estimated noise sigmas, above which a warning is given
+#: (pure noise averages 0.8 sigma; a clean fit of a scan measures 0.9, a watertight STL's
+#: tessellation 1.9; a network whose patches are too coarse for thin parts, the scanned
+#: bunny's ears, 2.9-3.7).
+WARN_NOISE = 2.5
 
 
 @dataclass
@@ -224,6 +230,11 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
                         f"{quality.far_limit:.3g} from every point (up to {quality.s2c_max:.3g}, "
                         f"{quality.s2c_max / max(quality.diagonal, 1e-300):.1%} of the diagonal): "
                         "a part the scan does not hold")
+    noise = estimate_noise(measured)
+    if noise > 0 and quality.c2s_mean > WARN_NOISE * noise:
+        warnings.append(f"the points lie {quality.c2s_mean / noise:.1f} noise sigmas from the "
+                        f"network on average (noise about {noise:.3g}): details finer than its "
+                        "patches (thin parts, creases) are smoothed over")
     deviation = np.full(len(points), np.nan)
     assert quality.distances is not None, "network_quality keeps the point distances"
     deviation[sample] = quality.distances
