@@ -38,13 +38,6 @@ class ScriptedRun(QObject):
         self._load_timer.timeout.connect(self._on_load_timeout)
 
     def begin(self):
-        from app.session_file import SESSION_SUFFIX
-
-        if len(self.files) == 1 and self.files[0].lower().endswith(SESSION_SUFFIX):
-            # a session (nurbs-studio work.nstudio): opened whole, its network shown again
-            opened = self.window.open_session(self.files[0])
-            QTimer.singleShot(0, lambda: self._on_session(opened))
-            return
         self.window.files_loaded.connect(self._on_loaded)
         started = (self.window.open_files(self.files) if self.files
                    else self.window.open_demo())
@@ -65,13 +58,6 @@ class ScriptedRun(QObject):
         self.window.cancel_load(quiet=True)  # the run says it, in one line
         self._finish(failed=f"reading {names} took longer than {self.load_timeout:g} s: "
                             "cancelled (--load-timeout sets the limit)")
-
-    def _on_session(self, opened: bool):
-        if not opened:
-            self._finish(failed=self.window.last_error or "could not open the session")
-            return
-        self.window.files_loaded.connect(self._on_loaded)
-        self._on_loaded(True)
 
     @Slot(bool)
     def _on_loaded(self, ok: bool):

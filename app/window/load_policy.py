@@ -23,6 +23,7 @@ from PySide6.QtWidgets import QFileDialog, QMenu
 from app import loading
 from app.demo import demo_path
 from app.errors import describe, is_expected
+from app.session_file import SESSION_SUFFIX
 from app.state import control_grid_for
 from app.window.text import format_seconds, names
 
@@ -104,6 +105,14 @@ class LoadPolicy(QObject):
             return False
         if self._load is not None:
             self.cancel()
+        if len(paths) == 1 and paths[0].lower().endswith(SESSION_SUFFIX):
+            # a session (dropped, opened, on the command line) opens whole; its outcome arrives
+            # as any load's does
+            opened = window.open_session(paths[0])
+            self.message = (f"Opened the session {Path(paths[0]).name}" if opened
+                            else f"Cannot open the session {Path(paths[0]).name}")
+            QTimer.singleShot(0, lambda: window.files_loaded.emit(opened))
+            return True
         job_id = window.jobs.submit_detached(
             "load", lambda cancel: loading.load_files(paths, cancel),
             lambda loaded: self._on_done(paths, loaded),
@@ -143,7 +152,7 @@ class LoadPolicy(QObject):
         suffixes = " ".join(f"*{s}" for s in loading.open_suffixes())
         paths, _ = QFileDialog.getOpenFileNames(
             self._window, "Open point clouds or NURBS files", self.recent.last_directory(),
-            f"Supported files ({suffixes});;All files (*)")
+            f"Supported files ({suffixes} *{SESSION_SUFFIX});;All files (*)")
         if paths:
             self._window.open_files(paths)
 

@@ -236,3 +236,26 @@ def test_the_window_gives_each_of_its_parts_what_the_part_declares(window):
         missing = sorted(name for name in names if not hasattr(window, name))
         assert not missing, (host.__name__, missing)
         assert isinstance(window, host)
+
+
+def test_a_dropped_session_opens_whole(qtbot, window, tmp_path):
+    # sessions open like any file (drag and drop, File > Open, nurbs-studio work.nstudio):
+    # the outcome arrives as a load's does
+    from app.session_file import save_session
+    from app.state import Document, Target
+
+    saved = Document()
+    points = np.random.default_rng(0).normal(size=(500, 3))
+    saved.replace_content([Target("scan", points)], [], [])
+    path = tmp_path / "work.nstudio"
+    save_session(saved, path)
+    with qtbot.waitSignal(window.files_loaded, timeout=20000) as outcome:
+        assert window.open_files([str(path)])
+    assert outcome.args == [True]
+    np.testing.assert_array_equal(window.document.targets[0].points, points)
+    broken = tmp_path / "broken.nstudio"
+    broken.write_bytes(b"PK\x03\x04 not a zip")
+    with qtbot.waitSignal(window.files_loaded, timeout=20000) as outcome:
+        assert window.open_files([str(broken)])
+    assert outcome.args == [False]
+    np.testing.assert_array_equal(window.document.targets[0].points, points)  # unchanged
