@@ -147,6 +147,7 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
     tree = cKDTree(points)
     frames = local_frames(points, NORMAL_NEIGHBOURS, tree)  # shared by both wraps below
     grid = _grid(points)
+    cell = grid.cell  # the default grid's (the sealed one below has a margin)
     wrapped = wrap(points, grid, tree, frames=frames)
     missed = None
     if wrapped.encloses:
@@ -156,11 +157,10 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
             # what the wrap enclosed misses points: a pocket (holes let the outside into the
             # object: sealed below) or a thin fin the zero set passed by (finer grids below)
             missed = error
-    elif _two_sided_share(points, frames, tree, grid.cell) > TWO_SIDED:
+    elif _two_sided_share(points, frames, tree, cell) > TWO_SIDED:
         # a thin part (a plate, a fin) whose two sides lie closer than the balls of this grid:
         # a finer grid keeps an inside between them
-        thin = _on_finer_grids(points, normals, tree, frames, grid.cell,
-                               THIN_CELLS_PER_DIAGONAL)
+        thin = _on_finer_grids(points, normals, tree, frames, cell, THIN_CELLS_PER_DIAGONAL)
         if thin is not None:
             return thin
     sealed_mesh = None
@@ -178,8 +178,7 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
     if missed is not None:
         # holes or a fin: the sealed mesh and the one on finer grids, whichever follows the
         # points better (a sealed fin loses its tip; finer grids punch handles through holes)
-        thin = _on_finer_grids(points, normals, tree, frames, _grid(points).cell,
-                               FIN_CELLS_PER_DIAGONAL)
+        thin = _on_finer_grids(points, normals, tree, frames, cell, FIN_CELLS_PER_DIAGONAL)
         candidates = [mesh for mesh in (sealed_mesh, thin) if mesh is not None]
         if not candidates:
             raise missed
@@ -216,11 +215,10 @@ def _closeness(mesh: ScanMesh, points: np.ndarray) -> tuple[int, float]:
     """How a candidate closed mesh of the cloud ranks (smaller is better): first its handles
     (a larger Euler characteristic: finer grids punch handles through a scan's holes), then the
     99.5th percentile of the points' distances to its vertices (a sealed fin loses its tip)."""
-    faces = mesh.faces
-    edges = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]],
-                                              faces[:, [2, 0]]]), axis=1), axis=0)
-    euler = len(mesh.vertices) - len(edges) + len(faces)
-    return -euler, float(np.percentile(cKDTree(mesh.vertices).query(points)[0], 99.5))
+    from nurbs_core.patches.layout import euler_characteristic
+
+    distances = cKDTree(mesh.vertices).query(points)[0]
+    return -euler_characteristic(mesh.faces.tolist()), float(np.percentile(distances, 99.5))
 
 
 def tangent_plane_distance(query: np.ndarray, points: np.ndarray, normals: np.ndarray,

@@ -202,10 +202,11 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     sample = np.arange(len(points)) if len(points) <= QUALITY_POINTS else \
         np.sort(rng.choice(len(points), QUALITY_POINTS, replace=False))
     measured = points[sample]
+    noise = estimate_noise(fitted)  # once: the fit's Cp and the report's warning share it
     for last in fit_network(fitted, layout.vertices, layout.quads, mesh.vertices,
                             size=options.size, stiffness=options.stiffness,
                             seam_weight=options.seam_weight, tolerance=options.tolerance,
-                            max_size=options.max_size, border=border_points(mesh)):
+                            max_size=options.max_size, border=border_points(mesh), noise=noise):
         yield PatchEvent("pass", layout=layout, fit_pass=last)
         if stop is not None and stop():
             stopped = True
@@ -230,7 +231,6 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
                         f"{quality.far_limit:.3g} from every point (up to {quality.s2c_max:.3g}, "
                         f"{quality.s2c_max / max(quality.diagonal, 1e-300):.1%} of the diagonal): "
                         "a part the scan does not hold")
-    noise = estimate_noise(measured)
     if noise > 0 and quality.c2s_mean > WARN_NOISE * noise:
         warnings.append(f"the points lie {quality.c2s_mean / noise:.1f} noise sigmas from the "
                         f"network on average (noise about {noise:.3g}): details finer than its "
