@@ -90,7 +90,7 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
             raw_vertices, raw_faces = _read_obj(target)
             try:
                 quads_v, quads = _clean(raw_vertices, raw_faces)
-                _check_manifold(quads)
+                check_manifold(quads)
                 if euler_characteristic(quads.tolist()) != chi:
                     raise LayoutError(f"Euler characteristic {euler_characteristic(quads.tolist())} "
                                       f"differs from the mesh's {chi}")
@@ -186,7 +186,7 @@ def _merge_at(first: list[int], second: list[int], v: int) -> list[int] | None:
     return [a, x, b, y]
 
 
-def _check_manifold(quads: np.ndarray) -> None:
+def check_manifold(quads: np.ndarray) -> None:
     directed: Counter[tuple[int, int]] = Counter()
     for quad in quads.tolist():
         for k in range(4):

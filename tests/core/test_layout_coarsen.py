@@ -1,0 +1,67 @@
+"""A coarse quad layout from a fine one (nurbs_core.patches.coarsen): valid, on the shape, and
+fine only where the shape is thin."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nurbs_core import samples
+from nurbs_core.patches.closed_mesh import closed_mesh, mesh_from_faces
+from nurbs_core.patches.coarsen import COVER, MAX_VALENCE, coarsen, quad_normals, reach_ratios
+from nurbs_core.patches.layout import check_manifold, euler_characteristic, quad_layout
+from nurbs_core.patches.pipeline import PASSED_BY, _uniform_layout, choose_layout
+
+pytest.importorskip("pyinstantmeshes")
+
+BUNNY = Path(__file__).resolve().parents[1] / "data" / "stanford_bunny_1839.ply"
+
+
+def _corner_angles(vertices: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    c = vertices[quads]
+    after = np.roll(c, -1, axis=1) - c
+    before = np.roll(c, 1, axis=1) - c
+    cos = (after * before).sum(2) / (np.linalg.norm(after, axis=2) * np.linalg.norm(before, axis=2))
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def test_coarsening_a_fine_sphere_layout_keeps_it_valid_and_on_the_sphere():
+    mesh = closed_mesh(samples.sphere(4000, noise=0.0).points)
+    fine = quad_layout(mesh.vertices, mesh.faces, 600)
+    vertices, quads = coarsen(fine.vertices, fine.quads, mesh.vertices, mesh.vertex_normals())
+    assert len(quads) < len(fine.quads) / 4             # much coarser
+    check_manifold(quads)                                # raises when it is not a 2-manifold
+    assert euler_characteristic(quads.tolist()) == 2      # nothing torn, no handle
+    valence = np.bincount(quads.ravel())
+    assert valence.min() >= 3 and valence.max() <= MAX_VALENCE
+    # every quad faces outward, no reflex or needle corner, its corners on the sphere
+    centre = mesh.vertices.mean(axis=0)
+    c = vertices[quads]
+    assert ((quad_normals(vertices, quads) * (c.mean(axis=1) - centre)).sum(1) > 0).all()
+    angles = _corner_angles(vertices, quads)
+    assert angles.min() > 10.0 and angles.max() < 170.0
+    radius = np.linalg.norm(mesh.vertices - centre, axis=1).mean()
+    assert np.allclose(np.linalg.norm(vertices - centre, axis=1), radius, rtol=0.03)
+    # and the sphere stays within reach of the coarse quads
+    assert reach_ratios(vertices, quads, mesh.vertices).max() <= COVER + 1e-9
+
+
+def test_a_layout_that_passes_the_bunnys_ears_by_is_replaced_by_one_that_follows_them():
+    import trimesh
+
+    bunny = trimesh.load(BUNNY, process=False)
+    mesh, why = mesh_from_faces(np.asarray(bunny.vertices), np.asarray(bunny.faces))
+    assert mesh is not None, why
+    mesh.cell = float(np.median(np.linalg.norm(np.diff(mesh.vertices[mesh.faces], axis=1),
+                                               axis=2)))
+    uniform = _uniform_layout(mesh, 400)
+    # Instant Meshes' edges are wider than an ear: its layouts cut the ears off
+    assert reach_ratios(uniform.vertices, uniform.quads, mesh.vertices).max() > PASSED_BY
+    chosen = choose_layout(mesh, "auto", 10_000)
+    reach = reach_ratios(chosen.vertices, chosen.quads, mesh.vertices)
+    assert reach.max() < 1.5 and np.percentile(reach, 99) < PASSED_BY
+    check_manifold(chosen.quads)
+    assert euler_characteristic(chosen.quads.tolist()) == 2
+    assert len(chosen.quads) <= 400
