@@ -321,6 +321,57 @@ def _model(label: str, files: list[str], by_parameter: bool = False) -> Callable
     return build
 
 
+@dataclass(repr=False, eq=False)
+class MeshShape(samples.SampledShape):
+    """A cloud sampled from a watertight triangle mesh, the truth: distances are to its
+    triangles (the nearest of those whose centroids are among the 16 nearest)."""
+
+    mesh: Any = None
+
+    def distance_to_truth(self, query: np.ndarray, nearest: np.ndarray | None = None,
+                          steps: int = 8) -> np.ndarray:
+        import trimesh
+
+        query = np.asarray(query, np.float64)
+        triangles = np.asarray(self.mesh.triangles)
+        _, candidates = cKDTree(triangles.mean(axis=1)).query(query, k=16, workers=1)
+        best = np.full(len(query), np.inf)
+        for column in candidates.T:
+            foot = trimesh.triangles.closest_point(triangles[column], query)
+            best = np.minimum(best, np.linalg.norm(foot - query, axis=1))
+        return best
+
+
+def _mesh(label: str, path: Path) -> Callable[..., Case]:
+    """A cloud sampled area-uniformly from the triangles of a mesh file (a scanned object's
+    reconstruction), with the cases' noise; the mesh is the truth."""
+    def build(count=COUNT, truth_count=TRUTH_COUNT, data=None) -> Case:
+        import trimesh
+
+        mesh = trimesh.load(path, process=False)
+        if mesh.volume < 0:
+            mesh.invert()
+        diagonal = float(np.linalg.norm(mesh.extents))
+        clean, _ = trimesh.sample.sample_surface(mesh, count, seed=0)
+        noise = NOISE * diagonal
+        points = clean + np.random.default_rng(0).normal(0.0, noise, clean.shape)
+        truth, faces = trimesh.sample.sample_surface(mesh, truth_count, seed=1)
+        normals = np.asarray(mesh.face_normals)[faces]
+        shape = MeshShape(label, points, clean, truth, float(mesh.area), noise, closed=True,
+                          height_field=False, kind="closed", truth_normals=normals,
+                          diagonal=diagonal, truth_charts=np.zeros(len(truth), np.int64),
+                          mesh=mesh)
+        source = (f"{path.name} ({len(mesh.vertices)} vertices), area-uniform samples of its "
+                  "triangles")
+        return Case(label, shape, normals, source, "the watertight mesh's face normals "
+                    "(outward)")
+    return build
+
+
+#: the scanned Stanford bunny (public domain), the test data
+BUNNY = Path(__file__).resolve().parents[1] / "tests" / "data" / "stanford_bunny_1839.ply"
+
+
 def case_builders() -> dict[str, Callable[..., Case]]:
     """Every case by name, in table order; a builder takes (count, truth_count, data)."""
     g = samples
@@ -343,6 +394,8 @@ def case_builders() -> dict[str, Callable[..., Case]]:
         "head_no_base": _cut(_generated(g.head, "head"), "head_no_base"),
         "sphere_cut": _cut(_generated(g.sphere, "sphere"), "sphere_cut"),
     }
+    # a scanned object with thin parts (its ears), sampled from its mesh
+    builders["bunny"] = _mesh("bunny", BUNNY)
     for label, files in MODELS.items():
         builders[label] = _model(label, files)
     builders["duck_body_by_parameter"] = _model("duck_body_by_parameter", MODELS["duck"][:1],

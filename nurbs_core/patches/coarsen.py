@@ -181,7 +181,9 @@ class _Shape:
         middle = flat.mean(axis=0)
         radius = float(np.linalg.norm(flat - middle, axis=1).max())
         ball = np.array(self.tree.query_ball_point(middle, radius), np.int64)
-        owned = np.flatnonzero(np.isin(self.owner, list(quad_ids)))
+        mark = np.zeros(max(int(self.owner.max()), max(quad_ids, default=0)) + 1, bool)
+        mark[list(quad_ids)] = True
+        owned = np.flatnonzero(mark[self.owner])
         return np.union1d(ball, owned)
 
     def holds(self, corners: np.ndarray, ids: list[int], near: np.ndarray,
