@@ -147,6 +147,11 @@ def build_parser() -> argparse.ArgumentParser:
                              "STEP and IGES outputs and the JSON metadata (never a scaling; "
                              "default: the input's own where its format states one, E57: m; "
                              "else none: .3dm says no unit, STEP/IGES millimetres)")
+    parser.add_argument("--report", default=None, metavar="FILE",
+                        help="also write a deviation report, .html (pictures inline) or .pdf: "
+                             "the scan coloured by signed distance from four sides, the "
+                             "histogram with the tolerance bands, statistics, the result and "
+                             "the settings, in the scan's units")
     parser.add_argument("--max-hole", type=float, default=None, metavar="LENGTH",
                         help="the widest opening of a scan that is sealed by a smooth cap to "
                              "close an object (in the cloud's units; default 10%% of the "
@@ -260,9 +265,14 @@ def _check_mode(parser: argparse.ArgumentParser, args: argparse.Namespace) -> No
             ("--jobs", args.jobs, 1), ("--scheduler", args.scheduler, None),
             ("--format", args.format, ".json"),
             ("--batch-fits", args.batch_fits, DEFAULT_BATCH_FITS)) if value != default]
+        if args.report is not None and args.curve:
+            parser.error("--report reports a surface, a network or a solid, not a --curve")
         if used:
             parser.error(f"{', '.join(used)} need --output-dir DIR")
         return
+    if args.report is not None:
+        parser.error("--report writes the report of one input (-o); a batch's results are "
+                     "compared in its --summary")
     if args.output:
         parser.error("--output/-o names the result of one input; with --output-dir the results "
                      "are named after the inputs (--format picks the suffix)")

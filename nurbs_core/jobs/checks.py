@@ -25,6 +25,11 @@ def check_outputs(job: FitJob) -> list[Path]:
     outputs = [Path(p) for p in job.output]
     named = outputs + ([offset_path(p) for p in outputs] if job.offset is not None else [])
     check_output_paths(named, [job.input, job.initial], suffixes=suffixes)
+    if job.report is not None:
+        from nurbs_core.report.document import SUFFIXES as REPORT_SUFFIXES
+
+        check_output_paths(named + [Path(job.report)], [job.input, job.initial])
+        check_output_paths([job.report], suffixes=REPORT_SUFFIXES)
     return outputs
 
 

@@ -138,6 +138,23 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
     print_units(units, outputs)
     for path in outputs:
         print(f"wrote {path}")
+    if job.report is not None:
+        from nurbs_core.io.network_mesh import network_mesh_arrays
+        from nurbs_core.jobs.deviation_report import write_fit_report
+
+        vertices, faces = network_mesh_arrays(result.network)
+        summary = [("route", f"{'closed' if result.network.closed else 'open'} network of "
+                             "patches"),
+                   ("patches", f"{quality.patches} ({quality.size} x {quality.size} control "
+                               "points each, bicubic)"),
+                   ("seam angle", f"99th percentile {seam.p99:.2f}, max {seam.max:.2f} degrees"),
+                   ("largest seam gap", f"{seam.gap:.3g}"),
+                   ("flipped area", f"{quality.flipped_fraction:.2%}"),
+                   ("surface far from every point", f"{quality.far_fraction:.2%}"),
+                   ("time", f"{sum(result.timings.values()):.1f} s")]
+        write_fit_report(job, points, vertices, faces, status=result.status, summary=summary,
+                         warnings=list(result.warnings), closed=result.network.closed,
+                         tolerance=options.tolerance)
     return plain({"kind": "network", "fit_status": result.status, "points": len(points),
                    "patches": quality.patches, "s2c_max": quality.s2c_max,
                    "far_fraction": quality.far_fraction,

@@ -76,4 +76,19 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
     print_units(units, outputs)
     for path in outputs:
         print(f"wrote {path}")
+    if job.report is not None:
+        from nurbs_core.io.cad import triangulate
+        from nurbs_core.jobs.deviation_report import write_fit_report
+
+        vertices, faces, _ = triangulate(result.solid, result.segmentation.tolerance / 3)
+        summary = [("route", "a solid (machined part)"),
+                   ("faces", f"{len(result.faces)} ({kinds})"),
+                   ("solid", f"{'valid' if result.valid else 'INVALID'}, "
+                             f"{'closed' if result.closed else 'NOT closed'}"),
+                   ("volume", f"{result.volume:.6g}"),
+                   ("time", f"{sum(result.timings.values()):.1f} s")]
+        summary += [(f"face {index}", face.description) for index, face in enumerate(result.faces)]
+        write_fit_report(job, points, vertices, faces, status=result.status, summary=summary,
+                         warnings=list(result.problems.values()), closed=result.closed,
+                         tolerance=result.segmentation.tolerance)
     return plain(statistics)

@@ -42,6 +42,8 @@ class FitJob:
     patches: str | None = None
     part: bool | None = None
     units: str | None = None
+    #: a deviation report to write (.html or .pdf): :mod:`nurbs_core.jobs.deviation_report`
+    report: str | None = None
     max_hole: float | None = None
     patch_size: int | None = None
     seam_weight: float | None = None

@@ -197,6 +197,21 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
     for _, path, _ in jobs:
         print(f"wrote {path}")
     counts = [int(n) for n in np.shape(geometry.control_points)[:-1]]
+    if job.report is not None:
+        from nurbs_core.io.tessellate import tessellate
+        from nurbs_core.jobs.deviation_report import write_fit_report
+
+        mesh = tessellate(geometry)
+        summary = [("route", "one patch"),
+                   ("control points", " x ".join(map(str, counts))),
+                   ("degrees", f"{config.degree_u}, {config.degree_v}"),
+                   ("iterations", f"{result.iterations} in {result.elapsed:.2f} s"),
+                   ("chamfer distance", f"{chamfer:.4g}")]
+        if "flipped_fraction" in stats:
+            summary.append(("flipped area", f"{stats['flipped_fraction']:.2%}"))
+        write_fit_report(job, prepared.points, mesh.vertices, mesh.faces, status=status,
+                         summary=summary, warnings=quality_warnings(stats), closed=False,
+                         tolerance=stats.get("tolerance"))
     return plain({**stats, "kind": config.kind, "points": len(prepared.points),
                    "fit_status": status, "iterations": result.iterations,
                    "fit_seconds": result.elapsed, "fit_message": one_line(result.message or ""),

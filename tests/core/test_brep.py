@@ -180,6 +180,20 @@ def test_step_keeps_analytic_faces_and_reads_back_as_one_valid_solid(scanned, tm
     assert abs(volume(read) / volume(shape) - 1) < 0.02
 
 
+def test_a_part_report_names_the_solid_and_its_faces(tmp_path):
+    points, _, _ = scan_part(PARTS["plate"](), 6000, NOISE, seed=2)
+    cloud = tmp_path / "plate.xyz"
+    np.savetxt(cloud, points)
+    report = tmp_path / "plate.html"
+    assert main([str(cloud), "-o", str(tmp_path / "plate.step"), "--report", str(report),
+                 "-q"]) == 0
+    text = report.read_text()
+    assert "a solid (machined part)" in text and "valid, closed" in text
+    assert "plane" in text and "cylinder" in text
+    within = float(text.split("<th>within the tolerance</th><td>")[1].split("%")[0])
+    assert within > 95.0
+
+
 def test_no_part_and_outputs_that_hold_no_solid_keep_the_network(tmp_path, capsys):
     points, _, _ = scan_part(PARTS["plate"](), 6000, NOISE, seed=2)
     cloud = tmp_path / "plate.xyz"
