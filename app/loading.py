@@ -159,6 +159,46 @@ def export_geometry(geometries: list[GeometryArrays], path: str) -> int:
     return len(shapes)
 
 
+def export_report(path: str, points: np.ndarray, fitted: GeometryArrays | None, network,
+                  *, title: str, status: str, tolerance: float | None,
+                  warnings: list[str], settings: list[tuple[str, str]]) -> float:
+    """Write a deviation report (:mod:`nurbs_core.report`: .html or .pdf) of the points (N, 3)
+    against the patch network (when given) or the fitted surface; ``tolerance`` None: three
+    estimated noise sigmas. Returns the share of the points within the tolerance."""
+    from nurbs_core.report.deviation import Deviation, signed_distances
+    from nurbs_core.report.document import ReportContent, write_report
+
+    if network is not None:
+        from nurbs_core.io.network_mesh import network_mesh_arrays
+
+        vertices, faces = network_mesh_arrays(network)
+        closed = bool(network.closed)
+        summary = [("route", f"{'closed' if closed else 'open'} network of patches"),
+                   ("patches", f"{network.patch_count} ({network.size} x {network.size} "
+                               "control points each)")]
+    else:
+        from nurbs_core import geometry_from_numpy
+        from nurbs_core.io.tessellate import tessellate
+
+        assert fitted is not None, "a report needs a fitted surface or a network"
+        mesh = tessellate(geometry_from_numpy(fitted))
+        vertices, faces, closed = np.asarray(mesh.vertices), np.asarray(mesh.faces), False
+        counts = np.shape(fitted["control_points"])[:-1]
+        summary = [("route", "one patch"),
+                   ("control points", " x ".join(str(int(n)) for n in counts))]
+    points = np.asarray(points, np.float64)
+    if tolerance is None:
+        from nurbs_core.surfacing.neighbours import estimate_noise
+
+        tolerance = 3.0 * float(estimate_noise(points))
+    distances, normals = signed_distances(points, vertices, faces)
+    content = ReportContent(title, status, points, vertices, faces,
+                            Deviation(distances, tolerance, normals), None, closed, summary,
+                            settings, warnings)
+    write_report(path, content)
+    return float(content.deviation.within.mean())
+
+
 def export_network(network, path: str) -> int:
     """Write a patch network with ``nurbs_core.io.network_io.write_network`` (format from the
     suffix; it names the formats it has when the suffix is none of them); returns the patch

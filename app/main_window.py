@@ -316,6 +316,9 @@ class MainWindow(QMainWindow):
                                       self.export_policy.dialog(label, suffix))
             self.export_menu.addAction(action)
             self.export_actions[suffix] = action
+        self.report_action = self._action("Export Deviation &Report...",
+                                          self.export_policy.report_dialog)
+        file_menu.addAction(self.report_action)
         file_menu.addAction(self.screenshot_action)
         file_menu.addSeparator()
         file_menu.addAction(self.quit_action)
@@ -643,6 +646,24 @@ class MainWindow(QMainWindow):
     def open_session(self, path: str) -> bool:
         """Open a session; a file that does not read leaves the document and the fit unchanged."""
         return self.session_policy.open(path)
+
+    def export_report(self, path: str) -> bool:
+        """Write a deviation report (.html or .pdf) of what the mode shows against the clouds."""
+        return self.export_policy.export_report(path)
+
+    def result_status(self) -> tuple[str, list[str]]:
+        """The status of the result the mode shows and its warnings, as the headline says."""
+        if self.document.settings.fit_mode == "patches":
+            shown = self.patch_controller.latest_shown
+            if shown is None or not shown.done:
+                return "fit in progress", []
+            from nurbs_core.status import reported_status
+
+            return reported_status("converged", list(shown.warnings)), list(shown.warnings)
+        snapshot = self.controller.latest_shown
+        if snapshot is None or not snapshot.done:
+            return "fit in progress", []
+        return str(snapshot.status), []
 
     def save_screenshot(self, path: str) -> bool:
         """The whole window (viewport included) as an image (PNG; the format follows the

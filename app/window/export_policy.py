@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
 from PySide6.QtCore import QObject
 from PySide6.QtWidgets import QFileDialog
 
@@ -69,6 +70,49 @@ class ExportPolicy(QObject):
                            lambda count: self._exported(path, count, "patch(es) of the network"),
                            lambda exc: self._failed(path, exc))
         return True
+
+    def report_dialog(self) -> None:
+        """Ask where to write a deviation report (HTML or PDF)."""
+        start = str(Path(self._window.recent.last_directory()) / "deviation_report.html")
+        path, chosen = QFileDialog.getSaveFileName(self._window, "Export deviation report",
+                                                   start, "HTML report (*.html);;PDF report (*.pdf)")
+        if path:
+            if Path(path).suffix.lower() not in (".html", ".htm", ".pdf"):
+                path += ".pdf" if "PDF" in chosen else ".html"
+            self._window.export_report(path)
+
+    def export_report(self, path: str) -> bool:
+        """Write the deviation report of what the mode shows (the patch network in Patches mode,
+        else the fitted patch) against the visible clouds, in a job."""
+        window = self._window
+        document = window.document
+        clouds = [t.points for t in document.targets if t.visible]
+        network = document.network if document.settings.fit_mode == "patches" else None
+        fitted = None if network is not None else document.fitted
+        if not clouds or (network is None and fitted is None):
+            window.report("No fit to report yet: load a cloud and run a fit first.", error=True)
+            window.export_finished.emit(path, False)
+            return False
+        points = np.concatenate(clouds)
+        settings = document.settings
+        tolerance = (settings.patches.tolerance if network is not None
+                     else settings.fit.tolerance)
+        title = " + ".join(t.name for t in document.targets if t.visible)
+        status, warnings = window.result_status()
+        rows = [(name, str(value)) for name, value in
+                (settings.patches.to_json() if network is not None
+                 else settings.fit.to_json()).items()]
+        window.jobs.submit("report", lambda: loading.export_report(
+                               path, points, fitted, network, title=title, status=status,
+                               tolerance=tolerance, warnings=warnings, settings=rows),
+                           lambda within: self._exported_report(path, within),
+                           lambda exc: self._failed(path, exc))
+        return True
+
+    def _exported_report(self, path: str, within: float) -> None:
+        self._window.report(f"Wrote the deviation report {path} ({within:.1%} of the points "
+                            "within the tolerance)")
+        self._window.export_finished.emit(path, True)
 
     def screenshot_dialog(self) -> None:
         path, _ = QFileDialog.getSaveFileName(self._window, "Save screenshot",
