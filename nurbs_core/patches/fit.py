@@ -397,9 +397,7 @@ def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarra
     # derivative shrinking to nothing, which folds the corner)
     patch_of, corner_uv, vertex = network.corner_samples()
     _, su, sv = evaluate(network, patch_of, corner_uv[:, 0], corner_uv[:, 1])
-    vertex_normal = np.zeros((len(network.vertices), 3))
-    np.add.at(vertex_normal, vertex, unit(np.cross(su, sv)))
-    normal = unit(vertex_normal[vertex])
+    normal, sv = _unfolded_corners(len(network.vertices), vertex, su, sv)
     for direction, derivative in (("u", su), ("v", sv)):
         g, h = _projection_rows(network, patch_of, corner_uv, direction, derivative, normal)
         blocks.append(g)
@@ -407,6 +405,32 @@ def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarra
     values = np.concatenate(targets) if targets else np.zeros(0)
     g = scipy.sparse.vstack(blocks, format="csr") if blocks else scipy.sparse.csr_matrix((0, 3 * k))
     return g, values, worst
+
+
+def _unfolded_corners(count: int, vertex: np.ndarray, su: np.ndarray,
+                      sv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The plane each patch corner is drawn to: the mean normal (M, 3) of the corners at its
+    vertex (``vertex`` (M,) of ``count``) that are not folded, and the v derivatives (M, 3) to
+    draw them to. A folded corner (its S_u x S_v against that normal: the fit turned the patch
+    over at a flat corner) gets its v derivative's projection mirrored across its u
+    derivative's, so the corner opens the right way round instead of staying folded in the
+    plane."""
+    corner = unit(np.cross(su, sv))
+    mean = np.zeros((count, 3))
+    np.add.at(mean, vertex, corner)
+    normal = unit(mean[vertex])
+    folded = (corner * normal).sum(1) < 0
+    if not folded.any():
+        return normal, sv
+    kept = np.zeros((count, 3))
+    np.add.at(kept, vertex[~folded], corner[~folded])
+    robust = unit(kept[vertex])
+    normal = np.where((np.linalg.norm(robust, axis=1) > 0)[:, None], robust, normal)
+    folded = (corner * normal).sum(1) < 0
+    u_plane = unit(su - (su * normal).sum(1, keepdims=True) * normal)
+    v_plane = sv - (sv * normal).sum(1, keepdims=True) * normal
+    mirrored = 2.0 * (v_plane * u_plane).sum(1, keepdims=True) * u_plane - v_plane
+    return normal, np.where(folded[:, None], mirrored, sv)
 
 
 def _projection_rows(network: PatchNetwork, patch: np.ndarray, uv: np.ndarray, direction: str | None,

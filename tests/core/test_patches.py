@@ -154,6 +154,26 @@ def test_seam_rows_are_what_makes_the_seams_tangent():
     assert joined.irregular_corner_max < free.irregular_corner_max
 
 
+def test_a_folded_corner_is_drawn_open_the_right_way_round():
+    from nurbs_core.patches.fit import _unfolded_corners
+
+    # four corners at one vertex: three open about +z, one turned over (its S_u x S_v is -z)
+    su = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [1.0, 0.2, 0.0]])
+    sv = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.3, -1.0, 0.1]])
+    vertex = np.zeros(4, np.int64)
+    normal, target = _unfolded_corners(1, vertex, su, sv)
+    np.testing.assert_allclose(normal, np.tile([0.0, 0.0, 1.0], (4, 1)), atol=1e-12)
+    np.testing.assert_array_equal(target[:3], sv[:3])           # open corners keep theirs
+    assert np.cross(su[3], target[3]) @ normal[3] > 0             # the folded one opens
+    assert abs(target[3] @ normal[3]) < 1e-12                     # in the plane
+    # the corner's angle is kept, only its turn is mirrored
+    in_plane = sv[3] - (sv[3] @ normal[3]) * normal[3]
+    assert np.linalg.norm(target[3]) == pytest.approx(np.linalg.norm(in_plane))
+    # nothing folded: nothing changed
+    _, same = _unfolded_corners(1, vertex[:3], su[:3], sv[:3])
+    np.testing.assert_array_equal(same, sv[:3])
+
+
 def test_options_are_checked():
     for bad in (dict(patches=2), dict(patches="many"), dict(degree=2), dict(size=3),
                 dict(stiffness=-1.0), dict(tolerance=0.0)):

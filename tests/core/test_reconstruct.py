@@ -149,6 +149,7 @@ def test_the_bunnys_ears_are_two_sheets_that_reach_their_tips():
     import trimesh
 
     from nurbs_core.patches.coarsen import reach_ratios
+    from nurbs_core.patches.measures import corner_angles
     from nurbs_core.patches.pipeline import PASSED_BY, fit_patches
 
     bunny = trimesh.load(BUNNY, process=False)
@@ -169,6 +170,9 @@ def test_the_bunnys_ears_are_two_sheets_that_reach_their_tips():
     assert result.quality.s2c_max < 0.02 * diagonal
     assert result.quality.far_fraction < 0.005
     assert result.quality.flipped_fraction < 0.01
+    # no patch corner turned over (a corner of 147 degrees on the body folded to 179.5 before
+    # the fit drew folded corners open)
+    assert corner_angles(result.network).max() < 60.0
 
 
 def test_a_cloud_no_route_holds_cleanly_still_gets_one_patch_and_its_warnings(
