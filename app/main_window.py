@@ -85,6 +85,20 @@ def freeze_long_lived_objects():
     gc.freeze()
 
 
+def _shortcut_rows(menu) -> list[tuple[str, str]]:
+    """(what, keys) of the actions with a shortcut in a menu and its submenus."""
+    rows: list[tuple[str, str]] = []
+    if menu is None:
+        return rows
+    for action in menu.actions():
+        if action.menu() is not None:
+            rows += _shortcut_rows(action.menu())
+        elif not action.shortcut().isEmpty():
+            rows.append((action.text().replace("&", "").rstrip("."),
+                         action.shortcut().toString(QKeySequence.SequenceFormat.NativeText)))
+    return rows
+
+
 def _set_checked_quietly(action, checked: bool):
     """Tick or untick a checkable action without re-emitting its toggled signal."""
     if action.isChecked() != checked:
@@ -113,6 +127,7 @@ class MainWindow(QMainWindow):
         self.recent = RecentFiles(self._store)
         self._is_shut_down = False
         self._message_box: QMessageBox | None = None
+        self.shortcuts_box: QMessageBox | None = None
         self.fit_as_patches_button: QAbstractButton | None = None
         #: a refused single patch goes on as a network once its run has ended
         self._network_after_refusal = False
@@ -288,6 +303,15 @@ class MainWindow(QMainWindow):
         self.seam_action.setToolTip("Colour the patch network by the angle between neighbouring "
                                     "patches along their seams")
         self.camera_action = self._action("&Fit View", self.scene.reset_camera, "F")
+        # CAD's standard views on the number keys (Blender's layout: Ctrl for the opposite side)
+        self.view_actions = {
+            name: self._action(text, lambda _=False, name=name: self.scene.standard_view(name), key)
+            for name, text, key in (("front", "&Front", "1"), ("back", "&Back", "Ctrl+1"),
+                                    ("right", "&Right", "3"), ("left", "&Left", "Ctrl+3"),
+                                    ("top", "&Top", "7"), ("bottom", "B&ottom", "Ctrl+7"),
+                                    ("iso", "&Isometric", "0"))}
+        self.shortcuts_action = self._action("&Keyboard Shortcuts", self.show_shortcuts, "F1")
+        self.about_action = self._action("&About NURBS Studio", self.show_about)
 
     def _build_menus(self):
         bar = self.menuBar()
@@ -343,11 +367,18 @@ class MainWindow(QMainWindow):
         view_menu.addAction(self.seam_action)
         view_menu.addSeparator()
         view_menu.addAction(self.camera_action)
+        standard = view_menu.addMenu("&Standard Views")
+        for action in self.view_actions.values():
+            standard.addAction(action)
         view_menu.addSeparator()
         for dock in (self.tree_dock, self.fit_dock, self.knot_dock, self.offset_dock,
                      self.patches_dock, self.loss_dock, self.quality_dock,
                      self.network_quality_dock, self.log_dock):
             view_menu.addAction(dock.toggleViewAction())
+
+        help_menu = bar.addMenu("&Help")
+        help_menu.addAction(self.shortcuts_action)
+        help_menu.addAction(self.about_action)
 
         toolbar = self.addToolBar("Fit")
         toolbar.setObjectName("fit_toolbar")
@@ -646,6 +677,40 @@ class MainWindow(QMainWindow):
     def open_session(self, path: str) -> bool:
         """Open a session; a file that does not read leaves the document and the fit unchanged."""
         return self.session_policy.open(path)
+
+    def shortcut_table(self) -> list[tuple[str, str]]:
+        """(what, keys) of every action with a shortcut, in menu order: Help > Keyboard
+        Shortcuts shows them."""
+        rows = []
+        for menu_action in self.menuBar().actions():
+            rows += _shortcut_rows(menu_action.menu())
+        return rows
+
+    def show_shortcuts(self):
+        rows = self.shortcut_table()
+        text = "\n".join(f"{keys:<12} {what}" for what, keys in rows)
+        box = QMessageBox(QMessageBox.Icon.NoIcon, "Keyboard shortcuts", text,
+                          QMessageBox.StandardButton.Close, self)
+        box.setStyleSheet("QLabel { font-family: monospace; }")
+        box.open()
+        self.shortcuts_box = box
+
+    def about_text(self) -> str:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            release = version("nurbs-studio")
+        except PackageNotFoundError:
+            release = "(not installed)"
+        return (f"<h3>NURBS Studio {release}</h3>"
+                "<p>Scans to clean NURBS surfaces, watertight patch networks and CAD solids, "
+                "live and differentiable, after NURBS-Diff (Prasad et al.).</p>"
+                "<p>Open source: the engine is <tt>nurbs_core</tt>, the window PySide6 and "
+                "pyvista. Its command line is <tt>nurbs-fit</tt>; <tt>nurbs-fit --help</tt> lists "
+                "every option.</p>")
+
+    def show_about(self):
+        QMessageBox.about(self, "About NURBS Studio", self.about_text())
 
     def export_report(self, path: str) -> bool:
         """Write a deviation report (.html or .pdf) of what the mode shows against the clouds."""

@@ -121,6 +121,19 @@ def control_net_mesh(net: np.ndarray) -> pv.PolyData:
     return mesh
 
 
+
+#: The standard views: name -> (unit direction from the shape to the camera, the view's up).
+STANDARD_VIEWS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
+    "front": ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)),
+    "back": ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0)),
+    "right": ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
+    "left": ((-1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
+    "top": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
+    "bottom": ((0.0, 0.0, -1.0), (0.0, -1.0, 0.0)),
+    "iso": ((0.57735026919, -0.57735026919, 0.57735026919), (0.0, 0.0, 1.0)),
+}
+
+
 class SceneView(QObject):
     """Owns the QtInteractor and every mesh in it."""
 
@@ -470,6 +483,25 @@ class SceneView(QObject):
             camera.focal_point = tuple(centre)
             camera.position = tuple(centre + direction * size * 2.0)
             camera.up = tuple(up)
+        self.plotter.reset_camera(render=False)
+        self.request_render()
+
+    def standard_view(self, name: str):
+        """Look along a coordinate axis (CAD's standard views: "front" from -y, "back" from +y,
+        "right" from +x, "left" from -x, "top" from +z, "bottom" from -z, z up except from
+        above and below, where +y is up) or from (1, -1, 1) ("iso"), everything framed."""
+        direction, up = STANDARD_VIEWS[name]
+        points = self._visible_points()
+        if points is not None and len(points):
+            low, high = points.min(axis=0), points.max(axis=0)
+        else:
+            low, high = -np.ones(3), np.ones(3)
+        centre = 0.5 * (low + high)
+        size = float(np.linalg.norm(high - low)) or 1.0
+        camera = self.plotter.camera
+        camera.focal_point = tuple(centre)
+        camera.position = tuple(centre + np.asarray(direction, float) * size * 2.0)
+        camera.up = tuple(up)
         self.plotter.reset_camera(render=False)
         self.request_render()
 
