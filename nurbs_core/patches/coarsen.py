@@ -71,9 +71,7 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def quad_normals(vertices: np.ndarray, quads: np.ndarray) -> np.ndarray:
     """(P, 3) unit normals of the quads (cross product of their diagonals)."""
-    c = vertices[quads]
-    n = np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1])
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    return _normals_of(np.asarray(vertices, np.float64)[np.asarray(quads, np.int64)])
 
 
 class _Layout:
@@ -120,12 +118,16 @@ def _edge_key(a: int, b: int) -> tuple[int, int]:
 
 
 def _normals_of(corners: np.ndarray) -> np.ndarray:
+    """(Q, 3) unit normals of the quads given by their corners (Q, 4, 3)."""
     n = _cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
     return n / np.maximum(np.sqrt((n * n).sum(axis=1, keepdims=True)), 1e-300)
 
 
 class _Shape:
-    """The mesh a layout must stay on: its vertices, outward unit normals and a tree."""
+    """The mesh a layout must stay on (its vertices, outward unit normals and a tree) and how
+    the layout covers it: per mesh vertex its distance to the nearest quad over that quad's
+    side (``ratio``), that quad (``owner``) and the cosine between their normals (``cos``),
+    kept up to date as the layout changes."""
 
     def __init__(self, vertices: np.ndarray, normals: np.ndarray) -> None:
         self.vertices = np.asarray(vertices, np.float64)
