@@ -165,7 +165,7 @@ def export_report(path: str, points: np.ndarray, fitted: GeometryArrays | None, 
     """Write a deviation report (:mod:`nurbs_core.report`: .html or .pdf) of the points (N, 3)
     against the patch network (when given) or the fitted surface; ``tolerance`` None: three
     estimated noise sigmas. Returns the share of the points within the tolerance."""
-    from nurbs_core.report.deviation import Deviation, signed_distances
+    from nurbs_core.report.deviation import measure_deviation
     from nurbs_core.report.document import ReportContent, write_report
 
     if network is not None:
@@ -187,14 +187,9 @@ def export_report(path: str, points: np.ndarray, fitted: GeometryArrays | None, 
         summary = [("route", "one patch"),
                    ("control points", " x ".join(str(int(n)) for n in counts))]
     points = np.asarray(points, np.float64)
-    if tolerance is None:
-        from nurbs_core.surfacing.neighbours import estimate_noise
-
-        tolerance = 3.0 * float(estimate_noise(points))
-    distances, normals = signed_distances(points, vertices, faces)
     content = ReportContent(title, status, points, vertices, faces,
-                            Deviation(distances, tolerance, normals), None, closed, summary,
-                            settings, warnings)
+                            measure_deviation(points, vertices, faces, tolerance), None, closed,
+                            summary, settings, warnings)
     write_report(path, content)
     return float(content.deviation.within.mean())
 

@@ -16,19 +16,6 @@ import numpy as np
 
 from nurbs_core.jobs.settings import FitJob
 
-#: The automatic tolerance of the report when the job gives none: this many estimated noise
-#: standard deviations (the single patch's own automatic tolerance).
-NOISE_TOLERANCE = 3.0
-
-
-def report_tolerance(job: FitJob, points: np.ndarray) -> float:
-    """``--tolerance``, else NOISE_TOLERANCE estimated noise sigmas of the cloud (N, 3)."""
-    if job.tolerance is not None:
-        return float(job.tolerance)
-    from nurbs_core.surfacing.neighbours import estimate_noise
-
-    return NOISE_TOLERANCE * float(estimate_noise(np.asarray(points, np.float64)))
-
 
 def settings_rows(job: FitJob) -> list[tuple[str, str]]:
     """The job's options as (option, value) rows: the input, the outputs and every option that
@@ -56,19 +43,20 @@ def write_fit_report(job: FitJob, points: np.ndarray, vertices: np.ndarray, face
                      status: str, summary: list[tuple[str, str]], warnings: list[str],
                      closed: bool, tolerance: float | None = None) -> Path:
     """Measure the scan ``points`` (N, 3) against the fit's triangles (V, 3), (F, 3) and write
-    ``job.report``; ``closed``: the triangles enclose a volume, outward. Returns the path."""
+    ``job.report``; ``closed``: the triangles enclose a volume, outward; ``tolerance``: the
+    route's own (None: ``--tolerance``, else the report's default). Returns the path."""
     from nurbs_core.jobs.report import units_of
-    from nurbs_core.report.deviation import Deviation, signed_distances
+    from nurbs_core.report.deviation import measure_deviation
     from nurbs_core.report.document import ReportContent, write_report
 
     assert job.report is not None, "the job asks for no report"
-    points = np.asarray(points, np.float64)
-    distances, normals = signed_distances(points, vertices, faces)
-    tolerance = report_tolerance(job, points) if tolerance is None else tolerance
-    content = ReportContent(Path(job.input).name, status, points, np.asarray(vertices),
-                            np.asarray(faces), Deviation(distances, tolerance, normals),
-                            units_of(job), closed, summary, settings_rows(job), warnings)
+    if tolerance is None and job.tolerance is not None:
+        tolerance = float(job.tolerance)
+    deviation = measure_deviation(points, vertices, faces, tolerance)
+    content = ReportContent(Path(job.input).name, status, np.asarray(points, np.float64),
+                            np.asarray(vertices), np.asarray(faces), deviation, units_of(job),
+                            closed, summary, settings_rows(job), warnings)
     write_report(job.report, content)
-    print(f"wrote {job.report} (deviation report: {content.deviation.within.mean():.1%} of the "
-          f"points within +/-{tolerance:.3g})", file=sys.stdout)
+    print(f"wrote {job.report} (deviation report: {deviation.within.mean():.1%} of the "
+          f"points within +/-{deviation.tolerance:.3g})", file=sys.stdout)
     return Path(job.report)

@@ -36,6 +36,8 @@ from collections.abc import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
+from nurbs_core.patches.layout import merge_doublet
+
 #: A mesh vertex may lie this many local layout edge lengths from the layout's bilinear quads.
 COVER = 0.8
 #: Largest angle (degrees) between the normals of two neighbouring quads a change may leave (a
@@ -341,7 +343,7 @@ def _collapse_diagonal(layout: _Layout, q: int, a: int, c: int, shape: _Shape,
             continue
         if len(at) < 2:
             return None
-        union = _merge_doublet(after[at[0]], after[at[1]], v)
+        union = merge_doublet(after[at[0]], after[at[1]], v)
         if union is None:
             return None
         del after[at[0]], after[at[1]]
@@ -476,18 +478,6 @@ def _hexagon(layout: _Layout, pair: list[int], x: int, y: int) -> list[int] | No
             hexagon = [x, b1, b2, y, a1, a2]
             return hexagon if len(set(hexagon)) == 6 else None
     return None
-
-
-def _merge_doublet(first: list[int], second: list[int], v: int) -> list[int] | None:
-    """The quad left when the two quads around the valence-2 vertex v merge: first is
-    (v, p, x, r) from v, second must be (v, r, y, p); the union is (p, x, r, y)."""
-    k = first.index(v)
-    _, p, x, r = first[k:] + first[:k]
-    k = second.index(v)
-    _, r2, y, p2 = second[k:] + second[:k]
-    if (r2, p2) != (r, p) or len({p, x, r, y}) < 4:
-        return None
-    return [p, x, r, y]
 
 
 def _edges_of(quads_by_id: dict, ids: set[int]) -> dict[tuple[int, int], list[int]]:

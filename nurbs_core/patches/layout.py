@@ -163,7 +163,7 @@ def _clean(vertices: np.ndarray, faces: list[list[int]]) -> tuple[np.ndarray, np
             break
         v = twos[0]
         pair = [k for k, f in enumerate(faces) if v in f]
-        merged = _merge_at(faces[pair[0]], faces[pair[1]], v)
+        merged = merge_doublet(faces[pair[0]], faces[pair[1]], v)
         if merged is None:
             raise LayoutError("a valence-2 vertex whose quads cannot be merged")
         faces = [f for k, f in enumerate(faces) if k not in pair] + [merged]
@@ -174,7 +174,7 @@ def _clean(vertices: np.ndarray, faces: list[list[int]]) -> tuple[np.ndarray, np
     return vertices[used], remap[quads]
 
 
-def _merge_at(first: list[int], second: list[int], v: int) -> list[int] | None:
+def merge_doublet(first: list[int], second: list[int], v: int) -> list[int] | None:
     """The quad left when the two quads around the valence-2 vertex v are merged: first is
     (v, a, x, b) from v, second must be (v, b, y, a); the union is (a, x, b, y)."""
     k = first.index(v)

@@ -13,6 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+#: The tolerance a report judges by when none is given: this many estimated noise standard
+#: deviations of the scan (the single patch's own automatic tolerance).
+NOISE_TOLERANCE = 3.0
 #: Triangles (nearest centroids) searched per point, once no edge is longer than the mesh's
 #: diagonal over SPLIT_EDGES.
 CANDIDATES = 12
@@ -90,3 +93,16 @@ class Deviation:
                 "max_above": float(max(d.max(), 0.0)), "max_below": float(min(d.min(), 0.0)),
                 "tolerance": self.tolerance, "within": float(self.within.mean()),
                 "above": float(self.above.mean()), "below": float(self.below.mean())}
+
+
+def measure_deviation(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray,
+                      tolerance: float | None = None) -> Deviation:
+    """The scan's (N, 3) signed distances to the triangles (V, 3), (F, 3) with the normals at
+    their feet, judged by ``tolerance`` (None: NOISE_TOLERANCE estimated noise sigmas)."""
+    points = np.asarray(points, np.float64)
+    if tolerance is None:
+        from nurbs_core.surfacing.neighbours import estimate_noise
+
+        tolerance = NOISE_TOLERANCE * float(estimate_noise(points))
+    distances, normals = signed_distances(points, vertices, faces)
+    return Deviation(distances, float(tolerance), normals)
