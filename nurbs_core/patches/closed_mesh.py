@@ -372,5 +372,7 @@ def mesh_from_faces(vertices: np.ndarray, faces: np.ndarray) -> tuple[ScanMesh |
     faces = np.asarray(mesh.faces, np.int64)
     if mesh.volume < 0:
         faces = faces[:, ::-1].copy()
+    # its cell (the voxel size of a rebuilt mesh, which sizes fine layouts) is its median edge
+    cell = float(np.median(mesh.edges_unique_length))
     return ScanMesh(np.asarray(mesh.vertices, np.float64), faces,
-                      np.asarray(mesh.vertex_normals, np.float64), 0.0, int(mesh.body_count)), ""
+                    np.asarray(mesh.vertex_normals, np.float64), cell, int(mesh.body_count)), ""
