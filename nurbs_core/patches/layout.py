@@ -89,7 +89,7 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
                                             pure_quad=True, deterministic=True)
             raw_vertices, raw_faces = _read_obj(target)
             try:
-                quads_v, quads = _clean(raw_vertices, raw_faces)
+                quads_v, quads = _without_small_corners(*_clean(raw_vertices, raw_faces))
                 check_manifold(quads)
                 if euler_characteristic(quads.tolist()) != chi:
                     raise LayoutError(f"Euler characteristic {euler_characteristic(quads.tolist())} "
@@ -172,6 +172,46 @@ def _clean(vertices: np.ndarray, faces: list[list[int]]) -> tuple[np.ndarray, np
     remap = np.full(len(vertices), -1, np.int64)
     remap[used] = np.arange(len(used))
     return vertices[used], remap[quads]
+
+
+#: A quad at a corner of an open layout's border (two of its sides on the border, its corner in
+#: no other quad) smaller than this share of the median quad's area is removed: Instant Meshes
+#: reaches into the ragged end of an open scan's mesh with such slivers, and the patches on them
+#: fold against their neighbours (seams at 20-30 degrees on a head without its base).
+SMALL_CORNER = 0.3
+
+
+def _without_small_corners(vertices: np.ndarray, quads: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """The layout (V, 3), (P, 4) without the small quads at corners of its border (see
+    ``SMALL_CORNER``); a closed layout is returned as it is."""
+    if len(quads) < 8:
+        return vertices, quads
+    corners = vertices[quads]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 2] - corners[:, 0],
+                                         corners[:, 3] - corners[:, 1]), axis=1)
+    valence = np.bincount(quads.ravel(), minlength=len(vertices))
+    small = (valence[quads] == 1).any(axis=1) & (area < SMALL_CORNER * np.median(area))
+    sides = Counter(tuple(sorted(side)) for quad in quads.tolist()
+                    for side in zip(quad, quad[1:] + quad[:1]))
+    drop = []
+    for q in np.flatnonzero(small):
+        quad = quads[q].tolist()
+        k = next(k for k in range(4) if valence[quad[k]] == 1)
+        before, after = quad[k - 1], quad[(k + 1) % 4]
+        opposite = quad[(k + 2) % 4]
+        # the two sides away from the corner stay shared (else the quad hangs by one side or
+        # bridges: removing it would tear the layout)
+        if sides[tuple(sorted((after, opposite)))] == 2 and \
+                sides[tuple(sorted((opposite, before)))] == 2:
+            drop.append(q)
+    if not drop:
+        return vertices, quads
+    kept = np.delete(quads, drop, axis=0)
+    used = np.unique(kept)
+    remap = np.full(len(vertices), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return vertices[used], remap[kept]
 
 
 def merge_doublet(first: list[int], second: list[int], v: int) -> list[int] | None:
