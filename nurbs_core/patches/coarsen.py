@@ -1,4 +1,4 @@
-"""A coarse quad layout from a fine one by diagonal collapses, keeping thin parts.
+"""A coarse quad layout from a fine one by chord and diagonal collapses, keeping thin parts.
 
 Instant Meshes places its quads with one edge length over the whole mesh: where a part is
 thinner than that length (a bunny's ears, a finger, a fin) its position field cannot place
@@ -6,16 +6,21 @@ vertices there, and the layout passes the part by. Patches laid over such a layo
 gap, and the fit pulls them into a web between the ears. A fine layout (edges of a few mesh
 cells) follows every part; this module makes it coarse where the shape allows, and only there.
 
-A *diagonal collapse* merges two opposite corners of a quad and removes it (Tarini et al. 2010,
-"Practical quad mesh simplification"); a vertex left between two quads (a doublet) is dissolved
-and its quads merged. The mesh stays a conforming pure quad mesh of the same Euler
-characteristic. Quads are collapsed smallest first, along their shorter diagonal, in rounds:
+A *chord collapse* removes a whole strip of quads joined by opposite sides and merges the two
+ends of every side it crosses (Daniels et al. 2008, "Quadrilateral mesh simplification"): a
+regular layout stays regular. A *diagonal collapse* merges two opposite corners of a quad and
+removes it (Tarini et al. 2010, "Practical quad mesh simplification"); a vertex left between
+two quads (a doublet) is dissolved and its quads merged. Chords go first, narrowest first;
+where none passes the checks (the long loops of a closed layout mostly), diagonals. The mesh
+stays a conforming pure quad mesh of the same Euler characteristic. Quads are collapsed
+smallest first, along their shorter diagonal, in rounds:
 after each, edges are rotated where that brings valences closer to 4 (collapses pile valence
 up) and the vertices relaxed towards their neighbours (collapses leave skewed quads). A change
 is kept only when the layout stays valid (no edge shared by more than two quads, interior
 valences 3 to ``MAX_VALENCE``, no border pinched, every changed quad facing the mesh's way with
-its corners between ``MIN_CORNER`` and its supplement) and stays on the shape, each measure
-either within its bound or no worse than before:
+its corners between ``MIN_CORNER`` and its supplement, every point of it within ``OFF_MESH``
+of the mesh) and stays on the shape, each measure either within its bound or no worse than
+before:
 
 * every nearby mesh vertex lies within ``COVER`` x the local edge length of the layout's
   bilinear quads: a part the layout would pass by, an ear, stops the collapses there;
@@ -32,6 +37,7 @@ from __future__ import annotations
 import heapq
 import math
 from collections.abc import Callable
+from typing import Literal, overload
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -54,6 +60,10 @@ COS_CORNER = math.cos(math.radians(MIN_CORNER))
 #: ear's tip or a strip flattened over both sides of an ear.
 MAX_SPREAD = 75.0
 COS_SPREAD = math.cos(math.radians(MAX_SPREAD))
+#: Every point of a quad lies within this many of its side lengths (plus the mesh's vertex
+#: spacing) of the mesh: a bilinear quad over a part turning ``MAX_TURN`` bulges about 0.2 sides
+#: from it, one spanning the air between an ear and the head a side or more.
+OFF_MESH = 0.35
 #: Samples per side of a quad when measuring how close the layout stays to the mesh.
 COVER_SAMPLES = 4
 #: Rounds of collapses and relaxation, and relaxation sweeps per round.
@@ -125,6 +135,18 @@ def _normals_of(corners: np.ndarray) -> np.ndarray:
     return n / np.maximum(np.sqrt((n * n).sum(axis=1, keepdims=True)), 1e-300)
 
 
+def _bilinear_samples(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``COVER_SAMPLES`` x ``COVER_SAMPLES`` points of each bilinear quad (Q, 4, 3): (Q, S, 3),
+    each sample's quad (Q * S,) and each quad's mean side length (Q,)."""
+    t = np.linspace(0.0, 1.0, COVER_SAMPLES)
+    u, v = (grid.ravel() for grid in np.meshgrid(t, t, indexing="ij"))
+    weights = np.stack([(1 - u) * (1 - v), u * (1 - v), u * v, (1 - u) * v], -1)
+    samples = np.einsum("sk,pkc->psc", weights, corners)
+    owner = np.repeat(np.arange(len(corners)), len(u))
+    step = corners - corners[:, _PREVIOUS]
+    return samples, owner, np.sqrt((step * step).sum(axis=2)).mean(axis=1)
+
+
 class _Shape:
     """The mesh a layout must stay on (its vertices, outward unit normals and a tree) and how
     the layout covers it: per mesh vertex its distance to the nearest quad over that quad's
@@ -135,13 +157,20 @@ class _Shape:
         self.vertices = np.asarray(vertices, np.float64)
         self.normals = np.asarray(normals, np.float64)
         self.tree = cKDTree(self.vertices)
+        # the mesh's vertex spacing: a point of a quad lying on the mesh is about this far from
+        # its nearest vertex
+        self.spacing = float(np.median(self.tree.query(self.vertices, k=2)[0][:, 1])) \
+            if len(self.vertices) > 1 else 0.0
 
     def snap(self, point: np.ndarray) -> np.ndarray:
         return self.vertices[self.tree.query(point)[1]]
 
     def facing(self, corners: np.ndarray) -> bool:
-        """Every quad (Q, 4, 3) faces the mesh's way at its centre, has no reflex corner and no
-        corner sharper than ``MIN_CORNER`` degrees or flatter than its supplement."""
+        """Every quad (Q, 4, 3) lies on the mesh (:meth:`on_mesh`), faces the mesh's way at its
+        centre, has no reflex corner and no corner sharper than ``MIN_CORNER`` degrees or flatter
+        than its supplement."""
+        if not self.on_mesh(corners):
+            return False
         n = _cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
         along = self.normals[self.tree.query(corners.mean(axis=1))[1]]
         if ((n * along).sum(axis=1) <= 0).any():
@@ -154,19 +183,23 @@ class _Shape:
             np.sqrt((after * after).sum(axis=2) * (before * before).sum(axis=2)), 1e-300)
         return bool((np.abs(cos) <= COS_CORNER).all())
 
+    def on_mesh(self, corners: np.ndarray) -> bool:
+        """Every point of the bilinear quads (Q, 4, 3) lies within ``OFF_MESH`` x its quad's
+        mean side (plus the mesh's vertex spacing) of a mesh vertex: a quad spanning the air
+        between an ear and the head, which no vertex lies under, is refused."""
+        if not len(corners):
+            return True
+        samples, _, sides = _bilinear_samples(corners)
+        distance = self.tree.query(samples.reshape(-1, 3))[0].reshape(len(corners), -1)
+        return bool((distance <= (OFF_MESH * sides + self.spacing)[:, None]).all())
+
     def measure(self, corners: np.ndarray, ids: list[int],
                 near: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per mesh vertex in ``near``: its distance to the bilinear quads (Q, 4, 3) over the
         nearest quad's mean side length, that quad's id (from ``ids`` (Q,)), and the cosine
         between the vertex's normal and that quad's."""
-        t = np.linspace(0.0, 1.0, COVER_SAMPLES)
-        u, v = (grid.ravel() for grid in np.meshgrid(t, t, indexing="ij"))
-        weights = np.stack([(1 - u) * (1 - v), u * (1 - v), u * v, (1 - u) * v], -1)
-        samples = np.einsum("sk,pkc->psc", weights, corners).reshape(-1, 3)
-        owner = np.repeat(np.arange(len(corners)), len(u))
-        step = corners - corners[:, _PREVIOUS]
-        sides = np.sqrt((step * step).sum(axis=2)).mean(axis=1)
-        distance, nearest = cKDTree(samples).query(self.vertices[near])
+        samples, owner, sides = _bilinear_samples(corners)
+        distance, nearest = cKDTree(samples.reshape(-1, 3)).query(self.vertices[near])
         quad = owner[nearest]
         cos = (_normals_of(corners)[quad] * self.normals[near]).sum(axis=1)
         return (distance / np.maximum(sides[quad], 1e-300), np.asarray(ids, np.int64)[quad],
@@ -181,10 +214,11 @@ class _Shape:
     def watched(self, quad_ids: set[int], corners: np.ndarray) -> np.ndarray:
         """The mesh vertices a change of the quads ``quad_ids`` (their corners (Q, 4, 3) after
         it) may move away from: those these quads were nearest to, and those around them."""
-        flat = corners.reshape(-1, 3)
-        middle = flat.mean(axis=0)
-        radius = float(np.linalg.norm(flat - middle, axis=1).max())
-        ball = np.array(self.tree.query_ball_point(middle, radius), np.int64)
+        middle = corners.mean(axis=1)
+        radius = np.sqrt(((corners - middle[:, None]) ** 2).sum(axis=2)).max(axis=1)
+        balls = self.tree.query_ball_point(middle, radius)
+        ball = np.unique(np.concatenate([np.asarray(b, np.int64) for b in balls]
+                                        + [np.zeros(0, np.int64)]))
         mark = np.zeros(max(int(self.owner.max()), max(quad_ids, default=0)) + 1, bool)
         mark[list(quad_ids)] = True
         owned = np.flatnonzero(mark[self.owner])
@@ -208,12 +242,28 @@ class _Shape:
         self.ratio[near], self.owner[near], self.cos[near] = measured
 
 
-def reach_ratios(vertices: np.ndarray, quads: np.ndarray, mesh_vertices: np.ndarray) -> np.ndarray:
+@overload
+def reach_ratios(vertices: np.ndarray, quads: np.ndarray, mesh_vertices: np.ndarray,
+                 sides: Literal[False] = False) -> np.ndarray: ...
+
+
+@overload
+def reach_ratios(vertices: np.ndarray, quads: np.ndarray, mesh_vertices: np.ndarray,
+                 sides: Literal[True]) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+def reach_ratios(vertices: np.ndarray, quads: np.ndarray, mesh_vertices: np.ndarray,
+                 sides: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """(M,) per mesh vertex its distance to the layout's bilinear quads (``vertices`` (V, 3),
-    ``quads`` (P, 4)) over the nearest quad's mean side length."""
+    ``quads`` (P, 4)) over the nearest quad's mean side length; with ``sides`` also (M,) that
+    side length."""
     shape = _Shape(mesh_vertices, np.zeros_like(np.asarray(mesh_vertices, np.float64)))
-    return shape.measure(np.asarray(vertices, np.float64)[np.asarray(quads, np.int64)],
-                         list(range(len(quads))), np.arange(len(shape.vertices)))[0]
+    corners = np.asarray(vertices, np.float64)[np.asarray(quads, np.int64)]
+    ratio, owner, _ = shape.measure(corners, list(range(len(quads))),
+                                    np.arange(len(shape.vertices)))
+    if not sides:
+        return ratio
+    return ratio, _bilinear_samples(corners)[2][owner]
 
 
 def coarsen(vertices: np.ndarray, quads: np.ndarray, mesh_vertices: np.ndarray,
@@ -228,6 +278,7 @@ def coarsen(vertices: np.ndarray, quads: np.ndarray, mesh_vertices: np.ndarray,
     shape.start(np.asarray(vertices, np.float64)[np.asarray(quads, np.int64)])
     for _ in range(ROUNDS):
         before = layout.count
+        _collapse_chords(layout, shape, min_quads, max_turn, cover)
         _collapse_all(layout, shape, min_quads, max_turn, cover)
         if layout.count <= min_quads:
             break
@@ -236,6 +287,121 @@ def coarsen(vertices: np.ndarray, quads: np.ndarray, mesh_vertices: np.ndarray,
             break
         _relax(layout, shape, cover)
     return layout.arrays()
+
+
+def _chord(layout: _Layout, q: int, k: int) -> tuple[list[int], list[tuple[int, int]]] | None:
+    """The chord through quad q across its sides k and k + 2 (the strip of quads joined by
+    opposite sides): its quads and its rungs (the sides it crosses, as vertex pairs), or None
+    when it crosses itself."""
+    quads, rungs = [q], []
+    closed = False
+    for side in (k, (k + 2) % 4):
+        current, leaving = q, side
+        path: list[int] = []
+        while not closed:
+            here = layout.quads[current]
+            assert here is not None
+            a, b = here[leaving], here[(leaving + 1) % 4]
+            rungs.append((a, b))
+            beyond = (layout.around[a] & layout.around[b]) - {current}
+            if not beyond:
+                break
+            current = beyond.pop()
+            if current == q:
+                closed = True               # a loop: both directions walked at once
+                break
+            if current in path or current in quads:
+                return None
+            path.append(current)
+            nxt = layout.quads[current]
+            assert nxt is not None
+            leaving = (nxt.index(b) + 2) % 4   # the side opposite (b, a)
+        quads += path
+    return quads, list(dict.fromkeys(_edge_key(*r) for r in rungs))
+
+
+def _collapse_chords(layout: _Layout, shape: _Shape, min_quads: int, max_turn: float,
+                     cover: float) -> int:
+    """Collapse chords, narrowest first, while they pass the checks: each rung's two vertices
+    merge and the chord's quads go (Daniels et al. 2008, "Quadrilateral mesh simplification"):
+    a strip of a regular layout goes without leaving an irregular vertex, where a diagonal
+    collapse leaves two. The count collapsed."""
+    collapsed = 0
+    failed: set[tuple[tuple[int, int], ...]] = set()   # chords refused as they stand
+    while True:
+        seen: set[tuple[int, int]] = set()
+        chords = []
+        for q, quad in enumerate(layout.quads):
+            if quad is None:
+                continue
+            for k in (0, 1):
+                key = _edge_key(quad[k], quad[k + 1])
+                if key in seen:
+                    continue
+                found = _chord(layout, q, k)
+                if found is None:
+                    continue
+                members, rungs = found
+                seen.update(rungs)
+                width = float(np.mean([math.dist(layout.positions[a], layout.positions[b])
+                                       for a, b in rungs]))
+                chords.append((width, members, rungs))
+        done = False
+        for _, members, rungs in sorted(chords, key=lambda chord: chord[0]):
+            if layout.count - len(members) < min_quads:
+                continue
+            chord_key = tuple(sorted(rungs))
+            if chord_key in failed or any(layout.quads[o] is None for o in members):
+                continue
+            if _collapse_chord(layout, members, rungs, shape, max_turn, cover):
+                collapsed += 1
+                done = True
+                break
+            failed.add(chord_key)
+        if not done:
+            return collapsed
+
+
+def _collapse_chord(layout: _Layout, members: list[int], rungs: list[tuple[int, int]],
+                    shape: _Shape, max_turn: float, cover: float) -> bool:
+    """Merge each rung's two vertices and remove the chord's quads when the result passes
+    every check (see the module docstring); whether it did."""
+    border = layout.border
+    ends = [v for rung in rungs for v in rung]
+    if len(set(ends)) != len(ends):
+        return False                    # the chord touches itself
+    chord = set(members)
+    merged: dict[int, int] = {}
+    positions: dict[int, np.ndarray] = {}
+    on_border = []
+    for a, b in rungs:
+        if a not in layout.around or b not in layout.around:
+            return False
+        crossing = layout.around[a] & layout.around[b] & chord
+        if a in border and b in border and len(crossing) > 1:
+            return False                # an inner rung across the layout: would pinch it
+        new = len(layout.positions) + len(positions)
+        merged[a] = merged[b] = new
+        if (a in border) != (b in border):
+            positions[new] = layout.positions[a if a in border else b]
+        else:
+            positions[new] = shape.snap(0.5 * (layout.positions[a] + layout.positions[b]))
+        if a in border or b in border:
+            on_border.append(new)
+    region = {o for v in merged for o in layout.around[v]}
+    ring = {w for o in region - chord for w in layout.quads[o] or ()}
+    context = {o for w in ring for o in layout.around.get(w, ())} - region
+    before = {o: layout.quads[o] for o in region | context}
+    after = {o: [merged.get(v, v) for v in quad_o] for o, quad_o in before.items()
+             if o not in chord and quad_o}
+    if not any(before.get(o) != quad_o for o, quad_o in after.items()):
+        return False                    # the chord is all there is around its rungs
+    border.update(on_border)
+    result = _commit(layout, before, after, positions, shape, max_turn, cover)
+    if result is None:
+        border.difference_update(on_border)
+        return False
+    return True
 
 
 def _collapse_all(layout: _Layout, shape: _Shape, min_quads: int,
@@ -317,12 +483,15 @@ def _collapse_diagonal(layout: _Layout, q: int, a: int, c: int, shape: _Shape,
     border = layout.border
     if quads_a & quads_c or (layout.neighbours(a) & layout.neighbours(c)) - {b, d}:
         return None                     # a and c share another quad, or two edges become one
-    if a in border and c in border:
-        return None                     # would pinch the border
+    # a and c both on the border pinch it, unless the quad is a corner of the border (b or d
+    # in this quad only): then the corner is cut off, the border two vertices shorter
+    corner = [v for v in (b, d) if layout.around[v] == {q}]
+    if a in border and c in border and len(corner) != 1:
+        return None
     if len(quads_a) + len(quads_c) > MAX_VALENCE:
         return None
     merged = len(layout.positions)      # the new vertex's id
-    if a in border or c in border:
+    if (a in border) != (c in border):
         where = layout.positions[a if a in border else c]
     else:
         where = shape.snap(0.5 * (layout.positions[a] + layout.positions[c]))
@@ -336,7 +505,7 @@ def _collapse_diagonal(layout: _Layout, q: int, a: int, c: int, shape: _Shape,
         # a doublet (an interior vertex of two quads) merges its two quads into one
         at = [o for o, quad_o in after.items() if v in quad_o]
         if v in border:
-            if not at:
+            if not at and v not in corner:
                 return None
             continue
         if len(at) >= 3:

@@ -67,3 +67,34 @@ def test_a_layout_that_passes_the_bunnys_ears_by_is_replaced_by_one_that_follows
     check_manifold(chosen.quads)
     assert euler_characteristic(chosen.quads.tolist()) == 2
     assert len(chosen.quads) <= 400
+
+
+def _tube(around: int, along: int, radius: float = 1.0, length: float = 6.0
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """A regular quad grid on an open cylinder (vertices (around x (along + 1), 3), quads facing
+    outward)."""
+    angle = 2 * np.pi * np.arange(around) / around
+    z = np.linspace(0.0, length, along + 1)
+    vertices = np.array([[radius * np.cos(a), radius * np.sin(a), h] for h in z for a in angle])
+    quads = np.array([[j * around + i, j * around + (i + 1) % around,
+                       (j + 1) * around + (i + 1) % around, (j + 1) * around + i]
+                      for j in range(along) for i in range(around)])
+    return vertices, quads
+
+
+def test_a_regular_tube_layout_is_coarsened_by_whole_rings_and_stays_regular():
+    # A diagonal collapse leaves two irregular corners behind it (valences 3 and 5) and every
+    # irregular corner is a patch corner where the seams are hardest to keep tangent. A chord
+    # collapse removes a whole ring of a regular layout and leaves every vertex regular.
+    vertices, quads = _tube(12, 24)
+    mesh_vertices, _ = _tube(96, 192)
+    normals = mesh_vertices * [1.0, 1.0, 0.0]
+    coarse_vertices, coarse_quads = coarsen(vertices, quads, mesh_vertices, normals)
+    assert len(coarse_quads) <= len(quads) / 2
+    check_manifold(coarse_quads)
+    assert euler_characteristic(coarse_quads.tolist()) == 0
+    # every vertex in four quads inside, two on the tube's two open ends
+    valence = np.bincount(coarse_quads.ravel())
+    ends = (np.abs(coarse_vertices[:, 2]) < 1e-9) | (np.abs(coarse_vertices[:, 2] - 6.0) < 1e-9)
+    assert (valence[~ends] == 4).all() and (valence[ends] == 2).all()
+    assert reach_ratios(coarse_vertices, coarse_quads, mesh_vertices).max() <= COVER + 1e-9
