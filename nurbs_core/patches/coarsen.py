@@ -269,10 +269,10 @@ def reach_ratios(vertices: np.ndarray, quads: np.ndarray, mesh_vertices: np.ndar
 def coarsen(vertices: np.ndarray, quads: np.ndarray, mesh_vertices: np.ndarray,
             mesh_normals: np.ndarray, *, min_quads: int = 6, max_turn: float = MAX_TURN,
             cover: float = COVER) -> tuple[np.ndarray, np.ndarray]:
-    """The coarsest layout reached by diagonal collapses of the fine layout (``vertices``
-    (V, 3), ``quads`` (P, 4), oriented like the mesh), smallest quads first, while it stays
-    valid and on the shape of the mesh (``mesh_vertices`` (M, 3) with unit outward
-    ``mesh_normals`` (M, 3)); see the module docstring. Returns (V', 3), (P', 4)."""
+    """The coarsest layout reached by chord and diagonal collapses of the fine layout
+    (``vertices`` (V, 3), ``quads`` (P, 4), oriented like the mesh) while it stays valid and on
+    the shape of the mesh (``mesh_vertices`` (M, 3) with unit outward ``mesh_normals`` (M, 3));
+    see the module docstring. Returns (V', 3), (P', 4)."""
     layout = _Layout(vertices, quads)
     shape = _Shape(mesh_vertices, mesh_normals)
     shape.start(np.asarray(vertices, np.float64)[np.asarray(quads, np.int64)])

@@ -46,6 +46,9 @@ PASSED_BY = 0.75
 #: bunny reach 1.1-1.2 at its ears' tips).
 FINE_CELLS = (3.0, 2.0)
 FINE_REACH = 1.3
+#: On an open mesh, the reach leaves out the vertices this many layout edge lengths from its
+#: border (the fine layouts of the bunny's head and ears stop 1.7 edges short of it).
+BORDER_STRIP = 2.0
 #: ``auto`` makes at most one patch per this many cloud points.
 MIN_POINTS_PER_PATCH = 25
 #: Points the fit passes use at most (a random subset of larger clouds), and the quality.
@@ -124,9 +127,9 @@ def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None)
     edge turns whatever the size), the one that turned least. ``points``: the cloud's size,
     which bounds the patch count (each patch needs a few points per control point).
 
-    When that layout passes a part of a closed mesh by (a mesh vertex farther than
-    ``PASSED_BY`` local edge lengths from it: a part thinner than its edges, the bunny's ears),
-    a fine layout is coarsened where the shape allows instead
+    When that layout passes a part of the mesh by (a mesh vertex farther than ``PASSED_BY``
+    local edge lengths from it: a part thinner than its edges, the bunny's ears, closed or in an
+    open scan), a fine layout is coarsened where the shape allows instead
     (:func:`nurbs_core.patches.coarsen.coarsen`)."""
     if patches != "auto":
         return quad_layout(mesh.vertices, mesh.faces, int(patches))
@@ -136,10 +139,7 @@ def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None)
         layout = _uniform_layout(mesh, most)
     except LayoutError as error:
         failed = error
-        if not mesh.closed:
-            raise
-    if not mesh.closed or (layout is not None and layout_reach(layout, mesh) <= PASSED_BY):
-        assert layout is not None
+    if layout is not None and layout_reach(layout, mesh) <= PASSED_BY:
         return layout
     try:
         fine = _fine_layout(mesh)
@@ -157,8 +157,18 @@ def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None)
 
 def layout_reach(layout: QuadLayout, mesh: ScanMesh) -> float:
     """The largest distance of a mesh vertex from the layout's bilinear quads, in edge lengths
-    of the nearest quad."""
-    return float(reach_ratios(layout.vertices, layout.quads, mesh.vertices).max())
+    of the nearest quad. On an open mesh the vertices within ``BORDER_STRIP`` edge lengths of
+    its border are left out: Instant Meshes' layouts stop short of a border (the fit's border
+    term draws the patches out to it)."""
+    ratios, sides = reach_ratios(layout.vertices, layout.quads, mesh.vertices, sides=True)
+    if mesh.border:
+        from scipy.spatial import cKDTree
+
+        border = border_points(mesh)
+        assert border is not None, "an open mesh has a border"
+        inside = cKDTree(border).query(mesh.vertices)[0] > BORDER_STRIP * sides
+        ratios = ratios[inside]
+    return float(ratios.max(initial=0.0))
 
 
 def _fine_layout(mesh: ScanMesh) -> QuadLayout:
