@@ -135,14 +135,21 @@ def _normals_of(corners: np.ndarray) -> np.ndarray:
     return n / np.maximum(np.sqrt((n * n).sum(axis=1, keepdims=True)), 1e-300)
 
 
+def _bilinear_weights(count: int) -> np.ndarray:
+    """(count * count, 4) weights of a quad's corners at a count x count grid of parameters."""
+    t = np.linspace(0.0, 1.0, count)
+    u, v = (grid.ravel() for grid in np.meshgrid(t, t, indexing="ij"))
+    return np.stack([(1 - u) * (1 - v), u * (1 - v), u * v, (1 - u) * v], -1)
+
+
+_WEIGHTS = _bilinear_weights(COVER_SAMPLES)
+
+
 def _bilinear_samples(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``COVER_SAMPLES`` x ``COVER_SAMPLES`` points of each bilinear quad (Q, 4, 3): (Q, S, 3),
     each sample's quad (Q * S,) and each quad's mean side length (Q,)."""
-    t = np.linspace(0.0, 1.0, COVER_SAMPLES)
-    u, v = (grid.ravel() for grid in np.meshgrid(t, t, indexing="ij"))
-    weights = np.stack([(1 - u) * (1 - v), u * (1 - v), u * v, (1 - u) * v], -1)
-    samples = np.einsum("sk,pkc->psc", weights, corners)
-    owner = np.repeat(np.arange(len(corners)), len(u))
+    samples = np.einsum("sk,pkc->psc", _WEIGHTS, corners)
+    owner = np.repeat(np.arange(len(corners)), len(_WEIGHTS))
     step = corners - corners[:, _PREVIOUS]
     return samples, owner, np.sqrt((step * step).sum(axis=2)).mean(axis=1)
 
@@ -169,8 +176,6 @@ class _Shape:
         """Every quad (Q, 4, 3) lies on the mesh (:meth:`on_mesh`), faces the mesh's way at its
         centre, has no reflex corner and no corner sharper than ``MIN_CORNER`` degrees or flatter
         than its supplement."""
-        if not self.on_mesh(corners):
-            return False
         n = _cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
         along = self.normals[self.tree.query(corners.mean(axis=1))[1]]
         if ((n * along).sum(axis=1) <= 0).any():
@@ -181,7 +186,7 @@ class _Shape:
             return False
         cos = (after * before).sum(axis=2) / np.maximum(
             np.sqrt((after * after).sum(axis=2) * (before * before).sum(axis=2)), 1e-300)
-        return bool((np.abs(cos) <= COS_CORNER).all())
+        return bool((np.abs(cos) <= COS_CORNER).all()) and self.on_mesh(corners)
 
     def on_mesh(self, corners: np.ndarray) -> bool:
         """Every point of the bilinear quads (Q, 4, 3) lies within ``OFF_MESH`` x its quad's

@@ -130,7 +130,8 @@ def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None)
     When that layout passes a part of the mesh by (a mesh vertex farther than ``PASSED_BY``
     local edge lengths from it: a part thinner than its edges, the bunny's ears, closed or in an
     open scan), a fine layout is coarsened where the shape allows instead
-    (:func:`nurbs_core.patches.coarsen.coarsen`)."""
+    (:func:`nurbs_core.patches.coarsen.coarsen`), its neighbouring quads turning by at most
+    ``MAX_LAYOUT_TURN`` too (where the fine layout does not turn more already)."""
     if patches != "auto":
         return quad_layout(mesh.vertices, mesh.faces, int(patches))
     most = AUTO_MAX if points is None else min(AUTO_MAX, max(AUTO_START, points // MIN_POINTS_PER_PATCH))
@@ -144,7 +145,7 @@ def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None)
     try:
         fine = _fine_layout(mesh)
         vertices, quads = coarsen(fine.vertices, fine.quads, mesh.vertices,
-                                  mesh.vertex_normals())
+                                  mesh.vertex_normals(), max_turn=MAX_LAYOUT_TURN)
     except LayoutError:
         if layout is None:
             raise failed from None
