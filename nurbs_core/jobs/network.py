@@ -127,6 +127,9 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
         print(f"holes filled: {result.mesh.filled_fraction:.2%} of the surface lies on caps over "
               f"the scan's openings (the widest sealed: {result.mesh.max_hole:.4g}; set with "
               "--max-hole)")
+    if result.outliers:
+        print(f"outliers: {result.outliers} points ({result.outliers / len(points):.2%}) lie off "
+              "the reconstructed surface: left out of the fit and its measures")
     for warning in result.warnings:
         print(f"warning: {warning}")
     units = units_of(job)

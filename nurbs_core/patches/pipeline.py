@@ -49,6 +49,12 @@ FINE_REACH = 1.3
 #: On an open mesh, the reach leaves out the vertices this many layout edge lengths from its
 #: border (the fine layouts of the bunny's head and ears stop 1.7 edges short of it).
 BORDER_STRIP = 2.0
+#: Points farther than this many mesh cells from the reconstructed mesh are outliers; when
+#: more than ``MAX_OUTLIERS`` of the cloud are, a warning says so.
+OUTLIER_CELLS = 4.0
+MAX_OUTLIERS = 0.05
+OUTLIER_NEIGHBOURS = 6
+OUTLIER_SPREAD = 3.0
 #: ``auto`` makes at most one patch per this many cloud points.
 MIN_POINTS_PER_PATCH = 25
 #: Points the fit passes use at most (a random subset of larger clouds), and the quality.
@@ -95,6 +101,9 @@ class PatchResult:
     deviation: np.ndarray | None = field(default=None, repr=False)
     #: the caller stopped the fit (``stop``): the network as it stood, measured
     stopped: bool = False
+    #: how many points lay off the reconstructed surface (:func:`on_surface`) and were left out
+    #: of the fit and its measures (their deviation is NaN)
+    outliers: int = 0
 
     @property
     def status(self) -> str:
@@ -228,6 +237,31 @@ def border_points(mesh: ScanMesh) -> np.ndarray | None:
                            for loop in mesh.border])
 
 
+def on_surface(points: np.ndarray, mesh: ScanMesh) -> np.ndarray:
+    """(N,) bool: the points (N, 3) on the surface: within ``OUTLIER_CELLS`` cells of the mesh's
+    vertices, or farther but not isolated (their ``OUTLIER_NEIGHBOURS``-th neighbour within
+    ``OUTLIER_SPREAD`` times the usual distance); the rest are outliers the reconstruction
+    passed by. All of them when fewer than half lie near the mesh."""
+    from scipy.spatial import cKDTree
+
+    if mesh.cell <= 0 or not len(mesh.vertices) or len(points) <= OUTLIER_NEIGHBOURS:
+        return np.ones(len(points), bool)
+    near = cKDTree(mesh.vertices).query(points)[0] <= OUTLIER_CELLS * mesh.cell
+    # a mesh that misses most of the cloud does not stand for it: nothing is left out then
+    if near.mean() < 0.5 or near.all():
+        return np.ones(len(points), bool)
+    # a point off the mesh where the scan is dense (a thin tip the reconstruction cut short) is
+    # part of the surface: only isolated ones are outliers
+    tree = cKDTree(points)
+    reach = tree.query(points[near][:: max(1, int(near.sum()) // 5000)],
+                       k=OUTLIER_NEIGHBOURS + 1)[0][:, -1]
+    off = np.flatnonzero(~near)
+    isolated = tree.query(points[off], k=OUTLIER_NEIGHBOURS + 1)[0][:, -1] > \
+        OUTLIER_SPREAD * float(np.median(reach))
+    near[off[~isolated]] = True
+    return near
+
+
 def scan_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
     """The mesh a network is laid out on: the closed mesh of a closed object (holes up to
     ``max_hole`` sealed), else the bounded mesh of an open shell."""
@@ -259,6 +293,11 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     start = time.perf_counter()
     if mesh is None:
         mesh = scan_mesh(points, options.max_hole)
+    # points off the reconstructed surface (stray returns, isolated specks) would pull the
+    # patches out into spikes: they are left out of the fit and its measures
+    everything = points
+    inliers = on_surface(points, mesh)
+    points = points[inliers]
     timings["mesh"] = time.perf_counter() - start
     yield PatchEvent("mesh", mesh=mesh)
     start = time.perf_counter()
@@ -309,11 +348,16 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
         warnings.append(f"the points lie {quality.c2s_mean / noise:.1f} noise sigmas from the "
                         f"network on average (noise about {noise:.3g}): details finer than its "
                         "patches (thin parts, creases) are smoothed over")
-    deviation = np.full(len(points), np.nan)
+    outliers = int((~inliers).sum())
+    if outliers > MAX_OUTLIERS * len(everything):
+        warnings.append(f"{outliers} points ({outliers / len(everything):.1%}) lie farther than "
+                        f"{OUTLIER_CELLS * mesh.cell:.3g} from the reconstructed surface and were "
+                        "left out as outliers: more than a scan's stray points")
+    deviation = np.full(len(everything), np.nan)
     assert quality.distances is not None, "network_quality keeps the point distances"
-    deviation[sample] = quality.distances
+    deviation[np.flatnonzero(inliers)[sample]] = quality.distances
     result = PatchResult(last.network, quality, layout, mesh, timings, warnings, last.index + 1,
-                         deviation, stopped)
+                         deviation, stopped, outliers)
     yield PatchEvent("done", mesh=mesh, layout=layout, fit_pass=last, result=result)
 
 

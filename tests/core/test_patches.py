@@ -237,3 +237,20 @@ def test_patch_counts_are_bounded_by_the_machine_and_the_cloud():
     points = samples.sphere(300, truth_count=100).points
     with pytest.raises(ValueError, match="need at least 800 points"):
         fit_patches(points, PatchOptions(patches=200))
+
+
+def test_stray_points_are_left_out_instead_of_pulling_spikes():
+    # A scan with 1% stray returns drawn anywhere in its box: the patches were pulled out to
+    # them (4.6% of the area farther than the far limit from every true point, seams up to 134
+    # degrees, 'fitted with warnings'). The reconstruction keeps the head and passes the strays
+    # by; points that far from it are left out of the fit and counted.
+    shape = samples.with_outliers(samples.head(6000), fraction=0.01, seed=3)
+    result = fit_patches(shape.points)
+    tree = cKDTree(shape.truth)
+    stray = shape.outliers & (tree.query(shape.points)[0] > 0.05 * shape.diagonal)
+    assert result.outliers >= 0.8 * stray.sum()
+    assert np.isnan(result.deviation[stray]).mean() >= 0.8
+    s, _, _ = surface_samples(result.network)
+    assert tree.query(s)[0].max() < 0.015 * shape.diagonal
+    assert result.quality.seam.p99 < 2.0
+    assert result.status == "converged", result.warnings
