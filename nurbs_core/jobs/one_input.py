@@ -91,8 +91,16 @@ def _single_patch_or_open_network(job: FitJob, options: PatchOptions,
     refused: no input that holds a surface is refused)."""
     from nurbs_core.patches.layout import LayoutError
     from nurbs_core.route import open_network_instead, single_patch_problems
+    from nurbs_core.surfacing.neighbours import stray_points
     from nurbs_core.surfacing.parameterize import NotADiskError
 
+    stray = stray_points(points)
+    if stray.any():
+        # isolated stray returns fold one patch towards them: they are left out
+        points = points[~stray]
+        if not job.quiet:
+            print(f"outliers: {int(stray.sum())} isolated points "
+                  f"({stray.sum() / len(stray):.2%}) left out of the fit", file=sys.stderr)
     prepared = prepare_fit(job, points)
     result, refusal = None, None
     try:

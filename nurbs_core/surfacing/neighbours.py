@@ -114,3 +114,24 @@ def smooth_points(points: np.ndarray, k: int = 20, tree: cKDTree | None = None) 
         _, fitted, normal, height = _quadric_residuals(points, chunk, k, tree)
         out[start:start + 65536] = chunk + (fitted - height)[:, None] * normal
     return out
+
+
+#: A point is isolated when its ``STRAY_NEIGHBOURS``-th neighbour lies over ``STRAY_SPREAD``
+#: times farther than usual over the whole cloud and than its own neighbours' do.
+STRAY_NEIGHBOURS = 6
+STRAY_SPREAD = 3.0
+
+
+def stray_points(points: np.ndarray, tree: cKDTree | None = None) -> np.ndarray:
+    """(N,) bool: the isolated points of a cloud (N, 3), stray returns away from the surface.
+    A point is stray when its ``STRAY_NEIGHBOURS``-th neighbour lies over ``STRAY_SPREAD``
+    times farther than the cloud's median and than the median of its own neighbours' (a
+    sparse part of an unevenly sampled scan is sparse around each of its points, and stays)."""
+    points = np.asarray(points, np.float64)
+    if len(points) <= 2 * STRAY_NEIGHBOURS:
+        return np.zeros(len(points), bool)
+    tree = tree or cKDTree(points)
+    distance, neighbours = tree.query(points, k=STRAY_NEIGHBOURS + 1)
+    reach = distance[:, -1]
+    around = np.median(reach[neighbours[:, 1:]], axis=1)
+    return (reach > STRAY_SPREAD * float(np.median(reach))) & (reach > STRAY_SPREAD * around)
