@@ -117,7 +117,10 @@ class Case:
 
     @property
     def diagonal(self) -> float:
-        return float(np.linalg.norm(self.points.max(axis=0) - self.points.min(axis=0)))
+        """The bounding-box diagonal of the surface's samples (stray points left out)."""
+        points = self.points if self.shape.outliers is None else \
+            self.points[~self.shape.outliers]
+        return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
 
 
 def _chart_sides(shape: samples.SampledShape):
@@ -270,21 +273,29 @@ def _holed(build: Callable[..., Case], label: str, holes: int = 3,
         for centre in shape.points[:holes]:
             keep &= np.linalg.norm(shape.points - centre, axis=1) > 0.5 * width * shape.diagonal
         shape.points, shape.clean = shape.points[keep], shape.clean[keep]
+        if shape.outliers is not None:
+            shape.outliers = shape.outliers[keep]
         shape.name = case.name = label
         case.source += f", {holes} holes {width:.0%} of the diagonal wide cut out"
         return case
     return holed
 
 
-def _cut(build: Callable[..., Case], label: str, below: float = -0.5) -> Callable[..., Case]:
-    """An open shell: the case's cloud and truth above ``z = below`` only (a head scanned
-    without its base); the true area is the kept truth's share of it."""
+def _cut(build: Callable[..., Case], label: str, below: float = -0.5, axis: int = 2,
+         quantile: float | None = None) -> Callable[..., Case]:
+    """An open shell: the case's cloud and truth above ``below`` along ``axis`` only (a head
+    scanned without its base; with ``quantile``, above that quantile of the cloud's
+    coordinates); the true area is the kept truth's share of it."""
     def cut(count=COUNT, truth_count=TRUTH_COUNT, data=None) -> Case:
         case = build(count=count, truth_count=truth_count, data=data)
         shape = case.shape
-        keep = shape.points[:, 2] > below
+        level = below if quantile is None else float(np.quantile(shape.points[:, axis],
+                                                                 quantile))
+        keep = shape.points[:, axis] > level
         shape.points, shape.clean = shape.points[keep], shape.clean[keep]
-        truth = shape.truth[:, 2] > below
+        if shape.outliers is not None:
+            shape.outliers = shape.outliers[keep]
+        truth = shape.truth[:, axis] > level
         shape.true_area *= float(truth.mean())
         shape.truth = shape.truth[truth]
         for name in ("truth_normals", "truth_parameters", "truth_charts"):
@@ -293,9 +304,23 @@ def _cut(build: Callable[..., Case], label: str, below: float = -0.5) -> Callabl
         case.normals = case.normals[truth]
         shape.closed = False
         shape.name = case.name = label
-        case.source += f", cut below z = {below:g} (open: no base)"
+        case.source += f", cut below {'xyz'[axis]} = {level:.4g} (open)"
         return case
     return cut
+
+
+def _with_strays(build: Callable[..., Case], label: str,
+                 fraction: float = 0.01) -> Callable[..., Case]:
+    """A case with ``fraction`` of its points replaced by stray returns drawn uniformly in its
+    box grown by 10% of the diagonal (``samples.with_outliers``); the cloud-to-truth distance
+    leaves the strays out (they are not the surface's samples)."""
+    def strays(count=COUNT, truth_count=TRUTH_COUNT, data=None) -> Case:
+        case = build(count=count, truth_count=truth_count, data=data)
+        case.shape = samples.with_outliers(case.shape, fraction=fraction, seed=3)
+        case.shape.name = case.name = label
+        case.source += f", {fraction:.0%} of its points thrown anywhere in its box"
+        return case
+    return strays
 
 
 def _model(label: str, files: list[str], by_parameter: bool = False) -> Callable[..., Case]:
@@ -394,8 +419,12 @@ def case_builders() -> dict[str, Callable[..., Case]]:
         "head_no_base": _cut(_generated(g.head, "head"), "head_no_base"),
         "sphere_cut": _cut(_generated(g.sphere, "sphere"), "sphere_cut"),
     }
-    # a scanned object with thin parts (its ears), sampled from its mesh
+    # a scanned object with thin parts (its ears), sampled from its mesh; its head and ears
+    # scanned alone (an open shell with the thin parts)
     builders["bunny"] = _mesh("bunny", BUNNY)
+    builders["bunny_head"] = _cut(_mesh("bunny", BUNNY), "bunny_head", axis=1, quantile=0.55)
+    # stray returns: 1% of the head's points anywhere in its box
+    builders["head_strays"] = _with_strays(_generated(g.head, "head"), "head_strays")
     for label, files in MODELS.items():
         builders[label] = _model(label, files)
     builders["duck_body_by_parameter"] = _model("duck_body_by_parameter", MODELS["duck"][:1],
@@ -541,7 +570,9 @@ def run_case(case: Case, single: bool = True, options: Any = None) -> dict[str, 
     """One case: the network, the single-patch baseline and the target flags."""
     tree = cKDTree(case.shape.truth)
     start = time.perf_counter()
-    truth_c2s = float(truth_distance(case, case.points).mean())
+    on_surface = case.points if case.shape.outliers is None else \
+        case.points[~case.shape.outliers]
+    truth_c2s = float(truth_distance(case, on_surface).mean())
     truth_s = time.perf_counter() - start
     network = run_network(case, tree, truth_c2s, options)
     out = {"case": case.name, "points": len(case.points), "diagonal": case.diagonal,

@@ -42,7 +42,7 @@ from nurbs_core.patches.closed_mesh import (
 )
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.reconstruct.wrap import NEIGHBOURS as NORMAL_NEIGHBOURS
-from nurbs_core.reconstruct.wrap import blocked_voxels, point_radii
+from nurbs_core.reconstruct.wrap import VoxelGrid, blocked_voxels, point_radii
 from nurbs_core.surfacing.mesh import voxel_subsample
 from nurbs_core.surfacing.neighbours import local_frames
 
@@ -52,6 +52,11 @@ BAND_GROWTH = 2
 MASK_GROWTH = 1
 #: Openings narrower than this many cells are pin-holes of the band, always capped.
 PIN_HOLE = 2.0
+#: Blurs of the distance field tried in turn (x SMOOTHING) while its zero set has handles.
+HANDLE_BLURS = (1.0, 1.5, 2.0)
+#: ... as long as this share of the points stays within HANDLE_REACH cells of the zero set.
+HANDLE_COVER = 0.97
+HANDLE_REACH = 2.0
 #: The border is smoothed along itself by a Gaussian of this many of its own vertices.
 BORDER_SMOOTHING = 3.0
 
@@ -78,24 +83,27 @@ def open_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
     radii = point_radii(points, grid.cell, tree)
     blocked = blocked_voxels(points, radii, grid)
     band = scipy.ndimage.binary_dilation(blocked, iterations=BAND_GROWTH)
-    field = np.zeros(grid.shape)
-    field[band] = tangent_plane_distance(grid.centres()[band.ravel()], points, normals, tree,
-                                         grid.cell)
-    # blurred inside the band only (a normalised convolution: the zeros outside do not leak in)
-    inside = band.astype(np.float64)
-    field = (scipy.ndimage.gaussian_filter(field * inside, SMOOTHING)
-             / np.maximum(scipy.ndimage.gaussian_filter(inside, SMOOTHING), 1e-12))
+    distance = np.zeros(grid.shape)
+    distance[band] = tangent_plane_distance(grid.centres()[band.ravel()], points, normals, tree,
+                                            grid.cell)
     mask = scipy.ndimage.binary_dilation(blocked, iterations=MASK_GROWTH)
-    if field[mask].min() >= 0 or field[mask].max() <= 0:
-        raise NotASurfaceError("the cloud's distance field has no zero set")
-    from skimage.measure import marching_cubes
-
-    vertices, faces, _, _ = marching_cubes(field, 0.0, spacing=(grid.cell,) * 3, mask=mask)
-    vertices = vertices + grid.origin
-    faces, pieces = _largest_piece(faces.astype(np.int64), len(vertices))
-    faces = _without_pinches(faces)
-    faces, _ = _largest_piece(faces, len(vertices))
-    vertices, faces = compacted(vertices, faces)
+    # noise across a thin part (an ear) punches tunnels through the zero set: handles an open
+    # scan does not have, which no quad layout reproduces; a wider blur closes them
+    best = None
+    for blur in HANDLE_BLURS:
+        vertices, faces, pieces = _zero_set(distance, band, mask, grid, SMOOTHING * blur)
+        handles = genus(faces)
+        if best is not None:
+            # a blur that closes the tunnels but shrinks the surface off the points (the ears'
+            # tips) is not taken
+            near = cKDTree(vertices).query(points)[0] <= HANDLE_REACH * grid.cell
+            if handles >= best[0] or near.mean() < HANDLE_COVER:
+                continue
+        best = (handles, vertices, faces, pieces)
+        if handles == 0:
+            break
+    assert best is not None, "HANDLE_BLURS holds at least one blur"
+    _, vertices, faces, pieces = best
     # faces turned like the points' normals
     centroid = vertices[faces].mean(axis=1)
     face_normal = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
@@ -125,6 +133,36 @@ def open_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
     vertices, faces = np.concatenate(new_vertices), np.concatenate(new_faces)
     return ScanMesh(vertices, faces, normals, grid.cell, pieces, filled if filled.any() else None,
                     max_hole, border)
+
+
+def _zero_set(distance: np.ndarray, band: np.ndarray, mask: np.ndarray, grid: VoxelGrid,
+              blur: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """The zero set of the tangent-plane ``distance`` on the grid, blurred by ``blur`` cells
+    inside the ``band`` and cut by ``mask``: vertices (V, 3), faces (F, 3) of its largest
+    piece without pinched vertices, and how many pieces marching cubes found."""
+    from skimage.measure import marching_cubes
+
+    # blurred inside the band only (a normalised convolution: the zeros outside do not leak in)
+    inside = band.astype(np.float64)
+    field = (scipy.ndimage.gaussian_filter(distance * inside, blur)
+             / np.maximum(scipy.ndimage.gaussian_filter(inside, blur), 1e-12))
+    if field[mask].min() >= 0 or field[mask].max() <= 0:
+        raise NotASurfaceError("the cloud's distance field has no zero set")
+    vertices, faces, _, _ = marching_cubes(field, 0.0, spacing=(grid.cell,) * 3, mask=mask)
+    vertices = vertices + grid.origin
+    faces, pieces = _largest_piece(faces.astype(np.int64), len(vertices))
+    faces = _without_pinches(faces)
+    faces, _ = _largest_piece(faces, len(vertices))
+    vertices, faces = compacted(vertices, faces)
+    return vertices, faces, pieces
+
+
+def genus(faces: np.ndarray) -> int:
+    """The genus of a connected triangle mesh (F, 3) with or without border: (2 - chi - b) / 2
+    for Euler characteristic chi and b border loops."""
+    from nurbs_core.patches.layout import euler_characteristic
+
+    return max(0, (2 - euler_characteristic(faces.tolist()) - len(boundary_loops(faces))) // 2)
 
 
 def propagated_normals(points: np.ndarray, normals: np.ndarray,
