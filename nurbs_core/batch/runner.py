@@ -116,6 +116,20 @@ def _complete(path: str) -> bool:
         return False
 
 
+def _record_written(records: list[dict | None], items: list, since: float) -> None:
+    """Rows for the inputs without a record whose outputs this run wrote whole (after
+    ``since``, a time.time()): the run was interrupted after writing them and before recording
+    them; their statistics are not known."""
+    for position, item in enumerate(items):
+        if records[position] is not None or item.error is not None or not item.outputs:
+            continue
+        if all(_complete(p) and os.path.getmtime(p) >= since for p in item.outputs):
+            records[position] = {"input": item.label, "output": item.outputs[0],
+                                 "status": "ok", "seconds": None, "error": "",
+                                 "note": "written just before the interruption: its statistics "
+                                         "were not recorded"}
+
+
 def _head(path: str, size: int = 4096) -> str:
     with open(path, encoding="utf-8", errors="replace") as handle:
         return handle.read(size)
@@ -235,6 +249,7 @@ def run_batch(batch: BatchSettings) -> int:
         print(f"nurbs-fit: {len(items)} inputs ({len(todo)} to fit, {skipped} skipped) on {where}; "
               f"results in {directory}", file=sys.stderr, flush=True)
     interrupted = False
+    started = time.time()
     # the summary is rewritten (atomically) as each result arrives: a run killed at any moment
     # leaves an accurate one
     write_summary(summary, [r for r in records if r is not None])
@@ -253,6 +268,8 @@ def run_batch(batch: BatchSettings) -> int:
                 write_summary(summary, [r for r in records if r is not None])
     except KeyboardInterrupt:
         interrupted = True
+        # an interruption between a result's files and its record: the files are there, whole
+        _record_written(records, items, started)
     progress.show(final=True)
     done = [r for r in records if r is not None]
     write_summary(summary, done)

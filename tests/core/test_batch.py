@@ -701,6 +701,32 @@ def test_sigterm_stops_a_batch_like_ctrl_c_with_its_summary(tmp_path):
     assert {Path(row["output"]).name for row in rows.values()} == written
 
 
+def test_a_result_written_just_before_an_interruption_is_in_the_summary(tmp_path, monkeypatch):
+    """Ctrl-C (or SIGTERM) between a result's files and its record: the summary lists every
+    file the run wrote (the SIGTERM test above failed now and then on a loaded machine: two
+    results written, one row)."""
+    import nurbs_core.batch.executors as executors
+
+    real = executors.serial
+
+    def interrupted_after_the_second_write(*args, **kwargs):
+        for count, settled in enumerate(real(*args, **kwargs)):
+            if count == 1:
+                raise KeyboardInterrupt     # its file is written, its record not yet taken
+            yield settled
+
+    monkeypatch.setattr(executors, "serial", interrupted_after_the_second_write)
+    folder = _folder(tmp_path, corrupt=False)
+    out = tmp_path / "fits"
+    assert main([str(folder), "--output-dir", str(out), "-q", *FIT]) == 130
+    rows = _summary(out / "summary.jsonl")
+    written = {p.name for p in out.glob("*.json")}
+    assert len(written) == 2
+    assert {Path(row["output"]).name for row in rows.values()} == written
+    late = [row for row in rows.values() if row.get("note")]
+    assert len(late) == 1 and late[0]["status"] == "ok"
+
+
 # --- bounds on what a setting or a file can claim ---------------------------------------------
 
 
