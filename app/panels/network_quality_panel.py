@@ -32,6 +32,9 @@ ROWS = (
     ("s2c", "Surface to cloud", "mean and largest distance from the network to the nearest "
                                 "point, and the share of its area farther from every point than "
                                 "the limit shown (a part the scan does not hold: a flap, a horn)"),
+    ("scan", "Scan", "what the fit did to the scan: stray points off the reconstructed surface "
+                     "left out of the fit and its measures, and the share of the surface on "
+                     "caps over the scan's holes"),
 )
 
 
@@ -116,3 +119,18 @@ class NetworkQualityPanel(QWidget):
                                    f"{_number(get('far_limit'))}")
         self.values["s2c"].setStyleSheet(f"QLabel {{ color: {WARNING_COLOR}; }}" if far > 0.005
                                          else "")
+        self.values["scan"].setText(scan_summary(quality))
+
+
+def scan_summary(quality: dict) -> str:
+    """What the fit did to the scan, one line: the stray points left out and the share of the
+    surface on caps over holes ("every point fitted, no hole capped" when neither)."""
+    parts = []
+    outliers, points = int(quality.get("outliers", 0)), int(quality.get("points", 0))
+    if outliers:
+        share = f" ({outliers / points:.2%})" if points else ""
+        parts.append(f"{outliers} stray points{share} left out")
+    filled = float(quality.get("filled_fraction", 0.0))
+    if filled > 0:
+        parts.append(f"{filled:.1%} of the surface on caps over holes")
+    return "; ".join(parts) or "every point fitted, no hole capped"

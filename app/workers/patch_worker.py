@@ -156,7 +156,11 @@ class PatchWorker(QObject):
                         network=result.network, pass_index=result.passes - 1,
                         size=result.network.size, patch_count=result.network.patch_count,
                         rms=float(event.fit_pass.rms), seam=float(event.fit_pass.seam),
-                        elapsed=time.monotonic() - started, quality=result.quality.as_dict(),
+                        elapsed=time.monotonic() - started,
+                        # with what the fit did to the scan: strays left out, holes capped
+                        quality={**result.quality.as_dict(), "outliers": result.outliers,
+                                 "points": len(request.points),
+                                 "filled_fraction": result.mesh.filled_fraction},
                         warnings=list(result.warnings), done=True,
                         deviation=result.deviation))
                     return

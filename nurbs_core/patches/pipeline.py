@@ -27,7 +27,7 @@ from nurbs_core.patches.network import PatchNetwork
 from nurbs_core.patches.options import PatchOptions, check_patch_count
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import WARN_FLIPPED, reported_status
-from nurbs_core.surfacing.neighbours import estimate_noise
+from nurbs_core.surfacing.neighbours import STRAY_MAX_POINTS, estimate_noise
 
 #: The first patch count ``auto`` tries, how much finer each retry is, and the most it goes to.
 AUTO_START = 24
@@ -241,10 +241,12 @@ def on_surface(points: np.ndarray, mesh: ScanMesh) -> np.ndarray:
     """(N,) bool: the points (N, 3) on the surface: within ``OUTLIER_CELLS`` cells of the mesh's
     vertices, or farther but not isolated (their ``OUTLIER_NEIGHBOURS``-th neighbour within
     ``OUTLIER_SPREAD`` times the usual distance); the rest are outliers the reconstruction
-    passed by. All of them when fewer than half lie near the mesh."""
+    passed by. All of them when fewer than half lie near the mesh, and in clouds over
+    :data:`nurbs_core.surfacing.neighbours.STRAY_MAX_POINTS` (the queries cost seconds there)."""
     from scipy.spatial import cKDTree
 
-    if mesh.cell <= 0 or not len(mesh.vertices) or len(points) <= OUTLIER_NEIGHBOURS:
+    if mesh.cell <= 0 or not len(mesh.vertices) or not \
+            OUTLIER_NEIGHBOURS < len(points) <= STRAY_MAX_POINTS:
         return np.ones(len(points), bool)
     near = cKDTree(mesh.vertices).query(points)[0] <= OUTLIER_CELLS * mesh.cell
     # a mesh that misses most of the cloud does not stand for it: nothing is left out then

@@ -120,15 +120,19 @@ def smooth_points(points: np.ndarray, k: int = 20, tree: cKDTree | None = None) 
 #: times farther than usual over the whole cloud and than its own neighbours' do.
 STRAY_NEIGHBOURS = 6
 STRAY_SPREAD = 3.0
+#: Larger clouds are not checked: the neighbour queries cost seconds there (5 s at 1,000,000
+#: points on one core).
+STRAY_MAX_POINTS = 300_000
 
 
 def stray_points(points: np.ndarray, tree: cKDTree | None = None) -> np.ndarray:
     """(N,) bool: the isolated points of a cloud (N, 3), stray returns away from the surface.
     A point is stray when its ``STRAY_NEIGHBOURS``-th neighbour lies over ``STRAY_SPREAD``
     times farther than the cloud's median and than the median of its own neighbours' (a
-    sparse part of an unevenly sampled scan is sparse around each of its points, and stays)."""
+    sparse part of an unevenly sampled scan is sparse around each of its points, and stays).
+    None are flagged in clouds over ``STRAY_MAX_POINTS``."""
     points = np.asarray(points, np.float64)
-    if len(points) <= 2 * STRAY_NEIGHBOURS:
+    if not 2 * STRAY_NEIGHBOURS < len(points) <= STRAY_MAX_POINTS:
         return np.zeros(len(points), bool)
     tree = tree or cKDTree(points)
     distance, neighbours = tree.query(points, k=STRAY_NEIGHBOURS + 1)

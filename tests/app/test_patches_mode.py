@@ -297,6 +297,25 @@ def test_start_on_a_closed_cloud_goes_on_as_a_network(qtbot, window, tmp_path):
     assert not window.scene.deviation_shown()  # it measured the network, not a single patch
 
 
+def test_the_dock_says_which_stray_points_the_network_left_out(qtbot, window, tmp_path):
+    """A closed scan with 1% stray points anywhere in its box: the network leaves the isolated
+    ones out of its fit and measures, and the Patch quality dock says how many; the deviation
+    map leaves them uncoloured (NaN), not at the far end of the scale."""
+    from nurbs_core import samples
+
+    shape = samples.with_outliers(samples.sphere(3000), fraction=0.01, seed=3)
+    _open_cloud(qtbot, window, tmp_path, "sphere_strays", shape.points)
+    with qtbot.waitSignal(window.patch_controller.fit_finished, timeout=FIT_TIMEOUT_MS) as done:
+        window.start_action.trigger()
+    quality = done.args[0].quality
+    assert quality["outliers"] > 0 and quality["points"] == len(shape.points)
+    text = window.network_quality_panel.values["scan"].text()
+    assert text.startswith(f"{quality['outliers']} stray points (")
+    deviation = window.scene._meshes["cloud"].point_data[DEVIATION_TITLE]
+    assert np.isnan(deviation).sum() == quality["outliers"]
+    assert window.network_quality_panel.status.text().endswith(": converged")
+
+
 def test_patch_settings_are_undoable_and_reach_the_engine_options(qtbot, window):
     from app.state import Settings
     from nurbs_core.patches.options import PatchOptions
