@@ -150,8 +150,13 @@ def _bilinear_samples(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.n
     each sample's quad (Q * S,) and each quad's mean side length (Q,)."""
     samples = np.einsum("sk,pkc->psc", _WEIGHTS, corners)
     owner = np.repeat(np.arange(len(corners)), len(_WEIGHTS))
+    return samples, owner, _mean_sides(corners)
+
+
+def _mean_sides(corners: np.ndarray) -> np.ndarray:
+    """(Q,) mean side length of each quad (Q, 4, 3)."""
     step = corners - corners[:, _PREVIOUS]
-    return samples, owner, np.sqrt((step * step).sum(axis=2)).mean(axis=1)
+    return np.sqrt((step * step).sum(axis=2)).mean(axis=1)
 
 
 class _Shape:
@@ -268,7 +273,7 @@ def reach_ratios(vertices: np.ndarray, quads: np.ndarray, mesh_vertices: np.ndar
                                     np.arange(len(shape.vertices)))
     if not sides:
         return ratio
-    return ratio, _bilinear_samples(corners)[2][owner]
+    return ratio, _mean_sides(corners)[owner]
 
 
 def coarsen(vertices: np.ndarray, quads: np.ndarray, mesh_vertices: np.ndarray,

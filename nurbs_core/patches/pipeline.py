@@ -27,7 +27,12 @@ from nurbs_core.patches.network import PatchNetwork
 from nurbs_core.patches.options import PatchOptions, check_patch_count
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import WARN_FLIPPED, reported_status
-from nurbs_core.surfacing.neighbours import STRAY_MAX_POINTS, estimate_noise
+from nurbs_core.surfacing.neighbours import (
+    STRAY_MAX_POINTS,
+    STRAY_NEIGHBOURS,
+    STRAY_SPREAD,
+    estimate_noise,
+)
 
 #: The first patch count ``auto`` tries, how much finer each retry is, and the most it goes to.
 AUTO_START = 24
@@ -53,8 +58,6 @@ BORDER_STRIP = 2.0
 #: more than ``MAX_OUTLIERS`` of the cloud are, a warning says so.
 OUTLIER_CELLS = 4.0
 MAX_OUTLIERS = 0.05
-OUTLIER_NEIGHBOURS = 6
-OUTLIER_SPREAD = 3.0
 #: ``auto`` makes at most one patch per this many cloud points.
 MIN_POINTS_PER_PATCH = 25
 #: Points the fit passes use at most (a random subset of larger clouds), and the quality.
@@ -239,14 +242,15 @@ def border_points(mesh: ScanMesh) -> np.ndarray | None:
 
 def on_surface(points: np.ndarray, mesh: ScanMesh) -> np.ndarray:
     """(N,) bool: the points (N, 3) on the surface: within ``OUTLIER_CELLS`` cells of the mesh's
-    vertices, or farther but not isolated (their ``OUTLIER_NEIGHBOURS``-th neighbour within
-    ``OUTLIER_SPREAD`` times the usual distance); the rest are outliers the reconstruction
-    passed by. All of them when fewer than half lie near the mesh, and in clouds over
-    :data:`nurbs_core.surfacing.neighbours.STRAY_MAX_POINTS` (the queries cost seconds there)."""
+    vertices, or farther but not isolated (their ``STRAY_NEIGHBOURS``-th neighbour within
+    ``STRAY_SPREAD`` times the usual distance: the bounds of
+    :func:`nurbs_core.surfacing.neighbours.stray_points`); the rest are outliers the
+    reconstruction passed by. All of them when fewer than half lie near the mesh, and in clouds
+    over ``STRAY_MAX_POINTS`` (the queries cost seconds there)."""
     from scipy.spatial import cKDTree
 
     if mesh.cell <= 0 or not len(mesh.vertices) or not \
-            OUTLIER_NEIGHBOURS < len(points) <= STRAY_MAX_POINTS:
+            STRAY_NEIGHBOURS < len(points) <= STRAY_MAX_POINTS:
         return np.ones(len(points), bool)
     near = cKDTree(mesh.vertices).query(points)[0] <= OUTLIER_CELLS * mesh.cell
     # a mesh that misses most of the cloud does not stand for it: nothing is left out then
@@ -256,10 +260,10 @@ def on_surface(points: np.ndarray, mesh: ScanMesh) -> np.ndarray:
     # part of the surface: only isolated ones are outliers
     tree = cKDTree(points)
     reach = tree.query(points[near][:: max(1, int(near.sum()) // 5000)],
-                       k=OUTLIER_NEIGHBOURS + 1)[0][:, -1]
+                       k=STRAY_NEIGHBOURS + 1)[0][:, -1]
     off = np.flatnonzero(~near)
-    isolated = tree.query(points[off], k=OUTLIER_NEIGHBOURS + 1)[0][:, -1] > \
-        OUTLIER_SPREAD * float(np.median(reach))
+    isolated = tree.query(points[off], k=STRAY_NEIGHBOURS + 1)[0][:, -1] > \
+        STRAY_SPREAD * float(np.median(reach))
     near[off[~isolated]] = True
     return near
 
