@@ -19,11 +19,11 @@ from PySide6.QtCore import QObject, Signal
 from PySide6.QtGui import QUndoCommand, QUndoStack
 
 from nurbs_core.fitting.config import INITS, FitConfig
-from nurbs_core.fitting.config import LOSS_TERMS as LOSS_TERMS  # re-exported for the panels
 from nurbs_core.fitting.config import OPTIMIZERS as OPTIMIZERS
 from nurbs_core.fitting.config import PARAMETERIZATIONS as _PARAMETERIZATIONS
 from nurbs_core.fitting.config import SOLVERS as _SOLVERS
 from nurbs_core.geometry_arrays import GeometryArrays, from_mapping
+from nurbs_core.loss_terms import LOSS_TERMS as LOSS_TERMS  # re-exported for the panels
 from nurbs_core.patches.options import PatchOptions
 
 #: Sessions are zip archives (:mod:`app.session_file`); the JSON sessions written before them

@@ -32,7 +32,7 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
-from nurbs_core.fitting.config import LOSS_TERMS, Loss
+from nurbs_core.loss_terms import LOSS_TERMS, Loss
 
 # --------------------------------------------------------------------------------------------
 # Pointwise losses
@@ -261,7 +261,7 @@ TERMS: dict[str, tuple[Callable[[LossInputs, str], torch.Tensor], str]] = {
                 "regulariser"),
 }
 if {name: kind for name, (_, kind) in TERMS.items()} != LOSS_TERMS:  # pragma: no cover
-    raise ImportError("nurbs_core.losses.TERMS and nurbs_core.fitting.config.LOSS_TERMS disagree")
+    raise ImportError("nurbs_core.losses.TERMS and nurbs_core.loss_terms.LOSS_TERMS disagree")
 
 
 class CompositeLoss:
@@ -297,7 +297,7 @@ class CompositeLoss:
 
 
 def parse_loss(expression: Loss | str) -> CompositeLoss:
-    """The loss to evaluate for ``expression``: a :class:`~nurbs_core.fitting.config.Loss` or its
+    """The loss to evaluate for ``expression``: a :class:`~nurbs_core.loss_terms.Loss` or its
     text form, e.g. ``"chamfer+0.1*laplacian+10*hausdorff"`` (see :meth:`Loss.parse`: names l1,
     l2, mse, p2s (point_to_surface; mse at foot points), chamfer (cd), hausdorff (hd), laplacian
     (lap), length (curve_length), fairing (thin_plate; surfaces)). Raises ValueError naming the
