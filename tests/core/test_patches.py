@@ -254,3 +254,27 @@ def test_stray_points_are_left_out_instead_of_pulling_spikes():
     assert tree.query(s)[0].max() < 0.015 * shape.diagonal
     assert result.quality.seam.p99 < 2.0
     assert result.status == "converged", result.warnings
+
+
+
+def test_the_network_fit_weighs_points_by_huber_loss_as_scipy_defines_it():
+    """Points far from the network count by Huber's loss (scipy.special.huber, doubled so that
+    it is the sum of squares within the limit), and the reweighting is its influence over the
+    distance, so a stray point's pull on the surface is bounded."""
+    from scipy.special import huber
+
+    import nurbs_core.patches.fit as network_fit
+
+    d = np.abs(np.random.default_rng(3).normal(0.0, 0.01, 500)) * np.r_[np.ones(450),
+                                                                       np.full(50, 20.0)]
+    sigma = 0.01
+    limit = network_fit.HUBER_SIGMAS * sigma
+    assert network_fit.huber_loss(d, sigma) == pytest.approx(2.0 * huber(limit, d).sum(),
+                                                             rel=1e-12)
+    # IRLS weight = psi(d) / d with psi the derivative of the loss (by central differences)
+    step = 1e-7
+    psi = (huber(limit, d + step) - huber(limit, d - step)) / (2 * step)
+    np.testing.assert_allclose(network_fit.huber_weights(d, sigma), psi / d, rtol=1e-5)
+    # a point 20 sigmas out pulls like one at the limit, not twenty times as hard
+    far = network_fit.huber_weights(np.array([20 * sigma]), sigma)[0] * 20 * sigma
+    assert far == pytest.approx(limit)
