@@ -38,7 +38,7 @@ class Histogram(QWidget):
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
-        self.setMinimumSize(220, 110)
+        self.setMinimumSize(200, 100)
         self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
         self.counts = np.zeros(0, np.int64)
         self.edges = np.zeros(0)
@@ -132,10 +132,14 @@ class DeviationPanel(QWidget):
         row.addWidget(self.limit_box, 1)
         row.addWidget(self.auto_limit)
         form.addRow("Range +/-", row)
-        layout = QVBoxLayout(self)
-        layout.addLayout(form)
+        # side by side: the bottom docks are short and wide
+        controls = QVBoxLayout()
+        controls.addLayout(form)
+        controls.addWidget(self.counts)
+        controls.addStretch(1)
+        layout = QHBoxLayout(self)
+        layout.addLayout(controls, 1)
         layout.addWidget(self.histogram, 1)
-        layout.addWidget(self.counts)
 
         self.mode_box.currentIndexChanged.connect(lambda _i: self._emit())
         self.tolerance_box.editingFinished.connect(self._tolerance_typed)
@@ -221,7 +225,7 @@ class DeviationPanel(QWidget):
         total = len(deviation.distances)
         unit = f" {self._units}" if self._units else ""
         sampled = "" if total == len(self.map.distances) else (
-            f" (a sample of {len(self.map.distances):,})")
+            f" measured of {len(self.map.distances):,}")
         stats = deviation.statistics()
         self.counts.setText(
             f"Within +/-{deviation.tolerance:.4g}{unit}: {n['within']:,} "
