@@ -353,7 +353,12 @@ def test_a_batch_whose_last_worker_dies_ends_with_the_waiting_inputs_failed(tmp_
             assert time.monotonic() < deadline, "no result within 300 s"
             time.sleep(0.2)
         worker.kill()
-        stdout, stderr = batch.communicate(timeout=60)
+        try:
+            stdout, stderr = batch.communicate(timeout=180)
+        except subprocess.TimeoutExpired:
+            batch.kill()
+            raise AssertionError(("the batch did not end within 180 s of its last worker's "
+                                  "death", batch.communicate())) from None
     assert batch.returncode == SOME_FAILED_STATUS, stderr
     rows = _summary(out / "summary.jsonl")
     assert len(rows) == 8
