@@ -193,6 +193,7 @@ class FitController(QObject):
         if self._latest is not None and self._latest.deviation is not None and (
                 snapshot.deviation is None):
             snapshot.deviation = self._latest.deviation  # keep the newest deviation we have
+            snapshot.signed = self._latest.signed
         self._latest = snapshot
         self._rate_history.append((snapshot.elapsed, snapshot.iteration))
         while len(self._rate_history) > 2 and (

@@ -59,3 +59,24 @@ class NetworkDisplay:
 FINE, FAR, OVERLAP, FLIPPED = 0, 1, 2, 3
 CATEGORY_NAMES = {FINE: "fine", FAR: "far from the cloud", OVERLAP: "overlapping sheets",
                   FLIPPED: "flipped"}
+
+
+@dataclass
+class DeviationMap:
+    """The signed deviation of a scan from a fit, ready to paint.
+
+    distances (N,): each point's signed distance to the fit (positive above its surface, outside
+    a closed network; :func:`nurbs_core.report.deviation.signed_distances`), NaN where a point
+    was not measured (a large cloud's sample, a stray point the fit left out); tolerance: the
+    fit's (or three estimated noise sigmas); surface_vertices (V, 3), surface_faces (F, 3) and
+    surface_values (V,): the fitted surface as drawn and, per vertex, the inverse-distance
+    weighted mean of the signed distances of the nearest measured points (NaN where no point
+    is near: a hole in the scan); None while a fit runs (the surface moves between maps).
+    mode: the fit it measures ("single" or "patches")."""
+
+    distances: np.ndarray
+    tolerance: float
+    mode: str = "single"
+    surface_vertices: np.ndarray | None = None
+    surface_faces: np.ndarray | None = None
+    surface_values: np.ndarray | None = None

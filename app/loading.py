@@ -14,9 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
+from app.display_types import DeviationMap
 from app.state import OffsetDisplay, Target
+from app.workers.deviation_map import fit_triangles
 from app.workers.display import DisplayGeometry, display_geometry
-from app.workers.fit_worker import FINAL_DEVIATION_POINTS, sampled_deviation
+from app.workers.fit_worker import FINAL_DEVIATION_POINTS, sampled_deviation, signed_map
 from app.workers.quality import measure_quality
 from nurbs_core.geometry_arrays import GeometryArrays
 
@@ -115,11 +117,14 @@ class FittedDisplay:
     deviation: np.ndarray | None = None
     statistics: dict[str, float] | None = None
     quality_cells: np.ndarray | None = None
+    signed: DeviationMap | None = None
 
 
 def fitted_display(geometry: GeometryArrays, points: np.ndarray | None,
-                   statistics: dict[str, float] | None = None) -> FittedDisplay:
-    """Display arrays, per-point deviation and quality of a fitted shape (e.g. from a session).
+                   statistics: dict[str, float] | None = None,
+                   tolerance: float | None = None) -> FittedDisplay:
+    """Display arrays, per-point deviation (and the signed map, judged by ``tolerance``; None:
+    three noise sigmas) and quality of a fitted shape (e.g. from a session).
     statistics: the fit's own measures when it has them (only the quality map is computed)."""
     from nurbs_core import geometry_from_numpy
     from nurbs_core.fitting import deviation
@@ -131,6 +136,8 @@ def fitted_display(geometry: GeometryArrays, points: np.ndarray | None,
                                    geometry.control_points.shape[-1] == 2) else points
         result.deviation = sampled_deviation(deviation, geometry_from_numpy(geometry), target,
                                              FINAL_DEVIATION_POINTS)
+        result.signed = signed_map(geometry, display, target, tolerance,
+                                   FINAL_DEVIATION_POINTS, final=True)
         if display.kind == "surface":
             result.statistics, result.quality_cells = measure_quality(
                 geometry, target, display.grid_u, display.grid_v, statistics, result.deviation)
@@ -168,21 +175,13 @@ def export_report(path: str, points: np.ndarray, fitted: GeometryArrays | None, 
     from nurbs_core.report.deviation import measure_deviation
     from nurbs_core.report.document import ReportContent, write_report
 
+    vertices, faces, closed = fit_triangles(fitted, network)
     if network is not None:
-        from nurbs_core.io.network_mesh import network_mesh_arrays
-
-        vertices, faces = network_mesh_arrays(network)
-        closed = bool(network.closed)
         summary = [("route", f"{'closed' if closed else 'open'} network of patches"),
                    ("patches", f"{network.patch_count} ({network.size} x {network.size} "
                                "control points each)")]
     else:
-        from nurbs_core import geometry_from_numpy
-        from nurbs_core.io.tessellate import tessellate
-
         assert fitted is not None, "a report needs a fitted surface or a network"
-        mesh = tessellate(geometry_from_numpy(fitted))
-        vertices, faces, closed = np.asarray(mesh.vertices), np.asarray(mesh.faces), False
         counts = np.shape(fitted["control_points"])[:-1]
         summary = [("route", "one patch"),
                    ("control points", " x ".join(str(int(n)) for n in counts))]

@@ -48,6 +48,7 @@ from app.controller import FitController
 from app.demo import ICON_FILE, demo_path
 from app.errors import log_failure, one_line
 from app.offsets import OffsetController
+from app.panels.deviation_panel import DeviationPanel
 from app.panels.document_tree import DocumentTree
 from app.panels.fit_panel import POLICY_TEXT, FitSettingsPanel
 from app.panels.knot_panel import KnotPanel
@@ -206,6 +207,7 @@ class MainWindow(QMainWindow):
         self.network_quality_panel = NetworkQualityPanel()
         self.loss_plot = LossPlot()
         self.quality_panel = QualityPanel()
+        self.deviation_panel = DeviationPanel()
         self.log_panel = LogPanel()
         logging.getLogger().addHandler(self.log_panel.handler)
         if logging.getLogger().level > logging.INFO or logging.getLogger().level == 0:
@@ -224,10 +226,13 @@ class MainWindow(QMainWindow):
         self.quality_dock = self._dock("Quality", self.quality_panel, bottom, "quality_dock", True)
         self.network_quality_dock = self._dock("Patch quality", self.network_quality_panel,
                                                bottom, "network_quality_dock", True)
+        self.deviation_dock = self._dock("Deviation", self.deviation_panel, bottom,
+                                         "deviation_dock", True)
         self.log_dock = self._dock("Log", self.log_panel, bottom, "log_dock")
         self.splitDockWidget(self.loss_dock, self.quality_dock, Qt.Orientation.Horizontal)
         self.splitDockWidget(self.quality_dock, self.log_dock, Qt.Orientation.Horizontal)
         self.tabifyDockWidget(self.quality_dock, self.network_quality_dock)
+        self.tabifyDockWidget(self.network_quality_dock, self.deviation_dock)
         self.quality_dock.raise_()
         self.resizeDocks([self.tree_dock, self.fit_dock], [240, 330], Qt.Orientation.Horizontal)
         self.resizeDocks([self.loss_dock, self.quality_dock, self.log_dock], [420, 560, 420],
@@ -373,7 +378,7 @@ class MainWindow(QMainWindow):
         view_menu.addSeparator()
         for dock in (self.tree_dock, self.fit_dock, self.knot_dock, self.offset_dock,
                      self.patches_dock, self.loss_dock, self.quality_dock,
-                     self.network_quality_dock, self.log_dock):
+                     self.network_quality_dock, self.deviation_dock, self.log_dock):
             view_menu.addAction(dock.toggleViewAction())
 
         help_menu = bar.addMenu("&Help")
@@ -423,6 +428,9 @@ class MainWindow(QMainWindow):
     def _connect(self):
         doc, ctl = self.document, self.controller
         doc.settings_changed.connect(self.settings_policy.on_settings_changed)
+        self.deviation_panel.style_changed.connect(
+            lambda mode, limit, tolerance: self.scene.set_deviation_style(
+                mode, limit or None, tolerance or None))
         doc.content_changed.connect(self.fit_display.on_content_changed)
         doc.fitted_changed.connect(self.fit_display.on_fitted_changed)
         ctl.state_changed.connect(self.update_fit_actions)
@@ -642,6 +650,9 @@ class MainWindow(QMainWindow):
         self.patch_controller.reset()
         self.loss_plot.clear()
         self.patch_view.clear()
+        if self.scene.deviation_map() is not None:  # it measured the network just discarded
+            self.scene.set_deviation(None, mode="patches")
+            self.fit_display.refresh_deviation_panel()
         self.rebuild_tree()
 
     @Slot(str)

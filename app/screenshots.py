@@ -1,11 +1,12 @@
 """Regenerate the documentation screenshots: ``xvfb-run -a python -m app.screenshots OUT_DIR``.
 
 Drives the real window through the main states a user sees: the demo just opened, a fit
-converging, the deviation map after the fit, multi-patch offsets (the paper's two-patch turbine
+converging, the signed deviation map after the fit (then its tolerance bands), multi-patch
+offsets (the paper's two-patch turbine
 blade, when its data is on this machine), a 2D curve fit, the quality map of a sheet rolled
 1.5 turns: fitted cleanly by default, and folded when its (u, v) come from the principal plane,
 and Patches mode: a torus fitted with a patch network (its layout drawn on it), then its seam
-angles. ``--only single`` or ``--only patches`` makes one of the two sets.
+angles, then its signed deviation. ``--only single`` or ``--only patches`` makes one of the two sets.
 """
 
 from __future__ import annotations
@@ -59,7 +60,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path)
     parser.add_argument("--only", choices=("single", "patches"),
-                        help="make only the single-patch (01-07) or the Patches mode (08-09) set")
+                        help="make only the single-patch (01-07, 11) or the Patches mode (08-09, 12) "
+                             "set")
     arguments = parser.parse_args(argv)
     arguments.out.mkdir(parents=True, exist_ok=True)
 
@@ -115,9 +117,14 @@ def main(argv: list[str] | None = None) -> int:
         window.controller.start()
 
     def deviation_map():
-        window.set_layer_visible("surface", False)
         window.set_layer_visible("knot_lines", False)
-        later(lambda: (shot("03_deviation_map.png"), next_step()))
+        window.deviation_dock.raise_()
+        later(lambda: (shot("03_deviation_map.png"), deviation_bands()))
+
+    def deviation_bands():
+        window.deviation_panel.set_mode("bands")
+        later(lambda: (shot("11_deviation_bands.png"), window.deviation_panel.set_mode("signed"),
+                       next_step()))
 
     # 4. multi-patch offsets of the paper's turbine blade (two patches sharing an edge)
     def offsets():
@@ -192,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
     # 8. Patches mode: a torus fitted with a patch network, 9. its seam angles
     def patches_mode():
         window.set_quality_visible(False)
-        window.set_deviation_visible(True)
+        window.set_deviation_visible(False)  # the network plain (12 shows it painted)
 
         def loaded(ok):
             window.document.edit_settings("Fit mode", fit_mode="patches")
@@ -207,12 +214,19 @@ def main(argv: list[str] | None = None) -> int:
         window.set_seam_visible(True)
         later(lambda: (shot("09_seam_angles.png"), next_step()), 600)
 
+    def patches_deviation():
+        window.set_seam_visible(False)
+        window.set_deviation_visible(True)
+        window.set_layer_visible("cloud", True)
+        window.deviation_dock.raise_()
+        later(lambda: (shot("12_patches_deviation.png"), next_step()), 600)
+
     def frame():
         window.scene.reset_camera()
         window.scene.plotter.camera.zoom(1.25)
 
     single = [demo, converging, offsets, curve, quality_clean, quality_folded]
-    patches = [patches_mode, seam_map]
+    patches = [patches_mode, seam_map, patches_deviation]
     steps.extend({"single": single, "patches": patches}.get(arguments.only, single + patches))
     window.controller.fit_failed.connect(lambda message: failures.append(message))
     window.patch_controller.fit_failed.connect(lambda message: failures.append(message))

@@ -41,8 +41,12 @@ def seam_range_top(seam: np.ndarray) -> float:
 class NetworkLayers:
     """The network's actors in ``plotter``; ``request_render`` schedules a frame."""
 
-    def __init__(self, plotter, request_render: Callable[[], None]):
+    def __init__(self, plotter, request_render: Callable[[], None],
+                 changed: Callable[[], None] | None = None):
+        """``changed``: called after the layers' visibility or colouring may have changed."""
         self.plotter, self._request_render = plotter, request_render
+        self._changed = changed
+        self._covered = False  # the deviation map paints a copy of the surface instead
         self._meshes: dict[str, pv.PolyData] = {}
         self._actors: dict[str, object] = {}
         self._visible = {"network": True, "layout": True}
@@ -157,17 +161,27 @@ class NetworkLayers:
         return (self._seam_on and self._has_seam and self._enabled and self._visible["network"]
                 and self._meshes["network"].n_points > 0)
 
+    def set_covered(self, on: bool):
+        """Hide the surface (not its lines) while the deviation map paints a copy of it."""
+        self._covered = bool(on)
+        self._actors["network"].SetVisibility(self._surface_on())
+        self._request_render()
+
+    def _surface_on(self) -> bool:
+        return (self._enabled and self._visible["network"] and not self._covered
+                and self._meshes["network"].n_points > 0)
+
     def _apply(self):
-        surface_on = self._enabled and self._visible["network"] and (
-            self._meshes["network"].n_points > 0)
         lines_on = self._enabled and self._visible["layout"]
-        self._actors["network"].SetVisibility(surface_on)
+        self._actors["network"].SetVisibility(self._surface_on())
         self._actors["layout"].SetVisibility(lines_on and self._meshes["layout"].n_points > 0)
         self._actors["corners"].SetVisibility(lines_on and self._meshes["corners"].n_points > 0)
         seam = self.seam_shown()
         self._actors["network"].mapper.scalar_visibility = seam
         self.scalar_bar.SetVisibility(seam)
         self._request_render()
+        if self._changed is not None:
+            self._changed()
 
     # --- queries ---------------------------------------------------------------------------------
     def mesh(self, name: str) -> pv.PolyData:

@@ -22,12 +22,11 @@ from PySide6.QtCore import QObject, QTimer
 from PySide6.QtWidgets import QWidget
 from pyvistaqt import QtInteractor
 
-from app.display_types import FAR, FINE, FLIPPED, OVERLAP, DisplayGeometry
-from app.viewport.color_scale import nice_ceiling
+from app.display_types import FAR, FINE, FLIPPED, OVERLAP, DeviationMap, DisplayGeometry
+from app.viewport.deviation_colours import DeviationColours
 from app.viewport.network_layers import NetworkLayers
 
 RENDER_INTERVAL_MS = 33
-DEVIATION_COLORMAP = "viridis"  # perceptually uniform, readable in grey scale
 DEVIATION_TITLE = "Deviation"
 
 COLORS = {
@@ -155,6 +154,7 @@ class SceneView(QObject):
         self._deviation_on = True
         self._has_deviation = False
         self._deviation_mode = "single"  # the fit the cloud's deviation colours measure
+        self._deviation_map: DeviationMap | None = None  # signed, when the fit has one
         self._stats_text = ""
         self._quality_on = False
         self._quality_cells: np.ndarray | None = None
@@ -170,7 +170,10 @@ class SceneView(QObject):
         self._render_timer.setSingleShot(True)
         self._render_timer.setInterval(RENDER_INTERVAL_MS)
         self._render_timer.timeout.connect(self.render_now)
-        self.network = NetworkLayers(self.plotter, self.request_render)
+        self.network = NetworkLayers(self.plotter, self.request_render,
+                                     self._apply_deviation_surface)
+        #: the colour scale (signed or tolerance bands) the cloud and the deviation surface share
+        self.deviation_colours = DeviationColours(self.plotter)
 
     @property
     def widget(self) -> QWidget:
@@ -198,6 +201,8 @@ class SceneView(QObject):
         actor.SetVisibility(visible)
         if name == "cloud":
             self._update_scalar_bar()
+        elif name in ("surface", "deviation_surface"):
+            self._apply_deviation_surface()
 
     def set_cloud(self, points: np.ndarray | None):
         """The (stacked) target cloud (N, 3); resets its deviation colouring."""
@@ -205,34 +210,29 @@ class SceneView(QObject):
         mesh.point_data[DEVIATION_TITLE] = np.zeros(mesh.n_points)
         if "cloud" not in self._meshes:
             self._layer("cloud", mesh, color=COLORS["cloud"], point_size=3.0,
-                        scalars=DEVIATION_TITLE, cmap=DEVIATION_COLORMAP, clim=(0.0, 1.0),
-                        nan_color="#b0b0b0", show_scalar_bar=False)
-            self.plotter.add_scalar_bar(DEVIATION_TITLE, mapper=self._actors["cloud"].mapper,
-                                        render=False,
-                                        vertical=True, position_x=0.88, position_y=0.12,
-                                        height=0.5, width=0.06, fmt="%.3g", color="#222222")
+                        scalars=DEVIATION_TITLE, clim=(-1.0, 1.0), show_scalar_bar=False)
+            self.deviation_colours.attach(self._actors["cloud"].mapper)
         else:
             self._layer("cloud", mesh)
         self.set_deviation(None)
 
     def set_deviation(self, deviation: np.ndarray | None, stats: dict | None = None,
                       mode: str = "single"):
-        """Colour the cloud by each point's distance to the fitted shape (None: plain); ``mode``:
-        the fit it measures ("single" or "patches": it shows in that mode only)."""
-        mesh, actor = self._meshes.get("cloud"), self._actors.get("cloud")
+        """Colour the cloud by each point's (unsigned) distance to the fitted shape (None:
+        plain, and the signed map is dropped); ``mode``: the fit it measures ("single" or
+        "patches": it shows in that mode only). A signed map (:meth:`set_deviation_map`) given
+        afterwards replaces the colours; the corner keeps these statistics."""
+        mesh = self._meshes.get("cloud")
         if mesh is None:
             return
         valid = deviation is not None and len(deviation) == mesh.n_points and mesh.n_points > 0
         self._has_deviation = bool(valid)
         self._deviation_mode = mode
+        self._deviation_map = None
+        self._show_deviation_surface(None)
         if valid:
-            mesh.point_data[DEVIATION_TITLE][:] = deviation
-            mesh.point_data[DEVIATION_TITLE] = mesh.point_data[DEVIATION_TITLE]  # mark modified
-            top = nice_ceiling(float(np.nanmax(deviation)) if np.isfinite(deviation).any()
-                               else 0.0)
-            if actor.mapper.scalar_range[1] != top:  # relabelling the bar costs a slow frame
-                actor.mapper.scalar_range = (0.0, top)
-        self._update_scalar_bar()
+            self._write_cloud_values(deviation)
+            self.deviation_colours.set_values(deviation, signed=False)
         if not valid:
             self._stats_text = ""
         elif stats is not None:
@@ -240,8 +240,103 @@ class SceneView(QObject):
             self._stats_text = (f"Deviation ({stats['count']}{sampled} points)\n"
                                 f"mean {stats['mean']:.4g}\n"
                                 f"RMS  {stats['rms']:.4g}\nmax  {stats['max']:.4g}")
+        self._update_scalar_bar()
         self._corner_text(UPPER_RIGHT, self._stats_text if self.deviation_shown() else "")
         self.request_render()
+
+    def _write_cloud_values(self, values: np.ndarray):
+        mesh = self._meshes["cloud"]
+        mesh.point_data[DEVIATION_TITLE][:] = values
+        mesh.point_data[DEVIATION_TITLE] = mesh.point_data[DEVIATION_TITLE]  # mark modified
+
+    def set_deviation_map(self, deviation_map: DeviationMap | None):
+        """Colour the cloud (and, when the map has one, the fitted surface) by the signed
+        distances of ``deviation_map`` (:class:`app.display_types.DeviationMap`, one value per
+        cloud point), in the colour scale's mode, range and tolerance; None drops the signed map
+        (the unsigned colours of :meth:`set_deviation` stay)."""
+        mesh = self._meshes.get("cloud")
+        if mesh is None:
+            return
+        if deviation_map is None or len(deviation_map.distances) != mesh.n_points:
+            self._deviation_map = None
+            self._show_deviation_surface(None)
+            self._update_scalar_bar()
+            self.request_render()
+            return
+        self._deviation_map = deviation_map
+        self._has_deviation = mesh.n_points > 0
+        self._deviation_mode = deviation_map.mode
+        self._write_cloud_values(deviation_map.distances)
+        self.deviation_colours.set_values(deviation_map.distances, signed=True,
+                                          tolerance=deviation_map.tolerance)
+        self._show_deviation_surface(deviation_map)
+        self._update_scalar_bar()
+        self._corner_text(UPPER_RIGHT, self._stats_text if self.deviation_shown() else "")
+        self.request_render()
+
+    def deviation_map(self) -> DeviationMap | None:
+        """The signed map the view shows in the current mode (None: none)."""
+        if self._deviation_map is None or self._deviation_map.mode != self._mode:
+            return None
+        return self._deviation_map
+
+    def set_deviation_style(self, mode: str, limit: float | None, tolerance: float | None):
+        """How the deviation is coloured: ``mode`` "signed" (a diverging scale over +/- limit;
+        None: the robust default) or "bands" (within / above / below +/- tolerance; None: the
+        fit's)."""
+        self.deviation_colours.set_style(mode, limit, tolerance)
+        self._update_scalar_bar()
+        self.request_render()
+
+    def set_units(self, units: str | None):
+        """The length unit the scalar bar names (None: not known)."""
+        self.deviation_colours.set_units(units)
+        self.request_render()
+
+    def _show_deviation_surface(self, deviation_map: DeviationMap | None):
+        """The fitted surface painted by the map's per-vertex values (hidden without them)."""
+        if deviation_map is None or deviation_map.surface_values is None:
+            mesh = pv.PolyData()
+            mesh.point_data[DEVIATION_TITLE] = np.zeros(0)
+        else:
+            faces = np.asarray(deviation_map.surface_faces, np.int64)
+            mesh = pv.PolyData(np.asarray(deviation_map.surface_vertices, float),
+                               np.hstack([np.full((len(faces), 1), 3, np.int64), faces]).ravel())
+            mesh.point_data[DEVIATION_TITLE] = np.asarray(deviation_map.surface_values, float)
+        created = "deviation_surface" not in self._meshes
+        self._layer("deviation_surface", mesh, scalars=DEVIATION_TITLE, clim=(-1.0, 1.0),
+                    show_scalar_bar=False,
+                    specular=0.3, specular_power=20.0, smooth_shading=False)
+        if created:
+            self.deviation_colours.attach(self._actors["deviation_surface"].mapper)
+        self._apply_deviation_surface()
+
+    def deviation_surface_shown(self) -> bool:
+        """The fitted surface (or network) is painted by the signed deviation."""
+        actor = self._actors.get("deviation_surface")
+        return bool(actor is not None and actor.GetVisibility())
+
+    def _apply_deviation_surface(self):
+        """Show the painted surface instead of the plain one when the deviation map is on, the
+        map has surface values for the mode on show and no other map (quality, seams) paints
+        that surface."""
+        actor = self._actors.get("deviation_surface")
+        if actor is None:
+            return
+        painted = self.deviation_map() is not None and self._deviation_on and (
+            self._meshes["deviation_surface"].n_points > 0)
+        if self._mode == "single":
+            painted = painted and self._visible["surface"] and not self.quality_shown()
+        else:
+            painted = painted and self.network.is_visible("network") and (
+                not self.network.seam_shown())
+        actor.SetVisibility(painted)
+        surface = self._actors.get("surface")
+        if surface is not None:
+            surface.SetVisibility(self._mode == "single" and self._visible["surface"]
+                                  and self._meshes["surface"].n_points > 0
+                                  and not (painted and self._mode == "single"))
+        self.network.set_covered(painted and self._mode == "patches")
 
     def set_deviation_visible(self, on: bool):
         self._deviation_on = bool(on)
@@ -274,8 +369,8 @@ class SceneView(QObject):
             return
         colour = self.deviation_shown() and self._visible["cloud"]
         actor.mapper.scalar_visibility = colour
-        if DEVIATION_TITLE in self.plotter.scalar_bars:
-            self.plotter.scalar_bars[DEVIATION_TITLE].SetVisibility(colour)
+        self._apply_deviation_surface()
+        self.deviation_colours.show_bar(colour or self.deviation_surface_shown())
 
     def show_fit(self, display: DisplayGeometry | None):
         """The fitted surface or curve with its control net and knot lines (None clears)."""
@@ -381,6 +476,7 @@ class SceneView(QObject):
         self._legend.SetVisibility(self.quality_shown())
 
     def _apply_quality(self):
+        self._apply_deviation_surface()
         actor = self._actors.get("surface")
         if actor is not None:
             actor.mapper.scalar_visibility = self.quality_shown()

@@ -7,8 +7,10 @@ quality maps, the readout says "running" from a run's first picture (a refused r
 it was); the status bar shows iteration, loss, rate and time left; a finished fit is stored in
 the document without re-tessellation, reported in one line with its deviation, and its quality
 shown; a fitted shape replaced outside a run (reset, session) is measured again in a job and
-shown unless it was replaced meanwhile. The numbers come from the workers
-(:func:`app.workers.fit_worker.deviation_stats`); this module only presents them.
+shown unless it was replaced meanwhile. The signed deviation map of either mode goes to the
+viewport and the Deviation dock, which follows the mode on show. The numbers come from the
+workers (:func:`app.workers.fit_worker.deviation_stats`, :mod:`app.workers.deviation_map`);
+this module only presents them.
 """
 
 from __future__ import annotations
@@ -19,13 +21,24 @@ from typing import TYPE_CHECKING
 from PySide6.QtCore import QObject, Slot
 
 from app import loading
+from app.display_types import DeviationMap
 from app.errors import describe
 from app.window.text import format_seconds
 from app.workers.fit_worker import DisplaySnapshot, deviation_stats
 from nurbs_core.status import quality_warnings, reported_status
 
 if TYPE_CHECKING:
+    from app.state import Document
     from app.window.hosts import FitDisplayHost
+
+
+def cloud_units(document: Document) -> str | None:
+    """The length unit the visible clouds' files state (E57: metres), None when unknown or
+    when they disagree."""
+    from nurbs_core.io.units import units_of_file
+
+    units = {units_of_file(t.path) for t in document.targets if t.visible}
+    return units.pop() if len(units) == 1 else None
 
 
 class FitDisplay(QObject):
@@ -43,6 +56,8 @@ class FitDisplay(QObject):
         scene = window.scene
         points = window.document.target_points()
         scene.set_cloud(points)
+        scene.set_units(cloud_units(window.document))
+        self.show_deviation_map(None)
         window.knot_panel.set_points(points)
         patches = list(window.document.patches)
         scene.set_group("patches", [])
@@ -69,11 +84,14 @@ class FitDisplay(QObject):
         if fitted is None:
             window.scene.show_fit(None)
             window.scene.set_deviation(None)
+            self.refresh_deviation_panel()
             window.quality_panel.clear()
         else:
             points = window.document.target_points()
             window.quality_panel.clear("Measuring the fitted shape...")
-            window.jobs.submit("fitted", lambda: loading.fitted_display(fitted, points),
+            tolerance = window.document.settings.fit.tolerance
+            window.jobs.submit("fitted", lambda: loading.fitted_display(fitted, points,
+                                                                        tolerance=tolerance),
                                lambda result: self._show_fitted_display(fitted, result),
                                lambda exc: window.report(
                                    f"Cannot display the fit: {describe(exc)}", True, exc=exc))
@@ -90,6 +108,7 @@ class FitDisplay(QObject):
             window.scene.set_deviation(result.deviation, stats)
             window.quality_panel.show_deviation(stats)
         window.scene.set_quality(result.quality_cells, result.statistics)
+        self.show_deviation_map(result.signed)
         window.quality_panel.show_result("measured", "the fitted shape against the cloud",
                                          result.statistics,
                                          window.document.settings.fit.tolerance is None,
@@ -100,10 +119,14 @@ class FitDisplay(QObject):
     def on_patch_snapshot(self, snapshot) -> None:
         if snapshot.network is not None and not self._window.tree.shows_network:
             self._window.rebuild_tree()  # the first network of a run: list it in the tree
+        scene = self._window.scene
         if getattr(snapshot, "deviation", None) is not None:
             # the deviation map of the network (View > Deviation Map in Patches mode)
-            self._window.scene.set_deviation(snapshot.deviation,
-                                             deviation_stats(snapshot.deviation), mode="patches")
+            scene.set_deviation(snapshot.deviation, deviation_stats(snapshot.deviation),
+                                mode="patches")
+            self.show_deviation_map(getattr(snapshot, "signed", None))
+        elif scene.mode == "patches" and scene.deviation_map() is not None:
+            self.show_deviation_map(None)  # a new run: the painted network no longer matches
 
     @Slot(object)
     def on_snapshot_shown(self, snapshot: DisplaySnapshot) -> None:
@@ -119,8 +142,20 @@ class FitDisplay(QObject):
             stats = deviation_stats(snapshot.deviation)
             window.scene.set_deviation(snapshot.deviation, stats)
             window.quality_panel.show_deviation(stats)
+            self.show_deviation_map(snapshot.signed)
         if not window.tree.shows_fit:  # the first snapshot of a fit: list it in the tree
             window.rebuild_tree()
+
+    def show_deviation_map(self, deviation_map: DeviationMap | None) -> None:
+        """Paint the signed map (None: drop it) and show it in the Deviation dock."""
+        self._window.scene.set_deviation_map(deviation_map)
+        self.refresh_deviation_panel()
+
+    def refresh_deviation_panel(self) -> None:
+        """The Deviation dock shows the map of the mode on show (after a mode change too)."""
+        window = self._window
+        window.deviation_panel.show_map(window.scene.deviation_map(),
+                                        cloud_units(window.document))
 
     @Slot(dict)
     def on_progress(self, progress: dict) -> None:

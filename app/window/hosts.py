@@ -17,6 +17,7 @@ if TYPE_CHECKING:
 
     from app.controller import FitController
     from app.offsets import OffsetController
+    from app.panels.deviation_panel import DeviationPanel
     from app.panels.document_tree import DocumentTree
     from app.panels.fit_panel import FitSettingsPanel
     from app.panels.knot_panel import KnotPanel
@@ -98,6 +99,7 @@ class SettingsHost(Protocol):
     controller: FitController
     patch_controller: PatchController
     scene: SceneView
+    deviation_panel: DeviationPanel
     offsets: OffsetController
     fit_panel: FitSettingsPanel
     knot_panel: KnotPanel
@@ -119,6 +121,7 @@ class FitDisplayHost(Reporter, Protocol):
     scene: SceneView
     jobs: JobRunner
     offsets: OffsetController
+    deviation_panel: DeviationPanel
     quality_panel: QualityPanel
     knot_panel: KnotPanel
     loss_plot: LossPlot

@@ -15,6 +15,7 @@ from PySide6.QtCore import QObject, Slot
 from app.controller import FitController
 from app.patch_controller import PatchController
 from app.state import FIT_MODES, Settings
+from app.window.fit_display import cloud_units
 
 if TYPE_CHECKING:
     from app.window.hosts import SettingsHost
@@ -36,6 +37,9 @@ class SettingsPolicy(QObject):
         window.mode_selector.show_settings(settings)
         window.patches_panel.show_settings(settings.patches)
         window.scene.set_mode(settings.fit_mode)
+        # the Deviation dock follows the mode on show (each mode has its own map)
+        window.deviation_panel.show_map(window.scene.deviation_map(),
+                                        cloud_units(window.document))
         window.fit_panel.show_settings(settings.fit)
         window.offset_panel.show_settings(settings)
         window.knot_panel.show_state(settings.fit, window.document.fitted)

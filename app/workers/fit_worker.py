@@ -21,7 +21,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from PySide6.QtCore import QObject, Signal, Slot
 
+from app.display_types import DeviationMap
 from app.state import Settings
+from app.workers.deviation_map import fit_triangles, grid_triangles, measure_map
 from app.workers.display import DisplayGeometry, display_geometry
 from app.workers.quality import measure_quality
 from nurbs_core.geometry_arrays import GeometryArrays
@@ -65,6 +67,9 @@ class DisplaySnapshot:
     deviation: np.ndarray | None = None
     statistics: dict[str, float] | None = None
     quality_cells: np.ndarray | None = None
+    #: the signed deviation map (:mod:`app.workers.deviation_map`) of a surface fit, measured
+    #: with ``deviation``; on the final snapshot it also paints the surface
+    signed: DeviationMap | None = None
 
 
 class FitProblem(Exception):
@@ -131,6 +136,17 @@ def sampled_deviation(distance_function, geometry, target: np.ndarray, limit: in
     result = np.full(count, np.nan)
     result[index] = np.asarray(distance_function(geometry, target[index]), dtype=np.float64)
     return result
+
+
+def signed_map(geometry: GeometryArrays, display: DisplayGeometry, target: np.ndarray,
+               tolerance: float | None, limit: int, final: bool) -> DeviationMap | None:
+    """The signed deviation map of a fitted surface (None for a curve): the same points as
+    :func:`sampled_deviation` measures (seed 0); ``final``: the drawn surface is painted too."""
+    if display.kind != "surface" or np.shape(target)[-1] != 3:
+        return None
+    vertices, faces, _ = fit_triangles(geometry)
+    surface = grid_triangles(display.surface_grid) if final else None
+    return measure_map(target, vertices, faces, tolerance, limit, surface=surface)
 
 
 def starting_geometry(request: FitRequest) -> GeometryArrays | None:
@@ -224,15 +240,18 @@ class FitWorker(QObject):
             if not snapshot.geometry:  # the engine caught a failure and says why
                 raise FitProblem(f"The fit failed: {snapshot.message or snapshot.status}")
             now = time.monotonic()
-            dev = None
+            dev, signed = None, None
             # a run stopped for a restart, Reset or closing the window must end quickly
             final = snapshot.done and not (snapshot.status == "stopped" and self._hurry.is_set())
             if snapshot.done or now - last_deviation >= DEVIATION_INTERVAL:
                 limit = FINAL_DEVIATION_POINTS if final else LIVE_DEVIATION_POINTS
                 dev = sampled_deviation(deviation, geometry_from_numpy(snapshot.geometry),
                                         request.target, limit)
-                last_deviation = time.monotonic()
             display = display_geometry(snapshot.geometry)
+            if dev is not None:
+                signed = signed_map(snapshot.geometry, display, request.target, config.tolerance,
+                                    limit, final)
+                last_deviation = time.monotonic()
             statistics = dict(snapshot.statistics) if snapshot.statistics else None
             cells = None
             if final and display.kind == "surface":
@@ -247,6 +266,6 @@ class FitWorker(QObject):
                 display=display, losses=list(snapshot.losses),
                 elapsed=float(snapshot.elapsed), done=bool(snapshot.done),
                 status=str(snapshot.status), message=str(snapshot.message or ""), deviation=dev,
-                statistics=statistics, quality_cells=cells))
+                statistics=statistics, quality_cells=cells, signed=signed))
 
 

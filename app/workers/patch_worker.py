@@ -22,7 +22,9 @@ from typing import Any
 import numpy as np
 from PySide6.QtCore import QObject, Signal, Slot
 
-from app.workers.fit_worker import enter_worker_thread
+from app.display_types import DeviationMap
+from app.workers.deviation_map import fit_triangles, measure_map
+from app.workers.fit_worker import FINAL_DEVIATION_POINTS, enter_worker_thread
 from app.workers.network_display import NetworkDisplay, mesh_display, network_display
 
 #: At least this long (s) between two pass snapshots, and at most this share of the worker's time
@@ -71,6 +73,19 @@ class PatchSnapshot:
     #: (N,) distance of each cloud point to the network, as its quality measured it (done and
     #: stopped; NaN where a large cloud's quality sample left a point out): the deviation map
     deviation: np.ndarray | None = None
+    #: the signed deviation map (done and stopped): the points ``deviation`` measured (at most
+    #: FINAL_DEVIATION_POINTS of them), signed along the network's normal, and its surface
+    signed: DeviationMap | None = None
+
+
+def network_signed_map(network, display: NetworkDisplay, points: np.ndarray,
+                       deviation: np.ndarray | None, tolerance: float | None) -> DeviationMap:
+    """The signed map of ``points`` (N, 3) against ``network`` (the report's triangles), on the
+    points its quality measured (finite ``deviation`` (N,); None: all), painting ``display``."""
+    vertices, faces, _ = fit_triangles(None, network)
+    keep = None if deviation is None or len(deviation) != len(points) else np.isfinite(deviation)
+    return measure_map(points, vertices, faces, tolerance, FINAL_DEVIATION_POINTS,
+                       mode="patches", keep=keep, surface=(display.vertices, display.faces))
 
 
 class PatchWorker(QObject):
@@ -151,8 +166,11 @@ class PatchWorker(QObject):
                         cost = last_sent - now
                 elif event.kind == "done":
                     result = event.result
+                    display = network_display(result.network)
+                    signed = network_signed_map(result.network, display, points,
+                                                result.deviation, request.options.tolerance)
                     self._emit(PatchSnapshot(
-                        request.run_id, "done", network_display(result.network), "final",
+                        request.run_id, "done", display, "final",
                         network=result.network, pass_index=result.passes - 1,
                         size=result.network.size, patch_count=result.network.patch_count,
                         rms=float(event.fit_pass.rms), seam=float(event.fit_pass.seam),
@@ -162,7 +180,7 @@ class PatchWorker(QObject):
                                  "points": len(request.points),
                                  "filled_fraction": result.mesh.filled_fraction},
                         warnings=list(result.warnings), done=True,
-                        deviation=result.deviation))
+                        deviation=result.deviation, signed=signed))
                     return
                 self._wait_while_paused()
         finally:
@@ -187,6 +205,9 @@ class PatchWorker(QObject):
         snapshot.event, snapshot.done = "stopped", True
         quality = network_quality(fit_pass.network, request.points)
         snapshot.quality, snapshot.deviation = quality.as_dict(), quality.distances
+        snapshot.signed = network_signed_map(fit_pass.network, snapshot.display,
+                                             np.asarray(request.points, np.float64),
+                                             quality.distances, request.options.tolerance)
         return snapshot
 
     def _wait_while_paused(self):

@@ -92,20 +92,48 @@ def foot_points(network: PatchNetwork, points: np.ndarray, patch: np.ndarray | N
 
     Starts from the nearest of a dense grid of samples (or from the given patch/uv), then damped
     Gauss-Newton steps inside that patch, clamped to [0, 1]^2, each kept only if it brings the
-    point closer."""
+    point closer. From the grid, a point that ends on its patch's side (its foot may lie on the
+    neighbour across it) also descends from the nearest samples of the next two patches, and
+    the closest foot wins."""
     from scipy.spatial import cKDTree
 
     points = np.asarray(points, np.float64)
-    if patch is None or uv is None:
-        sp, suv = grid_samples(network, resolution)
-        s, _, _ = evaluate(network, sp, suv[:, 0], suv[:, 1])
-        nearest = cKDTree(s).query(points)[1]
-        patch, uv = sp[nearest], suv[nearest].copy()
-    else:
-        patch, uv = np.array(patch, np.int64), np.array(uv, np.float64)
+    if patch is not None and uv is not None:
+        return _descend(network, points, np.array(patch, np.int64), np.array(uv, np.float64),
+                        steps)
+    sp, suv = grid_samples(network, resolution)
+    s, _, _ = evaluate(network, sp, suv[:, 0], suv[:, 1])
+    tree = cKDTree(s)
+    nearest = tree.query(points)[1]
+    patch, uv, dist = _descend(network, points, sp[nearest], suv[nearest].copy(), steps)
+    on_side = np.flatnonzero(((uv <= 0.0) | (uv >= 1.0)).any(axis=1))
+    if len(on_side) and network.patch_count > 1:
+        # the nearest samples of the next two patches (a corner joins three or more)
+        candidates = tree.query(points[on_side], k=min(len(s), 32))[1]       # (M, k)
+        owner = sp[candidates]
+        tried = patch[on_side][:, None] == owner
+        for _ in range(2):
+            other = ~tried
+            has = other.any(axis=1)
+            pick = np.argmax(other, axis=1)
+            start = candidates[np.arange(len(on_side)), pick]
+            tried |= owner == owner[np.arange(len(on_side)), pick][:, None]
+            rows, start = on_side[has], start[has]
+            p2, uv2, d2 = _descend(network, points[rows], sp[start], suv[start].copy(), steps)
+            better = d2 < dist[rows]
+            patch[rows[better]], uv[rows[better]], dist[rows[better]] = (p2[better],
+                                                                          uv2[better], d2[better])
+    return patch, uv, dist
+
+
+def _descend(network: PatchNetwork, points: np.ndarray, patch: np.ndarray, uv: np.ndarray,
+             steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Damped Gauss-Newton steps from (patch (N,), uv (N, 2)) towards the closest points of
+    ``points`` (N, 3) inside each patch: (patch, uv, distance (N,))."""
     s, su, sv = evaluate(network, patch, uv[:, 0], uv[:, 1])
     residual = s - points
     dist2 = (residual ** 2).sum(axis=1)
+    scale = np.ones(len(points))      # a step that does not bring a point closer is halved
     for _ in range(steps):
         a = (su * su).sum(1)
         b = (su * sv).sum(1)
@@ -117,11 +145,12 @@ def foot_points(network: PatchNetwork, points: np.ndarray, patch: np.ndarray | N
         det = np.where(np.abs(det) > 0, det, 1e-300)
         du = -((c + mu) * gu - b * gv) / det
         dv = -((a + mu) * gv - b * gu) / det
-        trial = np.clip(uv + np.stack([du, dv], -1), 0.0, 1.0)
+        trial = np.clip(uv + scale[:, None] * np.stack([du, dv], -1), 0.0, 1.0)
         s2, su2, sv2 = evaluate(network, patch, trial[:, 0], trial[:, 1])
         r2 = s2 - points
         d2 = (r2 ** 2).sum(1)
         better = d2 < dist2
+        scale = np.where(better, 1.0, 0.5 * scale)
         uv[better], dist2[better], residual[better] = trial[better], d2[better], r2[better]
         su[better], sv[better] = su2[better], sv2[better]
     return patch, uv, np.sqrt(dist2)

@@ -3,9 +3,16 @@
 Unknowns are the network's global control points (K, 3), so every shared edge is one curve
 (exact G0). Each pass solves, for fixed foot-point parameters (patch_k, u_k, v_k),
 
-    (1 / N) sum_k |S(patch_k, u_k, v_k) - Q_k|^2  +  lambda sum_p E_fair(patch p)
-        + w_seam (1 / R) sum_r ((D_r C) . n_r / |D_r C|)^2
+    (1 / W) sum_k w_k [a |S_k - Q_k|^2 + (1 - a) ((S_k - Q_k) . n_k)^2]
+        + lambda sum_p E_fair(patch p) + w_seam (1 / R) sum_r ((D_r C) . n_r / |D_r C|)^2
 
+with S_k = S(patch_k, u_k, v_k) and n_k its unit normal:
+
+* data: a share ``POINT_SHARE`` (a) of point-to-point distance and the rest point to the
+  tangent plane (the surface may slide along itself under the points, so the passes converge
+  faster than with foot points alone dragging it); w_k are Huber weights (1 within ``HUBER_SIGMAS`` noise
+  sigmas of the network, falling as 1 / distance beyond), so points the stray check kept but
+  that lie off the surface pull it by a bounded amount, W their sum;
 * fairing: the exact thin-plate (+ 0.1 membrane) energy of every patch
   (:mod:`nurbs_core.surfacing.fairing`), lambda = ``stiffness`` relative to the data term;
 * tangent continuity (G1), linearised: along every shared edge, both patches' cross-boundary
@@ -61,6 +68,9 @@ SETTLED = 2e-3
 #: Polish passes at most on the chosen grid, and the seam angle (degrees) that ends them.
 POLISH_PASSES = 8
 POLISHED = 0.5
+#: Polish goes on while each pass brings the seam angles' 99th percentile below this share of
+#: the previous one.
+POLISH_GAIN = 0.97
 #: Control points per patch side tried in turn (the grid grows while Cp falls).
 SIZES = (4, 5, 6, 8, 10, 12, 14, 16)
 #: The first size tried (a smaller one only when the cloud is too sparse for it).
@@ -68,8 +78,14 @@ START_SIZE = 6
 #: Cp charges this many noise variances per control point (Mallows' 2: only the normal
 #: component of a residual is measured, so a control point counts once, not three times).
 CP_PENALTY = 2.0
-#: A grid has at most one control point per this many cloud points.
-POINTS_PER_CONTROL = 4
+#: A grid has at most one control point per this many cloud points (the fairing holds sparse
+#: regions; Cp chooses among the sizes this allows).
+POINTS_PER_CONTROL = 1.25
+#: Share of the data term measured point to point (the rest: point to tangent plane).
+POINT_SHARE = 0.25
+#: Points farther from the network than this many noise sigmas count in the fit by Huber's
+#: loss (linearly), not by their square.
+HUBER_SIGMAS = 3.0
 #: Weight (relative to the in-plane rows) of holding an edge's cross derivatives to their
 #: previous values less the normal part.
 EDGE_HOLD = 0.2
@@ -166,7 +182,7 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
             network = _resized(network, grid_size)
         previous = math.inf
         for _ in range(passes_per_grid):
-            network, seam = solver.solve(network, patch, uv, q)
+            network, seam = solver.solve(network, patch, uv, q, huber_weights(dist, _spread(dist, sigma)))
             patch, uv, dist = _reassign(network, q, patch, uv)
             rms = float(np.sqrt(np.mean(dist ** 2)))
             settled = previous - rms < SETTLED * rms
@@ -177,7 +193,7 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
             count += 1
             if settled:
                 break
-        rss = float((dist ** 2).sum())
+        rss = huber_loss(dist, sigma)
         cp = rss + CP_PENALTY * sigma ** 2 * len(network.control_points)
         met = tol is not None and rms <= tol
         current = (cp, network, patch, uv, dist, rms)
@@ -196,7 +212,7 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
     seam = math.inf
     for _ in range(POLISH_PASSES):
         before = (network, patch, uv, dist, rms)
-        network, measured = solver.solve(network, patch, uv, q)
+        network, measured = solver.solve(network, patch, uv, q, huber_weights(dist, _spread(dist, sigma)))
         patch, uv, dist = _reassign(network, q, patch, uv)
         rms = float(np.sqrt(np.mean(dist ** 2)))
         if rms > 1.01 * before[-1]:
@@ -206,10 +222,13 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
                           dist * frame.scale, rms * frame.scale, float(dist.mean()) * frame.scale,
                           measured, network.size)
         count += 1
-        if measured < POLISHED or measured > 0.9 * seam:
+        # judged on the 99th percentile, not the largest angle: one fold's angle does not
+        # tell whether the other seams still straighten
+        spread = solver.last_p99
+        if spread < POLISHED or spread > POLISH_GAIN * seam:
             break
-        seam = measured
-    rss = float((dist ** 2).sum())
+        seam = spread
+    rss = huber_loss(dist, sigma)
     cp = rss + CP_PENALTY * sigma ** 2 * len(network.control_points)
     message = None
     if tol is not None and rms > tol:
@@ -233,6 +252,32 @@ def _along_normals(ref: np.ndarray, tree: cKDTree, s: np.ndarray, normals: np.nd
     across = np.linalg.norm(offsets - along[..., None] * normals[:, None, :], axis=2)
     best = np.argmin(across + 0.1 * np.abs(along), axis=1)
     return ref[nearest[np.arange(len(s)), best]]
+
+
+def _spread(distances: np.ndarray, sigma: float) -> float:
+    """The noise sigma the Huber weights use: the estimate ``sigma``, or less when the points'
+    distances (N,) to the network say so (their median is 0.6745 sigma for Gaussian noise): stray
+    points inflate a noise estimate, not the median of the distances."""
+    return min(sigma, float(np.median(distances)) / 0.6745) if len(distances) else sigma
+
+
+def huber_weights(distances: np.ndarray, sigma: float) -> np.ndarray:
+    """(N,) iteratively reweighted least-squares weights of Huber's loss for the points'
+    distances (N,) to the network: 1 within HUBER_SIGMAS noise sigmas, falling as 1 / distance
+    beyond, so a stray return near the surface pulls it by a bounded amount instead of drawing a
+    spike out to it."""
+    limit = HUBER_SIGMAS * max(sigma, 1e-12)
+    return np.minimum(1.0, limit / np.maximum(distances, 1e-300))
+
+
+def huber_loss(distances: np.ndarray, sigma: float) -> float:
+    """Huber's loss of the distances (N,), scaled as a sum of squares (equal to it when every
+    distance is within HUBER_SIGMAS noise sigmas): Mallows' Cp on it does not grow the grid to
+    reach stray points."""
+    limit = HUBER_SIGMAS * max(sigma, 1e-12)
+    inside = distances <= limit
+    return float((distances[inside] ** 2).sum()
+                 + (2.0 * limit * distances[~inside] - limit ** 2).sum())
 
 
 def control_count(quads: np.ndarray, size: int) -> int:
@@ -286,6 +331,8 @@ class _Solver:
         self.border = None if border is None else cKDTree(border)
         self._fairing: dict[tuple[int, int], scipy.sparse.csr_matrix] = {}
         self.last_seam = math.nan
+        #: the 99th percentile of the seam angles at the last solve's samples (degrees)
+        self.last_p99 = math.nan
 
     def fairing(self, network: PatchNetwork) -> scipy.sparse.csr_matrix:
         key = (network.size, network.patch_count)
@@ -294,20 +341,38 @@ class _Solver:
         return self._fairing[key]
 
     def solve(self, network: PatchNetwork, patch: np.ndarray, uv: np.ndarray,
-              targets: np.ndarray) -> tuple[PatchNetwork, float]:
+              targets: np.ndarray, weights: np.ndarray | None = None) -> tuple[PatchNetwork, float]:
+        """One pass's solve for the foot points (patch (N,), uv (N, 2)) of ``targets`` (N, 3),
+        each weighted by ``weights`` (N,) (None: all 1)."""
         k = len(network.control_points)
         a = rows(network, patch, uv[:, 0], uv[:, 1])
-        n = len(targets)
+        if weights is not None:
+            a = scipy.sparse.diags(np.sqrt(weights)) @ a
+            targets = targets * np.sqrt(weights)[:, None]
+        n = len(targets) if weights is None else float(weights.sum())
         data = (a.T @ a) / n
         rhs = np.asarray(a.T @ targets) / n
         fair = self.fairing(network)
         lam = (self.stiffness * _fairing_share(network) * data.diagonal().sum()
                / max(fair.diagonal().sum(), 1e-300))
-        block = (data + lam * fair).tocsr()
-        g, h, seam = seam_rows(network)
+        block = (POINT_SHARE * data + lam * fair).tocsr()
+        g, h, angles = seam_rows(network)
+        seam = float(angles.max()) if angles.size else 0.0
         self.last_seam = seam
+        self.last_p99 = float(np.percentile(angles, 99)) if angles.size else 0.0
         system = scipy.sparse.block_diag([block, block, block], format="csr")
-        rhs = rhs.T.ravel()
+        rhs = POINT_SHARE * rhs.T.ravel()
+        if POINT_SHARE < 1.0:
+            # the rest of the data term measures the offsets along the surface's normal at the
+            # foot points (point to tangent plane): it lets the surface slide along itself
+            # under the points, so the passes converge in a few steps instead of dragging
+            _, su, sv = evaluate(network, patch, uv[:, 0], uv[:, 1])
+            normal = unit(np.cross(su, sv))
+            t = scipy.sparse.hstack([scipy.sparse.diags(normal[:, c]) @ a for c in range(3)],
+                                    format="csr")
+            share = (1.0 - POINT_SHARE) / n
+            system = system + share * (t.T @ t)
+            rhs = rhs + share * np.asarray(t.T @ (targets * normal).sum(1)).ravel()
         if g.shape[0]:
             # the rows are dimensionless (about the sine of an angle): a patch's squared size
             # turns them into the data term's units, so the balance does not depend on scale
@@ -359,13 +424,13 @@ def _cross_direction(side: str) -> tuple[str, str]:
     return ("v", "u") if side in ("v0", "v1") else ("u", "v")
 
 
-def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarray, float]:
+def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarray, np.ndarray]:
     """The linearised G1 rows (R, 3K) and their targets (R,) at the network's present shape
-    (see the module docstring), and the largest seam angle (degrees) at their edge samples."""
+    (see the module docstring), and the seam angles (degrees) at their edge samples (S,)."""
     k = len(network.control_points)
     m = SEAM_SAMPLES * network.size
     t = (np.arange(m) + 0.5) / m
-    blocks, targets, worst = [], [], 0.0
+    blocks, targets, angles = [], [], np.zeros(0)
     if network.edges:
         pa, uva, pb, uvb = network.seam_samples(t)
         _, sua, sva = evaluate(network, pa, uva[:, 0], uva[:, 1])
@@ -376,7 +441,7 @@ def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarra
         tangent = unit(np.where(cross_u_a[:, None], sva, sua))
         normal = unit(na + nb)
         normal = unit(normal - (normal * tangent).sum(1, keepdims=True) * tangent)
-        worst = float(np.degrees(np.arccos(np.clip((na * nb).sum(1), -1.0, 1.0))).max())
+        angles = np.degrees(np.arccos(np.clip((na * nb).sum(1), -1.0, 1.0)))
         for patch, uv, cross_u, su, sv in ((pa, uva, cross_u_a, sua, sva),
                                            (pb, uvb, cross_u_b, sub, svb)):
             for is_u in (True, False):
@@ -404,7 +469,7 @@ def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarra
         targets.append(h)
     values = np.concatenate(targets) if targets else np.zeros(0)
     g = scipy.sparse.vstack(blocks, format="csr") if blocks else scipy.sparse.csr_matrix((0, 3 * k))
-    return g, values, worst
+    return g, values, angles
 
 
 def _unfolded_corners(count: int, vertex: np.ndarray, su: np.ndarray,

@@ -8,10 +8,13 @@ signed by that triangle's normal: positive above the surface
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from scipy.spatial import cKDTree
+
+from nurbs_core.deviation_bands import Deviation
+
+__all__ = ["CANDIDATES", "Deviation", "NOISE_TOLERANCE", "SPLIT_EDGES", "measure_deviation",
+           "signed_distances"]
 
 #: The tolerance a report judges by when none is given: this many estimated noise standard
 #: deviations of the scan (the single patch's own automatic tolerance).
@@ -58,41 +61,6 @@ def signed_distances(points: np.ndarray, vertices: np.ndarray,
         side = np.where((offset * normals[column]).sum(1) >= 0, 1.0, -1.0)
         signed[closer] = (side * distance)[closer]
     return signed, normals[nearest]
-
-
-@dataclass
-class Deviation:
-    """Signed distances (N,) of a scan to its fit and the tolerance they are judged by;
-    ``normals`` (N, 3): the fit's unit normal nearest each point (None: not known)."""
-
-    distances: np.ndarray
-    tolerance: float
-    normals: np.ndarray | None = None
-
-    @property
-    def above(self) -> np.ndarray:
-        return self.distances > self.tolerance
-
-    @property
-    def below(self) -> np.ndarray:
-        return self.distances < -self.tolerance
-
-    @property
-    def within(self) -> np.ndarray:
-        return ~(self.above | self.below)
-
-    def statistics(self) -> dict[str, float]:
-        """Mean (signed and absolute), RMS, percentiles of the absolute distance, the largest
-        above and below, and the shares in, above and below the tolerance."""
-        d = self.distances
-        magnitude = np.abs(d)
-        return {"points": float(len(d)), "mean_signed": float(d.mean()),
-                "mean": float(magnitude.mean()), "rms": float(np.sqrt((d ** 2).mean())),
-                "p95": float(np.percentile(magnitude, 95)),
-                "p99": float(np.percentile(magnitude, 99)), "max": float(magnitude.max()),
-                "max_above": float(max(d.max(), 0.0)), "max_below": float(min(d.min(), 0.0)),
-                "tolerance": self.tolerance, "within": float(self.within.mean()),
-                "above": float(self.above.mean()), "below": float(self.below.mean())}
 
 
 def measure_deviation(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray,

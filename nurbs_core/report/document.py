@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from nurbs_core.report.deviation import Deviation
+from nurbs_core.deviation_bands import BAND_COLOURS, Deviation, histogram
 
 #: Points and triangles drawn in each view at most (a random sample; the statistics use all).
 VIEW_POINTS = 12_000
@@ -27,8 +27,6 @@ VIEW_TRIANGLES = 6_000
 #: (name, elevation, azimuth) of each view, degrees (matplotlib's 3-D axes: z up).
 VIEWS = (("front (from -y)", 0.0, -90.0), ("top (from +z)", 90.0, -90.0),
          ("right (from +x)", 0.0, 0.0), ("iso", 28.0, -55.0))
-#: Colours of the bands: within the tolerance, above it, below it.
-BAND_COLOURS = {"within": "#2e9e44", "above": "#d62728", "below": "#1f5fbf"}
 SUFFIXES = (".html", ".htm", ".pdf")
 
 
@@ -162,11 +160,9 @@ def _histogram_figure(content: ReportContent) -> Any:
     tolerance = deviation.tolerance
     figure = _figure(9.0, 3.8)
     axes = figure.add_subplot(1, 1, 1)
-    reach = max(float(np.percentile(np.abs(d), 99.5)), 1.5 * tolerance, 1e-300)
-    counts, edges = np.histogram(np.clip(d, -reach, reach), bins=61, range=(-reach, reach))
+    counts, edges, bands = histogram(d, tolerance)
     middles = 0.5 * (edges[:-1] + edges[1:])
-    colours = [BAND_COLOURS["above"] if m > tolerance else BAND_COLOURS["below"]
-               if m < -tolerance else BAND_COLOURS["within"] for m in middles]
+    colours = [BAND_COLOURS[band] for band in bands]
     axes.bar(middles, counts, width=np.diff(edges), color=colours, edgecolor="white",
              linewidth=0.4)
     for level in (-tolerance, tolerance):

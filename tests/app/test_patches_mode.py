@@ -106,7 +106,10 @@ def test_patch_fit_is_drawn_measured_and_exported(qtbot, window, tmp_path, monke
     assert network is snapshot.network and network.patch_count == snapshot.quality["patches"]
     layers = window.scene.network
     surface = layers.actor("network")
-    assert surface.GetVisibility()
+    # painted by the deviation map (a copy of it, drawn instead), plain without the map
+    assert window.scene.deviation_surface_shown() and not surface.GetVisibility()
+    window.set_deviation_visible(False)
+    assert surface.GetVisibility() and not window.scene.deviation_surface_shown()
     assert surface.mapper.dataset.n_points == len(snapshot.display.vertices)
     assert surface.mapper.dataset.n_cells == len(snapshot.display.faces)
     assert layers.mesh("layout").n_lines == 2 * network.patch_count
@@ -290,7 +293,12 @@ def test_start_on_a_closed_cloud_goes_on_as_a_network(qtbot, window, tmp_path):
     assert window.scene.deviation_shown()
     deviation = window.scene._meshes["cloud"].point_data[DEVIATION_TITLE]
     assert np.isfinite(deviation).all()
-    assert np.mean(deviation) == pytest.approx(done.args[0].quality["c2s_mean"], rel=0.05)
+    # signed along the network's outward normal (to its triangles, as the report measures):
+    # their magnitudes are close to the quality's foot-point distances (those come out about
+    # 8% longer on this sphere; test_deviation_map checks the signed ones against a reference)
+    assert np.mean(np.abs(deviation)) == pytest.approx(done.args[0].quality["c2s_mean"],
+                                                       rel=0.12)
+    assert (deviation > 0).any() and (deviation < 0).any()
     window.undo_action.trigger()  # back to one patch: the network's layers are hidden
     assert window.document.settings.fit_mode == "single"
     assert not window.scene.network.actor("network").GetVisibility()

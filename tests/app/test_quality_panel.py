@@ -216,6 +216,7 @@ def test_quality_map_paints_a_folded_surface_and_not_a_clean_one(qtbot, window, 
     shapes = {"clean": _saddle_sheet(np.linspace(-1.0, 1.0, 31)),
               "folded": _saddle_sheet(folds)}
     window.set_layer_visible("cloud", False)  # the deviation colours would count as painted
+    window.set_deviation_visible(False)  # (on the points and on the surface)
     window.set_layer_visible("knot_lines", False)
     seen = {}
     for name, fitted in shapes.items():

@@ -254,3 +254,48 @@ def test_stray_points_are_left_out_instead_of_pulling_spikes():
     assert tree.query(s)[0].max() < 0.015 * shape.diagonal
     assert result.quality.seam.p99 < 2.0
     assert result.status == "converged", result.warnings
+
+
+
+def test_the_network_fit_weighs_points_by_huber_loss_as_scipy_defines_it():
+    """Points far from the network count by Huber's loss (scipy.special.huber, doubled so that
+    it is the sum of squares within the limit), and the reweighting is its influence over the
+    distance, so a stray point's pull on the surface is bounded."""
+    from scipy.special import huber
+
+    import nurbs_core.patches.fit as network_fit
+
+    d = np.abs(np.random.default_rng(3).normal(0.0, 0.01, 500)) * np.r_[np.ones(450),
+                                                                       np.full(50, 20.0)]
+    sigma = 0.01
+    limit = network_fit.HUBER_SIGMAS * sigma
+    assert network_fit.huber_loss(d, sigma) == pytest.approx(2.0 * huber(limit, d).sum(),
+                                                             rel=1e-12)
+    # IRLS weight = psi(d) / d with psi the derivative of the loss (by central differences)
+    step = 1e-7
+    psi = (huber(limit, d + step) - huber(limit, d - step)) / (2 * step)
+    np.testing.assert_allclose(network_fit.huber_weights(d, sigma), psi / d, rtol=1e-5)
+    # a point 20 sigmas out pulls like one at the limit, not twenty times as hard
+    far = network_fit.huber_weights(np.array([20 * sigma]), sigma)[0] * 20 * sigma
+    assert far == pytest.approx(limit)
+
+
+def test_foot_points_cross_to_the_neighbouring_patch():
+    """Points whose nearest grid sample lies on one patch and whose closest point lies on the
+    next (near a seam) find that closest point: the distances match a dense sampling of every
+    patch (scipy's KD-tree over 400 x 400 samples each) to within its own spacing."""
+    from nurbs_core.patches.evaluate import foot_points, grid_samples
+
+    network = _cube_sphere(size=6)
+    rng = np.random.default_rng(5)
+    directions = unit(rng.normal(size=(3000, 3)))
+    points = directions * rng.uniform(0.9, 1.1, (3000, 1))
+    _, _, distance = foot_points(network, points, resolution=8, steps=6)
+    patches, uv = grid_samples(network, 400)
+    dense = evaluate(network, patches, uv[:, 0], uv[:, 1])[0]
+    reference = cKDTree(dense).query(points)[0]
+    spacing = 2.0 / 400                                  # a patch spans about 2 / 1.3
+    excess = distance - reference
+    assert np.percentile(excess, 99) <= 1e-12          # (a handful stop in a local minimum)
+    assert np.all(excess >= -spacing)
+    assert distance.mean() <= reference.mean()
