@@ -22,13 +22,19 @@ from nurbs_core.geometry_arrays import SurfaceArrays
 
 
 def gauss_newton_steps(surface: SurfaceArrays, points: np.ndarray, u: np.ndarray, v: np.ndarray,
-                       steps: int = 1) -> tuple[np.ndarray, np.ndarray]:
+                       steps: int = 1, *, line_search: bool = True
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """Refine foot-point parameters u, v (M,) of points (M, 3) by damped Gauss-Newton steps.
 
     Each step solves ``(J^T J + mu I) delta = -J^T r`` with ``J = [S_u, S_v]``, ``r = S - Q``,
-    clamps to the domain and keeps the new parameters only where the distance decreased. Points
-    whose step was rejected or negligible drop out of later steps (most converge in two or
-    three), so the work shrinks as the projection converges. Returns new arrays (float64)."""
+    clamps to the domain and keeps the new parameters only where the distance decreased. With
+    ``line_search`` (foot points to measure by), where it did not, the next step is a quarter as
+    long (a full step overshoots where the surface bends within it), down to 1/64, and a step
+    that leaves the domain across one side moves along that side instead; without it (the
+    least-squares core's corrections, whose passes were tuned on plain steps) such a point stops.
+    Points whose step became negligible or too short drop out of later
+    steps (most converge in two or three), so the work shrinks as the projection converges.
+    Returns new arrays (float64)."""
     (u0, u1), (v0, v1) = surface_domain(surface)
     points = np.asarray(points, np.float64)
     negligible = 1e-10 * max(u1 - u0, v1 - v0)
@@ -38,6 +44,7 @@ def gauss_newton_steps(surface: SurfaceArrays, points: np.ndarray, u: np.ndarray
     residual = s - points
     dist2 = (residual ** 2).sum(-1)
     active = np.arange(len(u))
+    length = np.ones(len(u))
     tiny, eps = np.finfo(np.float64).tiny, np.finfo(np.float64).eps
     for _ in range(steps):
         if active.size == 0:
@@ -51,9 +58,15 @@ def gauss_newton_steps(surface: SurfaceArrays, points: np.ndarray, u: np.ndarray
         a, c = a + mu, c + mu
         det = a * c - b * b
         det = np.where(np.abs(det) > 0, det, eps)
-        cur_u, cur_v = u[active], v[active]
-        new_u = np.clip(cur_u - (c * g_u - b * g_v) / det, u0, u1)
-        new_v = np.clip(cur_v - (a * g_v - b * g_u) / det, v0, v1)
+        cur_u, cur_v, step = u[active], v[active], length
+        new_u = cur_u - step * (c * g_u - b * g_v) / det
+        new_v = cur_v - step * (a * g_v - b * g_u) / det
+        # a step leaving the domain across one side: along that side instead (the 1-D step in
+        # the other parameter), so points beyond an edge slide to their nearest edge point
+        out_u = ((new_u < u0) | (new_u > u1)) & line_search
+        out_v = ((new_v < v0) | (new_v > v1)) & line_search
+        new_u = np.clip(np.where(out_v & ~out_u, cur_u - step * g_u / a, new_u), u0, u1)
+        new_v = np.clip(np.where(out_u & ~out_v, cur_v - step * g_v / c, new_v), v0, v1)
         s_new, s_u_new, s_v_new = surface_derivatives(surface, new_u, new_v)
         r_new = s_new - points[active]
         d_new = (r_new ** 2).sum(-1)
@@ -61,10 +74,14 @@ def gauss_newton_steps(surface: SurfaceArrays, points: np.ndarray, u: np.ndarray
         u[active] = np.where(better, new_u, cur_u)
         v[active] = np.where(better, new_v, cur_v)
         moved = np.abs(new_u - cur_u) + np.abs(new_v - cur_v) > negligible
-        going = better & moved
-        active = active[going]
-        s_u, s_v = s_u_new[going], s_v_new[going]
-        residual, dist2 = r_new[going], d_new[going]
+        length = np.where(better, 1.0, step / 4)
+        going = (better & moved) | (~better & (length >= 1 / 64) & line_search)
+        active, length = active[going], length[going]
+        keep = better[going]
+        s_u = np.where(keep[:, None], s_u_new[going], s_u[going])
+        s_v = np.where(keep[:, None], s_v_new[going], s_v[going])
+        residual = np.where(keep[:, None], r_new[going], residual[going])
+        dist2 = np.where(keep, d_new[going], dist2[going])
     return u, v
 
 

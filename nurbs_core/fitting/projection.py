@@ -31,12 +31,14 @@ def _domain_of(knots: torch.Tensor, degree: int) -> tuple[float, float]:
 def surface_gauss_newton(surface: NurbsSurface, points: torch.Tensor, u: torch.Tensor,
                          v: torch.Tensor, steps: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
     """Refine foot-point parameters u, v (M,) of points (M, 3) by damped Gauss-Newton steps:
-    :func:`nurbs_core.fitting.foot_points.gauss_newton_steps` (float64 numpy) on tensors. The
-    new u, v have the given ones' dtype and device. No gradient."""
+    :func:`nurbs_core.fitting.foot_points.gauss_newton_steps` (float64 numpy) on tensors, plain
+    steps (the gradient fit's update between iterations was tuned on them). The new u, v have the
+    given ones' dtype and device. No gradient."""
     arrays = surface.detach().to(dtype=torch.float64, device="cpu").numpy()
     new_u, new_v = gauss_newton_steps(arrays, points.detach().double().cpu().numpy(),
                                       u.detach().double().cpu().numpy(),
-                                      v.detach().double().cpu().numpy(), steps)
+                                      v.detach().double().cpu().numpy(), steps,
+                                      line_search=False)
     return (torch.as_tensor(new_u, dtype=u.dtype, device=u.device),
             torch.as_tensor(new_v, dtype=v.dtype, device=v.device))
 

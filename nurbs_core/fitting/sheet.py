@@ -19,9 +19,9 @@ from typing import Any, cast
 import numpy as np
 from scipy.spatial import cKDTree
 
-from nurbs_core.evaluate_arrays import surface_grid
+from nurbs_core.evaluate_arrays import surface_grid, surface_points
 from nurbs_core.fitting.config import FitConfig, FitSnapshot, StopToken
-from nurbs_core.fitting.foot_points import project_onto_surface
+from nurbs_core.fitting.foot_points import gauss_newton_steps, project_onto_surface
 from nurbs_core.fitting.normalised import NormalisedCloud
 from nurbs_core.fitting.principal import pca_parameters, principal_axes
 from nurbs_core.geometry_arrays import SurfaceArrays
@@ -216,7 +216,12 @@ def core_snapshots(cloud: NormalisedCloud, config: FitConfig, start: SheetStart,
 
         surface = conform(NurbsSurface.from_numpy(surface), config).numpy()
     if subset is None:
-        parameters, distances = last.parameters, last.distances
+        # the passes' distances are at parameters smoothed over each point's neighbourhood (a
+        # hair farther than the foot points): the result reports the foot points' distances
+        parameters = last.parameters
+        foot_u, foot_v = gauss_newton_steps(surface, points, parameters[:, 0], parameters[:, 1],
+                                            steps=6)
+        distances = np.linalg.norm(surface_points(surface, foot_u, foot_v) - points, axis=1)
     else:
         parameters, distances = None, sampled_distances(surface, points)
         if FINAL_POINTS > 0 and not last.stopped and not config.custom_knots:

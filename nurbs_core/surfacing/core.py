@@ -198,7 +198,7 @@ class LeastSquaresCore:
     def correct(self, surface: SurfaceArrays, steps: int = 2) -> np.ndarray:
         """Move the parameters to their foot points; returns the distances (N,)."""
         u, v = gauss_newton_steps(surface, self.points, self.parameters[:, 0],
-                                  self.parameters[:, 1], steps=steps)
+                                  self.parameters[:, 1], steps=steps, line_search=False)
         # the correction averaged over each point's neighbourhood: a real reparameterisation
         # is smooth and survives, while the jitter that noise causes (a noisy point catching the
         # nearest wiggle of the surface, which the next solve then deepens) averages out

@@ -96,8 +96,11 @@ def test_the_written_surface_is_as_far_from_the_points_as_reported(tmp_path):
 def rational_surface() -> NurbsSurface:
     rng = np.random.default_rng(7)
     knots_u = np.array([0, 0, 0, 0, 0.2, 0.5, 0.55, 1, 1, 1, 1.0])
-    return NurbsSurface(rng.normal(size=(7, 5, 3)), 3, 2, knots_u=knots_u,
-                        weights=rng.uniform(0.5, 2.0, (7, 5)))
+    # a bumpy rational sheet (a random cloud of control points folds onto itself, and then the
+    # nearest sample of a point may lie on another fold: no projection's business)
+    grid = np.stack(np.meshgrid(np.linspace(0, 3, 7), np.linspace(0, 2, 5), indexing="ij"), -1)
+    control = np.concatenate([grid, 0.4 * rng.normal(size=(7, 5, 1))], -1)
+    return NurbsSurface(control, 3, 2, knots_u=knots_u, weights=rng.uniform(0.5, 2.0, (7, 5)))
 
 
 def test_numpy_surface_evaluation_matches_geomdl_and_the_torch_twin(rational_surface):
@@ -111,10 +114,10 @@ def test_numpy_surface_evaluation_matches_geomdl_and_the_torch_twin(rational_sur
     reference = NURBS.Surface()
     reference.degree_u, reference.degree_v = 3, 2
     weights = arrays.weights
+    reference.ctrlpts_size_u, reference.ctrlpts_size_v = 7, 5
     reference.ctrlptsw = [list(np.append(c * w, w)) for c, w in
                           zip(arrays.control_points.reshape(-1, 3), weights.reshape(-1),
                               strict=True)]
-    reference.ctrlpts_size_u, reference.ctrlpts_size_v = 7, 5
     reference.knotvector_u, reference.knotvector_v = list(arrays.knots_u), list(arrays.knots_v)
     for k in range(len(u)):
         s, s_v = reference.derivatives(u[k], v[k], order=1)[0], None
@@ -153,6 +156,26 @@ def test_foot_points_land_where_the_surface_is_nearest(rational_surface):
     params, distances = project_onto_surface(arrays, s + offset[:, None] * normal)
     assert np.allclose(distances, np.abs(offset), atol=1e-9)
     assert np.allclose(params, uv, atol=1e-6)
+
+
+def test_points_beyond_an_edge_slide_to_their_nearest_edge_point():
+    """On a sheared sheet (S_u not orthogonal to S_v) the Gauss-Newton step of a point past the
+    edge u = 1 leaves the domain; clamped, it would stop where it crossed the edge. The foot is
+    the edge's nearest point, found here by scipy's bounded scalar minimisation."""
+    from scipy.optimize import minimize_scalar
+
+    corners = np.array([[[0, 0, 0], [0.7, 0.7, 0]], [[1, 0, 0], [1.7, 0.7, 0]]], float)
+    sheet = NurbsSurface(corners, 1, 1).numpy()
+    rng = np.random.default_rng(8)
+    points = np.c_[rng.uniform(1.6, 2.2, 40), rng.uniform(0.0, 0.5, 40), rng.uniform(-.3, .3, 40)]
+    params, distances = project_onto_surface(sheet, points)
+    for point, (u, v), distance in zip(points, params, distances, strict=True):
+        edge = minimize_scalar(lambda t, point=point: np.linalg.norm(
+            corners[1, 0] + t * (corners[1, 1] - corners[1, 0]) - point), bounds=(0, 1),
+            method="bounded", options={"xatol": 1e-12})
+        assert u == pytest.approx(1.0)
+        assert v == pytest.approx(edge.x, abs=1e-4)
+        assert distance == pytest.approx(edge.fun, rel=1e-7)
 
 
 def test_the_numpy_knots_and_basis_are_the_torch_ones():
