@@ -350,7 +350,7 @@ def starts(clouds: list[tuple[str, np.ndarray]], path: str | None) -> None:
     for name, points in clouds:
         problem = prepare(points, config)
         try:
-            sheet = sheet_start(problem, config.replace(single_patch=False))
+            sheet = sheet_start(problem.cloud, config.replace(single_patch=False))
             prediction = predict_surface(problem.points_input, model)
             pinned = learned_start.pinned_parameters(problem, sheet, prediction)
         except ValueError as exc:

@@ -6,14 +6,33 @@ knot panel runs these on the GUI thread, where torch is never imported.
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 from numpy.typing import ArrayLike
 
 
 def uniform(count: int, degree: int) -> np.ndarray:
-    """Clamped knot vector with uniform interior knots on [0, 1]: (count + degree + 1,)."""
-    interior = np.linspace(0.0, 1.0, count - degree + 1)
+    """Clamped knot vector with uniform interior knots on [0, 1]: (count + degree + 1,), bit for
+    bit :func:`nurbs_core.knots.clamped_uniform`'s (float64)."""
+    interior = even_steps(0.0, 1.0, count - degree + 1)
     return np.concatenate([np.zeros(degree), interior, np.ones(degree)])
+
+
+def even_steps(start: float, end: float, count: int) -> np.ndarray:
+    """``count`` evenly spaced values from ``start`` to ``end`` (float64), rounded as
+    ``torch.linspace`` rounds them: the first half ``start + step i``, the rest
+    ``end - step (count - 1 - i)``, each with one rounding (a fused multiply-add). numpy's
+    linspace rounds differently in the last bit, and a least-squares solve on those knots then
+    differs from the torch route's by up to 1e-10."""
+    if count == 1:
+        return np.array([float(start)])
+    step = (end - start) / (count - 1)
+    half = count // 2
+    exact_step = Fraction(step)
+    values = [float(Fraction(start) + exact_step * i) if i < half
+              else float(Fraction(end) - exact_step * (count - 1 - i)) for i in range(count)]
+    return np.array(values)
 
 
 def averaged(parameters: ArrayLike, n_control_points: int, degree: int) -> np.ndarray:

@@ -11,22 +11,25 @@ crumpled over the same part of the cloud. The measures here look from the surfac
   covers (coverage);
 * area against the cloud's own area, bending energy and the largest curvature.
 
-numpy + scipy + torch (the surface's basis functions) only; vectorised over samples and points.
+numpy + scipy only (on the surface's numpy twin; a NurbsSurface is read through it), vectorised
+over samples and points.
 For big clouds everything except the cloud-to-surface projection works on seeded random subsets
 (nested prefixes of one permutation), so the cost is bounded whatever the cloud's size.
 """
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
-from nurbs_core.basis import basis_derivatives, dense_basis_matrix, find_span
-from nurbs_core.geometry import NurbsSurface
+from nurbs_core.evaluate_arrays import dense_basis, homogeneous, surface_domain
+from nurbs_core.fitting.foot_points import project_onto_surface
+from nurbs_core.geometry_arrays import SurfaceArrays
 
 # the limits and warnings of the measures live with the status they decide (torch-free, for the
 # app's GUI thread); re-exported here beside the measures
@@ -37,6 +40,9 @@ from nurbs_core.status import quality_problems as quality_problems
 from nurbs_core.status import quality_warnings as quality_warnings
 from nurbs_core.surfacing.neighbours import estimate_noise, local_frames
 from nurbs_core.surfacing.normals import oriented_normals
+
+if TYPE_CHECKING:
+    from nurbs_core.geometry import NurbsSurface
 
 #: a surface sample is "near the cloud" within NEAR_SPACINGS x h + NEAR_NOISE x noise, h the
 #: cloud's sampling scale sqrt(area per point) (not less than its median spacing)
@@ -81,29 +87,16 @@ class QualityMaps:
 # Surface: points, first and second derivatives on a tensor grid
 
 
-def _dense_derivative_basis(knots: torch.Tensor, degree: int, t: np.ndarray) -> np.ndarray:
-    """Basis functions and their first two derivatives at t (M,), scattered: (3, M, n)."""
-    knots = knots.detach().to(torch.float64).reshape(1, -1)
-    n = knots.shape[1] - degree - 1
-    params = torch.as_tensor(t, dtype=torch.float64).reshape(1, -1)
-    span = find_span(knots, degree, params)
-    ders = basis_derivatives(knots, degree, params, span, 2)[:, 0]          # (3, M, p+1)
-    dense = dense_basis_matrix(ders, span.expand(3, -1), degree, n)         # (3, M, n)
-    return dense.numpy()
-
-
-def _grid_derivatives(surface: NurbsSurface, u: np.ndarray,
+def _grid_derivatives(surface: SurfaceArrays, u: np.ndarray,
                       v: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """S, S_u, S_v, S_uu, S_uv, S_vv on the grid u (Gu,) x v (Gv,): each (Gu, Gv, 3).
 
     Homogeneous derivatives from the basis-function derivatives (A2.3), then the quotient rule
     of the rational surface (The NURBS Book, eq. 4.20)."""
-    cp = surface.control_points.detach().to(torch.float64).numpy()
-    w = surface.weights.detach().to(torch.float64).expand(cp.shape[:-1]).numpy()
-    pw = np.concatenate([cp * w[..., None], w[..., None]], axis=-1)        # (n, m, 4)
-    du = _dense_derivative_basis(surface.knots_u, surface.degree_u, u)      # (3, Gu, n)
-    dv = _dense_derivative_basis(surface.knots_v, surface.degree_v, v)      # (3, Gv, m)
+    pw = homogeneous(surface)                                               # (n, m, 4)
+    du = dense_basis(surface.knots_u, surface.degree_u, u, 2)               # (3, Gu, n)
+    dv = dense_basis(surface.knots_v, surface.degree_v, v, 2)               # (3, Gv, m)
     n, m = pw.shape[:2]
     rows = (du.reshape(-1, n) @ pw.reshape(n, m * 4)).reshape(3, len(u), m, 4)
 
@@ -145,9 +138,9 @@ def _curvature(s_u: np.ndarray, s_v: np.ndarray, s_uu: np.ndarray, s_uv: np.ndar
     return np.where(good, jac, 0.0), normal, squares.clip(0.0), largest
 
 
-def _gauss_legendre(knots: torch.Tensor, degree: int) -> tuple[np.ndarray, np.ndarray]:
+def _gauss_legendre(knots: np.ndarray, degree: int) -> tuple[np.ndarray, np.ndarray]:
     """Gauss-Legendre parameters and weights over the knot spans of the domain."""
-    k = knots.detach().to(torch.float64).reshape(-1).numpy()
+    k = np.asarray(knots, np.float64).reshape(-1)
     n = len(k) - degree - 1
     breaks = np.unique(k[degree:n + 1])
     spans = len(breaks) - 1
@@ -158,15 +151,25 @@ def _gauss_legendre(knots: torch.Tensor, degree: int) -> tuple[np.ndarray, np.nd
     return (mid + half * x).ravel(), (half * w).ravel()
 
 
-def _check_surface(surface: NurbsSurface) -> NurbsSurface:
-    if not isinstance(surface, NurbsSurface):
-        raise TypeError(f"expected a NurbsSurface, got {type(surface).__name__}")
-    if len(surface.batch_shape):
-        raise ValueError(f"needs a single surface, got batch shape {tuple(surface.batch_shape)}")
-    return surface.detach().to(dtype=torch.float64, device="cpu")
+def _check_surface(surface: SurfaceArrays | NurbsSurface) -> SurfaceArrays:
+    """The single surface's numpy twin in float64 (a NurbsSurface is read through its twin)."""
+    if not isinstance(surface, SurfaceArrays):
+        # a NurbsSurface exists only once its module (and torch) has been imported
+        geometry = sys.modules.get("nurbs_core.geometry")
+        if geometry is None or not isinstance(surface, geometry.NurbsSurface):
+            raise TypeError(f"expected a NurbsSurface or SurfaceArrays, got "
+                            f"{type(surface).__name__}")
+        surface = surface.detach().numpy()
+    batch = np.shape(surface.control_points)[:-3]
+    if batch:
+        raise ValueError(f"needs a single surface, got batch shape {tuple(batch)}")
+    return SurfaceArrays(surface.degree_u, surface.degree_v,
+                         *(np.asarray(a, np.float64) for a in (
+                             surface.control_points, surface.weights, surface.knots_u,
+                             surface.knots_v)))
 
 
-def _area_and_bending(surface: NurbsSurface) -> tuple[float, float]:
+def _area_and_bending(surface: SurfaceArrays) -> tuple[float, float]:
     """Area and integral of (k1^2 + k2^2) dA by Gauss-Legendre quadrature per knot span."""
     u, wu = _gauss_legendre(surface.knots_u, surface.degree_u)
     v, wv = _gauss_legendre(surface.knots_v, surface.degree_v)
@@ -197,7 +200,7 @@ class _Measures:
     multiplicity: np.ndarray   # (n_cells,) sheets over each of the first n_cells subset points
 
 
-def _measure(surface: NurbsSurface, points: np.ndarray, normals: np.ndarray | None,
+def _measure(surface: SurfaceArrays, points: np.ndarray, normals: np.ndarray | None,
              samples: int, max_points: int, seed: int) -> _Measures:
     """Everything both public functions need: surface samples against nested cloud subsets."""
     count = len(points)
@@ -216,7 +219,7 @@ def _measure(surface: NurbsSurface, points: np.ndarray, normals: np.ndarray | No
     sub = points[order[:n_sub]]
 
     # -- surface samples: uniform grid, trapezoid x area-element weights
-    (u0, u1), (v0, v1) = surface.domain
+    (u0, u1), (v0, v1) = surface_domain(surface)
     u, v = np.linspace(u0, u1, g), np.linspace(v0, v1, g)
     s, s_u, s_v, s_uu, s_uv, s_vv = _grid_derivatives(surface, u, v)
     jac, unit, _, largest = _curvature(s_u, s_v, s_uu, s_uv, s_vv)
@@ -315,14 +318,15 @@ def _as_points(points: ArrayLike) -> np.ndarray:
     return array
 
 
-def surface_quality(surface: NurbsSurface, points: np.ndarray, *, normals: np.ndarray | None = None,
+def surface_quality(surface: SurfaceArrays | NurbsSurface, points: np.ndarray, *,
+                    normals: np.ndarray | None = None,
                     reference_area: float | None = None, distances: np.ndarray | None = None,
                     samples: int = 96, max_points: int = 200_000,
                     seed: int = 0) -> dict[str, float]:
     """Quality of ``surface`` as a model of the cloud ``points`` (N, 3). All values are floats.
 
     Cloud to surface (all N points; ``distances`` (N,) when the caller has them, else
-    :func:`nurbs_core.fitting.projection.project`): ``mean``, ``rms``, ``max``.
+    :func:`nurbs_core.fitting.foot_points.project_onto_surface`): ``mean``, ``rms``, ``max``.
 
     Surface to cloud, from a ``samples x samples`` grid over the domain, each sample weighted by
     its area ``|S_u x S_v| du dv``, against a seeded random subset of at most ``max_points``
@@ -360,8 +364,7 @@ def surface_quality(surface: NurbsSurface, points: np.ndarray, *, normals: np.nd
     surface = _check_surface(surface)
     array = _as_points(points)
     if distances is None:
-        from nurbs_core.fitting.projection import project
-        _, dist = project(surface, array)
+        _, dist = project_onto_surface(surface, array)
     else:
         dist = np.asarray(distances, np.float64).reshape(-1)
         if dist.shape != (len(array),):
@@ -381,10 +384,25 @@ def surface_quality(surface: NurbsSurface, points: np.ndarray, *, normals: np.nd
     return stats
 
 
-def quality_maps(surface: NurbsSurface, points: np.ndarray, *, normals: np.ndarray | None = None,
+def quality_maps(surface: SurfaceArrays | NurbsSurface, points: np.ndarray, *,
+                 normals: np.ndarray | None = None,
                  samples: int = 96, max_points: int = 200_000, seed: int = 0) -> QualityMaps:
     """The bad regions of ``surface`` against ``points`` (N, 3) on a ``samples x samples``
     parameter grid (see :class:`QualityMaps`); the same computation and thresholds as
     :func:`surface_quality`."""
     surface = _check_surface(surface)
     return _measure(surface, _as_points(points), normals, samples, max_points, seed).maps
+
+
+def chamfer(samples: np.ndarray, points: np.ndarray) -> float:
+    """Two-sided Chamfer distance ``mean_a d(a, B) + mean_b d(b, A)`` of samples (M, d) and
+    points (N, d): the number the report prints (nearest neighbours by cKDTree).
+    :func:`nurbs_core.losses.chamfer_distance` is the same sum as a differentiable loss."""
+    samples = np.asarray(samples, np.float64)
+    points = np.asarray(points, np.float64)
+    total = 0.0
+    for query, target in ((samples, points), (points, samples)):
+        workers = -1 if len(query) >= 20000 else 1
+        _, index = cKDTree(target).query(query, k=1, workers=workers)
+        total += float(np.linalg.norm(query - target[index], axis=-1).mean())
+    return total

@@ -7,13 +7,17 @@
 * ``model``         trainable control points, positive weights, strictly increasing free knots
 * ``projection``    foot points (parameter correction) and per-point deviation
 * ``refinement``    knot insertion where the error is largest (``refine``)
-* ``engine``        the optimisation loop (``iter_fit``, ``fit``), with its learning-rate
+* ``plan``          which route a fit takes (the least-squares core alone needs no torch)
+* ``run``           the entry points ``iter_fit``, ``fit`` and ``fit_arrays`` (numpy results)
+* ``sheet``, ``sheet_run``   the least-squares core's route of an unordered surface cloud
+* ``engine``        the gradient fit's optimisation loop, with its learning-rate
                     ``schedule``, divergence ``guard`` and loss ``evaluation``
 * ``batched``       many fits with known parameters in one batch (``fit_batch``)
 * ``learned_start`` the start of init "learned" (a trained encoder's prediction)
 
 The names load on first use (PEP 562): ``from nurbs_core.fitting import FitConfig`` does not
-import torch; ``fit`` and ``iter_fit`` do.
+import torch; ``fit`` and ``iter_fit`` import it for the routes that need it (not for the
+least-squares core alone: :func:`~nurbs_core.fitting.plan.torch_free`).
 """
 
 from __future__ import annotations
@@ -29,8 +33,9 @@ _LAZY = {
     "FitResult": "config",
     "FitSnapshot": "config",
     "StopToken": "config",
-    "fit": "engine",
-    "iter_fit": "engine",
+    "fit": "run",
+    "fit_arrays": "run",
+    "iter_fit": "run",
     "fit_batch": "batched",
     "statistics": "engine",
     "least_squares_fit": "least_squares",

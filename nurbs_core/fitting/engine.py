@@ -15,7 +15,7 @@ import contextlib
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Generator, Iterator
+from collections.abc import Iterator
 from typing import TypeAlias, cast
 
 import numpy as np
@@ -23,12 +23,13 @@ import torch
 from numpy.typing import ArrayLike
 
 from nurbs_core import losses as _losses
-from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, FitResult, FitSnapshot, Loss, StopToken
+from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, FitSnapshot, Loss, StopToken
 from nurbs_core.fitting.evaluation import Evaluation, cloud_tree, draw_batch, uses_parameters
 from nurbs_core.fitting.exact import exact_geometry, exact_problem, exact_snapshot, uses_exact
 from nurbs_core.fitting.guard import DivergenceGuard
 from nurbs_core.fitting.learned_start import CoreRace, LearnedStart, core_race, learned_start
 from nurbs_core.fitting.model import TrainableGeometry
+from nurbs_core.fitting.plan import resolved_solver, uses_core
 from nurbs_core.fitting.problem import Problem, initial_geometry, prepare, start_parameters
 from nurbs_core.fitting.projection import project
 from nurbs_core.fitting.refinement import refine
@@ -37,14 +38,13 @@ from nurbs_core.fitting.sheet import (
     SheetStart,
     core_geometry_numpy,
     core_snapshots,
-    resolved_solver,
     sheet_start,
     surface_statistics,
-    uses_core,
 )
+from nurbs_core.fitting.sheet_run import core_final, failed_snapshot, sheet_run, with_warnings
 from nurbs_core.geometry import NurbsCurve, NurbsSurface, geometry_from_numpy
 from nurbs_core.geometry_arrays import CurveArrays, GeometryArrays, SurfaceArrays
-from nurbs_core.quality import quality_problems, quality_warnings
+from nurbs_core.quality import quality_problems
 
 Geometry: TypeAlias = NurbsCurve | NurbsSurface
 
@@ -94,9 +94,9 @@ def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopTo
         if learned.geometry is not None:  # pinned to the cloud's mesh: the core applies
             return _learned_sheet_run(problem, config, learned, loss, stop, started)
         config, note, sheet = config.replace(init="pca"), learned.message, learned.sheet
-    if uses_core(problem, config, initial):
+    if uses_core(config, problem.known, initial is not None):
         # the fold-free start runs (and refuses shapes one patch cannot hold) before iterating
-        start = sheet if sheet is not None else sheet_start(problem, config)
+        start = sheet if sheet is not None else sheet_start(problem.cloud, config)
         return _noted(_sheet_run(problem, config, start, loss, stop, started), note)
     geometry = initial_geometry(problem, config, initial)
     return _noted(_gradient_run(problem, config, geometry, loss, stop, initial is not None), note)
@@ -127,13 +127,6 @@ def torch_threads(count: int | None) -> Iterator[None]:
             torch.set_num_threads(saved)
 
 
-def _failed(exc: Exception, started: float) -> FitSnapshot:
-    """The done snapshot of a run that raised: the app shows it instead of losing its thread."""
-    return FitSnapshot(iteration=0, geometry={}, losses=[], done=True, status="failed",
-                       elapsed=time.perf_counter() - started,
-                       message=f"{type(exc).__name__}: {exc}")
-
-
 def _gradient_run(problem: Problem, config: FitConfig, geometry: Geometry,
                   loss: _losses.CompositeLoss, stop: StopToken,
                   from_initial: bool) -> Iterator[FitSnapshot]:
@@ -150,7 +143,7 @@ def _learned_sheet_run(problem: Problem, config: FitConfig, learned: LearnedStar
     :func:`_sheet_run` from the closer core fit (the gradient fit goes on from either as it does
     from the mesh map's: when the mesh map's wins, the run is ``init="pca"``'s)."""
     assert learned.geometry is not None and learned.sheet is not None, "a learned start"
-    yield FitSnapshot(iteration=0, geometry=core_geometry_numpy(learned.geometry, problem),
+    yield FitSnapshot(iteration=0, geometry=core_geometry_numpy(learned.geometry.numpy(), problem.cloud),
                       losses=[], elapsed=time.perf_counter() - started, done=False,
                       status="running", message=learned.message)
     race = CoreRace()
@@ -158,12 +151,12 @@ def _learned_sheet_run(problem: Problem, config: FitConfig, learned: LearnedStar
         try:
             yield from core_race(problem, config, learned, stop, started, race)
         except Exception as exc:  # report to the app as a failed run instead of killing its thread
-            yield _failed(exc, started)
+            yield failed_snapshot(exc, started)
             return
     winner = race.result
     if winner["status"] != "stopped":  # the race's outcome: the core fit the run goes on from
         yield FitSnapshot(iteration=winner["iteration"],
-                          geometry=core_geometry_numpy(winner["geometry"], problem),
+                          geometry=core_geometry_numpy(winner["geometry"], problem.cloud),
                           losses=[], elapsed=time.perf_counter() - started, done=False,
                           status="running", message=race.message, stage="least_squares")
     # both cores fitted the same points over the same mesh: its quality measures serve either
@@ -176,109 +169,48 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _lo
     """The least-squares core's passes, then (when the config asks for more than least squares)
     the gradient fit from its result; the final snapshot carries the statistics. ``core``: the
     result of core passes already run over ``start``'s mesh (see
-    :func:`~nurbs_core.fitting.sheet.core_snapshots`): the run goes on from it."""
+    :func:`~nurbs_core.fitting.sheet.core_snapshots`): the run goes on from it. The core alone is
+    :func:`~nurbs_core.fitting.sheet_run.sheet_run` (numpy)."""
+    cloud = problem.cloud
+    if resolved_solver(config) != "gradient":
+        yield from sheet_run(cloud, config, start, stop, started, core)
+        return
     with torch_threads(config.threads):
         result: dict = {} if core is None else core
         try:
             if core is None:
-                yield from core_snapshots(problem, config, start, stop, started, result)
+                yield from core_snapshots(cloud, config, start, stop, started, result)
         except Exception as exc:  # report to the app as a failed run instead of killing its thread
-            yield _failed(exc, started)
+            yield failed_snapshot(exc, started)
             return
-        if resolved_solver(config) == "gradient" and result["status"] != "stopped":
-            if "fairing" not in loss.names and config.stiffness > 0:
-                # the same fairing as the least-squares core, at its final weight
-                loss = loss.with_term(config.stiffness * result["fairing_scale"], "fairing")
-            run = _Run(problem, config, result["geometry"].to(dtype=problem.dtype), loss, stop,
-                       True, start_params=result["parameters"], offset=result["iteration"],
-                       started=started)
-            final = None
-            for snapshot in run.loop():
-                if snapshot.done:
-                    final = snapshot
-                    break
-                yield snapshot
-            assert final is not None  # the loop always ends with a done snapshot
-            if final.status != "failed":
-                geometry = geometry_from_numpy(final.geometry, dtype=torch.float64)
-                surface = cast(NurbsSurface, geometry)  # the core fits surfaces only
-                stats = surface_statistics(surface, problem.points_input, mesh=start.mesh,
-                                           scale=problem.scale)
-                final = dataclasses.replace(final, statistics=stats,
-                                            elapsed=time.perf_counter() - started)
-                if config.loss == Loss.parse(DEFAULT_LOSS):
-                    final = _closer_of(final, _core_final(problem, start, result, started),
-                                       run.kept_note)
-                assert final.statistics is not None  # set above
-                final = dataclasses.replace(
-                    final, message=_with_warnings(final.message, final.statistics))
-            yield final
+        if result["status"] == "stopped":
+            yield core_final(cloud, start, result, started)
             return
-        final = _core_final(problem, start, result, started)
-        if result["status"] != "stopped":
-            final = yield from _unfolded(problem, config, start, stop, started, final)
+        if "fairing" not in loss.names and config.stiffness > 0:
+            # the same fairing as the least-squares core, at its final weight
+            loss = loss.with_term(config.stiffness * result["fairing_scale"], "fairing")
+        run = _Run(problem, config, geometry_from_numpy(result["geometry"], dtype=problem.dtype),
+                   loss, stop, True, start_params=result["parameters"],
+                   offset=result["iteration"], started=started)
+        final = None
+        for snapshot in run.loop():
+            if snapshot.done:
+                final = snapshot
+                break
+            yield snapshot
+        assert final is not None  # the loop always ends with a done snapshot
+        if final.status != "failed":
+            stats = surface_statistics(cast(SurfaceArrays, final.geometry), problem.points_input,
+                                       mesh=start.mesh, scale=problem.scale)
+            final = dataclasses.replace(final, statistics=stats,
+                                        elapsed=time.perf_counter() - started)
+            if config.loss == Loss.parse(DEFAULT_LOSS):
+                final = _closer_of(final, core_final(cloud, start, result, started),
+                                   run.kept_note)
+            assert final.statistics is not None  # set above
+            final = dataclasses.replace(
+                final, message=with_warnings(final.message, final.statistics))
         yield final
-
-
-#: A least-squares fit that folds is fitted again up to MAX_STIFFENINGS times, each STIFFEN x
-#: stiffer, while it folds; a stiffer fit is kept when it folds less and stays within
-#: STIFFER_RMS x the first fit's RMS distance to the points.
-STIFFEN = 3.0
-MAX_STIFFENINGS = 3
-STIFFER_RMS = 1.25
-
-
-def _unfolded(problem: Problem, config: FitConfig, start: SheetStart, stop: StopToken,
-              started: float, final: FitSnapshot) -> Generator[FitSnapshot, None, FitSnapshot]:
-    """The core's done snapshot ``final``, or, when it folds, a stiffer fit of the same start
-    that folds less (a sparse or rough cloud bends a soft surface over itself where the points
-    thin out; stiffer fairing keeps it a sheet at a small cost in distance). Yields the stiffer
-    fits' passes; returns the done snapshot to keep, its message saying what was done."""
-    assert final.statistics is not None, "a done snapshot"
-    first = final.statistics
-    stiffness = config.stiffness if config.stiffness > 0 else FitConfig().stiffness
-    kept, kept_stiffness = final, stiffness
-    for _ in range(MAX_STIFFENINGS):
-        assert kept.statistics is not None
-        if "folds" not in quality_problems(kept.statistics) or stop.stopped:
-            break
-        stiffness *= STIFFEN
-        retry: dict = {}
-        yield from core_snapshots(problem, config.replace(stiffness=stiffness), start, stop,
-                                  started, retry)
-        if retry["status"] == "stopped":
-            break
-        candidate = _core_final(problem, start, retry, started)
-        assert candidate.statistics is not None
-        if (candidate.statistics["flipped_fraction"] < kept.statistics["flipped_fraction"]
-                and candidate.statistics["rms"] <= STIFFER_RMS * first["rms"]):
-            kept, kept_stiffness = candidate, stiffness
-    if kept is final:
-        return final
-    assert kept.statistics is not None
-    note = (f"the fit at stiffness {config.stiffness:g} folded ({first['flipped_fraction']:.1%} "
-            f"of the area): refitted at stiffness {kept_stiffness:g} "
-            f"({kept.statistics['flipped_fraction']:.1%} folded, RMS {kept.statistics['rms']:.4g} "
-            f"against {first['rms']:.4g})")
-    return dataclasses.replace(kept, message=f"{kept.message}; {note}" if kept.message else note)
-
-
-def _core_final(problem: Problem, start: SheetStart, result: dict,
-                started: float) -> FitSnapshot:
-    """The done snapshot of the least-squares core's ``result`` (see
-    :func:`~nurbs_core.fitting.sheet.core_snapshots`), with its statistics."""
-    geometry = result["geometry"]
-    snapshot_geometry = core_geometry_numpy(geometry, problem)
-    core_surface = cast(NurbsSurface, geometry_from_numpy(snapshot_geometry))
-    stats = surface_statistics(core_surface, problem.points_input, mesh=start.mesh,
-                               scale=problem.scale, distances=result["distances"] * problem.scale)
-    stats.update(tolerance=result["tolerance"], noise=result["noise"],
-                 tolerance_met=float(result["tolerance_met"]))
-    return FitSnapshot(iteration=result["iteration"], geometry=snapshot_geometry,
-                       losses=result["records"], elapsed=time.perf_counter() - started,
-                       done=True, status=result["status"],
-                       message=_with_warnings(result["message"], stats), statistics=stats,
-                       stage="least_squares")
 
 
 #: What a gradient fit does when it gains a problem of :func:`quality_problems`
@@ -309,15 +241,6 @@ def _closer_of(final: FitSnapshot, core: FitSnapshot, kept_note: str | None) -> 
         message = message.removesuffix(kept_note).removesuffix("; ") or None
     return dataclasses.replace(final, geometry=core.geometry, statistics=core.statistics,
                                message=note if not message else f"{message}; {note}")
-
-
-def _with_warnings(message: str | None, stats: dict) -> str | None:
-    """The run's message followed by what the quality measures warn about."""
-    warnings = quality_warnings(stats)
-    if not warnings:
-        return message
-    text = "warning: " + "; ".join(warnings) + " (see the quality report)"
-    return f"{message}; {text}" if message else text
 
 
 class _Run:
@@ -599,36 +522,3 @@ def statistics(geometry: Geometry, points: ArrayLike,
         stats.update(paired_mean=float(paired.mean()),
                      paired_rms=float(paired.pow(2).mean().sqrt()), paired_max=float(paired.max()))
     return stats
-
-
-def fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopToken | None = None,
-        initial: Geometry | dict | None = None, parameters: ArrayLike | None = None,
-        on_snapshot: Callable[[FitSnapshot], object] | None = None) -> FitResult:
-    """Run :func:`iter_fit` to the end and return a :class:`FitResult` (see its docstring).
-
-    ``on_snapshot(snapshot)`` is called for every snapshot (progress display)."""
-    history: list[dict] = []
-    last, count = None, 0
-    for snapshot in iter_fit(target, config, stop=stop, initial=initial, parameters=parameters):
-        history.extend(snapshot.losses)
-        last, count = snapshot, count + 1
-        if on_snapshot is not None:
-            on_snapshot(snapshot)
-    assert last is not None  # iter_fit always ends with a done snapshot
-    dtype = torch.float32 if (config or FitConfig()).dtype == "float32" else torch.float64
-    if last.status == "failed" and not last.geometry:
-        return FitResult(geometry=None, history=history, status=last.status,
-                         message=last.message, statistics={}, iterations=last.iteration,
-                         elapsed=last.elapsed, snapshots=count)
-    geometry = geometry_from_numpy(last.geometry, dtype=dtype)
-    message = last.message
-    if last.statistics is not None:
-        stats = dict(last.statistics)
-    elif isinstance(geometry, NurbsSurface) and parameters is None:
-        stats = surface_statistics(geometry, np.asarray(target, np.float64))
-        message = _with_warnings(message, stats)
-    else:
-        stats = statistics(geometry, target, parameters)
-    return FitResult(geometry=geometry, history=history, status=last.status, message=message,
-                     statistics=stats, iterations=last.iteration, elapsed=last.elapsed,
-                     snapshots=count)

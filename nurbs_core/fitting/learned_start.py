@@ -115,7 +115,7 @@ def learned_start(problem: Problem, config: FitConfig) -> LearnedStart:
     # the core's mesh test: is the cloud an open patch? (single_patch only decides what happens
     # when it is not, so a fall-back reuses the start it built)
     try:
-        sheet = sheet_start(problem, config.replace(single_patch=False))
+        sheet = sheet_start(problem.cloud, config.replace(single_patch=False))
     except ValueError as exc:
         return LearnedStart(None, f"the learned model predicts open patches and this cloud is "
                             f"not one ({exc})" + fallback)
@@ -170,10 +170,10 @@ def core_race(problem: Problem, config: FitConfig, start: LearnedStart, stop: St
     fit is at least as close, the fit goes on from it exactly as ``init="pca"`` would."""
     assert start.sheet is not None, "a learned start that did not fall back"
     learned: dict[str, Any] = {}
-    yield from core_snapshots(problem, config, start.core_start(), stop, started, learned)
+    yield from core_snapshots(problem.cloud, config, start.core_start(), stop, started, learned)
     today: dict[str, Any] = {}
     if learned["status"] != "stopped":
-        for snapshot in core_snapshots(problem, config, start.sheet, stop, started, today):
+        for snapshot in core_snapshots(problem.cloud, config, start.sheet, stop, started, today):
             if snapshot.status == "paused":
                 yield dataclasses.replace(snapshot, iteration=learned["iteration"])
     if not today or today["status"] == "stopped":

@@ -1,4 +1,4 @@
-"""Linear least squares with fixed knots and known parameters, and the PCA plane/line start.
+"""Linear least squares with fixed knots and known parameters.
 
 The least-squares control points minimise ``sum_k |S(u_k, v_k) - Q_k|^2`` exactly (non-rational,
 fixed knots): the accuracy yardstick for gradient fits. The collocation matrix is sparse
@@ -14,58 +14,9 @@ import scipy.sparse
 import torch
 from numpy.typing import ArrayLike
 
-from nurbs_core.basis import basis_functions, find_span
+from nurbs_core.fitting.collocation import collocation_matrix, grid_axes
 from nurbs_core.geometry import NurbsCurve, NurbsSurface
 from nurbs_core.knots import check_knots, clamped_uniform
-
-
-def compact_basis(knots: ArrayLike, degree: int, parameters: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-    """Spans (M,) int and non-zero basis values (M, p + 1) at ``parameters`` (M,) (float64 numpy),
-    for a knot vector (n + p + 1,)."""
-    # grid and scanline data repeat parameter values: evaluate each distinct value once
-    values, inverse = np.unique(np.asarray(parameters, np.float64), return_inverse=True)
-    U = torch.as_tensor(np.asarray(knots, np.float64)).unsqueeze(0)
-    t = torch.as_tensor(values).unsqueeze(0)
-    span = find_span(U, degree, t)
-    basis = basis_functions(U, degree, t, span)[0].numpy()
-    return span[0].numpy()[inverse.ravel()], basis[inverse.ravel()]
-
-
-def grid_axes(parameters: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """(u, v) if the (N, 2) parameters are exactly the u-major tensor grid u x v, else None."""
-    u = np.unique(parameters[:, 0])
-    v = np.unique(parameters[:, 1])
-    if u.size * v.size != parameters.shape[0] or u.size < 2 or v.size < 2:
-        return None
-    uu, vv = np.meshgrid(u, v, indexing="ij")
-    if (np.array_equal(uu.ravel(), parameters[:, 0])
-            and np.array_equal(vv.ravel(), parameters[:, 1])):
-        return u, v
-    return None
-
-
-def collocation_matrix(knots: np.ndarray, degree: int, parameters: np.ndarray,
-                       knots_v: np.ndarray | None = None, degree_v: int | None = None,
-                       parameters_v: np.ndarray | None = None) -> scipy.sparse.csr_matrix:
-    """Sparse CSR collocation matrix: (M, n) for curves, (M, n*m) for surfaces (col i*m + j).
-
-    knots (n + p + 1,), parameters (M,); for surfaces also knots_v (m + q + 1,), degree_v q and
-    parameters_v (M,)."""
-    span_u, basis_u = compact_basis(knots, degree, parameters)
-    n = len(knots) - degree - 1
-    rows = np.arange(len(span_u))
-    cols_u = span_u[:, None] - degree + np.arange(degree + 1)
-    if knots_v is None:
-        return scipy.sparse.csr_matrix(
-            (basis_u.ravel(), (np.repeat(rows, degree + 1), cols_u.ravel())), shape=(len(rows), n))
-    assert degree_v is not None and parameters_v is not None, "a surface needs degree_v and parameters_v"
-    span_v, basis_v = compact_basis(knots_v, degree_v, parameters_v)
-    m = len(knots_v) - degree_v - 1
-    cols_v = span_v[:, None] - degree_v + np.arange(degree_v + 1)
-    cols = (cols_u[:, :, None] * m + cols_v[:, None, :]).reshape(len(rows), -1)
-    values = (basis_u[:, :, None] * basis_v[:, None, :]).reshape(len(rows), -1)
-    return scipy.sparse.csr_matrix(
-        (values.ravel(), (np.repeat(rows, cols.shape[1]), cols.ravel())), shape=(len(rows), n * m))
 
 
 def _second_difference(count: int) -> scipy.sparse.csr_matrix:
@@ -210,34 +161,3 @@ def surface_controls(points: np.ndarray, parameters: np.ndarray, degrees: tuple[
                                        scipy.sparse.kron(eye_u, _second_difference(m))]).tocsr()
         control = _solve(matrix, rhs, penalty, smoothing).reshape(n, m, 3 * count)
     return np.ascontiguousarray(control.reshape(n, m, count, 3).transpose(2, 0, 1, 3))
-
-
-# --------------------------------------------------------------------------------------------
-# Principal axes of a cloud
-
-
-def principal_axes(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centroid (d,), axes (d, d) as rows sorted by decreasing spread, singular values (d,)."""
-    centroid = points.mean(axis=0)
-    # an SVD of the d x d covariance is O(N d^2) and never forms an N x N matrix
-    covariance = (points - centroid).T @ (points - centroid) / max(len(points), 1)
-    values, vectors = np.linalg.eigh(covariance)
-    order = np.argsort(values)[::-1]
-    return centroid, vectors[:, order].T, np.sqrt(np.clip(values[order], 0, None))
-
-
-def pca_parameters(points: np.ndarray,
-                   dimensions: int) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
-    """Project on the first ``dimensions`` principal axes and rescale each to [0, 1].
-
-    Returns parameters (N, dimensions) and the affine map (origin (d,), edges (dimensions, d)) so
-    that ``origin + params @ edges`` is the projected point."""
-    centroid, axes, _ = principal_axes(points)
-    axes = axes[:dimensions]
-    coords = (points - centroid) @ axes.T
-    lo, hi = coords.min(axis=0), coords.max(axis=0)
-    extent = np.where(hi > lo, hi - lo, 1.0)
-    params = (coords - lo) / extent
-    origin = centroid + lo @ axes
-    edges = axes * extent[:, None]
-    return np.clip(params, 0.0, 1.0), (origin, edges)

@@ -10,14 +10,12 @@ import numpy as np
 import torch
 from numpy.typing import ArrayLike
 
+from nurbs_core.fitting.collocation import grid_axes
 from nurbs_core.fitting.config import FitConfig
-from nurbs_core.fitting.least_squares import (
-    grid_axes,
-    least_squares_fit,
-    pca_parameters,
-    principal_axes,
-)
+from nurbs_core.fitting.least_squares import least_squares_fit
+from nurbs_core.fitting.normalised import NormalisedCloud, normalise
 from nurbs_core.fitting.ordering import path_parameters
+from nurbs_core.fitting.principal import pca_parameters
 from nurbs_core.geometry import NurbsCurve, NurbsSurface, geometry_from_numpy
 from nurbs_core.knots import clamped_uniform, greville
 
@@ -37,6 +35,8 @@ class Problem:
     parameters: torch.Tensor | None
     domains: list[tuple[float, float]]
     dtype: torch.dtype
+    #: the checked, normalised points as numpy (what the least-squares core works on)
+    cloud: NormalisedCloud
     #: (u (Mu,), v (Mv,)) when the known surface parameters are the u-major grid u x v
     grid: tuple[torch.Tensor, torch.Tensor] | None = None
     #: (N,) chord-length parameters along the cloud's backbone (unordered curves; set by
@@ -55,43 +55,6 @@ class Problem:
     @property
     def count(self) -> int:
         return self.points.shape[0]
-
-
-def _check_points(target: ArrayLike, config: FitConfig) -> np.ndarray:
-    """The target points as (N, d) float64, or ValueError naming what is wrong with them."""
-    try:
-        points = np.asarray(target, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"the target points are not numeric: {exc}") from None
-    expected = "(N, 3)" if config.kind == "surface" else "(N, 2) or (N, 3)"
-    if points.ndim != 2 or points.shape[-1] not in ((3,) if config.kind == "surface" else (2, 3)):
-        raise ValueError(f"a {config.kind} fit needs target points of shape {expected}, got "
-                         f"{points.shape}")
-    n = points.shape[0]
-    if n == 0:
-        raise ValueError("the point cloud is empty")
-    if n == 1:
-        raise ValueError(f"a single point cannot define a {config.kind}")
-    bad = ~np.isfinite(points).all(axis=1)
-    if bad.any():
-        rows = np.flatnonzero(bad)
-        raise ValueError(f"the point cloud contains NaN or inf in {rows.size} row(s), first at "
-                         f"row {rows[0]} (0-based)")
-    extent = points.max(axis=0) - points.min(axis=0)
-    if not np.linalg.norm(extent) > 0:
-        raise ValueError(f"all {n} points coincide; a {config.kind} needs points that spread out")
-    if config.kind == "surface":
-        _, _, spread = principal_axes(points)
-        # eigenvalues carry rounding of about eps * largest: compare spreads at sqrt(eps) scale
-        if spread[1] <= 1e-6 * spread[0]:
-            raise ValueError("the points are collinear; a surface needs points spread over an "
-                             "area (fit a curve instead)")
-    controls = config.control_points_u * (config.control_points_v if config.kind == "surface"
-                                          else 1)
-    if n < controls:
-        raise ValueError(f"{n} points cannot determine {controls} control points; use fewer "
-                         "control points")
-    return points
 
 
 def _check_parameters(parameters: ArrayLike, n: int, config: FitConfig) -> np.ndarray:
@@ -120,12 +83,10 @@ def prepare(target: ArrayLike, config: FitConfig, parameters: ArrayLike | None =
     """Validate and normalise a fit's input: target points (N, d), known parameters (N, 2) /
     (N,) or None."""
     config.validate()
-    points = _check_points(target, config)
+    cloud = normalise(target, config)
+    points, center, scale = cloud.points_input, cloud.center, cloud.scale
     dtype = torch.float32 if config.dtype == "float32" else torch.float64
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    center = (lo + hi) / 2
-    scale = float(np.linalg.norm(hi - lo))
-    normalised = torch.as_tensor((points - center) / scale, dtype=dtype)
+    normalised = torch.as_tensor(cloud.points, dtype=dtype)
     dims = 1 if config.kind == "curve" else 2
     if parameters is not None:
         params = _check_parameters(parameters, points.shape[0], config)
@@ -140,7 +101,7 @@ def prepare(target: ArrayLike, config: FitConfig, parameters: ArrayLike | None =
         if axes is not None:
             grid = (torch.as_tensor(axes[0], dtype=dtype), torch.as_tensor(axes[1], dtype=dtype))
     return Problem(config.kind, points, normalised, center, scale, param_tensor, domains, dtype,
-                   grid)
+                   cloud, grid)
 
 
 # --------------------------------------------------------------------------------------------

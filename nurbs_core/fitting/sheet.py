@@ -17,13 +17,13 @@ from dataclasses import dataclass
 from typing import Any, cast
 
 import numpy as np
-import torch
 from scipy.spatial import cKDTree
 
-from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, FitSnapshot, Loss, StopToken
-from nurbs_core.fitting.least_squares import pca_parameters, principal_axes
-from nurbs_core.fitting.problem import Problem, conform
-from nurbs_core.geometry import NurbsSurface
+from nurbs_core.evaluate_arrays import surface_grid, surface_points
+from nurbs_core.fitting.config import FitConfig, FitSnapshot, StopToken
+from nurbs_core.fitting.foot_points import gauss_newton_steps, project_onto_surface
+from nurbs_core.fitting.normalised import NormalisedCloud
+from nurbs_core.fitting.principal import pca_parameters, principal_axes
 from nurbs_core.geometry_arrays import SurfaceArrays
 from nurbs_core.surfacing.core import CorePass, LeastSquaresCore
 from nurbs_core.surfacing.mesh import CloudMesh, median_spacing, voxel_subsample
@@ -49,26 +49,6 @@ NOISE_TOLERANCE = 3.0
 MIN_TOLERANCE = 1e-5
 
 
-def uses_core(problem: Problem, config: FitConfig, initial: object) -> bool:
-    """Whether this fit starts with the least-squares core (unordered surface clouds)."""
-    if config.kind != "surface" or problem.known or initial is not None:
-        return False
-    return not (config.parameterization == "plane" and resolved_solver(config) == "gradient")
-
-
-def resolved_solver(config: FitConfig) -> str:
-    """"least_squares" or "gradient" (see FitConfig.solver; custom knots need the gradient fit,
-    the core chooses its own knots; the core's fit from a learned start is refined by the
-    gradient fit unless only the core is asked for: :mod:`nurbs_core.fitting.learned_start`)."""
-    if config.solver != "auto":
-        return config.solver
-    if config.init == "learned":
-        return "gradient"
-    plain = (config.loss == Loss.parse(DEFAULT_LOSS) and not config.free_knots
-             and not config.free_weights and not config.pin_boundary and not config.custom_knots)
-    return "least_squares" if plain else "gradient"
-
-
 @dataclass
 class SheetStart:
     """(u, v) (M, 2) of the fitted points (all N, or the random ``subset`` (M,) of a large
@@ -85,12 +65,12 @@ class SheetStart:
     closed: str | None = None
 
 
-def sheet_start(problem: Problem, config: FitConfig) -> SheetStart:
+def sheet_start(cloud: NormalisedCloud, config: FitConfig) -> SheetStart:
     """The fold-free start (see the module docstring). Raises ValueError (with the reason and a
     pointer to multi-patch surfacing) for closed shapes and shapes with handles unless
     ``config.single_patch``; a tube comes back cut open (``closed`` names its seam's
     direction)."""
-    points = problem.points.double().numpy()
+    points = cloud.points
     corners = None
     if config.corners is not None:
         if max(config.corners) >= len(points):
@@ -170,20 +150,22 @@ def is_height_field(points: np.ndarray, agree: float = 0.98) -> bool:
     return bool((jump > 5 * frames.spacing).mean() <= 1 - agree)
 
 
-def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop: StopToken,
-                   started: float, result: dict[str, Any]) -> Iterator[FitSnapshot]:
-    """Run the least-squares passes, yielding a snapshot per pass (never ``done``). Fills
-    ``result`` with "geometry" (NurbsSurface, normalised), "parameters" ((N, 2) for every point,
-    None when a large cloud was fitted on a subset), "distances" (N,) for every point,
+def core_snapshots(cloud: NormalisedCloud, config: FitConfig, start: SheetStart,
+                   stop: StopToken, started: float,
+                   result: dict[str, Any]) -> Iterator[FitSnapshot]:
+    """Run the least-squares passes over ``cloud``, yielding a snapshot per pass (never
+    ``done``). Fills ``result`` with "geometry" (SurfaceArrays, normalised), "parameters"
+    ((N, 2) for every point, None when a large cloud was fitted on a subset), "distances" (N,)
+    for every point,
     "iteration", "status", "message", "records", "tolerance" and "noise" (input units),
     "fairing_scale" and "tolerance_met"."""
-    points = problem.points.double().numpy()
+    points = cloud.points
     subset = start.subset
     pass_points = points if subset is None else points[subset]
     pass_params = start.parameters
     noise = estimate_noise(points, seed=config.seed)   # thins a dense cloud itself
     if config.tolerance is not None:
-        tolerance = config.tolerance / problem.scale
+        tolerance = config.tolerance / cloud.scale
     else:
         tolerance = max(NOISE_TOLERANCE * noise, MIN_TOLERANCE)
     spacing = start.mesh.spacing if start.mesh is not None else median_spacing(pass_points)
@@ -210,7 +192,7 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
         if report.done and (report.index == shown or report.stopped):
             break
         shown = report.index
-        geometry = core_geometry_numpy(report.geometry, problem)
+        geometry = core_geometry_numpy(report.geometry, cloud)
         yield FitSnapshot(iteration=report.index, geometry=geometry,
                           losses=[_record(report, core.fairing_scale)],
                           elapsed=time.perf_counter() - started, done=False, status="running",
@@ -228,10 +210,18 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
     assert last is not None, "the core runs at least one pass"
     result["records"] = [_record(last, core.fairing_scale)]
     surface = last.geometry
-    if config.custom_knots:  # the start of the gradient fit on the user's knots
-        surface = conform(surface, config)
+    if config.custom_knots:  # the start of the gradient fit (torch) on the user's knots
+        from nurbs_core.fitting.problem import conform
+        from nurbs_core.geometry import NurbsSurface
+
+        surface = conform(NurbsSurface.from_numpy(surface), config).numpy()
     if subset is None:
-        parameters, distances = last.parameters, last.distances
+        # the passes' distances are at parameters smoothed over each point's neighbourhood (a
+        # hair farther than the foot points): the result reports the foot points' distances
+        parameters = last.parameters
+        foot_u, foot_v = gauss_newton_steps(surface, points, parameters[:, 0], parameters[:, 1],
+                                            steps=6)
+        distances = np.linalg.norm(surface_points(surface, foot_u, foot_v) - points, axis=1)
     else:
         parameters, distances = None, sampled_distances(surface, points)
         if FINAL_POINTS > 0 and not last.stopped and not config.custom_knots:
@@ -249,7 +239,7 @@ def core_snapshots(problem: Problem, config: FitConfig, start: SheetStart, stop:
     result.update(geometry=surface, parameters=parameters, distances=distances,
                   iteration=last.index, status="stopped" if stopped else "converged",
                   message=last.message if not start.message else f"{start.message}; {last.message}",
-                  tolerance=tolerance * problem.scale, noise=noise * problem.scale,
+                  tolerance=tolerance * cloud.scale, noise=noise * cloud.scale,
                   fairing_scale=core.fairing_scale or 1.0,
                   tolerance_met=bool(last.met))
 
@@ -262,19 +252,18 @@ def _record(report: CorePass, fairing_scale: float | None) -> dict[str, float]:
             "p2s": report.rms ** 2, "fairing": fairing}
 
 
-def surface_statistics(surface: NurbsSurface, points: np.ndarray, *, mesh: CloudMesh | None = None,
-                       scale: float = 1.0, distances: np.ndarray | None = None) -> dict[str, float]:
+def surface_statistics(surface: SurfaceArrays, points: np.ndarray, *,
+                       mesh: CloudMesh | None = None, scale: float = 1.0,
+                       distances: np.ndarray | None = None) -> dict[str, float]:
     """FitResult.statistics of a surface fit, in the points' units: the cloud-to-surface
-    distances (mean, rms, max; projected when ``distances`` is None) and every quality measure
+    distances (mean, rms, max; foot points when ``distances`` is None) and every quality measure
     of :func:`nurbs_core.quality.surface_quality`. mesh: the cloud's mesh in normalised units
     (its area times ``scale**2`` is the reference area)."""
-    from nurbs_core.fitting.projection import project
     from nurbs_core.quality import surface_quality
 
     points = np.asarray(points, np.float64)
-    surface = surface.detach().to(dtype=torch.float64)
     if distances is None:
-        _, distances = project(surface, points)
+        _, distances = project_onto_surface(surface, points)
     reference = None if mesh is None else mesh.area() * scale ** 2
     stats = {"mean": float(distances.mean()), "rms": float(np.sqrt((distances ** 2).mean())),
              "max": float(distances.max()), "points": int(distances.size)}
@@ -282,21 +271,23 @@ def surface_statistics(surface: NurbsSurface, points: np.ndarray, *, mesh: Cloud
     return stats
 
 
-def core_geometry_numpy(surface: NurbsSurface, problem: Problem) -> SurfaceArrays:
-    """The normalised surface's numpy twin in the input's coordinates."""
-    data = surface.numpy()
-    return data.replace(control_points=data.control_points * problem.scale + problem.center)
+def core_geometry_numpy(surface: SurfaceArrays, cloud: NormalisedCloud) -> SurfaceArrays:
+    """The normalised surface's numpy twin in the input's coordinates (fresh arrays)."""
+    return SurfaceArrays(surface.degree_u, surface.degree_v,
+                         np.asarray(surface.control_points) * cloud.scale + cloud.center,
+                         np.array(surface.weights), np.array(surface.knots_u),
+                         np.array(surface.knots_v))
 
 
-def sampled_distances(surface: NurbsSurface, points: np.ndarray, density: int = 256,
+def sampled_distances(surface: SurfaceArrays, points: np.ndarray, density: int = 256,
                       chunk: int = 262144) -> np.ndarray:
     """Distance (N,) of every point to the surface, from its nearest of ``density``^2 surface
     samples: the offset along that sample's normal, plus whatever lies beyond the sample's cell
     in the tangent plane (points past the surface's edge). The error is of second order in the
     cell size times the curvature: far below the noise for dense samples, at a fraction of the
     cost of foot-point projection for millions of points."""
-    t = torch.linspace(0, 1, density, dtype=torch.float64)
-    grid = surface.evaluate_grid(t, t).detach().numpy()          # (d, d, 3)
+    t = np.linspace(0, 1, density)
+    grid = surface_grid(surface, t, t)                           # (d, d, 3)
     d_u = np.gradient(grid, axis=0)
     d_v = np.gradient(grid, axis=1)
     normal = np.cross(d_u, d_v)

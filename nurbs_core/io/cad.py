@@ -35,7 +35,7 @@ from nurbs_core.io.limits import configured_size
 
 if TYPE_CHECKING:
     from nurbs_core.geometry import NurbsCurve, NurbsSurface
-    from nurbs_core.io.geometry_io import GeometryInput
+    from nurbs_core.io.geometry_io import GeometryInput, Writable
 
 #: OpenCASCADE objects (OCP ships no type information): shapes, geometry, arrays.
 OccObject = Any
@@ -170,7 +170,7 @@ def occ_curve(data: dict[str, Any]) -> OccObject:
                              _array1_int(mults), int(data["degree"]), False)
 
 
-def _compound(items: Iterable[NurbsCurve | NurbsSurface]) -> OccObject:
+def _compound(items: Iterable[Writable]) -> OccObject:
     from OCP.BRep import BRep_Builder
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace
     from OCP.TopoDS import TopoDS_Compound

@@ -1,5 +1,9 @@
 """Helpers shared by the NURBS readers and writers: building validated geometry from file data
-and flattening what the caller passes to ``save`` into single numpy curves/surfaces."""
+and flattening what the caller passes to ``save`` into single numpy curves/surfaces.
+
+The writers take NurbsCurve / NurbsSurface or their numpy twins
+(:class:`~nurbs_core.geometry_arrays.CurveArrays` / :class:`~nurbs_core.geometry_arrays.SurfaceArrays`):
+a fit that ran without torch is written without it."""
 
 from __future__ import annotations
 
@@ -8,6 +12,7 @@ from typing import TYPE_CHECKING, Any, TypeAlias, TypeVar
 
 import numpy as np
 
+from nurbs_core.geometry_arrays import CurveArrays, GeometryArrays, SurfaceArrays, check_arrays
 from nurbs_core.io.errors import FileFormatError, StrPath
 
 if TYPE_CHECKING:   # the geometry (and torch) load only where a file's geometry is built
@@ -15,8 +20,10 @@ if TYPE_CHECKING:   # the geometry (and torch) load only where a file's geometry
 
 #: One curve or surface (possibly batched), as the readers return and the writers take.
 Geometry: TypeAlias = "NurbsCurve | NurbsSurface"
-#: What ``save`` and the writers take: one geometry or a list / tuple of them.
-GeometryInput: TypeAlias = "NurbsCurve | NurbsSurface | Sequence[NurbsCurve | NurbsSurface]"
+#: One item the writers take: a curve or surface, or its numpy twin.
+Writable: TypeAlias = "NurbsCurve | NurbsSurface | GeometryArrays"
+#: What ``save`` and the writers take: one item or a list / tuple of them.
+GeometryInput: TypeAlias = "Writable | Sequence[Writable]"
 
 _T = TypeVar("_T")
 
@@ -134,30 +141,26 @@ def make_curve(path: StrPath, control_points: object, weights: object, knots: ob
     return _build(path, NurbsCurve, (control, degree, k, w), what, line)
 
 
-def as_geometry_list(geometry_or_list: GeometryInput) -> list[NurbsCurve | NurbsSurface]:
-    """A list of single (unbatched) curves and surfaces; batched geometry is split per item."""
-    from nurbs_core.geometry import NurbsCurve, NurbsSurface
-
+def as_geometry_list(geometry_or_list: GeometryInput) -> list[Writable]:
+    """A list of single (unbatched) curves and surfaces (or twins); batched geometry is split
+    per item. Twins are checked (:func:`~nurbs_core.geometry_arrays.check_arrays`)."""
     items = list(geometry_or_list) if isinstance(geometry_or_list, (list, tuple)) else \
         [geometry_or_list]
-    result: list[NurbsCurve | NurbsSurface] = []
+    result: list[Writable] = []
     for item in items:
+        if isinstance(item, (CurveArrays, SurfaceArrays)):
+            result.extend(_split_arrays(check_arrays(item)))
+            continue
+        from nurbs_core.geometry import NurbsCurve, NurbsSurface
+
         if not isinstance(item, (NurbsCurve, NurbsSurface)):
             raise TypeError(f"expected NurbsCurve or NurbsSurface, got {type(item).__name__}")
         if len(item.batch_shape) == 0:
             result.append(item)
             continue
-        data = item.numpy()
-        batch = tuple(item.batch_shape)
-        for index in np.ndindex(*batch):
-            single = dict(data)
-            single["control_points"] = data["control_points"][index]
-            single["weights"] = data["weights"][index]
-            for key in ("knots", "knots_u", "knots_v"):  # knots are either shared (1-D) or batched
-                if key in data and data[key].ndim > 1:
-                    single[key] = data[key][index]
-            cls: type[NurbsCurve] | type[NurbsSurface] = \
-                NurbsCurve if data["kind"] == "curve" else NurbsSurface
+        cls: type[NurbsCurve] | type[NurbsSurface] = \
+            NurbsCurve if isinstance(item, NurbsCurve) else NurbsSurface
+        for single in _split_arrays(item.numpy()):
             single_item = cls.from_numpy(single)
             if hasattr(item, "metadata"):
                 single_item.metadata = dict(item.metadata)
@@ -167,9 +170,26 @@ def as_geometry_list(geometry_or_list: GeometryInput) -> list[NurbsCurve | Nurbs
     return result
 
 
-def numpy_of(item: NurbsCurve | NurbsSurface) -> dict[str, Any]:
-    """``item.numpy()`` with float64 arrays (exact for float64 geometry)."""
-    data = item.numpy()
+def _split_arrays(data: GeometryArrays) -> list[GeometryArrays]:
+    """The items of a (possibly batched) twin: control points (*B, ..., d) give prod(B) items."""
+    net_dims = 3 if isinstance(data, SurfaceArrays) else 2
+    batch = np.shape(data.control_points)[:-net_dims]
+    if not batch:
+        return [data]
+    items: list[GeometryArrays] = []
+    for index in np.ndindex(*batch):
+        changes = {"control_points": data.control_points[index], "weights": data.weights[index]}
+        for key in ("knots", "knots_u", "knots_v"):  # knots are either shared (1-D) or batched
+            if key in data and data[key].ndim > 1:
+                changes[key] = data[key][index]
+        items.append(data.replace(**changes))
+    return items
+
+
+def numpy_of(item: Writable) -> dict[str, Any]:
+    """The item's arrays as a dict (``kind`` first) with float64 arrays (exact for float64
+    geometry)."""
+    data = item if isinstance(item, (CurveArrays, SurfaceArrays)) else item.numpy()
     return {k: (np.asarray(v, dtype=np.float64) if isinstance(v, np.ndarray) else v)
             for k, v in data.items()}
 

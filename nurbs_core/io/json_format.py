@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.geometry_io import (
     GeometryInput,
+    Writable,
     as_geometry_list,
     make_curve,
     make_surface,
@@ -107,7 +108,7 @@ def json_key(path: StrPath, entry: dict[str, Any], key: str, what: str) -> Any:
     return entry[key]
 
 
-def _item_to_dict(item: NurbsCurve | NurbsSurface) -> dict[str, Any]:
+def _item_to_dict(item: Writable) -> dict[str, Any]:
     data = numpy_of(item)
     entry: dict[str, Any]
     if data["kind"] == "surface":

@@ -6,13 +6,13 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
+from nurbs_core.evaluate_arrays import grid_parameters, surface_grid
+from nurbs_core.geometry_arrays import SurfaceArrays, from_mapping
 from nurbs_core.io.errors import StrPath
-from nurbs_core.io.geometry_io import GeometryInput, as_geometry_list
+from nurbs_core.io.geometry_io import GeometryInput, Writable, as_geometry_list, numpy_of
 
-if TYPE_CHECKING:   # torch loads only where a surface is evaluated (a network's mesh needs none)
+if TYPE_CHECKING:
     import trimesh
-
-    from nurbs_core.geometry import NurbsSurface
 
 #: Grid points per direction: one count for both, or (r_u, r_v).
 Resolution = int | tuple[int, int]
@@ -29,22 +29,22 @@ def grid_faces(count_u: int, count_v: int, offset: int = 0) -> np.ndarray:
     return np.concatenate([np.stack([a, b, c], axis=1), np.stack([a, c, d], axis=1)])
 
 
-def tessellate_surface(surface: NurbsSurface, resolution: Resolution = 64
+def tessellate_surface(surface: Writable, resolution: Resolution = 64
                        ) -> tuple[np.ndarray, np.ndarray]:
-    """Evaluate on a uniform (r_u, r_v) grid over the domain: vertices (r_u r_v, 3) float64,
-    faces (2 (r_u - 1)(r_v - 1), 3)."""
+    """Evaluate on a uniform (r_u, r_v) grid over the domain (numpy: no torch for a twin):
+    vertices (r_u r_v, 3) float64, faces (2 (r_u - 1)(r_v - 1), 3)."""
     # numpy types np.isscalar as a guard for numpy scalars / str / bytes, not for our ints
     count_u, count_v = cast("tuple[int, int]",
                             (resolution, resolution) if np.isscalar(resolution) else resolution)
     count_u, count_v = int(count_u), int(count_v)
     if count_u < 2 or count_v < 2:
         raise ValueError(f"resolution must be at least 2 per direction, got {resolution}")
-    import torch
-
-    surface = surface.detach().to(dtype=torch.float64, device="cpu")
-    u, v = surface.grid_parameters(count_u, count_v)
-    with torch.no_grad():
-        vertices = surface.evaluate_grid(u, v).reshape(-1, 3).numpy()
+    arrays = from_mapping(numpy_of(surface))
+    if not isinstance(arrays, SurfaceArrays):
+        raise ValueError("curves cannot be written to a mesh format; save them as .3dm, .step, "
+                         ".iges or .json")
+    u, v = grid_parameters(arrays, count_u, count_v)
+    vertices = surface_grid(arrays, u, v).reshape(-1, 3)
     return vertices, grid_faces(count_u, count_v)
 
 
@@ -53,13 +53,11 @@ def tessellate(geometry_or_list: GeometryInput, resolution: Resolution = 64) -> 
     (sum of r_u r_v, 3) float64, faces (sum of 2 (r_u - 1)(r_v - 1), 3)."""
     import trimesh
 
-    from nurbs_core.geometry import NurbsSurface
-
     vertices: list[np.ndarray] = []
     faces: list[np.ndarray] = []
     offset = 0
     for item in as_geometry_list(geometry_or_list):
-        if not isinstance(item, NurbsSurface):
+        if numpy_of(item)["kind"] != "surface":
             raise ValueError("curves cannot be written to a mesh format; save them as .3dm, "
                              ".step, .iges or .json")
         item_vertices, item_faces = tessellate_surface(item, resolution)

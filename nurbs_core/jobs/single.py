@@ -11,7 +11,7 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from nurbs_core.jobs.checks import check_before_work, offset_path
 from nurbs_core.jobs.report import FitFailed, Progress, plain, print_units, quality_text, units_of
@@ -22,6 +22,7 @@ if TYPE_CHECKING:
 
     from nurbs_core.fitting.config import FitConfig, FitResult, StopToken
     from nurbs_core.geometry import NurbsCurve, NurbsSurface
+    from nurbs_core.geometry_arrays import CurveArrays, GeometryArrays
 
 
 @dataclass
@@ -83,7 +84,7 @@ def _grid_parameters(count_u: int, count_v: int, points: int) -> np.ndarray:
 def _print_plan(job: FitJob, config: FitConfig, count: int,
                 known_parameters: bool) -> None:
     """The report's first line (stderr): the input, its size and how it is fitted."""
-    from nurbs_core.fitting.sheet import resolved_solver
+    from nurbs_core.fitting.plan import resolved_solver
 
     core = (not job.curve and not known_parameters and job.initial is None
             and resolved_solver(config) == "least_squares")
@@ -135,13 +136,14 @@ def run_fit(prepared: PreparedFit, stoppable: bool = True) -> FitResult:
     """The second step of :func:`fit_one`: the fit, with progress lines on stderr (unless
     ``--quiet``). ``stoppable``: the first Ctrl-C stops the fit (its result so far is returned),
     a second raises KeyboardInterrupt; otherwise Ctrl-C raises at once."""
-    from nurbs_core.fitting import StopToken, fit
+    from nurbs_core.fitting.config import StopToken
+    from nurbs_core.fitting.run import fit_arrays
 
     stop = StopToken()
     if stoppable:
         previous = signal.signal(signal.SIGINT, _interrupt_handler(stop))
     try:
-        return fit(prepared.target, prepared.config, stop=stop, parameters=prepared.parameters,
+        return fit_arrays(prepared.target, prepared.config, stop=stop, parameters=prepared.parameters,
                    initial=prepared.initial,
                    on_snapshot=Progress(prepared.config.iterations, prepared.job.quiet))
     finally:
@@ -152,9 +154,10 @@ def run_fit(prepared: PreparedFit, stoppable: bool = True) -> FitResult:
 def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
     """The last step of :func:`fit_one`: the rest of the report (status, distances, Chamfer,
     quality), the ``--offset`` surface, every output written (all or nothing, each atomically)
-    and the statistics as a plain dict. Raises FitFailed when the fit failed."""
+    and the statistics as a plain dict. Raises FitFailed when the fit failed. The result's
+    geometry, a NurbsCurve / NurbsSurface (``fit_batch``) or its numpy twin
+    (:func:`~nurbs_core.fitting.run.fit_arrays`), is reported and written as the twin."""
     import numpy as np
-    import torch
 
     from nurbs_core.failures import one_line
     from nurbs_core.io.dispatch import save_all
@@ -162,7 +165,7 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
     if result.status == "failed":
         raise FitFailed(f"the fit failed: {one_line(str(result.message))}")
     job, config, target = prepared.job, prepared.config, prepared.target
-    geometry = result.geometry.to(dtype=torch.float64)
+    geometry = _float64_arrays(result.geometry)
     diagonal = float(np.linalg.norm(np.ptp(target, axis=0)))
     chamfer = _chamfer(geometry, target, np.random.default_rng(job.seed))
     stats = result.statistics
@@ -181,14 +184,15 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
     if "flipped_fraction" in stats:
         print(quality_text(stats, diagonal))
     if prepared.flat_z:
-        geometry = _lift(geometry, float(prepared.points[0, 2]))
+        geometry = _lift(cast("CurveArrays", geometry), float(prepared.points[0, 2]))
     offset = None
     if job.offset is not None:
+        from nurbs_core.geometry import NurbsSurface
         from nurbs_core.offset import offset_surface
 
-        offset = offset_surface(geometry, job.offset)
+        offset = offset_surface(NurbsSurface.from_numpy(geometry), job.offset)
     units = units_of(job)
-    jobs: list[tuple[NurbsCurve | NurbsSurface, Path, dict[str, Any]]] = [
+    jobs: list[tuple[NurbsSurface | GeometryArrays, Path, dict[str, Any]]] = [
         (geometry, path, {"units": units}) for path in prepared.outputs]
     if offset is not None:
         jobs += [(offset, offset_path(path), {"units": units}) for path in prepared.outputs]
@@ -218,33 +222,37 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
                    "diagonal": diagonal, "chamfer": chamfer, "control_points": counts})
 
 
-def _chamfer(geometry: NurbsCurve | NurbsSurface, points: np.ndarray,
-             gen: np.random.Generator) -> float:
-    """Two-sided Chamfer between dense samples of the result and (up to 200k of) the points."""
-    import torch
+def _float64_arrays(geometry: NurbsCurve | NurbsSurface | GeometryArrays) -> GeometryArrays:
+    """The fit's geometry as its float64 numpy twin."""
+    import numpy as np
 
-    from nurbs_core.geometry import NurbsCurve
-    from nurbs_core.losses import chamfer_distance
+    from nurbs_core.geometry_arrays import CurveArrays, SurfaceArrays, from_mapping
 
-    with torch.no_grad():
-        if isinstance(geometry, NurbsCurve):
-            samples = geometry.sample(2000)
-        else:
-            (u0, u1), (v0, v1) = geometry.domain
-            grid = geometry.evaluate_grid(torch.linspace(u0, u1, 200, dtype=geometry.dtype),
-                                          torch.linspace(v0, v1, 200, dtype=geometry.dtype))
-            samples = grid.reshape(-1, 3)
+    twin = geometry if isinstance(geometry, (CurveArrays, SurfaceArrays)) else geometry.numpy()
+    return from_mapping({key: np.asarray(value, np.float64) if isinstance(value, np.ndarray)
+                         else value for key, value in twin.items()})
+
+
+def _chamfer(geometry: GeometryArrays, points: np.ndarray, gen: np.random.Generator) -> float:
+    """Two-sided Chamfer between dense samples of the result (2000 along a curve, 200 x 200 on
+    a surface) and (up to 200k of) the points."""
+    from nurbs_core.evaluate_arrays import curve_samples, grid_parameters, surface_grid
+    from nurbs_core.geometry_arrays import CurveArrays
+    from nurbs_core.quality import chamfer
+
+    if isinstance(geometry, CurveArrays):
+        samples = curve_samples(geometry, 2000)
+    else:
+        samples = surface_grid(geometry, *grid_parameters(geometry, 200)).reshape(-1, 3)
     if len(points) > 200_000:
         points = points[gen.choice(len(points), 200_000, replace=False)]
-    return float(chamfer_distance(samples.double(), torch.as_tensor(points)))
+    return chamfer(samples, points)
 
 
-def _lift(curve: NurbsCurve, z: float) -> NurbsCurve:
-    """A 2-D NurbsCurve fitted in the xy-plane back in 3-D at height z (for the file writers)."""
-    import torch
+def _lift(curve: CurveArrays, z: float) -> CurveArrays:
+    """A 2-D curve fitted in the xy-plane back in 3-D at height z (for the file writers)."""
+    import numpy as np
 
-    from nurbs_core.geometry import NurbsCurve
-
-    control = curve.control_points
-    lifted = torch.cat([control, torch.full_like(control[:, :1], z)], dim=-1)
-    return NurbsCurve(lifted, curve.degree, curve.knots, curve.weights)
+    control = np.asarray(curve.control_points)
+    lifted = np.concatenate([control, np.full_like(control[:, :1], z)], axis=-1)
+    return curve.replace(control_points=lifted)

@@ -22,14 +22,14 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
-import torch
 from scipy.spatial import cKDTree
 
+from nurbs_core.evaluate_arrays import surface_grid, surface_points
+from nurbs_core.fitting.collocation import collocation_matrix
 from nurbs_core.fitting.config import StopToken
-from nurbs_core.fitting.least_squares import collocation_matrix
-from nurbs_core.fitting.projection import surface_gauss_newton
-from nurbs_core.geometry import NurbsSurface
-from nurbs_core.knots import clamped_uniform
+from nurbs_core.fitting.foot_points import gauss_newton_steps
+from nurbs_core.geometry_arrays import SurfaceArrays
+from nurbs_core.knot_vectors import uniform
 from nurbs_core.sparse_solve import solve_spd
 from nurbs_core.surfacing.fairing import energy, fairing_matrices
 
@@ -58,11 +58,11 @@ MIN_GAIN = 0.03
 
 @dataclass
 class CorePass:
-    """One pass: geometry (NurbsSurface, normalised coordinates), parameters (N, 2) after
+    """One pass: geometry (the surface's numpy twin, normalised coordinates), parameters (N, 2) after
     correction, distances (N,) to the surface, and the pass's measures (normalised units)."""
 
     index: int
-    geometry: NurbsSurface
+    geometry: SurfaceArrays
     parameters: np.ndarray
     distances: np.ndarray
     rms: float
@@ -102,14 +102,14 @@ def density_knots(parameters: np.ndarray, count: int, degree: int) -> np.ndarray
     parameters' density (about as many points in every span: a map that crowds the scan's rim
     into a thin band near the square's sides gets as many spans there as it has data), halfway
     to uniform so that no span becomes a sliver. (count + degree + 1,)"""
-    uniform = clamped_uniform(count, degree).numpy()
+    even = uniform(count, degree)
     interior = count - degree - 1
     if interior <= 0:
-        return uniform
+        return even
     levels = np.arange(1, interior + 1) / (interior + 1)
     quantile = np.quantile(np.clip(parameters, 0.0, 1.0), levels)
-    knots = uniform.copy()
-    knots[degree + 1:count] = 0.5 * (uniform[degree + 1:count] + quantile)
+    knots = even.copy()
+    knots[degree + 1:count] = 0.5 * (even[degree + 1:count] + quantile)
     return np.maximum.accumulate(knots)
 
 
@@ -163,14 +163,14 @@ class LeastSquaresCore:
         # a closed direction keeps uniform knots: equal end spans make the seam's tangent
         # continuity a linear constraint (P_1 - P_0 = P_{n-1} - P_{n-2})
         self.knots = knots if knots is not None else tuple(
-            clamped_uniform(c, d).numpy() if self.closed == name
+            uniform(c, d) if self.closed == name
             else density_knots(self.parameters[:, k], c, d)
             for k, (name, c, d) in enumerate((("u", n, p), ("v", m, q))))
         self.seam = None if self.closed is None else seam_matrix(n, m, self.closed)
         thin_plate, membrane = fairing_matrices(self.knots[0], p, self.knots[1], q)
         self.fairing_matrix = (thin_plate + MEMBRANE_RATIO * membrane).tocsc()
 
-    def solve(self, fairing: float) -> NurbsSurface:
+    def solve(self, fairing: float) -> SurfaceArrays:
         """Control points for the current parameters and a fairing weight."""
         (p, q), (n, m) = self.degrees, self.grid
         matrix = collocation_matrix(self.knots[0], p, self.parameters[:, 0], self.knots[1], q,
@@ -193,30 +193,27 @@ class LeastSquaresCore:
         control = solve_spd(normal, np.asarray(rhs))
         if self.seam is not None:
             control = self.seam @ control
-        return NurbsSurface(control.reshape(n, m, 3), p, q, *self.knots)
+        return SurfaceArrays(p, q, control.reshape(n, m, 3), np.ones((n, m)), *self.knots)
 
-    def correct(self, surface: NurbsSurface, steps: int = 2) -> np.ndarray:
+    def correct(self, surface: SurfaceArrays, steps: int = 2) -> np.ndarray:
         """Move the parameters to their foot points; returns the distances (N,)."""
-        points = torch.as_tensor(self.points)
-        u = torch.as_tensor(self.parameters[:, 0])
-        v = torch.as_tensor(self.parameters[:, 1])
-        u, v = surface_gauss_newton(surface, points, u, v, steps=steps)
+        u, v = gauss_newton_steps(surface, self.points, self.parameters[:, 0],
+                                  self.parameters[:, 1], steps=steps, line_search=False)
         # the correction averaged over each point's neighbourhood: a real reparameterisation
         # is smooth and survives, while the jitter that noise causes (a noisy point catching the
         # nearest wiggle of the surface, which the next solve then deepens) averages out
-        delta = torch.stack([u, v], -1).numpy() - self.parameters
+        delta = np.stack([u, v], -1) - self.parameters
         if self.neighbourhood is not None:
             delta = delta[self.neighbourhood].mean(axis=1)
         self.parameters = np.clip(self.parameters + delta, 0.0, 1.0)
-        u, v = torch.as_tensor(self.parameters[:, 0]), torch.as_tensor(self.parameters[:, 1])
-        foot = surface.evaluate(u, v).detach().numpy()
+        foot = surface_points(surface, self.parameters[:, 0], self.parameters[:, 1])
         return np.linalg.norm(foot - self.points, axis=1)
 
-    def surface_to_cloud(self, surface: NurbsSurface, samples: int = 48) -> float:
+    def surface_to_cloud(self, surface: SurfaceArrays, samples: int = 48) -> float:
         """95th percentile of the distance from a samples x samples grid on the surface to the
         cloud, beyond twice the cloud's own spacing."""
-        t = torch.linspace(0, 1, samples, dtype=torch.float64)
-        grid = surface.evaluate_grid(t, t).detach().reshape(-1, 3).numpy()
+        t = np.linspace(0, 1, samples)
+        grid = surface_grid(surface, t, t).reshape(-1, 3)
         distance, _ = self.tree.query(grid)
         return float(max(np.quantile(distance, 0.95) - 2 * self.spacing, 0.0))
 
@@ -233,7 +230,7 @@ class LeastSquaresCore:
             rms = float(np.sqrt((distances ** 2).mean()))
             quantile = float(np.quantile(distances, 1 - self.outlier_fraction))
             s2c = self.surface_to_cloud(surface)
-            bending = energy(self.fairing_matrix, surface.control_points.numpy())
+            bending = energy(self.fairing_matrix, surface.control_points)
             report = CorePass(index, surface, self.parameters.copy(), distances, rms, quantile,
                               s2c, moved, fairing, bending, self.grid)
             settled = moved < SETTLED or rms > previous_rms * (1 - 2e-3)
@@ -291,9 +288,9 @@ class LeastSquaresCore:
     def _grown(self) -> tuple[int, int] | None:
         """A larger grid, shaped like the surface (control points per direction in proportion
         to its mean length in that direction), within ``max_grid`` and ``max_controls``."""
-        t = torch.linspace(0, 1, 24, dtype=torch.float64)
+        t = np.linspace(0, 1, 24)
         surface = self.solve(self.stiffness)
-        grid = surface.evaluate_grid(t, t).detach().numpy()
+        grid = surface_grid(surface, t, t)
         length_u = np.linalg.norm(np.diff(grid, axis=0), axis=-1).sum(0).mean()
         length_v = np.linalg.norm(np.diff(grid, axis=1), axis=-1).sum(1).mean()
         aspect = float(np.clip(length_u / max(length_v, 1e-300), 1 / 8, 8))
@@ -323,7 +320,7 @@ class LeastSquaresCore:
             return None
         return grown
 
-    def on_every_point(self, report: CorePass, points: np.ndarray) -> NurbsSurface:
+    def on_every_point(self, report: CorePass, points: np.ndarray) -> SurfaceArrays:
         """The kept pass's surface solved again on ``points`` (N, 3), the whole cloud of which
         the passes fitted a subset (``self.points``): on the kept grid and knots, each point
         starting from the parameters of its nearest fitted point, moved to its foot point on the
@@ -337,8 +334,7 @@ class LeastSquaresCore:
         self.neighbourhood = None      # the corrections of so many points average themselves
         self.correct(surface)
         self.grid = report.grid
-        self._setup_grid((surface.knots_u.detach().double().numpy(),
-                          surface.knots_v.detach().double().numpy()))
+        self._setup_grid((surface.knots_u, surface.knots_v))
         return self.solve(report.fairing)
 
     def _summary(self, report: CorePass, what: str) -> str:

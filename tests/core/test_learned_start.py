@@ -103,7 +103,7 @@ def test_the_start_is_a_solve_at_the_pinned_parameters_and_iteration_zero(monkey
     first = snapshots[0]
     assert first.iteration == 0 and first.message.startswith("learned start (the shipped model")
     problem = prepare(sheet.points, config)
-    pinned = learned.pinned_parameters(problem, sheet_start(problem, config), prediction)
+    pinned = learned.pinned_parameters(problem, sheet_start(problem.cloud, config), prediction)
     expected = least_squares_fit(sheet.points, pinned, 3, 3, 8, 8,
                                  smoothing=learned.LEARNED_START_SMOOTHING)
     np.testing.assert_allclose(first.geometry.control_points,

@@ -1,0 +1,78 @@
+"""A fit's points checked and normalised, in numpy: what every route starts from.
+
+:func:`normalise` refuses bad input with a message that names the problem and maps the points
+into the fit's normalised coordinates ``(x - center) / scale`` (bounding-box centre, diagonal
+1). The torch routes wrap the result in a :class:`~nurbs_core.fitting.problem.Problem`; the
+least-squares core works on it directly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from nurbs_core.fitting.config import FitConfig
+from nurbs_core.fitting.principal import principal_axes
+
+
+@dataclass(frozen=True)
+class NormalisedCloud:
+    """points_input (N, d) float64 as given; points (N, d) float64 in normalised coordinates
+    ``(x - center) / scale`` (rounded to the fit's dtype: float32 fits see float32 points);
+    center (d,); scale: the bounding box's diagonal."""
+
+    points_input: np.ndarray
+    points: np.ndarray
+    center: np.ndarray
+    scale: float
+
+
+def normalise(target: ArrayLike, config: FitConfig) -> NormalisedCloud:
+    """The checked points (:func:`check_points`) of a fit in its normalised coordinates."""
+    points = check_points(target, config)
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    center = (lo + hi) / 2
+    scale = float(np.linalg.norm(hi - lo))
+    normalised = (points - center) / scale
+    if config.dtype == "float32":
+        normalised = normalised.astype(np.float32).astype(np.float64)
+    return NormalisedCloud(points, normalised, center, scale)
+
+
+def check_points(target: ArrayLike, config: FitConfig) -> np.ndarray:
+    """The target points as (N, d) float64, or ValueError naming what is wrong with them."""
+    try:
+        points = np.asarray(target, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"the target points are not numeric: {exc}") from None
+    expected = "(N, 3)" if config.kind == "surface" else "(N, 2) or (N, 3)"
+    if points.ndim != 2 or points.shape[-1] not in ((3,) if config.kind == "surface" else (2, 3)):
+        raise ValueError(f"a {config.kind} fit needs target points of shape {expected}, got "
+                         f"{points.shape}")
+    n = points.shape[0]
+    if n == 0:
+        raise ValueError("the point cloud is empty")
+    if n == 1:
+        raise ValueError(f"a single point cannot define a {config.kind}")
+    bad = ~np.isfinite(points).all(axis=1)
+    if bad.any():
+        rows = np.flatnonzero(bad)
+        raise ValueError(f"the point cloud contains NaN or inf in {rows.size} row(s), first at "
+                         f"row {rows[0]} (0-based)")
+    extent = points.max(axis=0) - points.min(axis=0)
+    if not np.linalg.norm(extent) > 0:
+        raise ValueError(f"all {n} points coincide; a {config.kind} needs points that spread out")
+    if config.kind == "surface":
+        _, _, spread = principal_axes(points)
+        # eigenvalues carry rounding of about eps * largest: compare spreads at sqrt(eps) scale
+        if spread[1] <= 1e-6 * spread[0]:
+            raise ValueError("the points are collinear; a surface needs points spread over an "
+                             "area (fit a curve instead)")
+    controls = config.control_points_u * (config.control_points_v if config.kind == "surface"
+                                          else 1)
+    if n < controls:
+        raise ValueError(f"{n} points cannot determine {controls} control points; use fewer "
+                         "control points")
+    return points
