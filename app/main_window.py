@@ -477,6 +477,9 @@ class MainWindow(QMainWindow):
         self.load_indicator.hide()  # shown by the load policy while a load runs
         self.status_labels = {}
         selection = QLabel("")  # "12,345 of 1,000,000 points selected" while any are
+        selection.setStyleSheet("QLabel { background: #ffc400; color: #111111; "
+                                "padding: 0px 6px; border-radius: 3px; }")  # the highlight's
+        selection.setToolTip("Start fits only the selected points; Esc clears the selection")
         selection.hide()
         self.statusBar().addPermanentWidget(selection)
         self.status_labels["selection"] = selection

@@ -316,8 +316,7 @@ class Document(QObject):
         selection is None). Raises ValueError when the length does not match."""
         if selection is not None:
             selection = np.asarray(selection, bool)
-            points = self.target_points()
-            count = 0 if points is None else len(points)
+            count = self.visible_point_count()
             if selection.shape != (count,):
                 raise ValueError(f"a selection of {selection.shape} for {count} points")
             if not selection.any():
@@ -376,6 +375,10 @@ class Document(QObject):
         self.points_changed.emit()
         self.selection_changed.emit()
         self.fitted_changed.emit()  # measured again against the points now shown
+
+    def visible_point_count(self) -> int:
+        """How many points :meth:`target_points` stacks (without stacking them)."""
+        return sum(len(t.points) for t in self.targets if t.visible)
 
     def all_geometry(self) -> list[GeometryArrays]:
         """Fitted geometry, loaded patches and offsets: what Export writes."""

@@ -225,6 +225,8 @@ class SceneView(QObject):
     def show_selection(self, points: np.ndarray | None):
         """The selected points (M, 3) drawn over the cloud, larger and in the highlight colour
         (None or empty: no highlight); hidden with the cloud."""
+        if (points is None or not len(points)) and "selection" not in self._meshes:
+            return  # created with the first selection: drawn after the cloud, so on top of it
         mesh = pv.PolyData(np.zeros((0, 3)) if points is None else np.asarray(points, float))
         self._layer("selection", mesh, color=COLORS["selection"], point_size=5.0)
         self._apply_visibility("selection")

@@ -4,7 +4,9 @@ points hidden behind others are picked too).
 
 The projection is the renderer's own (its camera's composite projection matrix, then VTK's
 view-to-display mapping), vectorised: a million points take a few tens of milliseconds. The lasso
-test is matplotlib's ``Path.contains_points`` on the points inside the lasso's bounding box.
+test is exact (matplotlib's ``Path.contains_points``, even-odd) but runs only where it must: the
+lasso is painted into a pixel mask (filled, and its outline stroked 3 pixels wide), and a point
+takes its pixel's answer unless the outline passes through that pixel.
 
 :class:`SelectionTool` is the tool itself: while a mode ("box" or "lasso") is on, left-button
 drags on the viewport draw the region (an overlay in the render window) instead of rotating the
@@ -67,11 +69,57 @@ def lasso_mask(display: np.ndarray, in_front: np.ndarray, polygon: np.ndarray) -
     if len(polygon) < 3:
         return mask
     low, high = polygon.min(axis=0), polygon.max(axis=0)
-    candidates = np.flatnonzero(in_front & np.all(display >= low, axis=1)
-                                & np.all(display <= high, axis=1))
-    if len(candidates):
-        mask[candidates] = Path(polygon).contains_points(display[candidates])
+    x, y = display[:, 0], display[:, 1]  # per column: much faster than np.all(axis=1)
+    candidates = np.flatnonzero(in_front & (x >= low[0]) & (x <= high[0]) & (y >= low[1])
+                                & (y <= high[1]))
+    if len(candidates) < RASTER_FROM:
+        if len(candidates):
+            mask[candidates] = Path(polygon).contains_points(display[candidates])
+        return mask
+    inside, uncertain = _raster_test(polygon, x[candidates], y[candidates])
+    if uncertain.any():
+        inside[uncertain] = Path(polygon).contains_points(display[candidates[uncertain]])
+    mask[candidates] = inside
     return mask
+
+
+#: Lassos around fewer candidate points than this are tested exactly point by point.
+RASTER_FROM = 20000
+_INSIDE, _ON_OUTLINE = 255, 128
+
+
+def _raster_test(polygon: np.ndarray, x: np.ndarray, y: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(inside, uncertain), bool (N,) each, for points at (x, y) (N,) in the polygon's bounding
+    box:
+    the answer of each point's pixel in a painted mask of the polygon, and whether the outline
+    passes near that pixel (there the pixel's answer may differ from the point's)."""
+    from PySide6.QtCore import QPointF, Qt
+    from PySide6.QtGui import QBrush, QColor, QImage, QPainter, QPen, QPolygonF
+
+    origin = np.floor(polygon.min(axis=0)) - 2.0
+    width, height = (np.ceil(polygon.max(axis=0) - origin) + 3.0).astype(int)
+    image = QImage(int(width), int(height), QImage.Format.Format_Grayscale8)
+    image.fill(0)
+    outline = QPolygonF([QPointF(x, y) for x, y in polygon - origin])
+    painter = QPainter(image)
+    painter.setRenderHint(QPainter.RenderHint.Antialiasing, False)
+    painter.setPen(Qt.PenStyle.NoPen)
+    painter.setBrush(QBrush(QColor(_INSIDE, _INSIDE, _INSIDE)))
+    painter.drawPolygon(outline, Qt.FillRule.OddEvenFill)
+    # every pixel the outline crosses has its centre within 0.71 px of it: a 3 px pen covers it
+    painter.setCompositionMode(QPainter.CompositionMode.CompositionMode_Source)
+    painter.setPen(QPen(QColor(_ON_OUTLINE, _ON_OUTLINE, _ON_OUTLINE), 3.0))
+    painter.setBrush(Qt.BrushStyle.NoBrush)
+    painter.drawPolygon(outline, Qt.FillRule.OddEvenFill)
+    painter.end()
+    stride = image.bytesPerLine()
+    pixels = np.frombuffer(image.constBits(), np.uint8, count=stride * int(height)).reshape(
+        int(height), stride)
+    column = np.clip((x - origin[0]).astype(np.intp), 0, int(width) - 1)
+    row = np.clip((y - origin[1]).astype(np.intp), 0, int(height) - 1)
+    value = pixels[row, column]
+    return value == _INSIDE, value == _ON_OUTLINE
 
 
 def region_mask(points: np.ndarray, renderer, kind: str, polygon: np.ndarray) -> np.ndarray:

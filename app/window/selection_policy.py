@@ -26,11 +26,10 @@ if TYPE_CHECKING:
 
 #: what the status bar says when a tool is chosen
 TOOL_HINTS = {
-    "box": "Box select: drag a rectangle over the points",
-    "lasso": "Lasso select: draw around the points",
+    "box": "Box: drag a rectangle",
+    "lasso": "Lasso: draw around points",
 }
-DEPTH_HINT = ("every point inside is selected, through the whole depth (Shift adds, Ctrl "
-              "removes, Esc clears; right-drag zooms, middle-drag pans)")
+DEPTH_HINT = "(selects through the whole depth; Shift adds, Ctrl removes, Esc clears)"
 
 
 def count_text(selected: int, total: int) -> str:
@@ -74,7 +73,7 @@ class SelectionPolicy(QObject):
         if kind is None:
             window.statusBar().showMessage("The left button rotates the view", 4000)
         else:
-            window.statusBar().showMessage(f"{TOOL_HINTS[kind]}: {DEPTH_HINT}", 10000)
+            window.statusBar().showMessage(f"{TOOL_HINTS[kind]} {DEPTH_HINT}", 10000)
         self.update_actions()
 
     @Slot(str, object, str)
@@ -95,17 +94,17 @@ class SelectionPolicy(QObject):
         self._window.document.set_selection(selection)
 
     def select_all(self) -> None:
-        points = self._window.document.target_points()
-        if points is not None:
-            self._window.document.set_selection(np.ones(len(points), bool))
+        count = self._window.document.visible_point_count()
+        if count:
+            self._window.document.set_selection(np.ones(count, bool))
 
     def invert(self) -> None:
         document = self._window.document
-        points = document.target_points()
-        if points is None:
+        count = document.visible_point_count()
+        if not count:
             return
-        current = document.selection if document.selection is not None else np.zeros(
-            len(points), bool)
+        current = document.selection if document.selection is not None else np.zeros(count,
+                                                                                       bool)
         document.set_selection(~current)
 
     def clear(self) -> None:
@@ -174,12 +173,11 @@ class SelectionPolicy(QObject):
         """Highlight the selection, count it in the status bar, enable what needs one."""
         window = self._window
         document = window.document
-        points = document.target_points()
         selection = document.selection
-        window.scene.show_selection(None if selection is None or points is None
-                                    else points[selection])
+        points = None if selection is None else document.target_points()
+        window.scene.show_selection(None if points is None else points[selection])
         label = window.status_labels["selection"]
-        if selection is None or points is None:
+        if points is None:
             label.setText("")
             label.hide()
         else:
@@ -192,7 +190,7 @@ class SelectionPolicy(QObject):
         cancels that (two enabled actions on one key would both be ignored)."""
         window = self._window
         selected = window.document.selection is not None
-        has_points = window.document.target_points() is not None
+        has_points = window.document.visible_point_count() > 0
         tool_on = window.scene.selection_tool.kind is not None
         for name, action in window.selection_actions.items():
             if name == "clear":

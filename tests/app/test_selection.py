@@ -177,15 +177,19 @@ def test_delete_then_undo_and_redo(qtbot, window, tmp_path):
 
 
 def _plane_with_outliers(path):
-    """A tilted plane z = 0.2 x + 0.1 y with slight noise, and 40 stray points far above it."""
+    """A tilted plane z = 0.2 x + 0.1 y with slight noise, and 25 stray points far above it."""
     rng = np.random.default_rng(11)
-    xy = rng.uniform(-1.0, 1.0, (1500, 2))
-    plane = np.column_stack([xy, 0.2 * xy[:, 0] + 0.1 * xy[:, 1] + rng.normal(0.0, 0.003, 1500)])
-    stray_xy = rng.uniform(-0.8, 0.8, (40, 2))
-    strays = np.column_stack([stray_xy, rng.uniform(1.2, 1.6, 40)])
+    xy = rng.uniform(-1.0, 1.0, (PLANE_POINTS, 2))
+    plane = np.column_stack([xy, 0.2 * xy[:, 0] + 0.1 * xy[:, 1]
+                             + rng.normal(0.0, 0.003, PLANE_POINTS)])
+    stray_xy = rng.uniform(-0.8, 0.8, (25, 2))
+    strays = np.column_stack([stray_xy, rng.uniform(1.2, 1.6, 25)])
     points = np.concatenate([plane, strays])
     np.savetxt(path, points)
-    return points, np.arange(len(points)) >= 1500
+    return points, np.arange(len(points)) >= PLANE_POINTS
+
+
+PLANE_POINTS = 800
 
 
 def _fit(qtbot, window):
@@ -220,9 +224,10 @@ def test_delete_outliers_then_fit_and_undo_restores_the_points_and_the_surface(
 
     window.delete_selection_action.trigger()
     np.testing.assert_array_equal(window.document.targets[0].points, original[~strays])
+    window.reset_fit()  # afresh: Start would go on from the surface the strays bent
     _, after = _fit(qtbot, window)
     fitted_after = window.document.fitted
-    assert after["rms"] < 0.01 < before["rms"] / 3  # the noise (0.003) is what is left
+    assert after["rms"] < 0.006 < before["rms"] / 5, (before, after)  # the noise (0.003) is left
 
     window.undo_action.trigger()
     np.testing.assert_array_equal(window.document.targets[0].points, original)
@@ -246,12 +251,12 @@ def test_start_fits_the_selected_points_only(qtbot, window, tmp_path):
     window.invert_selection_action.trigger()  # the plane without its strays
     np.testing.assert_array_equal(window.document.selection, ~strays)
     snapshot, stats = _fit(qtbot, window)
-    assert snapshot.selected == 1500
+    assert snapshot.selected == PLANE_POINTS
     np.testing.assert_array_equal(window.controller.run_selection, ~strays)
     assert np.isnan(snapshot.deviation[strays]).all()  # not measured: grey
-    assert stats["count"] <= 1500 and stats["rms"] < 0.01
-    assert "on the 1,500 selected points" in window.statusBar().currentMessage()
-    assert "fitted on 1,500 selected points" in window.quality_panel.status.text()
+    assert stats["count"] <= PLANE_POINTS and stats["rms"] < 0.01
+    assert f"on the {PLANE_POINTS:,} selected points" in window.statusBar().currentMessage()
+    assert f"fitted on {PLANE_POINTS:,} selected points" in window.quality_panel.status.text()
     assert len(window.document.targets[0].points) == len(original)  # nothing removed
 
 
