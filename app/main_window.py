@@ -139,6 +139,7 @@ class MainWindow(QMainWindow):
         self.document = Document(self)
         self.controller = FitController(self.document, self)
         self.patch_controller = PatchController(self.document, self)
+        self.document.network_report_source = self.patch_controller.network_report
         self.jobs = JobRunner(self)
         self.scene = SceneView(self)
         # the policies: what loading, a settings edit, export, sessions and a fit's progress

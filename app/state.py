@@ -14,7 +14,7 @@ converted once, on the way in.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -181,12 +181,15 @@ def spread_over_cloud(values: np.ndarray, selection: np.ndarray | None) -> np.nd
 class PointsState:
     """What a point edit changes: every target's points (hidden ones too), the selection (bool
     over the visible clouds stacked, or None) with the targets' visibility it was made under,
-    and the fitted shape."""
+    the fitted shape, and the patch network with what a session keeps of its fit (its report:
+    ``PatchController.network_report``)."""
 
     points: tuple[np.ndarray, ...]
     selection: np.ndarray | None
     visible: tuple[bool, ...]
     fitted: GeometryArrays | None
+    network: Any = None
+    network_report: dict[str, Any] | None = None
 
 
 class _PointsCommand(QUndoCommand):
@@ -211,8 +214,11 @@ class _PointsCommand(QUndoCommand):
 
     def undo(self):
         if self._current():
-            self._after = dataclasses.replace(self._after, fitted=self._document.fitted)
-            self._document._apply_points(self._before)
+            document = self._document
+            self._after = dataclasses.replace(self._after, fitted=document.fitted,
+                                              network=document.network,
+                                              network_report=document.report_network())
+            document._apply_points(self._before)
 
 
 class _SettingsCommand(QUndoCommand):
@@ -252,6 +258,11 @@ class Document(QObject):
         self.selection: np.ndarray | None = None
         #: counts content replacements: point edits made before one cannot be undone after it
         self.content_generation = 0
+        #: what a session keeps of the fit that made :attr:`network` (the window's patch
+        #: controller answers); point edits keep it with the network they restore
+        self.network_report_source: Callable[[], dict[str, Any] | None] = lambda: None
+        #: the report of the network a point edit's undo / redo just restored
+        self.restored_network_report: dict[str, Any] | None = None
 
     # --- settings (undoable) -------------------------------------------------------------------
     def edit_settings(self, text: str, **changes: Any) -> bool:
@@ -357,14 +368,18 @@ class Document(QObject):
             else:
                 edited.append(target.points)
         before = self._points_state()
-        after = PointsState(tuple(edited), None, before.visible, self.fitted)
+        after = dataclasses.replace(before, points=tuple(edited), selection=None)
         self.undo_stack.push(_PointsCommand(self, before, after, text))
         return removed
+
+    def report_network(self) -> dict[str, Any] | None:
+        return self.network_report_source() if self.network is not None else None
 
     def _points_state(self) -> PointsState:
         return PointsState(tuple(t.points for t in self.targets),
                            None if self.selection is None else self.selection.copy(),
-                           tuple(t.visible for t in self.targets), self.fitted)
+                           tuple(t.visible for t in self.targets), self.fitted, self.network,
+                           self.report_network())
 
     def _apply_points(self, state: PointsState):
         for target, points in zip(self.targets, state.points, strict=True):
@@ -372,6 +387,7 @@ class Document(QObject):
         visible = tuple(t.visible for t in self.targets)
         self.selection = state.selection if visible == state.visible else None
         self.fitted = state.fitted
+        self.network, self.restored_network_report = state.network, state.network_report
         self.points_changed.emit()
         self.selection_changed.emit()
         self.fitted_changed.emit()  # measured again against the points now shown

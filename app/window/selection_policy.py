@@ -27,9 +27,9 @@ if TYPE_CHECKING:
 #: what the status bar says when a tool is chosen
 TOOL_HINTS = {
     "box": "Box: drag a rectangle",
-    "lasso": "Lasso: draw around points",
+    "lasso": "Lasso: draw around",
 }
-DEPTH_HINT = "(selects through the whole depth; Shift adds, Ctrl removes, Esc clears)"
+DEPTH_HINT = "(through the whole depth; Shift adds, Ctrl removes, Esc clears)"
 
 
 def count_text(selected: int, total: int) -> str:
@@ -151,8 +151,11 @@ class SelectionPolicy(QObject):
     @Slot()
     def on_points_changed(self) -> None:
         """A point edit, or its undo / redo: a fit of the old points stops; the cloud is shown
-        again (the fitted shape is measured again by the fit display)."""
+        again (the fitted shape is measured again by the fit display) and so is the patch
+        network the edit restored."""
         window = self._window
+        document = window.document
+        network, report = document.network, document.restored_network_report
         stopped = []
         if window.controller.is_busy():
             window.controller.abandon()
@@ -160,9 +163,14 @@ class SelectionPolicy(QObject):
         if window.patch_controller.is_busy():
             window.reset_patch_network()
             stopped.append("the patch fit")
-        points = window.document.target_points()
+        points = document.target_points()
         window.scene.set_cloud(points)
         window.knot_panel.set_points(points)
+        shown = window.patch_controller.latest_shown
+        if network is None and (shown is not None or stopped):
+            window.reset_patch_network()
+        elif network is not None and (shown is None or shown.network is not network):
+            window.patch_controller.show_saved(network, report)
         window.rebuild_tree()
         if stopped:
             window.report(f"The points changed: {' and '.join(stopped)} on the old points "

@@ -309,3 +309,52 @@ def test_a_million_points_are_selected_quickly(qtbot, window, kind):
         expected = Path(polygon).contains_points(reference)
     np.testing.assert_array_equal(mask[sample], expected)
     assert 0.02 < mask.mean() < 0.9
+
+
+def test_undo_of_a_delete_brings_back_the_patch_network_of_the_points(qtbot, window, tmp_path):
+    from nurbs_core.patches.network import build_network
+
+    corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    quads = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4],
+                      [1, 5, 7, 3]])
+    before = build_network(corners, quads, size=4, degree=3)
+    after = build_network(corners * 0.9, quads, size=4, degree=3)
+    rng = np.random.default_rng(4)
+    points = rng.uniform(0.0, 1.0, (600, 3))
+    points[np.arange(600), rng.integers(0, 3, 600)] = rng.integers(0, 2, 600)  # on the faces
+    np.savetxt(tmp_path / "cube.xyz", points)
+    open_by_drop(qtbot, window, [tmp_path / "cube.xyz"])
+    window.document.edit_settings("Fit mode", fit_mode="patches")
+    window.patch_controller.show_saved(before, None)  # as a finished network fit shows it
+    window.document.set_selection(points[:, 2] > 0.9)
+    window.delete_selection_action.trigger()
+    assert window.document.network is before  # the edit leaves the network shown
+    window.patch_controller.show_saved(after, None)  # a network fitted to what is left
+
+    window.undo_action.trigger()
+    np.testing.assert_array_equal(window.document.targets[0].points, points)
+    assert window.document.network is before
+    assert window.patch_controller.latest_shown.network is before  # shown again
+    window.redo_action.trigger()
+    assert window.document.network is after
+    assert window.patch_controller.latest_shown.network is after
+    window.undo_action.trigger()  # the delete
+    window.undo_action.trigger()  # the fit mode
+    assert window.document.settings.fit_mode == "single"
+    np.testing.assert_array_equal(window.document.targets[0].points, points)
+
+
+def test_point_edits_made_before_opening_other_files_are_not_undone_into_them(
+        qtbot, window, tmp_path):
+    points = _top_view(qtbot, window, tmp_path)
+    window.document.set_selection(np.arange(len(points)) < 100)
+    window.delete_selection_action.trigger()
+    other = np.random.default_rng(5).uniform(-1.0, 1.0, (500, 3))
+    np.savetxt(tmp_path / "other.xyz", other)
+    open_by_drop(qtbot, window, [tmp_path / "other.xyz"])
+    stack = window.document.undo_stack
+    while stack.canUndo():  # settings edits undo as ever; the delete of the old cloud is dropped
+        stack.undo()
+    np.testing.assert_allclose(window.document.targets[0].points, other, atol=1e-6)
+    assert window.document.targets[0].name == "other.xyz"
+    assert not any(stack.text(i).startswith("Delete") for i in range(stack.count()))
