@@ -60,7 +60,7 @@ class FitController(QObject):
         self.failure_needs_patches = False
         self.latest_shown: DisplaySnapshot | None = None
         #: the selection (bool over the visible clouds) the run fits, None: every visible point
-        self.run_selection = None
+        self.run_selection: np.ndarray | None = None
         self._timer = QTimer(self)
         self._timer.setInterval(RENDER_INTERVAL_MS)
         self._timer.timeout.connect(self._tick)

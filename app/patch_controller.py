@@ -12,6 +12,7 @@ import dataclasses
 import logging
 import math
 
+import numpy as np
 from PySide6.QtCore import QObject, QThread, QTimer, Signal, Slot
 
 from app.state import Document, spread_over_cloud
@@ -48,7 +49,7 @@ class PatchController(QObject):
         self.snapshots_shown = 0
         self.latest_shown: PatchSnapshot | None = None
         #: the selection (bool over the visible clouds) the run fits, None: every visible point
-        self.run_selection = None
+        self.run_selection: np.ndarray | None = None
         self._timer = QTimer(self)
         self._timer.setInterval(RENDER_INTERVAL_MS)
         self._timer.timeout.connect(self._tick)

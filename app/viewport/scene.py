@@ -1,6 +1,7 @@
-"""The 3D scene: point cloud, fitted surface or curve, control net, knot lines, deviation map,
-quality map, loaded patches and their offsets, and the patch network
-(:mod:`app.viewport.network_layers`).
+"""The 3D scene: point cloud (with its selected points highlighted), fitted surface or curve,
+control net, knot lines, deviation map, quality map, loaded patches and their offsets, the patch
+network (:mod:`app.viewport.network_layers`) and the selection tool
+(:mod:`app.viewport.selection`).
 
 The fit mode decides which fit is on show: in Patches mode the single fit's layers (surface,
 curve, control net, knot lines, deviation and quality maps) are hidden and the network's shown,

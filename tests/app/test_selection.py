@@ -358,3 +358,36 @@ def test_point_edits_made_before_opening_other_files_are_not_undone_into_them(
     np.testing.assert_allclose(window.document.targets[0].points, other, atol=1e-6)
     assert window.document.targets[0].name == "other.xyz"
     assert not any(stack.text(i).startswith("Delete") for i in range(stack.count()))
+
+
+def test_as_a_user_with_the_keyboard_and_the_mouse(qtbot, window, tmp_path):
+    # S, a drag with the mouse (qtbot's own events), Del, Ctrl+Z, Ctrl+Shift+Z, L, Esc, Esc
+    from PySide6.QtCore import QPoint
+
+    points = _top_view(qtbot, window, tmp_path)
+    window.activateWindow()
+    qtbot.waitUntil(window.isActiveWindow, timeout=5000)
+    qtbot.keyClick(window, Qt.Key.Key_S)
+    assert window.scene.selection_tool.kind == "box" and window.box_select_action.isChecked()
+    assert "through the whole depth" in window.statusBar().currentMessage()
+    widget = window.scene.plotter
+    start = QPoint(widget.width() // 2, widget.height() // 2)
+    end = QPoint(widget.width() - 5, 5)  # up and right: the grid's +x, +y quarter
+    qtbot.mousePress(widget, Qt.MouseButton.LeftButton, pos=start)
+    qtbot.mouseMove(widget, end)
+    qtbot.mouseRelease(widget, Qt.MouseButton.LeftButton, pos=end)
+    selected = window.document.selected_count()
+    quarter = (points[:, 0] > 0.05) & (points[:, 1] > 0.05)  # well inside the dragged quarter
+    assert window.document.selection[quarter].all() and selected < 0.4 * len(points)
+    qtbot.keyClick(window, Qt.Key.Key_Delete)
+    assert len(window.document.targets[0].points) == len(points) - selected
+    qtbot.keyClick(window, Qt.Key.Key_Z, Qt.KeyboardModifier.ControlModifier)
+    assert len(window.document.targets[0].points) == len(points)
+    qtbot.keyClick(window, Qt.Key.Key_Z, Qt.KeyboardModifier.ControlModifier
+                   | Qt.KeyboardModifier.ShiftModifier)
+    assert len(window.document.targets[0].points) == len(points) - selected
+    qtbot.keyClick(window, Qt.Key.Key_L)
+    assert window.scene.selection_tool.kind == "lasso" and not window.box_select_action.isChecked()
+    qtbot.keyClick(window, Qt.Key.Key_Escape)  # nothing is selected: leaves the tool
+    assert window.scene.selection_tool.kind is None
+    assert not window.lasso_select_action.isChecked()
