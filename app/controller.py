@@ -12,6 +12,7 @@ current shape. Reset discards the fitted shape so the next Start initializes afr
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections import deque
@@ -19,7 +20,7 @@ from collections import deque
 import numpy as np
 from PySide6.QtCore import QObject, QThread, QTimer, Signal, Slot
 
-from app.state import Document
+from app.state import Document, spread_over_cloud
 from app.workers.fit_worker import DisplaySnapshot, FitRequest, FitWorker
 
 log = logging.getLogger(__name__)
@@ -58,6 +59,8 @@ class FitController(QObject):
         #: the last failure was the refusal of a shape one patch cannot hold (offer patches)
         self.failure_needs_patches = False
         self.latest_shown: DisplaySnapshot | None = None
+        #: the selection (bool over the visible clouds) the run fits, None: every visible point
+        self.run_selection: np.ndarray | None = None
         self._timer = QTimer(self)
         self._timer.setInterval(RENDER_INTERVAL_MS)
         self._timer.timeout.connect(self._tick)
@@ -79,11 +82,12 @@ class FitController(QObject):
 
     # --- commands --------------------------------------------------------------------------------
     def start(self, paused: bool = False) -> bool:
-        """Start a run from the current shape (or a fresh initialization after Reset)."""
+        """Start a run from the current shape (or a fresh initialization after Reset), fitting
+        the selected points while there are any, else every visible point."""
         if self._is_shut_down or self._thread is not None:
             return False
         self.failure_needs_patches = False
-        target = self._document.target_points()
+        target, selection = self._document.fit_points()
         if target is None:
             self.fit_failed.emit("Nothing to fit: open or drop a point cloud first.")
             return False
@@ -98,6 +102,7 @@ class FitController(QObject):
             self.fit_failed.emit(f"Cannot start the fit: {exc}")
             return False
         self._run_id += 1
+        self.run_selection = selection
         self._stop_token = StopToken()
         if paused:
             self._stop_token.pause()
@@ -138,13 +143,19 @@ class FitController(QObject):
 
     def reset(self):
         """Stop, then forget the fitted shape: the next Start initializes afresh."""
+        self.abandon()
+        self._document.set_fitted(None)
+
+    def abandon(self):
+        """Stop at once and drop the run's results (the points it fitted were edited); the
+        document's fitted shape is left as it is."""
         if self._worker is not None:
             self._worker.hurry()  # the shape is dropped: no final measures
         self.stop()
         self._join()
         self._run_id += 1  # drop snapshots of the old run still queued for delivery
         self._latest, self._pending_losses = None, []
-        self._document.set_fitted(None)
+        self._timer.stop()
         self._set_state("idle")
 
     def schedule_restart(self):
@@ -190,6 +201,13 @@ class FitController(QObject):
         if snapshot.run_id != self._run_id or self._is_shut_down:
             return
         self._pending_losses.extend(snapshot.losses)
+        if self.run_selection is not None:  # per-point values of the selection -> of the cloud
+            snapshot.selected = int(self.run_selection.sum())
+            if snapshot.deviation is not None:
+                snapshot.deviation = spread_over_cloud(snapshot.deviation, self.run_selection)
+            if snapshot.signed is not None:
+                snapshot.signed = dataclasses.replace(snapshot.signed, distances=spread_over_cloud(
+                    snapshot.signed.distances, self.run_selection))
         if self._latest is not None and self._latest.deviation is not None and (
                 snapshot.deviation is None):
             snapshot.deviation = self._latest.deviation  # keep the newest deviation we have

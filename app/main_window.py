@@ -14,9 +14,10 @@ screenshots) are written atomically: a failed write leaves the previous file as 
 
 What the window does when something happens lives in its policies (:mod:`app.window`): loading
 files (:class:`LoadPolicy`), settings edits (:class:`SettingsPolicy`), export
-(:class:`ExportPolicy`), sessions (:class:`SessionPolicy`) and showing a fit
-(:class:`FitDisplay`). This class builds the widgets, wires the signals and keeps the public
-methods scripts and tests call, delegating to those policies.
+(:class:`ExportPolicy`), sessions (:class:`SessionPolicy`), selecting, cropping and deleting
+points (:class:`SelectionPolicy`) and showing a fit (:class:`FitDisplay`). This class builds
+the widgets, wires the signals and keeps the public methods scripts and tests call, delegating
+to those policies.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import importlib.util
 import logging
 
 from PySide6.QtCore import QSettings, Qt, Signal, Slot
-from PySide6.QtGui import QAction, QIcon, QKeySequence
+from PySide6.QtGui import QAction, QActionGroup, QIcon, QKeySequence
 from PySide6.QtWidgets import (
     QAbstractButton,
     QApplication,
@@ -65,6 +66,7 @@ from app.viewport.scene import SceneView
 from app.window.export_policy import ExportPolicy
 from app.window.fit_display import FitDisplay
 from app.window.load_policy import LoadPolicy, RecentFiles
+from app.window.selection_policy import SelectionPolicy
 from app.window.session_policy import SessionPolicy
 from app.window.settings_policy import SettingsPolicy
 from app.workers.jobs import JobRunner
@@ -137,6 +139,7 @@ class MainWindow(QMainWindow):
         self.document = Document(self)
         self.controller = FitController(self.document, self)
         self.patch_controller = PatchController(self.document, self)
+        self.document.network_report_source = self.patch_controller.network_report
         self.jobs = JobRunner(self)
         self.scene = SceneView(self)
         # the policies: what loading, a settings edit, export, sessions and a fit's progress
@@ -146,6 +149,7 @@ class MainWindow(QMainWindow):
         self.export_policy = ExportPolicy(self)
         self.session_policy = SessionPolicy(self)
         self.fit_display = FitDisplay(self)
+        self.selection_policy = SelectionPolicy(self)
         self.setCentralWidget(self._native_container(self.scene.widget))
 
         self._build_docks()
@@ -161,6 +165,7 @@ class MainWindow(QMainWindow):
         self._connect()
         self.settings_policy.show(self.document.settings)
         self.update_fit_actions("idle")
+        self.selection_policy.on_selection_changed()
         app = QApplication.instance()
         if app is not None:
             app.aboutToQuit.connect(self.shutdown)
@@ -315,8 +320,47 @@ class MainWindow(QMainWindow):
                                     ("right", "&Right", "3"), ("left", "&Left", "Ctrl+3"),
                                     ("top", "&Top", "7"), ("bottom", "B&ottom", "Ctrl+7"),
                                     ("iso", "&Isometric", "0"))}
+        self._build_selection_actions()
         self.shortcuts_action = self._action("&Keyboard Shortcuts", self.show_shortcuts, "F1")
         self.about_action = self._action("&About NURBS Studio", self.show_about)
+
+    def _build_selection_actions(self):
+        """The selection tools (checkable, at most one on) and the Edit menu's selection and
+        point edits (:class:`SelectionPolicy` does them)."""
+        policy = self.selection_policy
+        group = QActionGroup(self)
+        group.setExclusionPolicy(QActionGroup.ExclusionPolicy.ExclusiveOptional)
+        self.selection_tool_actions = {}
+        for kind, text, key, tip in (
+                ("box", "&Box Select", "S", "Drag a rectangle to select the points inside it"),
+                ("lasso", "&Lasso Select", "L", "Draw around the points to select them")):
+            action = self._action(text, lambda checked, kind=kind: policy.tool_toggled(
+                kind, checked), key, checkable=True)
+            action.setToolTip(f"{tip}, through the whole depth ({key}; Shift adds, Ctrl "
+                              "removes, Esc clears)")
+            group.addAction(action)
+            self.selection_tool_actions[kind] = action
+        self.selection_actions = {
+            "select_all": self._action("Select &All Points", policy.select_all,
+                                       QKeySequence.StandardKey.SelectAll),
+            "invert": self._action("&Invert Selection", policy.invert, "Ctrl+I"),
+            "clear": self._action("&Clear Selection", policy.clear,
+                                  QKeySequence(Qt.Key.Key_Escape)),
+            "crop": self._action("Crop to Selectio&n", policy.crop, "Ctrl+K"),
+            "delete": self._action("&Delete Selection", policy.delete,
+                                   QKeySequence(Qt.Key.Key_Delete)),
+        }
+        self.selection_actions["crop"].setToolTip("Keep only the selected points (Ctrl+Z undoes)")
+        self.selection_actions["delete"].setToolTip("Remove the selected points, e.g. outliers "
+                                                    "(Ctrl+Z undoes)")
+        self.box_select_action = self.selection_tool_actions["box"]
+        self.lasso_select_action = self.selection_tool_actions["lasso"]
+        self.invert_selection_action = self.selection_actions["invert"]
+        self.clear_selection_action = self.selection_actions["clear"]
+        self.crop_action = self.selection_actions["crop"]
+        self.delete_selection_action = self.selection_actions["delete"]
+        # Esc cancels a load while one runs, else clears the selection
+        self.cancel_load_action.changed.connect(policy.update_actions)
 
     def _build_menus(self):
         bar = self.menuBar()
@@ -355,6 +399,14 @@ class MainWindow(QMainWindow):
         edit_menu = bar.addMenu("&Edit")
         edit_menu.addAction(self.undo_action)
         edit_menu.addAction(self.redo_action)
+        edit_menu.addSeparator()
+        for action in self.selection_tool_actions.values():
+            edit_menu.addAction(action)
+        for name in ("select_all", "invert", "clear"):
+            edit_menu.addAction(self.selection_actions[name])
+        edit_menu.addSeparator()
+        edit_menu.addAction(self.selection_actions["crop"])
+        edit_menu.addAction(self.selection_actions["delete"])
 
         fit_menu = bar.addMenu("F&it")
         for action in (self.start_action, self.pause_action, self.resume_action,
@@ -399,6 +451,13 @@ class MainWindow(QMainWindow):
         toolbar.addSeparator()
         toolbar.addAction(self.undo_action)
         toolbar.addAction(self.redo_action)
+        select_bar = self.addToolBar("Select")
+        select_bar.setObjectName("select_toolbar")
+        select_bar.setToolButtonStyle(Qt.ToolButtonStyle.ToolButtonTextOnly)
+        for action in self.selection_tool_actions.values():
+            select_bar.addAction(action)
+        select_bar.addAction(self.selection_actions["crop"])
+        select_bar.addAction(self.selection_actions["delete"])
 
     def _build_status_bar(self):
         # while a load runs: a busy bar and Cancel, left of the fit's labels (hidden otherwise)
@@ -418,6 +477,13 @@ class MainWindow(QMainWindow):
         self.statusBar().addPermanentWidget(self.load_indicator)
         self.load_indicator.hide()  # shown by the load policy while a load runs
         self.status_labels = {}
+        selection = QLabel("")  # "12,345 of 1,000,000 points selected" while any are
+        selection.setStyleSheet("QLabel { background: #ffc400; color: #111111; "
+                                "padding: 0px 6px; border-radius: 3px; }")  # the highlight's
+        selection.setToolTip("Start fits only the selected points; Esc clears the selection")
+        selection.hide()
+        self.statusBar().addPermanentWidget(selection)
+        self.status_labels["selection"] = selection
         for name, width in (("state", 90), ("iteration", 130), ("loss", 140), ("rate", 100),
                             ("remaining", 120)):
             label = QLabel("-")
@@ -431,6 +497,9 @@ class MainWindow(QMainWindow):
         self.deviation_panel.style_changed.connect(
             lambda mode, limit, tolerance: self.scene.set_deviation_style(
                 mode, limit or None, tolerance or None))
+        doc.points_changed.connect(self.selection_policy.on_points_changed)
+        doc.selection_changed.connect(self.selection_policy.on_selection_changed)
+        self.scene.selection_tool.region_drawn.connect(self.selection_policy.on_region_drawn)
         doc.content_changed.connect(self.fit_display.on_content_changed)
         doc.fitted_changed.connect(self.fit_display.on_fitted_changed)
         ctl.state_changed.connect(self.update_fit_actions)
@@ -605,7 +674,9 @@ class MainWindow(QMainWindow):
         self.rebuild_tree()
 
     def set_target_visible(self, index: int, visible: bool):
-        """Hide a cloud from the view and from the fit target (applies to the next run)."""
+        """Hide a cloud from the view and from the fit target (applies to the next run); the
+        selection (of the visible points) is cleared."""
+        self.document.set_selection(None)
         self.document.targets[index].visible = visible
         self.scene.set_cloud(self.document.target_points())
         self.knot_panel.set_points(self.document.target_points())
@@ -623,6 +694,10 @@ class MainWindow(QMainWindow):
         """Start the fit of the current mode (not while the other mode's fit still runs)."""
         if self.controller.is_busy() or self.patch_controller.is_busy():
             return False
+        if self.document.selection is not None:
+            self.statusBar().showMessage(
+                f"Fitting the {self.document.selected_count():,} selected points only (Esc "
+                "clears the selection: Start then fits every point)", 8000)
         if self.active_controller() is self.patch_controller:
             self.network_quality_dock.raise_()
             self.loss_plot.clear()  # a network starts from the cloud: a new curve

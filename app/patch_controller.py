@@ -8,12 +8,14 @@ paused run restarts paused); when idle it applies to the next Start. Reset drops
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 
+import numpy as np
 from PySide6.QtCore import QObject, QThread, QTimer, Signal, Slot
 
-from app.state import Document
+from app.state import Document, spread_over_cloud
 from app.workers.patch_worker import PatchRequest, PatchSnapshot, PatchWorker
 
 log = logging.getLogger(__name__)
@@ -46,6 +48,8 @@ class PatchController(QObject):
         self._is_shut_down = False
         self.snapshots_shown = 0
         self.latest_shown: PatchSnapshot | None = None
+        #: the selection (bool over the visible clouds) the run fits, None: every visible point
+        self.run_selection: np.ndarray | None = None
         self._timer = QTimer(self)
         self._timer.setInterval(RENDER_INTERVAL_MS)
         self._timer.timeout.connect(self._tick)
@@ -71,10 +75,11 @@ class PatchController(QObject):
 
     # --- commands --------------------------------------------------------------------------------
     def start(self, paused: bool = False) -> bool:
-        """Fit a network to the visible clouds with the document's patch settings."""
+        """Fit a network to the selected points (or, with none selected, the visible clouds)
+        with the document's patch settings."""
         if self._is_shut_down or self._thread is not None:
             return False
-        points = self._document.target_points()
+        points, selection = self._document.fit_points()
         if points is None:
             self.fit_failed.emit("Nothing to fit: open or drop a point cloud first.")
             return False
@@ -87,6 +92,7 @@ class PatchController(QObject):
             self.fit_failed.emit(f"Cannot start the patch fit: {exc}")
             return False
         self._run_id += 1
+        self.run_selection = selection
         self._stop_token = StopToken()
         if paused:
             self._stop_token.pause()
@@ -211,6 +217,13 @@ class PatchController(QObject):
     def _on_snapshot(self, snapshot: PatchSnapshot):
         if snapshot.run_id == self._run_id and not self._is_shut_down:
             self._pending_losses.extend(snapshot.losses)  # kept when the picture is replaced
+            if self.run_selection is not None:  # per-point values of the selection -> the cloud
+                if snapshot.deviation is not None:
+                    snapshot.deviation = spread_over_cloud(snapshot.deviation, self.run_selection)
+                if snapshot.signed is not None:
+                    snapshot.signed = dataclasses.replace(
+                        snapshot.signed,
+                        distances=spread_over_cloud(snapshot.signed.distances, self.run_selection))
             self._latest = snapshot
 
     @Slot(int, str, str)

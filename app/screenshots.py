@@ -5,8 +5,10 @@ converging, the signed deviation map after the fit (then its tolerance bands), m
 offsets (the paper's two-patch turbine
 blade, when its data is on this machine), a 2D curve fit, the quality map of a sheet rolled
 1.5 turns: fitted cleanly by default, and folded when its (u, v) come from the principal plane,
-and Patches mode: a torus fitted with a patch network (its layout drawn on it), then its seam
-angles, then its signed deviation. ``--only single`` or ``--only patches`` makes one of the two sets.
+Patches mode: a torus fitted with a patch network (its layout drawn on it), then its seam
+angles, then its signed deviation, and choosing what to fit: a lasso selection on the demo cloud
+(a second lasso being drawn), then the fit of the selected points alone. ``--only single``,
+``--only patches`` or ``--only selection`` makes one of the sets.
 """
 
 from __future__ import annotations
@@ -59,9 +61,9 @@ def torus_cloud(path: Path) -> Path:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path)
-    parser.add_argument("--only", choices=("single", "patches"),
-                        help="make only the single-patch (01-07, 11) or the Patches mode (08-09, 12) "
-                             "set")
+    parser.add_argument("--only", choices=("single", "patches", "selection"),
+                        help="make only the single-patch (01-07, 11), the Patches mode (08-09, 12) "
+                             "or the selection (13-14) set")
     arguments = parser.parse_args(argv)
     arguments.out.mkdir(parents=True, exist_ok=True)
 
@@ -225,9 +227,72 @@ def main(argv: list[str] | None = None) -> int:
         window.scene.reset_camera()
         window.scene.plotter.camera.zoom(1.25)
 
+    # 13. a lasso selection on the demo cloud, a second lasso being drawn;
+    # 14. Start fits the selected points alone (the others grey in the deviation map)
+    def lasso(centre, radius, corners=9):
+        """A wobbly loop (display pixels, fractions of the viewport) as a hand draws it."""
+        width, height = window.scene.plotter.renderer.GetRenderWindow().GetSize()
+        angles = np.linspace(0.0, 2.0 * np.pi, 4 * corners, endpoint=False)
+        wobble = 1.0 + 0.18 * np.sin(3.0 * angles) + 0.08 * np.cos(5.0 * angles)
+        return np.column_stack([centre[0] + radius[0] * wobble * np.cos(angles),
+                                centre[1] + radius[1] * wobble * np.sin(angles)]) * [width, height]
+
+    def drag(outline, release: bool, modifiers=None):
+        from PySide6.QtCore import QEvent, QPointF, Qt
+        from PySide6.QtGui import QMouseEvent
+
+        widget = window.scene.plotter
+        width, height = window.scene.plotter.renderer.GetRenderWindow().GetSize()
+        modifiers = modifiers or Qt.KeyboardModifier.NoModifier
+        kinds = [QEvent.Type.MouseButtonPress] + [QEvent.Type.MouseMove] * (len(outline) - 1)
+        if release:
+            kinds.append(QEvent.Type.MouseButtonRelease)
+            outline = [*outline, outline[0]]
+        for kind, (x, y) in zip(kinds, outline, strict=True):
+            position = QPointF(x * widget.width() / width, widget.height() - y * widget.height()
+                               / height)
+            button = (Qt.MouseButton.NoButton if kind == QEvent.Type.MouseMove
+                      else Qt.MouseButton.LeftButton)
+            QApplication.sendEvent(widget, QMouseEvent(kind, position,
+                                                       widget.mapToGlobal(position), button,
+                                                       Qt.MouseButton.LeftButton, modifiers))
+
+    def selection():
+        window.set_quality_visible(False)
+        window.set_deviation_visible(True)
+        window.set_layer_visible("knot_lines", False)
+        window.fit_dock.raise_()
+        window.quality_dock.raise_()
+
+        def loaded(ok):
+            window.scene.reset_camera()
+            window.lasso_select_action.trigger()
+            drag(lasso((0.42, 0.45), (0.17, 0.2)), release=True)
+            second = lasso((0.66, 0.62), (0.09, 0.1))
+            drag(second[: len(second) * 3 // 4], release=False)  # still drawing
+            later(lambda: (shot("13_selection.png"), finish_lasso(second)), 600)
+        once(window.files_loaded, loaded)
+        window.open_demo()
+
+    def finish_lasso(second):
+        window.scene.selection_tool.cancel()  # Esc: the second lasso is dropped
+        next_step()
+
+    def fit_selection():
+        window.lasso_select_action.trigger()  # back to rotating
+        window.deviation_dock.raise_()
+
+        def finished(snapshot):
+            window.selection_policy.clear()  # Esc: the deviation colours show; grey: not fitted
+            later(lambda: (shot("14_fit_selection.png"), next_step()), 600)
+        once(window.controller.fit_finished, finished)
+        window.start_fit()
+
     single = [demo, converging, offsets, curve, quality_clean, quality_folded]
     patches = [patches_mode, seam_map, patches_deviation]
-    steps.extend({"single": single, "patches": patches}.get(arguments.only, single + patches))
+    choose = [selection, fit_selection]
+    steps.extend({"single": single, "patches": patches, "selection": choose}.get(
+        arguments.only, single + choose + patches))
     window.controller.fit_failed.connect(lambda message: failures.append(message))
     window.patch_controller.fit_failed.connect(lambda message: failures.append(message))
     next_step()

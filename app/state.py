@@ -1,7 +1,11 @@
 """The document: targets (point clouds), the fitted geometry, loaded patches, offsets, settings.
 
 Pure data plus Qt signals; no torch, no VTK. Settings edits go through a ``QUndoStack`` so every
-edit can be undone and redone; loading files replaces the content and is not an undoable edit.
+edit can be undone and redone; so do point edits (crop to the selection, delete the selection),
+whose undo also brings back the fitted surface of the points as they were. Loading files replaces
+the content and is not an undoable edit. The selection (which points of the visible clouds are
+picked) is the document's too, but not an edit: it is not undone, and Start fits only the selected
+points while there are any.
 Geometry is held as the engine's numpy twins (:mod:`nurbs_core.geometry_arrays`: what
 ``NurbsCurve.numpy()`` / ``NurbsSurface.numpy()`` return); anything else given to the document is
 converted once, on the way in.
@@ -10,7 +14,7 @@ converted once, on the way in.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -161,6 +165,62 @@ class OffsetDisplay:
     shared_edges: int = 0
 
 
+def spread_over_cloud(values: np.ndarray, selection: np.ndarray | None) -> np.ndarray:
+    """Per-point values of a fit of the selected points (M,) as values of the whole cloud (N,):
+    NaN at the points left out (drawn grey, left out of the statistics). selection: bool (N,)
+    with M True entries, or None (the values are returned as they are)."""
+    values = np.asarray(values)
+    if selection is None or len(values) != int(np.count_nonzero(selection)):
+        return values
+    spread = np.full(len(selection), np.nan)
+    spread[selection] = values
+    return spread
+
+
+@dataclass(frozen=True)
+class PointsState:
+    """What a point edit changes: every target's points (hidden ones too), the selection (bool
+    over the visible clouds stacked, or None) with the targets' visibility it was made under,
+    the fitted shape, and the patch network with what a session keeps of its fit (its report:
+    ``PatchController.network_report``)."""
+
+    points: tuple[np.ndarray, ...]
+    selection: np.ndarray | None
+    visible: tuple[bool, ...]
+    fitted: GeometryArrays | None
+    network: Any = None
+    network_report: dict[str, Any] | None = None
+
+
+class _PointsCommand(QUndoCommand):
+    """Crop or delete: undo restores the points, the selection and the fitted shape as they were
+    before; redo the edited points with the shape fitted to them since (a fit after a crop comes
+    back with the crop)."""
+
+    def __init__(self, document: Document, before: PointsState, after: PointsState, text: str):
+        super().__init__(text)
+        self._document, self._before, self._after = document, before, after
+        self._generation = document.content_generation
+
+    def _current(self) -> bool:
+        if self._document.content_generation == self._generation:
+            return True
+        self.setObsolete(True)  # other files were opened since: nothing of this edit is left
+        return False
+
+    def redo(self):
+        if self._current():
+            self._document._apply_points(self._after)
+
+    def undo(self):
+        if self._current():
+            document = self._document
+            self._after = dataclasses.replace(self._after, fitted=document.fitted,
+                                              network=document.network,
+                                              network_report=document.report_network())
+            document._apply_points(self._before)
+
+
 class _SettingsCommand(QUndoCommand):
     def __init__(self, document: Document, old: Settings, new: Settings, text: str):
         super().__init__(text)
@@ -180,6 +240,8 @@ class Document(QObject):
     fitted_changed = Signal()
     offsets_changed = Signal()
     settings_changed = Signal(object, object)  # (old Settings, new Settings)
+    points_changed = Signal()  # a point edit (crop, delete) or its undo / redo
+    selection_changed = Signal()
 
     def __init__(self, parent: QObject | None = None):
         super().__init__(parent)
@@ -192,6 +254,15 @@ class Document(QObject):
         self.offsets = OffsetDisplay()
         self.settings = Settings()
         self.undo_stack = QUndoStack(self)
+        #: bool (N,) over :meth:`target_points` (True: selected), or None: nothing selected
+        self.selection: np.ndarray | None = None
+        #: counts content replacements: point edits made before one cannot be undone after it
+        self.content_generation = 0
+        #: what a session keeps of the fit that made :attr:`network` (the window's patch
+        #: controller answers); point edits keep it with the network they restore
+        self.network_report_source: Callable[[], dict[str, Any] | None] = lambda: None
+        #: the report of the network a point edit's undo / redo just restored
+        self.restored_network_report: dict[str, Any] | None = None
 
     # --- settings (undoable) -------------------------------------------------------------------
     def edit_settings(self, text: str, **changes: Any) -> bool:
@@ -219,6 +290,8 @@ class Document(QObject):
                         patch_names: list[str]):
         """Swap in freshly loaded files (all already validated); drops the fit and offsets."""
         self.targets, self.patch_names = targets, patch_names
+        self.content_generation += 1
+        self.selection = None
         self.patches = [from_mapping(p) for p in patches]
         self.fitted = None
         self.network = None
@@ -226,6 +299,7 @@ class Document(QObject):
         self.content_changed.emit()
         self.fitted_changed.emit()
         self.offsets_changed.emit()
+        self.selection_changed.emit()
 
     def set_fitted(self, geometry: Mapping[str, Any] | None, notify: bool = True):
         """Replace the fitted shape. Live fit updates pass ``notify=False``: the controller
@@ -246,6 +320,81 @@ class Document(QObject):
         """All visible targets stacked: (N, 3), or None when there is nothing to fit."""
         clouds = [t.points for t in self.targets if t.visible and len(t.points)]
         return np.concatenate(clouds, axis=0) if clouds else None
+
+    # --- selection and point edits ---------------------------------------------------------------
+    def set_selection(self, selection: np.ndarray | None) -> None:
+        """Select points of the visible clouds: bool (N,) over :meth:`target_points` (an empty
+        selection is None). Raises ValueError when the length does not match."""
+        if selection is not None:
+            selection = np.asarray(selection, bool)
+            count = self.visible_point_count()
+            if selection.shape != (count,):
+                raise ValueError(f"a selection of {selection.shape} for {count} points")
+            if not selection.any():
+                selection = None
+        if selection is None and self.selection is None:
+            return
+        self.selection = selection
+        self.selection_changed.emit()
+
+    def selected_count(self) -> int:
+        return 0 if self.selection is None else int(np.count_nonzero(self.selection))
+
+    def fit_points(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """What Start fits: (the selected points (M, 3), the selection (N,)) while points are
+        selected, else (all visible points (N, 3) or None, None)."""
+        points = self.target_points()
+        if points is None or self.selection is None:
+            return points, None
+        return points[self.selection], self.selection.copy()
+
+    def keep_points(self, keep: np.ndarray, text: str) -> int:
+        """Keep only the visible points where ``keep`` (bool (N,) over :meth:`target_points`) is
+        True, as one undoable edit (hidden clouds are left alone); the selection is cleared.
+        Returns how many points were removed (0: no edit pushed)."""
+        keep = np.asarray(keep, bool)
+        points = self.target_points()
+        if points is None or keep.shape != (len(points),):
+            raise ValueError("keep must have one entry per visible point")
+        removed = int(len(keep) - np.count_nonzero(keep))
+        if removed == 0:
+            return 0
+        edited, start = [], 0
+        for target in self.targets:
+            if target.visible and len(target.points):
+                part = keep[start:start + len(target.points)]
+                start += len(target.points)
+                edited.append(target.points[part])
+            else:
+                edited.append(target.points)
+        before = self._points_state()
+        after = dataclasses.replace(before, points=tuple(edited), selection=None)
+        self.undo_stack.push(_PointsCommand(self, before, after, text))
+        return removed
+
+    def report_network(self) -> dict[str, Any] | None:
+        return self.network_report_source() if self.network is not None else None
+
+    def _points_state(self) -> PointsState:
+        return PointsState(tuple(t.points for t in self.targets),
+                           None if self.selection is None else self.selection.copy(),
+                           tuple(t.visible for t in self.targets), self.fitted, self.network,
+                           self.report_network())
+
+    def _apply_points(self, state: PointsState):
+        for target, points in zip(self.targets, state.points, strict=True):
+            target.points = points
+        visible = tuple(t.visible for t in self.targets)
+        self.selection = state.selection if visible == state.visible else None
+        self.fitted = state.fitted
+        self.network, self.restored_network_report = state.network, state.network_report
+        self.points_changed.emit()
+        self.selection_changed.emit()
+        self.fitted_changed.emit()  # measured again against the points now shown
+
+    def visible_point_count(self) -> int:
+        """How many points :meth:`target_points` stacks (without stacking them)."""
+        return sum(len(t.points) for t in self.targets if t.visible)
 
     def all_geometry(self) -> list[GeometryArrays]:
         """Fitted geometry, loaded patches and offsets: what Export writes."""

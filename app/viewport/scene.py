@@ -1,6 +1,7 @@
-"""The 3D scene: point cloud, fitted surface or curve, control net, knot lines, deviation map,
-quality map, loaded patches and their offsets, and the patch network
-(:mod:`app.viewport.network_layers`).
+"""The 3D scene: point cloud (with its selected points highlighted), fitted surface or curve,
+control net, knot lines, deviation map, quality map, loaded patches and their offsets, the patch
+network (:mod:`app.viewport.network_layers`) and the selection tool
+(:mod:`app.viewport.selection`).
 
 The fit mode decides which fit is on show: in Patches mode the single fit's layers (surface,
 curve, control net, knot lines, deviation and quality maps) are hidden and the network's shown,
@@ -25,6 +26,7 @@ from pyvistaqt import QtInteractor
 from app.display_types import FAR, FINE, FLIPPED, OVERLAP, DeviationMap, DisplayGeometry
 from app.viewport.deviation_colours import DeviationColours
 from app.viewport.network_layers import NetworkLayers
+from app.viewport.selection import SelectionTool
 
 RENDER_INTERVAL_MS = 33
 DEVIATION_TITLE = "Deviation"
@@ -37,6 +39,7 @@ COLORS = {
     "knot_lines": "#1b2b3a",
     "patch": "#9fb8d0",
     "offset": "#f2a33a",
+    "selection": "#ffc400",
 }
 
 UPPER_LEFT, UPPER_RIGHT, LOWER_RIGHT = 2, 3, 1  # vtkCornerAnnotation corner indices
@@ -174,6 +177,9 @@ class SceneView(QObject):
                                      self._apply_deviation_surface)
         #: the colour scale (signed or tolerance bands) the cloud and the deviation surface share
         self.deviation_colours = DeviationColours(self.plotter)
+        #: box and lasso selection over the viewport (off until a mode is chosen)
+        self.selection_tool = SelectionTool(self.plotter, self.plotter.renderer,
+                                            self.request_render, self)
 
     @property
     def widget(self) -> QWidget:
@@ -195,7 +201,8 @@ class SceneView(QObject):
         actor = self._actors.get(name)
         if actor is None:
             return
-        visible = self._visible.get(name, True) and self._meshes[name].n_points > 0
+        visible = self._visible.get("cloud" if name == "selection" else name, True) and (
+            self._meshes[name].n_points > 0)
         if name in SINGLE_FIT_LAYERS and self._mode != "single":
             visible = False
         actor.SetVisibility(visible)
@@ -215,6 +222,16 @@ class SceneView(QObject):
         else:
             self._layer("cloud", mesh)
         self.set_deviation(None)
+
+    def show_selection(self, points: np.ndarray | None):
+        """The selected points (M, 3) drawn over the cloud, larger and in the highlight colour
+        (None or empty: no highlight); hidden with the cloud."""
+        if (points is None or not len(points)) and "selection" not in self._meshes:
+            return  # created with the first selection: drawn after the cloud, so on top of it
+        mesh = pv.PolyData(np.zeros((0, 3)) if points is None else np.asarray(points, float))
+        self._layer("selection", mesh, color=COLORS["selection"], point_size=5.0)
+        self._apply_visibility("selection")
+        self.request_render()
 
     def set_deviation(self, deviation: np.ndarray | None, stats: dict | None = None,
                       mode: str = "single"):
@@ -523,6 +540,8 @@ class SceneView(QObject):
                     actor.SetVisibility(self._visible[layer])
         else:
             self._apply_visibility(layer)
+        if layer == "cloud":
+            self._apply_visibility("selection")
         if layer == "surface":
             self._apply_quality()
         self.request_render()
@@ -603,7 +622,7 @@ class SceneView(QObject):
 
     def _visible_points(self) -> np.ndarray | None:
         parts = [mesh.points for name, mesh in self._meshes.items()
-                 if mesh.n_points and self._actors[name].GetVisibility()]
+                 if mesh.n_points and self._actors[name].GetVisibility() and name != "selection"]
         parts += self.network.visible_points()
         for group in ("patches", "offsets"):
             for name in self._extra_meshes[group]:

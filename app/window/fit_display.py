@@ -181,6 +181,8 @@ class FitDisplay(QObject):
         # "converged" only when the quality checks hold
         status = reported_status(snapshot.status, quality_warnings(snapshot.statistics or {}))
         text = f"Fit {status} after {snapshot.iteration} iterations"
+        if snapshot.selected is not None:
+            text += f" on the {snapshot.selected:,} selected points"
         if snapshot.deviation is not None:
             stats = deviation_stats(snapshot.deviation)
             text += (f"; deviation mean {stats['mean']:.4g}, RMS {stats['rms']:.4g}, "
@@ -193,7 +195,11 @@ class FitDisplay(QObject):
         if getattr(geometry, "kind", None) == "surface":   # what ran, beside the settings' start
             count_u, count_v = (int(n) for n in geometry.control_points.shape[-3:-1])
             grid = (count_u, count_v, int(geometry.degree_u), int(geometry.degree_v))
-        window.quality_panel.show_result(status, snapshot.message, snapshot.statistics,
+        account = snapshot.message
+        if snapshot.selected is not None:
+            account = f"fitted on {snapshot.selected:,} selected points" + (
+                f"; {account}" if account else "")
+        window.quality_panel.show_result(status, account, snapshot.statistics,
                                          document.settings.fit.tolerance is None,
                                          snapshot.display.kind,
                                          warned=status != snapshot.status, grid=grid)

@@ -1,9 +1,10 @@
 """What each of the window's parts may reach of the window: one narrow protocol per part.
 
 The parts (:mod:`app.window.export_policy`, ``load_policy``, ``session_policy``,
-``settings_policy``, ``fit_display``) are owned by :class:`app.main_window.MainWindow`, which
-satisfies every protocol here (a test checks it on the real window); they never import it. A
-part that needs more of the window says so here first.
+``settings_policy``, ``selection_policy``, ``fit_display``) are owned by
+:class:`app.main_window.MainWindow`, which satisfies every protocol here (a test checks it on
+the real window); they never import it. A part that needs more of the window says so here
+first.
 """
 
 from __future__ import annotations
@@ -129,3 +130,22 @@ class FitDisplayHost(Reporter, Protocol):
     status_labels: dict[str, QLabel]
 
     def rebuild_tree(self) -> None: ...
+
+
+@runtime_checkable
+class SelectionHost(Reporter, Protocol):
+    document: Document
+    controller: FitController
+    patch_controller: PatchController
+    scene: SceneView
+    knot_panel: KnotPanel
+    status_labels: dict[str, QLabel]
+    cancel_load_action: QAction
+    #: "box" / "lasso" -> the checkable tool actions
+    selection_tool_actions: dict[str, QAction]
+    #: "select_all", "invert", "clear", "crop", "delete" -> the Edit menu's actions
+    selection_actions: dict[str, QAction]
+
+    def statusBar(self) -> QStatusBar: ...  # noqa: N802 (Qt's name)
+    def rebuild_tree(self) -> None: ...
+    def reset_patch_network(self) -> None: ...

@@ -70,6 +70,9 @@ class DisplaySnapshot:
     #: the signed deviation map (:mod:`app.workers.deviation_map`) of a surface fit, measured
     #: with ``deviation``; on the final snapshot it also paints the surface
     signed: DeviationMap | None = None
+    #: the run fitted this many selected points (None: every visible point); per-point values
+    #: (deviation, signed) are then spread over the whole cloud by the controller, NaN elsewhere
+    selected: int | None = None
 
 
 class FitProblem(Exception):
