@@ -13,13 +13,15 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
 from nurbs_core.patches.coarsen import coarsen, reach_ratios
+from nurbs_core.patches.crease_layout import coverage, layout_edges, snap_to_creases
+from nurbs_core.patches.creases import Creases, detect_creases, no_creases, sharpened
 from nurbs_core.patches.fit import NetworkPass, fit_network
 from nurbs_core.patches.layout import LayoutError, QuadLayout, quad_layout
 from nurbs_core.patches.measures import NetworkQuality, network_quality
@@ -116,7 +118,8 @@ class PatchResult:
 
 
 def layout_turn(layout: QuadLayout) -> float:
-    """The largest angle (degrees) between the normals of two layout quads sharing an edge."""
+    """The largest angle (degrees) between the normals of two layout quads sharing an edge
+    (not a crease edge: a crease turns whatever the size)."""
     c = layout.vertices[layout.quads]
     normals = np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1])
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
@@ -125,6 +128,8 @@ def layout_turn(layout: QuadLayout) -> float:
     for p, quad in enumerate(layout.quads.tolist()):
         for k in range(4):
             key = (min(quad[k], quad[(k + 1) % 4]), max(quad[k], quad[(k + 1) % 4]))
+            if key in layout.creases:
+                continue
             if key in owner:
                 cos = float(np.clip(normals[owner[key]] @ normals[p], -1.0, 1.0))
                 worst = max(worst, math.degrees(math.acos(cos)))
@@ -133,7 +138,56 @@ def layout_turn(layout: QuadLayout) -> float:
     return worst
 
 
-def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None) -> QuadLayout:
+#: Instant Meshes aligns its orientation field to the edges of the sharpened mesh whose faces
+#: turn by more than so many degrees (on a noisy box: quads in a grid per face), and the
+#: patch counts tried for a layout along the creases (``auto``: up to the plain layout's
+#: count, twice over).
+CREASE_ANGLE = 30.0
+CREASE_TARGETS = (24, 38, 61, 98, 157)
+CREASE_BAND = 3.0
+
+
+def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None,
+                  creases: Creases | None = None) -> QuadLayout:
+    """The layout of :func:`plain_layout`; when the scan has creases, the layout whose crease
+    edges (:mod:`nurbs_core.patches.crease_layout`) cover most of them, among that one and
+    Instant Meshes' layouts of the sharpened mesh aligned to them (each snapped onto the
+    creases), none turning or passing the shape by more than the plain one."""
+    layout = plain_layout(mesh, patches, points)
+    if creases is None or not len(creases):
+        return layout
+    best = snap_to_creases(layout, creases)
+    best_cover = coverage(best, creases)
+    turn = max(MAX_LAYOUT_TURN, _turn_off_creases(best, creases))
+    reach = max(PASSED_BY, layout_reach(best, mesh))
+    sharp = sharpened(mesh, creases)
+    targets = [int(patches)] if patches != "auto" else \
+        [t for t in CREASE_TARGETS if t <= 2 * len(layout.quads)]
+    for target in targets:
+        try:
+            candidate = snap_to_creases(quad_layout(sharp.vertices, sharp.faces, target,
+                                                    crease_angle=CREASE_ANGLE), creases)
+        except LayoutError:
+            continue
+        cover = coverage(candidate, creases)
+        if cover > best_cover and _turn_off_creases(candidate, creases) <= turn and \
+                layout_reach(candidate, mesh) <= reach:
+            best, best_cover = candidate, cover
+    return best
+
+
+def _turn_off_creases(layout: QuadLayout, creases: Creases) -> float:
+    """:func:`layout_turn` over the edges away from the creases (their middles farther than
+    ``CREASE_BAND`` crease reaches d from every crease point): next to a crease the quads turn
+    with it, on the edge or not (and crease pieces stop short of where creases meet)."""
+    edges = layout_edges(layout.quads)
+    middle = 0.5 * (layout.vertices[edges[:, 0]] + layout.vertices[edges[:, 1]])
+    near = np.isfinite(creases.near(middle, CREASE_BAND * creases.reach)[0])
+    skip = frozenset((int(a), int(b)) for a, b in edges[near])
+    return layout_turn(replace(layout, creases=layout.creases | skip))
+
+
+def plain_layout(mesh: ScanMesh, patches: int | str, points: int | None = None) -> QuadLayout:
     """The layout for a target count; for "auto" the coarsest that turns by at most
     ``MAX_LAYOUT_TURN`` between neighbours, or, when finer layouts stop turning less (a sharp
     edge turns whatever the size), the one that turned least. ``points``: the cloud's size,
@@ -307,7 +361,8 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     timings["mesh"] = time.perf_counter() - start
     yield PatchEvent("mesh", mesh=mesh)
     start = time.perf_counter()
-    layout = choose_layout(mesh, options.patches, len(points))
+    creases = detect_creases(mesh, points) if options.creases else no_creases()
+    layout = choose_layout(mesh, options.patches, len(points), creases)
     timings["layout"] = time.perf_counter() - start
     yield PatchEvent("layout", mesh=mesh, layout=layout)
     start = time.perf_counter()
@@ -322,10 +377,13 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
         np.sort(rng.choice(len(points), QUALITY_POINTS, replace=False))
     measured = points[sample]
     noise = estimate_noise(fitted)  # once: the fit's Cp and the report's warning share it
-    for last in fit_network(fitted, layout.vertices, layout.quads, mesh.vertices,
+    # the wrap passes draw the network to the mesh: to its sharpened creases where it has any
+    reference = sharpened(mesh, creases).vertices if layout.creases else mesh.vertices
+    for last in fit_network(fitted, layout.vertices, layout.quads, reference,
                             size=options.size, stiffness=options.stiffness,
                             seam_weight=options.seam_weight, tolerance=options.tolerance,
-                            max_size=options.max_size, border=border_points(mesh), noise=noise):
+                            max_size=options.max_size, border=border_points(mesh), noise=noise,
+                            creases=layout.creases):
         yield PatchEvent("pass", layout=layout, fit_pass=last)
         if stop is not None and stop():
             stopped = True
