@@ -160,3 +160,16 @@ def test_a_box_network_lays_g0_seams_on_its_edges():
     assert np.percentile(off, 90) < 2.0 * noise
     # and cover most of them (the rest lie inside patches, rounded as before)
     assert (cKDTree(curve).query(_edge_points(box))[0] < 2.0 * noise).mean() > 0.5
+
+
+@pytest.mark.slow
+def test_the_command_line_names_the_crease_seams(tmp_path, capsys):
+    from nurbs_core.cli import main
+
+    cloud = tmp_path / "box.xyz"
+    np.savetxt(cloud, _box()[0])
+    assert main([str(cloud), "-o", str(tmp_path / "box.json"), "--patches", "auto", "-q"]) == 0
+    report = capsys.readouterr().out
+    line = next(x for x in report.splitlines() if x.startswith("seam angle"))
+    assert "(tangent-continuous seams)" in line and "crease seams (G0)" in line
+    assert "on the scan's creases" in line and "warning" not in report
