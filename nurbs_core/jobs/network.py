@@ -118,6 +118,10 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
           f"irregular max {seam.irregular_corner_max:.3f} degrees"
           + (f" (tangent-continuous seams); {seam.crease_text()} on the scan's creases"
              if seam.crease_seams else ""))
+    creases = result.creases
+    if creases is not None and len(creases) and not seam.crease_seams:
+        print(f"creases: the scan has {creases.count} sharp edges ({creases.angles.min():.0f}-"
+              f"{creases.angles.max():.0f} degrees) no layout followed: patches round them")
     print(f"point-to-surface distance: mean {quality.c2s_mean:.6g}, rms {quality.c2s_rms:.6g}, "
           f"99th percentile {quality.c2s_p99:.6g}")
     print(f"surface-to-cloud distance: mean {quality.s2c_mean:.6g}, 99th percentile "

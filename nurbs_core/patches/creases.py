@@ -215,8 +215,11 @@ def detect_creases(mesh: ScanMesh, points: np.ndarray) -> Creases:
     index = np.flatnonzero(candidate)
     bisector = na[index] + nb[index]
     bisector /= np.maximum(np.linalg.norm(bisector, axis=1, keepdims=True), 1e-12)
-    kink, gain = _kink(points, cloud, vertices[index], bisector, on_line[index], line[index],
-                       KINK_REACH * d)
+    kink, gain = np.zeros(len(index)), np.ones(len(index))
+    for start in range(0, len(index), CHUNK):       # (chunk, KINK_POINTS, 7) at a time
+        part = slice(start, start + CHUNK)
+        kink[part], gain[part] = _kink(points, cloud, vertices[index[part]], bisector[part],
+                                       on_line[index[part]], line[index[part]], KINK_REACH * d)
     candidate[index] = (gain >= KINK_GAIN) & (kink > WEAK)
     turn[index] = kink
     keep = _hysteresis(on_line, turn, candidate, d)

@@ -109,6 +109,9 @@ class PatchResult:
     #: how many points lay off the reconstructed surface (:func:`on_surface`) and were left out
     #: of the fit and its measures (their deviation is NaN)
     outliers: int = 0
+    #: the creases found in the scan (:func:`nurbs_core.patches.creases.detect_creases`); the
+    #: network's crease seams (``network.creases``) lie on them
+    creases: Creases | None = field(default=None, repr=False)
 
     @property
     def status(self) -> str:
@@ -429,7 +432,7 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     assert quality.distances is not None, "network_quality keeps the point distances"
     deviation[np.flatnonzero(inliers)[sample]] = quality.distances
     result = PatchResult(last.network, quality, layout, mesh, timings, warnings, last.index + 1,
-                         deviation, stopped, outliers)
+                         deviation, stopped, outliers, creases)
     yield PatchEvent("done", mesh=mesh, layout=layout, fit_pass=last, result=result)
 
 

@@ -126,6 +126,7 @@ def test_creases_must_be_shared_edges_and_options_check_the_switch():
     assert PatchOptions.from_json(PatchOptions(creases=False).to_json()).creases is False
 
 
+@pytest.mark.slow
 def test_a_smooth_scan_fits_the_same_with_or_without_crease_detection():
     points = samples.sphere(count=2500, noise=NOISE).points
     on = fit_patches(points, PatchOptions())
