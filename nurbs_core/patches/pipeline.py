@@ -10,6 +10,7 @@ until the tolerance is met.
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Callable, Iterator
@@ -142,10 +143,11 @@ def layout_turn(layout: QuadLayout) -> float:
 
 
 #: Instant Meshes aligns its orientation field to the edges of the sharpened mesh whose faces
-#: turn by more than so many degrees (on a noisy box: quads in a grid per face), and the
-#: patch counts tried for a layout along the creases (``auto``: up to the plain layout's
-#: count, twice over).
-CREASE_ANGLE = 30.0
+#: turn by more than so many degrees (each tried: on a noisy box, a grid per face comes at one
+#: or the other, 24 patches with 20 degrees on one cloud, with 30 on another), and the patch
+#: counts tried for a layout along the creases (``auto``: up to the plain layout's count, twice
+#: over).
+CREASE_ANGLES = (20.0, 30.0)
 CREASE_TARGETS = (24, 38, 61, 98, 157)
 CREASE_BAND = 3.0
 #: The least share of the crease points a layout's crease edges must cover to be used (a noisy
@@ -172,10 +174,10 @@ def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None,
     sharp = sharpened(mesh, creases)
     targets = [int(patches)] if patches != "auto" else \
         [t for t in CREASE_TARGETS if t <= 2 * len(layout.quads)]
-    for target in targets:
+    for target, angle in itertools.product(targets, CREASE_ANGLES):
         try:
             candidate = snap_to_creases(quad_layout(sharp.vertices, sharp.faces, target,
-                                                    crease_angle=CREASE_ANGLE), creases)
+                                                    crease_angle=angle), creases)
         except LayoutError:
             continue
         cover = coverage(candidate, creases)
