@@ -155,6 +155,8 @@ CREASE_BAND = 3.0
 #: cross the rest of the creases: seam p99 0.89 -> 1.99, max 2.6 -> 18.6 degrees, c2s ratio
 #: 1.02 -> 1.10).
 MIN_COVERAGE = 0.6
+#: ... and the share at which the search stops.
+GOOD_COVERAGE = 0.75
 
 
 def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None,
@@ -174,6 +176,8 @@ def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None,
     sharp = sharpened(mesh, creases)
     targets = [int(patches)] if patches != "auto" else \
         [t for t in CREASE_TARGETS if t <= 2 * len(layout.quads)]
+    if best_cover >= GOOD_COVERAGE:
+        targets = []
     for target, angle in itertools.product(targets, CREASE_ANGLES):
         try:
             candidate = snap_to_creases(quad_layout(sharp.vertices, sharp.faces, target,
@@ -184,6 +188,8 @@ def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None,
         if cover > best_cover and _turn_off_creases(candidate, creases) <= turn and \
                 layout_reach(candidate, mesh) <= reach:
             best, best_cover = candidate, cover
+        if best_cover >= GOOD_COVERAGE:
+            break       # each try is an Instant Meshes run (a second or so)
     # a layout that follows the creases only in part leaves the rest crossing its G1 seams,
     # moved vertices beside them: the plain layout rounds every crease alike, and fits better
     return best if best_cover >= MIN_COVERAGE else layout
