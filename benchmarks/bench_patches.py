@@ -7,8 +7,9 @@ Run: ``python benchmarks/bench_patches.py [--quick] [--cases NAME ...] [--points
 thread throughout.
 
 Cases: generated closed shapes of :mod:`nurbs_core.samples` with exact truth (sphere, torus,
-capsule, three blobs with different seeds, rounded box) and clouds sampled from the paper's
-multi-patch models (``shared/data/nurbsdiff_paper``: aorta, 18 biquadratic patches; stabilizer,
+capsule, three blobs with different seeds, rounded box), a sharp box (trimesh's, twelve
+90-degree creases) and clouds sampled from the paper's multi-patch models
+(``shared/data/nurbsdiff_paper``: aorta, 18 biquadratic patches; stabilizer,
 27 bicubic; duck, 3 bicubic). A model's cloud is area-uniform over all its patches together
 (each patch gets points in proportion to its area), with Gaussian noise of 0.2 % of the
 diagonal; its truth is 250k dense area-uniform samples of the same patches with their normals.
@@ -22,8 +23,10 @@ Per case, from ``fit_patches(points, PatchOptions())`` (``patches="auto"``):
 
 * patches, control points per side; gap: the largest distance between the two sides of a shared
   edge (absolute and relative to the cloud's diagonal);
-* seam angles (degrees) along shared edges: median, 99th percentile, max; corner angles: max at
-  regular (valence 4) and at irregular corners;
+* seam angles (degrees) along shared edges meant to be tangent-continuous: median, 99th
+  percentile, max; corner angles: max at regular (valence 4) and at irregular corners; crease
+  seams (on a crease the engine found in the scan, G0 by design, left out of those): how many,
+  and the least and largest of their mean angles;
 * flipped %: area of the network whose normal points against the nearest oriented truth normal
   (the engine's own measure, against its mesh's normals, is in the JSON as ``engine_flipped``);
 * area ratio: network area / true area;
@@ -359,7 +362,9 @@ class MeshShape(samples.SampledShape):
 
         query = np.asarray(query, np.float64)
         triangles = np.asarray(self.mesh.triangles)
-        _, candidates = cKDTree(triangles.mean(axis=1)).query(query, k=16, workers=1)
+        k = min(16, len(triangles))
+        _, candidates = cKDTree(triangles.mean(axis=1)).query(query, k=k, workers=1)
+        candidates = candidates.reshape(len(query), k)
         best = np.full(len(query), np.inf)
         for column in candidates.T:
             foot = trimesh.triangles.closest_point(triangles[column], query)
@@ -374,23 +379,39 @@ def _mesh(label: str, path: Path) -> Callable[..., Case]:
         import trimesh
 
         mesh = trimesh.load(path, process=False)
-        if mesh.volume < 0:
-            mesh.invert()
-        diagonal = float(np.linalg.norm(mesh.extents))
-        clean, _ = trimesh.sample.sample_surface(mesh, count, seed=0)
-        noise = NOISE * diagonal
-        points = clean + np.random.default_rng(0).normal(0.0, noise, clean.shape)
-        truth, faces = trimesh.sample.sample_surface(mesh, truth_count, seed=1)
-        normals = np.asarray(mesh.face_normals)[faces]
-        shape = MeshShape(label, points, clean, truth, float(mesh.area), noise, closed=True,
-                          height_field=False, kind="closed", truth_normals=normals,
-                          diagonal=diagonal, truth_charts=np.zeros(len(truth), np.int64),
-                          mesh=mesh)
-        source = (f"{path.name} ({len(mesh.vertices)} vertices), area-uniform samples of its "
-                  "triangles")
-        return Case(label, shape, normals, source, "the watertight mesh's face normals "
-                    "(outward)")
+        return _mesh_case(label, mesh, count, truth_count,
+                          f"{path.name} ({len(mesh.vertices)} vertices)")
     return build
+
+
+def _box(label: str, extents: tuple[float, float, float] = (1.0, 0.8, 0.6)) -> Callable[..., Case]:
+    """A box with sharp edges (twelve 90-degree creases), sampled like a mesh file: the truth
+    is trimesh's box."""
+    def build(count=COUNT, truth_count=TRUTH_COUNT, data=None) -> Case:
+        import trimesh
+
+        return _mesh_case(label, trimesh.creation.box(extents=extents), count, truth_count,
+                          f"trimesh.creation.box(extents={extents})")
+    return build
+
+
+def _mesh_case(label: str, mesh: Any, count: int, truth_count: int, name: str) -> Case:
+    import trimesh
+
+    if mesh.volume < 0:
+        mesh.invert()
+    diagonal = float(np.linalg.norm(mesh.extents))
+    clean, _ = trimesh.sample.sample_surface(mesh, count, seed=0)
+    noise = NOISE * diagonal
+    points = clean + np.random.default_rng(0).normal(0.0, noise, clean.shape)
+    truth, faces = trimesh.sample.sample_surface(mesh, truth_count, seed=1)
+    normals = np.asarray(mesh.face_normals)[faces]
+    shape = MeshShape(label, points, clean, truth, float(mesh.area), noise, closed=True,
+                      height_field=False, kind="closed", truth_normals=normals,
+                      diagonal=diagonal, truth_charts=np.zeros(len(truth), np.int64),
+                      mesh=mesh)
+    source = f"{name}, area-uniform samples of its triangles"
+    return Case(label, shape, normals, source, "the watertight mesh's face normals (outward)")
 
 
 #: the scanned Stanford bunny (public domain), the test data
@@ -423,6 +444,8 @@ def case_builders() -> dict[str, Callable[..., Case]]:
     # scanned alone (an open shell with the thin parts)
     builders["bunny"] = _mesh("bunny", BUNNY)
     builders["bunny_head"] = _cut(_mesh("bunny", BUNNY), "bunny_head", axis=1, quantile=0.55)
+    # sharp edges: creases a tangent-continuous network cannot follow (G0 crease seams)
+    builders["box"] = _box("box")
     # stray returns: 1% of the head's points anywhere in its box
     builders["head_strays"] = _with_strays(_generated(g.head, "head"), "head_strays")
     for label, files in MODELS.items():
@@ -494,6 +517,10 @@ def run_network(case: Case, tree: cKDTree, truth_c2s: float,
         "patches": int(q.patches), "size": int(q.size), "passes": int(result.passes),
         "gap": q.seam.gap, "gap_relative": q.gap_relative,
         "seam_median": q.seam.median, "seam_p99": q.seam.p99, "seam_max": q.seam.max,
+        # seams on the scan's creases (G0 by design; the seam statistics are over the rest)
+        "crease_seams": int(getattr(q.seam, "crease_seams", 0)),
+        "crease_min": float(getattr(q.seam, "crease_min", 0.0)),
+        "crease_max": float(getattr(q.seam, "crease_max", 0.0)),
         "corner_regular_max": q.seam.regular_corner_max,
         "corner_irregular_max": q.seam.irregular_corner_max,
         "corner_irregular_p90": q.seam.irregular_corner_p90,
@@ -620,7 +647,9 @@ NETWORK_COLUMNS = [
     ("patches", "patches", "g"), ("size", "cp/side", "g"), ("gap", "gap", "e"),
     ("gap_relative", "gap/diag", "e"), ("seam_median", "seam med", "a"),
     ("seam_p99", "seam p99", "a"), ("seam_max", "seam max", "t"),
-    ("corner_regular_max", "reg corner", "a"), ("corner_irregular_max", "irr corner", "a"),
+    ("crease_seams", "crease seams", "g"), ("crease_min", "crease min", "t"),
+    ("crease_max", "crease max", "t"), ("corner_regular_max", "reg corner", "a"),
+    ("corner_irregular_max", "irr corner", "a"),
     ("flipped", "flip %", "%"), ("area_ratio", "area/true", "g"), ("c2s_fit", "c2s fit", "g"),
     ("c2s_truth", "c2s truth", "g"), ("c2s_ratio", "c2s ratio", "a"),
     ("s2t_sigma", "s2t/sigma", "a"), ("mesh_s", "mesh s", "t"),

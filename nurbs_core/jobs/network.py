@@ -115,7 +115,13 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
           f"{quality.diagonal:.6g}); {shape}")
     print(f"seam angle: median {seam.median:.3f}, 99th percentile {seam.p99:.3f}, max "
           f"{seam.max:.3f} degrees; corners: regular max {seam.regular_corner_max:.3f}, "
-          f"irregular max {seam.irregular_corner_max:.3f} degrees")
+          f"irregular max {seam.irregular_corner_max:.3f} degrees"
+          + (f" (tangent-continuous seams); {seam.crease_text()} on the scan's creases"
+             if seam.crease_seams else ""))
+    creases = result.creases
+    if creases is not None and len(creases) and not seam.crease_seams:
+        print(f"creases: the scan has {creases.count} sharp edges ({creases.angles.min():.0f}-"
+              f"{creases.angles.max():.0f} degrees) no layout followed: patches round them")
     print(f"point-to-surface distance: mean {quality.c2s_mean:.6g}, rms {quality.c2s_rms:.6g}, "
           f"99th percentile {quality.c2s_p99:.6g}")
     print(f"surface-to-cloud distance: mean {quality.s2c_mean:.6g}, 99th percentile "
@@ -150,7 +156,10 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
                              "patches"),
                    ("patches", f"{quality.patches} ({quality.size} x {quality.size} control "
                                "points each, bicubic)"),
-                   ("seam angle", f"99th percentile {seam.p99:.2f}, max {seam.max:.2f} degrees"),
+                   ("seam angle", f"99th percentile {seam.p99:.2f}, max {seam.max:.2f} degrees"
+                                  + (" (tangent-continuous seams)" if seam.crease_seams else "")),
+                   *([("crease seams", f"{seam.crease_text()} on the scan's creases")]
+                     if seam.crease_seams else []),
                    ("largest seam gap", f"{seam.gap:.3g}"),
                    ("flipped area", f"{quality.flipped_fraction:.2%}"),
                    ("surface far from every point", f"{quality.far_fraction:.2%}"),
@@ -165,7 +174,9 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
                    "fit_seconds": sum(result.timings.values()), "closed": result.network.closed,
                    "gap": seam.gap, "gap_relative": quality.gap_relative,
                    "diagonal": quality.diagonal, "seam_median": seam.median, "seam_p99": seam.p99,
-                   "seam_max": seam.max, "mean": quality.c2s_mean, "rms": quality.c2s_rms,
+                   "seam_max": seam.max, "crease_seams": seam.crease_seams,
+                   "crease_angle_min": seam.crease_min, "crease_angle_max": seam.crease_max,
+                   "mean": quality.c2s_mean, "rms": quality.c2s_rms,
                    "p99": quality.c2s_p99, "s2c_mean": quality.s2c_mean,
                    "flipped_fraction": quality.flipped_fraction, "area": quality.area,
                    "volume": quality.volume, "warnings": list(result.warnings)})

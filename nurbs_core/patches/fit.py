@@ -20,7 +20,9 @@ with S_k = S(patch_k, u_k, v_k) and n_k its unit normal:
   normals at the previous pass (made orthogonal to the edge). At a layout vertex, every patch's
   two corner derivatives must lie in the plane of the mean normal of all patches there, which
   is G1 at corners where 3, 5 or more patches meet, without the collapse a C1 condition forces
-  there. Each row is scaled so its residual is about the sine of the angle it measures.
+  there. Each row is scaled so its residual is about the sine of the angle it measures. An
+  edge on a crease of the scan (``creases``, :mod:`nurbs_core.patches.crease_layout`) and the
+  corners at its ends have no such rows: the network is G0 there, its tangents free.
 
 It couples x, y and z, so the normal equations are one sparse (3K, 3K) system. Then every point
 moves to its foot point on the new network (Gauss-Newton from where it was, and the nearest of a
@@ -139,14 +141,15 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
                 reference: np.ndarray, *, size: int | None = None, stiffness: float = STIFFNESS,
                 seam_weight: float = SEAM_WEIGHT, tolerance: float | None = None,
                 max_size: int = SIZES[-1], passes_per_grid: int = PASSES_PER_GRID,
-                noise: float | None = None,
-                border: np.ndarray | None = None) -> Iterator[NetworkPass]:
+                noise: float | None = None, border: np.ndarray | None = None,
+                creases: frozenset[tuple[int, int]] = frozenset()) -> Iterator[NetworkPass]:
     """Fit a network over the layout (``vertices`` (V, 3), ``quads`` (P, 4)) to ``points``
     (N, 3), passes as they finish; the last has ``done``. ``reference`` (M, 3): points of the
     scan's mesh for the wrap passes. ``size``: control points per patch side (None: grow while
     Cp falls, from 6); ``tolerance``: grow until the RMS distance is below it (cloud units);
     ``border`` (B, 3): points along the scan's border, densely (an open network's free sides
-    are drawn to them)."""
+    are drawn to them); ``creases``: layout edges (lower, higher vertex) on a crease of the
+    scan, left G0 (no tangent rows along them, none at their ends' corners)."""
     points = np.asarray(points, np.float64)
     lo, hi = points.min(axis=0), points.max(axis=0)
     frame = _Frame(0.5 * (lo + hi), float(np.linalg.norm(hi - lo)) or 1.0)
@@ -162,7 +165,7 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
         fits = [s for s in SIZES if s <= max_size and control_count(quads, s) <= budget]
         first = max([s for s in fits if s <= START_SIZE], default=SIZES[0])
         sizes = [s for s in SIZES if first <= s <= max_size] or [first]
-    network = build_network(frame.inward(vertices), quads, size=sizes[0])
+    network = build_network(frame.inward(vertices), quads, size=sizes[0], creases=creases)
     solver = _Solver(stiffness, seam_weight,
                      None if border is None or not len(border) else frame.inward(border))
     count = 0
@@ -298,7 +301,8 @@ def _reassign(network: PatchNetwork, q: np.ndarray, patch: np.ndarray,
 
 def _resized(network: PatchNetwork, size: int) -> PatchNetwork:
     """The network with ``size`` control points per side, fitted to its present shape."""
-    bigger = build_network(network.vertices, network.quads, size=size, degree=network.degree)
+    bigger = build_network(network.vertices, network.quads, size=size, degree=network.degree,
+                           creases=network.creases)
     patches, uv = grid_samples(bigger, 3 * size)
     s, _, _ = evaluate(network, patches, uv[:, 0], uv[:, 1])
     a = rows(bigger, patches, uv[:, 0], uv[:, 1])
@@ -426,18 +430,22 @@ def _cross_direction(side: str) -> tuple[str, str]:
 
 def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarray, np.ndarray]:
     """The linearised G1 rows (R, 3K) and their targets (R,) at the network's present shape
-    (see the module docstring), and the seam angles (degrees) at their edge samples (S,)."""
+    (see the module docstring), and the seam angles (degrees) at their edge samples (S,).
+    Edges on a crease of the scan (``network.creases``) have none, nor do the corners at their
+    ends: there the network is G0 only."""
     k = len(network.control_points)
     m = SEAM_SAMPLES * network.size
     t = (np.arange(m) + 0.5) / m
     blocks, targets, angles = [], [], np.zeros(0)
-    if network.edges:
-        pa, uva, pb, uvb = network.seam_samples(t)
+    smooth = ~network.crease_mask()
+    if smooth.any():
+        keep = np.repeat(smooth, m)
+        pa, uva, pb, uvb = (x[keep] for x in network.seam_samples(t))
         _, sua, sva = evaluate(network, pa, uva[:, 0], uva[:, 1])
         _, sub, svb = evaluate(network, pb, uvb[:, 0], uvb[:, 1])
         na, nb = unit(np.cross(sua, sva)), unit(np.cross(sub, svb))
-        cross_u_a = np.repeat([e.side_a in ("u0", "u1") for e in network.edges], m)
-        cross_u_b = np.repeat([e.side_b in ("u0", "u1") for e in network.edges], m)
+        cross_u_a = np.repeat([e.side_a in ("u0", "u1") for e in network.edges], m)[keep]
+        cross_u_b = np.repeat([e.side_b in ("u0", "u1") for e in network.edges], m)[keep]
         tangent = unit(np.where(cross_u_a[:, None], sva, sua))
         normal = unit(na + nb)
         normal = unit(normal - (normal * tangent).sum(1, keepdims=True) * tangent)
@@ -461,12 +469,16 @@ def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarra
     # vertex's mean normal (a full target, not only "in the plane": that one is also met by a
     # derivative shrinking to nothing, which folds the corner)
     patch_of, corner_uv, vertex = network.corner_samples()
-    _, su, sv = evaluate(network, patch_of, corner_uv[:, 0], corner_uv[:, 1])
-    normal, sv = _unfolded_corners(len(network.vertices), vertex, su, sv)
-    for direction, derivative in (("u", su), ("v", sv)):
-        g, h = _projection_rows(network, patch_of, corner_uv, direction, derivative, normal)
-        blocks.append(g)
-        targets.append(h)
+    if network.creases:
+        free = ~network.crease_vertices()[vertex]
+        patch_of, corner_uv, vertex = patch_of[free], corner_uv[free], vertex[free]
+    if len(patch_of):
+        _, su, sv = evaluate(network, patch_of, corner_uv[:, 0], corner_uv[:, 1])
+        normal, sv = _unfolded_corners(len(network.vertices), vertex, su, sv)
+        for direction, derivative in (("u", su), ("v", sv)):
+            g, h = _projection_rows(network, patch_of, corner_uv, direction, derivative, normal)
+            blocks.append(g)
+            targets.append(h)
     values = np.concatenate(targets) if targets else np.zeros(0)
     g = scipy.sparse.vstack(blocks, format="csr") if blocks else scipy.sparse.csr_matrix((0, 3 * k))
     return g, values, angles

@@ -43,13 +43,16 @@ class LayoutError(ValueError):
 @dataclass
 class QuadLayout:
     """vertices (V, 3), quads (P, 4) consistently oriented (like the input mesh), valence (V,)
-    quads per vertex; target: the patch count asked for; attempts: failed tries and why."""
+    quads per vertex; target: the patch count asked for; attempts: failed tries and why;
+    creases: the edges (lower, higher vertex) that lie on a crease of the scan
+    (:mod:`nurbs_core.patches.crease_layout`)."""
 
     vertices: np.ndarray
     quads: np.ndarray
     valence: np.ndarray
     target: int
     attempts: list[str]
+    creases: frozenset[tuple[int, int]] = frozenset()
 
     @property
     def irregular(self) -> np.ndarray:
@@ -65,9 +68,11 @@ def euler_characteristic(faces: Sequence[Sequence[int]]) -> int:
 
 
 def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
-                retry: bool = True) -> QuadLayout:
+                retry: bool = True, crease_angle: float = -1.0) -> QuadLayout:
     """A quad layout of about ``patches`` quads of the triangle mesh (vertices (N, 3), faces
-    (F, 3), consistently oriented). Raises :class:`LayoutError` when no valid layout results."""
+    (F, 3), consistently oriented). ``crease_angle``: Instant Meshes aligns its fields to the
+    mesh's edges whose faces turn by more than so many degrees (negative: none). Raises
+    :class:`LayoutError` when no valid layout results."""
     import pyinstantmeshes
 
     vertices = np.asarray(vertices, np.float64)
@@ -86,7 +91,8 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
             count = max(2, int(round(patches * factor / QUADS_PER_TARGET_FACE)))
             with _silenced_stdout():
                 pyinstantmeshes.remesh_file(source, target, target_face_count=count,
-                                            pure_quad=True, deterministic=True)
+                                            pure_quad=True, deterministic=True,
+                                            crease_angle=crease_angle)
             raw_vertices, raw_faces = _read_obj(target)
             try:
                 quads_v, quads = _without_small_corners(*_clean(raw_vertices, raw_faces))
@@ -267,7 +273,13 @@ def _orient_like(vertices: np.ndarray, quads: np.ndarray, tree: cKDTree, normals
         agree = -agree
     if (agree <= 0).any():
         raise LayoutError(f"{int((agree <= 0).sum())} of {len(quads)} quads face away from the mesh")
-    # every corner of every quad turns the quad's way (no dart: a reflex corner folds the patch)
+    check_quads(vertices, quads)
+    return quads
+
+
+def check_quads(vertices: np.ndarray, quads: np.ndarray) -> None:
+    """Raise :class:`LayoutError` when a quad (P, 4) of the layout (V, 3) has a reflex corner:
+    every corner must turn the quad's way (a dart folds its patch)."""
     corners = vertices[quads]
     n = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
     turns = np.cross(np.roll(corners, -1, axis=1) - corners, np.roll(corners, 1, axis=1) - corners)
@@ -275,4 +287,3 @@ def _orient_like(vertices: np.ndarray, quads: np.ndarray, tree: cKDTree, normals
     if reflex.any():
         raise LayoutError(f"{int(reflex.any(axis=1).sum())} of {len(quads)} quads have a reflex "
                           "corner")
-    return quads

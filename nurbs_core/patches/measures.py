@@ -3,9 +3,11 @@
 * **gap**: the largest distance between the two patches' points along each shared edge (the
   same boundary curve evaluated from both sides; 0 up to rounding when control points are shared);
 * **seam angle**: the angle between the two patches' unit normals at samples along every shared
-  edge (corners excluded); **corner angle**: at each layout vertex, the largest angle between the
-  normals of the patches meeting there, reported apart for regular (4 patches) and irregular
-  (3, 5 or more) corners;
+  edge meant to be tangent-continuous (corners excluded); **corner angle**: at each layout
+  vertex, the largest angle between the normals of the patches meeting there, reported apart for
+  regular (4 patches) and irregular (3, 5 or more) corners. Seams on a crease of the scan
+  (``network.creases``, G0 by design) and the corners at their ends are left out of these and
+  counted apart: how many, and the range of their mean angles;
 * **flipped area**: the fraction of the area whose normal points against the reference's
   oriented normals (outward on a closed object), at Gauss points of every patch;
 * **volume**: the signed volume the network encloses (positive: normals outward).
@@ -27,7 +29,9 @@ GAUSS_POINTS = 16
 
 @dataclass
 class SeamStatistics:
-    """Seam angles (degrees) along shared edges and at corners."""
+    """Seam angles (degrees) along the tangent-continuous (G1) shared edges and at their
+    corners; the crease seams (G0 by design) apart: their count and the least and largest of
+    their mean angles."""
 
     median: float
     p99: float
@@ -36,6 +40,17 @@ class SeamStatistics:
     irregular_corner_max: float
     irregular_corner_p90: float
     gap: float
+    crease_seams: int = 0
+    crease_min: float = 0.0
+    crease_max: float = 0.0
+
+    def crease_text(self) -> str:
+        """"3 crease seams (G0), 78-92 degrees", or "" without crease seams."""
+        if not self.crease_seams:
+            return ""
+        plural = "s" if self.crease_seams != 1 else ""
+        return (f"{self.crease_seams} crease seam{plural} (G0), {self.crease_min:.0f}-"
+                f"{self.crease_max:.0f} degrees")
 
 
 @dataclass
@@ -76,8 +91,11 @@ class NetworkQuality:
 
 def seam_statistics(network: PatchNetwork, samples: int = 48) -> SeamStatistics:
     """Seam angles along every shared edge (``samples`` interior points each), corner angles and
-    the largest gap."""
+    the largest gap; the statistics over the G1 seams, the crease seams apart (see the module
+    docstring)."""
     along, gap = np.zeros(1), 0.0
+    crease = network.crease_mask() if network.edges else np.zeros(0, bool)
+    crease_means = np.zeros(0)
     if network.edges:
         # interior samples for the angles (a corner's normals are the corners' business), the
         # ends too for the gap
@@ -85,17 +103,23 @@ def seam_statistics(network: PatchNetwork, samples: int = 48) -> SeamStatistics:
         pa, uva, pb, uvb = network.seam_samples(t)
         sa, sua, sva = evaluate(network, pa, uva[:, 0], uva[:, 1])
         sb, sub, svb = evaluate(network, pb, uvb[:, 0], uvb[:, 1])
-        interior = np.tile(np.arange(len(t)) < samples, len(network.edges))
-        cos = (unit(np.cross(sua, sva)) * unit(np.cross(sub, svb))).sum(1)[interior]
-        along = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+        interior = np.arange(len(t)) < samples
+        cos = (unit(np.cross(sua, sva)) * unit(np.cross(sub, svb))).sum(1)
+        angles = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).reshape(len(network.edges), -1)
+        angles = angles[:, interior]
+        along = angles[~crease].ravel() if (~crease).any() else np.zeros(1)
+        crease_means = angles[crease].mean(axis=1)
         gap = float(np.linalg.norm(sa - sb, axis=1).max())
     corners = corner_angles(network)
-    regular = corners[network.valence == 4]
-    irregular = corners[(network.valence != 4) & (network.valence > 0)]
+    smooth = ~network.crease_vertices()
+    regular = corners[(network.valence == 4) & smooth]
+    irregular = corners[(network.valence != 4) & (network.valence > 0) & smooth]
     return SeamStatistics(float(np.median(along)), float(np.percentile(along, 99)),
                           float(along.max()), float(regular.max()) if regular.size else 0.0,
                           float(irregular.max()) if irregular.size else 0.0,
-                          float(np.percentile(irregular, 90)) if irregular.size else 0.0, gap)
+                          float(np.percentile(irregular, 90)) if irregular.size else 0.0, gap,
+                          int(crease.sum()), float(crease_means.min(initial=np.inf)) if
+                          crease_means.size else 0.0, float(crease_means.max(initial=0.0)))
 
 
 def corner_angles(network: PatchNetwork) -> np.ndarray:

@@ -80,7 +80,8 @@ class PatchNetwork:
     vertices (V, 3) layout corners; quads (P, 4) their indices per patch; control_points (K, 3)
     the global unknowns; index (P, size, size) global index of each patch's control points;
     edges: every layout edge with two patches; valence (V,) patches at each layout vertex;
-    closed: every edge has two patches."""
+    closed: every edge has two patches; creases: the layout edges (lower, higher vertex) that
+    lie on a crease of the scan (:mod:`nurbs_core.patches.crease_layout`), left G0 by the fit."""
 
     vertices: np.ndarray
     quads: np.ndarray
@@ -92,6 +93,7 @@ class PatchNetwork:
     valence: np.ndarray
     closed: bool
     info: dict = field(default_factory=dict)
+    creases: frozenset[tuple[int, int]] = field(default_factory=frozenset)
 
     @property
     def patch_count(self) -> int:
@@ -125,7 +127,19 @@ class PatchNetwork:
     def adjacency(self) -> list[dict]:
         """The shared edges as plain dictionaries (for files)."""
         return [{"patches": [e.a, e.b], "sides": [e.side_a, e.side_b], "reversed": e.reversed,
-                 "vertices": list(e.vertices)} for e in self.edges]
+                 "vertices": list(e.vertices), "crease": e.vertices in self.creases}
+                for e in self.edges]
+
+    def crease_mask(self) -> np.ndarray:
+        """(E,) whether each shared edge lies on a crease (G0 there)."""
+        return np.array([e.vertices in self.creases for e in self.edges], bool)
+
+    def crease_vertices(self) -> np.ndarray:
+        """(V,) whether each layout vertex ends a crease edge (its corner is not G1)."""
+        out = np.zeros(len(self.vertices), bool)
+        for a, b in self.creases:
+            out[[a, b]] = True
+        return out
 
     def seam_samples(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The same points of every shared edge seen from both patches, at side parameters t
@@ -169,13 +183,15 @@ class PatchNetwork:
         if c.shape != self.control_points.shape:
             raise ValueError(f"expected control points {self.control_points.shape}, got {c.shape}")
         return PatchNetwork(self.vertices, self.quads, self.degree, self.size, c, self.index,
-                            self.edges, self.valence, self.closed, dict(self.info))
+                            self.edges, self.valence, self.closed, dict(self.info), self.creases)
 
 
 def build_network(vertices: np.ndarray, quads: np.ndarray, size: int = 6,
-                  degree: int = 3) -> PatchNetwork:
+                  degree: int = 3,
+                  creases: frozenset[tuple[int, int]] = frozenset()) -> PatchNetwork:
     """The network over layout ``quads`` (P, 4) with corners ``vertices`` (V, 3), each patch
-    ``size x size`` control points placed bilinearly in its quad (a start for the fit).
+    ``size x size`` control points placed bilinearly in its quad (a start for the fit);
+    ``creases``: the shared edges (lower, higher vertex) that lie on a crease of the scan.
 
     Raises ValueError for an edge shared by more than two quads or used twice in the same
     direction (the layout is not an oriented manifold), or for a size the degree cannot take."""
@@ -237,7 +253,12 @@ def build_network(vertices: np.ndarray, quads: np.ndarray, size: int = 6,
     _check_orientation(quads, uses)
     valence = np.bincount(quads.ravel(), minlength=len(vertices))
     control = _bilinear_start(vertices, quads, index, size, count)
-    return PatchNetwork(vertices, quads, degree, size, control, index, edges, valence, closed)
+    known = {e.vertices for e in edges}
+    creases = frozenset((min(a, b), max(a, b)) for a, b in creases)
+    if not creases <= known:
+        raise ValueError(f"creases name edges no two patches share: {sorted(creases - known)[:5]}")
+    return PatchNetwork(vertices, quads, degree, size, control, index, edges, valence, closed,
+                        creases=creases)
 
 
 def _check_orientation(quads: np.ndarray, uses: dict) -> None:

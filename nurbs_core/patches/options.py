@@ -36,7 +36,9 @@ class PatchOptions:
     fairing weight relative to the data term; seam_weight: of tangent continuity; tolerance: RMS
     distance to reach (cloud units, None: automatic); max_size: largest control grid per side;
     max_hole: the widest opening of the scan sealed by a smooth cap (cloud units; None: 10% of
-    the diagonal; 0: none). Immutable: ``dataclasses.replace`` makes an edited copy."""
+    the diagonal; 0: none); creases: find the scan's creases and lay patch boundaries on them,
+    left G0 (:mod:`nurbs_core.patches.creases`). Immutable: ``dataclasses.replace`` makes an
+    edited copy."""
 
     patches: int | str = "auto"
     size: int | None = None
@@ -46,6 +48,7 @@ class PatchOptions:
     tolerance: float | None = None
     max_size: int = 16
     max_hole: float | None = None
+    creases: bool = True
 
     def validate(self) -> None:
         """Raise ValueError naming the first bad setting."""
@@ -71,6 +74,8 @@ class PatchOptions:
         if self.tolerance is not None and not (math.isfinite(self.tolerance)
                                                and self.tolerance > 0):
             raise ValueError(f"tolerance must be positive, got {self.tolerance!r}")
+        if not isinstance(self.creases, bool):
+            raise ValueError(f"creases must be true or false, got {self.creases!r}")
         if self.max_hole is not None and not (isinstance(self.max_hole, (int, float))
                                               and math.isfinite(self.max_hole)
                                               and self.max_hole >= 0):
