@@ -20,13 +20,15 @@ Our JSON (``"format": "nurbs-studio-network-v1"``)::
      "degree": p, "size": n, "knots": [n + p + 1],
      "layout": {"vertices": V x 3, "quads": P x 4},
      "control_points": K x 3, "index": P x n x n (into control_points),
-     "valence": [V], "closed": bool, "adjacency": [{"patches", "sides", "reversed", "vertices"}],
+     "valence": [V], "closed": bool,
+     "adjacency": [{"patches", "sides", "reversed", "vertices", "crease"}],
      "patches": [{"degree_u", "degree_v", "knots_u", "knots_v", "control_points": n x n x 3,
                   "weights": n x n}]}
 
 ``patches`` repeats each patch's surface for other readers. Floats are written with Python's
 shortest round-trip repr, so float64 values come back bit-exactly. On reading, the network is
-rebuilt from the layout and every derived field is checked against it.
+rebuilt from the layout and every derived field is checked against it. ``crease`` marks a
+seam on a crease of the scan (G0 there; absent in files from before creases: false).
 """
 
 from __future__ import annotations
@@ -193,7 +195,8 @@ def _network_from(path: StrPath, document: object) -> PatchNetwork:
         raise FileFormatError(path, f"layout.quads must index the {len(vertices)} layout "
                                     "vertices (and not be empty)")
     try:
-        network = build_network(vertices, quads, size=size, degree=degree)
+        network = build_network(vertices, quads, size=size, degree=degree,
+                                creases=_creases(path, document.get("adjacency")))
     except ValueError as exc:
         raise FileFormatError(path, f"invalid layout: {exc}") from None
     control = _array(path, document, "control_points", network.control_points.shape, np.float64)
@@ -211,6 +214,25 @@ def _network_from(path: StrPath, document: object) -> PatchNetwork:
     return network
 
 
+def _creases(path: StrPath, adjacency: object) -> frozenset[tuple[int, int]]:
+    """The shared edges (lower, higher vertex) the file marks ``"crease": true`` (G0 seams on
+    the scan's creases); files from before creases mark none."""
+    if not isinstance(adjacency, list) or not all(isinstance(e, dict) for e in adjacency):
+        raise FileFormatError(path, "adjacency must be a list of objects")
+    creases = set()
+    for k, edge in enumerate(adjacency):
+        flag = edge.get("crease", False)
+        if not isinstance(flag, bool):
+            raise FileFormatError(path, f"adjacency[{k}].crease must be true or false")
+        vertices = edge.get("vertices")
+        if flag:
+            if (not isinstance(vertices, list) or len(vertices) != 2
+                    or not all(isinstance(v, int) and not isinstance(v, bool) for v in vertices)):
+                raise FileFormatError(path, f"adjacency[{k}].vertices must be two vertex indices")
+            creases.add((min(vertices), max(vertices)))
+    return frozenset(creases)
+
+
 def _check_derived(path: StrPath, document: dict[str, Any], network: PatchNetwork) -> None:
     """The redundant fields (knots, valence, closed, adjacency, patches) agree with the network
     rebuilt from the layout and control points."""
@@ -224,7 +246,8 @@ def _check_derived(path: StrPath, document: dict[str, Any], network: PatchNetwor
         raise FileFormatError(path, "valence does not match the layout")
     if document.get("closed") is not bool(network.closed):
         raise FileFormatError(path, f"closed must be {bool(network.closed)} for this layout")
-    if document.get("adjacency") != network.adjacency():
+    written = [{"crease": False, **edge} for edge in document["adjacency"]]  # checked a list
+    if written != network.adjacency():
         raise FileFormatError(path, "adjacency does not match the layout")
     patches = document.get("patches")
     if not isinstance(patches, list) or len(patches) != network.patch_count:

@@ -78,6 +78,28 @@ def test_json_round_trip_is_exact(tmp_path, ball):
         assert np.array_equal(ours["control_points"], theirs["control_points"])
 
 
+def test_crease_seams_round_trip_and_files_from_before_creases_still_read(tmp_path):
+    """The cube's edges as creases (G0 seams): written with ``"crease": true`` on those shared
+    edges and read back as the same creases; a file without the flag (written before creases
+    existed) reads as a network with none; a flag that is not a boolean is refused."""
+    creases = frozenset({(0, 1), (4, 6), (3, 7)})
+    network = build_network(CUBE_VERTICES, CUBE_QUADS, size=5, creases=creases)
+    path = tmp_path / "box.json"
+    write_network(network, path)
+    document = json.loads(path.read_text())
+    assert sum(edge["crease"] for edge in document["adjacency"]) == 3
+    back = read_network(path)
+    assert back.creases == creases and back.adjacency() == network.adjacency()
+    for edge in document["adjacency"]:
+        del edge["crease"]
+    path.write_text(json.dumps(document))
+    assert read_network(path).creases == frozenset()
+    document["adjacency"][0]["crease"] = "yes"
+    path.write_text(json.dumps(document))
+    with pytest.raises(FileFormatError, match=r"adjacency\[0\].crease must be true or false"):
+        read_network(path)
+
+
 def _edit(document: dict, change: str) -> None:
     if change == "no control points":
         del document["control_points"]
