@@ -22,12 +22,16 @@ from nurbs_core.knot_vectors import uniform
 #: turns by 23 degrees over that window; a rectangle's corner by 90).
 CORNER_ANGLE = 50.0
 CORNER_WINDOW = 4.0
+#: outline points this many spacings from a corner are left to the corner point
+CORNER_GAP = 1.5
 #: knot spans of about SPAN_SPACINGS point spacings; the penalty on second differences of the
 #: control points, relative to the data term
-SPAN_SPACINGS = 3.0
-SMOOTHING = 1e-3
-#: refits to the points on or outside the previous loop (see :func:`fit_loop`)
-ENVELOPE_ROUNDS = 2
+SPAN_SPACINGS = 5.0
+SMOOTHING = 0.1
+#: refits weighting the points outside the previous loop EXPECTILE, inside 1 - EXPECTILE
+#: (see :func:`fit_loop`)
+ENVELOPE_ROUNDS = 8
+EXPECTILE = 0.99
 DEGREE = 3
 
 
@@ -83,19 +87,16 @@ def _line(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre, direction
 
 
-def corner_point(points: np.ndarray, index: int, spacing: float,
-                 keep: np.ndarray | None = None) -> np.ndarray:
+def corner_point(points: np.ndarray, index: int, spacing: float) -> np.ndarray:
     """The corner at vertex ``index`` of the closed polyline (L, 2): where the lines through the
     outline 1.5 to 6 spacings before and after it meet (a sampled corner is cut: the true corner
     lies beyond the nearest sample), or the vertex itself when they barely meet (near-parallel
-    sides, or a meeting point farther than 3 spacings away). ``keep`` (L,): the vertices the
-    lines go through (default all)."""
+    sides, or a meeting point farther than 3 spacings away)."""
     arc = arc_lengths(points)
     total = arc[-1]
     offset = (arc[:-1] - arc[index] + 0.5 * total) % total - 0.5 * total   # signed, wrapped
-    keep = np.ones(len(points), bool) if keep is None else keep
-    before = points[(offset < -1.5 * spacing) & (offset > -6 * spacing) & keep]
-    after = points[(offset > 1.5 * spacing) & (offset < 6 * spacing) & keep]
+    before = points[(offset < -1.5 * spacing) & (offset > -6 * spacing)]
+    after = points[(offset > 1.5 * spacing) & (offset < 6 * spacing)]
     vertex = points[index]
     if len(before) < 2 or len(after) < 2:
         return vertex
@@ -110,12 +111,13 @@ def corner_point(points: np.ndarray, index: int, spacing: float,
 
 def fit_segment(points: np.ndarray, count: int, *, start: np.ndarray | None = None,
                 end: np.ndarray | None = None, closed: bool = False,
-                smoothing: float = SMOOTHING) -> CurveArrays:
+                smoothing: float = SMOOTHING, weights: np.ndarray | None = None) -> CurveArrays:
     """A clamped cubic B-spline (count control points, uniform knots on [0, 1]) through the
     polyline points (M, d) at their chord-length parameters, by least squares with a penalty
     ``smoothing`` on the control points' second differences. ``start`` / ``end`` (d,) pin its
     end points; ``closed``: the curve ends where it starts with the same first derivative (the
-    equal end spans of uniform knots make that P_1 - P_0 = P_{n-1} - P_{n-2})."""
+    equal end spans of uniform knots make that P_1 - P_0 = P_{n-1} - P_{n-2}); ``weights``
+    (M,): each point's weight in the data term (default ones)."""
     points = np.asarray(points, np.float64)
     dim = points.shape[1]
     walk = np.concatenate([points, points[:1]]) if closed else points
@@ -126,8 +128,10 @@ def fit_segment(points: np.ndarray, count: int, *, start: np.ndarray | None = No
     count = max(int(count), DEGREE + 1 + (2 if closed else 0))
     knots = uniform(count, DEGREE)
     basis = dense_basis(knots, DEGREE, t)[0]                     # (M, count)
-    data = basis.T @ basis / len(t)
-    rhs = basis.T @ walk / len(t)
+    weight = np.ones(len(t)) if weights is None else np.asarray(weights, np.float64)
+    weight = weight / weight.sum()
+    data = basis.T @ (weight[:, None] * basis)
+    rhs = basis.T @ (weight[:, None] * walk)
     second = np.diff(np.eye(count), 2, axis=0)
     scale = np.trace(data) / max(np.trace(second.T @ second), 1e-300)
     normal = data + smoothing * scale * second.T @ second
@@ -173,29 +177,30 @@ def fit_loop(points: np.ndarray, spacing: float, *, corners: bool = True,
 
     A sampled outline zigzags between the outermost points and dents a spacing deep (the mesh's
     boundary runs through both), all inside the true edge; after the first fit, ``envelope``
-    rounds refit to the points on or outside the previous curve only, so the loop follows the
-    outermost points (the scan's extent) rather than the dents' average."""
+    rounds of asymmetric least squares (points outside the previous loop weigh EXPECTILE, those
+    inside 1 - EXPECTILE) move the loop out to the outermost points (the scan's extent) rather
+    than the dents' average."""
     points = np.asarray(points, np.float64)
     # a mesh's boundary edges are often longer than the cloud's spacing (they cut across dents)
     edges = np.linalg.norm(np.diff(np.concatenate([points, points[:1]]), axis=0), axis=1)
     spacing = max(spacing, float(np.median(edges)))
     found = find_corners(points, spacing) if corners else np.zeros(0, int)
-    keep = np.ones(len(points), bool)
-    segments = _fit_pieces(points, keep, found, spacing, span_spacings, smoothing)
+    segments = _fit_pieces(points, found, spacing, span_spacings, smoothing)
     for _ in range(envelope):
-        offset = outward_offsets(points, segments)
-        keep = offset >= 0
-        keep[found] = True
-        if keep.sum() < 8:
-            break
-        segments = _fit_pieces(points, keep, found, spacing, span_spacings, smoothing)
+        # asymmetric least squares (an expectile): the points outside the previous loop weigh
+        # EXPECTILE, those inside 1 - EXPECTILE, so the loop moves out to the outermost points
+        # while every point still holds it (dropping the inner points lets it wiggle)
+        offset, _ = outward_offsets(points, segments)
+        weights = np.where(offset > 0, EXPECTILE, 1 - EXPECTILE)
+        segments = _fit_pieces(points, found, spacing, span_spacings, smoothing, weights)
     return segments
 
 
 def outward_offsets(points: np.ndarray, segments: list[CurveArrays],
-                    per_segment: int = 400) -> np.ndarray:
-    """Signed distance (L,) of points (L, 2) to the loop ``segments``: positive to the right of
-    the loop's direction (outside a counter-clockwise loop)."""
+                    per_segment: int = 400) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distance (L,) of points (L, 2) to the loop ``segments``, positive to the right of
+    the loop's direction (outside a counter-clockwise loop), and the unit outward normals (L, 2)
+    at their nearest curve points."""
     from scipy.spatial import cKDTree
 
     from nurbs_core.evaluate_arrays import curve_points, knot_domain
@@ -209,29 +214,36 @@ def outward_offsets(points: np.ndarray, segments: list[CurveArrays],
     normal = np.stack([tangent[:, 1], -tangent[:, 0]], 1)
     normal /= np.linalg.norm(normal, axis=1, keepdims=True) + 1e-300
     _, nearest = cKDTree(dense).query(points)
-    return ((points - dense[nearest]) * normal[nearest]).sum(1)
+    return ((points - dense[nearest]) * normal[nearest]).sum(1), normal[nearest]
 
 
-def _fit_pieces(points: np.ndarray, keep: np.ndarray, found: np.ndarray, spacing: float,
-                span_spacings: float, smoothing: float) -> list[CurveArrays]:
-    """One fit of the loop to the kept points (corner vertices always kept)."""
+def _fit_pieces(points: np.ndarray, found: np.ndarray, spacing: float,
+                span_spacings: float, smoothing: float,
+                weights: np.ndarray | None = None) -> list[CurveArrays]:
+    """One fit of the loop to the points (weighted by ``weights`` (L,) when given), split at the
+    corners ``found``."""
+    weights = np.ones(len(points)) if weights is None else weights
     total = arc_lengths(points)[-1]
     if len(found) == 0:
         count = int(round(total / (span_spacings * spacing))) + DEGREE
-        return [fit_segment(points[keep], count, closed=True, smoothing=smoothing)]
-    tips = [corner_point(points, int(index), spacing, keep) for index in found]
+        return [fit_segment(points, count, closed=True, smoothing=smoothing, weights=weights)]
+    tips = [corner_point(points, int(index), spacing) for index in found]
     segments = []
     for k, first in enumerate(found):
         last = found[(k + 1) % len(found)]
         stretch = np.r_[first:last + 1] if last > first else \
             np.r_[first:len(points), 0:last + 1]
-        inner = stretch[1:-1][keep[stretch[1:-1]]]
-        # the corner's own (cut) vertex is replaced by the corner point at both ends
+        # the corner's own (cut) vertex and its neighbours within CORNER_GAP spacings give way
+        # to the corner point at both ends (they would bend the segment into a fishtail there)
+        along = arc_lengths(points[stretch], closed=False)
+        near = (along < CORNER_GAP * spacing) | (along > along[-1] - CORNER_GAP * spacing)
+        inner = stretch[1:-1][~near[1:-1]]
         end = tips[(k + 1) % len(found)]
         polyline = np.concatenate([tips[k][None], points[inner], end[None]])
         length = arc_lengths(points[stretch], closed=False)[-1]
         count = min(int(round(length / (span_spacings * spacing))) + DEGREE,
                     max(len(polyline) // 2, DEGREE + 1))
-        segments.append(fit_segment(polyline, count, start=tips[k], end=end,
-                                    smoothing=smoothing))
+        segments.append(fit_segment(polyline, count, start=tips[k], end=end, smoothing=smoothing,
+                                    weights=np.r_[weights[inner].mean(), weights[inner],
+                                                  weights[inner].mean()]))
     return segments
