@@ -98,7 +98,8 @@ def load_any(path: StrPath, **point_options: Any) -> PointCloud | list[NurbsCurv
                                 f"{', '.join(sorted(set(NURBS_SUFFIXES + POINT_CLOUD_SUFFIXES)))}")
 
 
-def save(geometry_or_list: GeometryInput | PatchNetwork | TrimmedSurface, path: StrPath, **options: Any) -> None:
+def save(geometry_or_list: GeometryInput | PatchNetwork | TrimmedSurface, path: StrPath,
+         **options: Any) -> None:
     """Write one NurbsCurve / NurbsSurface or a list of them; the suffix picks the format.
 
     Curves have control points (*B, n, d) with d 2 or 3, surfaces (*B, n_u, n_v, 3); a batch

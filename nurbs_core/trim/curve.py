@@ -24,6 +24,8 @@ CORNER_ANGLE = 50.0
 CORNER_WINDOW = 4.0
 #: outline points this many spacings from a corner are left to the corner point
 CORNER_GAP = 1.5
+#: ... and turns by at least CONCENTRATED of that over half the window
+CONCENTRATED = 0.6
 #: knot spans of about SPAN_SPACINGS point spacings; the penalty on second differences of the
 #: control points, relative to the data term
 SPAN_SPACINGS = 5.0
@@ -50,27 +52,32 @@ def _at(points: np.ndarray, arc: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 
 def turning_angles(points: np.ndarray, window: float) -> np.ndarray:
-    """Turning angle (L,) in degrees at every vertex of the closed polyline (L, 2), between the
-    chords to the points ``window`` (arc length) before and after it."""
+    """Signed turning angle (L,) in degrees at every vertex of the closed polyline (L, 2),
+    between the chords to the points ``window`` (arc length) before and after it: positive
+    turning left (counter-clockwise)."""
     arc = arc_lengths(points)
     s = arc[:-1]
     before = points - _at(points, arc, s - window)
     after = _at(points, arc, s + window) - points
-    cos = (before * after).sum(1) / (np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1)
-                                     + 1e-300)
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
+    return np.degrees(np.arctan2(cross, (before * after).sum(1)))
 
 
 def find_corners(points: np.ndarray, spacing: float, angle: float = CORNER_ANGLE) -> np.ndarray:
-    """Indices (K,) of the corners of the closed polyline (L, 2), in order: vertices turning by
-    more than ``angle`` degrees over CORNER_WINDOW spacings, the sharpest in each
-    2 x CORNER_WINDOW stretch of arc length."""
+    """Indices (K,) of the convex corners of the counter-clockwise closed polyline (L, 2), in
+    order: vertices turning left by more than ``angle`` degrees over CORNER_WINDOW spacings (and
+    by CONCENTRATED of that over half of it), the sharpest in each 2 x CORNER_WINDOW stretch of
+    arc length. Right turns are not corners: on a sampled outline they are dents between
+    samples (a notch turns right at its bottom), so a concave corner is rounded instead."""
     window = CORNER_WINDOW * spacing
     arc = arc_lengths(points)
     if arc[-1] < 8 * window:
         return np.zeros(0, int)
     turn = turning_angles(points, window)
-    candidates = np.flatnonzero(turn > angle)
+    # a corner turns at one place: over half the window it turns nearly as much (a round
+    # stretch, a small hole's outline, turns half as much over half the window)
+    half = turning_angles(points, 0.5 * window)
+    candidates = np.flatnonzero((turn > angle) & (half > CONCENTRATED * turn))
     kept: list[int] = []
     for index in candidates[np.argsort(-turn[candidates])]:
         gap = np.abs(arc[index] - arc[np.asarray(kept, int)])

@@ -84,7 +84,8 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
     loops = []
     for outline in loops_found:
         # fitted in isotropic coordinates: uv * size has the plane's lengths
-        segments = fit_loop(outline.uv * size, fit.spacing)
+        # holes are smooth loops: their corners cannot be told from dents (both turn right)
+        segments = fit_loop(outline.uv * size, fit.spacing, corners=outline.outer)
         loops.append(TrimLoop(tuple(_scaled(s, 1 / size) for s in segments), outline.outer))
     trimmed = TrimmedSurface(surface, tuple(loops))
     trimmed.validate()
