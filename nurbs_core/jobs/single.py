@@ -299,7 +299,9 @@ def fit_trimmed_job(job: FitJob, points: np.ndarray | None = None) -> dict[str, 
           f"max {stats['max']:.6g}  (tolerance {stats['tolerance']:.4g})")
     print(f"trimmed area {stats['trimmed_area']:.6g} of the untrimmed patch's "
           f"{stats['untrimmed_area']:.6g} ({stats['area_ratio']:.1%}); "
-          f"{int(stats['corners'])} corner(s), {int(stats['inner_loops'])} hole(s)")
+          f"{int(stats['corners'])} corner(s), {int(stats['inner_loops'])} hole(s); the surface "
+          f"beyond the trim leaves its tangent planes there by at most "
+          f"{stats['extension_height']:.4g}")
     print(f"trim curve to the scan's outline: max {stats['trim_max_deviation']:.4g}, 95% "
           f"{stats['trim_p95_deviation']:.4g}; outline points to the trim: max "
           f"{stats['outline_max_deviation']:.4g} (point spacing {stats['spacing']:.4g})")

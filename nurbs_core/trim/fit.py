@@ -29,7 +29,12 @@ from nurbs_core.surfacing.fairing import energy, fairing_matrices
 from nurbs_core.surfacing.mesh import cloud_mesh
 from nurbs_core.trim.curve import fit_loop
 from nurbs_core.trim.extended import extended_fit
-from nurbs_core.trim.measures import areas, distances_to_polylines, trim_curves_3d
+from nurbs_core.trim.measures import (
+    areas,
+    distances_to_polylines,
+    extension_height,
+    trim_curves_3d,
+)
 from nurbs_core.trim.outline import mesh_loops, outlines
 from nurbs_core.trim.value import TrimLoop, TrimmedSurface
 
@@ -44,7 +49,9 @@ class TrimmedFit:
     ``max`` (points to the surface), ``trimmed_area``, ``untrimmed_area``, ``area_ratio``
     (trimmed / untrimmed), ``trim_max_deviation`` and ``trim_p95_deviation`` (outline points
     to the trim curve on the surface), ``tolerance``, ``noise``, ``spacing``, ``inner_loops``,
-    ``corners`` (of the outer loop), ``bending`` (the fairing energy, normalised units) and
+    ``corners`` (of the outer loop), ``extension_height`` (how far the surface beyond the trim
+    leaves the tangent planes at the trim: :func:`~nurbs_core.trim.measures.extension_height`),
+    ``bending`` (the fairing energy, normalised units) and
     ``elapsed`` seconds: ``trim_*_deviation`` measure the trim curve on the surface to the
     outline polyline, ``outline_max_deviation`` the outline's points to the trim (the dents of a
     sampled outline lie up to a spacing or two inside it); ``outline`` the outer outline (L, 3)
@@ -116,6 +123,7 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
              "tolerance": fit.tolerance * scale, "noise": fit.noise * scale,
              "spacing": fit.spacing * scale, "inner_loops": float(len(loops) - 1),
              "corners": float(len(loops[0].segments)) if len(loops[0].segments) > 1 else 0.0,
+             "extension_height": extension_height(in_input),
              "bending": float(energy((thin_plate + 0.1 * membrane).tocsc(),
                                      surface.control_points)),
              "elapsed": time.perf_counter() - started}

@@ -83,3 +83,23 @@ def trimmed_mesh(trimmed: TrimmedSurface, resolution: int = 128
     faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     used, faces = np.unique(faces, return_inverse=True)
     return vertices[used], faces.reshape(-1, 3)
+
+
+def extension_height(trimmed: TrimmedSurface, density: int = 120) -> float:
+    """How far the surface beyond the trim leaves the tangent planes at the trim: the largest
+    distance of a surface sample outside the trim (a density x density grid) from the tangent
+    plane at its nearest trim point (a surface continuing smoothly rises by about half its
+    curvature times the squared distance; a curled or wild extension by much more)."""
+    (u0, u1), (v0, v1) = surface_domain(trimmed.surface)
+    u, v = np.linspace(u0, u1, density), np.linspace(v0, v1, density)
+    outside = ~inside_grid(loop_polygons(trimmed), u, v)
+    if not outside.any():
+        return 0.0
+    i, j = np.nonzero(outside)
+    samples = surface_points(trimmed.surface, u[i], v[j])
+    boundary = np.concatenate(loop_polygons(trimmed))
+    point, s_u, s_v = surface_derivatives(trimmed.surface, boundary[:, 0], boundary[:, 1])
+    normal = np.cross(s_u, s_v)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True) + 1e-300
+    _, nearest = cKDTree(point).query(samples)
+    return float(np.abs(((samples - point[nearest]) * normal[nearest]).sum(1)).max())

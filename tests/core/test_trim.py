@@ -167,6 +167,10 @@ def test_step_reads_back_as_one_valid_face_with_the_true_area_and_outline(kind, 
     assert np.median(distance) < 0.5 * stats["tolerance"]
     assert np.quantile(distance, 0.9) < 2 * stats["tolerance"]
     assert distance.max() < 8 * stats["spacing"]
+    # the surface beyond the trim continues smoothly (no wild extrapolation into the margin)
+    diagonal = np.linalg.norm(np.ptp(outline, axis=0))
+    print(f"{kind}: extension height {stats['extension_height']:.4f} (diagonal {diagonal:.3f})")
+    assert stats["extension_height"] < 0.02 * diagonal
 
 
 def test_a_hole_becomes_an_inner_loop_in_step_and_iges(fits, tmp_path):
