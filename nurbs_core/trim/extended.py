@@ -20,6 +20,7 @@ import numpy as np
 
 from nurbs_core.fitting.config import FitConfig, StopToken
 from nurbs_core.fitting.principal import principal_axes
+from nurbs_core.fitting.sheet import PASS_POINTS
 from nurbs_core.geometry_arrays import SurfaceArrays
 from nurbs_core.surfacing.core import LeastSquaresCore
 from nurbs_core.surfacing.mesh import median_spacing
@@ -53,8 +54,9 @@ class PlaneFrame:
 @dataclass
 class ExtendedFit:
     """The core's surface over the extended domain (normalised units), every fitted point's foot
-    parameters (N, 2) and distance (N,), the plane frame, and the measures the core used
-    (tolerance, noise, spacing: normalised), its last message."""
+    parameters (M, 2) and distance (M,) (M: the ``subset`` fitted, or all N points), the plane
+    frame, and the measures the core used (tolerance, noise, spacing: normalised), its last
+    message."""
 
     surface: SurfaceArrays
     parameters: np.ndarray
@@ -65,6 +67,8 @@ class ExtendedFit:
     spacing: float
     message: str
     grid: tuple[int, int]
+    #: the points the passes fitted (a seeded random subset of a large cloud), None: all
+    subset: np.ndarray | None = None
 
 
 def plane_frame(points: np.ndarray, spacing: float) -> PlaneFrame:
@@ -83,8 +87,13 @@ def extended_fit(points: np.ndarray, config: FitConfig, stop: StopToken | None =
     """The surface under the trim (module docstring) for normalised points (N, 3), with the
     degrees, stiffness, grid bounds and tolerance of ``config`` (its tolerance already in
     normalised units when given: the caller divides by the cloud's scale)."""
+    subset = None
+    if len(points) > PASS_POINTS:    # the passes on a seeded random subset, as the sheet route
+        subset = np.sort(np.random.default_rng(config.seed).choice(len(points), PASS_POINTS,
+                                                                   replace=False))
+    frame = plane_frame(points, median_spacing(points))
+    points = points if subset is None else points[subset]
     spacing = median_spacing(points)
-    frame = plane_frame(points, spacing)
     parameters = frame.parameters(points)
     noise = estimate_noise(points, seed=config.seed)
     tolerance = config.tolerance if config.tolerance is not None else \
@@ -105,4 +114,4 @@ def extended_fit(points: np.ndarray, config: FitConfig, stop: StopToken | None =
             break
     assert last is not None, "the core runs at least one pass"
     return ExtendedFit(last.geometry, last.parameters, last.distances, frame, tolerance, noise,
-                       spacing, last.message or "", last.grid)
+                       spacing, last.message or "", last.grid, subset)

@@ -23,10 +23,10 @@ from numpy.typing import ArrayLike
 from nurbs_core.fitting.config import FitConfig, StopToken
 from nurbs_core.fitting.foot_points import gauss_newton_steps
 from nurbs_core.fitting.normalised import normalise
-from nurbs_core.fitting.sheet import is_height_field
+from nurbs_core.fitting.sheet import MESH_POINTS, is_height_field
 from nurbs_core.geometry_arrays import CurveArrays, SurfaceArrays
 from nurbs_core.surfacing.fairing import energy, fairing_matrices
-from nurbs_core.surfacing.mesh import cloud_mesh
+from nurbs_core.surfacing.mesh import cloud_mesh, voxel_subsample
 from nurbs_core.trim.curve import fit_loop
 from nurbs_core.trim.extended import extended_fit
 from nurbs_core.trim.measures import (
@@ -74,7 +74,10 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
     config = config or FitConfig()
     config.validate()
     cloud = normalise(points, config)
-    if not is_height_field(cloud.points):
+    # judged on about MESH_POINTS voxel centroids (a dense cloud's noise rivals its spacing)
+    judged = cloud.points if len(cloud.points) <= MESH_POINTS else \
+        voxel_subsample(cloud.points, MESH_POINTS)[1]
+    if not is_height_field(judged):
         raise ValueError("trimming fits a patch over the cloud's principal plane, and this sheet "
                          "folds over it (it is not a height field over that plane): fit it "
                          "without trimming")
@@ -98,8 +101,8 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
     trimmed.validate()
     in_input = TrimmedSurface(_to_input(surface, cloud.center, scale), trimmed.loops)
     # measures, in input units
-    foot_u, foot_v = gauss_newton_steps(surface, cloud.points, fit.parameters[:, 0],
-                                        fit.parameters[:, 1], steps=6)
+    start = fit.frame.parameters(cloud.points) if fit.subset is not None else fit.parameters
+    foot_u, foot_v = gauss_newton_steps(surface, cloud.points, start[:, 0], start[:, 1], steps=8)
     from nurbs_core.evaluate_arrays import surface_points
 
     distances = np.linalg.norm(surface_points(surface, foot_u, foot_v) - cloud.points,
