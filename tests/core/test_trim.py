@@ -61,12 +61,16 @@ def _sheet(kind, seed=0, noise=0.002):
         outline = _lifted(RADIUS * np.cos(angle), RADIUS * np.sin(angle))
         area = _disc_area()
     else:
-        if kind == "uneven":   # density rising 5x from x = 0 to x = WIDTH (inverse CDF)
+        if kind == "grid":     # a scanner's grid (edges sampled), noisy
+            x, y = (g.ravel() for g in np.meshgrid(np.linspace(0, WIDTH, 84),
+                                                    np.linspace(0, HEIGHT, 60)))
+        elif kind == "uneven":   # density rising 5x from x = 0 to x = WIDTH (inverse CDF)
             u = rng.random(COUNT)
             x = (-1 + np.sqrt(1 + 8 * 3 * u * WIDTH / WIDTH)) * WIDTH / 4
         else:
             x = rng.random(int(COUNT * 1.2)) * WIDTH
-        y = rng.random(len(x)) * HEIGHT
+        if kind != "grid":
+            y = rng.random(len(x)) * HEIGHT
         if kind == "holed":
             keep = np.hypot(x - HOLE_CENTRE[0], y - HOLE_CENTRE[1]) > HOLE_RADIUS
             x, y = x[keep], y[keep]
@@ -136,7 +140,7 @@ def _edge_samples(shape, count=1500):
     return lines
 
 
-@pytest.mark.parametrize("kind", ["rectangle", "disc", "uneven"])
+@pytest.mark.parametrize("kind", ["rectangle", "disc", "uneven", "grid"])
 def test_step_reads_back_as_one_valid_face_with_the_true_area_and_outline(kind, fits, tmp_path):
     pytest.importorskip("OCP")
     from OCP.BRepCheck import BRepCheck_Analyzer
