@@ -193,6 +193,11 @@ def build_parser() -> argparse.ArgumentParser:
                              "...); converted to the requested degrees and counts")
     parser.add_argument("--offset", type=float, default=None, metavar="DIST",
                         help="also write the fitted surface offset by DIST along its normals")
+    parser.add_argument("--trim", action="store_true",
+                        help="an open sheet as one patch over a rectangle around its outline, "
+                             "trimmed by a fair curve along the scan's outline (corners kept "
+                             "sharp, holes as inner loops): one trimmed face in .step/.iges/.3dm, "
+                             "the trim loops in .json, the trimmed face in mesh formats")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=1,
                         help="torch threads (default 1: fastest for typical fits)")

@@ -47,8 +47,8 @@ NURBS_SURFACE_CLASS = uuid.UUID("4ED7D4DE-E947-11d3-BFE5-0010830122F0")
 
 #: ON_BrepTrim::TYPE, ON_BrepLoop::TYPE and ON_Surface::ISO values used here
 TRIM_BOUNDARY, TRIM_MATED = 1, 2
-LOOP_OUTER = 1
-ISO_W, ISO_S, ISO_E, ISO_N = 3, 4, 5, 6
+LOOP_OUTER, LOOP_INNER = 1, 2
+ISO_NONE, ISO_W, ISO_S, ISO_E, ISO_N = 0, 3, 4, 5, 6
 
 #: ON_BoundingBox's default (empty) box, written where openNURBS writes it
 _EMPTY_BOX = (1.0, 0.0, 0.0, -1.0, 0.0, 0.0)
@@ -70,6 +70,8 @@ class Edge:
     vertices: tuple[int, int]
     trims: list[int] = field(default_factory=list)
     domain: tuple[float, float] = (0.0, 1.0)
+    #: how far the 3-D curve may lie from the trims' curves on the surface (0: exact)
+    tolerance: float = 0.0
 
 
 @dataclass
@@ -100,6 +102,10 @@ class BrepTopology:
     loops: list[tuple[list[int], int]]  # (trim indices, face index)
     box: tuple[np.ndarray, np.ndarray]  # min (3,), max (3,)
     reversed_faces: bool = False
+    #: LOOP_OUTER / LOOP_INNER per loop (default: all outer) and each face's loops (default:
+    #: face f has loop f), for trimmed faces with holes
+    loop_kinds: list[int] | None = None
+    face_loops: list[list[int]] | None = None
 
 
 class _Chunk:
@@ -212,7 +218,7 @@ def _write_brep(data: _Chunk, brep: BrepTopology) -> None:
         chunk.doubles(edge.domain)  # proxy-curve domain
         chunk.ints(edge.vertices)
         chunk.int_array(edge.trims)
-        chunk.doubles([0.0, *edge.domain])  # tolerance (exact), domain
+        chunk.doubles([edge.tolerance, *edge.domain])  # tolerance, domain
     chunk = _component_array(data, 0x10, len(brep.trims))
     for index, trim in enumerate(brep.trims):
         chunk.ints([index, trim.curve])
@@ -226,11 +232,11 @@ def _write_brep(data: _Chunk, brep: BrepTopology) -> None:
     for index, (trims, face) in enumerate(brep.loops):
         chunk.ints([index])
         chunk.int_array(trims)
-        chunk.ints([LOOP_OUTER, face])
+        chunk.ints([LOOP_OUTER if brep.loop_kinds is None else brep.loop_kinds[index], face])
     chunk = _component_array(data, 0x11, len(brep.surfaces))
     for index in range(len(brep.surfaces)):
         chunk.ints([index])
-        chunk.int_array([index])  # its loop
+        chunk.int_array([index] if brep.face_loops is None else brep.face_loops[index])
         chunk.ints([index, int(brep.reversed_faces), 0])  # surface, reversed, material channel
     for _ in brep.surfaces:
         chunk.parts.append(bytes(16))  # nil face UUIDs

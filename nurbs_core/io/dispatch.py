@@ -14,9 +14,11 @@ if TYPE_CHECKING:
     from nurbs_core.geometry import NurbsCurve, NurbsSurface
     from nurbs_core.io.geometry_io import GeometryInput
     from nurbs_core.patches.network import PatchNetwork
+    from nurbs_core.trim.value import TrimmedSurface
 
 #: One file for :func:`save_all`: (geometry or a patch network, path, options for the writer).
-SaveJob: TypeAlias = "tuple[GeometryInput | PatchNetwork, StrPath, Mapping[str, Any] | None]"
+SaveJob: TypeAlias = ("tuple[GeometryInput | PatchNetwork | TrimmedSurface, StrPath, "
+                      "Mapping[str, Any] | None]")
 
 
 
@@ -96,7 +98,8 @@ def load_any(path: StrPath, **point_options: Any) -> PointCloud | list[NurbsCurv
                                 f"{', '.join(sorted(set(NURBS_SUFFIXES + POINT_CLOUD_SUFFIXES)))}")
 
 
-def save(geometry_or_list: GeometryInput | PatchNetwork, path: StrPath, **options: Any) -> None:
+def save(geometry_or_list: GeometryInput | PatchNetwork | TrimmedSurface, path: StrPath,
+         **options: Any) -> None:
     """Write one NurbsCurve / NurbsSurface or a list of them; the suffix picks the format.
 
     Curves have control points (*B, n, d) with d 2 or 3, surfaces (*B, n_u, n_v, 3); a batch
@@ -110,7 +113,9 @@ def save(geometry_or_list: GeometryInput | PatchNetwork, path: StrPath, **option
     tessellated on a uniform grid; option ``resolution``, int or (r_u, r_v), default 64), .csv
     (control points and weights), .dat (smesh, one surface). Batched geometry is split into
     one item per batch entry. A :class:`~nurbs_core.patches.network.PatchNetwork` is written
-    whole by :func:`nurbs_core.io.network_io.write_network` (one joined B-rep / sewn shell).
+    whole by :func:`nurbs_core.io.network_io.write_network` (one joined B-rep / sewn shell); a
+    :class:`~nurbs_core.trim.value.TrimmedSurface` as one trimmed face
+    (:mod:`nurbs_core.io.trimmed_io`: .json, .step, .iges, .3dm, meshes).
 
     The write is atomic: the file is written next to ``path`` and replaces it only once complete
     and flushed, so a failed save (full disk, an exception, Ctrl-C) leaves an existing file as
@@ -144,11 +149,24 @@ def is_network(geometry: object) -> TypeGuard[PatchNetwork]:
     return isinstance(geometry, PatchNetwork)
 
 
+def is_trimmed(geometry: object) -> TypeGuard[TrimmedSurface]:
+    """True when ``geometry`` is a :class:`~nurbs_core.trim.value.TrimmedSurface`."""
+    from nurbs_core.trim.value import TrimmedSurface
+
+    return isinstance(geometry, TrimmedSurface)
+
+
 def check_save_suffix(geometry: object, path: StrPath) -> None:
     """FileFormatError unless ``save`` can write ``geometry`` (geometry, or a patch network) in
     the format of ``path``'s suffix."""
     suffix = suffix_of(path)
-    if geometry is not None and is_network(geometry):
+    if is_trimmed(geometry):
+        from nurbs_core.io.trimmed_io import TRIMMED_SUFFIXES
+
+        if suffix not in TRIMMED_SUFFIXES:
+            raise FileFormatError(path, f"cannot save a trimmed surface as {suffix!r}; "
+                                        f"supported: {', '.join(TRIMMED_SUFFIXES)}")
+    elif geometry is not None and is_network(geometry):
         if suffix not in NETWORK_SUFFIXES:
             raise FileFormatError(path, f"cannot save a patch network as {suffix!r}; supported: "
                                         f"{', '.join(NETWORK_SUFFIXES)}")
@@ -157,9 +175,14 @@ def check_save_suffix(geometry: object, path: StrPath) -> None:
                                     f"{', '.join(EXPORT_SUFFIXES)}")
 
 
-def _write(geometry_or_list: GeometryInput | PatchNetwork, path: StrPath, suffix: str,
+def _write(geometry_or_list: GeometryInput | PatchNetwork | TrimmedSurface, path: StrPath, suffix: str,
            **options: Any) -> None:
     """Write to ``path`` (a temporary file) in the format of ``suffix``."""
+    if is_trimmed(geometry_or_list):
+        from nurbs_core.io.trimmed_io import write_trimmed_file
+
+        write_trimmed_file(geometry_or_list, path, suffix, **options)
+        return
     if is_network(geometry_or_list):
         from nurbs_core.io.network_io import write_network_file
 

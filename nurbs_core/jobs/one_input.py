@@ -32,6 +32,10 @@ def fit_one(job: FitJob, points: np.ndarray | None = None,
 
     The three steps, :func:`prepare_fit`, :func:`run_fit` and :func:`finish_fit`, are also run
     apart (a batch fits many prepared inputs at once with ``fit_batch``)."""
+    if job.trim:
+        from nurbs_core.jobs.single import fit_trimmed_job
+
+        return fit_trimmed_job(job, points)
     if job.part and not is_automatic(job):
         raise ValueError("--part fits a solid: it cannot be combined with --patches, "
                          "--single-patch, --curve, --grid, --initial or --offset")

@@ -60,6 +60,8 @@ class FitJob:
     refine: int = 0
     initial: str | None = None
     offset: float | None = None
+    #: one patch trimmed at the scan's outline (:func:`nurbs_core.jobs.single.fit_trimmed_job`)
+    trim: bool = False
     seed: int = 0
     threads: int = 1
     dtype: str = "float64"

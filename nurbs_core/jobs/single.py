@@ -256,3 +256,60 @@ def _lift(curve: CurveArrays, z: float) -> CurveArrays:
     control = np.asarray(curve.control_points)
     lifted = np.concatenate([control, np.full_like(control[:, :1], z)], axis=-1)
     return curve.replace(control_points=lifted)
+
+
+def fit_trimmed_job(job: FitJob, points: np.ndarray | None = None) -> dict[str, Any]:
+    """``nurbs-fit --trim``: one patch of an open sheet trimmed at the scan's outline
+    (:func:`nurbs_core.trim.fit.fit_trimmed`), the report (distances, trimmed vs untrimmed area,
+    the trim's deviation from the outline) and every output written all or nothing (trimmed
+    faces in .step/.iges/.3dm/.json, the trimmed face tessellated in mesh formats). Raises
+    ValueError for options trimming does not combine with and for a cloud it cannot trim."""
+    import time
+
+    import numpy as np
+
+    from nurbs_core.io import load_points
+    from nurbs_core.io.dispatch import save_all
+    from nurbs_core.io.errors import FileFormatError
+    from nurbs_core.io.points import suffix_of
+    from nurbs_core.io.trimmed_io import TRIMMED_SUFFIXES
+    from nurbs_core.trim.fit import fit_trimmed
+
+    if job.curve or job.patches is not None or job.part or job.grid is not None \
+            or job.initial is not None or job.offset is not None or job.report is not None:
+        raise ValueError("--trim fits one trimmed patch of an open sheet: it cannot be combined "
+                         "with --curve, --patches, --part, --grid, --initial, --offset or "
+                         "--report")
+    outputs = check_before_work(job)
+    for path in outputs:
+        if suffix_of(path) not in TRIMMED_SUFFIXES:
+            raise FileFormatError(path, f"a trimmed patch is written as "
+                                        f"{', '.join(TRIMMED_SUFFIXES)}")
+    if points is None:
+        points = load_points(job.input).points
+    config = fit_config(job, 3)
+    print(f"{job.input}: {len(points)} points; fitting a patch over the outline's rectangle by "
+          f"fairing least squares (stiffness {config.stiffness:g}), trimmed at the scan's "
+          "outline", file=sys.stderr)
+    started = time.perf_counter()
+    result = fit_trimmed(points, config)
+    stats = result.statistics
+    print(f"status: converged in {time.perf_counter() - started:.2f} s ({result.message})")
+    print(f"point-to-surface distance: mean {stats['mean']:.6g}, rms {stats['rms']:.6g}, "
+          f"max {stats['max']:.6g}  (tolerance {stats['tolerance']:.4g})")
+    print(f"trimmed area {stats['trimmed_area']:.6g} of the untrimmed patch's "
+          f"{stats['untrimmed_area']:.6g} ({stats['area_ratio']:.1%}); "
+          f"{int(stats['corners'])} corner(s), {int(stats['inner_loops'])} hole(s); the surface "
+          f"beyond the trim leaves its tangent planes there by at most "
+          f"{stats['extension_height']:.4g}")
+    print(f"trim curve to the scan's outline: max {stats['trim_max_deviation']:.4g}, 95% "
+          f"{stats['trim_p95_deviation']:.4g}; outline points to the trim: max "
+          f"{stats['outline_max_deviation']:.4g} (point spacing {stats['spacing']:.4g})")
+    units = units_of(job)
+    save_all([(result.trimmed, path, {"units": units}) for path in outputs])
+    print_units(units, outputs)
+    for path in outputs:
+        print(f"wrote {path}")
+    counts = [int(n) for n in np.shape(result.trimmed.surface.control_points)[:-1]]
+    return plain({**stats, "kind": "surface", "points": len(points), "fit_status": "converged",
+                  "fit_message": result.message, "control_points": counts, "trimmed": True})
