@@ -21,7 +21,9 @@ ROWS = (
                            "fraction of the cloud's bounding-box diagonal (0 up to rounding: the "
                            "patches share their boundary control points)"),
     ("seam", "Seam angle", "angle between the normals of the two patches along every shared "
-                           "edge (degrees): median, 99th percentile, largest"),
+                           "edge (degrees): median, 99th percentile, largest, over the "
+                           "tangent-continuous seams; seams on a crease of the scan are G0 by "
+                           "design and counted apart"),
     ("corners", "Corner angle", "largest angle between the normals of the patches meeting at a "
                                 "layout corner (degrees), at regular (4 patches) and irregular "
                                 "corners"),
@@ -102,8 +104,13 @@ class NetworkQualityPanel(QWidget):
                                        f"{quality['size']} control points each)")
         self.values["gap"].setText(f"{_number(get('gap', seam))} "
                                    f"({_number(get('gap_relative'))} of the diagonal)")
+        creases = int(seam.get("crease_seams", 0))
+        crease_text = (f"; {creases} crease seam{'s' if creases != 1 else ''} (G0), "
+                       f"{_degrees(get('crease_min', seam))}-{_degrees(get('crease_max', seam))}"
+                       if creases else "")
         self.values["seam"].setText(f"median {_degrees(get('median', seam))}, p99 "
-                                    f"{_degrees(get('p99', seam))}, max {_degrees(get('max', seam))}")
+                                    f"{_degrees(get('p99', seam))}, max {_degrees(get('max', seam))}"
+                                    + crease_text)
         self.values["corners"].setText(f"regular max {_degrees(get('regular_corner_max', seam))}, "
                                        f"irregular max "
                                        f"{_degrees(get('irregular_corner_max', seam))}")

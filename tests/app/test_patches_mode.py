@@ -423,3 +423,26 @@ def test_a_forced_single_patch_stays_one_patch_whatever_its_quality(qtbot, windo
     qtbot.waitUntil(lambda: not window.controller.is_busy(), timeout=FIT_TIMEOUT_MS)
     assert window.document.settings.fit_mode == "single"
     assert not window.patch_controller.is_busy()
+
+
+def test_the_dock_counts_crease_seams_apart(qtbot, window):
+    """Seams on a crease of the scan are G0 by design: the dock's seam row says how many there
+    are and their angles beside the tangent-continuous seams' statistics (what
+    nurbs_core.patches.measures.SeamStatistics holds), and says nothing of creases without."""
+    from dataclasses import asdict
+
+    from nurbs_core.patches.measures import SeamStatistics
+
+    seam = SeamStatistics(gap=1e-16, median=0.2, p99=0.48, max=1.8, regular_corner_max=1.0,
+                          irregular_corner_max=1.5, irregular_corner_p90=1.2, crease_seams=17,
+                          crease_min=82.4, crease_max=93.1)
+    panel = window.network_quality_panel
+    panel.show_result("Patches: converged", {"patches": 24, "size": 10, "seam": asdict(seam)}, [])
+    text = panel.values["seam"].text()
+    assert "p99 0.48\N{DEGREE SIGN}" in text
+    assert text.endswith("; 17 crease seams (G0), 82.40\N{DEGREE SIGN}-93.10\N{DEGREE SIGN}")
+    smooth = asdict(SeamStatistics(gap=1e-16, median=0.2, p99=0.48, max=1.8,
+                                   regular_corner_max=1.0, irregular_corner_max=1.5,
+                                   irregular_corner_p90=1.2))
+    panel.show_result("Patches: converged", {"patches": 24, "size": 10, "seam": smooth}, [])
+    assert "crease" not in panel.values["seam"].text()
