@@ -143,31 +143,37 @@ class DaskExecutor:
                                                      return_when="FIRST_COMPLETED")
                 except TimeoutError:
                     done = set()
-                if not done:
-                    # a cluster whose last worker died keeps its tasks waiting for one: after
-                    # WORKERLESS_S with none, the inputs still waiting fail instead of hanging
-                    if self.workers > 0:
-                        workerless_since = None
-                        continue
-                    workerless_since = workerless_since or time.monotonic()
-                    if time.monotonic() - workerless_since < WORKERLESS_S:
-                        continue
-                    where = self.scheduler or "the local cluster"
-                    for future in pending:
-                        yield from _failed(futures[future], f"no Dask worker left on {where} "
-                                           f"for {WORKERLESS_S:g} s (start workers, then "
-                                           "resume with --skip-existing)")
-                    return
-                workerless_since = None
+                settled = False
                 for future in done:
                     chunk = futures[future]
                     try:
-                        records = future.result()
+                        # bounded: a result whose worker died before it was gathered is
+                        # rescheduled, and waits for a worker like the tasks still pending
+                        records = future.result(timeout=POLL_S)
+                    except TimeoutError:
+                        pending.add(future)
+                        continue
                     except Exception as exc:  # the worker died (memory, a crash): they failed
+                        settled = True
                         yield from _failed(chunk, f"the worker failed: {exc}")
                         continue
+                    settled = True
                     for (position, _), record in zip(chunk, records, strict=True):
                         yield position, record
+                # a cluster whose last worker died keeps its tasks waiting for one: after
+                # WORKERLESS_S with none, the inputs still waiting fail instead of hanging
+                if settled or not pending or self.workers > 0:
+                    workerless_since = None
+                    continue
+                workerless_since = workerless_since or time.monotonic()
+                if time.monotonic() - workerless_since < WORKERLESS_S:
+                    continue
+                where = self.scheduler or "the local cluster"
+                for future in pending:
+                    yield from _failed(futures[future], f"no Dask worker left on {where} "
+                                       f"for {WORKERLESS_S:g} s (start workers, then "
+                                       "resume with --skip-existing)")
+                return
         finally:
             self.client.cancel(list(futures))
 
