@@ -5,7 +5,8 @@ scripted options run the real window: open the files, fit, save a screenshot, qu
 status is 0 on success and 1 when a file cannot be read (one line on stderr names it), the load
 takes longer than ``--load-timeout`` seconds (default 60), the fit fails or the screenshot cannot
 be written. Ctrl-C (SIGINT) or SIGTERM closes the window and exits quietly with status 130
-(143 for SIGTERM).
+(143 for SIGTERM), within about two seconds even during a long step of a fit (the controllers
+wait for their worker threads for a bounded time, then leave them).
 """
 
 from __future__ import annotations
@@ -108,9 +109,10 @@ class _Interrupt:
 
 
 def _end_without_finalizing(status: int) -> None:
-    """Exit now, skipping interpreter finalization: used only when an abandoned load thread still
-    runs. Finalizing under a thread that is inside torch aborts the process ("terminate called
-    without an active exception", status 134, measured), so flush what the app wrote (settings
+    """Exit now, skipping interpreter finalization: used only when abandoned work still runs (a
+    load, or a fit's step that did not stop within the shutdown's wait). Finalizing under a
+    thread that is inside torch aborts the process ("terminate called without an active
+    exception", status 134, measured), so flush what the app wrote (settings
     are synced by the window's shutdown; sessions, exports and screenshots were written and
     replaced atomically before) and leave."""
     logging.shutdown()
@@ -143,7 +145,7 @@ def _main(argv: list[str] | None) -> int:
 
     from app.main_window import MainWindow
     from app.scripted import ScriptedRun
-    from app.workers.jobs import abandoned_threads
+    from app.workers.jobs import work_left_running
 
     application = QApplication.instance() or QApplication(sys.argv[:1])
     application.setApplicationName("NURBS Studio")
@@ -165,7 +167,7 @@ def _main(argv: list[str] | None) -> int:
         if not run.finished:  # the window was closed before the run got to its end
             print("nurbs-studio: the window was closed before the run finished", file=sys.stderr)
             status = 1
-    if abandoned_threads():
+    if work_left_running():
         _end_without_finalizing(status)
     return status
 

@@ -16,6 +16,7 @@ import numpy as np
 from PySide6.QtCore import QObject, QThread, QTimer, Signal, Slot
 
 from app.state import Document, spread_over_cloud
+from app.workers.jobs import SHUTDOWN_WAIT_MS, abandon_qthread
 from app.workers.patch_worker import PatchRequest, PatchSnapshot, PatchWorker
 
 log = logging.getLogger(__name__)
@@ -194,22 +195,29 @@ class PatchController(QObject):
             self._stop_token.stop()
 
     def shutdown(self):
-        """Stop the worker and timers and wait for the thread; idempotent."""
+        """Stop the worker and the timers; idempotent. The thread is waited for at most
+        :data:`SHUTDOWN_WAIT_MS`, then left to finish on its own (the window closes at once)."""
         if self._is_shut_down:
             return
         self._is_shut_down = True
         self._restart_pending = False
         self._restart_timer.stop()
         self._timer.stop()
-        self._join()
+        self._join(wait_ms=SHUTDOWN_WAIT_MS)
 
-    def _join(self):
+    def _join(self, wait_ms: int | None = None):
+        """Stop the run and wait for its thread (``wait_ms``: at most that long, then abandon
+        it: an engine step on millions of points never looks at the stop token, and closing
+        the window waited 20-30 s for it)."""
         if self._thread is None:
             return
         self._worker.hurry()
         self._stop_token.stop()
         self._thread.quit()
-        self._thread.wait()
+        if wait_ms is None:
+            self._thread.wait()
+        elif not self._thread.wait(wait_ms):
+            abandon_qthread(self._thread, self._worker)
         self._thread, self._worker, self._stop_token = None, None, None
 
     # --- worker signals (queued into the GUI thread) ---------------------------------------------

@@ -14,6 +14,9 @@ Two kinds:
   next check), and whatever it returns later is dropped without touching Qt. A daemon thread does
   not hold up interpreter exit; :func:`abandoned_threads` lists the ones still running, so the
   program can end without finalizing the interpreter under them (``app.__main__``).
+
+The fit controllers' worker QThreads are joined at shutdown for a bounded time; one still busy
+then is handed to :func:`abandon_qthread` (:func:`work_left_running` counts both kinds).
 """
 
 from __future__ import annotations
@@ -28,6 +31,9 @@ from PySide6.QtCore import QObject, QThread, Signal, Slot
 
 log = logging.getLogger(__name__)
 
+#: How long closing the window waits for a fit's worker thread to stop (ms) before leaving it.
+SHUTDOWN_WAIT_MS = 1500
+
 _abandoned_lock = threading.Lock()
 _abandoned: list[threading.Thread] = []
 
@@ -37,6 +43,28 @@ def abandoned_threads() -> list[threading.Thread]:
     with _abandoned_lock:
         _abandoned[:] = [thread for thread in _abandoned if thread.is_alive()]
         return list(_abandoned)
+
+
+#: Worker QThreads left running at shutdown, with their workers: kept referenced, since Qt
+#: aborts the process when a running QThread is destroyed.
+_abandoned_qthreads: list[tuple[QThread, QObject]] = []
+
+
+def abandon_qthread(thread: QThread, worker: QObject) -> None:
+    """Leave a worker thread that did not stop in time (a step of the engine that never looks at
+    its stop token: a KD-tree or the final measures on millions of points) to finish on its own
+    (from the GUI thread). Its signals reach a shut-down controller, which drops them."""
+    with _abandoned_lock:
+        _abandoned_qthreads.append((thread, worker))
+
+
+def work_left_running() -> bool:
+    """Whether abandoned work still runs (a detached job or a worker QThread): the program then
+    ends without finalizing the interpreter under it (``app.__main__``)."""
+    with _abandoned_lock:
+        _abandoned_qthreads[:] = [entry for entry in _abandoned_qthreads if entry[0].isRunning()]
+        running = bool(_abandoned_qthreads)
+    return running or bool(abandoned_threads())
 
 
 class _DetachedBridge(QObject):

@@ -6,6 +6,8 @@ fitted together, else one), each fitted by :func:`nurbs_core.batch.worker.iter_c
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import math
 import os
 import time
@@ -13,6 +15,7 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any, TypeAlias
 
 from nurbs_core.batch.inputs import BATCH_EXTRA_HINT
+from nurbs_core.batch.interrupts import held_signals, kill_processes, shield_children
 from nurbs_core.batch.worker import chunk_size, fit_chunk, iter_chunk, pin_worker, prepare_worker
 
 if TYPE_CHECKING:
@@ -65,8 +68,19 @@ class DaskExecutor:
         # distributed's LocalCluster / Client (Dask is an optional extra: imported on entry)
         self.cluster: Any = None
         self.client: Any = None
+        # while stopping an interrupted run: Dask's log of the tasks it lost is noise
+        self._quiet = contextlib.ExitStack()
+        self._silenced = False
 
     def __enter__(self) -> DaskExecutor:
+        try:
+            self._start()
+        except BaseException:  # Ctrl-C during start-up too: nothing started is left running
+            self._close(stop_workers=True)
+            raise
+        return self
+
+    def _start(self) -> None:
         distributed = _distributed()
         if self.scheduler is None:
             single = {name: "1" for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS",
@@ -74,11 +88,16 @@ class DaskExecutor:
             import dask
 
             # Dask's nannies set MALLOC_TRIM_THRESHOLD_=65536, which makes every large numpy or
-            # torch allocation a fresh mmap: the fits run ~1.3x slower (measured); unset it
-            with dask.config.set({UNSET_TRIM: None}):
+            # torch allocation a fresh mmap: the fits run ~1.3x slower (measured); unset it.
+            # The workers (and any the nannies restart) start with SIGINT blocked: a terminal's
+            # Ctrl-C reaches the whole process group, and this process decides what stops
+            with dask.config.set({UNSET_TRIM: None}), shield_children():
                 self.cluster = distributed.LocalCluster(
                     n_workers=self.jobs, threads_per_worker=1, processes=True,
-                    dashboard_address=None, env=single, silence_logs=40)
+                    dashboard_address=None, env=single, silence_logs=40,
+                    # its HTTP server (health, metrics) on a free port: the default 8787, taken
+                    # by another cluster, printed a warning
+                    scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
             self.client = distributed.Client(self.cluster)
             self.client.wait_for_workers(self.jobs, timeout=WORKER_WAIT_S)
             self._pin()
@@ -90,7 +109,6 @@ class DaskExecutor:
                 raise OSError(f"no Dask worker joined {self.scheduler} within {WORKER_WAIT_S} s "
                               f"(start some with: dask worker {self.scheduler})") from None
         self.client.run(prepare_worker, self.threads)  # the engine loads once per worker
-        return self
 
     def _pin(self) -> None:
         """One CPU per worker of the embedded cluster, when there are enough (see pin_worker)."""
@@ -102,13 +120,44 @@ class DaskExecutor:
             for address, cpu in zip(workers, cpus):
                 self.client.run(pin_worker, cpu, workers=[address])
 
-    def __exit__(self, *_: object) -> None:
-        try:
-            if self.client is not None:
-                self.client.close()
-        finally:
-            if self.cluster is not None:
-                self.cluster.close()
+    def __exit__(self, kind: type[BaseException] | None, *_: object) -> None:
+        # interrupted (Ctrl-C, SIGTERM) or failed: the embedded workers are killed, not asked
+        # to finish the fits under way (a graceful close waited ~5-8 s for them)
+        self._close(stop_workers=kind is not None)
+
+    def _close(self, stop_workers: bool) -> None:
+        """Close the client and the embedded cluster; ``stop_workers``: kill its worker
+        processes first. A Ctrl-C or SIGTERM meanwhile waits for the end (and is dropped when
+        the workers are being stopped anyway)."""
+        with held_signals(replay=not stop_workers), self._quiet:
+            if stop_workers:
+                self._silence()
+                kill_processes(self.worker_pids())
+            try:
+                if self.client is not None:
+                    self.client.close()
+            finally:
+                if self.cluster is not None:
+                    self.cluster.close()
+        self._silenced = False
+
+    def _silence(self) -> None:
+        """No log records until the cluster is closed (Dask logs the cancelled tasks and the
+        killed workers as errors: a stopped batch prints its one line only)."""
+        if not self._silenced:
+            self._silenced = True
+            self._quiet.enter_context(_logging_disabled())
+
+    def worker_pids(self) -> list[int]:
+        """The process ids of the embedded cluster's workers (none for ``--scheduler``)."""
+        if self.cluster is None:
+            return []
+        pids = []
+        for nanny in list(self.cluster.workers.values()):
+            with contextlib.suppress(Exception):  # a nanny still starting or already closed
+                if nanny.pid:
+                    pids.append(int(nanny.pid))
+        return pids
 
     @property
     def workers(self) -> int:
@@ -174,8 +223,22 @@ class DaskExecutor:
                                        f"for {WORKERLESS_S:g} s (start workers, then "
                                        "resume with --skip-existing)")
                 return
+        except BaseException:  # Ctrl-C, SIGTERM: what follows is the run being stopped
+            self._silence()
+            raise
         finally:
             self.client.cancel(list(futures))
+
+
+@contextlib.contextmanager
+def _logging_disabled() -> Iterator[None]:
+    """Every log record dropped during the block (Dask logs from its own threads)."""
+    previous = logging.root.manager.disable
+    logging.disable(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logging.disable(previous)
 
 
 def _failed(chunk: PositionedItems, why: str) -> Iterator[tuple[int, dict]]:

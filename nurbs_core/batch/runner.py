@@ -50,6 +50,11 @@ class Progress:
         self.failed += record["status"] == "failed"
         self.show()
 
+    def end_line(self) -> None:
+        """End the line a terminal shows in place (before another message)."""
+        if self.tty and not self.quiet and self.shown >= 0:
+            print(file=self.stream, flush=True)
+
     def show(self, final: bool = False) -> None:
         now = time.perf_counter()
         if self.quiet or (now - self.last < PROGRESS_INTERVAL and not final):
@@ -116,14 +121,24 @@ def _complete(path: str) -> bool:
         return False
 
 
+def _written_since(path: str, since: float) -> bool:
+    """Whether this run wrote ``path`` (after ``since``, a time.time()). Its writes are atomic:
+    a file in place is whole (reading it back loaded the engine: ~2.5 s after a Ctrl-C)."""
+    try:
+        status = os.stat(path)
+    except OSError:
+        return False
+    return status.st_size > 0 and status.st_mtime >= since
+
+
 def _record_written(records: list[dict | None], items: list, since: float) -> None:
-    """Rows for the inputs without a record whose outputs this run wrote whole (after
-    ``since``, a time.time()): the run was interrupted after writing them and before recording
-    them; their statistics are not known."""
+    """Rows for the inputs without a record whose outputs this run wrote (after ``since``, a
+    time.time()): the run was interrupted after writing them and before recording them; their
+    statistics are not known."""
     for position, item in enumerate(items):
         if records[position] is not None or item.error is not None or not item.outputs:
             continue
-        if all(_complete(p) and os.path.getmtime(p) >= since for p in item.outputs):
+        if all(_written_since(p, since) for p in item.outputs):
             records[position] = {"input": item.label, "output": item.outputs[0],
                                  "status": "ok", "seconds": None, "error": "",
                                  "note": "written just before the interruption: its statistics "
@@ -201,7 +216,8 @@ def run_batch(batch: BatchSettings) -> int:
 
     from nurbs_core.batch.executors import DaskExecutor, serial
     from nurbs_core.batch.inputs import check_planned_writes, expand, name_outputs
-    from nurbs_core.jobs import INTERRUPTED_STATUS, SOME_FAILED_STATUS
+    from nurbs_core.batch.interrupts import held_signals
+    from nurbs_core.jobs import SOME_FAILED_STATUS
 
     if not batch.format.startswith("."):
         batch = dataclasses.replace(batch, format="." + batch.format)
@@ -248,7 +264,6 @@ def run_batch(batch: BatchSettings) -> int:
     if not job.quiet:
         print(f"nurbs-fit: {len(items)} inputs ({len(todo)} to fit, {skipped} skipped) on {where}; "
               f"results in {directory}", file=sys.stderr, flush=True)
-    interrupted = False
     started = time.time()
     # the summary is rewritten (atomically) as each result arrives: a run killed at any moment
     # leaves an accurate one
@@ -267,19 +282,43 @@ def run_batch(batch: BatchSettings) -> int:
                 progress.update(record)
                 write_summary(summary, [r for r in records if r is not None])
     except KeyboardInterrupt:
-        interrupted = True
-        # an interruption between a result's files and its record: the files are there, whole
-        _record_written(records, items, started)
+        # a second Ctrl-C must not cut the summary short: held, then dropped
+        with held_signals(replay=False):
+            return _interrupted(records, items, todo, started, summary,
+                                writers_stopped=batch.scheduler is None, progress=progress)
     progress.show(final=True)
     done = [r for r in records if r is not None]
     write_summary(summary, done)
     failed = [r for r in done if r["status"] == "failed"]
     ok = sum(r["status"] == "ok" for r in done)
-    if interrupted:
-        print(f"nurbs-fit: interrupted after {ok} results; rerun with --skip-existing to fit the "
-              f"other {len(items) - len(done)} (summary: {summary})", file=sys.stderr)
-        return INTERRUPTED_STATUS
     print(f"{ok} fitted, {len(failed)} failed, {skipped} skipped; summary: {summary}")
     for record in failed:
         print(f"failed: {record['input']}: {record['error']}", file=sys.stderr)
     return SOME_FAILED_STATUS if failed else 0
+
+
+def _interrupted(records: list[dict | None], items: list, todo: list[tuple[int, dict]],
+                 started: float, summary: Path, writers_stopped: bool,
+                 progress: Progress) -> int:
+    """After Ctrl-C or SIGTERM: the summary of what was kept, one line saying so, status 130.
+    ``writers_stopped``: no fit of this run is still writing (this process, or the embedded
+    cluster's killed workers), so their half-written files can go."""
+    from nurbs_core.batch.interrupts import remove_partial_writes
+    from nurbs_core.jobs import INTERRUPTED_STATUS
+
+    # an interruption between a result's files and its record: the files are there, whole
+    _record_written(records, items, started)
+    if writers_stopped:
+        remove_partial_writes(p for position, _ in todo if records[position] is None
+                              for p in items[position].outputs)
+    done = [r for r in records if r is not None]
+    write_summary(summary, done)
+    progress.end_line()
+    written = sum(r["status"] == "ok" for r in done)
+    counts = [f"{n} {what}" for n, what in (
+        (sum(r["status"] == "skipped" for r in done), "already there"),
+        (sum(r["status"] == "failed" for r in done), "failed")) if n]
+    print(f"nurbs-fit: interrupted: {written} of {len(items)} results written"
+          + (f" ({', '.join(counts)})" if counts else "")
+          + f", summary in {summary}; resume with --skip-existing", file=sys.stderr, flush=True)
+    return INTERRUPTED_STATUS
