@@ -61,9 +61,12 @@ def surface_derivatives(surface: SurfaceArrays, u: ArrayLike, v: ArrayLike
         rows = (span_u - p)[:, None] + np.arange(p + 1)                        # (M, p + 1)
         cols = (span_v - q)[:, None] + np.arange(q + 1)                        # (M, q + 1)
         local = pw[rows[:, :, None], cols[:, None, :]]                         # (M, p+1, q+1, 4)
-        h = np.einsum("mi,mj,mijc->mc", ders_u[0], ders_v[0], local)
-        h_u = np.einsum("mi,mj,mijc->mc", ders_u[1], ders_v[0], local)
-        h_v = np.einsum("mi,mj,mijc->mc", ders_u[0], ders_v[1], local)
+        # contract v first for both of its rows (batched matmuls, not a three-operand einsum)
+        along_v = local.transpose(0, 1, 3, 2) @ np.stack(
+            [ders_v[0], ders_v[1]], -1)[:, None]                               # (M, p+1, 4, 2)
+        h = (ders_u[0][:, None, :] @ along_v[..., 0])[:, 0]                    # (M, 4)
+        h_u = (ders_u[1][:, None, :] @ along_v[..., 0])[:, 0]
+        h_v = (ders_u[0][:, None, :] @ along_v[..., 1])[:, 0]
         w = h[:, 3:]
         s = h[:, :3] / w
         out[0, part] = s

@@ -55,3 +55,42 @@ def collocation_matrix(knots: np.ndarray, degree: int, parameters: np.ndarray,
     values = (basis_u[:, :, None] * basis_v[:, None, :]).reshape(len(rows), -1)
     return scipy.sparse.csr_matrix(
         (values.ravel(), (np.repeat(rows, cols.shape[1]), cols.ravel())), shape=(len(rows), n * m))
+
+
+def normal_equations(knots_u: np.ndarray, degree_u: int, parameters_u: np.ndarray,
+                     knots_v: np.ndarray, degree_v: int, parameters_v: np.ndarray,
+                     values: np.ndarray) -> tuple[scipy.sparse.csr_matrix, np.ndarray]:
+    """``(A^T A, A^T values)`` of the surface collocation matrix ``A`` (M, n*m) of
+    :func:`collocation_matrix`, without forming ``A``: (n*m, n*m) sparse and (n*m, d).
+
+    knots_u (n + p + 1,), knots_v (m + q + 1,), parameters_u and parameters_v (M,), values (M, d).
+    Every point of one knot cell (span pair) has the same (p + 1)(q + 1) non-zero columns, so
+    the points are grouped by cell and each cell adds one dense Gram block ``B^T B``: a dense
+    product per cell instead of a sparse product over every point (on a million points, the
+    sparse ``A^T A`` is most of a least-squares solve)."""
+    span_u, basis_u = compact_basis(knots_u, degree_u, parameters_u)
+    span_v, basis_v = compact_basis(knots_v, degree_v, parameters_v)
+    p, q = degree_u, degree_v
+    n, m = len(knots_u) - p - 1, len(knots_v) - q - 1
+    values = np.asarray(values, np.float64).reshape(len(span_u), -1)
+    width = (p + 1) * (q + 1)
+    cell = (span_u - p) * (m - q) + (span_v - q)                   # (M,) in [0, (n-p)(m-q))
+    order = np.argsort(cell, kind="stable")
+    cells, starts = np.unique(cell[order], return_index=True)
+    ends = np.append(starts[1:], len(order))
+    local = (np.arange(p + 1)[:, None] * m + np.arange(q + 1)).ravel()        # (width,)
+    blocks = np.empty((len(cells), width, width))
+    rhs_blocks = np.empty((len(cells), width, values.shape[1]))
+    for k, (begin, end) in enumerate(zip(starts, ends)):
+        rows = order[begin:end]
+        products = (basis_u[rows, :, None] * basis_v[rows, None, :]).reshape(len(rows), width)
+        blocks[k] = products.T @ products
+        rhs_blocks[k] = products.T @ values[rows]
+    first = (cells // (m - q)) * m + cells % (m - q)                # each cell's first column
+    columns = first[:, None] + local                                # (cells, width)
+    gram = scipy.sparse.coo_matrix(
+        (blocks.ravel(), (np.repeat(columns, width, axis=1).ravel(),
+                          np.tile(columns, (1, width)).ravel())), shape=(n * m, n * m)).tocsr()
+    rhs = np.zeros((n * m, values.shape[1]))
+    np.add.at(rhs, columns.ravel(), rhs_blocks.reshape(-1, values.shape[1]))
+    return gram, rhs

@@ -39,9 +39,9 @@ from nurbs_core.surfacing.parameterize import (
 #: many points. Every point is measured against the final surface.
 PASS_POINTS = 30_000
 #: ... and then solved once more on every point, or on a seeded random FINAL_POINTS of them: on
-#: a height field the truth error falls from 0.11 to about 0.06 noise sigmas from 100,000
-#: points on, at 1.4-2.4x the time (``benchmarks/bench_dense.py``; 0: no final solve)
-FINAL_POINTS = 300_000
+#: a height field the truth error falls from 0.11 to 0.06 noise sigmas from 100,000 points on
+#: (``benchmarks/bench_dense.py``; 0: no final solve)
+FINAL_POINTS = 1_000_000
 MESH_POINTS = 6_000
 #: The automatic tolerance, in estimated noise standard deviations (99% of Gaussian noise lies
 #: within 2.6 of them), and its floor relative to the bounding-box diagonal.
@@ -227,14 +227,18 @@ def core_snapshots(cloud: NormalisedCloud, config: FitConfig, start: SheetStart,
         if FINAL_POINTS > 0 and not last.stopped and not config.custom_knots:
             # the passes ran on a subset: one more solve on every point (at most FINAL_POINTS
             # of them), kept when closer to them
-            final = points
+            final = None
             if len(points) > FINAL_POINTS:
-                final = points[np.random.default_rng(config.seed + 1).choice(
-                    len(points), FINAL_POINTS, replace=False)]
-            dense = core.on_every_point(last, final)
-            if (np.mean(sampled_distances(dense, final) ** 2)
-                    < np.mean(sampled_distances(surface, final) ** 2)):
-                surface, distances = dense, sampled_distances(dense, points)
+                final = np.random.default_rng(config.seed + 1).choice(
+                    len(points), FINAL_POINTS, replace=False)
+            final_points = points if final is None else points[final]
+            dense = core.on_every_point(last, final_points)
+            dense_distances = sampled_distances(dense, final_points)
+            kept = distances if final is None else distances[final]
+            if np.mean(dense_distances ** 2) < np.mean(kept ** 2):
+                surface = dense
+                distances = (dense_distances if final is None
+                             else sampled_distances(dense, points))
     stopped = last.stopped
     result.update(geometry=surface, parameters=parameters, distances=distances,
                   iteration=last.index, status="stopped" if stopped else "converged",

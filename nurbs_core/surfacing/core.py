@@ -25,7 +25,7 @@ import scipy.sparse.linalg
 from scipy.spatial import cKDTree
 
 from nurbs_core.evaluate_arrays import surface_grid, surface_points
-from nurbs_core.fitting.collocation import collocation_matrix
+from nurbs_core.fitting.collocation import normal_equations
 from nurbs_core.fitting.config import StopToken
 from nurbs_core.fitting.foot_points import gauss_newton_steps
 from nurbs_core.geometry_arrays import SurfaceArrays
@@ -42,6 +42,10 @@ MAX_PASSES = 40
 #: Mallows' Cp charges 2 noise variances per control point; a little more guards against a
 #: noise estimate on the low side (it falls short by up to 20% when the noise nears the spacing).
 CP_PENALTY = 3.0
+#: Gauss-Newton steps that move every point of a large cloud from its nearest fitted point's
+#: parameters to its foot point before the final solve (one is as close as two on a million
+#: points: ``benchmarks/bench_dense.py``)
+DENSE_STEPS = 1
 #: Points (each with its nearest neighbours) over which a parameter correction is averaged.
 CORRECTION_NEIGHBOURS = 12
 #: Noise above this fraction of the spacing gets neighbourhood-averaged corrections.
@@ -173,17 +177,17 @@ class LeastSquaresCore:
     def solve(self, fairing: float) -> SurfaceArrays:
         """Control points for the current parameters and a fairing weight."""
         (p, q), (n, m) = self.degrees, self.grid
-        matrix = collocation_matrix(self.knots[0], p, self.parameters[:, 0], self.knots[1], q,
-                                    self.parameters[:, 1])
+        gram, rhs = normal_equations(self.knots[0], p, self.parameters[:, 0], self.knots[1], q,
+                                     self.parameters[:, 1], self.points)
         count = len(self.points)
-        data = (matrix.T @ matrix) / count
+        data = gram / count
         if self.fairing_scale is None:
             # the weight is relative to the data term on the starting grid, and stays fixed as
             # the grid grows: the same stiffness means the same energy for any cloud and grid
             self.fairing_scale = (data.diagonal().sum()
                                   / max(self.fairing_matrix.diagonal().sum(), 1e-300))
         normal = data + fairing * self.fairing_scale * self.fairing_matrix
-        rhs = (matrix.T @ self.points) / count
+        rhs = rhs / count
         if self.seam is not None:
             # the seam's control points as functions of the free ones: exact G0 and C1
             normal = self.seam.T @ normal @ self.seam
@@ -197,6 +201,12 @@ class LeastSquaresCore:
 
     def correct(self, surface: SurfaceArrays, steps: int = 2) -> np.ndarray:
         """Move the parameters to their foot points; returns the distances (N,)."""
+        self.reproject(surface, steps)
+        foot = surface_points(surface, self.parameters[:, 0], self.parameters[:, 1])
+        return np.linalg.norm(foot - self.points, axis=1)
+
+    def reproject(self, surface: SurfaceArrays, steps: int = 2) -> None:
+        """Move the parameters to their foot points (``steps`` Gauss-Newton steps)."""
         u, v = gauss_newton_steps(surface, self.points, self.parameters[:, 0],
                                   self.parameters[:, 1], steps=steps, line_search=False)
         # the correction averaged over each point's neighbourhood: a real reparameterisation
@@ -206,8 +216,6 @@ class LeastSquaresCore:
         if self.neighbourhood is not None:
             delta = delta[self.neighbourhood].mean(axis=1)
         self.parameters = np.clip(self.parameters + delta, 0.0, 1.0)
-        foot = surface_points(surface, self.parameters[:, 0], self.parameters[:, 1])
-        return np.linalg.norm(foot - self.points, axis=1)
 
     def surface_to_cloud(self, surface: SurfaceArrays, samples: int = 48) -> float:
         """95th percentile of the distance from a samples x samples grid on the surface to the
@@ -324,15 +332,17 @@ class LeastSquaresCore:
         """The kept pass's surface solved again on ``points`` (N, 3), the whole cloud of which
         the passes fitted a subset (``self.points``): on the kept grid and knots, each point
         starting from the parameters of its nearest fitted point, moved to its foot point on the
-        kept surface. More points average the noise further down on the same grid (the grid
-        itself was chosen on the subset). The core then holds the whole cloud (its tree, for
+        kept surface (DENSE_STEPS Gauss-Newton steps). More points average the noise further
+        down on the same grid (the grid itself was chosen on the subset: growing it by Mallows'
+        Cp on the whole cloud helped a height field but cost 5-25% of the truth error on a
+        saddle, a bowl and a leaflet). The core then holds the whole cloud (its tree, for
         :meth:`surface_to_cloud`, still the subset's)."""
         surface = report.geometry
         nearest = self.tree.query(points)[1]
         self.points = np.asarray(points, np.float64)
         self.parameters = report.parameters[nearest].copy()
         self.neighbourhood = None      # the corrections of so many points average themselves
-        self.correct(surface)
+        self.reproject(surface, steps=DENSE_STEPS)
         self.grid = report.grid
         self._setup_grid((surface.knots_u, surface.knots_v))
         return self.solve(report.fairing)

@@ -126,3 +126,28 @@ def test_curve_fit_reaches_least_squares_optimum():
                        learning_rate=1.0, iterations=60)
     result = fit(points, config, parameters=t)
     assert result.statistics["paired_rms"] ** 2 <= 1.01 * best
+
+
+@pytest.mark.parametrize("grid", [(4, 4), (7, 11)])
+def test_the_normal_equations_by_knot_cell_are_scipys_collocation_products(grid):
+    """``normal_equations`` builds A^T A and A^T b cell by cell without forming A: equal to the
+    products of the collocation matrix that scipy's own B-spline design matrices give (each row
+    the Kronecker product of its u and v rows), parameters on the domain's ends and on knots
+    included."""
+    from scipy.interpolate import BSpline
+
+    from nurbs_core.fitting.collocation import normal_equations
+
+    rng = np.random.default_rng(sum(grid))
+    (n, m), p, q = grid, 3, 2
+    knots_u = np.r_[np.zeros(p + 1), np.sort(rng.uniform(0, 1, n - p - 1)), np.ones(p + 1)]
+    knots_v = np.r_[np.zeros(q + 1), np.linspace(0, 1, m - q + 1)[1:-1], np.ones(q + 1)]
+    u = np.r_[rng.uniform(0, 1, 3000), 0.0, 1.0, knots_u[p + 1]]
+    v = np.r_[rng.uniform(0, 1, 3000), 1.0, 0.0, knots_v[q + 1]]
+    values = rng.normal(size=(len(u), 3))
+    design_u = BSpline.design_matrix(u, knots_u, p).toarray()            # (M, n)
+    design_v = BSpline.design_matrix(v, knots_v, q).toarray()            # (M, m)
+    design = (design_u[:, :, None] * design_v[:, None, :]).reshape(len(u), n * m)
+    gram, rhs = normal_equations(knots_u, p, u, knots_v, q, v, values)
+    np.testing.assert_allclose(gram.toarray(), design.T @ design, atol=1e-10)
+    np.testing.assert_allclose(rhs, design.T @ values, atol=1e-10)
