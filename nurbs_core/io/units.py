@@ -9,6 +9,7 @@ or None when unknown: .3dm then says so ("None": no unit, no scaling on import),
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any
 
 #: The length units a model may declare (the CLI's ``--units``).
@@ -38,6 +39,31 @@ def rhino_unit_system(units: str | None) -> Any:
 
     checked = check_units(units)
     return getattr(rhino3dm.UnitSystem, "None" if checked is None else _RHINO[checked])
+
+
+#: The library names of a unit a file states -> ours: openNURBS's UnitSystem names (.3dm)
+#: and OpenCASCADE's (STEP). Others (microns, kilometres, yards...) are units we do not offer.
+_FROM_LIBRARY = {**{name: unit for unit, name in _RHINO.items()},
+                 **{name: unit for unit, name in _OCC.items()}}
+
+
+def units_from_library(name: object) -> str | None:
+    """Our unit for openNURBS's ("Meters") or OpenCASCADE's ("M") name of it; None for no
+    unit ("None", None) and for units not in :data:`UNITS`."""
+    return _FROM_LIBRARY.get(str(name)) if name is not None else None
+
+
+def units_of_items(items: Iterable[Any]) -> str | None:
+    """The length unit NURBS items read from one file state (their ``metadata["units"]``: .3dm,
+    STEP and our JSON carry it); None when none states one or they disagree."""
+    found = set()
+    for item in items:
+        metadata = getattr(item, "metadata", None)
+        unit = metadata.get("units") if isinstance(metadata, dict) else None
+        if unit is not None:
+            found.add(unit if isinstance(unit, str) else repr(unit))  # JSON may hold anything
+    unit = found.pop() if len(found) == 1 else None
+    return unit if unit in UNITS else None
 
 
 def units_metadata(metadata: dict | None, units: str | None) -> dict | None:
