@@ -93,8 +93,9 @@ class PatchView(QObject):
                f"{snapshot.size} control points each"
         if snapshot.quality:
             seam = snapshot.quality["seam"]
+            unit = f" {self._panel.units}" if self._panel.units else ""
             text += (f"; seam angle p99 {seam['p99']:.2f}\N{DEGREE SIGN}, cloud to surface mean "
-                     f"{snapshot.quality['c2s_mean']:.4g}")
+                     f"{snapshot.quality['c2s_mean']:.4g}{unit}")
             self._labels["rate"].setText(f"seam p99 {seam['p99']:.2f}\N{DEGREE SIGN}, max "
                                          f"{seam['max']:.2f}\N{DEGREE SIGN}")
         self._report(text)
