@@ -70,7 +70,8 @@ class PatchView(QObject):
         self.stage = stage_text(snapshot)
         labels = self._labels
         labels["iteration"].setText(self.stage)
-        labels["loss"].setText(f"RMS {snapshot.rms:.4g}" if math.isfinite(snapshot.rms)
+        unit = f" {self._panel.units}" if self._panel.units else ""
+        labels["loss"].setText(f"RMS {snapshot.rms:.4g}{unit}" if math.isfinite(snapshot.rms)
                                else "RMS -")
         # the pass's own largest seam angle while it runs; the final quality's (what the Patch
         # quality dock shows) once measured

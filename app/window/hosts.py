@@ -30,7 +30,6 @@ if TYPE_CHECKING:
     from app.patch_controller import PatchController
     from app.state import Document
     from app.viewport.scene import SceneView
-    from app.window.fit_display import FitDisplay
     from app.workers.jobs import JobRunner
 
 
@@ -142,7 +141,7 @@ class UnitsHost(Reporter, Protocol):
     network_quality_panel: NetworkQualityPanel
     offset_panel: OffsetPanel
     fit_panel: FitSettingsPanel
-    fit_display: FitDisplay
+    deviation_panel: DeviationPanel
 
     def rebuild_tree(self) -> None: ...
 

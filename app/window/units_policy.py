@@ -115,5 +115,5 @@ class UnitsPolicy(QObject):
         window.network_quality_panel.set_units(units)
         window.offset_panel.set_units(units)
         window.fit_panel.set_units(units)
-        window.fit_display.refresh_deviation_panel()
+        window.deviation_panel.show_map(window.scene.deviation_map(), units)
         window.rebuild_tree()
