@@ -2,13 +2,14 @@
 with every length.
 
 It decides: a load takes the unit its files state (.3dm's unit system, STEP's length unit, our
-JSON's metadata, E57: metres; :mod:`nurbs_core.io.units`); files that state none take the unit
-another file of the same load states, else the unit stays unknown and the user is told where to
-choose it; files that state different units leave it unknown, with a warning. The toolbar's
-Units box and Edit > Units choose it (an undoable edit; nothing is scaled: the unit says what the
-numbers measure). Every length the window shows names it (the viewport's legend and corner, the
-Quality, Patch quality, Deviation and Offsets docks, the tolerance field, the status bar's
-messages); sessions keep it; .3dm, STEP and IGES exports and the deviation report declare it.
+JSON's metadata, E57: metres, LAS: its coordinate system's; :mod:`nurbs_core.io.units`); files
+that state none take the unit another file of the same load states, else the unit stays unknown
+and the user is told where to choose it; files that state different units leave it unknown,
+with a warning. The toolbar's Units box and Edit > Units choose it (an undoable edit; nothing is
+scaled: the unit says what the numbers measure). Every length the window shows names it (the
+viewport's legend and corner, the Quality, Patch quality, Deviation and Offsets docks, the
+tolerance field, the status bar's messages); sessions keep it; .3dm, STEP and IGES exports and
+the deviation report declare it.
 """
 
 from __future__ import annotations

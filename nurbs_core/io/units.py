@@ -9,6 +9,7 @@ or None when unknown: .3dm then says so ("None": no unit, no scaling on import),
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable
 from typing import Any
 
@@ -72,6 +73,54 @@ def units_metadata(metadata: dict | None, units: str | None) -> dict | None:
 
 
 def units_of_file(path: object) -> str | None:
-    """The length unit a point-cloud file states by its format: E57 coordinates are metres
-    (ASTM E2807); the other cloud formats carry none (None)."""
-    return "m" if str(path).lower().endswith(".e57") else None
+    """The length unit a point-cloud file states: E57 coordinates are metres (ASTM E2807); a
+    LAS / LAZ file's coordinate system names its linear unit (:func:`las_units`); the other
+    cloud formats carry none (None)."""
+    name = str(path).lower()
+    if name.endswith(".e57"):
+        return "m"
+    if name.endswith((".las", ".laz")):
+        return las_units(path)
+    return None
+
+
+#: EPSG codes of linear units (GeoTIFF's ProjLinearUnitsGeoKey, VerticalUnitsGeoKey) -> ours;
+#: the US survey foot (9003) is not the foot (2 ppm apart) and is left unknown
+_EPSG_UNITS = {9001: "m", 9002: "ft"}
+#: GeoTIFF keys naming a linear unit: projected, vertical
+_GEO_LINEAR_KEYS = (3076, 4099)
+_WKT_UNIT = re.compile(r'(?:UNIT|LENGTHUNIT)\s*\[\s*"([^"]+)"')
+_WKT_UNITS = {"metre": "m", "meter": "m", "metres": "m", "meters": "m", "foot": "ft",
+              "international foot": "ft", "feet": "ft", "millimetre": "mm", "millimeter": "mm",
+              "centimetre": "cm", "centimeter": "cm", "inch": "in"}
+_ANGULAR = ("degree", "radian", "grad", "arc-second", "arc-minute")
+
+
+def las_units(path: object) -> str | None:
+    """The linear unit a LAS / LAZ file's coordinate system states: its GeoTIFF keys
+    (projected and vertical linear units, EPSG codes) or its OGC WKT (the length units named),
+    when every unit named is one of :data:`UNITS` and they agree; else None (also when laspy is
+    missing or the header does not read). Only the header and its records are read."""
+    try:
+        import laspy
+
+        from nurbs_core.io.scans import check_las_header
+
+        check_las_header(str(path))
+        with laspy.open(str(path)) as reader:
+            records = list(reader.header.vlrs) + list(getattr(reader, "evlrs", None) or [])
+    except Exception:  # noqa: BLE001 - no unit known; reading the points says what is wrong
+        return None
+    found: set[str | None] = set()
+    for record in records:
+        for key in getattr(record, "geo_keys", None) or []:
+            if key.id in _GEO_LINEAR_KEYS and key.tiff_tag_location == 0:
+                found.add(_EPSG_UNITS.get(int(key.value_offset)))
+        text = getattr(record, "string", None)
+        if isinstance(text, str):
+            for unit in _WKT_UNIT.findall(text):
+                unit = unit.strip().lower()
+                if not unit.startswith(_ANGULAR):
+                    found.add(_WKT_UNITS.get(unit))
+    unit = found.pop() if len(found) == 1 else None
+    return unit if unit in UNITS else None

@@ -82,6 +82,7 @@ def test_a_cloud_without_units_asks_for_them_and_the_choice_is_undoable(qtbot, w
 
 
 def test_units_come_from_the_files_that_state_them(qtbot, window, tmp_path):
+    """.3dm, LAS and STEP state their units; a file that states none follows the others."""
     from nurbs_core.geometry import NurbsSurface
     from nurbs_core.io import save
 
@@ -96,6 +97,21 @@ def test_units_come_from_the_files_that_state_them(qtbot, window, tmp_path):
     assert window.units_policy.box.currentText() == "in"
     assert "as reference.3dm states (scan.xyz taken to be in in too)" in (
         window.statusBar().currentMessage())
+    # a LAS scan whose coordinate system is in metres (GeoTIFF's ProjLinearUnitsGeoKey 9001)
+    laspy = pytest.importorskip("laspy")
+    from laspy.vlrs.known import GeoKeyDirectoryVlr, GeoKeyEntryStruct
+
+    las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.2"))
+    points = sin_cos_cloud(600)
+    las.x, las.y, las.z = points.T
+    directory, key = GeoKeyDirectoryVlr(), GeoKeyEntryStruct()
+    key.id, key.tiff_tag_location, key.count, key.value_offset = 3076, 0, 1, 9001
+    directory.geo_keys, directory.geo_keys_header.number_of_keys = [key], 1
+    las.vlrs.append(directory)
+    las.write(str(tmp_path / "survey.las"))
+    open_by_drop(qtbot, window, [tmp_path / "survey.las"])
+    assert window.document.units == "m"
+    assert "Units: m, as survey.las states." in window.statusBar().currentMessage()
     if HAS_OCP:  # a STEP in metres beside the .3dm in inches: they disagree, nothing is scaled
         step = tmp_path / "reference.step"
         save(surface, step, units="m")
