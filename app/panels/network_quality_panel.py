@@ -73,6 +73,7 @@ class NetworkQualityPanel(QWidget):
             for label in (name, value):
                 label.setToolTip(tip)
             value.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+            value.setWordWrap(True)  # long rows (distances with their unit) wrap, not clip
             grid.addWidget(name, row, 0)
             grid.addWidget(value, row, 1)
             self.values[key] = value

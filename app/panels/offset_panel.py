@@ -40,7 +40,9 @@ class OffsetPanel(QWidget):
         self.gap = QLabel("-")
         self.gap.setObjectName("offset_gap")
         form.addRow(self.show_offsets)
-        form.addRow("Distance", self.distance)
+        # the unit in the label: a suffix would widen the box past the dock's width
+        self.distance_label = QLabel("Distance")
+        form.addRow(self.distance_label, self.distance)
         form.addRow(self.constrain)
         form.addRow("Largest gap on shared edges", self.gap)
         self.show_offsets.toggled.connect(
@@ -66,7 +68,7 @@ class OffsetPanel(QWidget):
     def set_units(self, units: str | None):
         """The length unit of the distance and the gap (None: unknown, shown bare)."""
         self._units = units
-        self.distance.setSuffix(f" {units}" if units else "")
+        self.distance_label.setText(f"Distance ({units})" if units else "Distance")
         if self._offsets is not None:
             self.show_result(self._offsets)
 

@@ -61,7 +61,7 @@ def test_a_cloud_without_units_asks_for_them_and_the_choice_is_undoable(qtbot, w
     assert document.units == "mm" and box.styleSheet() == ""
     assert window.units_policy.actions["mm"].isChecked()
     assert window.fit_panel.tolerance_unit.text() == "mm"
-    assert window.offset_panel.distance.suffix() == " mm"
+    assert window.offset_panel.distance_label.text() == "Distance (mm)"
     assert window.tree.headerItem().text(0) == "Document (mm)"
     assert window.scene.deviation_colours.title().endswith("(mm)")
     # Edit > Units does the same; both are edits Undo takes back
