@@ -35,7 +35,9 @@ def parse_arguments(argv: list[str] | None = None) -> argparse.Namespace:
                         help="iteration budget of the fit (default: the settings' 500)")
     parser.add_argument("--screenshot", metavar="OUT.png",
                         help="save a screenshot of the window when done (after the fit with --fit)")
-    parser.add_argument("--units", choices=("mm", "cm", "m", "in", "ft"),
+    from nurbs_core.io.units import UNITS
+
+    parser.add_argument("--units", choices=UNITS,
                         help="the length unit of the files' coordinates, as the Units box sets "
                              "it (default: what the files state, else unknown); nothing is "
                              "scaled")
