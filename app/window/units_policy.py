@@ -55,8 +55,7 @@ def units_of_load(loaded: LoadedFiles) -> tuple[str | None, str]:
         return unit, f"Units: {unit}, as {sources} states{also}."
     names = ", ".join(silent)
     return None, (f"{names} state{'s' if len(silent) == 1 else ''} no units: choose them in the "
-                  "toolbar's Units box (or Edit > Units); until then lengths are shown without "
-                  "a unit and .3dm exports declare none.")
+                  "toolbar's Units box (or Edit > Units).")
 
 
 class UnitsPolicy(QObject):
