@@ -1,4 +1,4 @@
-"""``nurbs-studio [FILE...] [--fit] [--iterations N] [--screenshot OUT.png] [--quit]``.
+"""``nurbs-studio [FILE...] [--units U] [--fit] [--iterations N] [--screenshot OUT.png] [--quit]``.
 
 With no file the built-in demo (z = sin(x) cos(y) as a point cloud) opens, ready to fit. The
 scripted options run the real window: open the files, fit, save a screenshot, quit; the exit
@@ -35,6 +35,12 @@ def parse_arguments(argv: list[str] | None = None) -> argparse.Namespace:
                         help="iteration budget of the fit (default: the settings' 500)")
     parser.add_argument("--screenshot", metavar="OUT.png",
                         help="save a screenshot of the window when done (after the fit with --fit)")
+    from nurbs_core.io.units import UNITS
+
+    parser.add_argument("--units", choices=UNITS,
+                        help="the length unit of the files' coordinates, as the Units box sets "
+                             "it (default: what the files state, else unknown); nothing is "
+                             "scaled")
     parser.add_argument("--quit", action="store_true",
                         help="exit when done (status 0 on success, 1 on failure)")
     parser.add_argument("--load-timeout", type=float, default=60.0, metavar="SECONDS",
@@ -155,7 +161,8 @@ def _main(argv: list[str] | None) -> int:
     window.show()
     run = ScriptedRun(window, arguments.files, fit=arguments.fit,
                       iterations=arguments.iterations, screenshot=arguments.screenshot,
-                      quit_when_done=arguments.quit, load_timeout=arguments.load_timeout)
+                      quit_when_done=arguments.quit, load_timeout=arguments.load_timeout,
+                      units=arguments.units)
     run.begin()
     status = application.exec()
     interrupt.restore()

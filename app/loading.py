@@ -42,6 +42,8 @@ class LoadedFiles:
     targets: list[Target] = field(default_factory=list)
     patches: list[GeometryArrays] = field(default_factory=list)
     patch_names: list[str] = field(default_factory=list)
+    #: file name -> the length unit the file states (None: it states none), in reading order
+    stated_units: dict[str, str | None] = field(default_factory=dict)
 
 
 def open_suffixes() -> tuple[str, ...]:
@@ -86,12 +88,15 @@ def load_files(paths: list[str], cancel: threading.Event | None = None) -> Loade
 
 def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
     """Read one file into ``loaded`` (a failure leaves the caller to drop it all)."""
+    from nurbs_core.io.units import units_of_file, units_of_items
+
     _check(cancel)
     result = _read(path)  # the engine's reader checks the file (missing, link loop, folder...)
     _check(cancel)
     if isinstance(result, (list, tuple)):
         if not result:
             raise ValueError(f"{path}: contains no curves or surfaces")
+        loaded.stated_units[path.name] = units_of_items(result)  # .3dm, STEP, our JSON
         for index, geometry in enumerate(result):
             loaded.patches.append(geometry.numpy())
             suffix = f" #{index + 1}" if len(result) > 1 else ""
@@ -101,6 +106,7 @@ def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
         if len(points) < 4:
             raise ValueError(f"{path}: needs at least 4 points, has {len(points)}")
         loaded.targets.append(Target(path.name, points, str(path)))
+        loaded.stated_units[path.name] = units_of_file(path)  # E57: metres
 
 
 def tessellate(geometries: list[GeometryArrays]) -> list[DisplayGeometry]:
@@ -156,22 +162,27 @@ def compute_offsets(surfaces: list[GeometryArrays], distance: float, constrain_s
             tessellate(geometries))
 
 
-def export_geometry(geometries: list[GeometryArrays], path: str) -> int:
-    """Write the shapes with ``nurbs_core.io.save`` (format from the suffix); returns the count."""
+def export_geometry(geometries: list[GeometryArrays], path: str,
+                    units: str | None = None) -> int:
+    """Write the shapes with ``nurbs_core.io.save`` (format from the suffix) declaring
+    ``units`` (:mod:`nurbs_core.io.units`: .3dm's unit system, STEP's and IGES's length unit,
+    JSON's metadata; None: .3dm says none, STEP and IGES millimetres); returns the count."""
     from nurbs_core import geometry_from_numpy
     from nurbs_core.io import save
 
     shapes = [geometry_from_numpy(g) for g in geometries]
-    save(shapes, path)
+    save(shapes, path, units=units)
     return len(shapes)
 
 
 def export_report(path: str, points: np.ndarray, fitted: GeometryArrays | None, network,
                   *, title: str, status: str, tolerance: float | None,
-                  warnings: list[str], settings: list[tuple[str, str]]) -> float:
+                  warnings: list[str], settings: list[tuple[str, str]],
+                  units: str | None = None) -> float:
     """Write a deviation report (:mod:`nurbs_core.report`: .html or .pdf) of the points (N, 3)
     against the patch network (when given) or the fitted surface; ``tolerance`` None: three
-    estimated noise sigmas. Returns the share of the points within the tolerance."""
+    estimated noise sigmas; ``units`` the length unit the report names (None: not given).
+    Returns the share of the points within the tolerance."""
     from nurbs_core.report.deviation import measure_deviation
     from nurbs_core.report.document import ReportContent, write_report
 
@@ -187,17 +198,17 @@ def export_report(path: str, points: np.ndarray, fitted: GeometryArrays | None, 
                    ("control points", " x ".join(str(int(n)) for n in counts))]
     points = np.asarray(points, np.float64)
     content = ReportContent(title, status, points, vertices, faces,
-                            measure_deviation(points, vertices, faces, tolerance), None, closed,
+                            measure_deviation(points, vertices, faces, tolerance), units, closed,
                             summary, settings, warnings)
     write_report(path, content)
     return float(content.deviation.within.mean())
 
 
-def export_network(network, path: str) -> int:
+def export_network(network, path: str, units: str | None = None) -> int:
     """Write a patch network with ``nurbs_core.io.network_io.write_network`` (format from the
-    suffix; it names the formats it has when the suffix is none of them); returns the patch
-    count."""
+    suffix; it names the formats it has when the suffix is none of them) declaring ``units``
+    (as :func:`export_geometry`); returns the patch count."""
     from nurbs_core.io.network_io import write_network
 
-    write_network(network, path)
+    write_network(network, path, units=units)
     return network.patch_count

@@ -69,6 +69,7 @@ from app.window.load_policy import LoadPolicy, RecentFiles
 from app.window.selection_policy import SelectionPolicy
 from app.window.session_policy import SessionPolicy
 from app.window.settings_policy import SettingsPolicy
+from app.window.units_policy import UnitsPolicy
 from app.workers.jobs import JobRunner
 
 log = logging.getLogger("app")
@@ -150,6 +151,7 @@ class MainWindow(QMainWindow):
         self.session_policy = SessionPolicy(self)
         self.fit_display = FitDisplay(self)
         self.selection_policy = SelectionPolicy(self)
+        self.units_policy = UnitsPolicy(self)
         self.setCentralWidget(self._native_container(self.scene.widget))
 
         self._build_docks()
@@ -164,6 +166,7 @@ class MainWindow(QMainWindow):
                                     self.status_labels, self.report, self)
         self._connect()
         self.settings_policy.show(self.document.settings)
+        self.units_policy.on_units_changed()
         self.update_fit_actions("idle")
         self.selection_policy.on_selection_changed()
         app = QApplication.instance()
@@ -407,6 +410,9 @@ class MainWindow(QMainWindow):
         edit_menu.addSeparator()
         edit_menu.addAction(self.selection_actions["crop"])
         edit_menu.addAction(self.selection_actions["delete"])
+        edit_menu.addSeparator()
+        self.units_menu = edit_menu.addMenu("U&nits")
+        self.units_policy.fill_menu(self.units_menu)
 
         fit_menu = bar.addMenu("F&it")
         for action in (self.start_action, self.pause_action, self.resume_action,
@@ -451,6 +457,9 @@ class MainWindow(QMainWindow):
         toolbar.addSeparator()
         toolbar.addAction(self.undo_action)
         toolbar.addAction(self.redo_action)
+        toolbar.addSeparator()
+        toolbar.addWidget(QLabel(" Units "))
+        toolbar.addWidget(self.units_policy.box)
         select_bar = self.addToolBar("Select")
         select_bar.setObjectName("select_toolbar")
         select_bar.setToolButtonStyle(Qt.ToolButtonStyle.ToolButtonTextOnly)
@@ -501,6 +510,7 @@ class MainWindow(QMainWindow):
         doc.selection_changed.connect(self.selection_policy.on_selection_changed)
         self.scene.selection_tool.region_drawn.connect(self.selection_policy.on_region_drawn)
         doc.content_changed.connect(self.fit_display.on_content_changed)
+        doc.units_changed.connect(self.units_policy.on_units_changed)
         doc.fitted_changed.connect(self.fit_display.on_fitted_changed)
         ctl.state_changed.connect(self.update_fit_actions)
         self.patch_controller.state_changed.connect(self.update_fit_actions)

@@ -70,9 +70,11 @@ class OffsetController(QObject):
         offsets, displays = result
         self._document.set_offsets(offsets)
         self._scene.set_group("offsets", displays, opacity=0.85)
-        note = f"Offset {distance:g}: {len(displays)} patch(es)"
+        unit = f" {self._document.units}" if self._document.units else ""
+        note = f"Offset {distance:g}{unit}: {len(displays)} patch(es)"
         if offsets.shared_edges:
-            note += (f", {offsets.shared_edges} shared edge(s), largest gap {offsets.max_gap:.3g}"
+            note += (f", {offsets.shared_edges} shared edge(s), largest gap "
+                     f"{offsets.max_gap:.3g}{unit}"
                      f" ({'constrained' if constrain else 'unconstrained'})")
         self._scene.set_note(note)
         self._panel.show_result(offsets)

@@ -70,7 +70,8 @@ class PatchView(QObject):
         self.stage = stage_text(snapshot)
         labels = self._labels
         labels["iteration"].setText(self.stage)
-        labels["loss"].setText(f"RMS {snapshot.rms:.4g}" if math.isfinite(snapshot.rms)
+        unit = f" {self._panel.units}" if self._panel.units else ""
+        labels["loss"].setText(f"RMS {snapshot.rms:.4g}{unit}" if math.isfinite(snapshot.rms)
                                else "RMS -")
         # the pass's own largest seam angle while it runs; the final quality's (what the Patch
         # quality dock shows) once measured
@@ -93,8 +94,9 @@ class PatchView(QObject):
                f"{snapshot.size} control points each"
         if snapshot.quality:
             seam = snapshot.quality["seam"]
+            unit = f" {self._panel.units}" if self._panel.units else ""
             text += (f"; seam angle p99 {seam['p99']:.2f}\N{DEGREE SIGN}, cloud to surface mean "
-                     f"{snapshot.quality['c2s_mean']:.4g}")
+                     f"{snapshot.quality['c2s_mean']:.4g}{unit}")
             self._labels["rate"].setText(f"seam p99 {seam['p99']:.2f}\N{DEGREE SIGN}, max "
                                          f"{seam['max']:.2f}\N{DEGREE SIGN}")
         self._report(text)

@@ -7,8 +7,9 @@ blade, when its data is on this machine), a 2D curve fit, the quality map of a s
 1.5 turns: fitted cleanly by default, and folded when its (u, v) come from the principal plane,
 Patches mode: a torus fitted with a patch network (its layout drawn on it), then its seam
 angles, then its signed deviation, and choosing what to fit: a lasso selection on the demo cloud
-(a second lasso being drawn), then the fit of the selected points alone. ``--only single``,
-``--only patches`` or ``--only selection`` makes one of the sets.
+(a second lasso being drawn), then the fit of the selected points alone, and units: a scan
+whose file states none (the Units box asks), then fitted in metres. ``--only single``,
+``--only patches``, ``--only selection`` or ``--only units`` makes one of the sets.
 """
 
 from __future__ import annotations
@@ -51,6 +52,15 @@ def sheet_cloud(path: Path) -> Path:
     return _write_points(path, samples.curled_sheet().points)
 
 
+def panel_cloud(path: Path) -> Path:
+    """A scanned panel in metres: 0.5 m square, a 5 cm wave (the demo's surface scaled by
+    0.05), 0.5 mm of noise; the file (.xyz) states no unit."""
+    rng = np.random.default_rng(11)
+    xy = rng.uniform(-5.0, 5.0, size=(4000, 2))
+    z = np.sin(xy[:, 0]) * np.cos(xy[:, 1]) + rng.normal(0.0, 0.01, len(xy))
+    return _write_points(path, 0.05 * np.column_stack([xy, z]))
+
+
 def torus_cloud(path: Path) -> Path:
     """``nurbs_core.samples.torus(3000)``: a closed object of genus 1."""
     from nurbs_core import samples
@@ -61,9 +71,9 @@ def torus_cloud(path: Path) -> Path:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path)
-    parser.add_argument("--only", choices=("single", "patches", "selection"),
-                        help="make only the single-patch (01-07, 11), the Patches mode (08-09, 12) "
-                             "or the selection (13-14) set")
+    parser.add_argument("--only", choices=("single", "patches", "selection", "units"),
+                        help="make only the single-patch (01-07, 11), the Patches mode (08-09, 12), "
+                             "the selection (13-14) or the units (15-17) set")
     arguments = parser.parse_args(argv)
     arguments.out.mkdir(parents=True, exist_ok=True)
 
@@ -288,11 +298,33 @@ def main(argv: list[str] | None = None) -> int:
         once(window.controller.fit_finished, finished)
         window.start_fit()
 
+    # 15. a scan whose file states no units: the toolbar's Units box asks (amber), the status
+    # bar says where to choose them; 16. chosen (metres) and fitted: the Quality dock, the
+    # viewport's corner and legend in metres; 17. the Deviation dock in metres
+    def units_import():
+        window.set_quality_visible(False)
+        window.set_deviation_visible(True)
+        window.set_layer_visible("knot_lines", False)
+        window.fit_dock.raise_()
+        window.quality_dock.raise_()
+        once(window.files_loaded, lambda ok: later(lambda: (shot("15_units_import.png"),
+                                                             units_chosen())))
+        window.open_files([str(panel_cloud(scratch / "panel_scan.xyz"))])
+
+    def units_chosen():
+        window.units_policy.choose("m")
+        window.document.edit_settings("Tolerance", tolerance=0.002)  # 2 mm: 4 noise sigmas
+        once(window.controller.fit_finished, lambda snapshot: later(lambda: (
+            shot("16_units_metres.png"), window.deviation_dock.raise_(),
+            later(lambda: (shot("17_units_deviation.png"), next_step()), 600)), 600))
+        window.start_fit()
+
     single = [demo, converging, offsets, curve, quality_clean, quality_folded]
     patches = [patches_mode, seam_map, patches_deviation]
     choose = [selection, fit_selection]
-    steps.extend({"single": single, "patches": patches, "selection": choose}.get(
-        arguments.only, single + choose + patches))
+    units = [units_import]
+    steps.extend({"single": single, "patches": patches, "selection": choose,
+                  "units": units}.get(arguments.only, single + choose + units + patches))
     window.controller.fit_failed.connect(lambda message: failures.append(message))
     window.patch_controller.fit_failed.connect(lambda message: failures.append(message))
     next_step()

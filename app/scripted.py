@@ -25,12 +25,14 @@ class ScriptedRun(QObject):
 
     def __init__(self, window: MainWindow, files: list[str], *, fit: bool = False,
                  iterations: int | None = None, screenshot: str | None = None,
-                 quit_when_done: bool = False, load_timeout: float | None = LOAD_TIMEOUT_S):
+                 quit_when_done: bool = False, load_timeout: float | None = LOAD_TIMEOUT_S,
+                 units: str | None = None):
         super().__init__(window)
         self.window, self.files, self.fit = window, list(files), fit
         self.iterations, self.screenshot = iterations, screenshot
         self.quit_when_done = quit_when_done
         self.load_timeout = load_timeout
+        self.units = units  # the files' length unit (None: what they state)
         self.exit_status = 0
         self._finished = False
         self._load_timer = QTimer(self)
@@ -66,6 +68,8 @@ class ScriptedRun(QObject):
         if not ok:
             self._finish(failed=self.window.load_message)  # set by every load that ends
             return
+        if self.units is not None:
+            self.window.units_policy.choose(self.units)
         if self.iterations is not None:
             self.window.document.edit_settings("Iterations", iterations=self.iterations)
         if not self.fit:

@@ -1,7 +1,7 @@
 """The session file: one zip archive (stored, not compressed) holding ``session.json`` (the
-settings, the names, the fitted and loaded surfaces, the patch network's report) and the
-arrays as ``.npy`` members (the clouds' points, the network's deviation), and the patch network
-as our lossless network JSON (``network.json``, :mod:`nurbs_core.io.network_io`).
+settings, the length unit, the names, the fitted and loaded surfaces, the patch network's
+report) and the arrays as ``.npy`` members (the clouds' points, the network's deviation), and
+the patch network as our lossless network JSON (``network.json``, :mod:`nurbs_core.io.network_io`).
 
 Binary points make a 1,000,000-point session about 24 MB, written and read in a fraction of a
 second (JSON took 60 MB and 7 s). Reading is bounded and never runs code: members must be
@@ -134,6 +134,7 @@ def save_session(document: Document, path: str | Path,
     manifest: dict[str, Any] = {
         "format": ARCHIVE_FORMAT,
         "settings": document.settings.to_json(),
+        "units": document.units,
         "targets": [{"name": t.name, "path": t.path, "visible": t.visible,
                      "points": f"targets/{k}"} for k, t in enumerate(document.targets)],
         "patches": [{"name": name, "geometry": g.to_json()}
@@ -160,7 +161,8 @@ def read_session(path: str | Path) -> dict[str, Any]:
     """Parse and check a session file (an archive, or a JSON session of the formats before it)
     without touching any document; raises ValueError naming the problem. Returns settings,
     targets, patches, names, fitted, network (a PatchNetwork or None) and network_report (for
-    :meth:`app.state.Document.apply_session`; the network is the window's to show)."""
+    :meth:`app.state.Document.apply_session`; the network is the window's to show) and units
+    (the length unit, None: unknown)."""
     path = Path(path)
     if is_archive(path):
         try:
@@ -240,13 +242,29 @@ def _parsed_session(path: Path, data: dict[str, Any], archive: Any) -> dict[str,
             raise ValueError("patch names must be text")
         fitted = data.get("fitted")
         fitted = None if fitted is None else from_mapping(fitted)
+        units = _session_units(data, targets)
         network, report = None, None
         if archive is not None and data.get("network") is not None:
             network, report = _session_network(path, data, archive)
     except (KeyError, TypeError) as exc:
         raise ValueError(f"{type(exc).__name__}: {exc}") from None
     return {"settings": settings, "targets": targets, "patches": patches, "names": names,
-            "fitted": fitted, "network": network, "network_report": report}
+            "fitted": fitted, "network": network, "network_report": report, "units": units}
+
+
+def _session_units(data: dict[str, Any], targets: list[Target]) -> str | None:
+    """The session's length unit (None: unknown). Sessions from before units were kept have
+    none: their clouds' files say it where their format does (E57: metres), as the window
+    showed it then."""
+    from nurbs_core.io.units import check_units, units_of_file
+
+    if "units" in data:
+        units = data["units"]
+        if units is not None and not isinstance(units, str):
+            raise ValueError("units must be text or null")
+        return check_units(units)
+    stated = {units_of_file(t.path) for t in targets}
+    return stated.pop() if len(stated) == 1 else None
 
 
 def _session_network(path: Path, data: dict[str, Any], archive: Any) -> tuple[Any, dict]:

@@ -221,6 +221,31 @@ class _PointsCommand(QUndoCommand):
             document._apply_points(self._before)
 
 
+class _UnitsCommand(QUndoCommand):
+    """The document's length unit chosen (Edit > Units, the toolbar's Units): undo restores the
+    one before. An edit made before other files were opened is dropped when reached (those
+    files came with their own unit)."""
+
+    def __init__(self, document: Document, old: str | None, new: str | None):
+        super().__init__(f"Units: {new or 'unknown'}")
+        self._document, self._old, self._new = document, old, new
+        self._generation = document.content_generation
+
+    def _current(self) -> bool:
+        if self._document.content_generation == self._generation:
+            return True
+        self.setObsolete(True)
+        return False
+
+    def redo(self):
+        if self._current():
+            self._document._apply_units(self._new)
+
+    def undo(self):
+        if self._current():
+            self._document._apply_units(self._old)
+
+
 class _SettingsCommand(QUndoCommand):
     def __init__(self, document: Document, old: Settings, new: Settings, text: str):
         super().__init__(text)
@@ -242,6 +267,7 @@ class Document(QObject):
     settings_changed = Signal(object, object)  # (old Settings, new Settings)
     points_changed = Signal()  # a point edit (crop, delete) or its undo / redo
     selection_changed = Signal()
+    units_changed = Signal()  # the document's length unit (replaced content sends it too)
 
     def __init__(self, parent: QObject | None = None):
         super().__init__(parent)
@@ -253,6 +279,10 @@ class Document(QObject):
         self.network: Any = None
         self.offsets = OffsetDisplay()
         self.settings = Settings()
+        #: the length unit of the coordinates (one of ``nurbs_core.io.units.UNITS``), None while
+        #: unknown: what every length shown is in and what .3dm / STEP exports declare (the
+        #: coordinates are never scaled)
+        self.units: str | None = None
         self.undo_stack = QUndoStack(self)
         #: bool (N,) over :meth:`target_points` (True: selected), or None: nothing selected
         self.selection: np.ndarray | None = None
@@ -285,11 +315,26 @@ class Document(QObject):
         old, self.settings = self.settings, new
         self.settings_changed.emit(old, new)
 
+    # --- units (undoable) ---------------------------------------------------------------------
+    def set_units(self, units: str | None) -> bool:
+        """Choose the length unit of the coordinates as an undoable edit (None: unknown);
+        returns False when it does not change. Nothing is scaled."""
+        if units == self.units:
+            return False
+        self.undo_stack.push(_UnitsCommand(self, self.units, units))
+        return True
+
+    def _apply_units(self, units: str | None):
+        self.units = units
+        self.units_changed.emit()
+
     # --- content ---------------------------------------------------------------------------------
     def replace_content(self, targets: list[Target], patches: list[Mapping[str, Any]],
-                        patch_names: list[str]):
-        """Swap in freshly loaded files (all already validated); drops the fit and offsets."""
+                        patch_names: list[str], units: str | None = None):
+        """Swap in freshly loaded files (all already validated) in ``units`` (the length unit
+        they are in; None: unknown); drops the fit and offsets."""
         self.targets, self.patch_names = targets, patch_names
+        self.units = units
         self.content_generation += 1
         self.selection = None
         self.patches = [from_mapping(p) for p in patches]
@@ -300,6 +345,7 @@ class Document(QObject):
         self.fitted_changed.emit()
         self.offsets_changed.emit()
         self.selection_changed.emit()
+        self.units_changed.emit()
 
     def set_fitted(self, geometry: Mapping[str, Any] | None, notify: bool = True):
         """Replace the fitted shape. Live fit updates pass ``notify=False``: the controller
@@ -406,7 +452,8 @@ class Document(QObject):
         """Replace the document with a session read by :func:`app.session_file.read_session`
         (its network is shown by the window's patch controller, which hands it to
         :meth:`set_network`)."""
-        self.replace_content(session["targets"], session["patches"], session["names"])
+        self.replace_content(session["targets"], session["patches"], session["names"],
+                             session.get("units"))
         self.undo_stack.clear()
         self._apply_settings(session["settings"])
         self.set_fitted(session["fitted"])

@@ -207,6 +207,8 @@ class DeviationPanel(QWidget):
     def show_map(self, deviation_map: DeviationMap | None, units: str | None = None) -> None:
         """The signed map of the mode on show (None: none yet)."""
         self.map, self._units = deviation_map, units
+        for box in (self.tolerance_box, self.limit_box):
+            box.setSuffix(f" {units}" if units else "")
         if deviation_map is not None and not self._tolerance_edited:
             self.tolerance_box.setValue(deviation_map.tolerance)
         self._refresh()
@@ -232,7 +234,7 @@ class DeviationPanel(QWidget):
             f"({n['within'] / total:.1%}); above: {n['above']:,} ({n['above'] / total:.1%}); "
             f"below: {n['below']:,} ({n['below'] / total:.1%}) of {total:,} points{sampled}.\n"
             f"Mean signed {stats['mean_signed']:.4g}{unit}, largest above "
-            f"{stats['max_above']:.4g}, below {stats['max_below']:.4g}.")
+            f"{stats['max_above']:.4g}{unit}, below {stats['max_below']:.4g}{unit}.")
 
 
 def _length_box() -> QDoubleSpinBox:

@@ -40,6 +40,8 @@ class DocumentTree(QTreeWidget):
         self._updating = True
         try:
             self.clear()
+            self.setHeaderLabels([f"Document ({document.units or 'units unknown'})"
+                                  if document.targets or document.patches else "Document"])
             clouds = self._item(self, "Point clouds", ("layer", "cloud"), layer_visible("cloud"),
                                 "the fit target: every checked cloud")
             for index, target in enumerate(document.targets):

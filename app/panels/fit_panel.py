@@ -18,6 +18,7 @@ from PySide6.QtWidgets import (
     QFormLayout,
     QGridLayout,
     QGroupBox,
+    QHBoxLayout,
     QLabel,
     QLineEdit,
     QSpinBox,
@@ -224,7 +225,12 @@ class FitSettingsPanel(QWidget):
         form.addRow("Solver", self.solver)
         form.addRow("Parameterisation", self.parameterization)
         form.addRow("Stiffness", self.stiffness)
-        form.addRow("Tolerance", self.tolerance)
+        self.tolerance_unit = QLabel("")  # the document's length unit (empty: unknown)
+        self.tolerance_unit.setObjectName("tolerance_unit")
+        row = QHBoxLayout()
+        row.addWidget(self.tolerance, 1)
+        row.addWidget(self.tolerance_unit)
+        form.addRow("Tolerance", row)
         form.addRow(self.tolerance_hint)
         form.addRow(self.grow_grid)
         form.addRow("Grow up to", self.max_control_points)
@@ -269,6 +275,12 @@ class FitSettingsPanel(QWidget):
     def _clear_tolerance_hint(self):
         self.tolerance_hint.setVisible(False)
         self.tolerance.setStyleSheet("")
+
+    def set_units(self, units: str | None):
+        """The length unit the tolerance is in (None: unknown)."""
+        self.tolerance_unit.setText(units or "")
+        self.tolerance.setToolTip(SURFACING_HELP["tolerance"] + (
+            f" (in {units})" if units else " (the units are unknown: choose them under Units)"))
 
     def cancel_pending(self):
         """Drop a slider change still waiting to be committed (shutdown)."""

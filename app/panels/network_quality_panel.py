@@ -28,7 +28,7 @@ ROWS = (
                                 "layout corner (degrees), at regular (4 patches) and irregular "
                                 "corners"),
     ("flipped", "Flipped area", "share of the area whose normal points inward (folds)"),
-    ("area", "Area", "the network's surface area (cloud units squared)"),
+    ("area", "Area", "the network's surface area (in the units squared)"),
     ("c2s", "Cloud to surface", "mean, RMS and 99th percentile distance of the cloud's points "
                                 "to the network"),
     ("s2c", "Surface to cloud", "mean and largest distance from the network to the nearest "
@@ -42,6 +42,11 @@ ROWS = (
 
 def _number(value: float) -> str:
     return f"{value:.4g}" if math.isfinite(value) else "-"
+
+
+def _length(value: float, units: str | None, power: str = "") -> str:
+    """A distance (an area with ``power`` "\N{SUPERSCRIPT TWO}") with its unit when known."""
+    return _number(value) + (f" {units}{power}" if units and math.isfinite(value) else "")
 
 
 def _degrees(value: float) -> str:
@@ -68,6 +73,7 @@ class NetworkQualityPanel(QWidget):
             for label in (name, value):
                 label.setToolTip(tip)
             value.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+            value.setWordWrap(True)  # long rows (distances with their unit) wrap, not clip
             grid.addWidget(name, row, 0)
             grid.addWidget(value, row, 1)
             self.values[key] = value
@@ -79,19 +85,35 @@ class NetworkQualityPanel(QWidget):
         self.warnings.setStyleSheet(f"QLabel {{ color: {WARNING_COLOR}; }}")
         layout.addWidget(self.warnings)
         layout.addStretch(1)
+        self._units: str | None = None
+        self._result: tuple | None = None  # show_result's arguments, to show in other units
         self.clear()
 
     def clear(self, note: str = "No patch network yet: choose Mode > Patches and Start."):
         self.status.setText(note)
+        self._result = None
         for label in self.values.values():
             label.setText("-")
         self.warnings.setText("")
 
+    def set_units(self, units: str | None):
+        """The length unit every distance is shown in (None: unknown, shown bare)."""
+        self._units = units
+        if self._result is not None:
+            self.show_result(*self._result)
+
+    @property
+    def units(self) -> str | None:
+        return self._units
+
     def show_running(self, text: str):
         """A run's progress (the stage); the measures come when it ends."""
+        self._result = None
         self.status.setText(f"{text}. The network is measured when the fit ends.")
 
     def show_result(self, headline: str, quality: dict | None, warnings: list[str]):
+        self._result = (headline, quality, warnings)
+        units = self._units
         self.status.setText(headline + ("" if quality else " (not measured)"))
         # the headline in the warning colour when a quality check fails ("fitted with warnings")
         self.status.setStyleSheet(f"QLabel {{ color: {WARNING_COLOR}; }}" if warnings else "")
@@ -102,7 +124,7 @@ class NetworkQualityPanel(QWidget):
         get = lambda key, where=quality: float(where.get(key, math.nan))  # noqa: E731
         self.values["patches"].setText(f"{quality['patches']} ({quality['size']} x "
                                        f"{quality['size']} control points each)")
-        self.values["gap"].setText(f"{_number(get('gap', seam))} "
+        self.values["gap"].setText(f"{_length(get('gap', seam), units)} "
                                    f"({_number(get('gap_relative'))} of the diagonal)")
         creases = int(seam.get("crease_seams", 0))
         crease_text = (f"; {creases} crease seam{'s' if creases != 1 else ''} (G0), "
@@ -117,13 +139,14 @@ class NetworkQualityPanel(QWidget):
         flipped = get("flipped_fraction")
         self.values["flipped"].setText(f"{100 * flipped:.2f}%" if math.isfinite(flipped) else
                                        "- (not measured for a stopped fit)")
-        self.values["area"].setText(_number(get("area")))
-        self.values["c2s"].setText(f"mean {_number(get('c2s_mean'))}, RMS "
-                                   f"{_number(get('c2s_rms'))}, p99 {_number(get('c2s_p99'))}")
+        self.values["area"].setText(_length(get("area"), units, "\N{SUPERSCRIPT TWO}"))
+        self.values["c2s"].setText(f"mean {_length(get('c2s_mean'), units)}, RMS "
+                                   f"{_length(get('c2s_rms'), units)}, p99 "
+                                   f"{_length(get('c2s_p99'), units)}")
         far = get("far_fraction")
-        self.values["s2c"].setText(f"mean {_number(get('s2c_mean'))}, max "
-                                   f"{_number(get('s2c_max'))}; {far:.2%} farther than "
-                                   f"{_number(get('far_limit'))}")
+        self.values["s2c"].setText(f"mean {_length(get('s2c_mean'), units)}, max "
+                                   f"{_length(get('s2c_max'), units)}; {far:.2%} farther than "
+                                   f"{_length(get('far_limit'), units)}")
         self.values["s2c"].setStyleSheet(f"QLabel {{ color: {WARNING_COLOR}; }}" if far > 0.005
                                          else "")
         self.values["scan"].setText(scan_summary(quality))

@@ -35,10 +35,14 @@ class OffsetPanel(QWidget):
         self.constrain = QCheckBox("Keep shared edges together")
         self.constrain.setToolTip("offset the points of edges shared by two patches once, so the "
                                   "offset patches stay watertight along them")
+        self._units: str | None = None
+        self._offsets: OffsetDisplay | None = None
         self.gap = QLabel("-")
         self.gap.setObjectName("offset_gap")
         form.addRow(self.show_offsets)
-        form.addRow("Distance", self.distance)
+        # the unit in the label: a suffix would widen the box past the dock's width
+        self.distance_label = QLabel("Distance")
+        form.addRow(self.distance_label, self.distance)
         form.addRow(self.constrain)
         form.addRow("Largest gap on shared edges", self.gap)
         self.show_offsets.toggled.connect(
@@ -61,10 +65,20 @@ class OffsetPanel(QWidget):
         finally:
             self._updating = False
 
+    def set_units(self, units: str | None):
+        """The length unit of the distance and the gap (None: unknown, shown bare)."""
+        self._units = units
+        self.distance_label.setText(f"Distance ({units})" if units else "Distance")
+        if self._offsets is not None:
+            self.show_result(self._offsets)
+
     def show_result(self, offsets: OffsetDisplay, busy: bool = False):
+        self._offsets = None if busy else offsets
+        unit = f" {self._units}" if self._units else ""
         if busy:
             self.gap.setText("computing...")
         elif not offsets.surfaces:
             self.gap.setText("-")
         else:
-            self.gap.setText(f"{offsets.max_gap:.3g} ({offsets.shared_edges} shared edges)")
+            self.gap.setText(f"{offsets.max_gap:.3g}{unit} ({offsets.shared_edges} shared "
+                             "edges)")

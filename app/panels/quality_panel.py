@@ -45,7 +45,7 @@ ROWS = (
                                  "(folds count twice)"),
     ("bending_energy", "Bending energy", "integral of k1^2 + k2^2 over the surface (0 for a "
                                          "plane)"),
-    ("max_curvature", "Max curvature", "largest principal curvature on the surface (1 / units)"),
+    ("max_curvature", "Max curvature", "largest principal curvature on the surface (1 / length)"),
     ("grid", "Control grid", "the fitted surface's control points per direction and degrees: "
                             "what ran (the fit grows or trims the grid the settings start from)"),
 )
@@ -53,6 +53,11 @@ ROWS = (
 
 def _number(value: float) -> str:
     return f"{value:.4g}" if math.isfinite(value) else "-"
+
+
+def _length(value: float, units: str | None) -> str:
+    """A distance to four digits with its unit when known ("0.0123 mm")."""
+    return _number(value) + (f" {units}" if units and math.isfinite(value) else "")
 
 
 def _percent(value: float) -> str:
@@ -89,17 +94,33 @@ class QualityPanel(QWidget):
         grid.setColumnStretch(3, 1)
         layout.addLayout(grid)
         layout.addStretch(1)
+        self._units: str | None = None
+        #: what is shown, to show again in other units: the deviation's statistics and the
+        #: arguments of show_result
+        self._deviation: dict[str, float] | None = None
+        self._result: tuple | None = None
         self.clear()
 
     # --- what the window calls -----------------------------------------------------------------
     def clear(self, note: str = "No fit yet: the quality of the fitted surface shows here when "
                                 "a fit ends."):
         self.status.setText(note)
+        self._deviation = self._result = None
         for key in self.values:
             self._set(key, "-")
 
+    def set_units(self, units: str | None):
+        """The length unit every distance is shown in (None: unknown, shown bare)."""
+        self._units = units
+        deviation, result = self._deviation, self._result
+        if deviation is not None:
+            self.show_deviation(deviation)
+        if result is not None:
+            self.show_result(*result)
+
     def show_running(self):
         self.status.setText("Fitting... the quality is measured when the fit ends.")
+        self._result = None
         for key in self.values:
             if key != "deviation":
                 self._set(key, "-")
@@ -107,10 +128,14 @@ class QualityPanel(QWidget):
     def show_deviation(self, stats: dict[str, float] | None):
         """mean / rms / max of the per-point deviation (``deviation_stats``)."""
         if not stats or not stats.get("count"):
+            self._deviation = None
             self._set("deviation", "-")
             return
-        self._set("deviation", f"mean {_number(stats['mean'])}, RMS {_number(stats['rms'])}, "
-                               f"max {_number(stats['max'])}")
+        self._deviation = dict(stats)
+        units = self._units
+        self._set("deviation", f"mean {_length(stats['mean'], units)}, RMS "
+                               f"{_length(stats['rms'], units)}, max "
+                               f"{_length(stats['max'], units)}")
 
     def show_result(self, status: str, message: str, statistics: dict[str, float] | None,
                     automatic_tolerance: bool = True, kind: str = "surface",
@@ -118,6 +143,7 @@ class QualityPanel(QWidget):
         """The final snapshot's status, message and quality statistics (None: not measured);
         ``warned``: a quality check failed (the headline takes the warning colour); ``grid``:
         the fitted surface's (control points u, v, degree u, v)."""
+        self._result = (status, message, statistics, automatic_tolerance, kind, warned, grid)
         headline = status.capitalize() + (f": {message}" if message else "")
         self._set("grid", "-" if grid is None else
                   f"{grid[0]} x {grid[1]} (degree {grid[2]} x {grid[3]})")
@@ -134,16 +160,17 @@ class QualityPanel(QWidget):
     # --- formatting ----------------------------------------------------------------------------
     def _show_statistics(self, stats: dict[str, float], automatic_tolerance: bool):
         get = lambda key: float(stats.get(key, math.nan))  # noqa: E731
+        units = self._units
         if "tolerance" in stats:
             met = bool(stats.get("tolerance_met"))
             source = " (auto)" if automatic_tolerance else ""
-            self._set("tolerance", f"{_number(get('tolerance'))}{source}: "
+            self._set("tolerance", f"{_length(get('tolerance'), units)}{source}: "
                                    f"{'met' if met else 'not met'}",
                       GOOD_COLOR if met else BAD_COLOR)
         else:
             self._set("tolerance", "not checked (gradient fit)")
         p95, allowance, spacing = get("s2c_p95"), get("allowance"), get("spacing")
-        text = _number(p95)
+        text = _length(p95, units)
         if math.isfinite(spacing) and spacing > 0:
             text += f" ({p95 / spacing:.1f} spacings)"
         self._set("s2c_p95", text, BAD_COLOR if p95 > allowance else None)
@@ -156,10 +183,14 @@ class QualityPanel(QWidget):
         self._set("area_ratio", _number(ratio),
                   BAD_COLOR if abs(ratio - 1) > AREA_RATIO_LIMIT else None)
         self._set("bending_energy", _number(get("bending_energy")))
-        self._set("max_curvature", _number(get("max_curvature")))
-        if "mean" in stats and self.values["deviation"].text() == "-":
-            self._set("deviation", f"mean {_number(get('mean'))}, RMS {_number(get('rms'))}, "
-                                   f"max {_number(get('max'))}")
+        curvature = get("max_curvature")
+        self._set("max_curvature", _number(curvature) + (
+            f" /{units}" if units and math.isfinite(curvature) else ""))
+        if "mean" in stats and (self._deviation is None or
+                                self.values["deviation"].text() == "-"):
+            self._set("deviation", f"mean {_length(get('mean'), units)}, RMS "
+                                   f"{_length(get('rms'), units)}, max "
+                                   f"{_length(get('max'), units)}")
 
     def _set(self, key: str, text: str, color: str | None = None):
         label = self.values[key]

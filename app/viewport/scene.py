@@ -159,6 +159,8 @@ class SceneView(QObject):
         self._deviation_mode = "single"  # the fit the cloud's deviation colours measure
         self._deviation_map: DeviationMap | None = None  # signed, when the fit has one
         self._stats_text = ""
+        self._units: str | None = None
+        self._stats: tuple[dict, int] | None = None  # (deviation statistics, points)
         self._quality_on = False
         self._quality_cells: np.ndarray | None = None
         self._legend = None
@@ -251,12 +253,10 @@ class SceneView(QObject):
             self._write_cloud_values(deviation)
             self.deviation_colours.set_values(deviation, signed=False)
         if not valid:
-            self._stats_text = ""
+            self._stats, self._stats_text = None, ""
         elif stats is not None:
-            sampled = "" if stats["count"] == len(deviation) else f" of {len(deviation)}"
-            self._stats_text = (f"Deviation ({stats['count']}{sampled} points)\n"
-                                f"mean {stats['mean']:.4g}\n"
-                                f"RMS  {stats['rms']:.4g}\nmax  {stats['max']:.4g}")
+            self._stats = (dict(stats), len(deviation))
+            self._stats_text = self._deviation_text()
         self._update_scalar_bar()
         self._corner_text(UPPER_RIGHT, self._stats_text if self.deviation_shown() else "")
         self.request_render()
@@ -306,9 +306,26 @@ class SceneView(QObject):
         self.request_render()
 
     def set_units(self, units: str | None):
-        """The length unit the scalar bar names (None: not known)."""
+        """The length unit the scalar bar and the deviation's corner name (None: not known;
+        the corner's statistics name it from the next deviation on)."""
+        self._units = units
+        if self._stats_text:
+            self._stats_text = self._deviation_text()
+            self._corner_text(UPPER_RIGHT, self._stats_text if self.deviation_shown() else "")
         self.deviation_colours.set_units(units)
+        self._update_scalar_bar()
         self.request_render()
+
+    def _deviation_text(self) -> str:
+        """The corner's deviation statistics, in the units."""
+        if self._stats is None:
+            return ""
+        stats, count = self._stats
+        sampled = "" if stats["count"] == count else f" of {count}"
+        unit = f" {self._units}" if self._units else ""
+        return (f"Deviation ({stats['count']}{sampled} points)\n"
+                f"mean {stats['mean']:.4g}{unit}\n"
+                f"RMS  {stats['rms']:.4g}{unit}\nmax  {stats['max']:.4g}{unit}")
 
     def _show_deviation_surface(self, deviation_map: DeviationMap | None):
         """The fitted surface painted by the map's per-vertex values (hidden without them)."""

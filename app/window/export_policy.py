@@ -3,7 +3,8 @@
 It decides: Export writes what the mode shows (the patch network in Patches mode, else the
 fitted shape, loaded patches and offsets) in a job, refuses with a message when there is nothing
 to write, names the missing package when a writer needs one and says that an existing file was
-left as it was after a failure; every export ends with one ``export_finished(path, ok)``. The
+left as it was after a failure; .3dm, STEP and IGES declare the document's units (the report
+names them) and the message says which; every export ends with one ``export_finished(path, ok)``. The
 formats and writers are :mod:`app.loading`'s (``nurbs_core.io``'s).
 """
 
@@ -21,6 +22,21 @@ from app.errors import describe
 
 if TYPE_CHECKING:
     from app.window.hosts import ExportHost
+
+
+#: the export formats that declare a length unit
+UNIT_SUFFIXES = (".3dm", ".step", ".stp", ".iges", ".igs")
+
+
+def declared_units(path: str, units: str | None) -> str:
+    """What an export to ``path`` says of its unit (nothing for formats that carry none)."""
+    if Path(path).suffix.lower() not in UNIT_SUFFIXES:
+        return ""
+    if units is not None:
+        return f" in {units}"
+    return (" with no unit (the units are unknown: choose them under Units)"
+            if Path(path).suffix.lower() == ".3dm" else
+            " in mm, the format's default (the units are unknown: choose them under Units)")
 
 
 class ExportPolicy(QObject):
@@ -51,7 +67,8 @@ class ExportPolicy(QObject):
             window.report("Nothing to export yet: run a fit or open NURBS files first.", error=True)
             window.export_finished.emit(path, False)
             return False
-        window.jobs.submit("export", lambda: loading.export_geometry(geometries, path),
+        units = window.document.units
+        window.jobs.submit("export", lambda: loading.export_geometry(geometries, path, units),
                            lambda count: self._exported(path, count),
                            lambda exc: self._failed(path, exc))
         return True
@@ -66,7 +83,8 @@ class ExportPolicy(QObject):
                           error=True)
             window.export_finished.emit(path, False)
             return False
-        window.jobs.submit("export", lambda: loading.export_network(network, path),
+        units = window.document.units
+        window.jobs.submit("export", lambda: loading.export_network(network, path, units),
                            lambda count: self._exported(path, count, "patch(es) of the network"),
                            lambda exc: self._failed(path, exc))
         return True
@@ -104,7 +122,8 @@ class ExportPolicy(QObject):
                  else settings.fit.to_json()).items()]
         window.jobs.submit("report", lambda: loading.export_report(
                                path, points, fitted, network, title=title, status=status,
-                               tolerance=tolerance, warnings=warnings, settings=rows),
+                               tolerance=tolerance, warnings=warnings, settings=rows,
+                               units=document.units),
                            lambda within: self._exported_report(path, within),
                            lambda exc: self._failed(path, exc))
         return True
@@ -143,7 +162,8 @@ class ExportPolicy(QObject):
         return True
 
     def _exported(self, path: str, count: int, what: str = "shape(s)"):
-        self._window.report(f"Exported {count} {what} to {path}")
+        units = declared_units(path, self._window.document.units)
+        self._window.report(f"Exported {count} {what} to {path}{units}")
         self._window.export_finished.emit(path, True)
 
     def _failed(self, path: str, exc: Exception):

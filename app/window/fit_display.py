@@ -33,12 +33,14 @@ if TYPE_CHECKING:
 
 
 def cloud_units(document: Document) -> str | None:
-    """The length unit the visible clouds' files state (E57: metres), None when unknown or
-    when they disagree."""
-    from nurbs_core.io.units import units_of_file
+    """The length unit of the document's coordinates (read from the files or chosen under
+    Units: :mod:`app.window.units_policy`), None while unknown."""
+    return document.units
 
-    units = {units_of_file(t.path) for t in document.targets if t.visible}
-    return units.pop() if len(units) == 1 else None
+
+def with_unit(value: float, units: str | None) -> str:
+    """``value`` to four digits, with the unit when known: "0.0123 mm"."""
+    return f"{value:.4g}" + (f" {units}" if units else "")
 
 
 class FitDisplay(QObject):
@@ -185,8 +187,9 @@ class FitDisplay(QObject):
             text += f" on the {snapshot.selected:,} selected points"
         if snapshot.deviation is not None:
             stats = deviation_stats(snapshot.deviation)
-            text += (f"; deviation mean {stats['mean']:.4g}, RMS {stats['rms']:.4g}, "
-                     f"max {stats['max']:.4g}")
+            units = document.units
+            text += (f"; deviation mean {with_unit(stats['mean'], units)}, RMS "
+                     f"{with_unit(stats['rms'], units)}, max {with_unit(stats['max'], units)}")
         if snapshot.message:
             text += f" ({snapshot.message})"
         window.report(text)

@@ -1,7 +1,7 @@
 """What each of the window's parts may reach of the window: one narrow protocol per part.
 
 The parts (:mod:`app.window.export_policy`, ``load_policy``, ``session_policy``,
-``settings_policy``, ``selection_policy``, ``fit_display``) are owned by
+``settings_policy``, ``selection_policy``, ``units_policy``, ``fit_display``) are owned by
 :class:`app.main_window.MainWindow`, which satisfies every protocol here (a test checks it on
 the real window); they never import it. A part that needs more of the window says so here
 first.
@@ -23,6 +23,7 @@ if TYPE_CHECKING:
     from app.panels.fit_panel import FitSettingsPanel
     from app.panels.knot_panel import KnotPanel
     from app.panels.loss_plot import LossPlot
+    from app.panels.network_quality_panel import NetworkQualityPanel
     from app.panels.offset_panel import OffsetPanel
     from app.panels.patches_panel import ModeSelector, PatchesPanel
     from app.panels.quality_panel import QualityPanel
@@ -128,6 +129,19 @@ class FitDisplayHost(Reporter, Protocol):
     loss_plot: LossPlot
     tree: DocumentTree
     status_labels: dict[str, QLabel]
+
+    def rebuild_tree(self) -> None: ...
+
+
+@runtime_checkable
+class UnitsHost(Reporter, Protocol):
+    document: Document
+    scene: SceneView
+    quality_panel: QualityPanel
+    network_quality_panel: NetworkQualityPanel
+    offset_panel: OffsetPanel
+    fit_panel: FitSettingsPanel
+    deviation_panel: DeviationPanel
 
     def rebuild_tree(self) -> None: ...
 

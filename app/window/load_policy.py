@@ -2,7 +2,8 @@
 
 It decides: a load runs in an abandonable thread and the newest request wins (a running load is
 cancelled); the progress indicator shows only when a load lasts longer than
-:data:`LOAD_INDICATOR_DELAY_MS`; the document changes only when every file reads; a load resets
+:data:`LOAD_INDICATOR_DELAY_MS`; the document changes only when every file reads, and takes the
+length unit the files state (:func:`app.window.units_policy.units_of_load`); a load resets
 both fits; a planar cloud switches the fit to a curve and a small cloud gets the smaller control
 grid :func:`app.state.control_grid_for` asks for (both undoable settings edits); what the user is
 told when a load opens, fails or is cancelled; and which files the Open Recent menu lists.
@@ -26,6 +27,7 @@ from app.errors import describe, is_expected
 from app.session_file import SESSION_SUFFIX
 from app.state import control_grid_for
 from app.window.text import format_seconds, names
+from app.window.units_policy import units_of_load
 
 if TYPE_CHECKING:
     from app.window.hosts import LoadHost
@@ -197,7 +199,8 @@ class LoadPolicy(QObject):
         for label in window.status_labels.values():
             label.setText("-")
         window.status_labels["state"].setText("Idle")
-        document.replace_content(loaded.targets, loaded.patches, loaded.patch_names)
+        units, units_note = units_of_load(loaded)  # the files' own unit, else unknown
+        document.replace_content(loaded.targets, loaded.patches, loaded.patch_names, units)
         points = document.target_points()
         if points is not None and np.ptp(points[:, 2]) == 0 and document.settings.fit.kind != (
                 "curve"):
@@ -216,7 +219,7 @@ class LoadPolicy(QObject):
             sources = sorted({Path(p).name for p in paths} - {t.name for t in loaded.targets})
             counts.append(f"{len(loaded.patch_names)} NURBS shape(s) from {names(sources)}")
         self.message = f"Opened {'; '.join(counts)}"
-        window.report(self.message)
+        window.report(f"{self.message}. {units_note}")
         window.setWindowTitle(f"NURBS Studio - {names([Path(p).name for p in paths])}")
         window.files_loaded.emit(True)
 

@@ -10,7 +10,9 @@ file needs them). Protocol: one ``{"ready": true}`` line once started; then one 
 line on stdin ``{"path", "kind" ("step" | "iges" | "3dm"), "output", "memory" (bytes or
 null)}``; on the original stdout, ``{"reading": true}`` once the library is imported (the time
 limit starts then), then the reply ``{"ok": true, "count": k, "objects": m}`` or ``{"ok": false,
-"error": "..."}``. The B-spline data goes to ``output`` as an .npz:
+"error": "..."}`` (a successful reply also has ``"units"``: the length unit the file states, as
+openNURBS names it for .3dm ("Meters"; "None" when it states none) or OpenCASCADE for STEP
+("M"), else null). The B-spline data goes to ``output`` as an .npz:
 ``kind_<k>`` ("surface" | "curve"), ``control_<k>`` (n_u, n_v, 3) or (n, d), ``weights_<k>``,
 ``knots_u_<k>``/``knots_v_<k>`` or ``knots_<k>``, ``degrees_<k>``, and for .3dm items
 ``label_<k>`` (which object) and ``name_<k>`` (its name).
@@ -267,8 +269,9 @@ def _rhino_object(obj: rhino3dm.File3dmObject, index: int, available: int) -> li
     return items
 
 
-def read_3dm_items(path: str) -> tuple[list[Arrays], int]:
-    """(every surface and curve of a .3dm file, its number of objects)."""
+def read_3dm_items(path: str) -> tuple[list[Arrays], int, str]:
+    """(every surface and curve of a .3dm file, its number of objects, its model unit system's
+    name, e.g. "Meters" or "None")."""
     import rhino3dm
 
     available = os.path.getsize(path)
@@ -286,7 +289,9 @@ def read_3dm_items(path: str) -> tuple[list[Arrays], int]:
         except Exception as exc:  # the binding's RuntimeError/TypeError, a None where expected
             raise ReadError(f"object {index}: rhino3dm could not read it ({type(exc).__name__}: "
                             f"{str(exc)[:160]})") from None
-    return items, count
+    settings = model.Settings
+    unit = getattr(getattr(settings, "ModelUnitSystem", None), "name", None)
+    return items, count, str(unit or "None")
 
 
 # --- the worker loop ---------------------------------------------------------------------------
@@ -346,16 +351,18 @@ def _handle(request: dict[str, Any], replies: TextIO) -> dict[str, Any]:
     previous = _cap_memory(request.get("memory"))
     try:
         items: list[Arrays]
+        units: str | None
         if kind == "3dm":
-            items, objects = read_3dm_items(request["path"])
+            items, objects, units = read_3dm_items(request["path"])
         else:
             items = read_items(request["path"], kind)
             objects = len(items)
+            units = _step_length_unit(request["path"]) if kind == "step" else None
         # Any values: numpy's stubs match **kwds against allow_pickle otherwise
         arrays: dict[str, Any] = {f"{key}_{k}": value for k, item in enumerate(items)
                                   for key, value in item.items()}
         np.savez(request["output"], **arrays)
-        return {"ok": True, "count": len(items), "objects": objects}
+        return {"ok": True, "count": len(items), "objects": objects, "units": units}
     except ReadError as exc:
         return {"ok": False, "error": str(exc)}
     except MemoryError:

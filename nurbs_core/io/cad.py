@@ -448,9 +448,11 @@ _LIBRARIES = {"step": ("OpenCASCADE", "STEP"), "iges": ("OpenCASCADE", "IGES"),
 def read_in_worker(path: StrPath, kind: str,
                    timeout: float | None = None) -> list[NurbsCurve | NurbsSurface]:
     """Every surface and curve the worker process reads from ``path`` (``kind`` "step", "iges" or
-    "3dm"), as validated geometry with ``.metadata``; a crash, a timeout (``timeout`` seconds,
-    by default :func:`read_timeout` of the file's size), running out of the memory cap
-    (:func:`reader_memory`) or bad data: FileFormatError naming the file."""
+    "3dm"), as validated geometry with ``.metadata`` (``"name"`` when the object has one,
+    ``"units"`` when the file states a length unit :mod:`nurbs_core.io.units` knows); a crash,
+    a timeout (``timeout`` seconds, by default :func:`read_timeout` of the file's size), running
+    out of the memory cap (:func:`reader_memory`) or bad data: FileFormatError naming the
+    file."""
     library, label = _LIBRARIES[kind]
     with open(path, "rb") as handle:
         if not handle.read(1):
@@ -478,6 +480,9 @@ def read_in_worker(path: StrPath, kind: str,
             arrays = {key: data[key] for key in data.files}
     warm.join()
     from nurbs_core.io.geometry_io import make_curve, make_surface
+    from nurbs_core.io.units import units_from_library
+
+    units = units_from_library(reply.get("units"))
 
     result: list[NurbsCurve | NurbsSurface] = []
     for k in range(reply["count"]):
@@ -495,6 +500,8 @@ def read_in_worker(path: StrPath, kind: str,
                               arrays[f"knots_{k}"], degrees[0], what=what)
         name = str(arrays[f"name_{k}"]) if f"name_{k}" in arrays else ""
         item.metadata = {"name": name} if name else {}
+        if units is not None:  # the length unit the file states (never scaled)
+            item.metadata["units"] = units
         result.append(item)
     if not result:
         raise FileFormatError(path, f"the {label} file has no surfaces or curves "

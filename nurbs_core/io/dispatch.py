@@ -28,7 +28,11 @@ def _load_json(path: StrPath) -> list[NurbsCurve | NurbsSurface]:
     document = json_format.read_json_file(path)
     if isinstance(document, dict):
         if document.get("format") == json_format.FORMAT_NAME:
-            return json_format.read_document(path, document)[0]
+            geometry, metadata = json_format.read_document(path, document)
+            if "units" in metadata:  # the document's length unit (save(..., units=)) per item
+                for item in geometry:
+                    item.metadata = {"units": metadata["units"], **item.metadata}
+            return geometry
         if document.get("format") == json_format.SHARED_FORMAT_NAME or "ctrlpts" in document:
             return json_format.read_shared_json(path, document)
         if geomdl_json.is_geomdl_document(document):

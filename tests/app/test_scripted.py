@@ -36,6 +36,12 @@ def test_scripted_fit_writes_a_screenshot_and_exits_zero(ply_cloud, tmp_path):
     assert pixels.std() > 10  # not a blank image
 
 
+def test_scripted_units_are_the_documents(ply_cloud):
+    result = _run([str(ply_cloud[0]), "--units", "m", "--quit"])
+    assert result.returncode == 0, result.stderr
+    assert "scan.ply states no units" in result.stderr and "Units: m" in result.stderr
+
+
 def test_scripted_run_fails_with_status_1_on_a_bad_file(tmp_path):
     bad = tmp_path / "bad.xyz"
     bad.write_text("1 2 3\n4 five 6\n")

@@ -67,7 +67,9 @@ def test_json_round_trip_is_bit_exact(tmp_path):
                 assert loaded.numpy()[key].dtype == np.float64
             else:
                 assert loaded.numpy()[key] == value
-    assert back[0].metadata == surface.metadata
+    # the document's unit comes with every item (what the app reads a file's unit from)
+    assert back[0].metadata == {"units": "mm", **surface.metadata}
+    assert back[1].metadata == {"units": "mm"}
 
 
 def test_batched_geometry_is_saved_as_items(tmp_path):
@@ -569,7 +571,8 @@ def test_opencascade_refusal_is_a_clear_value_error(tmp_path):
 def test_units_are_declared_never_scaled(tmp_path, units, millimetres):
     """A model in metres used to be written as millimetres (Rhino showed a scanned bunny 0.15 mm
     long). The unit is declared: OpenCASCADE, converting to its millimetres, scales by it;
-    rhino3dm reads the model's unit system; our own reading keeps the file's numbers."""
+    rhino3dm reads the model's unit system; our own reading keeps the file's numbers and
+    gives the unit in the items' metadata."""
     rhino3dm = pytest.importorskip("rhino3dm")
     pytest.importorskip("OCP")
     surface = _random_surface()
@@ -585,3 +588,9 @@ def test_units_are_declared_never_scaled(tmp_path, units, millimetres):
     names = {None: "None", "mm": "Millimeters", "m": "Meters", "in": "Inches", "ft": "Feet"}
     assert rhino3dm.File3dm.Read(str(model)).Settings.ModelUnitSystem.name == names[units]
     assert json.loads(document.read_text())["metadata"].get("units") == units
+    # and our readers give the unit each file states (STEP must state one: millimetres)
+    from nurbs_core.io.units import units_of_items
+
+    assert units_of_items(load(step)) == (units or "mm")
+    assert units_of_items(load(model)) == units
+    assert units_of_items(load(document)) == units

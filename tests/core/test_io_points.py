@@ -275,6 +275,37 @@ def test_las_and_laz_written_by_laspy(tmp_path):
         assert cloud.attributes["colors"].shape == (200, 3)
 
 
+UTM_WKT = ('PROJCS["ETRS89 / UTM zone 32N",GEOGCS["ETRS89",DATUM["ETRS_1989",SPHEROID["GRS 1980",'
+           '6378137,298.257222101]],PRIMEM["Greenwich",0],UNIT["degree",0.0174532925199433]],'
+           'PROJECTION["Transverse_Mercator"],UNIT["metre",1,AUTHORITY["EPSG","9001"]]]')
+
+
+@pytest.mark.parametrize("geo_key, wkt, units", [
+    (9001, None, "m"), (9002, None, "ft"), (9003, None, None),  # the US survey foot: unknown
+    (None, UTM_WKT, "m"), (None, UTM_WKT.replace('"metre",1', '"foot",0.3048'), "ft"),
+    (None, None, None), (9002, UTM_WKT, None)])  # disagreeing: unknown
+def test_las_states_its_units_by_its_coordinate_system(tmp_path, geo_key, wkt, units):
+    laspy = pytest.importorskip("laspy")
+    from laspy.vlrs.known import GeoKeyDirectoryVlr, GeoKeyEntryStruct, WktCoordinateSystemVlr
+
+    from nurbs_core.io.units import units_of_file
+
+    las = laspy.LasData(laspy.LasHeader(point_format=6, version="1.4"))
+    las.x, las.y, las.z = np.arange(5.0), np.arange(5.0), np.zeros(5)
+    if geo_key is not None:  # GeoTIFF's ProjLinearUnitsGeoKey
+        directory, key = GeoKeyDirectoryVlr(), GeoKeyEntryStruct()
+        key.id, key.tiff_tag_location, key.count, key.value_offset = 3076, 0, 1, geo_key
+        directory.geo_keys, directory.geo_keys_header.number_of_keys = [key], 1
+        las.vlrs.append(directory)
+    if wkt is not None:
+        las.vlrs.append(WktCoordinateSystemVlr(wkt))
+    path = tmp_path / "scan.las"
+    las.write(str(path))
+    assert units_of_file(path) == units
+    assert load_points(path).points.shape == (5, 3)
+    assert units_of_file(tmp_path / "missing.las") is None
+
+
 def test_e57_written_by_pye57(tmp_path):
     pye57 = pytest.importorskip("pye57")
     rng = np.random.default_rng(3)
