@@ -13,6 +13,17 @@ FLOOR = 1e-16
 REDRAW_INTERVAL_MS = 200  # log scale: zero or negative values are drawn at this floor
 
 
+class LossAxis(pg.AxisItem):
+    """The log axis with labels on 1, 2 and 5 times a power of ten only: pyqtgraph labels
+    every minor tick of a range within one or two decades, and 2..9 x 10^-7 overlap."""
+
+    def logTickStrings(self, values: list[float], scale: float, spacing: float) -> list[str]:
+        strings = super().logTickStrings(values, scale, spacing)
+        mantissas = [float(f"{10 ** v * scale:.1e}".split("e")[0]) for v in values]
+        return [text if mantissa in (1.0, 2.0, 5.0) else ""
+                for text, mantissa in zip(strings, mantissas, strict=True)]
+
+
 class LossPlot(QWidget):
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
@@ -21,7 +32,7 @@ class LossPlot(QWidget):
         pg.setConfigOptions(antialias=False, background="w", foreground="#333333")
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
-        self.plot = pg.PlotWidget()
+        self.plot = pg.PlotWidget(axisItems={"left": LossAxis("left")})
         self.plot.setLogMode(x=False, y=True)
         self.plot.showGrid(x=True, y=True, alpha=0.25)
         self.plot.setDownsampling(auto=True, mode="peak")
