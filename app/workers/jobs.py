@@ -21,6 +21,7 @@ then is handed to :func:`abandon_qthread` (:func:`work_left_running` counts both
 
 from __future__ import annotations
 
+import atexit
 import itertools
 import logging
 import threading
@@ -53,9 +54,25 @@ _abandoned_qthreads: list[tuple[QThread, QObject]] = []
 def abandon_qthread(thread: QThread, worker: QObject) -> None:
     """Leave a worker thread that did not stop in time (a step of the engine that never looks at
     its stop token: a KD-tree or the final measures on millions of points) to finish on its own
-    (from the GUI thread). Its signals reach a shut-down controller, which drops them."""
+    (from the GUI thread). Its signals reach a shut-down controller, which drops them.
+
+    ``nurbs-studio`` ends without finalizing the interpreter while such a thread runs
+    (``app.__main__``); a program that embeds the window and simply returns from its event
+    loop instead waits for the thread at exit (:func:`_wait_for_abandoned_qthreads`), since
+    finalizing the interpreter destroys the running QThread, and Qt then aborts the process."""
     with _abandoned_lock:
+        if not _abandoned_qthreads:
+            atexit.register(_wait_for_abandoned_qthreads)
         _abandoned_qthreads.append((thread, worker))
+
+
+def _wait_for_abandoned_qthreads() -> None:
+    """At interpreter exit: wait for the abandoned worker threads still running."""
+    with _abandoned_lock:
+        entries = list(_abandoned_qthreads)
+    for thread, _ in entries:
+        if thread.isRunning():
+            thread.wait()
 
 
 def work_left_running() -> bool:
