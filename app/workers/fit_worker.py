@@ -1,6 +1,7 @@
-"""The fit worker: a QObject living in its own QThread, the only place the live fit runs.
+"""The fit worker (:class:`~app.workers.live_worker.LiveWorker`): the only place a live
+single-patch fit runs.
 
-It calls :func:`nurbs_core.fitting.iter_fit` with a :class:`StopToken` and turns each (already
+It calls :func:`nurbs_core.fitting.iter_fit` with the run's StopToken and turns each (already
 throttled) engine snapshot into a :class:`DisplaySnapshot`: numpy arrays the GUI thread copies
 into its meshes (tessellated surface, control net, knot lines) and, at a lower rate, each target
 point's deviation from the fitted shape. The final snapshot of a surface fit also carries the
@@ -11,22 +12,19 @@ from __future__ import annotations
 
 import gc
 import itertools
-import os
-import sys
-import threading
 import time
-import traceback
 from dataclasses import dataclass, field
 
 import numpy as np
-from PySide6.QtCore import QObject, Signal, Slot
 
 from app.display_types import DeviationMap
 from app.state import Settings
 from app.workers.deviation_map import fit_triangles, grid_triangles, measure_map
 from app.workers.display import DisplayGeometry, display_geometry
+from app.workers.live_worker import FitProblem, LiveWorker
 from app.workers.quality import measure_quality
 from nurbs_core.geometry_arrays import GeometryArrays
+from nurbs_core.streaming import RunStatus
 
 #: Deviation needs a closest-point projection of the whole cloud (~0.3 s for 4000 points here,
 #: about five fit iterations): do it at most this often (s), and always on the final snapshot.
@@ -73,16 +71,6 @@ class DisplaySnapshot:
     #: the run fitted this many selected points (None: every visible point); per-point values
     #: (deviation, signed) are then spread over the whole cloud by the controller, NaN elsewhere
     selected: int | None = None
-
-
-class FitProblem(Exception):
-    """A fit that cannot run or ended in failure, with a message that explains it all (the log
-    gets no traceback). needs_patches: the shape is one a single patch cannot hold (closed, a
-    tube, handles): the window offers the patch network fit."""
-
-    def __init__(self, message: str, needs_patches: bool = False):
-        super().__init__(message)
-        self.needs_patches = needs_patches
 
 
 def needs_patches(error: ValueError) -> bool:
@@ -164,60 +152,8 @@ def starting_geometry(request: FitRequest) -> GeometryArrays | None:
     return initial
 
 
-def lower_thread_priority(niceness: int = 10):
-    """Make the calling thread (and threads it starts) yield the CPU to the GUI thread.
-
-    On Linux the nice value is per thread; a busy machine otherwise gives the GUI thread only a
-    share of a core and the event loop stalls behind the fit. Elsewhere this does nothing.
-    """
-    if not sys.platform.startswith("linux"):
-        return
-    try:
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), niceness)
-    except (AttributeError, OSError):
-        pass
-
-
-def enter_worker_thread() -> None:
-    """Set up the calling worker thread for engine work: torch on all cores but one (the event
-    loop must keep answering) and a lower priority than the GUI thread."""
-    import torch
-
-    torch.set_num_threads(max(1, (os.cpu_count() or 2) - 1))
-    lower_thread_priority()
-
-
-class FitWorker(QObject):
-    """Runs one fit. Signals carry plain Python/numpy payloads (queued to the GUI thread)."""
-
-    snapshot_ready = Signal(object)  # DisplaySnapshot
-    #: run id, message, traceback ("" when the message says all), the shape needs patches
-    run_failed = Signal(int, str, str, bool)
-    run_finished = Signal(int)  # run id, always emitted last
-
-    def __init__(self, request: FitRequest, stop_token):
-        super().__init__()
-        self._request, self._stop = request, stop_token
-        self._hurry = threading.Event()
-
-    def hurry(self):
-        """Skip the final measures of a stopped run (a restart, Reset or closing the window is
-        waiting for it); a plain Stop measures the shape it leaves. Any thread may call this."""
-        self._hurry.set()
-
-    @Slot()
-    def run(self):
-        request = self._request
-        try:
-            enter_worker_thread()
-            self._run(request)
-        except FitProblem as exc:
-            self.run_failed.emit(request.run_id, str(exc), "", exc.needs_patches)
-        except Exception as exc:  # noqa: BLE001 - reported to the user, never re-raised
-            self.run_failed.emit(request.run_id, f"{type(exc).__name__}: {exc}",
-                                 traceback.format_exc(limit=6), False)
-        finally:
-            self.run_finished.emit(request.run_id)
+class FitWorker(LiveWorker):
+    """Runs one single-patch fit (:class:`~app.workers.live_worker.LiveWorker`)."""
 
     def _run(self, request: FitRequest):
         from nurbs_core import geometry_from_numpy
@@ -245,7 +181,8 @@ class FitWorker(QObject):
             now = time.monotonic()
             dev, signed = None, None
             # a run stopped for a restart, Reset or closing the window must end quickly
-            final = snapshot.done and not (snapshot.status == "stopped" and self._hurry.is_set())
+            final = snapshot.done and not (snapshot.status == RunStatus.STOPPED
+                                           and self._stop.cancelled)
             if snapshot.done or now - last_deviation >= DEVIATION_INTERVAL:
                 limit = FINAL_DEVIATION_POINTS if final else LIVE_DEVIATION_POINTS
                 dev = sampled_deviation(deviation, geometry_from_numpy(snapshot.geometry),
@@ -261,7 +198,7 @@ class FitWorker(QObject):
                 statistics, cells = measure_quality(snapshot.geometry, request.target,
                                                     display.grid_u, display.grid_v,
                                                     statistics, dev)
-            self.snapshot_ready.emit(DisplaySnapshot(
+            self._emit(DisplaySnapshot(
                 run_id=request.run_id, iteration=int(snapshot.iteration),
                 iterations=(0 if snapshot.stage == "least_squares"
                             else snapshot.passes + config.iterations),

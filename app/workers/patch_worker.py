@@ -1,30 +1,28 @@
-"""The patch worker: a QObject in its own QThread that runs the patch network fit.
+"""The patch worker (:class:`~app.workers.live_worker.LiveWorker`): runs the patch network fit.
 
-It iterates :func:`nurbs_core.patches.pipeline.iter_patch_fit` (the engine yields after the
-mesh, the layout and every pass) and turns events into :class:`PatchSnapshot` values: numpy
-display arrays (:mod:`app.workers.network_display`), the pass statistics and, at the end, the
-engine's quality measures and warnings. Stop and pause are honoured between events; pass
-snapshots are throttled so building them never costs the fit more than a fraction of its time.
-Nothing here touches Qt widgets or VTK.
+It reads :func:`nurbs_core.patches.pipeline.iter_patch_fit` with the run's StopToken (the engine
+yields after the mesh, the layout and every pass, and pauses and stops between them) and turns
+events into :class:`PatchSnapshot` values: numpy display arrays
+(:mod:`app.workers.network_display`), the pass statistics and, at the end, the engine's quality
+measures and warnings. Pass snapshots are throttled so building them never costs the fit more
+than a fraction of its time. Nothing here touches Qt widgets or VTK.
 """
 
 from __future__ import annotations
 
 import gc
 import math
-import threading
 import time
-import traceback
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from PySide6.QtCore import QObject, Signal, Slot
 
 from app.display_types import DeviationMap
 from app.workers.deviation_map import fit_triangles, measure_map
-from app.workers.fit_worker import FINAL_DEVIATION_POINTS, enter_worker_thread
+from app.workers.fit_worker import FINAL_DEVIATION_POINTS
+from app.workers.live_worker import FitProblem, LiveWorker
 from app.workers.network_display import NetworkDisplay, mesh_display, network_display
 
 #: At least this long (s) between two pass snapshots, and at most this share of the worker's time
@@ -76,6 +74,9 @@ class PatchSnapshot:
     #: the signed deviation map (done and stopped): the points ``deviation`` measured (at most
     #: FINAL_DEVIATION_POINTS of them), signed along the network's normal, and its surface
     signed: DeviationMap | None = None
+    #: the run fitted this many selected points (None: every visible point); per-point values
+    #: (deviation, signed) are then spread over the whole cloud by the controller, NaN elsewhere
+    selected: int | None = None
 
 
 def network_signed_map(network, display: NetworkDisplay, points: np.ndarray,
@@ -88,53 +89,37 @@ def network_signed_map(network, display: NetworkDisplay, points: np.ndarray,
                        mode="patches", keep=keep, surface=(display.vertices, display.faces))
 
 
-class PatchWorker(QObject):
-    """Runs one patch network fit. Signals carry plain Python/numpy payloads."""
+class PatchWorker(LiveWorker):
+    """Runs one patch network fit (:class:`~app.workers.live_worker.LiveWorker`)."""
 
-    snapshot_ready = Signal(object)  # PatchSnapshot
-    run_failed = Signal(int, str, str)  # run id, message, traceback ("" when the message says all)
-    run_finished = Signal(int)  # run id, always emitted last
+    FAILED = "The patch fit failed: "
 
     def __init__(self, request: PatchRequest, stop_token):
-        super().__init__()
-        self._request, self._stop = request, stop_token
-        self._hurry = threading.Event()
+        super().__init__(request, stop_token)
         self._rows: list[dict] = []  # loss rows not yet sent
 
-    def hurry(self):
-        """Skip measuring a stopped network (a restart, Reset or closing is waiting)."""
-        self._hurry.set()
-
-    @Slot()
-    def run(self):
-        request = self._request
-        try:
-            enter_worker_thread()
-            gc.freeze()
-            self._run(request)
-        except ValueError as exc:  # the engine's refusals (LayoutError too) explain themselves
-            self.run_failed.emit(request.run_id, f"Cannot fit patches: {exc}", "")
-        except Exception as exc:  # noqa: BLE001 - reported to the user, never re-raised
-            self.run_failed.emit(request.run_id, f"The patch fit failed: {type(exc).__name__}: "
-                                                 f"{exc}", traceback.format_exc(limit=6))
-        finally:
-            self.run_finished.emit(request.run_id)
-
     def _run(self, request: PatchRequest):
+        try:
+            self._stream(request)
+        except ValueError as exc:  # the engine's refusals (LayoutError too) explain themselves
+            raise FitProblem(f"Cannot fit patches: {exc}") from None
+
+    def _stream(self, request: PatchRequest):
+        gc.freeze()
         from nurbs_core.patches.pipeline import iter_patch_fit
 
         started = time.monotonic()
-        events = iter_patch_fit(request.points, request.options)
+        # a stop ends the events after the pass under way; the network it left is measured here
+        events = iter_patch_fit(request.points, request.options, stop=self._stop,
+                                measure_stopped=False)
         mesh, last_pass, last_sent, cost = None, None, -math.inf, 0.0
         stages: Counter[str] = Counter()
         points = np.asarray(request.points, np.float64)
         diagonal = float(np.linalg.norm(np.ptp(points, axis=0))) if points.ndim == 2 and len(
             points) else 1.0
-        self._rows: list[dict] = []
+        self._rows = []
         try:
             for event in events:
-                if self._stop.stopped:
-                    break
                 elapsed = time.monotonic() - started
                 if event.kind == "mesh":
                     mesh = event.mesh
@@ -182,10 +167,9 @@ class PatchWorker(QObject):
                         warnings=list(result.warnings), done=True,
                         deviation=result.deviation, signed=signed))
                     return
-                self._wait_while_paused()
         finally:
             events.close()
-        if last_pass is not None and not self._hurry.is_set():
+        if last_pass is not None and not self._stop.cancelled:
             self._emit(self._stopped_snapshot(request, last_pass, time.monotonic() - started))
 
     def _pass_snapshot(self, run_id: int, fit_pass, stage: str, stage_pass: int,
@@ -210,10 +194,6 @@ class PatchWorker(QObject):
                                              quality.distances, request.options.tolerance)
         return snapshot
 
-    def _wait_while_paused(self):
-        while self._stop.paused and not self._stop.stopped:
-            self._stop.wait_while_paused(0.1)
-
     def _emit(self, snapshot: PatchSnapshot):
         snapshot.losses, self._rows = self._rows, []
-        self.snapshot_ready.emit(snapshot)
+        super()._emit(snapshot)

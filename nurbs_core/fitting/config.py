@@ -1,4 +1,5 @@
-"""Configuration, stop token, snapshots and results of a fit (numpy only: no torch here).
+"""Configuration, snapshots and results of a fit (numpy only: no torch here); its stop token
+and statuses are the streaming protocol's (:mod:`nurbs_core.streaming`).
 
 :class:`FitConfig` is the one description of a fit: the command line builds it from its flags, the
 Python API takes it, and the app keeps it in its document and edits it field by field. Its loss is
@@ -9,7 +10,6 @@ the command line and files.
 from __future__ import annotations
 
 import dataclasses
-import threading
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -18,6 +18,8 @@ import numpy as np
 
 from nurbs_core.knot_vectors import clamped_problem
 from nurbs_core.loss_terms import Loss
+from nurbs_core.streaming import RunStatus as RunStatus  # the streaming protocol's, re-exported
+from nurbs_core.streaming import StopToken as StopToken
 
 OPTIMIZERS = ("adam", "sgd", "momentum", "adagrad", "lbfgs")
 INITS = ("pca", "least_squares", "random", "learned")
@@ -25,7 +27,7 @@ PARAMETERIZATIONS = ("auto", "mesh", "plane")
 SOLVERS = ("auto", "least_squares", "gradient")
 KINDS = ("surface", "curve")
 LR_SCHEDULES = ("plateau", "cosine", "none")
-STATUSES = ("running", "paused", "converged", "stopped", "budget", "diverged", "failed")
+STATUSES = tuple(status.value for status in RunStatus)
 
 #: The NURBS-Diff paper's best loss for point clouds (CD + 0.1 Lap + 10 HD). With an unordered
 #: cloud and parameter correction the fitter adds the foot-point term p2s to it.
@@ -280,37 +282,6 @@ class FitConfig:
                              "core places its own knots)")
 
 
-class StopToken:
-    """Thread-safe stop / pause switch checked by :func:`iter_fit` every iteration."""
-
-    def __init__(self) -> None:
-        self._stop = threading.Event()
-        self._running = threading.Event()
-        self._running.set()
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._running.set()  # wake a paused fit so it can see the stop
-
-    def pause(self) -> None:
-        self._running.clear()
-
-    def resume(self) -> None:
-        self._running.set()
-
-    @property
-    def stopped(self) -> bool:
-        return self._stop.is_set()
-
-    @property
-    def paused(self) -> bool:
-        return not self._running.is_set()
-
-    def wait_while_paused(self, timeout: float = 0.1) -> None:
-        """Block (without spinning) until resumed or stopped; returns after ``timeout`` at most."""
-        self._running.wait(timeout)
-
-
 @dataclass(frozen=True)
 class FitSnapshot:
     """An immutable view of a running fit; only numpy copies, never live tensors.
@@ -323,7 +294,8 @@ class FitSnapshot:
     an iteration that was rolled back (non-finite or exploding loss) has no entry, and the
     next snapshot's ``message`` says what happened; the final snapshot's message sums up every
     roll-back of the fit (it does not depend on which snapshots were sent on the way).
-    status: one of "running", "paused", "converged", "stopped", "budget", "diverged", "failed".
+    status: a :class:`~nurbs_core.streaming.RunStatus` value ("running", "paused", "converged",
+    "stopped", "budget", "diverged", "failed"). A :class:`~nurbs_core.streaming.LiveEvent`.
     """
 
     iteration: int

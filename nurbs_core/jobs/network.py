@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from nurbs_core.jobs.report import plain, print_patch_event, print_units, units_of
 from nurbs_core.jobs.settings import FitJob
+from nurbs_core.streaming import StopToken
 
 if TYPE_CHECKING:
     import numpy as np
@@ -78,20 +79,20 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
           f"({options.patches} patches, stiffness {options.stiffness:g}, seam weight "
           f"{options.seam_weight:g})", file=sys.stderr)
     result = None
-    requested: list[bool] = []
+    stop = StopToken()
     passes: list[int] = []
 
     def on_interrupt(*_: object) -> None:
-        if requested or not passes:
+        if stop.stopped or not passes:
             raise KeyboardInterrupt
-        requested.append(True)
+        stop.stop()
         print("nurbs-fit: stopping after this pass (Ctrl-C again to quit without writing)",
               file=sys.stderr, flush=True)
 
     handle = stoppable and threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, on_interrupt) if handle else None
     try:
-        for event in iter_patch_fit(points, options, mesh=mesh, stop=lambda: bool(requested)):
+        for event in iter_patch_fit(points, options, mesh=mesh, stop=stop):
             result = event.result or result
             if event.kind == "pass":
                 passes.append(1)

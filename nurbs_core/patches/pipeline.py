@@ -13,7 +13,7 @@ from __future__ import annotations
 import itertools
 import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -30,6 +30,7 @@ from nurbs_core.patches.network import PatchNetwork
 from nurbs_core.patches.options import PatchOptions, check_patch_count
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import WARN_FLIPPED, reported_status
+from nurbs_core.streaming import RunStatus, Stop, cancelled, should_stop
 from nurbs_core.surfacing.neighbours import (
     STRAY_MAX_POINTS,
     STRAY_NEIGHBOURS,
@@ -88,6 +89,19 @@ class PatchEvent:
     layout: QuadLayout | None = None
     fit_pass: NetworkPass | None = None
     result: PatchResult | None = None
+
+    @property
+    def done(self) -> bool:
+        """The last event (a :class:`~nurbs_core.streaming.LiveEvent`)."""
+        return self.kind == "done"
+
+    @property
+    def status(self) -> str:
+        """The run's :class:`~nurbs_core.streaming.RunStatus`: running until "done", then
+        stopped or converged (what a user reads: :attr:`PatchResult.status`)."""
+        if self.result is None:
+            return RunStatus.RUNNING
+        return RunStatus.STOPPED if self.result.stopped else RunStatus.CONVERGED
 
 
 @dataclass
@@ -353,12 +367,15 @@ def scan_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
 
 
 def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
-                   mesh: ScanMesh | None = None,
-                   stop: Callable[[], bool] | None = None) -> Iterator[PatchEvent]:
+                   mesh: ScanMesh | None = None, stop: Stop = None,
+                   measure_stopped: bool = True) -> Iterator[PatchEvent]:
     """The steps of fitting a patch network to a cloud (N, 3): a closed object's or an open
-    shell's (its mesh built by :func:`scan_mesh` unless given). ``stop``: asked after every
-    pass; when it returns True the fit ends there and the network as it stands is measured and
-    returned (status "stopped")."""
+    shell's (its mesh built by :func:`scan_mesh` unless given), streamed as
+    :mod:`nurbs_core.streaming` says. ``stop`` (a StopToken or a callable) is looked at after
+    every step: a pause blocks there; a stop after a pass ends the fit, and the network as it
+    stands is measured and returned (status "stopped"); before the first pass, or when the
+    token is cancelled or ``measure_stopped`` is False (the caller measures what it kept), the
+    events just end (no "done")."""
     options = options or PatchOptions()
     options.validate()
     points = np.asarray(points, np.float64)
@@ -379,11 +396,15 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     points = points[inliers]
     timings["mesh"] = time.perf_counter() - start
     yield PatchEvent("mesh", mesh=mesh)
+    if should_stop(stop):
+        return
     start = time.perf_counter()
     creases = detect_creases(mesh, points) if options.creases else no_creases()
     layout = choose_layout(mesh, options.patches, len(points), creases)
     timings["layout"] = time.perf_counter() - start
     yield PatchEvent("layout", mesh=mesh, layout=layout)
+    if should_stop(stop):
+        return
     start = time.perf_counter()
     last: NetworkPass | None = None
     stopped = False
@@ -404,9 +425,11 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
                             max_size=options.max_size, border=border_points(mesh), noise=noise,
                             creases=layout.creases):
         yield PatchEvent("pass", layout=layout, fit_pass=last)
-        if stop is not None and stop():
+        if should_stop(stop):
             stopped = True
             break
+    if stopped and (cancelled(stop) or not measure_stopped):
+        return
     timings["fit"] = time.perf_counter() - start
     assert last is not None, "fit_network yields at least one pass"
     start = time.perf_counter()
