@@ -96,9 +96,9 @@ def _part_or(route: Route, points: np.ndarray, forced: bool) -> Route:
             require_ocp("A solid with analytic faces")
         return route
     from nurbs_core.brep.part import MAX_CURVED, MIN_COVERAGE, part_like
-    from nurbs_core.brep.segment import segment
+    from nurbs_core.brep.segment import segment_subset
 
-    segmentation = segment(points, give_up=0.0 if forced else 0.02)
+    segmentation = segment_subset(points, give_up=0.0 if forced else 0.02)
     share = f"{segmentation.coverage:.0%} of the points on {len(segmentation.surfaces)} analytic"
     if part_like(segmentation) or forced:
         return Route("part", f"{route.finding}; {share} surfaces", route.mesh,
