@@ -8,7 +8,9 @@
   cylinders, cones, spheres: :func:`nurbs_core.brep.part.part_like`) becomes a valid solid with
   those exact faces and sharp edges (:mod:`nurbs_core.brep`), when OpenCASCADE (the ``cad``
   extra) is installed and the outputs can hold a solid. ``part=False`` turns it off,
-  ``part=True`` forces it on a closed object.
+  ``part=True`` forces it on a closed object. A cloud above 50,000 points is segmented on a
+  seeded subset of that size (:func:`nurbs_core.brep.segment.segment_subset`), so the check
+  costs seconds whatever the cloud's size.
 * ``single_patch``: everything else (an open sheet, a shell, a tube): one patch, the fold-free
   least-squares core (:mod:`nurbs_core.fitting.sheet`), **when it holds the surface cleanly**.
   When one patch is refused (the surface is not a disk or a tube) or fails a quality check
