@@ -30,49 +30,48 @@ def basis_derivatives(knots: ArrayLike, degree: int, t: ArrayLike, order: int
     p, count = int(degree), len(t)
     span = find_span(knots, p, t)
     # ndu: the basis functions of every degree (upper triangle) and the knot differences
-    # (lower triangle), per parameter; the parameters run along the last axis, so every slice
-    # below is one contiguous row (the arithmetic is A2.3's, element by element)
-    ndu = np.zeros((p + 1, p + 1, count))
-    ndu[0, 0] = 1.0
-    left = np.zeros((p + 1, count))
-    right = np.zeros((p + 1, count))
+    # (lower triangle), per parameter
+    ndu = np.zeros((count, p + 1, p + 1))
+    ndu[:, 0, 0] = 1.0
+    left = np.zeros((count, p + 1))
+    right = np.zeros((count, p + 1))
     for j in range(1, p + 1):
-        left[j] = t - knots[span + 1 - j]
-        right[j] = knots[span + j] - t
+        left[:, j] = t - knots[span + 1 - j]
+        right[:, j] = knots[span + j] - t
         saved = np.zeros(count)
         for r in range(j):
-            ndu[j, r] = right[r + 1] + left[j - r]
-            temp = ndu[r, j - 1] / ndu[j, r]
-            ndu[r, j] = saved + right[r + 1] * temp
-            saved = left[j - r] * temp
-        ndu[j, j] = saved
-    ders = np.zeros((order + 1, p + 1, count))
-    ders[0] = ndu[:, p]
+            ndu[:, j, r] = right[:, r + 1] + left[:, j - r]
+            temp = ndu[:, r, j - 1] / ndu[:, j, r]
+            ndu[:, r, j] = saved + right[:, r + 1] * temp
+            saved = left[:, j - r] * temp
+        ndu[:, j, j] = saved
+    ders = np.zeros((order + 1, count, p + 1))
+    ders[0] = ndu[:, :, p]
     for r in range(p + 1):
-        a = np.zeros((2, p + 1, count))
-        a[0, 0] = 1.0
+        a = np.zeros((2, count, p + 1))
+        a[0, :, 0] = 1.0
         s1, s2 = 0, 1
         for k in range(1, min(order, p) + 1):
             d = np.zeros(count)
             rk, pk = r - k, p - k
             if r >= k:
-                a[s2, 0] = a[s1, 0] / ndu[pk + 1, rk]
-                d = a[s2, 0] * ndu[rk, pk]
+                a[s2, :, 0] = a[s1, :, 0] / ndu[:, pk + 1, rk]
+                d = a[s2, :, 0] * ndu[:, rk, pk]
             j1 = 1 if rk >= -1 else -rk
             j2 = k - 1 if r - 1 <= pk else p - r
             for j in range(j1, j2 + 1):
-                a[s2, j] = (a[s1, j] - a[s1, j - 1]) / ndu[pk + 1, rk + j]
-                d = d + a[s2, j] * ndu[rk + j, pk]
+                a[s2, :, j] = (a[s1, :, j] - a[s1, :, j - 1]) / ndu[:, pk + 1, rk + j]
+                d = d + a[s2, :, j] * ndu[:, rk + j, pk]
             if r <= pk:
-                a[s2, k] = -a[s1, k - 1] / ndu[pk + 1, r]
-                d = d + a[s2, k] * ndu[r, pk]
-            ders[k, r] = d
+                a[s2, :, k] = -a[s1, :, k - 1] / ndu[:, pk + 1, r]
+                d = d + a[s2, :, k] * ndu[:, r, pk]
+            ders[k, :, r] = d
             s1, s2 = s2, s1
     factor = float(p)
     for k in range(1, min(order, p) + 1):
         ders[k] *= factor
         factor *= p - k
-    return span, np.ascontiguousarray(ders.transpose(0, 2, 1))
+    return span, ders
 
 
 def basis_and_derivative(knots: ArrayLike, degree: int, t: ArrayLike
