@@ -8,7 +8,9 @@
   cylinders, cones, spheres: :func:`nurbs_core.brep.part.part_like`) becomes a valid solid with
   those exact faces and sharp edges (:mod:`nurbs_core.brep`), when OpenCASCADE (the ``cad``
   extra) is installed and the outputs can hold a solid. ``part=False`` turns it off,
-  ``part=True`` forces it on a closed object.
+  ``part=True`` forces it on a closed object. A cloud above 50,000 points is segmented on a
+  seeded subset of that size (:func:`nurbs_core.brep.segment.segment_subset`), so the check
+  costs seconds whatever the cloud's size.
 * ``single_patch``: everything else (an open sheet, a shell, a tube): one patch, the fold-free
   least-squares core (:mod:`nurbs_core.fitting.sheet`), **when it holds the surface cleanly**.
   When one patch is refused (the surface is not a disk or a tube) or fails a quality check
@@ -96,9 +98,9 @@ def _part_or(route: Route, points: np.ndarray, forced: bool) -> Route:
             require_ocp("A solid with analytic faces")
         return route
     from nurbs_core.brep.part import MAX_CURVED, MIN_COVERAGE, part_like
-    from nurbs_core.brep.segment import segment
+    from nurbs_core.brep.segment import segment_subset
 
-    segmentation = segment(points, give_up=0.0 if forced else 0.02)
+    segmentation = segment_subset(points, give_up=0.0 if forced else 0.02)
     share = f"{segmentation.coverage:.0%} of the points on {len(segmentation.surfaces)} analytic"
     if part_like(segmentation) or forced:
         return Route("part", f"{route.finding}; {share} surfaces", route.mesh,

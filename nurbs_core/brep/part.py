@@ -39,6 +39,10 @@ MAX_CURVED = 0.5
 MEAN_LIMIT = 1.25
 #: at least this many samples of the solid's faces decide which face is nearest to a point
 SAMPLES = 200_000
+#: ... and at most this many (10 per point up to it: a 1,000,000-point scan's 10,000,000 samples
+#: took most of its part route's time in the k-d tree, for a face choice that matters only
+#: within a sample spacing of an edge)
+MAX_SAMPLES = 1_000_000
 #: a face with at least this share of the area and under UNSEEN_SHARE of the points its area
 #: would hold is not in the scan (an extension of a surface the cells kept by mistake)
 UNSEEN_AREA = 0.01
@@ -163,7 +167,7 @@ def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarr
     # the nearest of dense samples of the faces decides a point's face (the triangulation's
     # vertices lie on the faces' edges only where they are flat)
     samples, sample_face = sample_triangles(vertices, triangles, owners,
-                                            max(SAMPLES, 10 * len(points)),
+                                            max(SAMPLES, min(10 * len(points), MAX_SAMPLES)),
                                             np.random.default_rng(0))
     mesh_distance, nearest = cKDTree(samples).query(points)
     face = sample_face[nearest]

@@ -562,9 +562,12 @@ def _commit(layout: _Layout, before: dict[int, list[int] | None], after: dict[in
     if not shape.facing(corners(after, changed_ids)):
         return None
     removed = set(before) - set(after)
+    if _edge_overuse(after):
+        return None
     new_turn = _largest_turn(after, changed, corners)
-    old_turn = _largest_turn(before, removed | {o for o in changed if o in before}, corners)
-    if (new_turn > max_turn and new_turn >= old_turn) or _edge_overuse(after):
+    # the old turn matters only when the new one is too large (it is the larger half of the work)
+    if new_turn > max_turn and new_turn >= _largest_turn(
+            before, removed | {o for o in changed if o in before}, corners):
         return None
     # coverage: the mesh vertices near the changed quads stay close to the layout
     live_ids = sorted(after)

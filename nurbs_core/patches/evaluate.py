@@ -60,14 +60,18 @@ def evaluate(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.ndar
     knots, p = network.knots, network.degree
     c = network.control_points if control_points is None else control_points
     bu, bv = basis_1d(knots, p, u), basis_1d(knots, p, v)
-    offsets = np.arange(p + 1)
-    iu = bu.first[:, None] + offsets
-    iv = bv.first[:, None] + offsets
-    nets = c[network.index[np.asarray(patch)[:, None, None], iu[:, :, None], iv[:, None, :]]]
-    s = np.einsum("ma,mb,mabc->mc", bu.values, bv.values, nets)
-    su = np.einsum("ma,mb,mabc->mc", bu.derivative, bv.values, nets)
-    sv = np.einsum("ma,mb,mabc->mc", bu.values, bv.derivative, nets)
-    return s, su, sv
+    n, index = p + 1, network.index
+    # the (p + 1)^2 control points of each parameter's span, by flat index into index (P, s, s)
+    first = (np.asarray(patch, np.int64) * index.shape[1] + bu.first) * index.shape[2] + bv.first
+    offsets = (np.arange(n)[:, None] * index.shape[2] + np.arange(n)).ravel()
+    nets = c[index.reshape(-1)[first[:, None] + offsets]]              # (M, n^2, 3)
+    # the three tensor-product weights (value, d/du, d/dv) as one (M, 3, n^2) batch of rows
+    weights = np.empty((len(first), 3, n, n))
+    np.multiply(bu.values[:, :, None], bv.values[:, None, :], out=weights[:, 0])
+    np.multiply(bu.derivative[:, :, None], bv.values[:, None, :], out=weights[:, 1])
+    np.multiply(bu.values[:, :, None], bv.derivative[:, None, :], out=weights[:, 2])
+    out = np.matmul(weights.reshape(-1, 3, n * n), nets)                # (M, 3, 3)
+    return out[:, 0], out[:, 1], out[:, 2]
 
 
 def unit(vectors: np.ndarray) -> np.ndarray:

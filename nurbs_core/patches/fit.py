@@ -520,9 +520,7 @@ def _projection_rows(network: PatchNetwork, patch: np.ndarray, uv: np.ndarray, d
     scale = 1.0 / np.maximum(np.linalg.norm(derivative, axis=1), 1e-9)
     target = derivative - (derivative * normal).sum(1, keepdims=True) * normal
     scaled = scipy.sparse.diags(scale) @ d
-    zero = scipy.sparse.csr_matrix(d.shape)
-    g = scipy.sparse.vstack([scipy.sparse.hstack([scaled if c == r else zero for c in range(3)])
-                             for r in range(3)], format="csr")
+    g = scipy.sparse.block_diag([scaled, scaled, scaled], format="csr")
     return g, (target * scale[:, None]).T.ravel()
 
 

@@ -19,6 +19,7 @@ failed when none passes.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import sys
 import tempfile
@@ -34,6 +35,13 @@ QUADS_PER_TARGET_FACE = 4.3
 #: Relative changes of the target count tried in turn when a layout fails its checks (Instant
 #: Meshes needs finer layouts where the shape is thin, a torus's tube say).
 RETRY_FACTORS = (1.0, 1.25, 0.8, 1.6, 2.0, 2.5, 3.2, 4.0, 5.0, 6.4)
+
+
+#: Instant Meshes' raw outputs by (mesh digest, target face count, crease angle), at most
+#: ``REMESHED_KEPT`` of them: it is deterministic, and the ``auto`` search's retries ask it for
+#: the same count again (on the bunny 11 of its 50 runs were repeats).
+_REMESHED: dict[tuple[bytes, int, float], tuple[np.ndarray, list[list[int]]]] = {}
+REMESHED_KEPT = 128
 
 
 class LayoutError(ValueError):
@@ -87,13 +95,21 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
         source = os.path.join(folder, "mesh.obj")
         target = os.path.join(folder, "quads.obj")
         _write_obj(source, vertices, faces)
+        digest = hashlib.blake2b(np.asarray(vertices.shape + faces.shape).tobytes()
+                                 + vertices.tobytes() + faces.tobytes(), digest_size=16).digest()
         for factor in RETRY_FACTORS if retry else (1.0,):
             count = max(2, int(round(patches * factor / QUADS_PER_TARGET_FACE)))
-            with _silenced_stdout():
-                pyinstantmeshes.remesh_file(source, target, target_face_count=count,
-                                            pure_quad=True, deterministic=True,
-                                            crease_angle=crease_angle)
-            raw_vertices, raw_faces = _read_obj(target)
+            key = (digest, count, float(crease_angle))
+            if key not in _REMESHED:
+                with _silenced_stdout():
+                    pyinstantmeshes.remesh_file(source, target, target_face_count=count,
+                                                pure_quad=True, deterministic=True,
+                                                crease_angle=crease_angle)
+                if len(_REMESHED) >= REMESHED_KEPT:
+                    _REMESHED.clear()
+                _REMESHED[key] = _read_obj(target)
+            raw_vertices, raw_faces = _REMESHED[key]
+            raw_vertices, raw_faces = raw_vertices.copy(), [list(f) for f in raw_faces]
             try:
                 quads_v, quads = _without_small_corners(*_clean(raw_vertices, raw_faces))
                 check_manifold(quads)

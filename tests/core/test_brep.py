@@ -14,7 +14,7 @@ from nurbs_core.brep.occ import face_kind, faces, is_valid, volume  # noqa: E402
 from nurbs_core.brep.part import fit_part, part_like  # noqa: E402
 from nurbs_core.brep.primitives import Primitive, fit_kind, refine  # noqa: E402
 from nurbs_core.brep.sample_parts import PARTS, scan_part  # noqa: E402
-from nurbs_core.brep.segment import segment  # noqa: E402
+from nurbs_core.brep.segment import segment, segment_subset  # noqa: E402
 from nurbs_core.brep.solid import winding_numbers  # noqa: E402
 from nurbs_core.cli import main  # noqa: E402
 from nurbs_core.patches.closed_mesh import closed_mesh  # noqa: E402
@@ -231,6 +231,22 @@ def test_a_freeform_closed_scan_is_not_taken_for_a_part():
     # with noise of 0.2% of the diagonal a dozen spheres and cones hold a sparse head within
     # 3 sigmas; a part is made mostly of planes and cylinders
     assert not part_like(segment(head, give_up=0.02))
+
+
+def test_a_large_cloud_is_segmented_on_a_subset_whose_surfaces_label_every_point():
+    from nurbs_core import samples
+
+    sphere = samples.sphere(9000, noise=0.004, truth_count=1000).points
+    whole = segment(sphere, give_up=0.02)
+    part = segment_subset(sphere, limit=3000, give_up=0.02)
+    assert [s.kind for s in part.surfaces] == [s.kind for s in whole.surfaces] == ["sphere"]
+    assert abs(part.surfaces[0].radius - 1.0) < 0.01
+    assert len(part.labels) == len(part.normals) == len(sphere)
+    assert part.coverage > 0.97 and part.region_sizes == [int((part.labels == 0).sum())]
+    assert part_like(part) and part_like(whole)
+    # up to the limit it is the plain segmentation
+    small = segment_subset(sphere[:2000], limit=3000, give_up=0.02)
+    assert np.array_equal(small.labels, segment(sphere[:2000], give_up=0.02).labels)
 
 
 def test_an_stl_mesh_of_a_machined_part_becomes_its_exact_solid(tmp_path, capsys):
