@@ -11,3 +11,6 @@ The seam weight scales the tangent-continuity rows.
 
 STIFFNESS = 3.0
 SEAM_WEIGHT = 2.0
+#: Seam angle 99th percentile (degrees) above which a network's report warns (and its status is
+#: not "converged"); the fit polishes its seams while they are above it and still straighten.
+WARN_SEAM = 2.0

@@ -23,6 +23,7 @@ from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
 from nurbs_core.patches.coarsen import coarsen, reach_ratios
 from nurbs_core.patches.crease_layout import coverage, layout_edges, snap_to_creases
 from nurbs_core.patches.creases import Creases, detect_creases, no_creases, sharpened
+from nurbs_core.patches.defaults import WARN_SEAM
 from nurbs_core.patches.fit import NetworkPass, fit_network
 from nurbs_core.patches.layout import LayoutError, QuadLayout, quad_layout
 from nurbs_core.patches.measures import NetworkQuality, network_quality
@@ -67,10 +68,9 @@ MIN_POINTS_PER_PATCH = 25
 #: Points the fit passes use at most (a random subset of larger clouds), and the quality.
 PASS_POINTS = 20_000
 QUALITY_POINTS = 200_000
-#: Seam angle 99th percentile (degrees) and the share of the area far from every point
-#: (:func:`nurbs_core.patches.measures.far_limit`) above which a warning is given (and the
-#: status is not "converged"); folds: :data:`nurbs_core.status.WARN_FLIPPED`.
-WARN_SEAM = 2.0
+#: The share of the area far from every point (:func:`nurbs_core.patches.measures.far_limit`)
+#: above which a warning is given (and the status is not "converged"); seams:
+#: :data:`nurbs_core.patches.defaults.WARN_SEAM`; folds: :data:`nurbs_core.status.WARN_FLIPPED`.
 WARN_FAR = 0.005
 #: Mean point-to-network distance, in estimated noise sigmas, above which a warning is given
 #: (pure noise averages 0.8 sigma; a clean fit of a scan measures 0.9, a watertight STL's
