@@ -192,21 +192,30 @@ class PointsState:
     network_report: dict[str, Any] | None = None
 
 
-class _PointsCommand(QUndoCommand):
-    """Crop or delete: undo restores the points, the selection and the fitted shape as they were
-    before; redo the edited points with the shape fitted to them since (a fit after a crop comes
-    back with the crop)."""
+class _ContentCommand(QUndoCommand):
+    """An edit of the document's content (its points, its unit): dropped when reached after
+    other files were opened (nothing of it is left; they came with their own)."""
 
-    def __init__(self, document: Document, before: PointsState, after: PointsState, text: str):
+    def __init__(self, document: Document, text: str):
         super().__init__(text)
-        self._document, self._before, self._after = document, before, after
+        self._document = document
         self._generation = document.content_generation
 
     def _current(self) -> bool:
         if self._document.content_generation == self._generation:
             return True
-        self.setObsolete(True)  # other files were opened since: nothing of this edit is left
+        self.setObsolete(True)
         return False
+
+
+class _PointsCommand(_ContentCommand):
+    """Crop or delete: undo restores the points, the selection and the fitted shape as they were
+    before; redo the edited points with the shape fitted to them since (a fit after a crop comes
+    back with the crop)."""
+
+    def __init__(self, document: Document, before: PointsState, after: PointsState, text: str):
+        super().__init__(document, text)
+        self._before, self._after = before, after
 
     def redo(self):
         if self._current():
@@ -221,21 +230,13 @@ class _PointsCommand(QUndoCommand):
             document._apply_points(self._before)
 
 
-class _UnitsCommand(QUndoCommand):
+class _UnitsCommand(_ContentCommand):
     """The document's length unit chosen (Edit > Units, the toolbar's Units): undo restores the
-    one before. An edit made before other files were opened is dropped when reached (those
-    files came with their own unit)."""
+    one before."""
 
     def __init__(self, document: Document, old: str | None, new: str | None):
-        super().__init__(f"Units: {new or 'unknown'}")
-        self._document, self._old, self._new = document, old, new
-        self._generation = document.content_generation
-
-    def _current(self) -> bool:
-        if self._document.content_generation == self._generation:
-            return True
-        self.setObsolete(True)
-        return False
+        super().__init__(document, f"Units: {new or 'unknown'}")
+        self._old, self._new = old, new
 
     def redo(self):
         if self._current():

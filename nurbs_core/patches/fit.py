@@ -224,7 +224,7 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
     # over 24 more passes, the RMS by 16%); go on while either gains, judged on the seams'
     # 99th percentile at the new network (one fold's largest angle does not tell whether the
     # other seams still straighten)
-    lowest = seam_p99(network)
+    lowest = network_p99 = seam_p99(network)         # the straightest seams; the network's
     smoothest = (network, patch, uv, dist, rms)      # the pass with the straightest seams
     stalled = 0
     for _ in range(POLISH_PASSES):
@@ -241,17 +241,17 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
                           dist * frame.scale, rms * frame.scale, float(dist.mean()) * frame.scale,
                           measured, network.size)
         count += 1
-        spread = seam_p99(network)
+        network_p99 = seam_p99(network)
         gain = POLISH_GAIN if lowest <= WARN_SEAM else POLISH_GAIN_OVER
-        gained = spread < gain * lowest or rms < (1.0 - SETTLED) * before[-1]
-        if spread < lowest:
-            lowest, smoothest = spread, (network, patch, uv, dist, rms)
+        gained = network_p99 < gain * lowest or rms < (1.0 - SETTLED) * before[-1]
+        if network_p99 < lowest:
+            lowest, smoothest = network_p99, (network, patch, uv, dist, rms)
         stalled = 0 if gained else stalled + 1
         if stalled >= POLISH_PATIENCE:
             break
     # where the seams swing from pass to pass (a sheet the layout does not suit), the last pass
     # need not be the best: the straightest seams win when their fit is as close
-    if smoothest[-1] <= POLISH_KEEP * rms and seam_p99(network) > lowest / POLISH_GAIN:
+    if smoothest[-1] <= POLISH_KEEP * rms and network_p99 > lowest / POLISH_GAIN:
         network, patch, uv, dist, rms = smoothest
     rss = huber_loss(dist, sigma)
     cp = rss + CP_PENALTY * sigma ** 2 * len(network.control_points)

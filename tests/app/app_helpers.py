@@ -58,3 +58,16 @@ def viewport_image(window) -> np.ndarray:
     """The viewport's rendered pixels (H, W, 3) uint8, straight from the render window."""
     window.scene.render_now()
     return np.asarray(window.scene.plotter.screenshot(return_img=True))[..., :3]
+
+
+def export_report(qtbot, window, monkeypatch, path) -> str:
+    """File > deviation report saved to ``path`` (the save dialog answered): the HTML's text;
+    the export must succeed."""
+    from PySide6.QtWidgets import QFileDialog
+
+    monkeypatch.setattr(QFileDialog, "getSaveFileName",
+                        staticmethod(lambda *a, **k: (str(path), "HTML report (*.html)")))
+    with qtbot.waitSignal(window.export_finished, timeout=60000) as blocker:
+        window.report_action.trigger()
+    assert blocker.args == [str(path), True], window.last_error
+    return path.read_text()

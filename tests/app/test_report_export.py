@@ -7,9 +7,8 @@ import base64
 import io
 import re
 
-from app_helpers import open_by_drop
+from app_helpers import export_report, open_by_drop
 from PIL import Image
-from PySide6.QtWidgets import QFileDialog
 
 
 def test_export_a_deviation_report_of_the_fit(qtbot, window, ply_cloud, tmp_path, monkeypatch):
@@ -18,13 +17,7 @@ def test_export_a_deviation_report_of_the_fit(qtbot, window, ply_cloud, tmp_path
     with qtbot.waitSignal(window.controller.fit_finished, timeout=60000):
         window.start_action.trigger()
     assert window.document.fitted is not None
-    report = tmp_path / "deviation.html"
-    monkeypatch.setattr(QFileDialog, "getSaveFileName",
-                        staticmethod(lambda *a, **k: (str(report), "HTML report (*.html)")))
-    with qtbot.waitSignal(window.export_finished, timeout=60000) as blocker:
-        window.report_action.trigger()
-    assert blocker.args == [str(report), True], window.last_error
-    text = report.read_text()
+    text = export_report(qtbot, window, monkeypatch, tmp_path / "deviation.html")
     assert "scan.ply" in text and "one patch" in text and "within the tolerance" in text
     pictures = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', text)
     assert len(pictures) == 2

@@ -14,8 +14,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from app_helpers import open_by_drop, sin_cos_cloud
-from PySide6.QtWidgets import QFileDialog
+from app_helpers import export_report, open_by_drop, sin_cos_cloud
 
 from app.session_file import MANIFEST, read_session
 from app.window.units_policy import UNKNOWN_STYLE
@@ -174,13 +173,7 @@ def test_units_through_fit_display_session_and_exports(qtbot, window, tmp_path, 
     assert box.Max.X - box.Min.X == pytest.approx(np.ptp(points[:, 0]), rel=0.05)
 
     # the deviation report names them
-    report = tmp_path / "report.html"
-    monkeypatch.setattr(QFileDialog, "getSaveFileName",
-                        staticmethod(lambda *a, **k: (str(report), "HTML report (*.html)")))
-    with qtbot.waitSignal(window.export_finished, timeout=60000) as blocker:
-        window.report_action.trigger()
-    assert blocker.args == [str(report), True], window.last_error
-    text = report.read_text()
+    text = export_report(qtbot, window, monkeypatch, tmp_path / "report.html")
     assert "Units: m." in text and "not given" not in text
 
     if HAS_OCP:
