@@ -5,7 +5,10 @@ An open shell's wrap encloses nothing (:mod:`nurbs_core.reconstruct.wrap`), so n
 
 * normals oriented by propagation: PCA normals flipped along the minimum spanning tree of the
   k-nearest-neighbour graph weighted by ``1 - |n_i . n_j|`` (Hoppe et al. 1992), so the sign
-  travels over the smoothest path; the first point (the farthest from the centroid) faces away
+  travels over the smoothest path, plus ``ACROSS`` x how much an edge runs along the normals
+  (so the sign travels along a sheet, not across a thin part: an ear's two sides have parallel
+  unsigned normals, and Hoppe's weight alone let the sign jump from one side to the other,
+  turning one side inside out); the first point (the farthest from the centroid) faces away
   from it;
 * Hoppe's tangent-plane distance ``d(x) = sum_k w_k (x - p_k) . n_k / sum_k w_k`` sampled only
   in the band of voxels the points block (each point's ball as wide as its neighbourhood, as in
@@ -57,6 +60,12 @@ HANDLE_BLURS = (1.0, 1.5, 2.0)
 #: ... as long as this share of the points stays within HANDLE_REACH cells of the zero set.
 HANDLE_COVER = 0.97
 HANDLE_REACH = 2.0
+#: Weight, in the orientation's spanning tree, of an edge's run along the normals (|n . d| for
+#: its unit direction d, averaged over its two ends) beside Hoppe's ``1 - |n_i . n_j|``. On
+#: the bunny's head and ears (4,500 points, noise 0.2% of the diagonal) the share of points
+#: oriented against the truth goes from 7.8% (0, the ears' far sides) to 0.18% (0.5; 0.20% at
+#: 2); the generated head's stays 0.5-0.7% up to 1 and grows from 2 on.
+ACROSS = 0.5
 #: The border is smoothed along itself by a Gaussian of this many of its own vertices.
 BORDER_SMOOTHING = 3.0
 
@@ -168,14 +177,20 @@ def genus(faces: np.ndarray) -> int:
 def propagated_normals(points: np.ndarray, normals: np.ndarray,
                        neighbours: np.ndarray) -> np.ndarray:
     """Unit normals (N, 3) of ``normals`` (N, 3) with consistent signs: flipped along the
-    minimum spanning tree of the ``neighbours`` (N, k) graph weighted by ``1 - |n_i . n_j|``,
-    from the point farthest from the centroid (turned away from it) in each connected part."""
+    minimum spanning tree of the ``neighbours`` (N, k) graph weighted by ``1 - |n_i . n_j|``
+    plus ``ACROSS`` x the edge's run along the normals, from the point farthest from the
+    centroid (turned away from it) in each connected part."""
     count = len(points)
     rows = np.repeat(np.arange(count), neighbours.shape[1])
     cols = neighbours.ravel()
     keep = rows != cols
     rows, cols = rows[keep], cols[keep]
-    weight = 1.0 - np.abs(np.einsum("ij,ij->i", normals[rows], normals[cols])) + 1e-6
+    step = points[cols] - points[rows]
+    step /= np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-300)
+    across = 0.5 * (np.abs(np.einsum("ij,ij->i", normals[rows], step))
+                    + np.abs(np.einsum("ij,ij->i", normals[cols], step)))
+    weight = (1.0 - np.abs(np.einsum("ij,ij->i", normals[rows], normals[cols]))
+              + ACROSS * across + 1e-6)
     graph = scipy.sparse.coo_matrix((weight, (rows, cols)), shape=(count, count)).tocsr()
     tree = scipy.sparse.csgraph.minimum_spanning_tree(graph.maximum(graph.T))
     tree = (tree + tree.T).tocsr()

@@ -275,13 +275,22 @@ def _fine_layout(mesh: ScanMesh) -> QuadLayout:
     """A layout whose edges are a few cells of the mesh long (``FINE_CELLS``, each in turn
     until one follows the whole shape: no mesh vertex farther than ``FINE_REACH`` edge lengths
     from it), the start of the coarsening."""
-    layout = None
+    layout, failed = None, None
     for cells in FINE_CELLS:
-        layout = quad_layout(mesh.vertices, mesh.faces,
-                             max(AUTO_START, int(mesh.area / (cells * mesh.cell) ** 2)))
+        try:
+            candidate = quad_layout(mesh.vertices, mesh.faces,
+                                    max(AUTO_START, int(mesh.area / (cells * mesh.cell) ** 2)))
+        except LayoutError as error:
+            # no valid layout at this size (Instant Meshes' quads facing away from the mesh at
+            # every target near it: the bunny's head and ears at three cells); the next size
+            failed = error
+            continue
+        layout = candidate
         if layout_reach(layout, mesh) <= FINE_REACH:
             break
-    assert layout is not None, "FINE_CELLS holds at least one size"
+    if layout is None:
+        assert failed is not None, "FINE_CELLS holds at least one size"
+        raise failed
     return layout
 
 
