@@ -516,6 +516,7 @@ class MainWindow(QMainWindow):
         doc.units_changed.connect(self.units_policy.on_units_changed)
         doc.fitted_changed.connect(self.fit_display.on_fitted_changed)
         ctl.state_changed.connect(self.update_fit_actions)
+        ctl.state_changed.connect(self.fit_display.on_state_changed)
         self.patch_controller.state_changed.connect(self.update_fit_actions)
         self.patch_controller.snapshot_shown.connect(self.fit_display.on_patch_snapshot)
         self.patch_controller.losses_received.connect(self.loss_plot.append)
