@@ -55,6 +55,7 @@ from app.panels.fit_panel import POLICY_TEXT, FitSettingsPanel
 from app.panels.knot_panel import KnotPanel
 from app.panels.log_panel import LogPanel
 from app.panels.loss_plot import LossPlot
+from app.panels.message_bar import MessageStatusBar
 from app.panels.network_quality_panel import NetworkQualityPanel
 from app.panels.offset_panel import OffsetPanel
 from app.panels.patches_panel import ModeSelector, PatchesPanel
@@ -126,6 +127,8 @@ class MainWindow(QMainWindow):
             self.setWindowIcon(QIcon(str(ICON_FILE)))
         self.resize(1400, 900)
         self.setAcceptDrops(True)
+        # long messages end in "..." before the permanent labels, whole in the tooltip
+        self.setStatusBar(MessageStatusBar(self))
         self._store = settings_store or QSettings("NURBS Studio", "nurbs-studio")
         self._store.setAtomicSyncRequired(True)  # Qt writes it through QSaveFile: all or nothing
         self.recent = RecentFiles(self._store)
@@ -513,6 +516,7 @@ class MainWindow(QMainWindow):
         doc.units_changed.connect(self.units_policy.on_units_changed)
         doc.fitted_changed.connect(self.fit_display.on_fitted_changed)
         ctl.state_changed.connect(self.update_fit_actions)
+        ctl.state_changed.connect(self.fit_display.on_state_changed)
         self.patch_controller.state_changed.connect(self.update_fit_actions)
         self.patch_controller.snapshot_shown.connect(self.fit_display.on_patch_snapshot)
         self.patch_controller.losses_received.connect(self.loss_plot.append)

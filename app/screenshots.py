@@ -8,8 +8,10 @@ blade, when its data is on this machine), a 2D curve fit, the quality map of a s
 Patches mode: a torus fitted with a patch network (its layout drawn on it), then its seam
 angles, then its signed deviation, and choosing what to fit: a lasso selection on the demo cloud
 (a second lasso being drawn), then the fit of the selected points alone, and units: a scan
-whose file states none (the Units box asks), then fitted in metres. ``--only single``,
-``--only patches``, ``--only selection`` or ``--only units`` makes one of the sets.
+whose file states none (the Units box asks), then fitted in metres, and what the Fit settings
+dock says of the fit: the result beside the settings it started from, and a note before Start
+when a setting changes the route. ``--only single``, ``--only patches``, ``--only selection``,
+``--only units`` or ``--only controls`` makes one of the sets.
 """
 
 from __future__ import annotations
@@ -71,9 +73,10 @@ def torus_cloud(path: Path) -> Path:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path)
-    parser.add_argument("--only", choices=("single", "patches", "selection", "units"),
+    parser.add_argument("--only", choices=("single", "patches", "selection", "units", "controls"),
                         help="make only the single-patch (01-07, 11), the Patches mode (08-09, 12), "
-                             "the selection (13-14) or the units (15-17) set")
+                             "the selection (13-14), the units (15-17) or the Fit settings "
+                             "result and route note (18-19) set")
     arguments = parser.parse_args(argv)
     arguments.out.mkdir(parents=True, exist_ok=True)
 
@@ -319,12 +322,37 @@ def main(argv: list[str] | None = None) -> int:
             later(lambda: (shot("17_units_deviation.png"), next_step()), 600)), 600))
         window.start_fit()
 
+    # 18. the demo fitted: the Fit settings dock's Result line (the grid the fit grew to, what
+    # ran, the tolerance) under the grid it started from, and the note on what Start runs next
+    # (the status bar's long report ends in "..."); 19. afresh, a loss that needs the gradient
+    # fit: the note under the loss, before Start
+    def fit_result():
+        window.set_layer_visible("knot_lines", True)
+        window.fit_dock.raise_()
+        window.quality_dock.raise_()
+
+        def loaded(ok):
+            window.document.edit_settings("Fit settings", tolerance=None, fit_mode="single")
+            once(window.controller.fit_finished, lambda snapshot: later(lambda: (
+                shot("18_fit_result.png"), route_note()), 600))
+            window.start_fit()
+        once(window.files_loaded, loaded)
+        window.open_demo()
+
+    def route_note():
+        window.reset_fit()
+        window.fit_panel.term_checks["hausdorff"].setChecked(True)
+        window.fit_dock.widget().ensureWidgetVisible(window.fit_panel.route_notes["loss"])
+        later(lambda: (shot("19_route_note.png"), window.undo_action.trigger(), next_step()))
+
     single = [demo, converging, offsets, curve, quality_clean, quality_folded]
     patches = [patches_mode, seam_map, patches_deviation]
     choose = [selection, fit_selection]
     units = [units_import]
-    steps.extend({"single": single, "patches": patches, "selection": choose,
-                  "units": units}.get(arguments.only, single + choose + units + patches))
+    controls = [fit_result]
+    steps.extend({"single": single, "patches": patches, "selection": choose, "units": units,
+                  "controls": controls}.get(arguments.only,
+                                            single + choose + units + controls + patches))
     window.controller.fit_failed.connect(lambda message: failures.append(message))
     window.patch_controller.fit_failed.connect(lambda message: failures.append(message))
     next_step()

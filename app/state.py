@@ -41,6 +41,9 @@ OLD_SESSION_FORMATS = ("nurbs-studio-session-v1",)
 INITIALIZATIONS = INITS
 #: labels of the engine's solvers and parameterisations of unordered surface clouds
 SOLVER_LABELS = {"least_squares": "least squares"}
+#: what the stages of a fit's plan (``nurbs_core.fitting.plan.FitPlan.stages``) are called
+STAGE_LABELS = {"least_squares": "least-squares core", "gradient": "gradient fit",
+                "exact": "exact least squares"}
 SOLVERS = tuple((name, SOLVER_LABELS.get(name, name)) for name in _SOLVERS)
 PARAMETERIZATIONS = tuple((name, name) for name in _PARAMETERIZATIONS)
 #: How Start fits the cloud: one NURBS surface (or curve), or a network of patches over a quad
@@ -148,6 +151,50 @@ def with_changes(settings: Settings, **changes: Any) -> Settings:
                                **window)
 
 
+def control_grid(geometry: GeometryArrays | None) -> tuple[int, ...] | None:
+    """(control points u, control points v, degree u, degree v) of a surface, (control points,
+    degree) of a curve; None for no shape."""
+    if geometry is None:
+        return None
+    if geometry.kind == "surface":
+        count_u, count_v = (int(n) for n in geometry.control_points.shape[:2])
+        return count_u, count_v, int(geometry.degree_u), int(geometry.degree_v)
+    return int(geometry.control_points.shape[0]), int(geometry.degree)
+
+
+@dataclass(frozen=True)
+class FitAccount:
+    """What the fitted shape is and how it was made: one source for the Fit settings dock's
+    Result line and the Quality dock's control grid and tolerance rows.
+
+    grid: :func:`control_grid` of the shape (the grid the fit grew to, not the one the settings
+    start from); stages: the stages of the plan that made it (``FitPlan.stages``; empty when
+    not known: a shape from a session); tolerance: the distance the result was held to (input
+    units), None when it was not (the gradient fit), with the engine's verdict and whether it
+    was the automatic one."""
+
+    kind: str
+    grid: tuple[int, ...]
+    stages: tuple[str, ...] = ()
+    tolerance: float | None = None
+    tolerance_met: bool = False
+    automatic_tolerance: bool = True
+
+    @classmethod
+    def of(cls, geometry: GeometryArrays, stages: tuple[str, ...] = (),
+           statistics: Mapping[str, float] | None = None,
+           automatic_tolerance: bool = True) -> FitAccount:
+        """The account of ``geometry``, made by ``stages``, whose final measures are
+        ``statistics`` (their "tolerance" and "tolerance_met": the core's verdict)."""
+        grid = control_grid(geometry)
+        assert grid is not None, "a shape"
+        statistics = statistics or {}
+        tolerance = statistics.get("tolerance")
+        return cls(geometry.kind, grid, tuple(stages),
+                   None if tolerance is None else float(tolerance),
+                   bool(statistics.get("tolerance_met", False)), automatic_tolerance)
+
+
 @dataclass
 class Target:
     """A point cloud to fit: points (N, 3) float64."""
@@ -190,6 +237,7 @@ class PointsState:
     fitted: GeometryArrays | None
     network: Any = None
     network_report: dict[str, Any] | None = None
+    fitted_account: FitAccount | None = None
 
 
 class _ContentCommand(QUndoCommand):
@@ -225,6 +273,7 @@ class _PointsCommand(_ContentCommand):
         if self._current():
             document = self._document
             self._after = dataclasses.replace(self._after, fitted=document.fitted,
+                                              fitted_account=document.fitted_account,
                                               network=document.network,
                                               network_report=document.report_network())
             document._apply_points(self._before)
@@ -276,6 +325,8 @@ class Document(QObject):
         self.patches: list[GeometryArrays] = []
         self.patch_names: list[str] = []
         self.fitted: GeometryArrays | None = None
+        #: what :attr:`fitted` is and how it was made (None with no fitted shape)
+        self.fitted_account: FitAccount | None = None
         #: the fitted patch network (``nurbs_core.patches.network.PatchNetwork``) or None
         self.network: Any = None
         self.offsets = OffsetDisplay()
@@ -339,7 +390,7 @@ class Document(QObject):
         self.content_generation += 1
         self.selection = None
         self.patches = [from_mapping(p) for p in patches]
-        self.fitted = None
+        self.fitted = self.fitted_account = None
         self.network = None
         self.offsets = OffsetDisplay()
         self.content_changed.emit()
@@ -348,10 +399,17 @@ class Document(QObject):
         self.selection_changed.emit()
         self.units_changed.emit()
 
-    def set_fitted(self, geometry: Mapping[str, Any] | None, notify: bool = True):
+    def set_fitted(self, geometry: Mapping[str, Any] | None, notify: bool = True,
+                   account: FitAccount | None = None):
         """Replace the fitted shape. Live fit updates pass ``notify=False``: the controller
-        already hands their display arrays to the view, so nothing needs re-tessellating."""
+        already hands their display arrays to the view, so nothing needs re-tessellating.
+        account: how the shape was made (a finished fit); None: only what the shape itself
+        says (its grid)."""
         self.fitted = None if geometry is None else from_mapping(geometry)
+        if self.fitted is None:
+            self.fitted_account = None
+        else:
+            self.fitted_account = account or FitAccount.of(self.fitted)
         if notify:
             self.fitted_changed.emit()
 
@@ -426,14 +484,14 @@ class Document(QObject):
         return PointsState(tuple(t.points for t in self.targets),
                            None if self.selection is None else self.selection.copy(),
                            tuple(t.visible for t in self.targets), self.fitted, self.network,
-                           self.report_network())
+                           self.report_network(), self.fitted_account)
 
     def _apply_points(self, state: PointsState):
         for target, points in zip(self.targets, state.points, strict=True):
             target.points = points
         visible = tuple(t.visible for t in self.targets)
         self.selection = state.selection if visible == state.visible else None
-        self.fitted = state.fitted
+        self.fitted, self.fitted_account = state.fitted, state.fitted_account
         self.network, self.restored_network_report = state.network, state.network_report
         self.points_changed.emit()
         self.selection_changed.emit()

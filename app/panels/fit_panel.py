@@ -1,8 +1,11 @@
 """Fit settings: model, surfacing (the least-squares core), loss composition, optimizer, freedom
-of the fit.
+of the fit; beside them what the fit made and what Start will run.
 
 Every edit goes through ``edit(text, **changes)`` (the document's undoable ``edit_settings``);
 ``show_settings`` mirrors the document back without emitting edits (after undo/redo, sessions).
+``show_result`` shows the Result line (the fitted shape's grid, the stages that made it, the
+tolerance verdict: :class:`app.state.FitAccount`) and ``show_route_note`` a note under the group
+whose setting takes Start off the default route; the window words both, nothing is decided here.
 """
 
 from __future__ import annotations
@@ -21,12 +24,14 @@ from PySide6.QtWidgets import (
     QHBoxLayout,
     QLabel,
     QLineEdit,
+    QPushButton,
     QSpinBox,
     QVBoxLayout,
     QWidget,
 )
 
 from app.panels.log_slider import LogSlider
+from app.panels.result_text import result_text
 from app.state import (
     INITIALIZATIONS,
     LOSS_TERMS,
@@ -34,6 +39,7 @@ from app.state import (
     PARAMETERIZATIONS,
     SOLVERS,
     TOLERANCE_HINT,
+    FitAccount,
     parse_tolerance,
 )
 from nurbs_core.fitting.config import FitConfig, Loss
@@ -74,6 +80,32 @@ SURFACING_HELP = {
 }
 
 
+RESULT_HELP = ("What the fitted shape is and what made it: the control grid the fit grew to "
+               "(the settings above are where a fresh fit starts), the stages that ran and "
+               "whether the result was held to the tolerance")
+USE_GRID_HELP = ("Set the control points above to the result's grid (an edit: Undo takes it "
+                 "back), so that Start goes on from the result without resampling it onto a "
+                 "smaller grid")
+#: where a route note shows: under the group of the setting that chose the route
+NOTE_SLOTS = ("model", "surfacing", "loss", "optimizer", "freedom")
+
+
+def _form_over_notes(group: QGroupBox) -> QFormLayout:
+    """The group's form, above room for wrapped notes: in a QFormLayout a word-wrapped row got
+    less height than its text needs (a route note cut off at the top and bottom, measured)."""
+    box = QVBoxLayout(group)
+    form = QFormLayout()
+    box.addLayout(form)
+    return form
+
+
+def _notes_of(group: QGroupBox) -> QVBoxLayout:
+    """The layout below the form of :func:`_form_over_notes`."""
+    layout = group.layout()
+    assert isinstance(layout, QVBoxLayout), "a group made by _form_over_notes"
+    return layout
+
+
 def _spin(minimum: int, maximum: int) -> QSpinBox:
     spin = QSpinBox()
     spin.setRange(minimum, maximum)
@@ -96,6 +128,14 @@ class FitSettingsPanel(QWidget):
         self._edit = edit
         self._updating = False
         self._last_weights = {name: 1.0 for name in LOSS_TERMS}
+        self._fit = FitConfig()
+        self._account: FitAccount | None = None
+        self._running = False
+        self._units: str | None = None
+        #: one note per group, at most one shown: what Start will run when a setting (or the
+        #: current shape) takes it off the default route (the window words it from the
+        #: engine's plan)
+        self.route_notes = {slot: self._note_label(slot) for slot in NOTE_SLOTS}
         layout = QVBoxLayout(self)
 
         policy = QLabel(POLICY_TEXT)
@@ -105,7 +145,7 @@ class FitSettingsPanel(QWidget):
         layout.addWidget(policy)
 
         model = QGroupBox("Model")
-        form = QFormLayout(model)
+        form = _form_over_notes(model)
         self.kind = QComboBox()
         self.kind.addItem("Surface", "surface")
         self.kind.addItem("Curve (2D or 3D)", "curve")
@@ -116,6 +156,8 @@ class FitSettingsPanel(QWidget):
         form.addRow("Degree v", self.degree_v)
         form.addRow("Control points u", self.control_points_u)
         form.addRow("Control points v", self.control_points_v)
+        _notes_of(model).addWidget(self._result_row())
+        _notes_of(model).addWidget(self.route_notes["model"])
         layout.addWidget(model)
         layout.addWidget(self._surfacing_group())
 
@@ -136,10 +178,11 @@ class FitSettingsPanel(QWidget):
         self.loss_text = QLabel()
         self.loss_text.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
         grid.addWidget(self.loss_text, len(LOSS_TERMS), 0, 1, 2)
+        grid.addWidget(self.route_notes["loss"], len(LOSS_TERMS) + 1, 0, 1, 2)
         layout.addWidget(loss)
 
         optimizer = QGroupBox("Optimizer")
-        form = QFormLayout(optimizer)
+        form = _form_over_notes(optimizer)
         self.optimizer = QComboBox()
         for name in OPTIMIZERS:
             self.optimizer.addItem(name, name)
@@ -157,6 +200,7 @@ class FitSettingsPanel(QWidget):
         form.addRow("Learning rate", self.learning_rate)
         form.addRow("Iterations", self.iterations)
         form.addRow("Initialization", self.init)
+        _notes_of(optimizer).addWidget(self.route_notes["optimizer"])
         layout.addWidget(optimizer)
 
         freedom = QGroupBox("Free parameters")
@@ -165,6 +209,7 @@ class FitSettingsPanel(QWidget):
         self.pin_boundary = QCheckBox("Pin the boundary control points")
         box.addWidget(self.free_weights)
         box.addWidget(self.pin_boundary)
+        box.addWidget(self.route_notes["freedom"])
         layout.addWidget(freedom)
         layout.addStretch(1)
 
@@ -193,7 +238,7 @@ class FitSettingsPanel(QWidget):
         """The least-squares core: solver, parameterisation, stiffness, tolerance, grid growth,
         forcing one patch."""
         group = QGroupBox("Surfacing (unordered surface clouds)")
-        form = QFormLayout(group)
+        form = _form_over_notes(group)
         self.solver = QComboBox()
         for value, label in SOLVERS:
             self.solver.addItem(label, value)
@@ -235,6 +280,7 @@ class FitSettingsPanel(QWidget):
         form.addRow(self.grow_grid)
         form.addRow("Grow up to", self.max_control_points)
         form.addRow(self.single_patch)
+        _notes_of(group).addWidget(self.route_notes["surfacing"])
 
         self.solver.currentIndexChanged.connect(
             lambda: self._changed("Solver", solver=self.solver.currentData()))
@@ -249,6 +295,89 @@ class FitSettingsPanel(QWidget):
         self.single_patch.toggled.connect(
             lambda on: self._changed("Force single patch", single_patch=bool(on)))
         return group
+
+    @staticmethod
+    def _note_label(slot: str) -> QLabel:
+        note = QLabel()
+        note.setObjectName(f"route_note_{slot}")
+        note.setWordWrap(True)
+        note.setStyleSheet("QLabel { color: #7a4a00; background: #fff4d6; padding: 3px; "
+                           "border-radius: 3px; }")
+        note.setVisible(False)
+        return note
+
+    def _result_row(self) -> QWidget:
+        """The Result line (what the fitted shape is and how it was made) and the button that
+        takes its grid into the settings."""
+        row = QWidget()
+        box = QHBoxLayout(row)
+        box.setContentsMargins(0, 0, 0, 0)
+        self.result = QLabel()
+        self.result.setObjectName("fit_result")
+        self.result.setWordWrap(True)
+        self.result.setToolTip(RESULT_HELP)
+        self.result.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.use_result_grid = QPushButton()
+        self.use_result_grid.setToolTip(USE_GRID_HELP)
+        self.use_result_grid.setVisible(False)
+        self.use_result_grid.clicked.connect(self._use_result_grid)
+        box.addWidget(self.result, 1)
+        box.addWidget(self.use_result_grid, 0, Qt.AlignmentFlag.AlignTop)
+        self._show_result()
+        return row
+
+    def show_result(self, account: FitAccount | None, running: bool = False):
+        """The Result line: ``account`` of the fitted shape (None: no fit), or "fitting" while a
+        run goes on (``running``)."""
+        self._account, self._running = account, running
+        self._show_result()
+
+    def _show_result(self):
+        account = self._account
+        if self._running:
+            text = "Result: fitting..."
+        elif account is None:
+            text = "Result: no fit yet"
+        else:
+            text = "Result: " + result_text(account, self._units)
+        self.result.setText(text)
+        counts = self._result_counts()
+        self.use_result_grid.setVisible(counts is not None)
+        if counts is not None:
+            self.use_result_grid.setText("Use " + " x ".join(str(n) for n in counts))
+
+    def _result_counts(self) -> tuple[int, ...] | None:
+        """The result's control point counts when they differ from the settings' (same kind),
+        else None."""
+        account, fit = self._account, self._fit
+        if self._running or account is None or account.kind != fit.kind:
+            return None
+        counts = account.grid[:2] if account.kind == "surface" else account.grid[:1]
+        wanted = ((fit.control_points_u, fit.control_points_v) if fit.kind == "surface"
+                  else (fit.control_points_u,))
+        return None if counts == wanted else counts
+
+    def _use_result_grid(self):
+        counts = self._result_counts()
+        if counts is None:
+            return
+        changes = {"control_points_u": counts[0]}
+        if len(counts) == 2:
+            changes["control_points_v"] = counts[1]
+        self._edit("Control points", **changes)
+
+    def show_route_note(self, slot: str | None, text: str = ""):
+        """Show ``text`` under the group ``slot`` (one of :data:`NOTE_SLOTS`), hiding any other
+        note; None hides them all."""
+        for name, note in self.route_notes.items():
+            if name == slot:
+                note.setText(text)
+            note.setVisible(name == slot)
+
+    def route_note(self) -> str:
+        """The route note on show ("" when none)."""
+        return next((note.text() for note in self.route_notes.values()
+                     if not note.isHidden()), "")
 
     def _grow_grid_edited(self, *_):
         on = self.grow_grid.isChecked()
@@ -277,7 +406,9 @@ class FitSettingsPanel(QWidget):
         self.tolerance.setStyleSheet("")
 
     def set_units(self, units: str | None):
-        """The length unit the tolerance is in (None: unknown)."""
+        """The length unit the tolerance (and the Result line's) is in (None: unknown)."""
+        self._units = units
+        self._show_result()
         self.tolerance_unit.setText(units or "")
         self.tolerance.setToolTip(SURFACING_HELP["tolerance"] + (
             f" (in {units})" if units else " (the units are unknown: choose them under Units)"))
@@ -309,6 +440,7 @@ class FitSettingsPanel(QWidget):
     def show_settings(self, fit: FitConfig):
         """Show ``fit`` (the document's FitConfig) without emitting edits."""
         self._updating = True
+        self._fit = fit
         try:
             self.kind.setCurrentIndex(self.kind.findData(fit.kind))
             self.degree_u.setValue(fit.degree_u)
@@ -347,3 +479,4 @@ class FitSettingsPanel(QWidget):
             self.max_control_points.setEnabled(surface and grows)
         finally:
             self._updating = False
+        self._show_result()  # the Use button follows the grid set here

@@ -13,6 +13,7 @@ import math
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QGridLayout, QLabel, QVBoxLayout, QWidget
 
+from app.panels.result_text import grid_text, length_text, tolerance_text
 from nurbs_core.status import WARN_FLIPPED, WARN_OVERLAP, WARN_UNCOVERED
 
 #: Display limits (how bad a value must be to be drawn red). Folds, overlaps and coverage use
@@ -55,9 +56,7 @@ def _number(value: float) -> str:
     return f"{value:.4g}" if math.isfinite(value) else "-"
 
 
-def _length(value: float, units: str | None) -> str:
-    """A distance to four digits with its unit when known ("0.0123 mm")."""
-    return _number(value) + (f" {units}" if units and math.isfinite(value) else "")
+_length = length_text
 
 
 def _percent(value: float) -> str:
@@ -139,14 +138,13 @@ class QualityPanel(QWidget):
 
     def show_result(self, status: str, message: str, statistics: dict[str, float] | None,
                     automatic_tolerance: bool = True, kind: str = "surface",
-                    warned: bool = False, grid: tuple[int, int, int, int] | None = None):
+                    warned: bool = False, grid: tuple[int, ...] | None = None):
         """The final snapshot's status, message and quality statistics (None: not measured);
         ``warned``: a quality check failed (the headline takes the warning colour); ``grid``:
         the fitted surface's (control points u, v, degree u, v)."""
         self._result = (status, message, statistics, automatic_tolerance, kind, warned, grid)
         headline = status.capitalize() + (f": {message}" if message else "")
-        self._set("grid", "-" if grid is None else
-                  f"{grid[0]} x {grid[1]} (degree {grid[2]} x {grid[3]})")
+        self._set("grid", "-" if grid is None else grid_text(grid))
         self.status.setStyleSheet(f"QLabel {{ color: {BAD_COLOR}; }}" if warned else "")
         if kind != "surface":
             self.status.setText(headline + " (the quality measures apply to surfaces)")
@@ -163,9 +161,8 @@ class QualityPanel(QWidget):
         units = self._units
         if "tolerance" in stats:
             met = bool(stats.get("tolerance_met"))
-            source = " (auto)" if automatic_tolerance else ""
-            self._set("tolerance", f"{_length(get('tolerance'), units)}{source}: "
-                                   f"{'met' if met else 'not met'}",
+            self._set("tolerance", tolerance_text(get("tolerance"), met, automatic_tolerance,
+                                                  units),
                       GOOD_COLOR if met else BAD_COLOR)
         else:
             self._set("tolerance", "not checked (gradient fit)")

@@ -7,8 +7,11 @@ quality maps, the readout says "running" from a run's first picture (a refused r
 it was); the status bar shows iteration, loss, rate and time left; a finished fit is stored in
 the document without re-tessellation, reported in one line with its deviation, and its quality
 shown; a fitted shape replaced outside a run (reset, session) is measured again in a job and
-shown unless it was replaced meanwhile. The signed deviation map of either mode goes to the
-viewport and the Deviation dock, which follows the mode on show. The numbers come from the
+shown unless it was replaced meanwhile. The Fit settings dock's Result line says what the fitted
+shape is and what made it (one :class:`~app.state.FitAccount` per shape, kept by the document
+with it, the Quality dock's grid and tolerance rows read the same), and its route note what Start
+will run from it (:mod:`app.window.route_note`). The signed deviation map of either mode goes to
+the viewport and the Deviation dock, which follows the mode on show. The numbers come from the
 workers (:func:`app.workers.fit_worker.deviation_stats`, :mod:`app.workers.deviation_map`);
 this module only presents them.
 """
@@ -23,6 +26,8 @@ from PySide6.QtCore import QObject, Slot
 from app import loading
 from app.display_types import DeviationMap
 from app.errors import describe
+from app.state import FitAccount
+from app.window.route_note import show_route_note
 from app.window.text import format_seconds
 from app.workers.fit_worker import DisplaySnapshot, deviation_stats
 from nurbs_core.status import quality_warnings, reported_status
@@ -99,6 +104,20 @@ class FitDisplay(QObject):
                                    f"Cannot display the fit: {describe(exc)}", True, exc=exc))
         window.rebuild_tree()
         window.knot_panel.show_state(window.document.settings.fit, fitted)
+        self.show_result_and_plan()
+
+    def show_result_and_plan(self) -> None:
+        """The Fit settings dock's Result line shows the document's fitted shape (what it is,
+        how it was made) and its route note what Start will run from it."""
+        window = self._window
+        window.fit_panel.show_result(window.document.fitted_account)
+        show_route_note(window.fit_panel, window.document)
+
+    @Slot(str)
+    def on_state_changed(self, state: str) -> None:
+        """A run ended (or never got going): the Result line leaves "fitting"."""
+        if state == "idle":
+            self.show_result_and_plan()
 
     def _show_fitted_display(self, fitted: dict, result: loading.FittedDisplay):
         window = self._window
@@ -111,10 +130,12 @@ class FitDisplay(QObject):
             window.quality_panel.show_deviation(stats)
         window.scene.set_quality(result.quality_cells, result.statistics)
         self.show_deviation_map(result.signed)
+        account = window.document.fitted_account
         window.quality_panel.show_result("measured", "the fitted shape against the cloud",
                                          result.statistics,
                                          window.document.settings.fit.tolerance is None,
-                                         result.display.kind)
+                                         result.display.kind,
+                                         grid=None if account is None else account.grid)
         window.rebuild_tree()
 
     @Slot(object)
@@ -137,6 +158,7 @@ class FitDisplay(QObject):
             # the first picture of a run (a refused run has none: the readout stays as it was)
             self._quality_run = snapshot.run_id
             window.quality_panel.show_running()
+            window.fit_panel.show_result(None, running=True)
         window.scene.show_fit(snapshot.display)
         if snapshot.quality_cells is not None:
             window.scene.set_quality(snapshot.quality_cells, snapshot.statistics)
@@ -176,8 +198,12 @@ class FitDisplay(QObject):
         window = self._window
         document = window.document
         window.loss_plot.flush()
+        # what the shape is and what made it: one account for the Result line and the Quality
+        # dock's grid and tolerance rows
+        account = FitAccount.of(snapshot.geometry, snapshot.plan.stages if snapshot.plan else (),
+                                snapshot.statistics, document.settings.fit.tolerance is None)
         # already on screen: store it without the re-tessellation a notifying change triggers
-        document.set_fitted(snapshot.geometry, notify=False)
+        document.set_fitted(snapshot.geometry, notify=False, account=account)
         window.rebuild_tree()
         window.knot_panel.show_state(document.settings.fit, snapshot.geometry)
         # "converged" only when the quality checks hold
@@ -193,18 +219,13 @@ class FitDisplay(QObject):
         if snapshot.message:
             text += f" ({snapshot.message})"
         window.report(text)
-        geometry = snapshot.geometry
-        grid = None
-        if getattr(geometry, "kind", None) == "surface":   # what ran, beside the settings' start
-            count_u, count_v = (int(n) for n in geometry.control_points.shape[-3:-1])
-            grid = (count_u, count_v, int(geometry.degree_u), int(geometry.degree_v))
-        account = snapshot.message
+        self.show_result_and_plan()
+        message = snapshot.message
         if snapshot.selected is not None:
-            account = f"fitted on {snapshot.selected:,} selected points" + (
-                f"; {account}" if account else "")
-        window.quality_panel.show_result(status, account, snapshot.statistics,
-                                         document.settings.fit.tolerance is None,
-                                         snapshot.display.kind,
-                                         warned=status != snapshot.status, grid=grid)
+            message = f"fitted on {snapshot.selected:,} selected points" + (
+                f"; {message}" if message else "")
+        window.quality_panel.show_result(status, message, snapshot.statistics,
+                                         account.automatic_tolerance, snapshot.display.kind,
+                                         warned=status != snapshot.status, grid=account.grid)
         if document.settings.show_offsets and not document.patches:
             window.offsets.request()

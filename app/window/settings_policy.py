@@ -16,6 +16,7 @@ from app.controller import FitController
 from app.patch_controller import PatchController
 from app.state import FIT_MODES, Settings
 from app.window.fit_display import cloud_units
+from app.window.route_note import show_route_note
 
 if TYPE_CHECKING:
     from app.window.hosts import SettingsHost
@@ -41,6 +42,7 @@ class SettingsPolicy(QObject):
         window.deviation_panel.show_map(window.scene.deviation_map(),
                                         cloud_units(window.document))
         window.fit_panel.show_settings(settings.fit)
+        show_route_note(window.fit_panel, window.document)  # what Start runs with them
         window.offset_panel.show_settings(settings)
         window.knot_panel.show_state(settings.fit, window.document.fitted)
 

@@ -23,6 +23,8 @@ from app.workers.deviation_map import fit_triangles, grid_triangles, measure_map
 from app.workers.display import DisplayGeometry, display_geometry
 from app.workers.live_worker import FitProblem, LiveWorker
 from app.workers.quality import measure_quality
+from nurbs_core.fitting.config import FitConfig
+from nurbs_core.fitting.plan import FitPlan, fit_plan
 from nurbs_core.geometry_arrays import GeometryArrays
 from nurbs_core.streaming import RunStatus
 
@@ -71,6 +73,8 @@ class DisplaySnapshot:
     #: the run fitted this many selected points (None: every visible point); per-point values
     #: (deviation, signed) are then spread over the whole cloud by the controller, NaN elsewhere
     selected: int | None = None
+    #: the engine's plan of the run (its stages, why the gradient fit runs): what made the shape
+    plan: FitPlan | None = None
 
 
 def needs_patches(error: ValueError) -> bool:
@@ -140,16 +144,22 @@ def signed_map(geometry: GeometryArrays, display: DisplayGeometry, target: np.nd
     return measure_map(target, vertices, faces, tolerance, limit, surface=surface)
 
 
+def continues_from(fit: FitConfig, shape: GeometryArrays | None,
+                   dimension: int | None = None) -> bool:
+    """Whether a fit with ``fit`` goes on from the current ``shape``: same kind and, for curves,
+    the same dimension as the target's points (``dimension``; None: not checked)."""
+    if shape is None or shape.kind != fit.kind:
+        return False
+    # a 3D curve cannot continue on a 2D target (or the reverse)
+    return fit.kind != "curve" or dimension is None or dimension == shape.control_points.shape[-1]
+
+
 def starting_geometry(request: FitRequest) -> GeometryArrays | None:
-    """The run's initial geometry: the current shape when the fit can continue from it (same
-    kind, same dimension for curves), else None for the engine's initialization. The engine
-    converts a different degree, control grid or custom knots itself (:func:`conform`)."""
+    """The run's initial geometry: the current shape when the fit can continue from it
+    (:func:`continues_from`), else None for the engine's initialization. The engine converts a
+    different degree, control grid or custom knots itself (:func:`conform`)."""
     fit, initial = request.settings.fit, request.initial
-    if initial is None or initial.kind != fit.kind:
-        return None
-    if fit.kind == "curve" and request.target.shape[1] != initial.control_points.shape[-1]:
-        return None  # a 3D curve cannot continue on a 2D target (or the reverse)
-    return initial
+    return initial if continues_from(fit, initial, request.target.shape[1]) else None
 
 
 class FitWorker(LiveWorker):
@@ -169,6 +179,7 @@ class FitWorker(LiveWorker):
         # first snapshot: a ValueError until then is a refusal, told in one line, no traceback
         try:
             initial = starting_geometry(request)
+            plan = fit_plan(config, has_initial=initial is not None)
             snapshots = iter(iter_fit(request.target, config, stop=self._stop, initial=initial))
             first = next(snapshots, None)
         except ValueError as exc:
@@ -206,6 +217,6 @@ class FitWorker(LiveWorker):
                 display=display, losses=list(snapshot.losses),
                 elapsed=float(snapshot.elapsed), done=bool(snapshot.done),
                 status=str(snapshot.status), message=str(snapshot.message or ""), deviation=dev,
-                statistics=statistics, quality_cells=cells, signed=signed))
+                statistics=statistics, quality_cells=cells, signed=signed, plan=plan))
 
 

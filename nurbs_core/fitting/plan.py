@@ -5,24 +5,46 @@ torch-free route runs without importing torch).
   alone (:func:`torch_free`: numpy + scipy) or followed by the gradient fit;
 * the gradient fit (:mod:`nurbs_core.fitting.engine`, torch) for everything else: curves,
   known parameters, an initial shape, another loss, free knots or weights, the learned start.
+
+:func:`fit_plan` says it as a value (the stages and why the gradient fit runs), for the front
+ends to tell before a fit runs: the CLI's plan line, the app's route note and result line.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, Loss
+
+#: What sends a fit to the gradient fit (:attr:`FitPlan.why`): the settings that ask for it
+#: (:func:`gradient_reason`), a curve, known parameters, or a starting shape to go on from.
+REASONS = ("solver", "learned", "loss", "free_knots", "free_weights", "pin_boundary",
+           "custom_knots", "curve", "known", "initial")
+
+
+def gradient_reason(config: FitConfig) -> str | None:
+    """Why an unordered surface cloud's fit goes on to the gradient fit after the least-squares
+    core, one of :data:`REASONS` (None: the core alone answers the config). "solver": chosen;
+    "learned": the core's fit from a learned start is refined by it unless only the core is asked
+    for (:mod:`nurbs_core.fitting.learned_start`); "loss": not the default loss; free knots,
+    free weights, a pinned boundary, custom knots (the core places its own knots)."""
+    if config.solver == "least_squares":
+        return None
+    if config.solver == "gradient":
+        return "solver"
+    if config.init == "learned":
+        return "learned"
+    if config.loss != Loss.parse(DEFAULT_LOSS):
+        return "loss"
+    for name in ("free_knots", "free_weights", "pin_boundary", "custom_knots"):
+        if getattr(config, name):
+            return name
+    return None
 
 
 def resolved_solver(config: FitConfig) -> str:
-    """"least_squares" or "gradient" (see FitConfig.solver; custom knots need the gradient fit,
-    the core chooses its own knots; the core's fit from a learned start is refined by the
-    gradient fit unless only the core is asked for: :mod:`nurbs_core.fitting.learned_start`)."""
-    if config.solver != "auto":
-        return config.solver
-    if config.init == "learned":
-        return "gradient"
-    plain = (config.loss == Loss.parse(DEFAULT_LOSS) and not config.free_knots
-             and not config.free_weights and not config.pin_boundary and not config.custom_knots)
-    return "least_squares" if plain else "gradient"
+    """"least_squares" or "gradient" (see FitConfig.solver and :func:`gradient_reason`)."""
+    return "least_squares" if gradient_reason(config) is None else "gradient"
 
 
 def uses_core(config: FitConfig, known: bool, has_initial: bool) -> bool:
@@ -38,3 +60,41 @@ def torch_free(config: FitConfig, known: bool, has_initial: bool) -> bool:
     fit after it or the learned start before it): it runs on numpy and scipy only."""
     return (uses_core(config, known, has_initial) and config.init != "learned"
             and resolved_solver(config) == "least_squares")
+
+
+@dataclass(frozen=True)
+class FitPlan:
+    """What :func:`~nurbs_core.fitting.engine.iter_fit` runs for a config, in order (see
+    :func:`fit_plan`).
+
+    stages: ("least_squares",) the core alone; ("least_squares", "gradient") the core, then the
+    gradient fit from its result; ("gradient",) the gradient fit alone; ("exact",) the exact
+    least-squares solve at known parameters. why: the :data:`REASONS` entry that brings in the
+    gradient fit (None when it does not run)."""
+
+    stages: tuple[str, ...]
+    why: str | None = None
+
+    @property
+    def tolerance_applies(self) -> bool:
+        """Whether the result is held to the tolerance: only the core alone grows its grid until
+        the tolerance is met and reports the verdict (after the gradient fit the tolerance has
+        sized the core's grid at most)."""
+        return self.stages == ("least_squares",)
+
+
+def fit_plan(config: FitConfig, known: bool = False, has_initial: bool = False) -> FitPlan:
+    """The stages a fit runs, decided by the rules iter_fit follows (:func:`uses_core`,
+    :func:`resolved_solver`, the exact solve at ``known`` parameters with solver
+    "least_squares"), before it runs: a learned start that finds no usable model falls back to
+    "pca" at run time, which may leave the core alone."""
+    if known and config.solver == "least_squares":
+        return FitPlan(("exact",))
+    if uses_core(config, known, has_initial):
+        why = gradient_reason(config)
+        return FitPlan(("least_squares",) if why is None else ("least_squares", "gradient"), why)
+    if config.kind != "surface":
+        return FitPlan(("gradient",), "curve")
+    if known or has_initial:
+        return FitPlan(("gradient",), "known" if known else "initial")
+    return FitPlan(("gradient",), gradient_reason(config))  # plane parameters: no core

@@ -84,13 +84,12 @@ def _grid_parameters(count_u: int, count_v: int, points: int) -> np.ndarray:
 def _print_plan(job: FitJob, config: FitConfig, count: int,
                 known_parameters: bool) -> None:
     """The report's first line (stderr): the input, its size and how it is fitted."""
-    from nurbs_core.fitting.plan import resolved_solver
+    from nurbs_core.fitting.plan import fit_plan
 
-    core = (not job.curve and not known_parameters and job.initial is None
-            and resolved_solver(config) == "least_squares")
-    if known_parameters and config.solver == "least_squares":
+    plan = fit_plan(config, known_parameters, job.initial is not None)
+    if plan.stages == ("exact",):
         how = "by exact least squares at the known parameters"
-    elif core:
+    elif plan.stages == ("least_squares",):
         how = (f"by fairing least squares (stiffness {config.stiffness:g}"
                + (f", grid growing to at most {config.max_control_points} per direction"
                   if config.max_control_points else "") + ")")
