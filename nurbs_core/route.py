@@ -151,7 +151,7 @@ def _open_surface(points: np.ndarray, why: str, max_hole: float | None) -> Route
     patch crowds part of it over ``MAX_MAP_CROWDING`` times; then the open network over the
     scan's bounded mesh, built here (one patch when no such mesh can be built). ``why``: the
     finding's opening words."""
-    from nurbs_core.fitting.sheet import MESH_POINTS
+    from nurbs_core.fitting.sheet import MESH_POINTS, is_height_field
     from nurbs_core.surfacing.map_crowding import map_crowding
     from nurbs_core.surfacing.neighbours import stray_points
 
@@ -160,6 +160,10 @@ def _open_surface(points: np.ndarray, why: str, max_hole: float | None) -> Route
     # the fit builds that map again: handing it down through the fit's layers (normalised
     # coordinates, the prepared job) is not worth ~0.4 s, the mesh's cost on a sheet
     surface = points[~stray_points(points)]
+    if is_height_field(surface):
+        # one patch holds a height field over its plane without crowding (a plane's map): the
+        # map is not built twice for it (0.27 of 1.2 CPU s on a 4,000-point sheet)
+        return Route("single_patch", f"{finding}; a height field over its principal plane)")
     try:
         crowding = map_crowding(surface, MESH_POINTS)
     except ValueError:
