@@ -13,14 +13,17 @@
   costs seconds whatever the cloud's size.
 * ``single_patch``: everything else (an open sheet, a shell, a tube): one patch, the fold-free
   least-squares core (:mod:`nurbs_core.fitting.sheet`), **when it holds the surface cleanly**.
-  When one patch is refused (the surface is not a disk or a tube) or fails a quality check
-  (folds, overlapping sheets, an uncovered part: a bowl too deep for one map, a head without its
-  base), :func:`open_network_instead` turns to an *open* network over the scan's bounded mesh
-  (:func:`nurbs_core.patches.open_mesh.open_mesh`), whose border follows where the scan ends.
+  An open surface whose map to one patch crowds part of it over ``MAX_MAP_CROWDING`` times
+  (:mod:`nurbs_core.surfacing.map_crowding`: a head with thin ears) goes straight to an *open*
+  network over the scan's bounded mesh (:func:`nurbs_core.patches.open_mesh.open_mesh`), whose
+  border follows where the scan ends: one patch would fold there. When one patch is refused
+  (the surface is not a disk or a tube) or fails a quality check (folds, overlapping sheets, an
+  uncovered part: a bowl too deep for one map, a head without its base),
+  :func:`open_network_instead` turns to that open network after the fact.
 
 A route forced by the caller (``--single-patch``, ``--patches``) is taken as it is. The decision
-carries its reason (printed by the CLI) and the closed mesh it built, so the network does not
-rebuild it. numpy + scipy + scikit-image only: deciding imports no torch.
+carries its reason (printed by the CLI) and the closed or open mesh it built, so the network does
+not rebuild it. numpy + scipy + scikit-image only: deciding imports no torch.
 """
 
 from __future__ import annotations
@@ -37,12 +40,19 @@ from nurbs_core.status import quality_problems
 
 RouteKind = Literal["single_patch", "network", "part"]
 
+#: An open surface whose map to one patch gives its most crowded 5% this many times less room
+#: than the median part (:func:`nurbs_core.surfacing.map_crowding.map_crowding`) goes straight
+#: to the open network. Open clouds one patch holds cleanly crowd up to 4.9 x, the bunny's head
+#: and ears 35,000 x and more (``benchmarks/bench_map_crowding.py``): 20 x keeps sheets four
+#: times under the limit, and only scans whose one patch is doomed over it.
+MAX_MAP_CROWDING = 20.0
+
 
 @dataclass
 class Route:
-    """kind: "single_patch" or "network"; finding: what decided it (one clause for the
-    report); mesh: the closed mesh of a network (the file's own or rebuilt from the points),
-    None for a single patch."""
+    """kind: "single_patch", "network" or "part"; finding: what decided it (one clause for the
+    report); mesh: the mesh of a network (the file's own or rebuilt from the points: closed, or
+    bounded for an open network), None for a single patch."""
 
     kind: RouteKind
     finding: str
@@ -59,9 +69,13 @@ class Route:
             return f"{self.finding}: one patch"
         if self.kind == "part":
             return f"{self.finding}: a solid with analytic faces"
-        closed = self.mesh is None or self.mesh.closed
-        return f"{self.finding}: " + ("a network of patches" if closed
-                                      else "an open network of patches")
+        return f"{self.finding}: " + ("an open network of patches" if self.open_network
+                                      else "a network of patches")
+
+    @property
+    def open_network(self) -> bool:
+        """Whether the route is a network over an open surface's bounded mesh."""
+        return self.kind == "network" and self.mesh is not None and not self.mesh.closed
 
 
 def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
@@ -73,7 +87,7 @@ def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
     OpenCASCADE is missing)."""
     started = time.perf_counter()
     route = _decide(points, file_mesh, file_mesh_note, max_hole)
-    if route.kind == "network" and part is not False:
+    if route.kind == "network" and not route.open_network and part is not False:
         route = _part_or(route, points, forced=bool(part))
     elif part:
         raise ValueError(f"a solid needs a closed object, but {route.finding}")
@@ -122,15 +136,52 @@ def _decide(points: np.ndarray, file_mesh: ScanMesh | None, file_mesh_note: str,
     points = np.asarray(points, np.float64)
     if len(points) < 100:
         return Route("single_patch", f"{len(points)} points are too few for a network")
+    why = f"{file_mesh_note}; " if file_mesh_note else ""
     try:
         mesh = closed_mesh(points, max_hole=max_hole)
     except NotClosedError:
-        why = f"{file_mesh_note}; " if file_mesh_note else ""
-        return Route("single_patch", f"{why}the cloud encloses no volume (an open surface)")
+        return _open_surface(points, why, max_hole)
     holes = (f" once its openings up to {mesh.max_hole:.4g} wide are sealed"
              if mesh.filled_fraction > 0 else "")
-    return Route("network", ((f"{file_mesh_note}; " if file_mesh_note else "")
-                             + f"the cloud encloses a volume{holes} (a closed object)"), mesh)
+    return Route("network", f"{why}the cloud encloses a volume{holes} (a closed object)", mesh)
+
+
+def _open_surface(points: np.ndarray, why: str, max_hole: float | None) -> Route:
+    """The route of a cloud (N, 3) that encloses no volume: one patch, unless its map to one
+    patch crowds part of it over ``MAX_MAP_CROWDING`` times; then the open network over the
+    scan's bounded mesh, built here (one patch when no such mesh can be built). ``why``: the
+    finding's opening words."""
+    from nurbs_core.fitting.sheet import MESH_POINTS, is_height_field
+    from nurbs_core.surfacing.map_crowding import map_crowding
+    from nurbs_core.surfacing.neighbours import stray_points
+
+    finding = f"{why}the cloud encloses no volume (an open surface"
+    # measured on the points the single patch would fit (strays left out) and on the same map;
+    # the fit builds that map again: handing it down through the fit's layers (normalised
+    # coordinates, the prepared job) is not worth ~0.4 s, the mesh's cost on a sheet
+    surface = points[~stray_points(points)]
+    if is_height_field(surface):
+        # one patch holds a height field over its plane without crowding (a plane's map): the
+        # map is not built twice for it (0.27 of 1.2 CPU s on a 4,000-point sheet)
+        return Route("single_patch", f"{finding}; a height field over its principal plane)")
+    try:
+        crowding = map_crowding(surface, MESH_POINTS)
+    except ValueError:
+        # no map (closed, handles): the single patch's refusal says why, and turns to the open
+        # network itself
+        return Route("single_patch", f"{finding})")
+    crowds = f"its map to one patch crowds part of it {_times(crowding)}"
+    if crowding <= MAX_MAP_CROWDING:
+        return Route("single_patch", f"{finding}; {crowds}, within {_times(MAX_MAP_CROWDING)})")
+    network = _open_network(surface, f"{finding}), and {crowds} (over "
+                                     f"{_times(MAX_MAP_CROWDING)})", max_hole)
+    return network or Route("single_patch", f"{finding}; {crowds}, but no bounded mesh can be "
+                                            "built for a network)")
+
+
+def _times(factor: float) -> str:
+    """A crowding factor for the report: "4.2 x", "35,000 x"."""
+    return f"{factor:.1f} x" if factor < 10 else f"{float(f'{factor:.2g}'):,.0f} x"
 
 
 def without_solid(route: Route, error: Exception) -> Route:
@@ -141,9 +192,9 @@ def without_solid(route: Route, error: Exception) -> Route:
 
 
 def without_layout(route: Route, error: Exception) -> Route:
-    """The route after a closed object's network found no quad layout (its mesh has a genus a
-    layout cannot reproduce, often handles that a sparse scan's wrap invented): the open
-    surface's route (one patch, else an open network), with the reason."""
+    """The route after a network found no quad layout (its mesh has a genus a layout cannot
+    reproduce, often handles that a sparse scan's wrap invented): the open surface's route (one
+    patch, else an open network; one patch after an open network), with the reason."""
     from nurbs_core.failures import one_line
 
     mesh = route.mesh
@@ -153,8 +204,9 @@ def without_layout(route: Route, error: Exception) -> Route:
 
         genus = f" (its mesh has Euler characteristic {euler_characteristic(mesh.faces.tolist())})"
     why = one_line(str(error)).split(":")[0]
+    instead = "fitted as one patch" if route.open_network else "fitted as an open surface"
     return Route("single_patch", f"{route.finding}, but no quad layout fits it{genus}: {why}; "
-                 "fitted as an open surface")
+                 f"{instead}")
 
 
 def single_patch_problems(status: str, statistics: dict | None) -> str:
@@ -173,14 +225,23 @@ def open_network_instead(points: np.ndarray, problems: str,
     """The open-network route for an open surface that one patch does not hold cleanly
     (``problems``: why, from :func:`single_patch_problems`), with the scan's bounded mesh; None
     when no such mesh can be built (then the single patch stays, with its warnings). Timed."""
+    started = time.perf_counter()
+    route = _open_network(points, f"an open surface that one patch does not hold cleanly "
+                                  f"({problems})", max_hole)
+    if route is not None:
+        route.seconds = time.perf_counter() - started
+    return route
+
+
+def _open_network(points: np.ndarray, finding: str, max_hole: float | None) -> Route | None:
+    """The open network over the bounded mesh of the cloud ``points`` (N, 3), its ``finding``
+    followed by where the mesh ends; None when no such mesh can be built."""
     from nurbs_core.patches.open_mesh import NotASurfaceError, open_mesh
 
-    started = time.perf_counter()
     try:
         mesh = open_mesh(points, max_hole=max_hole)
     except NotASurfaceError:
         return None
     loops = len(mesh.border)
-    finding = (f"an open surface that one patch does not hold cleanly ({problems}); its mesh "
-               f"ends at {loops} border loop{'s' if loops > 1 else ''}")
-    return Route("network", finding, mesh, time.perf_counter() - started)
+    return Route("network", f"{finding}; its mesh ends at {loops} border "
+                            f"loop{'s' if loops > 1 else ''}", mesh)

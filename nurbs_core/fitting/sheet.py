@@ -26,7 +26,7 @@ from nurbs_core.fitting.normalised import NormalisedCloud
 from nurbs_core.fitting.principal import pca_parameters, principal_axes
 from nurbs_core.geometry_arrays import SurfaceArrays
 from nurbs_core.surfacing.core import CorePass, LeastSquaresCore
-from nurbs_core.surfacing.mesh import CloudMesh, median_spacing, voxel_subsample
+from nurbs_core.surfacing.mesh import CloudMesh, median_spacing, points_to_map
 from nurbs_core.surfacing.neighbours import estimate_noise, local_frames
 from nurbs_core.surfacing.parameterize import (
     NotADiskError,
@@ -79,13 +79,10 @@ def sheet_start(cloud: NormalisedCloud, config: FitConfig) -> SheetStart:
         corners = points[list(config.corners)]
     if len(points) <= MESH_POINTS:
         return _sheet_start(points, config, corners)
-    # a large cloud: mesh and map the centroids of about MESH_POINTS voxels (even density, the
-    # noise averaged away; voxels the surface only grazes keep their noise and are left out),
-    # then fit the points themselves (a seeded random subset of PASS_POINTS of them when there
-    # are more), whose (u, v) come from the map's triangles
-    _, centroids, counts = voxel_subsample(points, MESH_POINTS)
-    centroids = centroids[counts >= 0.25 * np.median(counts)]
-    start = _sheet_start(centroids, config, corners)
+    # a large cloud: mesh and map the centroids of about MESH_POINTS voxels, then fit the points
+    # themselves (a seeded random subset of PASS_POINTS of them when there are more), whose
+    # (u, v) come from the map's triangles
+    start = _sheet_start(points_to_map(points, MESH_POINTS), config, corners)
     subset = None
     if len(points) > PASS_POINTS:
         subset = np.sort(np.random.default_rng(config.seed).choice(len(points), PASS_POINTS,

@@ -67,6 +67,7 @@ def fit_one(job: FitJob, points: np.ndarray | None = None,
                 if not job.quiet:
                     print(f"route: {route.reason}", file=sys.stderr)
         check_no_solid_outputs(outputs, route)
+        try_open_network = True
         if route.kind == "network":
             from nurbs_core.patches.layout import LayoutError
             from nurbs_core.route import without_layout
@@ -77,22 +78,27 @@ def fit_one(job: FitJob, points: np.ndarray | None = None,
                                    mesh_seconds=route.seconds, stoppable=stoppable)
             except LayoutError as error:
                 # a closed mesh no layout reproduces (handles a sparse scan invented): the
-                # cloud is fitted as an open surface instead, not refused
+                # cloud is fitted as an open surface instead, not refused; an open mesh no
+                # layout reproduces: one patch, without trying that open network again
+                try_open_network = not route.open_network
                 route = without_layout(route, error)
                 if not job.quiet:
                     print(f"route: {route.reason}", file=sys.stderr)
-        return _single_patch_or_open_network(job, options, outputs, points, route, stoppable)
+        return _single_patch_or_open_network(job, options, outputs, points, route, stoppable,
+                                             try_open_network)
     prepared = prepare_fit(job, points)
     return finish_fit(prepared, run_fit(prepared, stoppable))
 
 
 def _single_patch_or_open_network(job: FitJob, options: PatchOptions,
                                   outputs: list[Path], points: np.ndarray, route: Route,
-                                  stoppable: bool) -> dict[str, Any]:
+                                  stoppable: bool, try_open_network: bool = True
+                                  ) -> dict[str, Any]:
     """The automatic route of an open surface: one patch when it holds the surface cleanly,
-    else an open network (:func:`nurbs_core.route.open_network_instead`); the single patch,
-    with its warnings, when no open network can be built (forced over the cloud when it was
-    refused: no input that holds a surface is refused)."""
+    else an open network (:func:`nurbs_core.route.open_network_instead`; not when
+    ``try_open_network`` is False: it was tried already); the single patch, with its warnings,
+    when no open network can be built (forced over the cloud when it was refused: no input
+    that holds a surface is refused)."""
     from nurbs_core.patches.layout import LayoutError
     from nurbs_core.route import open_network_instead, single_patch_problems
     from nurbs_core.surfacing.neighbours import stray_points
@@ -116,7 +122,8 @@ def _single_patch_or_open_network(job: FitJob, options: PatchOptions,
     problems = (single_patch_problems(result.status, result.statistics) if result is not None
                 else f"{refusal.topology.kind}: {str(refusal).split(':')[0]}" if refusal
                 else "")
-    network = open_network_instead(points, problems, options.max_hole) if problems else None
+    network = (open_network_instead(points, problems, options.max_hole)
+               if problems and try_open_network else None)
     if network is not None:
         if not job.quiet:
             print(f"route: {network.reason} ({network.seconds:.1f} s)", file=sys.stderr)

@@ -197,6 +197,17 @@ def voxel_subsample(points: np.ndarray,
     return chosen[by_index], centroid[voxel], counts[voxel]
 
 
+def points_to_map(points: np.ndarray, max_points: int) -> np.ndarray:
+    """The points a cloud's map is built on: the cloud (N, 3) itself up to ``max_points``, else
+    the centroids (M, 3) of about ``max_points`` voxels (even density, the noise averaged away),
+    without the voxels the surface only grazes (under a quarter of the median count: they keep
+    their noise)."""
+    if len(points) <= max_points:
+        return points
+    _, centroids, counts = voxel_subsample(points, max_points)
+    return centroids[counts >= 0.25 * np.median(counts)]
+
+
 def _umbrella_triangles(points: np.ndarray, frames: LocalFrames) -> np.ndarray:
     """Every point's umbrella: triangles (T, 3) as vertex indices, the owner first."""
     n, k = frames.neighbours.shape

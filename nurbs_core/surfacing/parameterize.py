@@ -171,18 +171,26 @@ def corner_candidates(vertices: np.ndarray, loop: np.ndarray, faces: np.ndarray,
     return candidates
 
 
-def area_distortion(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) -> float:
-    """Area-weighted standard deviation of log(uv area / 3-D area) over the triangles, after
-    the best global scale: 0 for a map that stretches every triangle alike (an affine map),
-    large when the map crowds part of the surface into a corner of the square."""
+def log_area_ratios(vertices: np.ndarray, faces: np.ndarray,
+                    uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How a map scales the area of each triangle: (log(uv area / 3-D area) (K,), 3-D area
+    (K,)) for the K triangles of ``faces`` (F, 3) with a nonzero area on both sides (vertices
+    (V, 3), their map uv (V, 2))."""
     a, b, c = (vertices[faces[:, k]] for k in range(3))
     area3 = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
     area2 = np.abs(signed_areas(uv, faces))
     ok = (area3 > 0) & (area2 > 0)
-    if not ok.any():
+    return np.log(area2[ok] / area3[ok]), area3[ok]
+
+
+def area_distortion(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) -> float:
+    """Area-weighted standard deviation of log(uv area / 3-D area) over the triangles, after
+    the best global scale: 0 for a map that stretches every triangle alike (an affine map),
+    large when the map crowds part of the surface into a corner of the square."""
+    ratio, area = log_area_ratios(vertices, faces, uv)
+    if not ratio.size:
         return np.inf
-    ratio = np.log(area2[ok] / area3[ok])
-    weight = area3[ok] / area3[ok].sum()
+    weight = area / area.sum()
     mean = float((weight * ratio).sum())
     return float(np.sqrt((weight * (ratio - mean) ** 2).sum()))
 
