@@ -246,7 +246,9 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.network_quality_dock, self.deviation_dock)
         self.quality_dock.raise_()
         self.resizeDocks([self.tree_dock, self.fit_dock], [240, 330], Qt.Orientation.Horizontal)
-        self.resizeDocks([self.loss_dock, self.quality_dock, self.log_dock], [420, 560, 420],
+        # the Quality dock's rows need about 510 px with units: 44% of the width keeps them
+        # whole (no horizontal scroll bar) down to a 1280-px-wide window
+        self.resizeDocks([self.loss_dock, self.quality_dock, self.log_dock], [390, 620, 390],
                          Qt.Orientation.Horizontal)
         self.resizeDocks([self.loss_dock], [210], Qt.Orientation.Vertical)
 
@@ -297,6 +299,11 @@ class MainWindow(QMainWindow):
         self.undo_action.setShortcut(QKeySequence.StandardKey.Undo)
         self.redo_action = self.document.undo_stack.createRedoAction(self, "&Redo")
         self.redo_action.setShortcut(QKeySequence.StandardKey.Redo)
+        # the toolbar's buttons keep their short label ("Undo Crop to 1,234 selected points"
+        # would crowd the toolbar, and was elided): what they undo is in the tooltip, the
+        # Edit menu says it in full
+        self.undo_action.setIconText("Undo")
+        self.redo_action.setIconText("Redo")
         self.layer_actions = {}
         for layer, text, on in (("cloud", "Point Cloud", True), ("surface", "Fitted Surface", True),
                                 ("curve", "Fitted Curve", True),
