@@ -16,6 +16,7 @@ import numpy as np
 from PySide6.QtCore import Signal
 
 from app.live_controller import LiveController
+from app.state import FitAccount, Settings
 from app.workers.fit_worker import DisplaySnapshot, FitRequest, FitWorker
 from nurbs_core.streaming import StopToken
 
@@ -34,6 +35,8 @@ class FitController(LiveController):
         super().__init__(document, parent)
         self._last_loss = float("nan")
         self._rate_history: deque[tuple[float, int]] = deque()
+        #: the settings of the run under way (or the last)
+        self._run_settings = Settings()
 
     def _request(self, run_id: int, points: np.ndarray) -> FitRequest:
         settings = self._document.settings
@@ -42,13 +45,21 @@ class FitController(LiveController):
         settings.fit.validate()
         self._rate_history.clear()  # the run about to start is measured afresh
         self._last_loss = float("nan")
+        self._run_settings = settings
         return FitRequest(run_id, points, settings, initial=self._document.fitted)
 
     def _worker_for(self, request: FitRequest, stop_token: StopToken) -> FitWorker:
         return FitWorker(request, stop_token)
 
     def _show_in_document(self, snapshot: DisplaySnapshot) -> None:
-        self._document.set_fitted(snapshot.geometry, notify=False)
+        """The shape with its account: when the run has ended, the plan that ran and the
+        tolerance verdict (in the document before the fit's undo step records it)."""
+        done = snapshot.done
+        account = FitAccount.of(snapshot.geometry,
+                                snapshot.plan.stages if done and snapshot.plan else (),
+                                snapshot.statistics if done else None,
+                                self._run_settings.fit.tolerance is None)
+        self._document.set_fitted(snapshot.geometry, notify=False, account=account)
 
     def resume(self):
         if self._state == "paused":

@@ -68,8 +68,11 @@ def test_the_result_line_shows_the_grown_grid_and_follows_the_fitted_shape(qtbot
     assert panel.result.text() == shown
     window.reset_fit()
     assert panel.result.text() == "Result: no fit yet" and panel.route_note() == ""
-    window.undo_action.trigger()  # the deletion: the points, and the fit made before it
+    window.undo_action.trigger()  # the Reset: the shape with its account
     assert window.document.fitted is not None
+    assert panel.result.text() == shown
+    window.undo_action.trigger()  # the deletion: the points, and the fit made before it
+    assert len(window.document.target_points()) == len(points)
     assert panel.result.text() == shown
 
     # a new cloud has no fit yet
