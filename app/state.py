@@ -153,6 +153,14 @@ def with_changes(settings: Settings, **changes: Any) -> Settings:
                                **window)
 
 
+def grid_setting(fit: FitConfig) -> tuple[int, ...]:
+    """The control points per direction the settings ask for: (u, v) for a surface, (u,) for a
+    curve."""
+    if fit.kind == "surface":
+        return fit.control_points_u, fit.control_points_v
+    return (fit.control_points_u,)
+
+
 def control_grid(geometry: GeometryArrays | None) -> tuple[int, ...] | None:
     """(control points u, control points v, degree u, degree v) of a surface, (control points,
     degree) of a curve; None for no shape."""
@@ -173,7 +181,9 @@ class FitAccount:
     start from); stages: the stages of the plan that made it (``FitPlan.stages``; empty when
     not known: a shape from a session); tolerance: the distance the result was held to (input
     units), None when it was not (the gradient fit), with the engine's verdict and whether it
-    was the automatic one."""
+    was the automatic one; grid_setting: the control points the settings asked for when the
+    shape was made (:func:`grid_setting`; None: not known). Start goes on at the shape's own
+    grid while the setting is still that one (:func:`app.workers.fit_worker.start_config`)."""
 
     kind: str
     grid: tuple[int, ...]
@@ -181,20 +191,24 @@ class FitAccount:
     tolerance: float | None = None
     tolerance_met: bool = False
     automatic_tolerance: bool = True
+    grid_setting: tuple[int, ...] | None = None
 
     @classmethod
     def of(cls, geometry: GeometryArrays, stages: tuple[str, ...] = (),
            statistics: Mapping[str, float] | None = None,
-           automatic_tolerance: bool = True) -> FitAccount:
-        """The account of ``geometry``, made by ``stages``, whose final measures are
-        ``statistics`` (their "tolerance" and "tolerance_met": the core's verdict)."""
+           automatic_tolerance: bool = True,
+           grid_setting: tuple[int, ...] | None = None) -> FitAccount:
+        """The account of ``geometry``, made by ``stages`` with the settings' ``grid_setting``,
+        whose final measures are ``statistics`` (their "tolerance" and "tolerance_met": the
+        core's verdict)."""
         grid = control_grid(geometry)
         assert grid is not None, "a shape"
         statistics = statistics or {}
         tolerance = statistics.get("tolerance")
         return cls(geometry.kind, grid, tuple(stages),
                    None if tolerance is None else float(tolerance),
-                   bool(statistics.get("tolerance_met", False)), automatic_tolerance)
+                   bool(statistics.get("tolerance_met", False)), automatic_tolerance,
+                   None if grid_setting is None else tuple(grid_setting))
 
 
 @dataclass
@@ -508,13 +522,14 @@ class Document(QObject):
                    account: FitAccount | None = None):
         """Replace the fitted shape. Live fit updates pass ``notify=False``: the controller
         already hands their display arrays to the view, so nothing needs re-tessellating.
-        account: how the shape was made (a finished fit); None: only what the shape itself
-        says (its grid)."""
+        account: how the shape was made (a fit); None: what the shape itself says (its grid),
+        made under the settings now (a shape from a session)."""
         self.fitted = None if geometry is None else from_mapping(geometry)
         if self.fitted is None:
             self.fitted_account = None
         else:
-            self.fitted_account = account or FitAccount.of(self.fitted)
+            self.fitted_account = account or FitAccount.of(
+                self.fitted, grid_setting=grid_setting(self.settings.fit))
         if notify:
             self.fitted_changed.emit()
 

@@ -1,7 +1,7 @@
 """Undo restores the surface as well as the settings (issue 28, item 5), in the real window: a
 fit, a stopped fit, a patch network fit (with the switch to Patches mode it was made for) and
-Reset are each one step holding the shapes before and after; the Quality dock and the toolbar
-read fully at 1280 x 800."""
+Reset are each one step holding the shapes before and after; Start after a fit that grew the
+grid goes on at the grown grid; the Quality dock and the toolbar read fully at 1280 x 800."""
 
 from __future__ import annotations
 
@@ -49,10 +49,14 @@ def test_undo_after_a_fit_restores_the_surface_and_redo_brings_the_fit_back(qtbo
     assert window.quality_panel.values["grid"].text() == f"{grown[0]} x {grown[1]} (degree 3 x 3)"
     assert window.quality_panel.values["tolerance"].text().endswith("(auto): met")
 
-    # Start again: it goes on from the fit's shape
+    # Start again: it goes on at the grown grid (the settings still say 12 x 12), as the note says
+    assert document.settings.fit.control_points_u == 12
+    assert f"current {grown[0]} x {grown[1]} shape" in panel.route_note()
+    assert "keeping its grid" in panel.route_note() and "resampled" not in panel.route_note()
     window.start_action.trigger()
     qtbot.waitUntil(lambda: window.controller.latest_shown.run_id == window.controller.run_id,
                     timeout=FIT_TIMEOUT_MS)
+    assert document.fitted.control_points.shape[:2] == grown
     # a settings edit while it runs restarts it (its own step, before the fit's)
     window.fit_panel.learning_rate.setValue(0.005)
     assert document.undo_stack.undoText() == "Learning rate"
@@ -64,7 +68,7 @@ def test_undo_after_a_fit_restores_the_surface_and_redo_brings_the_fit_back(qtbo
         window.stop_action.trigger()
     assert stopped.args[0].status == "stopped"
     second = document.fitted
-    assert second is not fitted_first
+    assert second is not fitted_first and second.control_points.shape[:2] == grown
     assert "gradient fit" in panel.result.text()
     assert [document.undo_stack.text(i) for i in range(document.undo_stack.count())] == [
         "Fit", "Learning rate", "Fit"]
@@ -125,6 +129,23 @@ def test_undo_while_a_fit_runs_stops_it_and_puts_back_the_earlier_shape(qtbot, w
     window.undo_action.trigger()
     assert document.fitted is stopped
     _measured(qtbot, window)
+
+
+def test_a_changed_grid_setting_wins_over_the_grown_grid(qtbot, window):
+    document, panel = window.document, window.fit_panel
+    with qtbot.waitSignal(window.files_loaded, timeout=20000):
+        window.open_demo()
+    grown = _fit(qtbot, window).geometry.control_points.shape[:2]
+    panel.control_points_u.setValue(14)
+    panel.control_points_v.setValue(14)
+    assert "resampled onto the 14 x 14 grid" in panel.route_note()
+    document.edit_settings("Iterations", iterations=3)
+    snapshot = _fit(qtbot, window)
+    assert snapshot.geometry.control_points.shape[:2] == (14, 14) != grown
+    # the new shape was made under 14 x 14: the next Start keeps it
+    assert "keeping" not in panel.route_note() and "resampled" not in panel.route_note()
+    window.undo_action.trigger()
+    assert document.fitted.control_points.shape[:2] == grown
 
 
 def test_a_patch_network_fit_is_one_undo_step_with_its_switch_to_patches(qtbot, window,
