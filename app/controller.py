@@ -3,12 +3,15 @@ the document's points with its fit settings, continues from the current shape an
 iteration rate and time remaining.
 
 Settings policy: a change while a fit runs restarts it from the current shape; when idle, the
-next Start also continues from the current shape. Reset discards the fitted shape so the next
+next Start also continues from the current shape, on the shape's own control grid unless the
+grid was set to another one since that shape was made
+(:func:`app.workers.fit_worker.start_config`). Reset discards the fitted shape so the next
 Start initializes afresh.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections import deque
 
@@ -16,7 +19,8 @@ import numpy as np
 from PySide6.QtCore import Signal
 
 from app.live_controller import LiveController
-from app.workers.fit_worker import DisplaySnapshot, FitRequest, FitWorker
+from app.state import FitAccount, Settings, grid_setting
+from app.workers.fit_worker import DisplaySnapshot, FitRequest, FitWorker, start_config
 from nurbs_core.streaming import StopToken
 
 RATE_WINDOW_S = 2.0
@@ -34,21 +38,36 @@ class FitController(LiveController):
         super().__init__(document, parent)
         self._last_loss = float("nan")
         self._rate_history: deque[tuple[float, int]] = deque()
+        #: the settings of the run under way (or the last), as the user set them
+        self._run_settings = Settings()
 
     def _request(self, run_id: int, points: np.ndarray) -> FitRequest:
-        settings = self._document.settings
+        document = self._document
+        settings = document.settings
         if settings.fit.kind == "curve" and np.allclose(points[:, 2], points[0, 2]):
             points = points[:, :2]  # a planar cloud: fit a 2D curve
-        settings.fit.validate()
+        fit = start_config(settings.fit, document.fitted, document.fitted_account)
+        fit.validate()
         self._rate_history.clear()  # the run about to start is measured afresh
         self._last_loss = float("nan")
-        return FitRequest(run_id, points, settings, initial=self._document.fitted)
+        self._run_settings = settings
+        return FitRequest(run_id, points, dataclasses.replace(settings, fit=fit),
+                          initial=document.fitted)
 
     def _worker_for(self, request: FitRequest, stop_token: StopToken) -> FitWorker:
         return FitWorker(request, stop_token)
 
     def _show_in_document(self, snapshot: DisplaySnapshot) -> None:
-        self._document.set_fitted(snapshot.geometry, notify=False)
+        """The shape with its account: the grid the run's settings asked for (a restart after
+        a grid edit resamples onto the new grid: start_config) and, when the run has ended, the
+        plan that ran and the tolerance verdict."""
+        fit = self._run_settings.fit
+        done = snapshot.done
+        account = FitAccount.of(snapshot.geometry,
+                                snapshot.plan.stages if done and snapshot.plan else (),
+                                snapshot.statistics if done else None, fit.tolerance is None,
+                                grid_setting(fit))
+        self._document.set_fitted(snapshot.geometry, notify=False, account=account)
 
     def resume(self):
         if self._state == "paused":

@@ -13,6 +13,13 @@ running or paused restarts it with the new settings (a paused fit restarts pause
 the change applies to the next Start. Every run ends with ``run_finished`` from its worker; a
 restart, Reset or closing the window *cancel* the token (the result is dropped: no final
 measures), Stop only stops it (the result as it stands arrives, measured).
+
+Undo: a fit, from Start to its end (its restarts included: they go on from the shape it left),
+is one step of the document's history, pushed when it ends (finished, stopped, or failed after
+changing the shape) with the shapes from before its first run
+(:meth:`app.state.Document.record_shapes`); settings edited while it ran stay steps of their
+own, before it. A fit dropped at once (Reset, a new cloud, an Undo that puts back another shape,
+closing the window) pushes nothing.
 """
 
 from __future__ import annotations
@@ -24,7 +31,7 @@ from typing import Any
 import numpy as np
 from PySide6.QtCore import QObject, QThread, QTimer, Signal, Slot
 
-from app.state import Document, spread_over_cloud
+from app.state import Document, ShapeState, spread_over_cloud
 from app.workers.jobs import SHUTDOWN_WAIT_MS, abandon_qthread
 from app.workers.live_worker import LiveWorker
 from nurbs_core.streaming import StopToken
@@ -49,6 +56,10 @@ class LiveController(QObject):
     #: the job's name in messages ("fit", "patch fit") and its threads' names
     JOB = "fit"
     THREAD = "fit"
+    #: what Edit > Undo calls the step a fit of this kind makes
+    STEP = "Fit"
+    #: a patch network fit (its step completes a switch to Patches mode made for it)
+    FITS_NETWORK = False
 
     def __init__(self, document: Document, parent: QObject | None = None):
         super().__init__(parent)
@@ -69,6 +80,9 @@ class LiveController(QObject):
         self.latest_shown: Any = None
         #: the selection (bool over the visible clouds) the run fits, None: every visible point
         self.run_selection: np.ndarray | None = None
+        #: the document's shapes before the fit under way began (None while idle): what Undo
+        #: of the fit puts back
+        self.fit_before: ShapeState | None = None
         self._timer = QTimer(self)
         self._timer.setInterval(RENDER_INTERVAL_MS)
         self._timer.timeout.connect(self._tick)
@@ -118,6 +132,7 @@ class LiveController(QObject):
         """Start a run on the selected points while there are any, else every visible point."""
         if self._is_shut_down or self._thread is not None:
             return False
+        begins = self._state == "idle"  # not a restart of a fit under way
         self.failure_needs_patches = False
         points, selection = self._document.fit_points()
         if points is None:
@@ -130,6 +145,8 @@ class LiveController(QObject):
             return False
         self._run_id += 1
         self.run_selection = selection
+        if begins:
+            self.fit_before = self._document.shape_state()
         self._stop_token = StopToken()
         if paused:
             self._stop_token.pause()
@@ -173,6 +190,7 @@ class LiveController(QObject):
         self._run_id += 1  # drop snapshots of the old run still queued for delivery
         self._latest, self._pending_losses = None, []
         self._timer.stop()
+        self.fit_before = None  # dropped: not a step of the history
         self._set_state("idle")
 
     def schedule_restart(self):
@@ -265,8 +283,15 @@ class LiveController(QObject):
             self.start(paused=self._restart_paused)
             return
         self._set_state("idle")
+        self._record_fit()
         if final is not None:
             self.fit_finished.emit(final)
+
+    def _record_fit(self) -> None:
+        """The fit has ended: its change of the shapes becomes one undoable step."""
+        before, self.fit_before = self.fit_before, None
+        if before is not None:
+            self._document.record_shapes(before, self.STEP, network_fit=self.FITS_NETWORK)
 
     @Slot()
     def _tick(self):

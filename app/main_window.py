@@ -15,7 +15,8 @@ screenshots) are written atomically: a failed write leaves the previous file as 
 What the window does when something happens lives in its policies (:mod:`app.window`): loading
 files (:class:`LoadPolicy`), settings edits (:class:`SettingsPolicy`), export
 (:class:`ExportPolicy`), sessions (:class:`SessionPolicy`), selecting, cropping and deleting
-points (:class:`SelectionPolicy`) and showing a fit (:class:`FitDisplay`). This class builds
+points (:class:`SelectionPolicy`), putting back shapes on Undo and Redo (:class:`HistoryPolicy`)
+and showing a fit (:class:`FitDisplay`). This class builds
 the widgets, wires the signals and keeps the public methods scripts and tests call, delegating
 to those policies.
 """
@@ -66,6 +67,7 @@ from app.state import Document
 from app.viewport.scene import SceneView
 from app.window.export_policy import ExportPolicy
 from app.window.fit_display import FitDisplay
+from app.window.history_policy import HistoryPolicy
 from app.window.load_policy import LoadPolicy, RecentFiles
 from app.window.selection_policy import SelectionPolicy
 from app.window.session_policy import SessionPolicy
@@ -154,6 +156,7 @@ class MainWindow(QMainWindow):
         self.session_policy = SessionPolicy(self)
         self.fit_display = FitDisplay(self)
         self.selection_policy = SelectionPolicy(self)
+        self.history_policy = HistoryPolicy(self)
         self.units_policy = UnitsPolicy(self)
         self.setCentralWidget(self._native_container(self.scene.widget))
 
@@ -246,7 +249,9 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.network_quality_dock, self.deviation_dock)
         self.quality_dock.raise_()
         self.resizeDocks([self.tree_dock, self.fit_dock], [240, 330], Qt.Orientation.Horizontal)
-        self.resizeDocks([self.loss_dock, self.quality_dock, self.log_dock], [420, 560, 420],
+        # the Quality dock's rows need about 510 px with units: 44% of the width keeps them
+        # whole (no horizontal scroll bar) down to a 1280-px-wide window
+        self.resizeDocks([self.loss_dock, self.quality_dock, self.log_dock], [390, 620, 390],
                          Qt.Orientation.Horizontal)
         self.resizeDocks([self.loss_dock], [210], Qt.Orientation.Vertical)
 
@@ -297,6 +302,11 @@ class MainWindow(QMainWindow):
         self.undo_action.setShortcut(QKeySequence.StandardKey.Undo)
         self.redo_action = self.document.undo_stack.createRedoAction(self, "&Redo")
         self.redo_action.setShortcut(QKeySequence.StandardKey.Redo)
+        # the toolbar's buttons keep their short label ("Undo Crop to 1,234 selected points"
+        # would crowd the toolbar, and was elided): what they undo is in the tooltip, the
+        # Edit menu says it in full
+        self.undo_action.setIconText("Undo")
+        self.redo_action.setIconText("Redo")
         self.layer_actions = {}
         for layer, text, on in (("cloud", "Point Cloud", True), ("surface", "Fitted Surface", True),
                                 ("curve", "Fitted Curve", True),
@@ -510,6 +520,7 @@ class MainWindow(QMainWindow):
             lambda mode, limit, tolerance: self.scene.set_deviation_style(
                 mode, limit or None, tolerance or None))
         doc.points_changed.connect(self.selection_policy.on_points_changed)
+        doc.shapes_restored.connect(self.history_policy.on_shapes_restored)
         doc.selection_changed.connect(self.selection_policy.on_selection_changed)
         self.scene.selection_tool.region_drawn.connect(self.selection_policy.on_region_drawn)
         doc.content_changed.connect(self.fit_display.on_content_changed)
@@ -537,7 +548,7 @@ class MainWindow(QMainWindow):
                 and not self.document.settings.fit.single_patch):
             self.report("One open patch cannot hold this cloud: fitting it as a network of "
                         "patches (Patches mode; Undo returns to one patch).")
-            self.document.edit_settings("Fit mode", fit_mode="patches")
+            self.document.begin_fit_as_patches()
             # the refused run's thread ends just after: the network starts when it has
             self._network_after_refusal = True
             self._start_network_after_refusal()
@@ -560,7 +571,7 @@ class MainWindow(QMainWindow):
             return
         self.report(f"One patch does not hold this cloud cleanly ({problems}): fitting it as "
                     "a network of patches (Patches mode; Undo returns to one patch).")
-        self.document.edit_settings("Fit mode", fit_mode="patches")
+        self.document.begin_fit_as_patches()
         self._network_after_refusal = True
         self._start_network_after_refusal()
 
@@ -719,20 +730,26 @@ class MainWindow(QMainWindow):
         return self.controller.start()
 
     def fit_as_patches(self) -> bool:
-        """Switch to Patches mode (an undoable settings edit) and start the patch fit."""
+        """Switch to Patches mode and start the patch fit: one undoable step with the network."""
         if self._message_box is not None:
             self._message_box.reject()
-        self.document.edit_settings("Fit mode", fit_mode="patches")
+        self.document.begin_fit_as_patches()
         return self.start_fit()
 
     def reset_fit(self):
-        if self.active_controller() is self.patch_controller:
+        """Stop the mode's fit and discard its shape: an undoable step (Undo brings back the
+        shape from before a fit that was under way; that fit's result is dropped)."""
+        controller = self.active_controller()
+        before = controller.fit_before or self.document.shape_state()
+        if controller is self.patch_controller:
             self.reset_patch_network()
-            self.report("Reset: the patch network was discarded.")
-            return
-        self.controller.reset()
-        self.loss_plot.clear()
-        self.report("Reset: the next Start initializes a new shape.")
+            self.report("Reset: the patch network was discarded (Undo brings it back).")
+        else:
+            self.controller.reset()
+            self.loss_plot.clear()
+            self.report("Reset: the next Start initializes a new shape (Undo brings the "
+                        "discarded one back).")
+        self.document.record_shapes(before, "Reset")
 
     def reset_patch_network(self):
         """Stop and discard the patch network (its fit, view, loss curve and tree entry)."""

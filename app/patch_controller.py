@@ -22,6 +22,8 @@ class PatchController(LiveController):
 
     JOB = "patch fit"
     THREAD = "patches"
+    STEP = "Patch fit"
+    FITS_NETWORK = True
 
     def _request(self, run_id: int, points: np.ndarray) -> PatchRequest:
         options = self._document.settings.patches

@@ -2,10 +2,12 @@
 
 Pure data plus Qt signals; no torch, no VTK. Settings edits go through a ``QUndoStack`` so every
 edit can be undone and redone; so do point edits (crop to the selection, delete the selection),
-whose undo also brings back the fitted surface of the points as they were. Loading files replaces
-the content and is not an undoable edit. The selection (which points of the visible clouds are
-picked) is the document's too, but not an edit: it is not undone, and Start fits only the selected
-points while there are any.
+whose undo also brings back the fitted surface of the points as they were, and the fitted
+shapes: a finished (or stopped) fit, a patch network fit and Reset are each one step holding the
+shapes before and after (:class:`ShapeState`: control points, no points), pushed when the fit has
+ended. Loading files replaces the content and is not an undoable edit. The selection (which
+points of the visible clouds are picked) is the document's too, but not an edit: it is not
+undone, and Start fits only the selected points while there are any.
 Geometry is held as the engine's numpy twins (:mod:`nurbs_core.geometry_arrays`: what
 ``NurbsCurve.numpy()`` / ``NurbsSurface.numpy()`` return); anything else given to the document is
 converted once, on the way in.
@@ -151,6 +153,14 @@ def with_changes(settings: Settings, **changes: Any) -> Settings:
                                **window)
 
 
+def grid_setting(fit: FitConfig) -> tuple[int, ...]:
+    """The control points per direction the settings ask for: (u, v) for a surface, (u,) for a
+    curve."""
+    if fit.kind == "surface":
+        return fit.control_points_u, fit.control_points_v
+    return (fit.control_points_u,)
+
+
 def control_grid(geometry: GeometryArrays | None) -> tuple[int, ...] | None:
     """(control points u, control points v, degree u, degree v) of a surface, (control points,
     degree) of a curve; None for no shape."""
@@ -171,7 +181,9 @@ class FitAccount:
     start from); stages: the stages of the plan that made it (``FitPlan.stages``; empty when
     not known: a shape from a session); tolerance: the distance the result was held to (input
     units), None when it was not (the gradient fit), with the engine's verdict and whether it
-    was the automatic one."""
+    was the automatic one; grid_setting: the control points the settings asked for when the
+    shape was made (:func:`grid_setting`; None: not known). Start goes on at the shape's own
+    grid while the setting is still that one (:func:`app.workers.fit_worker.start_config`)."""
 
     kind: str
     grid: tuple[int, ...]
@@ -179,20 +191,24 @@ class FitAccount:
     tolerance: float | None = None
     tolerance_met: bool = False
     automatic_tolerance: bool = True
+    grid_setting: tuple[int, ...] | None = None
 
     @classmethod
     def of(cls, geometry: GeometryArrays, stages: tuple[str, ...] = (),
            statistics: Mapping[str, float] | None = None,
-           automatic_tolerance: bool = True) -> FitAccount:
-        """The account of ``geometry``, made by ``stages``, whose final measures are
-        ``statistics`` (their "tolerance" and "tolerance_met": the core's verdict)."""
+           automatic_tolerance: bool = True,
+           grid_setting: tuple[int, ...] | None = None) -> FitAccount:
+        """The account of ``geometry``, made by ``stages`` with the settings' ``grid_setting``,
+        whose final measures are ``statistics`` (their "tolerance" and "tolerance_met": the
+        core's verdict)."""
         grid = control_grid(geometry)
         assert grid is not None, "a shape"
         statistics = statistics or {}
         tolerance = statistics.get("tolerance")
         return cls(geometry.kind, grid, tuple(stages),
                    None if tolerance is None else float(tolerance),
-                   bool(statistics.get("tolerance_met", False)), automatic_tolerance)
+                   bool(statistics.get("tolerance_met", False)), automatic_tolerance,
+                   None if grid_setting is None else tuple(grid_setting))
 
 
 @dataclass
@@ -225,19 +241,34 @@ def spread_over_cloud(values: np.ndarray, selection: np.ndarray | None) -> np.nd
 
 
 @dataclass(frozen=True)
+class ShapeState:
+    """The document's fitted shapes as an undo step keeps them: the fitted patch (or curve) with
+    its account, and the patch network with what a session keeps of its fit (its report:
+    ``PatchController.network_report``). No points: a step holds the shapes' arrays (9.6 kB for
+    the demo's 17 x 17 patch, 21 kB for the 22-patch network of a sphere) and the network
+    report, whose deviation has one value per point (8 bytes each, shared with the fit that
+    made it, not copied)."""
+
+    fitted: GeometryArrays | None = None
+    fitted_account: FitAccount | None = None
+    network: Any = None
+    network_report: dict[str, Any] | None = None
+
+    def same_shapes(self, other: ShapeState) -> bool:
+        """Whether ``other`` holds these very shapes (a fit that changed nothing: no step)."""
+        return self.fitted is other.fitted and self.network is other.network
+
+
+@dataclass(frozen=True)
 class PointsState:
     """What a point edit changes: every target's points (hidden ones too), the selection (bool
     over the visible clouds stacked, or None) with the targets' visibility it was made under,
-    the fitted shape, and the patch network with what a session keeps of its fit (its report:
-    ``PatchController.network_report``)."""
+    and the fitted shapes."""
 
     points: tuple[np.ndarray, ...]
     selection: np.ndarray | None
     visible: tuple[bool, ...]
-    fitted: GeometryArrays | None
-    network: Any = None
-    network_report: dict[str, Any] | None = None
-    fitted_account: FitAccount | None = None
+    shapes: ShapeState = field(default_factory=ShapeState)
 
 
 class _ContentCommand(QUndoCommand):
@@ -272,11 +303,48 @@ class _PointsCommand(_ContentCommand):
     def undo(self):
         if self._current():
             document = self._document
-            self._after = dataclasses.replace(self._after, fitted=document.fitted,
-                                              fitted_account=document.fitted_account,
-                                              network=document.network,
-                                              network_report=document.report_network())
+            self._after = dataclasses.replace(self._after, shapes=document.shape_state())
             document._apply_points(self._before)
+
+
+class _ShapesCommand(_ContentCommand):
+    """A fit, a patch network fit, Reset: undo puts back the shapes before, redo the shapes
+    after. Pushed once the fit has ended, so its first redo (QUndoStack.push calls it) changes
+    nothing. ``settings`` (old, new): the switch to Patches mode that a network fit completes
+    (:meth:`Document.begin_fit_as_patches`): applied on push, undone with the shapes; settings
+    outlive loaded files, so they are restored even when the shapes are gone."""
+
+    def __init__(self, document: Document, before: ShapeState, after: ShapeState, text: str,
+                 settings: tuple[Settings, Settings] | None = None):
+        super().__init__(document, text)
+        self._before, self._after, self._settings = before, after, settings
+        self._pushed = False
+
+    def complete(self, after: ShapeState) -> None:
+        """The network fit this switch was made for has ended with ``after``."""
+        self._after = after
+
+    def _shapes_current(self) -> bool:
+        if self._settings is None:
+            return self._current()
+        return self._document.content_generation == self._generation
+
+    def redo(self):
+        document = self._document
+        if self._settings is not None:
+            document._apply_settings(self._settings[1])
+        if self._pushed and self._shapes_current():
+            document._apply_shapes(self._after)
+        self._pushed = True
+
+    def undo(self):
+        document = self._document
+        if document._pending_switch is self:
+            document._pending_switch = None  # the fit under way no longer completes it
+        if self._shapes_current():
+            document._apply_shapes(self._before)
+        if self._settings is not None:
+            document._apply_settings(self._settings[0])
 
 
 class _UnitsCommand(_ContentCommand):
@@ -316,6 +384,8 @@ class Document(QObject):
     offsets_changed = Signal()
     settings_changed = Signal(object, object)  # (old Settings, new Settings)
     points_changed = Signal()  # a point edit (crop, delete) or its undo / redo
+    #: an undo / redo put back fitted shapes: (the fitted shape changed, the network changed)
+    shapes_restored = Signal(bool, bool)
     selection_changed = Signal()
     units_changed = Signal()  # the document's length unit (replaced content sends it too)
 
@@ -343,8 +413,10 @@ class Document(QObject):
         #: what a session keeps of the fit that made :attr:`network` (the window's patch
         #: controller answers); point edits keep it with the network they restore
         self.network_report_source: Callable[[], dict[str, Any] | None] = lambda: None
-        #: the report of the network a point edit's undo / redo just restored
+        #: the report of the network an undo / redo just restored
         self.restored_network_report: dict[str, Any] | None = None
+        #: the switch to Patches mode waiting for its network fit (begin_fit_as_patches)
+        self._pending_switch: _ShapesCommand | None = None
 
     # --- settings (undoable) -------------------------------------------------------------------
     def edit_settings(self, text: str, **changes: Any) -> bool:
@@ -380,6 +452,53 @@ class Document(QObject):
         self.units = units
         self.units_changed.emit()
 
+    # --- fitted shapes (undoable) -------------------------------------------------------------
+    def shape_state(self) -> ShapeState:
+        """The fitted shapes now (what a fit's or Reset's step restores)."""
+        return ShapeState(self.fitted, self.fitted_account, self.network, self.report_network())
+
+    def record_shapes(self, before: ShapeState, text: str, network_fit: bool = False) -> bool:
+        """Push the change of the shapes since ``before`` (a fit has ended, Reset) as one
+        undoable step; nothing when the shapes are the same ones. ``network_fit``: a patch
+        network fit, which completes the switch to Patches mode made for it when that switch is
+        still the newest step (one step then: Undo returns to one patch and the shapes before).
+        Returns whether the history changed."""
+        pending, self._pending_switch = (self._pending_switch, None) if network_fit else (
+            None, self._pending_switch)
+        after = self.shape_state()
+        if after.same_shapes(before):
+            return False
+        stack = self.undo_stack
+        if (pending is not None and stack.index() == stack.count()
+                and stack.command(stack.index() - 1) is pending):
+            pending.complete(after)
+            return True
+        self.undo_stack.push(_ShapesCommand(self, before, after, text))
+        return True
+
+    def begin_fit_as_patches(self, text: str = "Fit as patches") -> bool:
+        """Switch to Patches mode to fit a network (the refusal of one patch, its poor fit, the
+        "Fit as patches" button): one undoable step, which the network fit that follows
+        completes (:meth:`record_shapes`). Returns False when the mode is Patches already."""
+        new = with_changes(self.settings, fit_mode="patches")
+        if new == self.settings:
+            return False
+        shapes = self.shape_state()
+        command = _ShapesCommand(self, shapes, shapes, text, (self.settings, new))
+        self.undo_stack.push(command)
+        self._pending_switch = command
+        return True
+
+    def _apply_shapes(self, state: ShapeState):
+        fitted_changed = (state.fitted is not self.fitted
+                          or state.fitted_account != self.fitted_account)
+        network_changed = state.network is not self.network
+        self.fitted, self.fitted_account = state.fitted, state.fitted_account
+        self.network, self.restored_network_report = state.network, state.network_report
+        self.shapes_restored.emit(fitted_changed, network_changed)
+        if fitted_changed:
+            self.fitted_changed.emit()
+
     # --- content ---------------------------------------------------------------------------------
     def replace_content(self, targets: list[Target], patches: list[Mapping[str, Any]],
                         patch_names: list[str], units: str | None = None):
@@ -403,13 +522,14 @@ class Document(QObject):
                    account: FitAccount | None = None):
         """Replace the fitted shape. Live fit updates pass ``notify=False``: the controller
         already hands their display arrays to the view, so nothing needs re-tessellating.
-        account: how the shape was made (a finished fit); None: only what the shape itself
-        says (its grid)."""
+        account: how the shape was made (a fit); None: what the shape itself says (its grid),
+        made under the settings now (a shape from a session)."""
         self.fitted = None if geometry is None else from_mapping(geometry)
         if self.fitted is None:
             self.fitted_account = None
         else:
-            self.fitted_account = account or FitAccount.of(self.fitted)
+            self.fitted_account = account or FitAccount.of(
+                self.fitted, grid_setting=grid_setting(self.settings.fit))
         if notify:
             self.fitted_changed.emit()
 
@@ -483,18 +603,20 @@ class Document(QObject):
     def _points_state(self) -> PointsState:
         return PointsState(tuple(t.points for t in self.targets),
                            None if self.selection is None else self.selection.copy(),
-                           tuple(t.visible for t in self.targets), self.fitted, self.network,
-                           self.report_network(), self.fitted_account)
+                           tuple(t.visible for t in self.targets), self.shape_state())
 
     def _apply_points(self, state: PointsState):
         for target, points in zip(self.targets, state.points, strict=True):
             target.points = points
         visible = tuple(t.visible for t in self.targets)
         self.selection = state.selection if visible == state.visible else None
-        self.fitted, self.fitted_account = state.fitted, state.fitted_account
-        self.network, self.restored_network_report = state.network, state.network_report
+        shapes = state.shapes
+        network_changed = shapes.network is not self.network
+        self.fitted, self.fitted_account = shapes.fitted, shapes.fitted_account
+        self.network, self.restored_network_report = shapes.network, shapes.network_report
         self.points_changed.emit()
         self.selection_changed.emit()
+        self.shapes_restored.emit(True, network_changed)
         self.fitted_changed.emit()  # measured again against the points now shown
 
     def visible_point_count(self) -> int:

@@ -29,7 +29,9 @@ BAD_COLOR = "#b00020"
 GOOD_COLOR = "#1b7f3b"
 
 #: (key, label, tooltip) in reading order; the first two rows span the panel, the others come
-#: in pairs of label and value
+#: in pairs of label and value: the long values (p95, control grid) on the left, under the wide
+#: rows, the short ones on the right (as a right half the control grid was clipped at
+#: 1280 x 800, behind a horizontal scroll bar)
 WIDE_ROWS = 2
 ROWS = (
     ("deviation", "Cloud to surface", "mean, RMS and max distance of the cloud's points to the "
@@ -46,9 +48,9 @@ ROWS = (
                                  "(folds count twice)"),
     ("bending_energy", "Bending energy", "integral of k1^2 + k2^2 over the surface (0 for a "
                                          "plane)"),
-    ("max_curvature", "Max curvature", "largest principal curvature on the surface (1 / length)"),
     ("grid", "Control grid", "the fitted surface's control points per direction and degrees: "
                             "what ran (the fit grows or trims the grid the settings start from)"),
+    ("max_curvature", "Max curvature", "largest principal curvature on the surface (1 / length)"),
 )
 
 

@@ -8,6 +8,8 @@ The window builds the widgets and wires the signals; each module here decides on
 - :mod:`app.window.export_policy`: what Export writes (and the window's screenshot);
 - :mod:`app.window.session_policy`: saving and opening sessions;
 - :mod:`app.window.selection_policy`: box and lasso selection, crop and delete (undoable);
+- :mod:`app.window.history_policy`: what an Undo or Redo that puts back fitted shapes (a fit,
+  Reset, a point edit) stops and shows;
 - :mod:`app.window.fit_display`: what the viewport, readouts and status bar show of a fit;
 - :mod:`app.window.text`: the short texts (file lists, durations) those messages share.
 

@@ -56,6 +56,9 @@ class FitDisplay(QObject):
         super().__init__(window)
         self._window = window
         self._quality_run = 0  # the run whose snapshots the quality readout follows
+        #: the newest measurement of a fitted shape asked for (latest wins: two undos in a row
+        #: measure the same shape against two different clouds)
+        self._measure_request = 0
 
     @Slot()
     def on_content_changed(self) -> None:
@@ -97,9 +100,11 @@ class FitDisplay(QObject):
             points = window.document.target_points()
             window.quality_panel.clear("Measuring the fitted shape...")
             tolerance = window.document.settings.fit.tolerance
+            self._measure_request += 1
+            request = self._measure_request
             window.jobs.submit("fitted", lambda: loading.fitted_display(fitted, points,
                                                                         tolerance=tolerance),
-                               lambda result: self._show_fitted_display(fitted, result),
+                               lambda result: self._show_fitted_display(fitted, result, request),
                                lambda exc: window.report(
                                    f"Cannot display the fit: {describe(exc)}", True, exc=exc))
         window.rebuild_tree()
@@ -119,10 +124,10 @@ class FitDisplay(QObject):
         if state == "idle":
             self.show_result_and_plan()
 
-    def _show_fitted_display(self, fitted: dict, result: loading.FittedDisplay):
+    def _show_fitted_display(self, fitted: dict, result: loading.FittedDisplay, request: int):
         window = self._window
-        if window.document.fitted is not fitted:
-            return  # replaced meanwhile (a new fit, another session)
+        if window.document.fitted is not fitted or request != self._measure_request:
+            return  # replaced meanwhile (a new fit, another session, other points)
         window.scene.show_fit(result.display)
         if result.deviation is not None:
             stats = deviation_stats(result.deviation)
@@ -131,10 +136,16 @@ class FitDisplay(QObject):
         window.scene.set_quality(result.quality_cells, result.statistics)
         self.show_deviation_map(result.signed)
         account = window.document.fitted_account
+        statistics = result.statistics
+        automatic = window.document.settings.fit.tolerance is None
+        if account is not None and account.stages:  # made by a fit here (an undo brought it back)
+            automatic = account.automatic_tolerance
+            if statistics is not None and account.tolerance is not None:
+                # the verdict of the fit that made it, as the Result line says
+                statistics = {**statistics, "tolerance": account.tolerance,
+                              "tolerance_met": account.tolerance_met}
         window.quality_panel.show_result("measured", "the fitted shape against the cloud",
-                                         result.statistics,
-                                         window.document.settings.fit.tolerance is None,
-                                         result.display.kind,
+                                         statistics, automatic, result.display.kind,
                                          grid=None if account is None else account.grid)
         window.rebuild_tree()
 
@@ -147,9 +158,35 @@ class FitDisplay(QObject):
             # the deviation map of the network (View > Deviation Map in Patches mode)
             scene.set_deviation(snapshot.deviation, deviation_stats(snapshot.deviation),
                                 mode="patches")
-            self.show_deviation_map(getattr(snapshot, "signed", None))
+            signed = getattr(snapshot, "signed", None)
+            self.show_deviation_map(signed)
+            if signed is None and snapshot.done and snapshot.network is not None:
+                self._sign_network_map(snapshot)
         elif scene.mode == "patches" and scene.deviation_map() is not None:
             self.show_deviation_map(None)  # a new run: the painted network no longer matches
+
+    def _sign_network_map(self, snapshot) -> None:
+        """A finished network shown again (Undo / Redo, a session) with its stored deviation
+        only: its signed map, as its fit painted it, measured in a job on the points the
+        deviation has values for; dropped when another network is shown meanwhile."""
+        from app.workers.patch_worker import network_signed_map
+
+        window = self._window
+        points = window.document.target_points()
+        if points is None or len(points) != len(snapshot.deviation):
+            return
+        tolerance = window.document.settings.patches.tolerance
+        window.jobs.submit(
+            "network map", lambda: network_signed_map(snapshot.network, snapshot.display, points,
+                                                      snapshot.deviation, tolerance),
+            lambda signed: self._show_network_map(snapshot, signed),
+            lambda exc: window.report(f"Cannot paint the network's deviation: {describe(exc)}",
+                                      True, exc=exc))
+
+    def _show_network_map(self, snapshot, signed: DeviationMap) -> None:
+        if self._window.patch_controller.latest_shown is snapshot:
+            snapshot.signed = signed
+            self.show_deviation_map(signed)
 
     @Slot(object)
     def on_snapshot_shown(self, snapshot: DisplaySnapshot) -> None:
@@ -198,12 +235,11 @@ class FitDisplay(QObject):
         window = self._window
         document = window.document
         window.loss_plot.flush()
-        # what the shape is and what made it: one account for the Result line and the Quality
-        # dock's grid and tolerance rows
-        account = FitAccount.of(snapshot.geometry, snapshot.plan.stages if snapshot.plan else (),
-                                snapshot.statistics, document.settings.fit.tolerance is None)
-        # already on screen: store it without the re-tessellation a notifying change triggers
-        document.set_fitted(snapshot.geometry, notify=False, account=account)
+        # what the shape is and what made it (the controller stored it with the shape): one
+        # account for the Result line and the Quality dock's grid and tolerance rows
+        account = document.fitted_account
+        if account is None or document.fitted is not snapshot.geometry:
+            account = FitAccount.of(snapshot.geometry)
         window.rebuild_tree()
         window.knot_panel.show_state(document.settings.fit, snapshot.geometry)
         # "converged" only when the quality checks hold

@@ -1,7 +1,8 @@
 """What each of the window's parts may reach of the window: one narrow protocol per part.
 
 The parts (:mod:`app.window.export_policy`, ``load_policy``, ``session_policy``,
-``settings_policy``, ``selection_policy``, ``units_policy``, ``fit_display``) are owned by
+``settings_policy``, ``selection_policy``, ``history_policy``, ``units_policy``,
+``fit_display``) are owned by
 :class:`app.main_window.MainWindow`, which satisfies every protocol here (a test checks it on
 the real window); they never import it. A part that needs more of the window says so here
 first.
@@ -120,6 +121,7 @@ class SettingsHost(Protocol):
 @runtime_checkable
 class FitDisplayHost(Reporter, Protocol):
     document: Document
+    patch_controller: PatchController
     scene: SceneView
     jobs: JobRunner
     offsets: OffsetController
@@ -144,6 +146,16 @@ class UnitsHost(Reporter, Protocol):
     deviation_panel: DeviationPanel
 
     def rebuild_tree(self) -> None: ...
+
+
+@runtime_checkable
+class HistoryHost(Reporter, Protocol):
+    document: Document
+    controller: FitController
+    patch_controller: PatchController
+
+    def rebuild_tree(self) -> None: ...
+    def reset_patch_network(self) -> None: ...
 
 
 @runtime_checkable

@@ -2,23 +2,25 @@
 the setting that takes the fit off its default route (the least-squares core alone, which grows
 the grid until the tolerance is met).
 
-The note words the engine's own plan (:func:`nurbs_core.fitting.plan.fit_plan`) of the
-document's settings and current shape (Start goes on from it when it can:
-:func:`app.workers.fit_worker.continues_from`, the worker's own test); no rule of the route is
-repeated here.
+The note words the engine's own plan (:func:`nurbs_core.fitting.plan.fit_plan`) of the config
+Start will send (:func:`app.workers.fit_worker.start_config`, the worker's own choice: the
+settings, on the current shape's grid while the grid setting is the one it was made under) and
+the current shape (Start goes on from it when it can:
+:func:`app.workers.fit_worker.continues_from`); no rule of the route is repeated here.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from app.state import STAGE_LABELS, Settings, control_grid
-from app.workers.fit_worker import continues_from
+from app.state import STAGE_LABELS, FitAccount, Settings, control_grid, grid_setting
+from app.workers.fit_worker import continues_from, start_config
 from nurbs_core.fitting.plan import fit_plan
 
 if TYPE_CHECKING:
     from app.panels.fit_panel import FitSettingsPanel
     from app.state import Document
+    from nurbs_core.fitting.config import FitConfig
     from nurbs_core.geometry_arrays import GeometryArrays
 
 #: where the note of each reason of the plan shows: the group of the setting behind it
@@ -44,12 +46,13 @@ def _counts(counts: tuple[int, ...]) -> str:
     return " x ".join(str(n) for n in counts)
 
 
-def route_note(settings: Settings, shape: GeometryArrays | None) -> tuple[str | None, str]:
+def route_note(settings: Settings, shape: GeometryArrays | None,
+               account: FitAccount | None = None) -> tuple[str | None, str]:
     """(slot, text) of the note for Start with ``settings`` and the current ``shape`` (None: no
-    fitted shape); (None, "") when Start takes the default route."""
+    fitted shape) made as ``account`` says; (None, "") when Start takes the default route."""
     if settings.fit_mode == "patches":
         return "model", PATCHES_NOTE
-    fit = settings.fit
+    fit = start_config(settings.fit, shape, account)
     plan = fit_plan(fit, has_initial=continues_from(fit, shape))
     if plan.tolerance_applies:
         return None, ""
@@ -57,7 +60,7 @@ def route_note(settings: Settings, shape: GeometryArrays | None) -> tuple[str | 
         return "model", CURVE_NOTE
     if plan.why == "initial":
         assert shape is not None, "a shape to go on from"
-        return "model", _going_on(settings, shape)
+        return "model", _going_on(settings, fit, shape)
     with_core = "least_squares" in plan.stages
     text = (f"{CAUSES.get(plan.why or '', 'These settings need the gradient fit')}: Start runs "
             f"{_stages(plan.stages)}"
@@ -68,17 +71,20 @@ def route_note(settings: Settings, shape: GeometryArrays | None) -> tuple[str | 
     return SLOTS.get(plan.why or "", "model"), text
 
 
-def _going_on(settings: Settings, shape: GeometryArrays) -> str:
-    """Start goes on from the current shape: with the gradient fit, on the grid set here."""
-    fit = settings.fit
+def _going_on(settings: Settings, fit: FitConfig, shape: GeometryArrays) -> str:
+    """Start goes on from the current shape with the gradient fit: on the shape's own grid
+    while the grid setting is the one it was made under, else resampled onto the grid set."""
     grid = control_grid(shape)
     assert grid is not None and shape.kind == "surface", "a fitted surface"
-    wanted = (fit.control_points_u, fit.control_points_v)
+    runs_on, asked = grid_setting(fit), grid_setting(settings.fit)
     text = f"Start goes on from the current {_counts(grid[:2])} shape with the gradient fit"
-    if grid[:2] != wanted:
-        text += f", resampled onto the {_counts(wanted)} grid above"
+    if grid[:2] != runs_on:
+        text += f", resampled onto the {_counts(runs_on)} grid set above"
+    elif runs_on != asked:
+        text += (f", keeping its grid (the {_counts(asked)} above is where a fit after Reset "
+                 "starts; set another grid to resample onto it)")
     text += ": slower, and the tolerance does not apply."
-    fresh = fit_plan(fit)
+    fresh = fit_plan(settings.fit)
     if fresh.tolerance_applies:
         return text + " Reset first to fit afresh with the least-squares core."
     return text + f" Reset first to fit afresh ({_stages(fresh.stages)})."
@@ -91,4 +97,5 @@ def _stages(stages: tuple[str, ...]) -> str:
 
 def show_route_note(panel: FitSettingsPanel, document: Document) -> None:
     """The Fit settings dock shows the note for the document's settings and shape."""
-    panel.show_route_note(*route_note(document.settings, document.fitted))
+    panel.show_route_note(*route_note(document.settings, document.fitted,
+                                      document.fitted_account))

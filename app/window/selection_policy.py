@@ -151,27 +151,18 @@ class SelectionPolicy(QObject):
     @Slot()
     def on_points_changed(self) -> None:
         """A point edit, or its undo / redo: a fit of the old points stops; the cloud is shown
-        again (the fitted shape is measured again by the fit display) and so is the patch
-        network the edit restored."""
+        again (the shapes the edit restored are the history policy's and the fit display's)."""
         window = self._window
         document = window.document
-        network, report = document.network, document.restored_network_report
         stopped = []
-        if window.controller.is_busy():
-            window.controller.abandon()
-            stopped.append("the fit")
-        if window.patch_controller.is_busy():
-            window.reset_patch_network()
-            stopped.append("the patch fit")
+        for controller, what in ((window.controller, "the fit"),
+                                 (window.patch_controller, "the patch fit")):
+            if controller.is_busy():
+                controller.abandon()
+                stopped.append(what)
         points = document.target_points()
         window.scene.set_cloud(points)
         window.knot_panel.set_points(points)
-        shown = window.patch_controller.latest_shown
-        if network is None and (shown is not None or stopped):
-            window.reset_patch_network()
-        elif network is not None and (shown is None or shown.network is not network):
-            window.patch_controller.show_saved(network, report)
-        window.rebuild_tree()
         if stopped:
             window.report(f"The points changed: {' and '.join(stopped)} on the old points "
                           "stopped")

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from app.display_types import DeviationMap
-from app.state import Settings
+from app.state import FitAccount, Settings, control_grid, grid_setting
 from app.workers.deviation_map import fit_triangles, grid_triangles, measure_map
 from app.workers.display import DisplayGeometry, display_geometry
 from app.workers.live_worker import FitProblem, LiveWorker
@@ -152,6 +152,28 @@ def continues_from(fit: FitConfig, shape: GeometryArrays | None,
         return False
     # a 3D curve cannot continue on a 2D target (or the reverse)
     return fit.kind != "curve" or dimension is None or dimension == shape.control_points.shape[-1]
+
+
+def start_config(fit: FitConfig, shape: GeometryArrays | None,
+                 account: FitAccount | None) -> FitConfig:
+    """What Start runs with on the current ``shape`` made as ``account`` says: ``fit`` with the
+    shape's own control grid when Start goes on from it (:func:`continues_from`) and the grid
+    setting is still the one that shape was made under (a grid the fit grew stays grown);
+    ``fit`` itself when the grid was set since (the new setting wins: the shape is resampled
+    onto it), with custom knots (they are for the grid set), or with no shape to go on from."""
+    if (not continues_from(fit, shape) or account is None or account.grid_setting is None
+            or fit.custom_knots or account.grid_setting != grid_setting(fit)):
+        return fit
+    grid = control_grid(shape)
+    assert grid is not None, "a shape to go on from"
+    counts = grid[:len(account.grid_setting)]
+    if counts == grid_setting(fit):
+        return fit
+    names = ("control_points_u", "control_points_v")
+    try:
+        return fit.replace(**dict(zip(names, counts, strict=False)))
+    except ValueError:  # a degree set since that the shape's grid cannot carry
+        return fit
 
 
 def starting_geometry(request: FitRequest) -> GeometryArrays | None:

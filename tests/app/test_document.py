@@ -228,7 +228,8 @@ def test_the_window_gives_each_of_its_parts_what_the_part_declares(window):
     from app.window import hosts
 
     for host in (hosts.ExportHost, hosts.LoadHost, hosts.SessionHost, hosts.SettingsHost,
-                 hosts.FitDisplayHost, hosts.SelectionHost, hosts.UnitsHost):
+                 hosts.FitDisplayHost, hosts.SelectionHost, hosts.UnitsHost,
+                 hosts.HistoryHost):
         names = {name for base in host.__mro__ if base.__module__ == hosts.__name__
                  for name in (*base.__dict__.get("__annotations__", {}), *vars(base))
                  if not name.startswith("_")}

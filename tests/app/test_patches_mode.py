@@ -299,8 +299,8 @@ def test_start_on_a_closed_cloud_goes_on_as_a_network(qtbot, window, tmp_path):
     assert np.mean(np.abs(deviation)) == pytest.approx(done.args[0].quality["c2s_mean"],
                                                        rel=0.12)
     assert (deviation > 0).any() and (deviation < 0).any()
-    window.undo_action.trigger()  # back to one patch: the network's layers are hidden
-    assert window.document.settings.fit_mode == "single"
+    window.undo_action.trigger()  # back to one patch, without the network (one step)
+    assert window.document.settings.fit_mode == "single" and window.document.network is None
     assert not window.scene.network.actor("network").GetVisibility()
     assert not window.scene.deviation_shown()  # it measured the network, not a single patch
 

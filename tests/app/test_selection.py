@@ -229,14 +229,21 @@ def test_delete_outliers_then_fit_and_undo_restores_the_points_and_the_surface(
     fitted_after = window.document.fitted
     assert after["rms"] < 0.006 < before["rms"] / 5, (before, after)  # the noise (0.003) is left
 
-    window.undo_action.trigger()
+    window.undo_action.trigger()  # the fit of the points left
+    assert window.document.fitted is None
+    window.undo_action.trigger()  # the Reset
+    assert window.document.fitted is fitted_before
+    np.testing.assert_array_equal(window.document.targets[0].points, original[~strays])
+    window.undo_action.trigger()  # the deletion
     np.testing.assert_array_equal(window.document.targets[0].points, original)
     assert window.document.fitted is fitted_before  # the surface as it was
     # measured again against the points it was fitted to, and drawn again as it was
-    qtbot.waitUntil(lambda: window.scene.deviation_shown(), timeout=30000)
+    qtbot.waitUntil(lambda: window.scene.deviation_shown() and window.jobs.active_count() == 0,
+                    timeout=30000)
     np.testing.assert_allclose(window.scene._meshes["surface"].points, surface_before)
     assert f"RMS  {before['rms']:.3g}"[:9] in window.scene.corner_text(3)
-    window.redo_action.trigger()  # the edited points come back with their fit
+    for _ in range(3):  # the deletion, the Reset and the fit of the points left come back
+        window.redo_action.trigger()
     np.testing.assert_array_equal(window.document.targets[0].points, original[~strays])
     assert window.document.fitted is fitted_after
     qtbot.waitUntil(lambda: window.jobs.active_count() == 0, timeout=30000)

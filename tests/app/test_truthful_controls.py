@@ -41,10 +41,11 @@ def test_the_result_line_shows_the_grown_grid_and_follows_the_fitted_shape(qtbot
     fit = window.document.settings.fit
     assert (fit.control_points_u, fit.control_points_v) == (12, 12)
     assert panel.control_points_u.value() == 12
-    # Start would go on from the shape with the gradient fit: the note says so, grids included
+    # Start would go on from the shape with the gradient fit, keeping its grid: the note says
+    # so, grids included
     note = panel.route_note()
     assert f"current {count_u} x {count_v} shape with the gradient fit" in note
-    assert "onto the 12 x 12 grid" in note and "tolerance does not apply" in note
+    assert "keeping its grid (the 12 x 12 above" in note and "tolerance does not apply" in note
     assert not panel.route_notes["model"].isHidden()
 
     # the result's grid taken into the settings: an edit, undone as one
@@ -54,6 +55,7 @@ def test_the_result_line_shows_the_grown_grid_and_follows_the_fitted_shape(qtbot
     fit = window.document.settings.fit
     assert (fit.control_points_u, fit.control_points_v) == (count_u, count_v)
     assert panel.use_result_grid.isHidden() and "resampled" not in panel.route_note()
+    assert "keeping" not in panel.route_note()
     window.undo_action.trigger()
     assert window.document.settings.fit.control_points_u == 12
     assert not panel.use_result_grid.isHidden()
@@ -68,8 +70,11 @@ def test_the_result_line_shows_the_grown_grid_and_follows_the_fitted_shape(qtbot
     assert panel.result.text() == shown
     window.reset_fit()
     assert panel.result.text() == "Result: no fit yet" and panel.route_note() == ""
-    window.undo_action.trigger()  # the deletion: the points, and the fit made before it
+    window.undo_action.trigger()  # the Reset: the shape with its account
     assert window.document.fitted is not None
+    assert panel.result.text() == shown
+    window.undo_action.trigger()  # the deletion: the points, and the fit made before it
+    assert len(window.document.target_points()) == len(points)
     assert panel.result.text() == shown
 
     # a new cloud has no fit yet

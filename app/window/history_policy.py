@@ -1,0 +1,50 @@
+"""The history policy: what an Undo or Redo that puts back fitted shapes changes in the window.
+
+The document's history holds the shapes of every fit, patch network fit and Reset (and those a
+point edit left; :class:`app.state.ShapeState`); an undo or redo of one puts them back in the
+document and this policy makes the window follow. It decides: a fit under way stops when the
+shape it is fitting is replaced (its result is dropped, as Reset drops it), and says so; the
+restored patch network is shown as a finished fit, with its stored report (or the network's
+drawing cleared when there was none); the fitted patch is measured and drawn again by the fit
+display (``Document.fitted_changed``). What a point edit changes besides (the cloud) is the
+selection policy's.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from PySide6.QtCore import QObject, Slot
+
+if TYPE_CHECKING:
+    from app.window.hosts import HistoryHost
+
+
+class HistoryPolicy(QObject):
+    """Follows ``Document.shapes_restored`` for the window (see the module docstring)."""
+
+    def __init__(self, window: HistoryHost):
+        super().__init__(window)
+        self._window = window
+
+    @Slot(bool, bool)
+    def on_shapes_restored(self, fitted_changed: bool, network_changed: bool) -> None:
+        window = self._window
+        document = window.document
+        network, report = document.network, document.restored_network_report
+        stopped = []
+        if fitted_changed and window.controller.is_busy():
+            window.controller.abandon()
+            stopped.append("the fit")
+        if network_changed and window.patch_controller.is_busy():
+            window.patch_controller.abandon()
+            stopped.append("the patch fit")
+        shown = window.patch_controller.latest_shown
+        if network is None and shown is not None:
+            window.reset_patch_network()
+        elif network is not None and (shown is None or shown.network is not network):
+            window.patch_controller.show_saved(network, report)
+        window.rebuild_tree()
+        if stopped:
+            window.report(f"An earlier shape is back: {' and '.join(stopped)} under way "
+                          "stopped (its result is dropped)")

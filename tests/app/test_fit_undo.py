@@ -1,0 +1,210 @@
+"""Undo restores the surface as well as the settings (issue 28, item 5), in the real window: a
+fit, a stopped fit, a patch network fit (with the switch to Patches mode it was made for) and
+Reset are each one step holding the shapes before and after; Start after a fit that grew the
+grid goes on at the grown grid; the Quality dock and the toolbar read fully at 1280 x 800."""
+
+from __future__ import annotations
+
+import numpy as np
+from app_helpers import QUICK, open_by_drop
+from PySide6.QtWidgets import QApplication, QToolBar
+
+FIT_TIMEOUT_MS = 120_000
+
+
+def _fit(qtbot, window, controller=None):
+    controller = controller or window.controller
+    with qtbot.waitSignal(controller.fit_finished, timeout=FIT_TIMEOUT_MS) as blocker:
+        window.start_action.trigger()
+    qtbot.waitUntil(lambda: not controller.is_busy() and controller.state == "idle")
+    return blocker.args[0]
+
+
+def _measured(qtbot, window):
+    """The fitted shape put back by an undo is measured again in a job: wait for it."""
+    qtbot.waitUntil(lambda: window.jobs.active_count() == 0, timeout=30000)
+
+
+def test_undo_after_a_fit_restores_the_surface_and_redo_brings_the_fit_back(qtbot, window):
+    document, panel = window.document, window.fit_panel
+    with qtbot.waitSignal(window.files_loaded, timeout=20000):
+        window.open_demo()
+    first = _fit(qtbot, window)
+    grown = first.geometry.control_points.shape[:2]
+    assert grown != (12, 12), "the demo's fit grows its grid (the premise)"
+    fitted_first, result_first = document.fitted, panel.result.text()
+    assert document.undo_stack.undoText() == "Fit"
+    assert window.undo_action.text() == "&Undo Fit"
+
+    # Undo: the surface before the fit (none), the Result line and the Quality dock with it
+    window.undo_action.trigger()
+    assert document.fitted is None and document.fitted_account is None
+    assert panel.result.text() == "Result: no fit yet" and panel.route_note() == ""
+    assert window.quality_panel.values["grid"].text() == "-"
+    assert window.scene._meshes["surface"].n_points == 0  # nothing drawn
+    # Redo: the fit's result, exactly, with its account
+    window.redo_action.trigger()
+    assert document.fitted is fitted_first and panel.result.text() == result_first
+    _measured(qtbot, window)
+    assert window.quality_panel.values["grid"].text() == f"{grown[0]} x {grown[1]} (degree 3 x 3)"
+    assert window.quality_panel.values["tolerance"].text().endswith("(auto): met")
+
+    # Start again: it goes on at the grown grid (the settings still say 12 x 12), as the note says
+    assert document.settings.fit.control_points_u == 12
+    assert f"current {grown[0]} x {grown[1]} shape" in panel.route_note()
+    assert "keeping its grid" in panel.route_note() and "resampled" not in panel.route_note()
+    window.start_action.trigger()
+    qtbot.waitUntil(lambda: window.controller.latest_shown.run_id == window.controller.run_id,
+                    timeout=FIT_TIMEOUT_MS)
+    assert document.fitted.control_points.shape[:2] == grown
+    # a settings edit while it runs restarts it (its own step, before the fit's)
+    window.fit_panel.learning_rate.setValue(0.005)
+    assert document.undo_stack.undoText() == "Learning rate"
+    restarted = window.controller.run_id
+    qtbot.waitUntil(lambda: window.controller.run_id > restarted, timeout=20000)
+    qtbot.waitUntil(lambda: window.controller.latest_shown.run_id == window.controller.run_id,
+                    timeout=FIT_TIMEOUT_MS)
+    with qtbot.waitSignal(window.controller.fit_finished, timeout=FIT_TIMEOUT_MS) as stopped:
+        window.stop_action.trigger()
+    assert stopped.args[0].status == "stopped"
+    second = document.fitted
+    assert second is not fitted_first and second.control_points.shape[:2] == grown
+    assert "gradient fit" in panel.result.text()
+    assert [document.undo_stack.text(i) for i in range(document.undo_stack.count())] == [
+        "Fit", "Learning rate", "Fit"]
+
+    # Undo of the stopped fit: the shape from before its first run, not from its restart
+    window.undo_action.trigger()
+    assert document.fitted is fitted_first
+    np.testing.assert_array_equal(document.fitted.control_points, first.geometry.control_points)
+    assert panel.result.text() == result_first
+    assert document.settings.fit.learning_rate == 0.005  # the edit is a step of its own
+    window.undo_action.trigger()
+    assert document.settings.fit.learning_rate == 0.01 and document.fitted is fitted_first
+    window.redo_action.trigger()
+    window.redo_action.trigger()
+    assert document.fitted is second
+    _measured(qtbot, window)
+
+    # Reset is a step too: Undo brings the discarded shape back
+    window.reset_fit()
+    assert document.fitted is None and document.undo_stack.undoText() == "Reset"
+    window.undo_action.trigger()
+    assert document.fitted is second
+    _measured(qtbot, window)
+
+
+def _running_shape(qtbot, window):
+    """Start a run and wait until it has put a shape of its own in the document."""
+    before = window.document.fitted
+    window.start_action.trigger()
+    qtbot.waitUntil(lambda: window.document.fitted is not before, timeout=FIT_TIMEOUT_MS)
+    return window.document.fitted
+
+
+def test_undo_while_a_fit_runs_stops_it_and_puts_back_the_earlier_shape(qtbot, window,
+                                                                        ply_cloud):
+    document = window.document
+    open_by_drop(qtbot, window, [ply_cloud[0]])
+    document.edit_settings("quick", **QUICK)  # runs until stopped
+    _running_shape(qtbot, window)
+    with qtbot.waitSignal(window.controller.fit_finished, timeout=FIT_TIMEOUT_MS):
+        window.stop_action.trigger()
+    stopped = document.fitted
+    assert document.undo_stack.undoText() == "Fit"  # a stopped fit keeps its shape: a step
+
+    partial = _running_shape(qtbot, window)
+    assert partial is not stopped
+    window.undo_action.trigger()  # the stopped fit's step: the fit under way stops
+    assert not window.controller.is_busy() and window.controller.state == "idle"
+    assert document.fitted is None
+    assert "stopped" in window.statusBar().currentMessage()
+    window.redo_action.trigger()
+    assert document.fitted is stopped
+
+    # Reset while a fit runs: Undo brings back the shape it started from, not its partial one
+    _running_shape(qtbot, window)
+    window.reset_fit()
+    assert document.fitted is None and document.undo_stack.undoText() == "Reset"
+    window.undo_action.trigger()
+    assert document.fitted is stopped
+    _measured(qtbot, window)
+
+
+def test_a_changed_grid_setting_wins_over_the_grown_grid(qtbot, window):
+    document, panel = window.document, window.fit_panel
+    with qtbot.waitSignal(window.files_loaded, timeout=20000):
+        window.open_demo()
+    grown = _fit(qtbot, window).geometry.control_points.shape[:2]
+    panel.control_points_u.setValue(14)
+    panel.control_points_v.setValue(14)
+    assert "resampled onto the 14 x 14 grid" in panel.route_note()
+    document.edit_settings("Iterations", iterations=3)
+    snapshot = _fit(qtbot, window)
+    assert snapshot.geometry.control_points.shape[:2] == (14, 14) != grown
+    # the new shape was made under 14 x 14: the next Start keeps it
+    assert "keeping" not in panel.route_note() and "resampled" not in panel.route_note()
+    window.undo_action.trigger()
+    assert document.fitted.control_points.shape[:2] == grown
+
+
+def test_a_patch_network_fit_is_one_undo_step_with_its_switch_to_patches(qtbot, window,
+                                                                        tmp_path):
+    from nurbs_core import samples
+
+    document = window.document
+    path = tmp_path / "sphere.xyz"
+    np.savetxt(path, samples.sphere(1500).points, fmt="%.8f")
+    open_by_drop(qtbot, window, [path])
+    steps = document.undo_stack.index()
+    # one patch cannot hold a closed cloud: Start goes on as a network (the automatic route)
+    first = _fit(qtbot, window, window.patch_controller)
+    network_first = document.network
+    assert document.settings.fit_mode == "patches" and network_first is first.network
+    assert document.undo_stack.index() == steps + 1  # the switch and the network: one step
+    assert document.undo_stack.undoText() == "Fit as patches"
+    status_first = window.network_quality_panel.status.text()
+
+    window.undo_action.trigger()  # back to one patch, and no network
+    assert document.settings.fit_mode == "single" and document.network is None
+    assert window.patch_controller.latest_shown is None
+    assert not window.scene.network.actor("network").GetVisibility()
+    window.redo_action.trigger()  # the network again, shown as the fit left it
+    assert document.settings.fit_mode == "patches" and document.network is network_first
+    assert window.patch_controller.latest_shown.network is network_first
+    assert window.network_quality_panel.status.text() == status_first
+    # its signed deviation map too, measured again from the stored deviation
+    qtbot.waitUntil(lambda: window.scene.deviation_map() is not None, timeout=30000)
+    np.testing.assert_allclose(window.scene.deviation_map().distances, first.signed.distances)
+
+    # a second network fit (Patches mode now) is a step of its own
+    second = _fit(qtbot, window, window.patch_controller)
+    assert document.network is second.network is not network_first
+    assert document.undo_stack.undoText() == "Patch fit"
+    window.undo_action.trigger()
+    assert document.network is network_first
+    np.testing.assert_array_equal(document.network.control_points,
+                                  first.network.control_points)
+    assert window.patch_controller.latest_shown.network is network_first
+    window.redo_action.trigger()
+    assert document.network is second.network
+
+
+def test_the_quality_dock_and_the_toolbar_read_fully_at_1280_x_800(qtbot, window):
+    window.resize(1280, 800)
+    qtbot.waitUntil(lambda: window.width() == 1280)
+    with qtbot.waitSignal(window.files_loaded, timeout=20000):
+        window.open_demo()
+    window.document.set_units("mm")  # every length carries its unit: the longest texts
+    _fit(qtbot, window)
+    QApplication.processEvents()
+    area = window.quality_dock.widget()
+    assert not area.horizontalScrollBar().isVisible()
+    for key, label in window.quality_panel.values.items():
+        assert label.sizeHint().width() <= label.width(), (key, label.text())
+    # the toolbar's Undo keeps its short label; the tooltip and the Edit menu say what it undoes
+    button = window.findChild(QToolBar, "fit_toolbar").widgetForAction(window.undo_action)
+    assert button.text() == "Undo" and button.toolTip() == "Undo Fit"
+    window.fit_panel.term_checks["hausdorff"].setChecked(True)
+    assert button.text() == "Undo" and button.toolTip() == "Undo Loss"
+    assert window.undo_action.text() == "&Undo Loss"
