@@ -202,7 +202,6 @@ def test_an_open_network_with_no_layout_is_not_tried_twice(bunny_head, tmp_path,
     """When the crowded cloud's open network finds no layout, one patch is fitted (with its
     warnings) and the same open network is not built and laid out again."""
     from nurbs_core import route as route_module
-    from nurbs_core.cli import main
     from nurbs_core.jobs import one_input
     from nurbs_core.patches.layout import LayoutError
 
@@ -214,10 +213,7 @@ def test_an_open_network_with_no_layout_is_not_tried_twice(bunny_head, tmp_path,
 
     monkeypatch.setattr(one_input, "run_patches", no_layout)
     monkeypatch.setattr(route_module, "open_network_instead", not_again)
-    source, out = tmp_path / "head.xyz", tmp_path / "head.json"
-    np.savetxt(source, bunny_head)
-    assert main([str(source), "-o", str(out)]) == 0
-    captured = capsys.readouterr()
+    captured, out = _fit_with_the_cli(bunny_head, tmp_path, capsys)
     routes = [line for line in captured.err.splitlines() if line.startswith("route: ")]
     assert len(routes) == 2 and "an open network of patches (" in routes[0]
     assert "no quad layout fits it" in routes[1] and routes[1].endswith("fitted as one patch: "
@@ -225,16 +221,22 @@ def test_an_open_network_with_no_layout_is_not_tried_twice(bunny_head, tmp_path,
     assert "fitting a surface" in captured.err and out.exists()
 
 
+def _fit_with_the_cli(points: np.ndarray, tmp_path, capsys):
+    """nurbs-fit on the points (N, 3) written as an .xyz, with its defaults; what it printed
+    (capsys' captured streams) and the output's path."""
+    from nurbs_core.cli import main
+
+    source, out = tmp_path / "head.xyz", tmp_path / "head.json"
+    np.savetxt(source, points)
+    assert main([str(source), "-o", str(out)]) == 0
+    return capsys.readouterr(), out
+
+
 @pytest.mark.slow
 def test_nurbs_fit_takes_the_bunnys_head_straight_to_the_open_network(bunny_head, tmp_path,
                                                                       capsys):
     """One route line, the open network's; no single patch fitted before it."""
-    from nurbs_core.cli import main
-
-    source, out = tmp_path / "head.xyz", tmp_path / "head.json"
-    np.savetxt(source, bunny_head)
-    assert main([str(source), "-o", str(out)]) == 0
-    captured = capsys.readouterr()
+    captured, _ = _fit_with_the_cli(bunny_head, tmp_path, capsys)
     routes = [line for line in captured.err.splitlines() if line.startswith("route: ")]
     assert len(routes) == 1 and "crowds part of it" in routes[0]
     assert "an open network of patches" in routes[0]
