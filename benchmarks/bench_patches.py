@@ -433,6 +433,10 @@ def case_builders() -> dict[str, Callable[..., Case]]:
         "head": _generated(g.head, "head"),
         "head_4k": _generated(g.head, "head_4k", count=4000),
         "head_no_ears": _generated(g.head, "head_no_ears", ears=False),
+        # other heads of the family: other proportions, narrower ears (samples.head_surface)
+        "head_v1": _generated(g.head, "head_v1", variant=1),
+        "head_v2": _generated(g.head, "head_v2", variant=2),
+        "head_v3": _generated(g.head, "head_v3", variant=3),
         # holes up to --max-hole (10% of the diagonal by default) are sealed
         "blob_holes": _holed(_generated(g.blob, "blob_s0", seed=0), "blob_holes"),
         "head_holes": _holed(_generated(g.head, "head"), "head_holes"),

@@ -699,35 +699,56 @@ def blob(count: int = 4000, noise: float = 0.002, seed: int = 0, *, bumps: float
                  kind="closed", truth_count=truth_count, info={"bumps": bumps, "turn": turn})
 
 
-def head_surface(ears: bool = True) -> NurbsSurface:
+def head_surface(ears: bool = True, variant: int | None = None) -> NurbsSurface:
     """A closed, head-like bicubic NURBS patch (a 14 x 20 control net; poles at both ends of u,
     its first and last v columns equal): an ellipsoid with a nose and, when ``ears``, two
     ear-like bumps (broad ones: the 20-column net smooths them; they are not thin parts). Its
     rows cluster at the poles, so a cloud uniform in its parameters is dense at the
     top and bottom and sparse around the middle (as a scan is dense where it looks straight at
-    the surface and sparse where it grazes it)."""
+    the surface and sparse where it grazes it).
+
+    ``variant`` (an integer seed) draws another head of the same family on a finer 18 x 28 net:
+    its proportions, the nose's size, a chin and the ears' size, height and narrowness (up to
+    about twice as narrow as the default's), and a little asymmetry between the ears, so that a
+    bench can try several heads rather than one."""
     from nurbs_core.geometry import NurbsSurface
 
-    t = np.linspace(0.0, 1.0, 14)
+    rng = None if variant is None else np.random.default_rng([int(variant), 7])
+    rows, columns = (14, 20) if rng is None else (18, 28)
+    t = np.linspace(0.0, 1.0, rows)
     polar = np.pi * (0.5 - 0.5 * np.cos(np.pi * t))
-    around = np.linspace(0.0, 2 * np.pi, 20)
+    around = np.linspace(0.0, 2 * np.pi, columns)
     p, a = np.meshgrid(polar, around, indexing="ij")
-    radius = 1.0 + 0.25 * np.exp(-np.minimum(a, 2 * np.pi - a) ** 2 / 0.08 - (p - 1.7) ** 2 / 0.1)
+    front = np.minimum(a, 2 * np.pi - a)
+    if rng is None:
+        axes, nose, chin = (0.8, 0.95, 1.2), 0.25, 0.0
+        ear_list = [(c, 0.35, 0.03, 1.5, 0.05) for c in (np.pi / 2, 3 * np.pi / 2)]
+    else:
+        axes = (rng.uniform(0.7, 0.9), rng.uniform(0.85, 1.0), rng.uniform(1.1, 1.3))
+        nose, chin = rng.uniform(0.12, 0.3), rng.uniform(0.0, 0.15)
+        size, width = rng.uniform(0.25, 0.45), rng.uniform(0.015, 0.03)
+        height, spread = rng.uniform(1.35, 1.7), rng.uniform(0.03, 0.06)
+        ear_list = [(c + rng.normal(0.0, 0.05), size * rng.uniform(0.9, 1.1), width,
+                     height + rng.normal(0.0, 0.03), spread) for c in (np.pi / 2, 3 * np.pi / 2)]
+    radius = 1.0 + nose * np.exp(-front ** 2 / 0.08 - (p - 1.7) ** 2 / 0.1)
+    radius += chin * np.exp(-front ** 2 / 0.2 - (p - 2.5) ** 2 / 0.08)
     if ears:
-        for centre in (np.pi / 2, 3 * np.pi / 2):
-            radius += 0.35 * np.exp(-(a - centre) ** 2 / 0.03 - (p - 1.5) ** 2 / 0.05)
-    net = np.stack([0.8 * radius * np.sin(p) * np.cos(a), 0.95 * radius * np.sin(p) * np.sin(a),
-                    1.2 * radius * np.cos(p)], -1)
+        for centre, size, width, height, spread in ear_list:
+            radius += size * np.exp(-(a - centre) ** 2 / width - (p - height) ** 2 / spread)
+    net = np.stack([axes[0] * radius * np.sin(p) * np.cos(a),
+                    axes[1] * radius * np.sin(p) * np.sin(a), axes[2] * radius * np.cos(p)], -1)
     net[0], net[-1] = net[0].mean(axis=0), net[-1].mean(axis=0)
-    return NurbsSurface(net, 3, 3, metadata={"name": "head"})
+    name = "head" if variant is None else f"head_v{variant}"
+    return NurbsSurface(net, 3, 3, metadata={"name": name})
 
 
 def head(count: int = 4000, noise: float = 0.002, seed: int = 0, *, ears: bool = True,
-         by_parameter: bool = True, truth_count: int = TRUTH_COUNT) -> SampledShape:
+         by_parameter: bool = True, truth_count: int = TRUTH_COUNT,
+         variant: int | None = None) -> SampledShape:
     """A cloud of :func:`head_surface`, uniform in its parameters by default (uneven density:
     the middle band is several times sparser than the poles); ``by_parameter=False`` samples it
-    uniformly by area."""
-    shape = sample_surface(head_surface(ears), count, noise, seed, "head",
+    uniformly by area; ``variant`` draws another head of the family (see :func:`head_surface`)."""
+    shape = sample_surface(head_surface(ears, variant), count, noise, seed, "head",
                            truth_count=truth_count, by_parameter=by_parameter)
     shape.info["ears"] = ears
     return shape
