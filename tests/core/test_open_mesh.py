@@ -239,7 +239,11 @@ def test_the_bunnys_ears_are_fitted_as_two_ears_without_a_web(bunny_head):
     # cells instead.
     from nurbs_core.patches.pipeline import fit_patches
 
+    # Then one ear's tip stayed folded (1.6%): the mesh stopped short of it (finer grids now
+    # keep it: 0.07%). The seams the polish left at p99 3.1 degrees straighten with heavier
+    # tangent rows (2.5; the fit as close).
     region, _ = bunny_head
     quality = fit_patches(region).quality
     assert quality.far_fraction < 0.001            # no web: the surface stays on the scan
-    assert quality.flipped_fraction < 0.025        # 3.1% before (one ear's tip: 1.6% now)
+    assert quality.flipped_fraction < 0.005
+    assert quality.seam.p99 < 2.75
