@@ -328,6 +328,8 @@ def test_set_reaches_any_fit_config_field(tmp_path, capsys):
     (["--threads", "0"], "--threads 0: this machine has"),
     (["--samples", "100000", "100000"], "--samples 100000 100000: the evaluation grid takes"),
     (["--samples", "0"], "--samples 0: the evaluation grid takes"),
+    # allowed before, and took 2.8 GB with the gradient fit on a 400-point cloud
+    (["--samples", "4096", "4096"], "--samples 4096 4096: the evaluation grid takes"),
 ])
 def test_settings_beyond_the_machine_are_one_clear_line(tmp_path, capsys, option, message):
     """Refused before anything runs (they used to end in raw libgomp or allocator errors)."""
