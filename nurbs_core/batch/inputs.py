@@ -185,10 +185,11 @@ def name_outputs(items: list[Item], directory: Path, suffix: str, offset: bool) 
         used.update(Path(p).name.lower() for p in item.outputs)
 
 
-def check_planned_writes(items: list[Item], summary: Path) -> None:
+def check_planned_writes(items: list[Item], summary: Path, read: tuple[str | None, ...] = ()) -> None:
     """Every file the batch will write (each item's results, the summary) against every input
-    and against each other, by file identity (symbolic and hard links, ``..``, letter case on a
-    case-insensitive file system), before any work: OutputPathError naming both."""
+    (the items, and ``read``: the other files every fit reads, ``--initial``) and against each
+    other, by file identity (symbolic and hard links, ``..``, letter case on a case-insensitive
+    file system), before any work: OutputPathError naming both."""
     from nurbs_core.io.errors import OutputPathError
     from nurbs_core.io.outputs import same_file
 
@@ -196,6 +197,9 @@ def check_planned_writes(items: list[Item], summary: Path) -> None:
     for item in items:
         if item.error is None:
             sources.setdefault(os.path.realpath(item.path), item.path)
+    for path in read:
+        if path is not None and os.path.exists(path):
+            sources.setdefault(os.path.realpath(path), path)
     writes = [(Path(p), f"the result of {item.label}") for item in items for p in item.outputs]
     writes.append((summary, "the summary"))
     for path, what in writes:

@@ -812,3 +812,25 @@ def test_an_hdf5_file_declaring_a_billion_clouds_is_refused_before_expanding_the
     rows = [json.loads(line) for line in summary.read_text().splitlines()]
     assert len(rows) == 1 and "decompress" in rows[0]["error"]
     assert rows[0]["input"] == str(path)
+
+
+def test_a_result_named_like_the_initial_shape_is_refused_before_any_work(tmp_path, capsys):
+    """``--initial out/one.json`` with one.xyz's result due at out/one.json: refused in one line
+    naming both before any fit (the batch fitted two.xyz first and failed one.xyz at its turn),
+    the starting shape untouched."""
+    folder = tmp_path / "scans"
+    _cloud_file(folder / "one.xyz", 0)
+    _cloud_file(folder / "two.xyz", 1)
+    out = tmp_path / "out"
+    out.mkdir()
+    initial = out / "one.json"
+    assert main([str(folder / "two.xyz"), "-o", str(initial), "-q", *FIT]) == 0
+    before = initial.read_bytes()
+    capsys.readouterr()
+    code = main([str(folder), "--output-dir", str(out), "--initial", str(initial), "-q", *FIT])
+    assert code == 1
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "would overwrite the input" in error[0], error
+    assert "one.json" in error[0] and "scans/one.xyz" in error[0]
+    assert initial.read_bytes() == before
+    assert sorted(p.name for p in out.iterdir()) == ["one.json"]     # nothing fitted
