@@ -197,9 +197,9 @@ def check_planned_writes(items: list[Item], summary: Path, read: tuple[str | Non
     for item in items:
         if item.error is None:
             sources.setdefault(os.path.realpath(item.path), item.path)
-    for path in read:
-        if path is not None and os.path.exists(path):
-            sources.setdefault(os.path.realpath(path), path)
+    for other in read:
+        if other is not None and os.path.exists(other):
+            sources.setdefault(os.path.realpath(other), other)
     writes = [(Path(p), f"the result of {item.label}") for item in items for p in item.outputs]
     writes.append((summary, "the summary"))
     for path, what in writes:
