@@ -199,21 +199,22 @@ def load_session(document: Document, path: str | Path) -> dict[str, Any]:
 
 
 def _session_target(number: int, item: Any) -> Target:
-    """A session's point cloud, checked like a cloud file (an (N, 3) array of finite numbers;
-    never regrouped from another shape); ValueError naming it."""
+    """A session's point cloud, checked like a cloud file (nurbs_core.io.cloud.check_points: an
+    (N, 3) array of finite numbers within the range the fit computes in; never regrouped from
+    another shape; an empty cloud stays allowed); ValueError naming it."""
+    from nurbs_core.io.cloud import check_points
+    from nurbs_core.io.errors import FileFormatError
+
     if not isinstance(item, dict) or not isinstance(item.get("name"), str):
         raise ValueError(f"targets[{number}] needs a name")
     points = np.asarray(item["points"], dtype=np.float64)
     if points.size == 0:
         points = points.reshape(0, 3)
-    where = f"targets[{number}] ({item['name']})"
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"{where}: expected (N, 3) coordinates, got an array of shape "
-                         f"{points.shape}")
-    finite = np.isfinite(points).all(axis=1)
-    if not finite.all():
-        raise ValueError(f"{where}: {int((~finite).sum())} point(s) have NaN or infinite "
-                         f"coordinates; the first is point {int(np.argmin(finite))}")
+    else:
+        try:
+            check_points(f"targets[{number}] ({item['name']})", points)
+        except FileFormatError as exc:
+            raise ValueError(str(exc)) from None
     return Target(item["name"], points, str(item.get("path", "")),
                   bool(item.get("visible", True)))
 

@@ -235,23 +235,22 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-#: The largest evaluation grid ``--samples`` may ask for (samples in all; 4096 x 4096 takes
-#: about 1.6 GB in the set losses' float64 tensors).
-MAX_SAMPLES = 4096 * 4096
-
-
 def _check_resources(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
-    """Settings that would claim more than the machine has, refused before anything runs."""
+    """Settings that would claim more than the machine has, refused before anything runs (the
+    bounds are FitConfig's, named here by their options)."""
     import os
 
+    from nurbs_core.fitting.config import MAX_SAMPLES, MAX_THREADS_PER_CPU
+
     cpus = os.cpu_count() or 1
-    if args.threads < 1 or args.threads > 4 * cpus:
+    if args.threads < 1 or args.threads > MAX_THREADS_PER_CPU * cpus:
         parser.error(f"--threads {args.threads}: this machine has {cpus} CPUs; give 1 to "
-                     f"{4 * cpus} (1 is fastest for typical fits)")
+                     f"{MAX_THREADS_PER_CPU * cpus} (1 is fastest for typical fits)")
+    side = math.isqrt(MAX_SAMPLES)
     if any(s < 1 for s in args.samples) or math.prod(args.samples) * (
             1 if len(args.samples) > 1 else args.samples[0]) > MAX_SAMPLES:
         parser.error(f"--samples {' '.join(map(str, args.samples))}: the evaluation grid takes "
-                     f"1 to {MAX_SAMPLES} samples in all (4096 x 4096)")
+                     f"1 to {MAX_SAMPLES} samples in all ({side} x {side})")
 
 
 def _check_mode(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:

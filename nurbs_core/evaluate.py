@@ -362,6 +362,7 @@ class CurveEvaluator:
 
     def __call__(self, control_points: torch.Tensor, weights: torch.Tensor | None = None, *,
                  higher_order: bool = False) -> torch.Tensor:
+        check_knot_count(self.knots, control_points.shape[-2], self.degree)
         weights = _default_weights(control_points, weights)
         if higher_order:
             return _native_curve_points(control_points, weights, self.basis, self.span,
@@ -399,6 +400,12 @@ class _FixedSurfaceBasis:
         self.span_u, self.basis_u, _ = _basis(ku_b, degree_u, u_b, 0, False)
         self.span_v, self.basis_v, _ = _basis(kv_b, degree_v, v_b, 0, False)
 
+    def _check(self, control_points: torch.Tensor) -> None:
+        """ValueError unless the knot vectors match the control grid (a vector one entry too
+        long was evaluated silently)."""
+        check_knot_count(self.knots_u, control_points.shape[-3], self.degrees[0], "knots_u")
+        check_knot_count(self.knots_v, control_points.shape[-2], self.degrees[1], "knots_v")
+
 
 class SurfaceEvaluator(_FixedSurfaceBasis):
     """Fixed knots and fixed paired parameters (u[k], v[k]); returns (*B, M, 3). Knots (K,) and
@@ -408,6 +415,7 @@ class SurfaceEvaluator(_FixedSurfaceBasis):
 
     def __call__(self, control_points: torch.Tensor, weights: torch.Tensor | None = None, *,
                  higher_order: bool = False) -> torch.Tensor:
+        self._check(control_points)
         weights = _default_weights(control_points, weights)
         if higher_order:
             return _native_surface_points(control_points, weights, self.basis_u, self.basis_v,
@@ -438,6 +446,7 @@ class SurfaceGridEvaluator(_FixedSurfaceBasis):
 
     def __call__(self, control_points: torch.Tensor, weights: torch.Tensor | None = None, *,
                  higher_order: bool = False) -> torch.Tensor:
+        self._check(control_points)
         weights = _default_weights(control_points, weights)
         if higher_order:
             return _native_grid_points(control_points, weights, self.dense_u, self.dense_v)

@@ -17,6 +17,9 @@ if TYPE_CHECKING:
 HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf")
 #: The dataset of an HDF5 file that holds the clouds.
 HDF5_DATASET = "points"
+#: The most clouds a batch takes from one HDF5 file (each is an item of the batch, named and
+#: tracked before the first fit: a million take about 0.6 GB).
+MAX_HDF5_CLOUDS = 1_000_000
 BATCH_EXTRA_HINT = "pip install 'nurbs-studio[batch]' (or: pip install h5py \"dask[distributed]\")"
 
 
@@ -54,6 +57,10 @@ def hdf5_count(path: str) -> int:
         import h5py
     except ImportError:
         raise ImportError(f"{path}: reading HDF5 files needs h5py: {BATCH_EXTRA_HINT}") from None
+    import numpy as np
+
+    from nurbs_core.io.limits import check_decompressed_size
+
     with h5py.File(path, "r") as handle:
         if HDF5_DATASET not in handle:
             raise ValueError(f"{path}: no '{HDF5_DATASET}' dataset (expected the SplineDataset "
@@ -61,6 +68,13 @@ def hdf5_count(path: str) -> int:
         shape = handle[HDF5_DATASET].shape
     if len(shape) != 3 or shape[2] != 3:
         raise ValueError(f"{path}: '{HDF5_DATASET}' has shape {shape}, expected (N, n, 3)")
+    # a small file may declare a billion clouds (each an item of the batch: gigabytes before the
+    # first fit): the whole dataset is capped like one cloud, its clouds by MAX_HDF5_CLOUDS
+    claimed = int(np.prod(shape, dtype=np.float64)) * 8
+    check_decompressed_size(path, claimed, os.path.getsize(path), f"'{HDF5_DATASET}' {shape}")
+    if shape[0] > MAX_HDF5_CLOUDS:
+        raise ValueError(f"{path}: '{HDF5_DATASET}' holds {shape[0]} clouds, more than the "
+                         f"{MAX_HDF5_CLOUDS} a batch takes from one file; split the file")
     return int(shape[0])
 
 
@@ -171,10 +185,11 @@ def name_outputs(items: list[Item], directory: Path, suffix: str, offset: bool) 
         used.update(Path(p).name.lower() for p in item.outputs)
 
 
-def check_planned_writes(items: list[Item], summary: Path) -> None:
+def check_planned_writes(items: list[Item], summary: Path, read: tuple[str | None, ...] = ()) -> None:
     """Every file the batch will write (each item's results, the summary) against every input
-    and against each other, by file identity (symbolic and hard links, ``..``, letter case on a
-    case-insensitive file system), before any work: OutputPathError naming both."""
+    (the items, and ``read``: the other files every fit reads, ``--initial``) and against each
+    other, by file identity (symbolic and hard links, ``..``, letter case on a case-insensitive
+    file system), before any work: OutputPathError naming both."""
     from nurbs_core.io.errors import OutputPathError
     from nurbs_core.io.outputs import same_file
 
@@ -182,6 +197,9 @@ def check_planned_writes(items: list[Item], summary: Path) -> None:
     for item in items:
         if item.error is None:
             sources.setdefault(os.path.realpath(item.path), item.path)
+    for other in read:
+        if other is not None and os.path.exists(other):
+            sources.setdefault(os.path.realpath(other), other)
     writes = [(Path(p), f"the result of {item.label}") for item in items for p in item.outputs]
     writes.append((summary, "the summary"))
     for path, what in writes:

@@ -230,7 +230,7 @@ def run_batch(batch: BatchSettings) -> int:
     # summary is an input, and the check below refuses to overwrite it
     items = expand(batch.inputs, exclude=(summary,) if _is_summary(summary) else ())
     name_outputs(items, directory, batch.format.lower(), offset=job.offset is not None)
-    check_planned_writes(items, summary)
+    check_planned_writes(items, summary, read=(job.initial,))
     records: list[dict | None] = [None] * len(items)
     earlier = _earlier_rows(summary) if batch.skip_existing else {}
     todo = []

@@ -10,6 +10,8 @@ the command line and files.
 from __future__ import annotations
 
 import dataclasses
+import math
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -40,6 +42,15 @@ DEFAULT_LOSS = "p2s+0.001*chamfer"
 #: The default loss of curves: Chamfer weighted like the foot-point term fits outlines closer than
 #: DEFAULT_LOSS (the SkelNetOn apple: Chamfer 1.27 px against 1.73 px, same time).
 DEFAULT_CURVE_LOSS = "chamfer+p2s"
+#: The largest control grid a setting may ask for, per direction (the app offers up to 200).
+MAX_CONTROL_POINTS = 1000
+#: The largest evaluation grid (samples_u x samples_v in all; a curve: samples_u): the gradient
+#: fit's losses hold about 250 bytes a sample (2048 x 2048: 1.0 GB at peak on a 400-point cloud,
+#: 4096 x 4096: 2.8 GB).
+MAX_SAMPLES = 2048 * 2048
+#: Torch threads a setting may ask for, per CPU of the machine (more only thrash; 10,000 ended
+#: in raw libgomp errors).
+MAX_THREADS_PER_CPU = 4
 #: Control points of a curve when none are given.
 DEFAULT_CURVE_CONTROL_POINTS = 16
 
@@ -207,12 +218,14 @@ class FitConfig:
 
     def validate(self) -> None:
         """Raise ValueError naming the first bad setting."""
-        def integer(name: str, minimum: int) -> None:
+        def integer(name: str, minimum: int, maximum: int | None = None) -> None:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
                 raise ValueError(f"{name} must be an integer, got {value!r}")
             if value < minimum:
                 raise ValueError(f"{name} must be at least {minimum}, got {value}")
+            if maximum is not None and value > maximum:
+                raise ValueError(f"{name} must be at most {maximum}, got {value}")
 
         def choice(name: str, options: tuple[str, ...]) -> None:
             if getattr(self, name) not in options:
@@ -229,20 +242,24 @@ class FitConfig:
         directions = ("u",) if self.kind == "curve" else ("u", "v")
         for d in directions:
             integer(f"degree_{d}", 1)
-            integer(f"control_points_{d}", 2)
-            integer(f"samples_{d}", 2)
+            integer(f"control_points_{d}", 2, MAX_CONTROL_POINTS)
+            integer(f"samples_{d}", 2, MAX_SAMPLES)
             degree, count = getattr(self, f"degree_{d}"), getattr(self, f"control_points_{d}")
             if count < degree + 1:
                 raise ValueError(f"control_points_{d}={count} cannot carry degree_{d}={degree}: "
                                  f"a degree p needs at least p + 1 control points")
+        grid = [getattr(self, f"samples_{d}") for d in directions]
+        if math.prod(grid) > MAX_SAMPLES:
+            raise ValueError(f"samples {' x '.join(map(str, grid))} make {math.prod(grid)} "
+                             f"samples, more than the {MAX_SAMPLES} an evaluation grid may have")
         integer("iterations", 0)
         integer("seed", 0)
         integer("correction_interval", 1)
         integer("batch_size", 16)
         integer("refinements", 0)
-        integer("max_control_points", 0)
+        integer("max_control_points", 0, MAX_CONTROL_POINTS)
         if self.threads is not None:
-            integer("threads", 1)
+            integer("threads", 1, MAX_THREADS_PER_CPU * (os.cpu_count() or 1))
         numbers = ["learning_rate", "loss_tolerance", "snapshot_interval", "momentum", "stiffness",
                    "outlier_fraction"] + (["tolerance"] if self.tolerance is not None else [])
         for name in numbers:

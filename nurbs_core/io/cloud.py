@@ -48,10 +48,13 @@ class PointCloud:
         return self.attributes.get("colors")
 
 
-#: Coordinates beyond this (in magnitude), or a cloud narrower than MIN_EXTENT, leave float64
-#: squared distances overflowing or underflowing (1e154 squared is the largest double).
-MAX_COORDINATE = 1e150
-MIN_EXTENT = 1e-150
+#: Coordinates beyond this (in magnitude), or a cloud narrower than MIN_EXTENT, leave the fit's
+#: arithmetic out of range: float64 products of four coordinates (a sheet at 1e80 ended in
+#: "'x' must be finite", one at 1e-90 in "No surface found at the given iso value") and the
+#: closed-surface reconstruction's single-precision distances (a sphere at 1e40 or 1e-50 failed
+#: so; 3.4e38 is the largest float32). Every route fits clouds at 1e30 and 1e-30.
+MAX_COORDINATE = 1e30
+MIN_EXTENT = 1e-30
 
 
 def check_points(path: StrPath | None, points: np.ndarray,
@@ -76,13 +79,13 @@ def check_points(path: StrPath | None, points: np.ndarray,
     largest = float(np.abs(points).max())
     if largest > MAX_COORDINATE:
         raise FileFormatError(path, f"coordinates reach {largest:.3g}: beyond {MAX_COORDINATE:g} "
-                                    "squared distances overflow; rescale the cloud (a unit "
+                                    "the fit's arithmetic overflows; rescale the cloud (a unit "
                                     "error?)")
     extent = float(np.ptp(points, axis=0).max()) if len(points) > 1 else 0.0
     if 0.0 < extent < MIN_EXTENT:
         raise FileFormatError(path, f"the cloud spans only {extent:.3g}: below {MIN_EXTENT:g} "
-                                    "squared distances underflow; rescale the cloud (a unit "
-                                    "error?)")
+                                    "the fit's arithmetic underflows; rescale the cloud (a "
+                                    "unit error?)")
     return points
 
 

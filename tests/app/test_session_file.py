@@ -84,6 +84,12 @@ def _manifest(**change):
             "patches": [], "fitted": None, "network": None, "network_report": None, **change}
 
 
+def _settings(**fit):
+    settings = Document().settings.to_json()
+    settings["fit"].update(fit)
+    return settings
+
+
 def _npy(array: np.ndarray, allow_pickle: bool = False) -> bytes:
     buffer = io.BytesIO()
     np.save(buffer, array, allow_pickle=allow_pickle)
@@ -113,6 +119,15 @@ GOOD_POINTS = np.zeros((4, 3))
      zipfile.ZIP_STORED, r"expected \(N, 3\) coordinates"),
     ({MANIFEST: json.dumps(_manifest()), "targets/0.npy": _npy(np.full((4, 3), np.nan))},
      zipfile.ZIP_STORED, "NaN or infinite"),
+    # coordinates a cloud file may not have (the fit's squared distances overflow)
+    ({MANIFEST: json.dumps(_manifest()), "targets/0.npy": _npy(np.full((4, 3), 1e200))},
+     zipfile.ZIP_STORED, "coordinates reach 1e[+]200"),
+    # settings beyond what a fit may claim (10**9 control points hung the window at 2.5 GB)
+    ({MANIFEST: json.dumps(_manifest(settings=_settings(control_points_u=10**9))),
+      "targets/0.npy": _npy(GOOD_POINTS)}, zipfile.ZIP_STORED,
+     "control_points_u must be at most 1000"),
+    ({MANIFEST: json.dumps(_manifest(settings=_settings(samples_u=10**6, samples_v=10**6))),
+      "targets/0.npy": _npy(GOOD_POINTS)}, zipfile.ZIP_STORED, "more than the 4194304"),
     ({MANIFEST: "{not json", "targets/0.npy": _npy(GOOD_POINTS)}, zipfile.ZIP_STORED,
      "not valid JSON"),
     ({MANIFEST: json.dumps(_manifest(format="nurbs-studio-session-v9"))}, zipfile.ZIP_STORED,

@@ -775,8 +775,9 @@ def test_jobs_never_exceed_the_inputs_or_the_cpus(tmp_path, capsys):
 
 
 def test_an_hdf5_file_declaring_a_huge_cloud_is_refused_before_allocating(tmp_path):
-    """27 KB on disk declaring 100,000,000 points per cloud (3 GB when read): one failed item
-    with the cap's message, at once, like the other compressed formats."""
+    """27 KB on disk declaring 100,000,000 points per cloud (3 GB when read): one failed input
+    with the cap's message (the whole dataset is capped), at once, like the other compressed
+    formats."""
     h5py = pytest.importorskip("h5py")
     path = tmp_path / "bomb.h5"
     with h5py.File(path, "w") as handle:
@@ -790,4 +791,46 @@ def test_an_hdf5_file_declaring_a_huge_cloud_is_refused_before_allocating(tmp_pa
     assert time.perf_counter() - started < 30
     assert code == SOME_FAILED_STATUS
     rows = [json.loads(line) for line in summary.read_text().splitlines()]
-    assert len(rows) == 2 and all("decompress" in row["error"] for row in rows)
+    assert len(rows) == 1 and "decompress" in rows[0]["error"]
+
+
+def test_an_hdf5_file_declaring_a_billion_clouds_is_refused_before_expanding_them(tmp_path):
+    """9 KB on disk declaring 1,000,000,000 clouds of 300 points: each cloud became an item of
+    the batch before the first fit (6.4 GB and still expanding after 120 s); now one failed
+    input with the cap's message, at once."""
+    h5py = pytest.importorskip("h5py")
+    path = tmp_path / "many.h5"
+    with h5py.File(path, "w") as handle:
+        dataset = handle.create_dataset("points", shape=(1_000_000_000, 300, 3), dtype="f4",
+                                        chunks=(1, 300, 3), compression="gzip")
+        dataset[0] = _cloud(0)
+    assert path.stat().st_size < 100_000
+    summary = tmp_path / "summary.jsonl"
+    code = main([str(path), "--output-dir", str(tmp_path / "out"), "--summary", str(summary),
+                 "-q", *FIT])
+    assert code == SOME_FAILED_STATUS
+    rows = [json.loads(line) for line in summary.read_text().splitlines()]
+    assert len(rows) == 1 and "decompress" in rows[0]["error"]
+    assert rows[0]["input"] == str(path)
+
+
+def test_a_result_named_like_the_initial_shape_is_refused_before_any_work(tmp_path, capsys):
+    """``--initial out/one.json`` with one.xyz's result due at out/one.json: refused in one line
+    naming both before any fit (the batch fitted two.xyz first and failed one.xyz at its turn),
+    the starting shape untouched."""
+    folder = tmp_path / "scans"
+    _cloud_file(folder / "one.xyz", 0)
+    _cloud_file(folder / "two.xyz", 1)
+    out = tmp_path / "out"
+    out.mkdir()
+    initial = out / "one.json"
+    assert main([str(folder / "two.xyz"), "-o", str(initial), "-q", *FIT]) == 0
+    before = initial.read_bytes()
+    capsys.readouterr()
+    code = main([str(folder), "--output-dir", str(out), "--initial", str(initial), "-q", *FIT])
+    assert code == 1
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "would overwrite the input" in error[0], error
+    assert "one.json" in error[0] and "scans/one.xyz" in error[0]
+    assert initial.read_bytes() == before
+    assert sorted(p.name for p in out.iterdir()) == ["one.json"]     # nothing fitted

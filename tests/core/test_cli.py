@@ -328,6 +328,8 @@ def test_set_reaches_any_fit_config_field(tmp_path, capsys):
     (["--threads", "0"], "--threads 0: this machine has"),
     (["--samples", "100000", "100000"], "--samples 100000 100000: the evaluation grid takes"),
     (["--samples", "0"], "--samples 0: the evaluation grid takes"),
+    # allowed before, and took 2.8 GB with the gradient fit on a 400-point cloud
+    (["--samples", "4096", "4096"], "--samples 4096 4096: the evaluation grid takes"),
 ])
 def test_settings_beyond_the_machine_are_one_clear_line(tmp_path, capsys, option, message):
     """Refused before anything runs (they used to end in raw libgomp or allocator errors)."""
@@ -355,3 +357,18 @@ def test_units_reach_the_files_that_carry_them(tmp_path, capsys):
     assert main([str(cloud), "-o", str(tmp_path / "b.3dm"), "-q"]) == 0
     assert "units: not given (--units)" in capsys.readouterr().out
     assert rhino3dm.File3dm.Read(str(tmp_path / "b.3dm")).Settings.ModelUnitSystem.name == "None"
+
+
+@pytest.mark.parametrize("scale", [1e29, 1e-29])
+@pytest.mark.parametrize("shape", ["saddle", "sphere"])
+def test_clouds_at_the_edges_of_the_accepted_range_are_fitted(tmp_path, capsys, scale, shape):
+    """Every cloud check_points lets through is fitted: an open sheet (one patch) and a sphere
+    (the closed route) at 1e29 and 1e-29 (clouds at 1e40 / 1e80 / 1e-50 / 1e-90 were let
+    through and ended in raw errors: "'x' must be finite", "No surface found at the given iso
+    value")."""
+    from nurbs_core import samples
+
+    cloud = tmp_path / "c.xyz"
+    np.savetxt(cloud, getattr(samples, shape)(800, seed=0).points * scale)
+    assert main([str(cloud), "-o", str(tmp_path / "o.json"), "-q"]) == 0
+    assert "error" not in capsys.readouterr().err

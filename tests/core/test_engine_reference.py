@@ -211,3 +211,26 @@ def test_the_functional_api_refuses_a_knot_vector_of_the_wrong_length(extra):
     for call in (curve_points, curve_derivatives):
         with pytest.raises(ValueError, match="need 9 knots"):
             call(net[:, 0], weights[:, 0], wrong, 3, t)
+
+
+@pytest.mark.parametrize("extra", [1, -1])
+def test_the_evaluators_refuse_a_knot_vector_of_the_wrong_length(extra):
+    """SurfaceEvaluator and CurveEvaluator (fixed knots and parameters) with a knot vector one
+    entry too long or short for the control points they are called on: ValueError naming the
+    counts (they evaluated it silently; SurfaceGridEvaluator failed in a raw torch error)."""
+    from nurbs_core.evaluate import CurveEvaluator, SurfaceEvaluator, SurfaceGridEvaluator
+    from nurbs_core.knots import clamped_uniform
+
+    net = torch.randn(5, 6, 3, dtype=torch.float64)
+    knots_u, knots_v = clamped_uniform(5, 3).double(), clamped_uniform(6, 3).double()
+    wrong = torch.cat([knots_u, knots_u[-1:]]) if extra > 0 else knots_u[1:]
+    t = torch.linspace(0.1, 0.9, 4, dtype=torch.float64)
+    for evaluator in (SurfaceEvaluator, SurfaceGridEvaluator):
+        with pytest.raises(ValueError, match="knots_u: 5 control points of degree 3 need 9"):
+            evaluator(wrong, knots_v, 3, 3, t, t)(net)
+        with pytest.raises(ValueError, match="knots_v: 5 control points of degree 3 need 9"):
+            evaluator(knots_v, wrong, 3, 3, t, t)(net.transpose(0, 1))
+        assert evaluator(knots_u, knots_v, 3, 3, t, t)(net).shape[-1] == 3
+    with pytest.raises(ValueError, match="5 control points of degree 3 need 9"):
+        CurveEvaluator(wrong, 3, t)(net[:, 0])
+    assert CurveEvaluator(knots_u, 3, t)(net[:, 0]).shape == (4, 3)

@@ -118,6 +118,22 @@ def test_a_continued_fit_is_conformed_onto_new_custom_knots():
     np.testing.assert_allclose(final.geometry["control_points"], reference.c, atol=1e-9)
 
 
+@pytest.mark.parametrize("changes, message", [
+    ({"control_points_u": 10**9}, "control_points_u must be at most 1000"),
+    ({"max_control_points": 100_000}, "max_control_points must be at most 1000"),
+    ({"samples_u": 10**6, "samples_v": 10**6}, "more than the 4194304 an evaluation grid"),
+    ({"samples_u": 4096, "samples_v": 4096}, "make 16777216 samples, more than"),
+    ({"threads": 10_000}, "threads must be at most"),
+])
+def test_settings_that_would_claim_more_than_the_machine_are_refused(changes, message):
+    """FitConfig bounds what a setting may claim, wherever the settings come from (a session's
+    control_points_u of 10**9 hung the app's window at 2.5 GB)."""
+    config = dataclasses.replace(FitConfig(), **changes)
+    with pytest.raises(ValueError, match=message):
+        config.validate()
+    FitConfig(control_points_u=1000, samples_u=2048, samples_v=2048, threads=1).validate()
+
+
 def test_the_settings_types_import_without_torch():
     code = ("import sys; import nurbs_core.fitting.config, nurbs_core.patches.options; "
             "from nurbs_core.fitting import FitConfig; FitConfig().validate(); "

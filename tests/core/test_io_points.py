@@ -458,15 +458,20 @@ def test_unknown_suffix_and_missing_file(tmp_path):
 
 
 @pytest.mark.parametrize("scale, message", [(1e200, r"coordinates reach [0-9.]+e\+200"),
-                                            (1e-200, "the cloud spans only")])
-def test_clouds_whose_squared_distances_overflow_are_refused_clearly(tmp_path, scale, message):
+                                            (1e80, r"coordinates reach [0-9.]+e\+80"),
+                                            (1e40, r"coordinates reach [0-9.]+e\+40"),
+                                            (1e-200, "the cloud spans only"),
+                                            (1e-90, "the cloud spans only")])
+def test_clouds_beyond_the_fits_range_are_refused_clearly(tmp_path, scale, message):
     """A cloud at 1e200 (or 1e-200) scale: one clear message at reading, not an internal error
-    (an IndexError, "Eigenvalues did not converge") deep in the fit."""
+    (an IndexError, "Eigenvalues did not converge") deep in the fit; so are 1e80 and 1e-90
+    (a sheet's fit ended in "'x' must be finite" and "No surface found at the given iso
+    value") and 1e40 (a sphere's closed reconstruction computes in single precision)."""
     points = np.random.default_rng(0).normal(size=(50, 3)) * scale
     path = tmp_path / "scaled.xyz"
     np.savetxt(path, points)
     with pytest.raises(FileFormatError, match=message + ".*rescale"):
         load_points(path)
     big_but_fine = tmp_path / "fine.xyz"
-    np.savetxt(big_but_fine, points / scale * 1e100)
+    np.savetxt(big_but_fine, points / scale * 1e29)
     assert load_points(big_but_fine).points.shape == (50, 3)
