@@ -172,6 +172,9 @@ def test_the_event_loop_keeps_processing_events_during_a_fit(qtbot, window, ply_
     qtbot.waitUntil(lambda: window.controller.state == "idle", timeout=20000)
 
 
+# a stress test (20 fits started and stopped); one start and stop, and the leak guards after every
+# window test, are in the default run
+@pytest.mark.slow
 def test_twenty_start_stop_cycles_leave_nothing_behind(qtbot, window, ply_cloud):
     import os
 

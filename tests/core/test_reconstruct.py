@@ -140,6 +140,9 @@ def test_the_scanned_bunny_with_holes_in_its_base_is_one_closed_sphere():
     assert near.mean() > 0.99
 
 
+# a big fit (the whole bunny as a closed network); the coarsened layout that follows its ears is
+# tested faster in test_layout_coarsen.py, and on the open head and ears below
+@pytest.mark.slow
 def test_the_bunnys_ears_are_two_sheets_that_reach_their_tips():
     # Instant Meshes' layouts of the scanned bunny pass its thin ears by (their edges are wider
     # than an ear): the patches laid over them spanned the gap, the ears came out cut short
