@@ -161,6 +161,7 @@ class MainWindow(QMainWindow):
         self.setCentralWidget(self._native_container(self.scene.widget))
 
         self._build_docks()
+        self.document.loss_history_source = self.loss_plot.history
         self.offsets = OffsetController(self.document, self.jobs, self.scene, self.offset_panel,
                                         self.report, self)
         self.offsets.offsets_updated.connect(self.offsets_updated)
@@ -725,8 +726,11 @@ class MainWindow(QMainWindow):
                 "clears the selection: Start then fits every point)", 8000)
         if self.active_controller() is self.patch_controller:
             self.network_quality_dock.raise_()
-            self.loss_plot.clear()  # a network starts from the cloud: a new curve
-            return self.patch_controller.start()
+            # (its step keeps the curve shown before it: cleared once the run has begun)
+            started = self.patch_controller.start()
+            if started:
+                self.loss_plot.clear()  # a network starts from the cloud: a new curve
+            return started
         return self.controller.start()
 
     def fit_as_patches(self) -> bool:

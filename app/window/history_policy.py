@@ -6,8 +6,9 @@ document and this policy makes the window follow. It decides: a fit under way st
 shape it is fitting is replaced (its result is dropped, as Reset drops it), and says so; the
 restored patch network is shown as a finished fit, with its stored report (or the network's
 drawing cleared when there was none); the fitted patch is measured and drawn again by the fit
-display (``Document.fitted_changed``). What a point edit changes besides (the cloud) is the
-selection policy's.
+display (``Document.fitted_changed``); the loss plot shows the curves kept with the shapes put
+back (those of the fits that made them; an empty plot when none did). What a point edit changes
+besides (the cloud) is the selection policy's.
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ class HistoryPolicy(QObject):
             window.reset_patch_network()
         elif network is not None and (shown is None or shown.network is not network):
             window.patch_controller.show_saved(network, report)
+        window.loss_plot.show_history(document.restored_loss_history)
         window.rebuild_tree()
         if stopped:
             window.report(f"An earlier shape is back: {' and '.join(stopped)} under way "

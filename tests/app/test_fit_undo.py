@@ -208,3 +208,34 @@ def test_the_quality_dock_and_the_toolbar_read_fully_at_1280_x_800(qtbot, window
     window.fit_panel.term_checks["hausdorff"].setChecked(True)
     assert button.text() == "Undo" and button.toolTip() == "Undo Loss"
     assert window.undo_action.text() == "&Undo Loss"
+
+
+def _curves(window) -> dict[str, np.ndarray]:
+    """The loss plot's curves: {term: values}, with "x" their iterations; {} when empty."""
+    history = window.loss_plot.history()
+    return {} if history is None else {"x": history.iterations, **history.values}
+
+
+def _assert_same_curves(shown: dict, expected: dict):
+    assert shown.keys() == expected.keys()
+    for name, values in expected.items():
+        np.testing.assert_array_equal(shown[name], values, err_msg=name)
+
+
+def test_undo_and_redo_of_a_fit_bring_its_loss_curve_with_the_shape(qtbot, window):
+    with qtbot.waitSignal(window.files_loaded, timeout=20000):
+        window.open_demo()
+    _fit(qtbot, window)
+    curves = _curves(window)
+    assert len(curves["total"]) > 1  # the premise: the fit drew a curve
+    window.undo_action.trigger()  # no fitted shape: no curve of a fit that made it
+    assert _curves(window) == {}
+    window.redo_action.trigger()
+    _assert_same_curves(_curves(window), curves)
+    _measured(qtbot, window)
+    window.reset_fit()  # Reset clears the plot; its Undo brings the curve back
+    assert _curves(window) == {}
+    window.undo_action.trigger()
+    _assert_same_curves(_curves(window), curves)
+    _measured(qtbot, window)
+
