@@ -154,6 +154,7 @@ class HistoryHost(Reporter, Protocol):
     controller: FitController
     patch_controller: PatchController
     loss_plot: LossPlot
+    status_labels: dict[str, QLabel]
 
     def rebuild_tree(self) -> None: ...
     def reset_patch_network(self) -> None: ...

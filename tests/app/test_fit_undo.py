@@ -239,3 +239,42 @@ def test_undo_and_redo_of_a_fit_bring_its_loss_curve_with_the_shape(qtbot, windo
     _assert_same_curves(_curves(window), curves)
     _measured(qtbot, window)
 
+
+def test_redo_of_a_network_shows_its_numbers_and_curve_and_claims_no_new_fit(qtbot, window,
+                                                                          tmp_path):
+    from app.workers.patch_worker import RMS_TERM
+    from nurbs_core import samples
+
+    document, labels = window.document, window.status_labels
+    path = tmp_path / "sphere.xyz"
+    np.savetxt(path, samples.sphere(1500).points, fmt="%.8f")
+    open_by_drop(qtbot, window, [path])
+    _fit(qtbot, window, window.patch_controller)
+    shown = {name: labels[name].text() for name in ("iteration", "loss", "rate", "remaining")}
+    assert shown["loss"].startswith("RMS ") and shown["loss"] != "RMS -"
+    assert shown["rate"].startswith("seam p99 ")
+    log = window.log_panel.toPlainText()
+    assert log.count("Patch network fitted") == 1
+    curves = _curves(window)
+    assert len(curves[RMS_TERM]) > 1
+
+    window.undo_action.trigger()  # back to one patch: nothing of the network shown
+    assert document.network is None
+    assert all(labels[name].text() == "-" for name in shown)
+    assert RMS_TERM not in _curves(window)
+    window.redo_action.trigger()  # the network as its fit left it: its numbers, its curve
+    assert document.network is not None
+    assert {name: labels[name].text() for name in shown} == shown
+    _assert_same_curves(_curves(window), curves)
+    # shown again, not fitted again: the log has no second "fitted" line (nor its warnings)
+    assert window.log_panel.toPlainText() == log
+
+    # a second network fit (Patches mode): its Undo shows the first network's curve again
+    _fit(qtbot, window, window.patch_controller)
+    second = _curves(window)
+    window.undo_action.trigger()
+    _assert_same_curves(_curves(window), curves)
+    assert {name: labels[name].text() for name in shown} == shown
+    window.redo_action.trigger()
+    _assert_same_curves(_curves(window), second)
+    qtbot.waitUntil(lambda: window.jobs.active_count() == 0, timeout=30000)
