@@ -27,8 +27,8 @@ import gc
 import importlib.util
 import logging
 
-from PySide6.QtCore import QSettings, Qt, Signal, Slot
-from PySide6.QtGui import QAction, QActionGroup, QIcon, QKeySequence
+from PySide6.QtCore import QSettings, QSize, Qt, Signal, Slot
+from PySide6.QtGui import QAction, QActionGroup, QGuiApplication, QIcon, QKeySequence
 from PySide6.QtWidgets import (
     QAbstractButton,
     QApplication,
@@ -92,6 +92,22 @@ def freeze_long_lived_objects():
     gc.freeze()
 
 
+#: the window's size on a first start, on screens that hold it
+DEFAULT_SIZE = (1400, 900)
+
+
+def initial_size() -> QSize:
+    """:data:`DEFAULT_SIZE` within the primary screen's available area: on a 1280 x 800 screen
+    the window opened 1400 x 900 and the bottom docks (Patch quality, Deviation), their tabs and
+    the status bar were off the screen."""
+    width, height = DEFAULT_SIZE
+    screen = QGuiApplication.primaryScreen()
+    if screen is not None:
+        available = screen.availableGeometry()
+        width, height = min(width, available.width()), min(height, available.height())
+    return QSize(width, height)
+
+
 def _shortcut_rows(menu) -> list[tuple[str, str]]:
     """(what, keys) of the actions with a shortcut in a menu and its submenus."""
     rows: list[tuple[str, str]] = []
@@ -127,7 +143,7 @@ class MainWindow(QMainWindow):
         self.setWindowTitle("NURBS Studio")
         if ICON_FILE.is_file():
             self.setWindowIcon(QIcon(str(ICON_FILE)))
-        self.resize(1400, 900)
+        self.resize(initial_size())
         self.setAcceptDrops(True)
         # long messages end in "..." before the permanent labels, whole in the tooltip
         self.setStatusBar(MessageStatusBar(self))

@@ -278,3 +278,40 @@ def test_redo_of_a_network_shows_its_numbers_and_curve_and_claims_no_new_fit(qtb
     window.redo_action.trigger()
     _assert_same_curves(_curves(window), second)
     qtbot.waitUntil(lambda: window.jobs.active_count() == 0, timeout=30000)
+
+
+def test_the_window_opens_within_the_screen_and_the_patch_quality_dock_scrolls(qtbot, window,
+                                                                             tmp_path):
+    from PySide6.QtCore import QSettings
+
+    from app.main_window import MainWindow
+    from nurbs_core import samples
+
+    # a first start on a screen smaller than 1400 x 900 (the tests' is 1280 x 1024): the window
+    # opens within it, so its bottom docks and the status bar are on the screen
+    store = QSettings(str(tmp_path / "fresh.ini"), QSettings.Format.IniFormat)
+    fresh = MainWindow(settings_store=store)
+    qtbot.addWidget(fresh)
+    available = QApplication.primaryScreen().availableGeometry()
+    assert fresh.width() <= available.width() and fresh.height() <= available.height()
+    fresh.close()
+
+    # at 1280 x 800, a network's Patch quality dock reads whole: scrolled, not cut
+    window.resize(1280, 800)
+    qtbot.waitUntil(lambda: window.width() == 1280 and window.height() == 800)
+    path = tmp_path / "sphere.xyz"
+    np.savetxt(path, samples.sphere(1500).points, fmt="%.8f")
+    open_by_drop(qtbot, window, [path])
+    window.document.set_units("mm")
+    _fit(qtbot, window, window.patch_controller)
+    QApplication.processEvents()
+    area = window.network_quality_dock.widget()
+    panel = area.widget()
+    assert window.network_quality_dock.isVisible() and panel.values["scan"].text() != "-"
+    needed = panel.heightForWidth(area.viewport().width())
+    assert panel.height() >= needed  # the rows are not squeezed
+    assert area.verticalScrollBar().isVisible() == (needed > area.viewport().height())
+    assert not area.horizontalScrollBar().isVisible()
+    for label in [*panel.values.values(), panel.warnings]:  # every row within what scrolls
+        assert label.geometry().bottom() < panel.height()
+    qtbot.waitUntil(lambda: window.jobs.active_count() == 0, timeout=30000)
