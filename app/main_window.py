@@ -27,8 +27,8 @@ import gc
 import importlib.util
 import logging
 
-from PySide6.QtCore import QSettings, Qt, Signal, Slot
-from PySide6.QtGui import QAction, QActionGroup, QIcon, QKeySequence
+from PySide6.QtCore import QSettings, QSize, Qt, Signal, Slot
+from PySide6.QtGui import QAction, QActionGroup, QGuiApplication, QIcon, QKeySequence
 from PySide6.QtWidgets import (
     QAbstractButton,
     QApplication,
@@ -92,6 +92,22 @@ def freeze_long_lived_objects():
     gc.freeze()
 
 
+#: the window's size on a first start, on screens that hold it
+DEFAULT_SIZE = (1400, 900)
+
+
+def initial_size() -> QSize:
+    """:data:`DEFAULT_SIZE` within the primary screen's available area: on a 1280 x 800 screen
+    the window opened 1400 x 900 and the bottom docks (Patch quality, Deviation), their tabs and
+    the status bar were off the screen."""
+    width, height = DEFAULT_SIZE
+    screen = QGuiApplication.primaryScreen()
+    if screen is not None:
+        available = screen.availableGeometry()
+        width, height = min(width, available.width()), min(height, available.height())
+    return QSize(width, height)
+
+
 def _shortcut_rows(menu) -> list[tuple[str, str]]:
     """(what, keys) of the actions with a shortcut in a menu and its submenus."""
     rows: list[tuple[str, str]] = []
@@ -127,7 +143,7 @@ class MainWindow(QMainWindow):
         self.setWindowTitle("NURBS Studio")
         if ICON_FILE.is_file():
             self.setWindowIcon(QIcon(str(ICON_FILE)))
-        self.resize(1400, 900)
+        self.resize(initial_size())
         self.setAcceptDrops(True)
         # long messages end in "..." before the permanent labels, whole in the tooltip
         self.setStatusBar(MessageStatusBar(self))
@@ -161,6 +177,7 @@ class MainWindow(QMainWindow):
         self.setCentralWidget(self._native_container(self.scene.widget))
 
         self._build_docks()
+        self.document.loss_history_source = self.loss_plot.history
         self.offsets = OffsetController(self.document, self.jobs, self.scene, self.offset_panel,
                                         self.report, self)
         self.offsets.offsets_updated.connect(self.offsets_updated)
@@ -725,8 +742,11 @@ class MainWindow(QMainWindow):
                 "clears the selection: Start then fits every point)", 8000)
         if self.active_controller() is self.patch_controller:
             self.network_quality_dock.raise_()
-            self.loss_plot.clear()  # a network starts from the cloud: a new curve
-            return self.patch_controller.start()
+            # (its step keeps the curve shown before it: cleared once the run has begun)
+            started = self.patch_controller.start()
+            if started:
+                self.loss_plot.clear()  # a network starts from the cloud: a new curve
+            return started
         return self.controller.start()
 
     def fit_as_patches(self) -> bool:

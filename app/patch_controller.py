@@ -47,21 +47,25 @@ class PatchController(LiveController):
         self._document.set_network(None)
 
     def network_report(self) -> dict | None:
-        """What a session keeps of the fit that made the network shown: its quality, warnings,
-        pass count, time, how it ended and the per-point ``deviation`` (N,); None when the
-        network shown is not a finished fit's."""
+        """What a session (and an undo step) keeps of the fit that made the network shown: its
+        quality, warnings, pass count, time, its last pass's RMS distance and seam angle, how it
+        ended and the per-point ``deviation`` (N,); None when the network shown is not a
+        finished fit's."""
         shown = self.latest_shown
         if (shown is None or not shown.done or shown.network is None
                 or shown.network is not self._document.network):
             return None
         return {"event": shown.event, "quality": _json_ready(shown.quality),
                 "warnings": list(shown.warnings), "passes": shown.pass_index + 1,
-                "elapsed": shown.elapsed, "deviation": shown.deviation}
+                "elapsed": shown.elapsed, "rms": _json_ready(shown.rms),
+                "seam": _json_ready(shown.seam), "deviation": shown.deviation}
 
-    def show_saved(self, network, report: dict | None) -> None:
+    def show_saved(self, network, report: dict | None, restored: bool = False) -> None:
         """Show a network read from a session as a finished fit: the viewport, the Patch
-        quality dock (its stored report, checked: a malformed one is left out) and the
-        deviation map (when it has one value per point), through the signals a run ends with."""
+        quality dock and the status bar's RMS and seam angle (its stored report, checked: a
+        malformed one is left out) and the deviation map (when it has one value per point),
+        through the signals a run ends with. ``restored``: shown again, not fitted now (an undo
+        or redo, a session): the snapshot says so and the log gets no "fitted" line."""
         from app.workers.network_display import network_display
 
         report = report or {}
@@ -74,13 +78,18 @@ class PatchController(LiveController):
         if deviation is not None and (points is None or len(deviation) != len(points)):
             deviation = None
         passes, elapsed = report.get("passes", 0), report.get("elapsed", 0.0)
+        rms = _number_or_nan(report.get("rms"))
+        if math.isnan(rms) and quality is not None:  # a session from before the RMS was kept
+            rms = _number_or_nan(quality.get("c2s_rms"))
         snapshot = PatchSnapshot(
             run_id=self._run_id, event="stopped" if report.get("event") == "stopped" else "done",
             display=network_display(network), stage="final", network=network,
             pass_index=(passes if isinstance(passes, int) else 0) - 1, size=network.size,
             patch_count=network.patch_count,
             elapsed=float(elapsed) if isinstance(elapsed, (int, float)) else 0.0,
-            quality=quality, warnings=warnings, done=True, deviation=deviation)
+            rms=rms, seam=_number_or_nan(report.get("seam")),
+            quality=quality, warnings=warnings, done=True, deviation=deviation,
+            restored=restored)
         self.latest_shown = snapshot
         self._document.set_network(network)
         self.snapshot_shown.emit(snapshot)
@@ -96,6 +105,13 @@ def _json_ready(value):
     if isinstance(value, float) and math.isnan(value):
         return None
     return value
+
+
+def _number_or_nan(value) -> float:
+    """A stored number (a float, or None for NaN) as a float; NaN when it is not one."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return math.nan
+    return float(value)
 
 
 def _quality_of(value) -> dict | None:

@@ -90,6 +90,12 @@ class PatchView(QObject):
             headline += f": {reported_status('converged', snapshot.warnings)}"
         self._panel.show_result(headline[0].upper() + headline[1:], snapshot.quality,
                                 snapshot.warnings)
+        if snapshot.quality:
+            seam = snapshot.quality["seam"]
+            self._labels["rate"].setText(f"seam p99 {seam['p99']:.2f}\N{DEGREE SIGN}, max "
+                                         f"{seam['max']:.2f}\N{DEGREE SIGN}")
+        if snapshot.restored:
+            return  # shown again, not fitted now: its fit was told when it ended
         text = f"Patch network {what}: {snapshot.patch_count} patches, {snapshot.size}x" \
                f"{snapshot.size} control points each"
         if snapshot.quality:
@@ -97,8 +103,6 @@ class PatchView(QObject):
             unit = f" {self._panel.units}" if self._panel.units else ""
             text += (f"; seam angle p99 {seam['p99']:.2f}\N{DEGREE SIGN}, cloud to surface mean "
                      f"{snapshot.quality['c2s_mean']:.4g}{unit}")
-            self._labels["rate"].setText(f"seam p99 {seam['p99']:.2f}\N{DEGREE SIGN}, max "
-                                         f"{seam['max']:.2f}\N{DEGREE SIGN}")
         self._report(text)
         for warning in snapshot.warnings:
             log.warning("patch network: %s", warning)

@@ -195,9 +195,12 @@ def main(argv: list[str] | None = None) -> int:
 
     def quality_folded():
         window.reset_fit()  # a fresh start: Start would otherwise continue from the clean fit
-        window.document.edit_settings("Parameterisation", parameterization="plane")
+        # one patch forced: the automatic route would go on with a network of the folded cloud
+        window.document.edit_settings("Parameterisation", parameterization="plane",
+                                      single_patch=True)
         once(window.controller.fit_finished, lambda snapshot: later(lambda: (
-            show_quality(), shot("07_quality_folded.png"), next_step())))
+            show_quality(), shot("07_quality_folded.png"),
+            window.document.edit_settings("One patch", single_patch=False), next_step())))
         window.controller.start()
 
     def show_quality():

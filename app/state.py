@@ -240,12 +240,27 @@ def spread_over_cloud(values: np.ndarray, selection: np.ndarray | None) -> np.nd
     return spread
 
 
+@dataclass(frozen=True, eq=False)
+class LossHistory:
+    """The loss plot's curves as they stood (:meth:`app.panels.loss_plot.LossPlot.history`):
+    ``iterations`` (n,) the x positions, ``values`` one (n,) series per term and the total (NaN
+    where a row had no value). Kept with the shapes of an undo step, so that Undo and Redo show
+    the curve of the fit that made the shape shown. 16 bytes a row per term."""
+
+    iterations: np.ndarray
+    values: Mapping[str, np.ndarray]
+
+    def __len__(self) -> int:
+        return len(self.iterations)
+
+
 @dataclass(frozen=True)
 class ShapeState:
     """The document's fitted shapes as an undo step keeps them: the fitted patch (or curve) with
     its account, and the patch network with what a session keeps of its fit (its report:
-    ``PatchController.network_report``). No points: a step holds the shapes' arrays (9.6 kB for
-    the demo's 17 x 17 patch, 21 kB for the 22-patch network of a sphere) and the network
+    ``PatchController.network_report``), and the loss plot's curves of the fits that made them
+    (``loss_history``; None: an empty plot). No points: a step holds the shapes' arrays (9.6 kB
+    for the demo's 17 x 17 patch, 21 kB for the 22-patch network of a sphere) and the network
     report, whose deviation has one value per point (8 bytes each, shared with the fit that
     made it, not copied)."""
 
@@ -253,6 +268,7 @@ class ShapeState:
     fitted_account: FitAccount | None = None
     network: Any = None
     network_report: dict[str, Any] | None = None
+    loss_history: LossHistory | None = None
 
     def same_shapes(self, other: ShapeState) -> bool:
         """Whether ``other`` holds these very shapes (a fit that changed nothing: no step)."""
@@ -415,6 +431,10 @@ class Document(QObject):
         self.network_report_source: Callable[[], dict[str, Any] | None] = lambda: None
         #: the report of the network an undo / redo just restored
         self.restored_network_report: dict[str, Any] | None = None
+        #: the loss plot's curves now (the window's loss plot answers): kept with each step
+        self.loss_history_source: Callable[[], LossHistory | None] = lambda: None
+        #: the curves of the shapes an undo / redo just restored (None: an empty plot)
+        self.restored_loss_history: LossHistory | None = None
         #: the switch to Patches mode waiting for its network fit (begin_fit_as_patches)
         self._pending_switch: _ShapesCommand | None = None
 
@@ -455,7 +475,8 @@ class Document(QObject):
     # --- fitted shapes (undoable) -------------------------------------------------------------
     def shape_state(self) -> ShapeState:
         """The fitted shapes now (what a fit's or Reset's step restores)."""
-        return ShapeState(self.fitted, self.fitted_account, self.network, self.report_network())
+        return ShapeState(self.fitted, self.fitted_account, self.network, self.report_network(),
+                          self.loss_history_source())
 
     def record_shapes(self, before: ShapeState, text: str, network_fit: bool = False) -> bool:
         """Push the change of the shapes since ``before`` (a fit has ended, Reset) as one
@@ -495,6 +516,7 @@ class Document(QObject):
         network_changed = state.network is not self.network
         self.fitted, self.fitted_account = state.fitted, state.fitted_account
         self.network, self.restored_network_report = state.network, state.network_report
+        self.restored_loss_history = state.loss_history
         self.shapes_restored.emit(fitted_changed, network_changed)
         if fitted_changed:
             self.fitted_changed.emit()
@@ -614,6 +636,7 @@ class Document(QObject):
         network_changed = shapes.network is not self.network
         self.fitted, self.fitted_account = shapes.fitted, shapes.fitted_account
         self.network, self.restored_network_report = shapes.network, shapes.network_report
+        self.restored_loss_history = shapes.loss_history
         self.points_changed.emit()
         self.selection_changed.emit()
         self.shapes_restored.emit(True, network_changed)

@@ -1,4 +1,6 @@
-"""The loss plot: one curve per term and the total, log scale, x = iterations in this session."""
+"""The loss plot: one curve per term and the total, log scale, x = iterations of the fits that
+made the shape shown (an Undo or Redo of a fit shows the curves kept with its step:
+:class:`app.state.LossHistory`)."""
 
 from __future__ import annotations
 
@@ -6,6 +8,8 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QVBoxLayout, QWidget
+
+from app.state import LossHistory
 
 PALETTE = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#17becf",
            "#e377c2"]
@@ -101,6 +105,27 @@ class LossPlot(QWidget):
 
     def live_timers(self) -> int:
         return int(self._redraw_timer.isActive())
+
+    def history(self) -> LossHistory | None:
+        """The curves as they stand (rows not yet drawn included); None: the plot is empty."""
+        if not self._x:
+            return None
+        return LossHistory(np.asarray(self._x, np.float64),
+                           {name: np.asarray(values, np.float64)
+                            for name, values in self._values.items()})
+
+    def show_history(self, history: LossHistory | None):
+        """Show ``history`` instead of the curves now (None: an empty plot); the next rows
+        continue its x axis."""
+        self.clear()
+        if history is None or not len(history):
+            return
+        self._x = [float(x) for x in history.iterations]
+        self._values = {name: [float(v) for v in values]
+                        for name, values in history.values.items()}
+        # the next run's first row (iteration 0) continues after the last x
+        self._offset, self._last_iteration = 0, int(self._x[-1])
+        self.flush()
 
     def series(self, name: str) -> np.ndarray:
         return np.asarray(self._values.get(name, []), dtype=np.float64)

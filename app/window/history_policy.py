@@ -5,9 +5,12 @@ point edit left; :class:`app.state.ShapeState`); an undo or redo of one puts the
 document and this policy makes the window follow. It decides: a fit under way stops when the
 shape it is fitting is replaced (its result is dropped, as Reset drops it), and says so; the
 restored patch network is shown as a finished fit, with its stored report (or the network's
-drawing cleared when there was none); the fitted patch is measured and drawn again by the fit
-display (``Document.fitted_changed``). What a point edit changes besides (the cloud) is the
-selection policy's.
+drawing cleared when there was none), with the RMS and seam numbers of its fit in the status
+bar and without a new "fitted" line in the log (nothing was fitted); the fitted patch is measured
+and drawn again by the fit display (``Document.fitted_changed``), the status bar's numbers of the
+fit that no longer shows are cleared; the loss plot shows the curves kept with the shapes put
+back (those of the fits that made them; an empty plot when none did). What a point edit changes
+besides (the cloud) is the selection policy's.
 """
 
 from __future__ import annotations
@@ -40,10 +43,16 @@ class HistoryPolicy(QObject):
             window.patch_controller.abandon()
             stopped.append("the patch fit")
         shown = window.patch_controller.latest_shown
+        network_shown = False
         if network is None and shown is not None:
             window.reset_patch_network()
         elif network is not None and (shown is None or shown.network is not network):
-            window.patch_controller.show_saved(network, report)
+            window.patch_controller.show_saved(network, report, restored=True)
+            network_shown = True
+        if (fitted_changed or network_changed) and not network_shown:
+            for name in ("iteration", "loss", "rate", "remaining"):  # a run's, no longer shown
+                window.status_labels[name].setText("-")
+        window.loss_plot.show_history(document.restored_loss_history)
         window.rebuild_tree()
         if stopped:
             window.report(f"An earlier shape is back: {' and '.join(stopped)} under way "

@@ -153,6 +153,8 @@ class HistoryHost(Reporter, Protocol):
     document: Document
     controller: FitController
     patch_controller: PatchController
+    loss_plot: LossPlot
+    status_labels: dict[str, QLabel]
 
     def rebuild_tree(self) -> None: ...
     def reset_patch_network(self) -> None: ...

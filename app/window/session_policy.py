@@ -79,6 +79,7 @@ class SessionPolicy(QObject):
         window.loss_plot.clear()
         window.document.apply_session(session)
         if session["network"] is not None:
-            window.patch_controller.show_saved(session["network"], session["network_report"])
+            window.patch_controller.show_saved(session["network"], session["network_report"],
+                                               restored=True)
         window.report(f"Session opened from {path}")
         return True

@@ -77,6 +77,8 @@ class PatchSnapshot:
     #: the run fitted this many selected points (None: every visible point); per-point values
     #: (deviation, signed) are then spread over the whole cloud by the controller, NaN elsewhere
     selected: int | None = None
+    #: a finished network shown again (an undo or redo, a session), not a fit that just ended
+    restored: bool = False
 
 
 def network_signed_map(network, display: NetworkDisplay, points: np.ndarray,

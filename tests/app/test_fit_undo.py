@@ -208,3 +208,110 @@ def test_the_quality_dock_and_the_toolbar_read_fully_at_1280_x_800(qtbot, window
     window.fit_panel.term_checks["hausdorff"].setChecked(True)
     assert button.text() == "Undo" and button.toolTip() == "Undo Loss"
     assert window.undo_action.text() == "&Undo Loss"
+
+
+def _curves(window) -> dict[str, np.ndarray]:
+    """The loss plot's curves: {term: values}, with "x" their iterations; {} when empty."""
+    history = window.loss_plot.history()
+    return {} if history is None else {"x": history.iterations, **history.values}
+
+
+def _assert_same_curves(shown: dict, expected: dict):
+    assert shown.keys() == expected.keys()
+    for name, values in expected.items():
+        np.testing.assert_array_equal(shown[name], values, err_msg=name)
+
+
+def test_undo_and_redo_of_a_fit_bring_its_loss_curve_with_the_shape(qtbot, window):
+    with qtbot.waitSignal(window.files_loaded, timeout=20000):
+        window.open_demo()
+    _fit(qtbot, window)
+    curves = _curves(window)
+    assert len(curves["total"]) > 1  # the premise: the fit drew a curve
+    window.undo_action.trigger()  # no fitted shape: no curve of a fit that made it
+    assert _curves(window) == {}
+    window.redo_action.trigger()
+    _assert_same_curves(_curves(window), curves)
+    _measured(qtbot, window)
+    window.reset_fit()  # Reset clears the plot; its Undo brings the curve back
+    assert _curves(window) == {}
+    window.undo_action.trigger()
+    _assert_same_curves(_curves(window), curves)
+    _measured(qtbot, window)
+
+
+def test_redo_of_a_network_shows_its_numbers_and_curve_and_claims_no_new_fit(qtbot, window,
+                                                                          tmp_path):
+    from app.workers.patch_worker import RMS_TERM
+    from nurbs_core import samples
+
+    document, labels = window.document, window.status_labels
+    path = tmp_path / "sphere.xyz"
+    np.savetxt(path, samples.sphere(1500).points, fmt="%.8f")
+    open_by_drop(qtbot, window, [path])
+    _fit(qtbot, window, window.patch_controller)
+    shown = {name: labels[name].text() for name in ("iteration", "loss", "rate", "remaining")}
+    assert shown["loss"].startswith("RMS ") and shown["loss"] != "RMS -"
+    assert shown["rate"].startswith("seam p99 ")
+    log = window.log_panel.toPlainText()
+    assert log.count("Patch network fitted") == 1
+    curves = _curves(window)
+    assert len(curves[RMS_TERM]) > 1
+
+    window.undo_action.trigger()  # back to one patch: nothing of the network shown
+    assert document.network is None
+    assert all(labels[name].text() == "-" for name in shown)
+    assert RMS_TERM not in _curves(window)
+    window.redo_action.trigger()  # the network as its fit left it: its numbers, its curve
+    assert document.network is not None
+    assert {name: labels[name].text() for name in shown} == shown
+    _assert_same_curves(_curves(window), curves)
+    # shown again, not fitted again: the log has no second "fitted" line (nor its warnings)
+    assert window.log_panel.toPlainText() == log
+
+    # a second network fit (Patches mode): its Undo shows the first network's curve again
+    _fit(qtbot, window, window.patch_controller)
+    second = _curves(window)
+    window.undo_action.trigger()
+    _assert_same_curves(_curves(window), curves)
+    assert {name: labels[name].text() for name in shown} == shown
+    window.redo_action.trigger()
+    _assert_same_curves(_curves(window), second)
+    qtbot.waitUntil(lambda: window.jobs.active_count() == 0, timeout=30000)
+
+
+def test_the_window_opens_within_the_screen_and_the_patch_quality_dock_scrolls(qtbot, window,
+                                                                             tmp_path):
+    from PySide6.QtCore import QSettings
+
+    from app.main_window import MainWindow
+    from nurbs_core import samples
+
+    # a first start on a screen smaller than 1400 x 900 (the tests' is 1280 x 1024): the window
+    # opens within it, so its bottom docks and the status bar are on the screen
+    store = QSettings(str(tmp_path / "fresh.ini"), QSettings.Format.IniFormat)
+    fresh = MainWindow(settings_store=store)
+    qtbot.addWidget(fresh)
+    available = QApplication.primaryScreen().availableGeometry()
+    assert fresh.width() <= available.width() and fresh.height() <= available.height()
+    fresh.close()
+
+    # at 1280 x 800, a network's Patch quality dock reads whole: scrolled, not cut
+    window.resize(1280, 800)
+    qtbot.waitUntil(lambda: window.width() == 1280 and window.height() == 800)
+    path = tmp_path / "sphere.xyz"
+    np.savetxt(path, samples.sphere(1500).points, fmt="%.8f")
+    open_by_drop(qtbot, window, [path])
+    window.document.set_units("mm")
+    _fit(qtbot, window, window.patch_controller)
+    QApplication.processEvents()
+    area = window.network_quality_dock.widget()
+    panel = area.widget()
+    assert window.network_quality_dock.isVisible() and panel.values["scan"].text() != "-"
+    needed = panel.heightForWidth(area.viewport().width())
+    assert panel.height() >= needed  # the rows are not squeezed
+    assert area.verticalScrollBar().isVisible() == (needed > area.viewport().height())
+    assert not area.horizontalScrollBar().isVisible()
+    for label in [*panel.values.values(), panel.warnings]:  # every row within what scrolls
+        assert label.geometry().bottom() < panel.height()
+    qtbot.waitUntil(lambda: window.jobs.active_count() == 0, timeout=30000)
