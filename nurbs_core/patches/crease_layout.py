@@ -41,6 +41,14 @@ def layout_edges(quads: np.ndarray) -> np.ndarray:
     return np.unique(np.sort(pairs, axis=1), axis=0)
 
 
+def shared_edges(quads: np.ndarray) -> np.ndarray:
+    """(E, 2) the edges of the layout ``quads`` (P, 4) that two quads share, lower vertex first
+    (a crease seam lies between two patches; an open layout's border edges are no seams)."""
+    pairs = np.sort(np.stack([quads, np.roll(quads, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1)
+    edges, uses = np.unique(pairs, axis=0, return_counts=True)
+    return edges[uses == 2]
+
+
 def snap_to_creases(layout: QuadLayout, creases: Creases) -> QuadLayout:
     """The layout with its vertices near creases moved onto them and its crease edges
     (``creases`` of the result); only the ends of crease edges keep their moves. The layout
@@ -144,13 +152,13 @@ def _nearest_to_lines(start: np.ndarray, points: np.ndarray, directions: np.ndar
 
 
 def crease_edges(layout: QuadLayout, creases: Creases) -> set[tuple[int, int]]:
-    """The layout's edges (lower, higher) that lie on a crease: every sample of its middle half
+    """The layout's shared edges (lower, higher) that lie on a crease: every sample of its middle half
     within
     ``EDGE_REACH`` d (and ``EDGE_SHARE`` of the edge's length) of a crease point whose
     direction is within ``EDGE_TURN`` degrees of the edge's."""
     if not len(creases):
         return set()
-    edges = layout_edges(layout.quads)
+    edges = shared_edges(layout.quads)
     a, b = layout.vertices[edges[:, 0]], layout.vertices[edges[:, 1]]
     length = np.linalg.norm(b - a, axis=1)
     direction = (b - a) / np.maximum(length, 1e-300)[:, None]

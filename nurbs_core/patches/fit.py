@@ -82,12 +82,6 @@ POLISH_PATIENCE = 2
 #: The polish ends on its pass with the lowest seam p99 rather than its last when that pass's
 #: RMS distance is within this factor of the last's.
 POLISH_KEEP = 1.02
-#: Seam weight factors tried in turn after the polish while the seams' 99th percentile is above
-#: ``WARN_SEAM``, ``BOOST_PASSES`` passes each; a factor's result is kept when its seams are
-#: straighter and its RMS distance within ``BOOST_RMS`` of the polished fit's.
-SEAM_BOOSTS = (4.0, 16.0)
-BOOST_PASSES = 4
-BOOST_RMS = 1.05
 #: Control points per patch side tried in turn (the grid grows while Cp falls).
 SIZES = (4, 5, 6, 8, 10, 12, 14, 16)
 #: The first size tried (a smaller one only when the cloud is too sparse for it).
@@ -259,31 +253,6 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
     # need not be the best: the straightest seams win when their fit is as close
     if smoothest[-1] <= POLISH_KEEP * rms and network_p99 > lowest / POLISH_GAIN:
         network, patch, uv, dist, rms = smoothest
-        network_p99 = lowest
-    # seams still above the report's limit once the polish stalls (the noisy bunny's ears: p99
-    # 3.1 degrees): the tangent rows weigh more, as long as the fit stays as close
-    settled_rms = rms
-    for boost in SEAM_BOOSTS:
-        if network_p99 <= WARN_SEAM:
-            break
-        solver.seam_weight = seam_weight * boost
-        trial = (network, patch, uv, dist, rms)
-        for _ in range(BOOST_PASSES):
-            trial_network, measured = solver.solve(trial[0], trial[1], trial[2], q,
-                                                   huber_weights(trial[3], _spread(trial[3], sigma)))
-            trial_patch, trial_uv, trial_dist = _reassign(trial_network, q, trial[1], trial[2])
-            trial = (trial_network, trial_patch, trial_uv, trial_dist,
-                     float(np.sqrt(np.mean(trial_dist ** 2))))
-            yield NetworkPass(count, "polish", frame.outward(trial_network), trial_patch,
-                              trial_uv * 1.0, trial_dist * frame.scale, trial[4] * frame.scale,
-                              float(trial_dist.mean()) * frame.scale, measured, network.size)
-            count += 1
-        trial_p99 = seam_p99(trial[0])
-        if trial_p99 >= network_p99 or trial[4] > BOOST_RMS * settled_rms:
-            break
-        network, patch, uv, dist, rms = trial
-        network_p99 = trial_p99
-    solver.seam_weight = seam_weight
     rss = huber_loss(dist, sigma)
     cp = rss + CP_PENALTY * sigma ** 2 * len(network.control_points)
     message = None

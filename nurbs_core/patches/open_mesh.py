@@ -14,10 +14,7 @@ An open shell's wrap encloses nothing (:mod:`nurbs_core.reconstruct.wrap`), so n
   in the band of voxels the points block (each point's ball as wide as its neighbourhood, as in
   the wrap) and blurred inside that band;
 * marching cubes (scikit-image) of its zero set, masked by the band: the surface ends where the
-  band ends, about one point spacing beyond the scan's border. Where a thin part's two sides lie
-  closer than a cell (an ear's tip), the zero set passes the points by; the mesh is then made
-  again on the closed mesh's finer fin grids and the one with the fewest handles that keeps the
-  points closest is taken.
+  band ends, about one point spacing beyond the scan's border.
 
 Then the mesh is made a clean 2-manifold for a layout: the largest piece, the faces at a vertex
 where two fans touch removed, holes narrower than ``max_hole`` (and pin-holes) capped
@@ -38,7 +35,6 @@ import scipy.sparse.csgraph
 from scipy.spatial import cKDTree
 
 from nurbs_core.patches.closed_mesh import (
-    FIN_CELLS_PER_DIAGONAL,
     MAX_HOLE,
     SMOOTHING,
     WRAP_POINTS,
@@ -64,11 +60,6 @@ HANDLE_BLURS = (1.0, 1.5, 2.0)
 #: ... as long as this share of the points stays within HANDLE_REACH cells of the zero set.
 HANDLE_COVER = 0.97
 HANDLE_REACH = 2.0
-#: A zero set that passes points by more than MISSED cells (a thin part's tip, its two sides
-#: closer than a cell: the bunny's ears, 4.7 cells on the default grid) is made again on the
-#: closed mesh's finer fin grids; the open sheets, shells and tubes of the benches keep every
-#: point within 0.9 cells.
-MISSED = 1.5
 #: Weight, in the orientation's spanning tree, of an edge's run along the normals (|n . d| for
 #: its unit direction d, averaged over its two ends) beside Hoppe's ``1 - |n_i . n_j|``. On
 #: the bunny's head and ears (4,500 points, noise 0.2% of the diagonal) the share of points
@@ -98,19 +89,29 @@ def open_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
     frames = local_frames(points, NORMAL_NEIGHBOURS, tree)
     normals = propagated_normals(points, frames.normals, frames.neighbours)
     grid = _grid(points)
-    best = _bounded_zero_set(points, normals, tree, grid)
-    cell = grid.cell
-    if _missed_cells(best[1], points, grid.cell) > MISSED:
-        # a thin part (an ear's tip) the zero set passed by, its two sides closer than the
-        # default grid's cells: finer grids keep it, unless they punch handles through it
-        for cells in FIN_CELLS_PER_DIAGONAL:
-            finer = _grid(points, cells=cells)
-            if finer.cell >= 0.8 * cell:
-                continue  # no finer than the last (the cloud's spacing bounds the cells)
-            cell = finer.cell
-            candidate = _bounded_zero_set(points, normals, tree, finer)
-            if _rank(candidate, points) < _rank(best, points):
-                best, grid = candidate, finer
+    radii = point_radii(points, grid.cell, tree)
+    blocked = blocked_voxels(points, radii, grid)
+    band = scipy.ndimage.binary_dilation(blocked, iterations=BAND_GROWTH)
+    distance = np.zeros(grid.shape)
+    distance[band] = tangent_plane_distance(grid.centres()[band.ravel()], points, normals, tree,
+                                            grid.cell)
+    mask = scipy.ndimage.binary_dilation(blocked, iterations=MASK_GROWTH)
+    # noise across a thin part (an ear) punches tunnels through the zero set: handles an open
+    # scan does not have, which no quad layout reproduces; a wider blur closes them
+    best = None
+    for blur in HANDLE_BLURS:
+        vertices, faces, pieces = _zero_set(distance, band, mask, grid, SMOOTHING * blur)
+        handles = genus(faces)
+        if best is not None:
+            # a blur that closes the tunnels but shrinks the surface off the points (the ears'
+            # tips) is not taken
+            near = cKDTree(vertices).query(points)[0] <= HANDLE_REACH * grid.cell
+            if handles >= best[0] or near.mean() < HANDLE_COVER:
+                continue
+        best = (handles, vertices, faces, pieces)
+        if handles == 0:
+            break
+    assert best is not None, "HANDLE_BLURS holds at least one blur"
     _, vertices, faces, pieces = best
     # faces turned like the points' normals
     centroid = vertices[faces].mean(axis=1)
@@ -141,49 +142,6 @@ def open_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
     vertices, faces = np.concatenate(new_vertices), np.concatenate(new_faces)
     return ScanMesh(vertices, faces, normals, grid.cell, pieces, filled if filled.any() else None,
                     max_hole, border)
-
-
-def _bounded_zero_set(points: np.ndarray, normals: np.ndarray, tree: cKDTree,
-                      grid: VoxelGrid) -> tuple[int, np.ndarray, np.ndarray, int]:
-    """The band's zero set on ``grid``: (handles, vertices (V, 3), faces (F, 3), pieces), with
-    the first of HANDLE_BLURS that closes the handles and keeps the points near it."""
-    radii = point_radii(points, grid.cell, tree)
-    blocked = blocked_voxels(points, radii, grid)
-    band = scipy.ndimage.binary_dilation(blocked, iterations=BAND_GROWTH)
-    distance = np.zeros(grid.shape)
-    distance[band] = tangent_plane_distance(grid.centres()[band.ravel()], points, normals, tree,
-                                            grid.cell)
-    mask = scipy.ndimage.binary_dilation(blocked, iterations=MASK_GROWTH)
-    # noise across a thin part (an ear) punches tunnels through the zero set: handles an open
-    # scan does not have, which no quad layout reproduces; a wider blur closes them
-    best = None
-    for blur in HANDLE_BLURS:
-        vertices, faces, pieces = _zero_set(distance, band, mask, grid, SMOOTHING * blur)
-        handles = genus(faces)
-        if best is not None:
-            # a blur that closes the tunnels but shrinks the surface off the points (the ears'
-            # tips) is not taken
-            near = cKDTree(vertices).query(points)[0] <= HANDLE_REACH * grid.cell
-            if handles >= best[0] or near.mean() < HANDLE_COVER:
-                continue
-        best = (handles, vertices, faces, pieces)
-        if handles == 0:
-            break
-    assert best is not None, "HANDLE_BLURS holds at least one blur"
-    return best
-
-
-def _missed_cells(vertices: np.ndarray, points: np.ndarray, cell: float) -> float:
-    """How far (in cells) the point farthest from a mesh's ``vertices`` (V, 3) lies."""
-    return float(cKDTree(vertices).query(points)[0].max()) / cell
-
-
-def _rank(candidate: tuple[int, np.ndarray, np.ndarray, int], points: np.ndarray
-          ) -> tuple[int, float]:
-    """How a candidate zero set ranks (smaller is better): its handles first, then the 99.5th
-    percentile of the points' distances to its vertices (a passed-by tip loses points)."""
-    handles, vertices = candidate[0], candidate[1]
-    return handles, float(np.percentile(cKDTree(vertices).query(points)[0], 99.5))
 
 
 def _zero_set(distance: np.ndarray, band: np.ndarray, mask: np.ndarray, grid: VoxelGrid,

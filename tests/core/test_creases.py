@@ -174,3 +174,15 @@ def test_the_command_line_names_the_crease_seams(tmp_path, capsys):
     line = next(x for x in report.splitlines() if x.startswith("seam angle"))
     assert "(tangent-continuous seams)" in line and "crease seams (G0)" in line
     assert "on the scan's creases" in line and "warning" not in report
+
+
+def test_an_open_layouts_border_edges_are_never_crease_seams():
+    # A crease seam lies between two patches; an open layout's border edge has one. A border
+    # edge along a crease was named a crease seam, and building the network then failed with
+    # "creases name edges no two patches share" (an open scan of the bunny's head on a finer
+    # mesh).
+    from nurbs_core.patches.crease_layout import layout_edges, shared_edges
+
+    quads = np.array([[0, 1, 4, 3], [1, 2, 5, 4]])            # a strip of two quads
+    assert [tuple(e) for e in shared_edges(quads)] == [(1, 4)]
+    assert len(layout_edges(quads)) == 7
