@@ -34,23 +34,46 @@ def basis_1d(knots: np.ndarray, degree: int, t: np.ndarray) -> Basis1D:
     return Basis1D(span - degree, values, derivative)
 
 
-def rows(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.ndarray,
-         derivative: str | None = None) -> scipy.sparse.csr_matrix:
-    """(M, K) sparse rows: row k evaluates patch[k] at (u[k], v[k]), or its derivative along
-    ``derivative`` ("u" or "v"), as a combination of the global control points."""
+@dataclass
+class LocalRows:
+    """Rows that each touch one patch's (p + 1) x (p + 1) control points: patch (M,), first
+    (M, 2) the grid index (i, j) of the block's first control point, values (M, p + 1, p + 1)
+    the weights of the block's control points."""
+
+    patch: np.ndarray
+    first: np.ndarray
+    values: np.ndarray
+
+
+def local_rows(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.ndarray,
+               derivative: str | None = None) -> LocalRows:
+    """The rows of :func:`rows` over each row's own patch (its control grid, not the global
+    control points)."""
     knots, p = network.knots, network.degree
     bu, bv = basis_1d(knots, p, u), basis_1d(knots, p, v)
     wu = bu.derivative if derivative == "u" else bu.values
     wv = bv.derivative if derivative == "v" else bv.values
-    offsets = np.arange(p + 1)
-    iu = bu.first[:, None] + offsets            # (M, p + 1)
-    iv = bv.first[:, None] + offsets
-    patch = np.asarray(patch, np.int64)
-    cols = network.index[patch[:, None, None], iu[:, :, None], iv[:, None, :]]   # (M, p+1, p+1)
-    vals = wu[:, :, None] * wv[:, None, :]
-    m = len(patch)
+    return LocalRows(np.asarray(patch, np.int64), np.stack([bu.first, bv.first], -1),
+                     wu[:, :, None] * wv[:, None, :])
+
+
+def rows(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.ndarray,
+         derivative: str | None = None) -> scipy.sparse.csr_matrix:
+    """(M, K) sparse rows: row k evaluates patch[k] at (u[k], v[k]), or its derivative along
+    ``derivative`` ("u" or "v"), as a combination of the global control points."""
+    return global_rows(network, local_rows(network, patch, u, v, derivative))
+
+
+def global_rows(network: PatchNetwork, local: LocalRows) -> scipy.sparse.csr_matrix:
+    """(M, K) sparse rows over the global control points of ``local``'s rows."""
+    n = local.values.shape[1]
+    offsets = np.arange(n)
+    iu = local.first[:, :1] + offsets            # (M, p + 1)
+    iv = local.first[:, 1:] + offsets
+    cols = network.index[local.patch[:, None, None], iu[:, :, None], iv[:, None, :]]  # (M, n, n)
+    m = len(local.patch)
     return scipy.sparse.csr_matrix(
-        (vals.ravel(), (np.repeat(np.arange(m), (p + 1) ** 2), cols.ravel())),
+        (local.values.ravel(), (np.repeat(np.arange(m), n * n), cols.ravel())),
         shape=(m, len(network.control_points)))
 
 
