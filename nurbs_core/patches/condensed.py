@@ -165,6 +165,7 @@ class Workspace:
 
     def __init__(self) -> None:
         self._arrays: dict[tuple[str, tuple[int, ...]], np.ndarray] = {}
+        self._pattern: _SchurPattern | None = None
 
     def array(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         """An uninitialised float64 array ``shape``, the same one for the same name and shape."""
@@ -173,6 +174,43 @@ class Workspace:
             self._arrays = {k: v for k, v in self._arrays.items() if k[0] != name}
             self._arrays[key] = np.empty(shape)
         return self._arrays[key]
+
+    def pattern(self, index: np.ndarray, bi: np.ndarray,
+                bj: np.ndarray) -> _SchurPattern:
+        """The Schur complement's sparsity for the networks of ``index`` (P, s, s) (the same
+        for every pass on one grid), border grid points (bi, bj)."""
+        if self._pattern is None or self._pattern.index is not index:
+            self._pattern = _SchurPattern(index, bi, bj)
+        return self._pattern
+
+
+class _SchurPattern:
+    """Where each patch's Schur block (P, nb, nb) adds into the CSR matrix on the shared control
+    points: shared (S,) their global indices, columns (P, nb) each patch's border unknowns
+    there (3 per point), slot (P nb^2,) each block entry's place in the CSR data, indices and
+    indptr the CSR structure, diagonal the diagonal's places."""
+
+    def __init__(self, index: np.ndarray, bi: np.ndarray, bj: np.ndarray) -> None:
+        self.index = index
+        patches = len(index)
+        # the shared control points, numbered in order of their global index
+        self.shared, number = np.unique(index[:, bi, bj], return_inverse=True)
+        self.columns = (3 * number.reshape(patches, -1)[:, :, None]
+                        + np.arange(3)).reshape(patches, -1)
+        self.count = count = 3 * len(self.shared)
+        nb = self.columns.shape[1]
+        key = (np.repeat(self.columns, nb, axis=1) * count + np.tile(self.columns, (1, nb))).ravel()
+        entries, self.slot = np.unique(key, return_inverse=True)
+        row, self.indices = np.divmod(entries, count)
+        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=count))])
+        self.diagonal = np.flatnonzero(row == self.indices)
+
+    def matrix(self, blocks: np.ndarray, ridge: float) -> scipy.sparse.csr_matrix:
+        """The sum of the blocks (P, nb, nb) plus ``ridge`` on the diagonal, (count, count)."""
+        data: np.ndarray = np.bincount(self.slot, blocks.ravel(), minlength=len(self.indices))
+        data[self.diagonal] += ridge
+        return scipy.sparse.csr_matrix((data, self.indices, self.indptr),
+                                       shape=(self.count, self.count))
 
 
 def solve_terms(network: PatchNetwork, terms: PatchTerms, fairing: np.ndarray | None = None,
@@ -226,6 +264,7 @@ class _Condensed:
         self.z = work.array("z", (patches, self.ni, self.nb + 1))
         self.schur = work.array("schur", (patches, self.nb, self.nb))
         self.b_b = work.array("b_b", (patches, self.nb))
+        self.work = work
 
     def eliminate(self, first: int, blocks: np.ndarray, rhs: np.ndarray, ridge: float) -> None:
         """Eliminate the interiors of patches first .. first + c - 1 from their blocks
@@ -272,19 +311,13 @@ class _Condensed:
     def solve(self, ridge: float) -> np.ndarray:
         """The control points (K, 3), once every patch is eliminated."""
         network = self.network
-        patches, nb = network.patch_count, self.nb
-        # the shared control points, numbered in order of their global index
-        shared, number = np.unique(network.index[:, self.bi, self.bj], return_inverse=True)
-        columns = (3 * number.reshape(patches, -1)[:, :, None] + np.arange(3)).reshape(patches, -1)
-        count = 3 * len(shared)
-        matrix = scipy.sparse.csr_matrix(
-            (self.schur.ravel(), (np.repeat(columns, nb, axis=1).ravel(),
-                                  np.tile(columns, (1, nb)).ravel())), shape=(count, count))
-        matrix = matrix + ridge * scipy.sparse.identity(count, format="csr")
-        border = solve_spd(matrix, np.bincount(columns.ravel(), self.b_b.ravel(),
-                                               minlength=count))
+        patches = network.patch_count
+        pattern = self.work.pattern(network.index, self.bi, self.bj)
+        columns = pattern.columns
+        border = solve_spd(pattern.matrix(self.schur, ridge),
+                           np.bincount(columns.ravel(), self.b_b.ravel(), minlength=pattern.count))
         control = np.zeros((len(network.control_points), 3))
-        control[shared] = border.reshape(-1, 3)
+        control[pattern.shared] = border.reshape(-1, 3)
         if self.ni:
             z_b, z_r = self.z[:, :, :-1], self.z[:, :, -1]
             residual = z_r - np.einsum("pib,pb->pi", z_b, border[columns])

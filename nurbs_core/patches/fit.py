@@ -24,9 +24,13 @@ with S_k = S(patch_k, u_k, v_k) and n_k its unit normal:
   edge on a crease of the scan (``creases``, :mod:`nurbs_core.patches.crease_layout`) and the
   corners at its ends have no such rows: the network is G0 there, its tangents free.
 
-It couples x, y and z, so the normal equations are one sparse (3K, 3K) system. Then every point
-moves to its foot point on the new network (Gauss-Newton from where it was, and the nearest of a
-dense grid of samples, so a point may change patch), and the normals are taken again.
+It couples x, y and z: the normal equations are one (3K, 3K) system, but every term lives on one
+patch (a seam row is one patch's cross derivative against the normal held for the pass), so they
+are built per patch and solved by condensing each patch's interior control points
+(:mod:`nurbs_core.patches.condensed`): the same system, a sparse solve on the shared control
+points only. Then every point moves to its foot point on the new network (Gauss-Newton from
+where it was, and the nearest of a dense grid of samples, so a point may change patch), and the
+normals are taken again.
 
 On an open network (a scan with a border) every free patch side is also drawn to the scan's
 border: ``w_border (1 / B) sum_b ((S_b - nearest border point) . m_b)^2`` at samples b along
@@ -48,7 +52,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse
-import scipy.sparse.linalg
 from scipy.spatial import cKDTree
 
 from nurbs_core.patches.condensed import PatchTerms, Workspace, solve_terms
