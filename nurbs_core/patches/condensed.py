@@ -5,11 +5,12 @@ offset to its foot point (point to point and point to tangent plane), a seam or 
 patch's cross derivative against a normal held fixed for the pass), a border row, the fairing.
 So the normal equations are a sum of dense per-patch blocks over each patch's control grid
 (size x size control points, x, y and z coupled by the normals). A patch's interior control
-points appear in its own block alone: they are eliminated in every patch at once (batched dense
-Cholesky factorisations), which leaves a sparse system (the Schur complement) on the control
+points appear in its own block alone: they are eliminated patch by patch (a dense Cholesky
+factorisation each, LAPACK), which leaves a sparse system (the Schur complement) on the control
 points patches share, those of the layout's vertices and edges, about a fifth of the unknowns;
 then the interiors follow by back substitution. It is the same linear system as the global
-sparse one, so the solution is the same to rounding, without assembling the big sparse matrix.
+sparse one (:func:`solve_global`, which grids above ``DENSE_MAX_SIZE`` still take), so the
+solution is the same to rounding, without assembling the big sparse matrix.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import scipy.linalg.blas
 import scipy.linalg.lapack
 import scipy.sparse
 
-from nurbs_core.patches.evaluate import LocalRows
+from nurbs_core.patches.evaluate import LocalRows, global_rows
 from nurbs_core.patches.network import PatchNetwork
 from nurbs_core.sparse_solve import solve_spd
 
@@ -59,21 +60,43 @@ class PatchTerms:
                           np.concatenate([t.rhs for t in terms]))
 
 
+#: The largest control grid (points per patch side) solved by condensation: a patch's dense
+#: interior factor grows as size^4 in memory and size^6 in time, a sparse factorisation of the
+#: whole network far more slowly (larger grids take :func:`solve_global`).
+DENSE_MAX_SIZE = 14
 #: Bytes of dense blocks assembled and condensed at a time (a few patches: they stay in cache
 #: and in memory the allocator reuses, instead of every patch's block at once).
 CHUNK_BYTES = 8 << 20
 
 
+#: The six entries (c <= d) of a symmetric 3 x 3 matrix, and each entry's place among them.
+_UPPER = np.triu_indices(3)
+_SYMMETRIC = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
+
+
 @dataclass
 class _Cells:
-    """The terms summed per cell (one patch's same n x n control points): grams (C, n, n, 3,
-    n, n, 3), their patch (C,) and position (C,) (first_u * cells + first_v), sorted by patch
-    then position; rhs (P, s, s, 3) the right-hand sides on every patch's grid."""
+    """The terms summed per cell (one patch's same n x n control points): packed (C, n^2 n^2 6)
+    each cell's sums over (a, b, e) (a, b its control points, e the six entries c <= d of the
+    3 x 3 coupling, ``_UPPER``), their patch (C,) and position (C,) (first_u * cells +
+    first_v), sorted by patch then position; rhs (P, s, s, 3) the right-hand sides on every
+    patch's grid."""
 
-    grams: np.ndarray
+    packed: np.ndarray
     patch: np.ndarray
     position: np.ndarray
     rhs: np.ndarray
+    n: int
+
+    def __post_init__(self) -> None:
+        n = self.n
+        a1, a2, c, b1, b2, d = np.indices((n, n, 3, n, n, 3)).reshape(6, -1)
+        self._unpack = ((a1 * n + a2) * n * n + b1 * n + b2) * 6 + _SYMMETRIC[c, d]
+
+    def blocks(self, pick: np.ndarray) -> np.ndarray:
+        """The cells ``pick`` (k,) as blocks (k, n, n, 3, n, n, 3) over (a, c, b, d)."""
+        n = self.n
+        return self.packed[pick[:, None], self._unpack].reshape(len(pick), n, n, 3, n, n, 3)
 
 
 def _cells(network: PatchNetwork, terms: PatchTerms) -> _Cells:
@@ -83,18 +106,20 @@ def _cells(network: PatchNetwork, terms: PatchTerms) -> _Cells:
     cells = s - n + 1
     rhs = np.zeros((patches, s, s, 3))
     if m == 0:
-        return _Cells(np.zeros((0, n, n, 3, n, n, 3)), np.zeros(0, np.int64),
-                      np.zeros(0, np.int64), rhs)
+        return _Cells(np.zeros((0, n ** 4 * 6)), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                      rhs, n)
     # the terms of a cell summed by one small product per cell (X^T Y, X the cell's (count,
-    # n^2) values, Y those times each term's matrix), cells padded to powers of two in count
+    # n^2) values, Y those times each term's six coupling entries), cells padded to powers of
+    # two in count; row m of x and y: the padding
     key = (rows.patch * cells + rows.first[:, 0]) * cells + rows.first[:, 1]
     order = np.argsort(key, kind="stable")
     cell, start, count = np.unique(key[order], return_index=True, return_counts=True)
-    x = rows.values.reshape(m, n * n)[order]
-    y = (x[:, :, None, None] * terms.matrix[order][:, None]).reshape(m, n * n * 9)
-    x = np.vstack([x, np.zeros((1, n * n))])        # row m: the padding
-    y = np.vstack([y, np.zeros((1, n * n * 9))])
-    gram = np.empty((len(cell), n * n, n * n * 9))
+    x = np.zeros((m + 1, n * n))
+    x[:m] = rows.values.reshape(m, n * n)[order]
+    y = np.zeros((m + 1, n * n, 6))
+    np.multiply(x[:m, :, None], terms.matrix[order][:, _UPPER[0], _UPPER[1]][:, None], out=y[:m])
+    y = y.reshape(m + 1, n * n * 6)
+    packed = np.empty((len(cell), n * n, n * n * 6))
     low = 0
     pad = 1
     while low < count.max():
@@ -102,10 +127,8 @@ def _cells(network: PatchNetwork, terms: PatchTerms) -> _Cells:
         if len(pick):
             slot = np.arange(pad)
             take = np.where(slot < count[pick, None], start[pick, None] + slot, m)
-            gram[pick] = np.matmul(x[take].transpose(0, 2, 1), y[take])
+            packed[pick] = np.matmul(x[take].transpose(0, 2, 1), y[take])
         low, pad = pad, 2 * pad
-    # (cell, a1, a2, b1, b2, c, d) -> (cell, a1, a2, c, b1, b2, d)
-    grams = gram.reshape(-1, n, n, n, n, 3, 3).transpose(0, 1, 2, 5, 3, 4, 6)
     patch_of, position = np.divmod(cell, cells * cells)
     # right-hand sides: rhs_k times the values, summed onto each patch's grid
     offsets = np.arange(n)
@@ -115,7 +138,7 @@ def _cells(network: PatchNetwork, terms: PatchTerms) -> _Cells:
     for c in range(3):
         rhs[..., c] = np.bincount(flat.ravel(), (values * terms.rhs[:, c, None]).ravel(),
                                   minlength=patches * s * s).reshape(patches, s, s)
-    return _Cells(grams, patch_of, position, rhs)
+    return _Cells(packed.reshape(len(cell), -1), patch_of, position, rhs, n)
 
 
 def _blocks(network: PatchNetwork, cells: _Cells, first: int, out: np.ndarray,
@@ -123,14 +146,14 @@ def _blocks(network: PatchNetwork, cells: _Cells, first: int, out: np.ndarray,
     """Fill ``out`` (c, s, s, 3, s, s, 3) with the blocks of patches first .. first + c - 1,
     each with ``fairing`` (s^2, s^2) on each coordinate."""
     count, s = len(out), network.size
-    n = cells.grams.shape[1]
+    n = cells.n
     side = s - n + 1
     out.fill(0.0)
     lo, hi = np.searchsorted(cells.patch, (first, first + count))
     patch, position = cells.patch[lo:hi] - first, cells.position[lo:hi]
     order = np.argsort(position, kind="stable")
     bounds = np.searchsorted(position[order], np.arange(side * side + 1))
-    every = np.empty((count,) + cells.grams.shape[1:])
+    every = np.empty((count, n, n, 3, n, n, 3))
     for where in range(side * side):
         pick = order[bounds[where]:bounds[where + 1]]
         if not len(pick):
@@ -138,7 +161,7 @@ def _blocks(network: PatchNetwork, cells: _Cells, first: int, out: np.ndarray,
         i, j = divmod(where, side)
         # every patch of the chunk at once through plain slices (a patch has one cell here)
         every.fill(0.0)
-        every[patch[pick]] = cells.grams[lo + pick]
+        every[patch[pick]] = cells.blocks(lo + pick)
         out[:, i:i + n, j:j + n, :, i:i + n, j:j + n, :] += every
     if fairing is not None:
         form = fairing.reshape((s,) * 4)
@@ -219,17 +242,49 @@ def solve_terms(network: PatchNetwork, terms: PatchTerms, fairing: np.ndarray | 
     each patch's coordinates plus ``ridge`` |C|^2: the blocks of :func:`assemble`, a few
     patches at a time, condensed (:func:`solve_condensed`)."""
     patches, s = network.patch_count, network.size
+    if s > DENSE_MAX_SIZE:
+        return solve_global(network, terms, fairing, ridge)
     cells = _cells(network, terms)
     size = 3 * s * s
     chunk = max(1, min(patches, CHUNK_BYTES // (8 * size * size)))
     work = workspace or Workspace()
     buffer = work.array("blocks", (chunk, s, s, 3, s, s, 3))
     condensed = _Condensed(network, work)
-    for first in range(0, patches, chunk):
-        out = buffer[:min(chunk, patches - first)]
-        _blocks(network, cells, first, out, fairing)
-        condensed.eliminate(first, out, cells.rhs[first:first + len(out)], ridge)
+    try:
+        for first in range(0, patches, chunk):
+            out = buffer[:min(chunk, patches - first)]
+            _blocks(network, cells, first, out, fairing)
+            condensed.eliminate(first, out, cells.rhs[first:first + len(out)], ridge)
+    except np.linalg.LinAlgError:
+        # a patch's interior without data nor fairing (stiffness 0): positive definite only by
+        # the ridge, which rounding may not keep; the sparse LU takes the system as it is
+        return solve_global(network, terms, fairing, ridge)
     return condensed.solve(ridge)
+
+
+def solve_global(network: PatchNetwork, terms: PatchTerms, fairing: np.ndarray | None = None,
+                 ridge: float = 0.0) -> np.ndarray:
+    """The control points (K, 3) of :func:`solve_terms`, from the same normal equations
+    assembled as one sparse (3K, 3K) matrix over the global control points (coordinate-major)
+    and solved by :func:`nurbs_core.sparse_solve.solve_spd`."""
+    k = len(network.control_points)
+    a = global_rows(network, terms.rows)
+    parts: list[list[scipy.sparse.csr_matrix | None]] = [[None] * 3 for _ in range(3)]
+    for c in range(3):
+        for d in range(c, 3):
+            # sum_k m_k[c, d] a_k a_k^T: symmetric, so also the (d, c) block
+            parts[c][d] = parts[d][c] = (a.T @ scipy.sparse.diags(terms.matrix[:, c, d]) @ a)
+    matrix = scipy.sparse.bmat(parts, format="csr")
+    if fairing is not None:
+        local = scipy.sparse.coo_matrix(fairing)
+        flat = network.index.reshape(network.patch_count, -1)
+        fair = scipy.sparse.csr_matrix(
+            (np.tile(local.data, network.patch_count),
+             (flat[:, local.row].ravel(), flat[:, local.col].ravel())), shape=(k, k))
+        matrix = matrix + scipy.sparse.block_diag([fair] * 3, format="csr")
+    matrix = matrix + ridge * scipy.sparse.identity(3 * k, format="csr")
+    rhs = np.concatenate([a.T @ terms.rhs[:, c] for c in range(3)])
+    return solve_spd(matrix.tocsr(), rhs).reshape(3, k).T
 
 
 def solve_condensed(network: PatchNetwork, blocks: np.ndarray, rhs: np.ndarray,
@@ -328,4 +383,5 @@ class _Condensed:
         return control
 
 
-__all__ = ["PatchTerms", "Workspace", "assemble", "solve_condensed", "solve_terms"]
+__all__ = ["DENSE_MAX_SIZE", "PatchTerms", "Workspace", "assemble", "solve_condensed",
+           "solve_global", "solve_terms"]

@@ -547,13 +547,16 @@ def _seam_groups(network: PatchNetwork) -> tuple[list[_Group], np.ndarray]:
                 if not pick.any():
                     continue
                 direction = "u" if is_u else "v"
-                groups.append(_plane_rows(network, patch[pick], uv[pick], direction,
-                                          normal[pick]))
+                rows_, plane, zero = _plane_rows(network, patch[pick], uv[pick], direction,
+                                                 normal[pick])
                 # a weak hold on the present cross derivative (less its normal part): "in the
-                # plane" alone is also met by a derivative turned over the seam or shrunk away
-                rows_, g, h = _projection_rows(network, patch[pick], uv[pick], direction,
-                                               (su if is_u else sv)[pick], normal[pick])
-                groups.append((rows_, EDGE_HOLD * g, EDGE_HOLD * h))
+                # plane" alone is also met by a derivative turned over the seam or shrunk away;
+                # one group with the plane row (its rows: the plane rows, then the hold's x, y
+                # and z rows), as the two evaluate the same derivative
+                _, g, h = _projection_rows(network, patch[pick], uv[pick], direction,
+                                           (su if is_u else sv)[pick], normal[pick])
+                groups.append((rows_, np.concatenate([plane, EDGE_HOLD * g], axis=1),
+                               np.concatenate([zero, EDGE_HOLD * h], axis=1)))
     # corners: every patch's two corner derivatives to their projections on the plane of the
     # vertex's mean normal (a full target, not only "in the plane": that one is also met by a
     # derivative shrinking to nothing, which folds the corner)

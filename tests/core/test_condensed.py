@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import scipy.sparse
 
-from nurbs_core.patches.condensed import CHUNK_BYTES, PatchTerms, assemble, solve_terms
+from nurbs_core.patches import condensed
+from nurbs_core.patches.condensed import CHUNK_BYTES, PatchTerms, assemble, solve_global, solve_terms
 from nurbs_core.patches.evaluate import global_rows, local_rows
 from nurbs_core.patches.network import build_network
 from nurbs_core.sparse_solve import solve_spd
@@ -73,6 +74,24 @@ def test_the_condensed_solve_is_the_global_solve(vertices, quads, size, monkeypa
     assert np.abs(whole - expected).max() < 1e-9 * scale
     assert np.abs(one_by_one - whole).max() < 1e-12 * scale
     assert CHUNK_BYTES > 1
+    assert np.abs(solve_global(network, terms, fairing, ridge=1e-12) - expected).max() < 1e-12 * scale
+
+
+def test_large_grids_and_failed_factors_take_the_global_solve(monkeypatch):
+    rng = np.random.default_rng(3)
+    network = build_network(CUBE_VERTICES, CUBE_QUADS, size=6)
+    terms = PatchTerms.of_rows(*_random_terms(network, rng, 2000))
+    expected = solve_global(network, terms, ridge=1e-12)
+    scale = np.abs(expected).max()
+    monkeypatch.setattr(condensed, "DENSE_MAX_SIZE", 5)
+    assert np.abs(solve_terms(network, terms, ridge=1e-12) - expected).max() < 1e-9 * scale
+    monkeypatch.undo()
+
+    def failing(a, **_):            # a patch's interior not positive definite in rounding
+        return a, 1
+
+    monkeypatch.setattr(condensed.scipy.linalg.lapack, "dpotrf", failing)
+    assert np.abs(solve_terms(network, terms, ridge=1e-12) - expected).max() < 1e-9 * scale
 
 
 def test_assembled_blocks_are_symmetric_and_sum_every_term():
