@@ -445,10 +445,6 @@ class _Solver:
         b = local_rows(network, patch, uv[:, 0], uv[:, 1])
         return b, across[:, None, :], (across * nearest).sum(axis=1)[:, None]
 
-    def border_rows(self, network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarray]:
-        """:meth:`border_group` as rows (M, 3K) and targets (M,)."""
-        return _group_matrix(network, self.border_group(network))
-
 
 def _data_trace(network: PatchNetwork, data: LocalRows, weights: np.ndarray) -> float:
     """The trace of sum_k weights_k a_k a_k^T, a_k (K,) the global row of ``data``'s row k."""
