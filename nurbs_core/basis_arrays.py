@@ -48,6 +48,12 @@ def basis_derivatives(knots: ArrayLike, degree: int, t: ArrayLike, order: int
         ndu[j, j] = saved
     ders = np.zeros((order + 1, p + 1, count))
     ders[0] = ndu[:, p]
+    if order == 1 and p >= 1:
+        # A2.3's loop below for the first derivative alone, the same operations in the same
+        # order (so the same values), without its coefficient table (the whole call: 5.4 ->
+        # 4.4 ms at 25,000 parameters, degree 3)
+        _first_derivative(ndu, p, ders[1])
+        return span, np.ascontiguousarray(ders.transpose(0, 2, 1))
     for r in range(p + 1):
         a = np.zeros((2, p + 1, count))
         a[0, 0] = 1.0
@@ -73,6 +79,20 @@ def basis_derivatives(knots: ArrayLike, degree: int, t: ArrayLike, order: int
         ders[k] *= factor
         factor *= p - k
     return span, np.ascontiguousarray(ders.transpose(0, 2, 1))
+
+
+def _first_derivative(ndu: np.ndarray, p: int, out: np.ndarray) -> None:
+    """The first derivatives (p + 1, M) of the degree-``p`` basis into ``out``, from A2.3's
+    table ``ndu`` (p + 1, p + 1, M): p (N_{r-1,p-1} / (u_{r+p} - u_r) - N_{r,p-1} /
+    (u_{r+p+1} - u_{r+1})), each term where it exists."""
+    for r in range(p + 1):
+        d = np.zeros(out.shape[1])
+        if r >= 1:
+            d = (1.0 / ndu[p, r - 1]) * ndu[r - 1, p - 1]
+        if r <= p - 1:
+            d = d + (-1.0 / ndu[p, r]) * ndu[r, p - 1]
+        out[r] = d
+    out *= float(p)
 
 
 def basis_and_derivative(knots: ArrayLike, degree: int, t: ArrayLike

@@ -34,23 +34,46 @@ def basis_1d(knots: np.ndarray, degree: int, t: np.ndarray) -> Basis1D:
     return Basis1D(span - degree, values, derivative)
 
 
-def rows(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.ndarray,
-         derivative: str | None = None) -> scipy.sparse.csr_matrix:
-    """(M, K) sparse rows: row k evaluates patch[k] at (u[k], v[k]), or its derivative along
-    ``derivative`` ("u" or "v"), as a combination of the global control points."""
+@dataclass
+class LocalRows:
+    """Rows that each touch one patch's (p + 1) x (p + 1) control points: patch (M,), first
+    (M, 2) the grid index (i, j) of the block's first control point, values (M, p + 1, p + 1)
+    the weights of the block's control points."""
+
+    patch: np.ndarray
+    first: np.ndarray
+    values: np.ndarray
+
+
+def local_rows(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.ndarray,
+               derivative: str | None = None) -> LocalRows:
+    """The rows of :func:`rows` over each row's own patch (its control grid, not the global
+    control points)."""
     knots, p = network.knots, network.degree
     bu, bv = basis_1d(knots, p, u), basis_1d(knots, p, v)
     wu = bu.derivative if derivative == "u" else bu.values
     wv = bv.derivative if derivative == "v" else bv.values
-    offsets = np.arange(p + 1)
-    iu = bu.first[:, None] + offsets            # (M, p + 1)
-    iv = bv.first[:, None] + offsets
-    patch = np.asarray(patch, np.int64)
-    cols = network.index[patch[:, None, None], iu[:, :, None], iv[:, None, :]]   # (M, p+1, p+1)
-    vals = wu[:, :, None] * wv[:, None, :]
-    m = len(patch)
+    return LocalRows(np.asarray(patch, np.int64), np.stack([bu.first, bv.first], -1),
+                     wu[:, :, None] * wv[:, None, :])
+
+
+def rows(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.ndarray,
+         derivative: str | None = None) -> scipy.sparse.csr_matrix:
+    """(M, K) sparse rows: row k evaluates patch[k] at (u[k], v[k]), or its derivative along
+    ``derivative`` ("u" or "v"), as a combination of the global control points."""
+    return global_rows(network, local_rows(network, patch, u, v, derivative))
+
+
+def global_rows(network: PatchNetwork, local: LocalRows) -> scipy.sparse.csr_matrix:
+    """(M, K) sparse rows over the global control points of ``local``'s rows."""
+    n = local.values.shape[1]
+    offsets = np.arange(n)
+    iu = local.first[:, :1] + offsets            # (M, p + 1)
+    iv = local.first[:, 1:] + offsets
+    cols = network.index[local.patch[:, None, None], iu[:, :, None], iv[:, None, :]]  # (M, n, n)
+    m = len(local.patch)
     return scipy.sparse.csr_matrix(
-        (vals.ravel(), (np.repeat(np.arange(m), (p + 1) ** 2), cols.ravel())),
+        (local.values.ravel(), (np.repeat(np.arange(m), n * n), cols.ravel())),
         shape=(m, len(network.control_points)))
 
 
@@ -64,14 +87,15 @@ def evaluate(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.ndar
     # the (p + 1)^2 control points of each parameter's span, by flat index into index (P, s, s)
     first = (np.asarray(patch, np.int64) * index.shape[1] + bu.first) * index.shape[2] + bv.first
     offsets = (np.arange(n)[:, None] * index.shape[2] + np.arange(n)).ravel()
-    nets = c[index.reshape(-1)[first[:, None] + offsets]]              # (M, n^2, 3)
-    # the three tensor-product weights (value, d/du, d/dv) as one (M, 3, n^2) batch of rows
-    weights = np.empty((len(first), 3, n, n))
-    np.multiply(bu.values[:, :, None], bv.values[:, None, :], out=weights[:, 0])
-    np.multiply(bu.derivative[:, :, None], bv.values[:, None, :], out=weights[:, 1])
-    np.multiply(bu.values[:, :, None], bv.derivative[:, None, :], out=weights[:, 2])
-    out = np.matmul(weights.reshape(-1, 3, n * n), nets)                # (M, 3, 3)
-    return out[:, 0], out[:, 1], out[:, 2]
+    dim = c.shape[1]
+    nets = c[index.reshape(-1)[first[:, None] + offsets]].reshape(-1, n, n, dim)  # (M, n, n, 3)
+    # contracted along v with (value, d/dv), then along u with (value, d/du): two small batched
+    # products instead of one over n^2 weights per output (10 -> 5 ms at 25,000 parameters;
+    # equal to rounding)
+    along_v = np.matmul(np.stack([bv.values, bv.derivative], 1)[:, None], nets)   # (M, n, 2, 3)
+    out = np.matmul(np.stack([bu.values, bu.derivative], 1),
+                    along_v.reshape(-1, n, 2 * dim))                        # (M, 2, 6)
+    return out[:, 0, :dim], out[:, 1, :dim], out[:, 0, dim:]
 
 
 def unit(vectors: np.ndarray) -> np.ndarray:

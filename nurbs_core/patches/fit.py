@@ -24,9 +24,13 @@ with S_k = S(patch_k, u_k, v_k) and n_k its unit normal:
   edge on a crease of the scan (``creases``, :mod:`nurbs_core.patches.crease_layout`) and the
   corners at its ends have no such rows: the network is G0 there, its tangents free.
 
-It couples x, y and z, so the normal equations are one sparse (3K, 3K) system. Then every point
-moves to its foot point on the new network (Gauss-Newton from where it was, and the nearest of a
-dense grid of samples, so a point may change patch), and the normals are taken again.
+It couples x, y and z: the normal equations are one (3K, 3K) system, but every term lives on one
+patch (a seam row is one patch's cross derivative against the normal held for the pass), so they
+are built per patch and solved by condensing each patch's interior control points
+(:mod:`nurbs_core.patches.condensed`): the same system, a sparse solve on the shared control
+points only. Then every point moves to its foot point on the new network (Gauss-Newton from
+where it was, and the nearest of a dense grid of samples, so a point may change patch), and the
+normals are taken again.
 
 On an open network (a scan with a border) every free patch side is also drawn to the scan's
 border: ``w_border (1 / B) sum_b ((S_b - nearest border point) . m_b)^2`` at samples b along
@@ -48,11 +52,20 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse
-import scipy.sparse.linalg
 from scipy.spatial import cKDTree
 
+from nurbs_core.patches.condensed import PatchTerms, Workspace, solve_terms
 from nurbs_core.patches.defaults import SEAM_WEIGHT, STIFFNESS, WARN_SEAM
-from nurbs_core.patches.evaluate import evaluate, foot_points, grid_samples, rows, unit
+from nurbs_core.patches.evaluate import (
+    LocalRows,
+    evaluate,
+    foot_points,
+    global_rows,
+    grid_samples,
+    local_rows,
+    rows,
+    unit,
+)
 from nurbs_core.patches.measures import seam_statistics
 from nurbs_core.patches.network import SIDES, PatchNetwork, build_network
 from nurbs_core.sparse_solve import solve_spd
@@ -356,6 +369,8 @@ class _Solver:
         self.seam_weight = seam_weight
         self.border = None if border is None else cKDTree(border)
         self._fairing: dict[tuple[int, int], scipy.sparse.csr_matrix] = {}
+        self._local_fairing: dict[int, np.ndarray] = {}
+        self.workspace = Workspace()
         self.last_seam = math.nan
 
     def fairing(self, network: PatchNetwork) -> scipy.sparse.csr_matrix:
@@ -364,59 +379,62 @@ class _Solver:
             self._fairing[key] = network_fairing(network)
         return self._fairing[key]
 
+    def local_fairing(self, network: PatchNetwork) -> np.ndarray:
+        """(s^2, s^2) one patch's thin plate + MEMBRANE_RATIO membrane form, dense."""
+        if network.size not in self._local_fairing:
+            knots = network.knots
+            thin, membrane = fairing_matrices(knots, network.degree, knots, network.degree)
+            self._local_fairing[network.size] = (thin + MEMBRANE_RATIO * membrane).toarray()
+        return self._local_fairing[network.size]
+
     def solve(self, network: PatchNetwork, patch: np.ndarray, uv: np.ndarray,
               targets: np.ndarray, weights: np.ndarray | None = None) -> tuple[PatchNetwork, float]:
         """One pass's solve for the foot points (patch (N,), uv (N, 2)) of ``targets`` (N, 3),
-        each weighted by ``weights`` (N,) (None: all 1)."""
-        k = len(network.control_points)
-        a = rows(network, patch, uv[:, 0], uv[:, 1])
-        if weights is not None:
-            a = scipy.sparse.diags(np.sqrt(weights)) @ a
-            targets = targets * np.sqrt(weights)[:, None]
+        each weighted by ``weights`` (N,) (None: all 1). Every term is over one patch, so the
+        normal equations are built per patch and solved by condensing each patch's interior
+        (:mod:`nurbs_core.patches.condensed`)."""
+        data = local_rows(network, patch, uv[:, 0], uv[:, 1])
         n = len(targets) if weights is None else float(weights.sum())
-        data = (a.T @ a) / n
-        rhs = np.asarray(a.T @ targets) / n
-        fair = self.fairing(network)
-        lam = (self.stiffness * _fairing_share(network) * data.diagonal().sum()
-               / max(fair.diagonal().sum(), 1e-300))
-        block = (POINT_SHARE * data + lam * fair).tocsr()
-        g, h, angles = seam_rows(network)
-        seam = float(angles.max()) if angles.size else 0.0
-        self.last_seam = seam
-        system = scipy.sparse.block_diag([block, block, block], format="csr")
-        rhs = POINT_SHARE * rhs.T.ravel()
+        w = (np.ones(len(targets)) if weights is None else np.asarray(weights, np.float64)) / n
+        # the data term: POINT_SHARE of |S_k - Q_k|^2, the rest ((S_k - Q_k) . n_k)^2 (point to
+        # tangent plane: it lets the surface slide along itself under the points, so the passes
+        # converge in a few steps instead of dragging)
+        matrix = np.broadcast_to(POINT_SHARE * np.eye(3), (len(targets), 3, 3))
+        rhs = POINT_SHARE * targets
         if POINT_SHARE < 1.0:
-            # the rest of the data term measures the offsets along the surface's normal at the
-            # foot points (point to tangent plane): it lets the surface slide along itself
-            # under the points, so the passes converge in a few steps instead of dragging
             _, su, sv = evaluate(network, patch, uv[:, 0], uv[:, 1])
             normal = unit(np.cross(su, sv))
-            t = scipy.sparse.hstack([scipy.sparse.diags(normal[:, c]) @ a for c in range(3)],
-                                    format="csr")
-            share = (1.0 - POINT_SHARE) / n
-            system = system + share * (t.T @ t)
-            rhs = rhs + share * np.asarray(t.T @ (targets * normal).sum(1)).ravel()
-        if g.shape[0]:
+            along = (targets * normal).sum(1)
+            matrix = matrix + (1.0 - POINT_SHARE) * normal[:, :, None] * normal[:, None, :]
+            rhs = rhs + (1.0 - POINT_SHARE) * along[:, None] * normal
+        terms = [PatchTerms(data, matrix * w[:, None, None], rhs * w[:, None])]
+        fair = self.fairing(network)
+        lam = (self.stiffness * _fairing_share(network) * _data_trace(network, data, w)
+               / max(fair.diagonal().sum(), 1e-300))
+        groups, angles = _seam_groups(network)
+        seam = float(angles.max()) if angles.size else 0.0
+        self.last_seam = seam
+        count = sum(g[2].size for g in groups)
+        if count:
             # the rows are dimensionless (about the sine of an angle): a patch's squared size
             # turns them into the data term's units, so the balance does not depend on scale
-            weight = self.seam_weight * _patch_area(network) / g.shape[0]
-            system = system + weight * (g.T @ g)
-            rhs = rhs + weight * (g.T @ h)
+            weight = self.seam_weight * _patch_area(network) / count
+            terms += [PatchTerms.of_rows(*g, weight) for g in groups]
         if self.border is not None and not network.closed:
-            g, h = self.border_rows(network)
-            weight = BORDER_WEIGHT / max(g.shape[0], 1)
-            system = system + weight * (g.T @ g)
-            rhs = rhs + weight * (g.T @ h)
-        system = system + 1e-12 * scipy.sparse.identity(3 * k, format="csr")
-        solution = solve_spd(system, rhs)
-        return network.with_control_points(solution.reshape(3, k).T), seam
+            rows_, across, target = self.border_group(network)
+            terms.append(PatchTerms.of_rows(rows_, across, target,
+                                            BORDER_WEIGHT / max(target.size, 1)))
+        solution = solve_terms(network, PatchTerms.joined(terms),
+                               lam * self.local_fairing(network), ridge=1e-12,
+                               workspace=self.workspace)
+        return network.with_control_points(solution), seam
 
-
-    def border_rows(self, network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarray]:
-        """Rows (M, 3K) and targets (M,) drawing samples of the free sides to the border: each
-        sample's offset to its nearest border point, measured across the side in the surface's
-        tangent plane (along the side it may slide, so samples do not bunch up on the border's
-        nearest points and fold the patch)."""
+    def border_group(self, network: PatchNetwork) -> tuple[LocalRows, np.ndarray, np.ndarray]:
+        """Rows drawing samples of the free sides to the border: each sample's offset to its
+        nearest border point, measured across the side in the surface's tangent plane (along
+        the side it may slide, so samples do not bunch up on the border's nearest points and
+        fold the patch): the samples' rows, the direction across (M, 1, 3) and the targets
+        (M, 1)."""
         assert self.border is not None
         m = BORDER_SAMPLES * network.size
         patch, uv = network.free_side_samples((np.arange(m) + 0.5) / m)
@@ -424,9 +442,37 @@ class _Solver:
         along_u = np.isin(uv[:, 1], (0.0, 1.0))         # a v0 / v1 side runs along u
         across = unit(np.cross(np.where(along_u[:, None], su, sv), unit(np.cross(su, sv))))
         nearest = self.border.data[self.border.query(s)[1]]
-        b = rows(network, patch, uv[:, 0], uv[:, 1])
-        g = scipy.sparse.hstack([b.multiply(across[:, [c]]) for c in range(3)], format="csr")
-        return g, (across * nearest).sum(axis=1)
+        b = local_rows(network, patch, uv[:, 0], uv[:, 1])
+        return b, across[:, None, :], (across * nearest).sum(axis=1)[:, None]
+
+
+def _data_trace(network: PatchNetwork, data: LocalRows, weights: np.ndarray) -> float:
+    """The trace of sum_k weights_k a_k a_k^T, a_k (K,) the global row of ``data``'s row k."""
+    grids = network.index.reshape(network.patch_count, -1)
+    if (np.diff(np.sort(grids, axis=1), axis=1) > 0).all():
+        # no patch has a control point twice: the global rows are the local values
+        return float(weights @ (data.values ** 2).sum(axis=(1, 2)))
+    a = global_rows(network, data)
+    return float(weights @ np.asarray(a.multiply(a).sum(axis=1)).ravel())
+
+
+def _group_matrix(network: PatchNetwork, group: tuple[LocalRows, np.ndarray, np.ndarray]
+                  ) -> tuple[scipy.sparse.csr_matrix, np.ndarray]:
+    """Rows (M r, 3K) and targets (M r,) of a group (rows, coefficients (M, r, 3), targets
+    (M, r)): row r' M + k is coefficients[k, r'] applied to row k's evaluation."""
+    rows_, coefficients, targets = group
+    k = len(network.control_points)
+    a = global_rows(network, rows_).tocoo()
+    m, r = targets.shape
+    # per scalar row (r', k) and coordinate c: a's row k scaled by coefficients[k, r', c]
+    row = (np.arange(r)[:, None, None] * m + a.row[None, None, :])
+    col = np.arange(3)[None, :, None] * k + a.col[None, None, :]
+    val = coefficients[a.row].transpose(1, 2, 0) * a.data      # (r, 3, nnz)
+    g = scipy.sparse.csr_matrix((val.ravel(), (np.broadcast_to(row, val.shape).ravel(),
+                                               np.broadcast_to(col, val.shape).ravel())),
+                                shape=(m * r, 3 * k))
+    g.eliminate_zeros()
+    return g, targets.T.ravel()
 
 
 def _fairing_share(network: PatchNetwork) -> float:
@@ -458,10 +504,25 @@ def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarra
     (see the module docstring), and the seam angles (degrees) at their edge samples (S,).
     Edges on a crease of the scan (``network.creases``) have none, nor do the corners at their
     ends: there the network is G0 only."""
-    k = len(network.control_points)
+    groups, angles = _seam_groups(network)
+    if not groups:
+        return scipy.sparse.csr_matrix((0, 3 * len(network.control_points))), np.zeros(0), angles
+    matrices = [_group_matrix(network, group) for group in groups]
+    return (scipy.sparse.vstack([g for g, _ in matrices], format="csr"),
+            np.concatenate([h for _, h in matrices]), angles)
+
+
+_Group = tuple[LocalRows, np.ndarray, np.ndarray]
+
+
+def _seam_groups(network: PatchNetwork) -> tuple[list[_Group], np.ndarray]:
+    """The rows of :func:`seam_rows` as groups (rows, coefficients (M, r, 3), targets (M, r)),
+    each row over one patch (its cross derivative, against normals held for the pass), and the
+    seam angles (S,)."""
     m = SEAM_SAMPLES * network.size
     t = (np.arange(m) + 0.5) / m
-    blocks, targets, angles = [], [], np.zeros(0)
+    groups: list[_Group] = []
+    angles = np.zeros(0)
     smooth = ~network.crease_mask()
     if smooth.any():
         keep = np.repeat(smooth, m)
@@ -482,14 +543,16 @@ def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarra
                 if not pick.any():
                     continue
                 direction = "u" if is_u else "v"
-                blocks.append(_plane_rows(network, patch[pick], uv[pick], direction, normal[pick]))
-                targets.append(np.zeros(int(pick.sum())))
+                rows_, plane, zero = _plane_rows(network, patch[pick], uv[pick], direction,
+                                                 normal[pick])
                 # a weak hold on the present cross derivative (less its normal part): "in the
-                # plane" alone is also met by a derivative turned over the seam or shrunk away
-                g, h = _projection_rows(network, patch[pick], uv[pick], direction,
-                                        (su if is_u else sv)[pick], normal[pick])
-                blocks.append(EDGE_HOLD * g)
-                targets.append(EDGE_HOLD * h)
+                # plane" alone is also met by a derivative turned over the seam or shrunk away;
+                # one group with the plane row (its rows: the plane rows, then the hold's x, y
+                # and z rows), as the two evaluate the same derivative
+                _, g, h = _projection_rows(network, patch[pick], uv[pick], direction,
+                                           (su if is_u else sv)[pick], normal[pick])
+                groups.append((rows_, np.concatenate([plane, EDGE_HOLD * g], axis=1),
+                               np.concatenate([zero, EDGE_HOLD * h], axis=1)))
     # corners: every patch's two corner derivatives to their projections on the plane of the
     # vertex's mean normal (a full target, not only "in the plane": that one is also met by a
     # derivative shrinking to nothing, which folds the corner)
@@ -501,12 +564,9 @@ def seam_rows(network: PatchNetwork) -> tuple[scipy.sparse.csr_matrix, np.ndarra
         _, su, sv = evaluate(network, patch_of, corner_uv[:, 0], corner_uv[:, 1])
         normal, sv = _unfolded_corners(len(network.vertices), vertex, su, sv)
         for direction, derivative in (("u", su), ("v", sv)):
-            g, h = _projection_rows(network, patch_of, corner_uv, direction, derivative, normal)
-            blocks.append(g)
-            targets.append(h)
-    values = np.concatenate(targets) if targets else np.zeros(0)
-    g = scipy.sparse.vstack(blocks, format="csr") if blocks else scipy.sparse.csr_matrix((0, 3 * k))
-    return g, values, angles
+            groups.append(_projection_rows(network, patch_of, corner_uv, direction, derivative,
+                                           normal))
+    return groups, angles
 
 
 def _unfolded_corners(count: int, vertex: np.ndarray, su: np.ndarray,
@@ -536,28 +596,25 @@ def _unfolded_corners(count: int, vertex: np.ndarray, su: np.ndarray,
 
 
 def _projection_rows(network: PatchNetwork, patch: np.ndarray, uv: np.ndarray, direction: str | None,
-                     derivative: np.ndarray,
-                     normal: np.ndarray) -> tuple[scipy.sparse.csr_matrix, np.ndarray]:
-    """Rows (3M, 3K) and targets (3M,): the derivative along ``direction`` at (patch, uv) equal
-    to its present value ``derivative`` (M, 3) without its ``normal`` component, both divided by
-    the present length."""
-    d = rows(network, patch, uv[:, 0], uv[:, 1], derivative=direction)
+                     derivative: np.ndarray, normal: np.ndarray) -> _Group:
+    """Rows as a group (3 per evaluation: coefficients (M, 3, 3), targets (M, 3)): the
+    derivative along ``direction`` at (patch, uv) equal to its present value ``derivative``
+    (M, 3) without its ``normal`` component, both divided by the present length."""
+    d = local_rows(network, patch, uv[:, 0], uv[:, 1], derivative=direction)
     scale = 1.0 / np.maximum(np.linalg.norm(derivative, axis=1), 1e-9)
     target = derivative - (derivative * normal).sum(1, keepdims=True) * normal
-    scaled = scipy.sparse.diags(scale) @ d
-    g = scipy.sparse.block_diag([scaled, scaled, scaled], format="csr")
-    return g, (target * scale[:, None]).T.ravel()
+    return d, scale[:, None, None] * np.eye(3), target * scale[:, None]
 
 
 def _plane_rows(network: PatchNetwork, patch: np.ndarray, uv: np.ndarray, direction: str | None,
-                normal: np.ndarray) -> scipy.sparse.csr_matrix:
-    """Rows (M, 3K): the derivative along ``direction`` at (patch, uv), dotted with ``normal``
-    (M, 3), divided by the derivative's present length."""
-    d = rows(network, patch, uv[:, 0], uv[:, 1], derivative=direction)
-    length = np.linalg.norm(d @ network.control_points, axis=1)
+                normal: np.ndarray) -> _Group:
+    """Rows as a group (1 per evaluation: coefficients (M, 1, 3), targets 0 (M, 1)): the
+    derivative along ``direction`` at (patch, uv), dotted with ``normal`` (M, 3), divided by
+    the derivative's present length."""
+    d = local_rows(network, patch, uv[:, 0], uv[:, 1], derivative=direction)
+    length = np.linalg.norm(global_rows(network, d) @ network.control_points, axis=1)
     scale = 1.0 / np.maximum(length, 1e-9)
-    blocks = [scipy.sparse.diags(normal[:, c] * scale) @ d for c in range(3)]
-    return scipy.sparse.hstack(blocks, format="csr")
+    return d, (normal * scale[:, None])[:, None, :], np.zeros((len(patch), 1))
 
 
 __all__ = ["NetworkPass", "fit_network", "seam_rows", "SIDES"]
