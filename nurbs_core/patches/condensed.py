@@ -240,7 +240,7 @@ def solve_terms(network: PatchNetwork, terms: PatchTerms, fairing: np.ndarray | 
                 ridge: float = 0.0, workspace: Workspace | None = None) -> np.ndarray:
     """The global control points (K, 3) minimising ``terms`` plus ``fairing`` (s^2, s^2) on
     each patch's coordinates plus ``ridge`` |C|^2: the blocks of :func:`assemble`, a few
-    patches at a time, condensed (:func:`solve_condensed`)."""
+    patches at a time, condensed (:class:`_Condensed`)."""
     patches, s = network.patch_count, network.size
     if s > DENSE_MAX_SIZE:
         return solve_global(network, terms, fairing, ridge)
@@ -287,22 +287,12 @@ def solve_global(network: PatchNetwork, terms: PatchTerms, fairing: np.ndarray |
     return solve_spd(matrix.tocsr(), rhs).reshape(3, k).T
 
 
-def solve_condensed(network: PatchNetwork, blocks: np.ndarray, rhs: np.ndarray,
-                    ridge: float = 0.0) -> np.ndarray:
-    """The global control points (K, 3) that solve the normal equations summed from the
-    per-patch ``blocks`` (P, s, s, 3, s, s, 3) and ``rhs`` (P, s, s, 3) of :func:`assemble`,
-    plus ``ridge`` times the identity: each patch's interior eliminated (dense Cholesky),
-    the Schur complement on the shared control points solved sparse
-    (:func:`nurbs_core.sparse_solve.solve_spd`), the interiors back-substituted. Control points
-    of no patch are 0."""
-    condensed = _Condensed(network, Workspace())
-    condensed.eliminate(0, blocks, rhs, ridge)
-    return condensed.solve(ridge)
-
-
 class _Condensed:
-    """Static condensation patch by patch (:func:`solve_condensed`): :meth:`eliminate` takes
-    the blocks of some patches, :meth:`solve` the rest once every patch's are in."""
+    """Static condensation patch by patch: each patch's interior eliminated (dense Cholesky),
+    the Schur complement on the shared control points solved sparse
+    (:func:`nurbs_core.sparse_solve.solve_spd`), the interiors back-substituted;
+    :meth:`eliminate` takes the blocks of some patches, :meth:`solve` the rest once every
+    patch's are in (control points of no patch are 0)."""
 
     def __init__(self, network: PatchNetwork, work: Workspace) -> None:
         self.network = network
@@ -383,5 +373,5 @@ class _Condensed:
         return control
 
 
-__all__ = ["DENSE_MAX_SIZE", "PatchTerms", "Workspace", "assemble", "solve_condensed",
-           "solve_global", "solve_terms"]
+__all__ = ["DENSE_MAX_SIZE", "PatchTerms", "Workspace", "assemble", "solve_global",
+           "solve_terms"]

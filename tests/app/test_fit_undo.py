@@ -87,10 +87,16 @@ def test_undo_after_a_fit_restores_the_surface_and_redo_brings_the_fit_back(qtbo
     _measured(qtbot, window)
 
     # Reset is a step too: Undo brings the discarded shape back
+    _reset_then_undo(qtbot, window, second)
+
+
+def _reset_then_undo(qtbot, window, before):
+    """Reset is one step: it clears the shape, and its Undo puts ``before`` back (measured)."""
+    document = window.document
     window.reset_fit()
     assert document.fitted is None and document.undo_stack.undoText() == "Reset"
     window.undo_action.trigger()
-    assert document.fitted is second
+    assert document.fitted is before
     _measured(qtbot, window)
 
 
@@ -124,11 +130,7 @@ def test_undo_while_a_fit_runs_stops_it_and_puts_back_the_earlier_shape(qtbot, w
 
     # Reset while a fit runs: Undo brings back the shape it started from, not its partial one
     _running_shape(qtbot, window)
-    window.reset_fit()
-    assert document.fitted is None and document.undo_stack.undoText() == "Reset"
-    window.undo_action.trigger()
-    assert document.fitted is stopped
-    _measured(qtbot, window)
+    _reset_then_undo(qtbot, window, stopped)
 
 
 def test_a_changed_grid_setting_wins_over_the_grown_grid(qtbot, window):
