@@ -34,6 +34,43 @@ def face_kind(face: OccShape) -> str:
     return _SURFACE_KINDS.get(name, "freeform")
 
 
+def face_primitive(face: OccShape) -> Any:
+    """The exact analytic surface a face lies on, as a
+    :class:`~nurbs_core.brep.primitives.Primitive` (None for a freeform face): a fillet that
+    OpenCASCADE made, measured on its own surface."""
+    from OCP.BRepAdaptor import BRepAdaptor_Surface
+
+    from nurbs_core.brep.primitives import Primitive
+
+    adaptor = BRepAdaptor_Surface(face)
+    kind = _SURFACE_KINDS.get(adaptor.GetType().name)
+    if kind is None:
+        return None
+
+    def frame(position: Any) -> tuple[np.ndarray, np.ndarray]:
+        return (np.array(position.Location().Coord()),
+                np.array(position.Direction().Coord()))
+
+    if kind == "plane":
+        return Primitive(kind, *frame(adaptor.Plane().Position()))
+    if kind == "cylinder":
+        surface = adaptor.Cylinder()
+        return Primitive(kind, *frame(surface.Position()), radius=surface.Radius())
+    if kind == "sphere":
+        surface = adaptor.Sphere()
+        return Primitive(kind, *frame(surface.Position()), radius=surface.Radius())
+    if kind == "torus":
+        surface = adaptor.Torus()
+        return Primitive(kind, *frame(surface.Position()), radius=surface.MajorRadius(),
+                         minor=surface.MinorRadius())
+    surface = adaptor.Cone()
+    _, axis = frame(surface.Position())
+    angle = surface.SemiAngle()
+    if angle < 0:  # the cone opens against its frame's direction
+        axis, angle = -axis, -angle
+    return Primitive(kind, np.array(surface.Apex().Coord()), axis, angle=angle)
+
+
 def sample_triangles(vertices: np.ndarray, triangles: np.ndarray, owners: np.ndarray,
                      count: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """``count`` points (count, 3) drawn uniformly by area on triangles (V, 3), (T, 3), and the

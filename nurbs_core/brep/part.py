@@ -83,6 +83,9 @@ class PartResult:
     closed: bool
     volume: float
     timings: dict[str, float] = field(default_factory=dict)
+    #: edges rounded as fillets (:mod:`nurbs_core.brep.fillets`; 0: built from
+    #: the arrangement of every surface)
+    fillets: int = 0
 
     @property
     def noise(self) -> float:
@@ -109,7 +112,7 @@ class PartResult:
                 "noise": self.noise, "coverage": self.segmentation.coverage,
                 "mean": float(d.mean()), "rms": float(np.sqrt((d ** 2).mean())),
                 "p99": float(np.percentile(d, 99)), "max": float(d.max()),
-                "fit_seconds": sum(self.timings.values()),
+                "fit_seconds": sum(self.timings.values()), "fillets": self.fillets,
                 "warnings": list(self.problems.values())}
 
 
@@ -209,9 +212,11 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
     low, high = points.min(axis=0), points.max(axis=0)
     extents = spans(segmentation.surfaces, points, segmentation.labels,
                     float(np.linalg.norm(high - low)), segmentation.tolerance)
-    surfaces = crossing(segmentation.surfaces, segmentation.tolerance)
-    solid = build_solid(surfaces, mesh_vertices, mesh_triangles, (low, high), extents,
-                        segmentation.tolerance)
+    solid, surfaces, fillets = _filleted(points, (mesh_vertices, mesh_triangles), segmentation)
+    if solid is None:
+        surfaces = crossing(segmentation.surfaces, segmentation.tolerance)
+        solid = build_solid(surfaces, mesh_vertices, mesh_triangles, (low, high), extents,
+                            segmentation.tolerance)
     timings["solid"] = time.perf_counter() - started
     started = time.perf_counter()
     # measured against the surfaces the solid is made of (fillets as enlarged to cross)
@@ -233,4 +238,27 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
     timings["measure"] = time.perf_counter() - started
     closed = count(solid, "SHELL") == 1 and count(solid, "SOLID") == 1
     return PartResult(solid, part_faces, segmentation, distance, nearest, is_valid(solid), closed,
-                      volume(solid), timings)
+                      volume(solid), timings, fillets)
+
+
+def _filleted(points: np.ndarray, mesh: tuple[np.ndarray, np.ndarray],
+              segmentation: Segmentation) -> tuple[OccShape | None, list[Primitive], int]:
+    """The solid built sharp and then filleted (:mod:`nurbs_core.brep.fillets`) when the scan
+    has blends, with the surfaces its faces lie on and the number of edges it rounded; (None, [], 0)
+    when it has none or OpenCASCADE cannot build it (the arrangement of every surface then
+    makes the solid)."""
+    from nurbs_core.brep.fillets import filleted_solid, find_blends
+    from nurbs_core.brep.occ import face_primitive
+    from nurbs_core.brep.solid import SolidError
+
+    blends, corners = find_blends(segmentation.surfaces, segmentation.labels, points,
+                                  segmentation.tolerance, segmentation.spacing)
+    if not blends:
+        return None, [], 0
+    try:
+        solid, rounded = filleted_solid(segmentation.surfaces, segmentation.labels, points,
+                                        blends, corners, mesh, segmentation.tolerance)
+    except SolidError:
+        return None, [], 0
+    own = [face_primitive(face) for face in faces(solid)]
+    return solid, [s for s in own if s is not None], rounded
