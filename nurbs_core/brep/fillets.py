@@ -40,8 +40,10 @@ from nurbs_core.brep.tangency import touching_sizes
 #: a blend's points span less than this turn around its axis (radians): a hole's go all round
 MAX_BLEND_TURN = np.pi
 #: a fillet read off the points along a sharp edge fits them within this share of the
-#: tolerance, as RMS (the segmentation's own limit for a surface)
-MAX_FIT_RMS = 0.45
+#: tolerance (3 noise sigmas), as RMS: the points near its tangent lines, half on a face, half
+#: on the fillet, raise it to about 1.6 sigmas (0.53); a sharp edge has almost no points off
+#: both faces, so the count is what tells it
+MAX_FIT_RMS = 0.7
 #: two regions are neighbours when some of their points lie within this many point spacings
 NEIGHBOUR_SPACINGS = 3.0
 

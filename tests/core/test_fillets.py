@@ -111,3 +111,27 @@ def test_a_block_with_every_edge_rounded_becomes_its_exact_filleted_solid():
     # the fillets are reported with their radius (0.15), measured on their own surfaces
     radii = [f.parameters["radius"] for f in fitted.faces if f.kind == "cylinder"]
     np.testing.assert_allclose(radii, 0.15, atol=0.01)
+
+
+@pytest.mark.parametrize("rounded", [True, False])
+def test_the_radius_a_scan_shows_along_a_sharp_edge(rounded):
+    """Along an edge of the sharp 1.6 x 1 x 0.7 block, the scan of the block with every edge
+    rounded (radius 0.15) shows a fillet of that radius; the scan of the sharp block shows
+    none."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.gp import gp_Pnt
+
+    from nurbs_core.brep.fillets import _edge_faces, _outward_normal, scanned_radius
+
+    box = BRepPrimAPI_MakeBox(gp_Pnt(0, 0, 0), 1.6, 1.0, 0.7).Shape()
+    shape = PARTS["rounded_block"]() if rounded else box
+    points, _, _ = scan_part(shape, 20_000, 0.002, seed=0)
+    tolerance = 3 * 0.002 * np.linalg.norm([1.6, 1.0, 0.7])
+    box_faces = faces(box)
+    radii = [scanned_radius(edge, (_outward_normal(box_faces[a]), _outward_normal(box_faces[b])),
+                            points, 0.3, tolerance) for edge, (a, b) in _edge_faces(box)]
+    assert len(radii) == 12
+    if rounded:
+        np.testing.assert_allclose(np.array(radii, float), 0.15, atol=tolerance / 2)
+    else:
+        assert radii == [None] * 12
