@@ -110,6 +110,23 @@ class Settings:
         return {"fit": self.fit.to_json(), "patches": self.patches.to_json(),
                 **{name: getattr(self, name) for name in WINDOW_FIELDS}}
 
+    def validate(self) -> None:
+        """Raise ValueError naming the first bad setting: the fit's and the patch options' own
+        checks, then the window's (a text ``"no"`` is not false, ``"0.1"`` not a number)."""
+        self.fit.validate()
+        self.patches.validate()
+        if self.fit_mode not in dict(FIT_MODES):
+            raise ValueError(f"fit_mode must be one of {', '.join(dict(FIT_MODES))}; got "
+                             f"{self.fit_mode!r}")
+        if (isinstance(self.offset_distance, bool)
+                or not isinstance(self.offset_distance, (int, float))
+                or not np.isfinite(self.offset_distance)):
+            raise ValueError(f"offset_distance must be a finite number, got "
+                             f"{self.offset_distance!r}")
+        for name in ("constrain_shared_edges", "show_offsets"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
+
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> Settings:
         """Inverse of :meth:`to_json`; raises ValueError for unknown settings."""
