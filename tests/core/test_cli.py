@@ -205,6 +205,22 @@ def test_a_small_sheet_fits_on_a_default_grid_it_can_hold(tmp_path, capsys):
     assert "lower degree" in line and "fewer control points" not in line
 
 
+def test_a_folder_input_and_a_nan_offset_are_refused_before_any_work(tmp_path, capsys):
+    """A folder given as the one input was "unknown point-cloud suffix ''"; --offset nan was
+    refused only after the whole fit ("distance must be finite")."""
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    np.savetxt(folder / "sheet.xyz", _sheet(300))
+    assert main([str(folder), "-o", str(tmp_path / "o.json")]) == 1
+    assert "is a folder, not a point-cloud file" in _error_line(capsys)
+    assert main([str(folder / "sheet.xyz"), "-o", str(tmp_path / "o.json"), "--offset",
+                 "nan"]) == 1
+    captured = capsys.readouterr()
+    assert captured.err.strip().splitlines() == [
+        "nurbs-fit: error: --offset nan: the offset distance must be a finite number"]
+    assert not (tmp_path / "o.json").exists()
+
+
 def test_missing_input_and_unwritable_output(tmp_path, capsys):
     assert main([str(tmp_path / "nope.xyz"), "-o", str(tmp_path / "o.json")]) == 1
     assert "nope.xyz" in _error_line(capsys)
