@@ -212,7 +212,8 @@ def test_a_folder_input_and_a_nan_offset_are_refused_before_any_work(tmp_path, c
     folder.mkdir()
     np.savetxt(folder / "sheet.xyz", _sheet(300))
     assert main([str(folder), "-o", str(tmp_path / "o.json")]) == 1
-    assert "is a folder, not a point-cloud file" in _error_line(capsys)
+    assert "is a directory, not a point-cloud file (a batch, with --output-dir" \
+        in _error_line(capsys)
     assert main([str(folder / "sheet.xyz"), "-o", str(tmp_path / "o.json"), "--offset",
                  "nan"]) == 1
     captured = capsys.readouterr()
