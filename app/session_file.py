@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from app.state import JSON_SESSION_FORMAT, OLD_SESSION_FORMATS, Document, Settings, Target
-from nurbs_core.geometry_arrays import from_mapping
+from nurbs_core.geometry_arrays import from_mapping, number_array
 
 #: The archive's manifest format (sessions of the JSON formats before it are still read).
 ARCHIVE_FORMAT = "nurbs-studio-session-v3"
@@ -212,7 +212,7 @@ def _session_target(number: int, item: Any) -> Target:
         raise ValueError(f"targets[{number}].path must be text, got {path!r}")
     if not isinstance(visible, bool):  # "no" is text: never read as true
         raise ValueError(f"targets[{number}].visible must be true or false, got {visible!r}")
-    points = _numbers(f"targets[{number}].points", item["points"])
+    points = number_array(f"targets[{number}].points", item["points"])
     if points.size == 0:
         points = points.reshape(0, 3)
     else:
@@ -221,19 +221,6 @@ def _session_target(number: int, item: Any) -> Target:
         except FileFormatError as exc:
             raise ValueError(str(exc)) from None
     return Target(item["name"], points, path, visible)
-
-
-def _numbers(name: str, value: Any) -> np.ndarray:
-    """``value`` (an array member, or a JSON session's nested lists) as float64; ValueError
-    naming ``name`` for text, true/false or ragged lists, which ``np.asarray(..., float)``
-    would read as numbers."""
-    try:
-        array = np.asarray(value)
-    except ValueError:
-        raise ValueError(f"{name} must be a (nested) list of numbers of one shape") from None
-    if array.size and array.dtype.kind not in "iuf":
-        raise ValueError(f"{name} must hold numbers, got {array.dtype.name} values")
-    return array.astype(np.float64)
 
 
 def _list(data: dict[str, Any], key: str) -> list[Any]:

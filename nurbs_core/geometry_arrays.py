@@ -57,9 +57,10 @@ class _Arrays(Mapping[str, Any]):
         return f"{type(self).__name__}({degrees}, control_points={shape})"
 
 
-def _array(name: str, value: Any) -> np.ndarray:
+def number_array(name: str, value: Any) -> np.ndarray:
     """``value`` (a nested list or an array of numbers) as float64; ValueError naming ``name``
-    for text, true/false or ragged lists (``np.asarray(..., float)`` would read ``"3"`` as 3)."""
+    for text, true/false or ragged lists (``np.asarray(..., float)`` would read ``"3"`` as 3).
+    The strict reading of numbers in a file (sessions)."""
     try:
         array = np.asarray(value)
     except ValueError:  # ragged nesting
@@ -115,24 +116,21 @@ def from_mapping(data: Mapping[str, Any]) -> GeometryArrays:
         return data
     kind = data.get("kind")
     try:
+        if kind not in ("curve", "surface"):
+            raise ValueError(f"unknown geometry kind {kind!r} (expected 'curve' or 'surface')")
+        control = number_array("control_points", data["control_points"])
+        weights = data.get("weights")
+        weights = (np.ones(control.shape[:-1]) if weights is None
+                   else number_array("weights", weights))
         if kind == "curve":
-            control = _array("control_points", data["control_points"])
-            weights = data.get("weights")
-            return check_arrays(CurveArrays(
-                _degree("degree", data["degree"]), control,
-                np.ones(control.shape[:-1]) if weights is None else _array("weights", weights),
-                _array("knots", data["knots"])))
-        if kind == "surface":
-            control = _array("control_points", data["control_points"])
-            weights = data.get("weights")
-            return check_arrays(SurfaceArrays(
-                _degree("degree_u", data["degree_u"]), _degree("degree_v", data["degree_v"]),
-                control,
-                np.ones(control.shape[:-1]) if weights is None else _array("weights", weights),
-                _array("knots_u", data["knots_u"]), _array("knots_v", data["knots_v"])))
+            return check_arrays(CurveArrays(_degree("degree", data["degree"]), control, weights,
+                                            number_array("knots", data["knots"])))
+        return check_arrays(SurfaceArrays(
+            _degree("degree_u", data["degree_u"]), _degree("degree_v", data["degree_v"]),
+            control, weights, number_array("knots_u", data["knots_u"]),
+            number_array("knots_v", data["knots_v"])))
     except KeyError as exc:
         raise ValueError(f"a {kind} needs {exc.args[0]!r}") from None
-    raise ValueError(f"unknown geometry kind {kind!r} (expected 'curve' or 'surface')")
 
 
 def _check_direction(name: str, knots: np.ndarray, count: int, degree: int) -> None:
