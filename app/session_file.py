@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from app.state import JSON_SESSION_FORMAT, OLD_SESSION_FORMATS, Document, Settings, Target
-from nurbs_core.geometry_arrays import from_mapping
+from nurbs_core.geometry_arrays import from_mapping, number_array
 
 #: The archive's manifest format (sessions of the JSON formats before it are still read).
 ARCHIVE_FORMAT = "nurbs-studio-session-v3"
@@ -207,7 +207,12 @@ def _session_target(number: int, item: Any) -> Target:
 
     if not isinstance(item, dict) or not isinstance(item.get("name"), str):
         raise ValueError(f"targets[{number}] needs a name")
-    points = np.asarray(item["points"], dtype=np.float64)
+    path, visible = item.get("path", ""), item.get("visible", True)
+    if not isinstance(path, str):
+        raise ValueError(f"targets[{number}].path must be text, got {path!r}")
+    if not isinstance(visible, bool):  # "no" is text: never read as true
+        raise ValueError(f"targets[{number}].visible must be true or false, got {visible!r}")
+    points = number_array(f"targets[{number}].points", item["points"])
     if points.size == 0:
         points = points.reshape(0, 3)
     else:
@@ -215,8 +220,15 @@ def _session_target(number: int, item: Any) -> Target:
             check_points(f"targets[{number}] ({item['name']})", points)
         except FileFormatError as exc:
             raise ValueError(str(exc)) from None
-    return Target(item["name"], points, str(item.get("path", "")),
-                  bool(item.get("visible", True)))
+    return Target(item["name"], points, path, visible)
+
+
+def _list(data: dict[str, Any], key: str) -> list[Any]:
+    """``data[key]`` when it is a list (missing: empty); ValueError naming it otherwise."""
+    value = data.get(key, [])
+    if not isinstance(value, list):
+        raise ValueError(f"{key} must be a list, got {type(value).__name__}")
+    return value
 
 
 def _parsed_session(path: Path, data: dict[str, Any], archive: Any) -> dict[str, Any]:
@@ -228,21 +240,21 @@ def _parsed_session(path: Path, data: dict[str, Any], archive: Any) -> dict[str,
             settings = Settings.from_flat_json(data.get("settings", {}))
         else:
             settings = Settings.from_json(data.get("settings", {}))
-        settings.fit.validate()
-        settings.patches.validate()
+        settings.validate()
         targets = []
-        for number, item in enumerate(data.get("targets", [])):
+        for number, item in enumerate(_list(data, "targets")):
             if archive is not None and isinstance(item, dict):
                 if not isinstance(item.get("points"), str):
                     raise ValueError(f"targets[{number}] needs the name of its points")
                 item = {**item, "points": archive.array(item["points"])}
             targets.append(_session_target(number, item))
-        patches = [from_mapping(p["geometry"]) for p in data.get("patches", [])]
-        names = [p["name"] for p in data.get("patches", [])]
+        patches = [_geometry(f"patches[{k}].geometry", p["geometry"])
+                   for k, p in enumerate(_list(data, "patches"))]
+        names = [p["name"] for p in _list(data, "patches")]
         if not all(isinstance(name, str) for name in names):
             raise ValueError("patch names must be text")
         fitted = data.get("fitted")
-        fitted = None if fitted is None else from_mapping(fitted)
+        fitted = None if fitted is None else _geometry("fitted", fitted)
         units = _session_units(data, targets)
         network, report = None, None
         if archive is not None and data.get("network") is not None:
@@ -251,6 +263,17 @@ def _parsed_session(path: Path, data: dict[str, Any], archive: Any) -> dict[str,
         raise ValueError(f"{type(exc).__name__}: {exc}") from None
     return {"settings": settings, "targets": targets, "patches": patches, "names": names,
             "fitted": fitted, "network": network, "network_report": report, "units": units}
+
+
+def _geometry(name: str, data: Any) -> Any:
+    """A session's curve or surface (:func:`from_mapping`, strict about types); ValueError
+    naming where it is."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{name} must be an object")
+    try:
+        return from_mapping(data)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
 
 
 def _session_units(data: dict[str, Any], targets: list[Target]) -> str | None:
@@ -284,12 +307,54 @@ def _session_network(path: Path, data: dict[str, Any], archive: Any) -> tuple[An
     if not isinstance(report, dict):
         raise ValueError("network_report must be an object")
     report = dict(report)
+    _check_report(report)
     if isinstance(report.get("deviation"), str):
         deviation = archive.array(report["deviation"])
         if deviation.ndim != 1:
             raise ValueError(f"the network's deviation must be one value per point, got "
                              f"shape {deviation.shape}")
-        report["deviation"] = deviation.astype(np.float64)
+        deviation = deviation.astype(np.float64)
+        # NaN marks a point left out of the fit (a fit of a selection); none fitted, or an
+        # infinite distance, is a damaged file
+        if deviation.size and np.isnan(deviation).all():
+            raise ValueError("network_report.deviation is NaN at every point")
+        if np.isinf(deviation).any():
+            raise ValueError("network_report.deviation holds infinite values")
+        report["deviation"] = deviation
+    elif report.get("deviation") is not None:
+        raise ValueError("network_report.deviation must name its member")
     else:
         report.pop("deviation", None)
     return network, report
+
+
+def _check_report(report: dict[str, Any]) -> None:
+    """The stored report of a network fit (``PatchController.network_report``): each field it
+    holds of the type that method writes (NaN stored as null); ValueError naming the first that
+    is not."""
+    def number(value: Any) -> bool:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+    def quality(value: Any) -> bool:  # numbers, true/false, null, and mappings of those
+        return all(item is None or isinstance(item, (bool, int, float))
+                   or (isinstance(item, dict) and quality(item)) for item in value.values())
+
+    if report.get("event", "done") not in ("done", "stopped"):
+        raise ValueError(f"network_report.event must be 'done' or 'stopped', got "
+                         f"{report['event']!r}")
+    if report.get("quality") is not None and not (isinstance(report["quality"], dict)
+                                                  and quality(report["quality"])):
+        raise ValueError("network_report.quality must be an object of numbers")
+    warnings = report.get("warnings", [])
+    if not (isinstance(warnings, list) and all(isinstance(w, str) for w in warnings)):
+        raise ValueError("network_report.warnings must be a list of text")
+    passes = report.get("passes", 0)
+    if isinstance(passes, bool) or not isinstance(passes, int) or passes < 0:
+        raise ValueError(f"network_report.passes must be a whole number, got {passes!r}")
+    if not (number(report.get("elapsed", 0.0)) and report.get("elapsed", 0.0) >= 0):
+        raise ValueError(f"network_report.elapsed must be a number of seconds, got "
+                         f"{report['elapsed']!r}")
+    for name in ("rms", "seam"):
+        if report.get(name) is not None and not number(report[name]):
+            raise ValueError(f"network_report.{name} must be a number or null, got "
+                             f"{report[name]!r}")

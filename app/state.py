@@ -28,6 +28,8 @@ from nurbs_core.fitting.config import INITS, FitConfig
 from nurbs_core.fitting.config import OPTIMIZERS as OPTIMIZERS
 from nurbs_core.fitting.config import PARAMETERIZATIONS as _PARAMETERIZATIONS
 from nurbs_core.fitting.config import SOLVERS as _SOLVERS
+from nurbs_core.fitting.grid_budget import POINTS_PER_CONTROL_POINT as POINTS_PER_CONTROL_POINT
+from nurbs_core.fitting.grid_budget import grid_for_points
 from nurbs_core.geometry_arrays import GeometryArrays, from_mapping
 from nurbs_core.loss_terms import LOSS_TERMS as LOSS_TERMS  # re-exported for the panels
 from nurbs_core.patches.options import PatchOptions
@@ -55,23 +57,11 @@ TOLERANCE_HINT = ("Tolerance: a positive distance in the cloud's units (e.g. 0.0
                   "\"auto\" to derive it from the cloud's noise")
 
 
-#: A surface fit wants several points per control point; fewer leaves the net free to fold.
-POINTS_PER_CONTROL_POINT = 8
-
-
 def control_grid_for(point_count: int, fit: FitConfig) -> tuple[int, int] | None:
-    """A smaller (n_u, n_v) when the cloud is too small for the fit's control grid, else None.
-
-    Each direction gets at most sqrt(points / POINTS_PER_CONTROL_POINT) control points, never
-    fewer than degree + 1 (the grid is only ever reduced)."""
-    if fit.kind != "surface":
-        return None
-    limit = int((point_count / POINTS_PER_CONTROL_POINT) ** 0.5)
-    n_u = min(fit.control_points_u, max(fit.degree_u + 1, limit))
-    n_v = min(fit.control_points_v, max(fit.degree_v + 1, limit))
-    if (n_u, n_v) == (fit.control_points_u, fit.control_points_v):
-        return None
-    return n_u, n_v
+    """A smaller (n_u, n_v) when the cloud is too small for the fit's surface control grid,
+    else None (the engine's rule, :func:`nurbs_core.fitting.grid_budget.grid_for_points`, which
+    the command line applies to its default grid too)."""
+    return grid_for_points(point_count, fit) if fit.kind == "surface" else None
 
 
 def parse_tolerance(text: str) -> float | None:
@@ -109,6 +99,23 @@ class Settings:
     def to_json(self) -> dict[str, Any]:
         return {"fit": self.fit.to_json(), "patches": self.patches.to_json(),
                 **{name: getattr(self, name) for name in WINDOW_FIELDS}}
+
+    def validate(self) -> None:
+        """Raise ValueError naming the first bad setting: the fit's and the patch options' own
+        checks, then the window's (a text ``"no"`` is not false, ``"0.1"`` not a number)."""
+        self.fit.validate()
+        self.patches.validate()
+        if self.fit_mode not in dict(FIT_MODES):
+            raise ValueError(f"fit_mode must be one of {', '.join(dict(FIT_MODES))}; got "
+                             f"{self.fit_mode!r}")
+        if (isinstance(self.offset_distance, bool)
+                or not isinstance(self.offset_distance, (int, float))
+                or not np.isfinite(self.offset_distance)):
+            raise ValueError(f"offset_distance must be a finite number, got "
+                             f"{self.offset_distance!r}")
+        for name in ("constrain_shared_edges", "show_offsets"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> Settings:

@@ -57,8 +57,24 @@ class _Arrays(Mapping[str, Any]):
         return f"{type(self).__name__}({degrees}, control_points={shape})"
 
 
-def _array(value: Any) -> np.ndarray:
-    return np.asarray(value, dtype=np.float64)
+def number_array(name: str, value: Any) -> np.ndarray:
+    """``value`` (a nested list or an array of numbers) as float64; ValueError naming ``name``
+    for text, true/false or ragged lists (``np.asarray(..., float)`` would read ``"3"`` as 3).
+    The strict reading of numbers in a file (sessions)."""
+    try:
+        array = np.asarray(value)
+    except ValueError:  # ragged nesting
+        raise ValueError(f"{name} must be a (nested) list of numbers of one shape") from None
+    if array.size and array.dtype.kind not in "iuf":
+        raise ValueError(f"{name} must hold numbers, got {array.dtype.name} values")
+    return array.astype(np.float64)
+
+
+def _degree(name: str, value: Any) -> int:
+    """``value`` when it is an integer (not text such as ``"3"``, not true/false, not 3.0)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    return int(value)
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -93,29 +109,28 @@ GeometryArrays = CurveArrays | SurfaceArrays
 def from_mapping(data: Mapping[str, Any]) -> GeometryArrays:
     """The twin of a ``{"kind": ..., ...}`` mapping (a former ``.numpy()`` dict, a session entry
     or a twin itself). Missing weights are ones; missing knots are not allowed here. Raises
-    ValueError for an unknown kind, a missing field, or arrays that do not make a valid NURBS
+    ValueError for an unknown kind, a missing field, a degree that is not an integer (``"3"``,
+    ``3.0``, ``true``), arrays that are not numbers, or arrays that do not make a valid NURBS
     (:func:`check_arrays`: shapes, finiteness, knot counts, degrees, positive weights)."""
     if isinstance(data, (CurveArrays, SurfaceArrays)):
         return data
     kind = data.get("kind")
     try:
+        if kind not in ("curve", "surface"):
+            raise ValueError(f"unknown geometry kind {kind!r} (expected 'curve' or 'surface')")
+        control = number_array("control_points", data["control_points"])
+        weights = data.get("weights")
+        weights = (np.ones(control.shape[:-1]) if weights is None
+                   else number_array("weights", weights))
         if kind == "curve":
-            control = _array(data["control_points"])
-            weights = data.get("weights")
-            return check_arrays(CurveArrays(
-                int(data["degree"]), control,
-                np.ones(control.shape[:-1]) if weights is None else _array(weights),
-                _array(data["knots"])))
-        if kind == "surface":
-            control = _array(data["control_points"])
-            weights = data.get("weights")
-            return check_arrays(SurfaceArrays(
-                int(data["degree_u"]), int(data["degree_v"]), control,
-                np.ones(control.shape[:-1]) if weights is None else _array(weights),
-                _array(data["knots_u"]), _array(data["knots_v"])))
+            return check_arrays(CurveArrays(_degree("degree", data["degree"]), control, weights,
+                                            number_array("knots", data["knots"])))
+        return check_arrays(SurfaceArrays(
+            _degree("degree_u", data["degree_u"]), _degree("degree_v", data["degree_v"]),
+            control, weights, number_array("knots_u", data["knots_u"]),
+            number_array("knots_v", data["knots_v"])))
     except KeyError as exc:
         raise ValueError(f"a {kind} needs {exc.args[0]!r}") from None
-    raise ValueError(f"unknown geometry kind {kind!r} (expected 'curve' or 'surface')")
 
 
 def _check_direction(name: str, knots: np.ndarray, count: int, degree: int) -> None:

@@ -233,6 +233,13 @@ class FitConfig:
                                  f"{getattr(self, name)!r}")
 
         choice("kind", KINDS)
+        for name in ("free_knots", "free_weights", "pin_boundary", "parameter_correction",
+                     "single_patch"):  # "no" is text, not false: never read as true
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
+        if self.learned_model is not None and not isinstance(self.learned_model, str):
+            raise ValueError(f"learned_model must be a file name or None, got "
+                             f"{self.learned_model!r}")
         choice("optimizer", OPTIMIZERS)
         choice("init", INITS)
         choice("lr_schedule", LR_SCHEDULES)

@@ -70,9 +70,24 @@ def check_points(target: ArrayLike, config: FitConfig) -> np.ndarray:
         if spread[1] <= 1e-6 * spread[0]:
             raise ValueError("the points are collinear; a surface needs points spread over an "
                              "area (fit a curve instead)")
-    controls = config.control_points_u * (config.control_points_v if config.kind == "surface"
-                                          else 1)
+    surface = config.kind == "surface"
+    controls = config.control_points_u * (config.control_points_v if surface else 1)
     if n < controls:
-        raise ValueError(f"{n} points cannot determine {controls} control points; use fewer "
-                         "control points")
+        raise ValueError(_too_few_points(n, controls, config))
     return points
+
+
+def _too_few_points(n: int, controls: int, config: FitConfig) -> str:
+    """What to do when ``n`` points cannot determine ``controls`` control points: a smaller
+    grid when the degree allows one, else a lower degree (the fewest control points a degree
+    p needs is p + 1 per direction), or more points."""
+    surface = config.kind == "surface"
+    degrees = (config.degree_u, config.degree_v) if surface else (config.degree_u,)
+    fewest = (degrees[0] + 1) * (degrees[-1] + 1 if surface else 1)
+    if n >= fewest:
+        return (f"{n} points cannot determine {controls} control points; use at most {n} "
+                f"(e.g. {' x '.join(str(p + 1) for p in degrees)})")
+    degree = " x ".join(map(str, degrees))
+    return (f"{n} points are too few for a {config.kind} of degree {degree}, which needs at "
+            f"least {fewest} points; give more points, or a lower degree (degree 1 needs "
+            f"{4 if surface else 2})")

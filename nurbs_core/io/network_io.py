@@ -157,9 +157,12 @@ def _array(path: StrPath, document: dict[str, Any], key: str, shape: tuple[int |
     if key not in document:
         raise FileFormatError(path, f"the network lacks the key {name!r}")
     try:
-        array = np.array(document[key], dtype=np.float64)
+        array = np.asarray(document[key])
     except (TypeError, ValueError):
         raise FileFormatError(path, f"{name} is not a (nested) list of numbers") from None
+    if array.size and array.dtype.kind not in "iuf":  # never "1.0" or true read as a number
+        raise FileFormatError(path, f"{name} is not a (nested) list of numbers")
+    array = array.astype(np.float64)
     if array.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, array.shape)):
         expected = " x ".join("?" if s is None else str(s) for s in shape) or "a number"
         raise FileFormatError(path, f"{name} has shape {array.shape}, expected {expected}")

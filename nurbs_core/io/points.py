@@ -79,6 +79,9 @@ def load_points(path: StrPath, *, mesh_mode: str = "vertices", sample_count: int
     if mesh_mode not in ("vertices", "sample"):
         raise ValueError(f"mesh_mode must be 'vertices' or 'sample', got {mesh_mode!r}")
     suffix = suffix_of(path)
+    if suffix not in POINT_CLOUD_SUFFIXES and os.path.isdir(path):
+        raise FileFormatError(path, "is a directory, not a point-cloud file (a batch, with "
+                                    "--output-dir, fits the clouds in a folder)")
     if suffix not in POINT_CLOUD_SUFFIXES:
         raise FileFormatError(path, f"unknown point-cloud suffix {suffix!r}; supported: "
                                     f"{', '.join(POINT_CLOUD_SUFFIXES)}")

@@ -4,6 +4,7 @@ holds fewer formats), and its options; the ``--offset`` companion's name."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -48,6 +49,8 @@ def check_before_work(job: FitJob) -> list[Path]:
     outputs = check_outputs(job)
     # a bad option fails before the cloud is read
     field_settings(job.settings)
+    if job.offset is not None and not math.isfinite(job.offset):
+        raise ValueError(f"--offset {job.offset}: the offset distance must be a finite number")
     return outputs
 
 

@@ -56,7 +56,7 @@ def prepare_fit(job: FitJob, points: np.ndarray | None = None) -> PreparedFit:
         points = load_points(job.input).points
     flat_z = bool(job.curve and len(points) and np.ptp(points[:, 2]) == 0)
     target = points[:, :2] if flat_z else points
-    config = fit_config(job, target.shape[1])
+    config = _default_grid_for(job, fit_config(job, target.shape[1]), len(target))
     parameters = None
     if job.grid is not None:
         if job.curve:
@@ -68,6 +68,23 @@ def prepare_fit(job: FitJob, points: np.ndarray | None = None) -> PreparedFit:
     _print_plan(job, config, len(points), known_parameters=parameters is not None)
     return PreparedFit(job, outputs, points, target, flat_z, config, parameters,
                        _initial(job, flat_z))
+
+
+def _default_grid_for(job: FitJob, config: FitConfig, point_count: int) -> FitConfig:
+    """``config`` with its default control grid shrunk to what ``point_count`` points can hold
+    (:func:`~nurbs_core.fitting.grid_budget.grid_for_points`); a grid the user chose
+    (``--control-points``, ``--set control_points_*`` or custom knots, ``--initial``) is kept as
+    it is, and the fit says when it is too large for the points."""
+    from nurbs_core.fitting.grid_budget import grid_for_points
+    from nurbs_core.jobs.settings import field_settings
+
+    chosen = {"control_points_u", "control_points_v", "knots_u", "knots_v"}
+    if job.control_points or job.initial or chosen & set(field_settings(job.settings)):
+        return config
+    grid = grid_for_points(point_count, config)
+    if grid is None:
+        return config
+    return config.replace(control_points_u=grid[0], control_points_v=grid[1])
 
 
 def _grid_parameters(count_u: int, count_v: int, points: int) -> np.ndarray:

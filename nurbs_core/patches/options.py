@@ -29,6 +29,11 @@ def check_patch_count(patches: int | str, points: int) -> None:
                          f"{max(4, points // POINTS_PER_PATCH)} or 'auto'")
 
 
+def _number(value: object) -> bool:
+    """Whether ``value`` is a real number (not text, not true/false)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
 @dataclass(frozen=True)
 class PatchOptions:
     """Settings of a network fit. patches: "auto" or a target patch count (>= 4); size: control
@@ -61,22 +66,30 @@ class PatchOptions:
             raise ValueError(f"patches: at most {MAX_PATCHES} patches, got {self.patches} (each "
                              "patch holds a grid of control points; a finer network needs a "
                              "finer control grid per patch: size)")
+        for name in ("degree", "max_size"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+                raise ValueError(f"{name} must be an integer, got {value!r}")
         if self.degree != 3:
             raise ValueError(f"patch networks are bicubic for now (degree 3), got {self.degree}")
         if self.size is not None and not (isinstance(self.size, numbers.Integral)
                                           and self.degree < self.size <= 40):
             raise ValueError(f"size must be an integer from {self.degree + 1} to 40, got "
                              f"{self.size!r}")
+        if not self.degree < self.max_size <= 40:
+            raise ValueError(f"max_size must be an integer from {self.degree + 1} to 40, got "
+                             f"{self.max_size!r}")
         for name in ("stiffness", "seam_weight"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+            if not (_number(value) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a finite non-negative number, got {value!r}")
-        if self.tolerance is not None and not (math.isfinite(self.tolerance)
+        if self.tolerance is not None and not (_number(self.tolerance)
+                                               and math.isfinite(self.tolerance)
                                                and self.tolerance > 0):
-            raise ValueError(f"tolerance must be positive, got {self.tolerance!r}")
+            raise ValueError(f"tolerance must be a positive number, got {self.tolerance!r}")
         if not isinstance(self.creases, bool):
             raise ValueError(f"creases must be true or false, got {self.creases!r}")
-        if self.max_hole is not None and not (isinstance(self.max_hole, (int, float))
+        if self.max_hole is not None and not (_number(self.max_hole)
                                               and math.isfinite(self.max_hole)
                                               and self.max_hole >= 0):
             raise ValueError(f"max_hole must be a finite non-negative length, got "

@@ -388,9 +388,11 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     options = options or PatchOptions()
     options.validate()
     points = np.asarray(points, np.float64)
-    if points.ndim != 2 or points.shape[1] != 3 or len(points) < 100:
-        raise ValueError(f"a patch network needs at least 100 points of shape (N, 3), got "
-                         f"{points.shape}")
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"a patch network needs points of shape (N, 3), got {points.shape}")
+    if len(points) < 100:
+        raise ValueError(f"a patch network needs at least 100 points, the cloud has "
+                         f"{len(points)}: fit it as one patch")
     if not np.isfinite(points).all():
         raise ValueError("the cloud has NaN or infinite coordinates")
     check_patch_count(options.patches, len(points))

@@ -146,6 +146,109 @@ def test_damaged_archives_are_refused_before_the_document_changes(tmp_path, memb
     assert (document.targets, document.settings) == before
 
 
+def _fitted_surface(**change):
+    from nurbs_core.geometry_arrays import SurfaceArrays
+
+    knots = [0.0] * 4 + [1.0] * 4
+    surface = SurfaceArrays(3, 3, np.zeros((4, 4, 3)), np.ones((4, 4)), np.array(knots),
+                            np.array(knots))
+    return {**surface.to_json(), **change}
+
+
+def _patch_settings(**patches):
+    settings = Document().settings.to_json()
+    settings["patches"].update(patches)
+    return settings
+
+
+# Hand-edited values of the wrong type: each names its field (bool("no") is True, int("3") is 3:
+# the reader never coerces)
+@pytest.mark.parametrize("change, message", [
+    ({"targets": [{"name": "a", "path": "", "visible": "no", "points": "targets/0"}]},
+     r"targets\[0\]\.visible must be true or false, got 'no'"),
+    ({"targets": [{"name": "a", "path": 7, "visible": True, "points": "targets/0"}]},
+     r"targets\[0\]\.path must be text"),
+    ({"fitted": _fitted_surface(degree_u="3")}, "fitted: degree_u must be an integer, got '3'"),
+    ({"fitted": _fitted_surface(degree_v=3.0)}, "fitted: degree_v must be an integer, got 3.0"),
+    ({"fitted": _fitted_surface(knots_u=["0"] * 4 + ["1"] * 4)},
+     "fitted: knots_u must hold numbers"),
+    ({"patches": [{"name": "p", "geometry": _fitted_surface(degree_u=True)}]},
+     r"patches\[0\]\.geometry: degree_u must be an integer, got True"),
+    ({"settings": _settings(degree_u="3")}, "degree_u must be an integer, got '3'"),
+    ({"settings": _settings(free_knots="no")}, "free_knots must be true or false, got 'no'"),
+    ({"settings": _settings(parameter_correction=0)},
+     "parameter_correction must be true or false"),
+    ({"settings": _patch_settings(degree="3")}, "degree must be an integer, got '3'"),
+    ({"settings": _patch_settings(tolerance="0.1")},
+     "tolerance must be a positive number, got '0.1'"),
+    ({"settings": _patch_settings(max_size=10**6)}, "max_size must be an integer from 4 to 40"),
+    ({"settings": {**Document().settings.to_json(), "show_offsets": "no"}},
+     "show_offsets must be true or false, got 'no'"),
+    ({"settings": {**Document().settings.to_json(), "fit_mode": "both"}},
+     "fit_mode must be one of single, patches"),
+    ({"settings": {**Document().settings.to_json(), "offset_distance": "0.1"}},
+     "offset_distance must be a finite number"),
+    ({"targets": {"name": "a"}}, "targets must be a list"),
+])
+def test_values_of_the_wrong_type_are_refused_naming_the_field(tmp_path, change, message):
+    path = _zip(tmp_path / "bad.nstudio", {MANIFEST: json.dumps(_manifest(**change)),
+                                           "targets/0.npy": _npy(GOOD_POINTS)})
+    document = _document(np.ones((3, 3)))
+    before = (document.targets, document.settings, document.fitted)
+    with pytest.raises(ValueError, match=message):
+        load_session(document, path)
+    assert (document.targets, document.settings, document.fitted) == before
+
+
+def test_a_json_session_of_points_as_text_is_refused(tmp_path):
+    from app.state import JSON_SESSION_FORMAT, Settings
+
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps({"format": JSON_SESSION_FORMAT, "settings": Settings().to_json(),
+                                "targets": [{"name": "a", "points": [["0", "0", "0"]] * 4}],
+                                "patches": [], "fitted": None}))
+    with pytest.raises(ValueError, match=r"targets\[0\]\.points must hold numbers"):
+        read_session(path)
+
+
+@pytest.mark.parametrize("report, deviation, message", [
+    ({"deviation": "network_deviation"}, np.full(4, np.nan), "NaN at every point"),
+    ({"deviation": "network_deviation"}, np.array([0.1, np.inf, 0.2, 0.3]), "infinite"),
+    ({"deviation": [0.1, 0.2, 0.3, 0.4]}, None, "deviation must name its member"),
+    ({"passes": "7"}, None, "passes must be a whole number, got '7'"),
+    ({"elapsed": "3.5"}, None, "elapsed must be a number of seconds"),
+    ({"rms": "0.1"}, None, "rms must be a number or null"),
+    ({"warnings": "seams"}, None, "warnings must be a list of text"),
+    ({"event": "fitted"}, None, "event must be 'done' or 'stopped'"),
+    ({"quality": {"patches": "6"}}, None, "quality must be an object of numbers"),
+])
+def test_a_damaged_network_report_is_refused(tmp_path, report, deviation, message):
+    from nurbs_core.io.network_io import network_document
+
+    arrays = {"targets/0": GOOD_POINTS}
+    if deviation is not None:
+        arrays["network_deviation"] = deviation
+    path = tmp_path / "bad.nstudio"
+    write_archive(path, _manifest(network="network.json", network_report=report), arrays,
+                  {"network.json": network_document(_cube_network())})
+    with pytest.raises(ValueError, match=message):
+        read_session(path)
+
+
+def test_a_deviation_of_a_selection_fit_keeps_its_nan_points(tmp_path):
+    """NaN marks the points a fit of a selection left out: a report with some NaN opens."""
+    from nurbs_core.io.network_io import network_document
+
+    deviation = np.array([0.1, np.nan, 0.2, np.nan])
+    path = tmp_path / "ok.nstudio"
+    write_archive(path, _manifest(network="network.json",
+                                  network_report={"deviation": "network_deviation",
+                                                  "passes": 3, "rms": None}),
+                  {"targets/0": GOOD_POINTS, "network_deviation": deviation},
+                  {"network.json": network_document(_cube_network())})
+    np.testing.assert_array_equal(read_session(path)["network_report"]["deviation"], deviation)
+
+
 def test_a_damaged_network_member_is_refused(tmp_path):
     from nurbs_core.io.network_io import network_document
 

@@ -183,6 +183,45 @@ def test_bad_settings_exit_with_one_line(tmp_path, capsys, extra, message):
     assert message in _error_line(capsys)
 
 
+def test_a_small_sheet_fits_on_a_default_grid_it_can_hold(tmp_path, capsys):
+    """16 points cannot hold the default 12 x 12 grid: the default shrinks (4 x 4, the fewest a
+    bicubic needs); only a grid the user chose is refused with "use at most", and a cloud too
+    small for the degree is told to lower it, never to use fewer control points it never
+    chose."""
+    source = tmp_path / "small_sheet.xyz"
+    u, v = np.meshgrid(np.linspace(0, 1, 4), np.linspace(0, 1, 4))
+    np.savetxt(source, np.c_[u.ravel(), v.ravel(), 0.1 * np.sin(3 * u.ravel())])
+    out = tmp_path / "f.json"
+    assert main([str(source), "-o", str(out)]) == 0
+    assert "(degree 3x3, 4x4 control points)" in capsys.readouterr().err
+    assert out.exists()
+    assert main([str(source), "-o", str(out), "--control-points", "6", "6"]) == 1
+    assert "16 points cannot determine 36 control points; use at most 16" in _error_line(capsys)
+    nine = tmp_path / "nine.xyz"
+    np.savetxt(nine, np.loadtxt(source)[:9])
+    assert main([str(nine), "-o", str(out)]) == 1
+    line = _error_line(capsys)
+    assert "9 points are too few for a surface of degree 3 x 3" in line
+    assert "lower degree" in line and "fewer control points" not in line
+
+
+def test_a_folder_input_and_a_nan_offset_are_refused_before_any_work(tmp_path, capsys):
+    """A folder given as the one input was "unknown point-cloud suffix ''"; --offset nan was
+    refused only after the whole fit ("distance must be finite")."""
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    np.savetxt(folder / "sheet.xyz", _sheet(300))
+    assert main([str(folder), "-o", str(tmp_path / "o.json")]) == 1
+    assert "is a directory, not a point-cloud file (a batch, with --output-dir" \
+        in _error_line(capsys)
+    assert main([str(folder / "sheet.xyz"), "-o", str(tmp_path / "o.json"), "--offset",
+                 "nan"]) == 1
+    captured = capsys.readouterr()
+    assert captured.err.strip().splitlines() == [
+        "nurbs-fit: error: --offset nan: the offset distance must be a finite number"]
+    assert not (tmp_path / "o.json").exists()
+
+
 def test_missing_input_and_unwritable_output(tmp_path, capsys):
     assert main([str(tmp_path / "nope.xyz"), "-o", str(tmp_path / "o.json")]) == 1
     assert "nope.xyz" in _error_line(capsys)

@@ -81,6 +81,18 @@ def test_patches_refuses_bad_requests_and_protects_the_input(sphere_file, tmp_pa
     assert sphere_file.read_bytes() == before
 
 
+def test_too_few_points_for_a_network_is_said_once_in_the_users_terms(tmp_path, capsys):
+    source = tmp_path / "small_sheet.xyz"
+    u, v = np.meshgrid(np.linspace(0, 1, 4), np.linspace(0, 1, 4))
+    np.savetxt(source, np.c_[u.ravel(), v.ravel(), 0.1 * np.sin(3 * u.ravel())])
+    assert main([str(source), "-o", str(tmp_path / "f.json"), "--patches", "4"]) == 1
+    err = capsys.readouterr().err
+    line = "nurbs-fit: error: a patch network needs at least 100 points, the cloud has 16: " \
+           "fit it as one patch"
+    assert err.splitlines()[-1] == line and err.count("100 points") == 1
+    assert "shape" not in err
+
+
 def test_a_forced_single_patch_on_a_closed_cloud_is_not_converged(sphere_file, tmp_path, capsys):
     assert main([str(sphere_file), "-o", str(tmp_path / "one.json"), "--single-patch"]) == 0
     captured = capsys.readouterr()

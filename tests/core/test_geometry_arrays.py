@@ -65,6 +65,25 @@ def test_json_form_round_trips_and_bad_entries_are_refused():
         from_mapping({"kind": "curve", "degree": 2, "control_points": [[0, 0], [1, 1], [2, 0]]})
 
 
+@pytest.mark.parametrize("change, message", [
+    ({"degree_u": "3"}, "degree_u must be an integer, got '3'"),
+    ({"degree_v": 3.0}, "degree_v must be an integer, got 3.0"),
+    ({"degree_u": True}, "degree_u must be an integer, got True"),
+    ({"knots_v": ["0"] * 4 + ["1"] * 4}, "knots_v must hold numbers"),
+    ({"weights": [[True] * 4] * 4}, "weights must hold numbers"),
+    ({"control_points": [[[0, 0, 0]] * 4] * 3 + [[[0, 0]]]}, "control_points must be a"),
+])
+def test_values_of_the_wrong_type_are_never_coerced(change, message):
+    """int("3") is 3 and np.asarray(["1"], float) is [1.0]: the session form refuses both."""
+    knots = [0.0] * 4 + [1.0] * 4
+    good = {"kind": "surface", "degree_u": 3, "degree_v": 3,
+            "control_points": np.zeros((4, 4, 3)).tolist(), "weights": np.ones((4, 4)).tolist(),
+            "knots_u": knots, "knots_v": knots}
+    assert from_mapping(good).degree_u == 3
+    with pytest.raises(ValueError, match=message):
+        from_mapping({**good, **change})
+
+
 def test_the_twins_import_without_torch():
     code = "import sys, nurbs_core.geometry_arrays; print('torch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -121,6 +121,8 @@ def _edit(document: dict, change: str) -> None:
         document["patches"][2]["control_points"][1][1][0] += 1.0
     elif change == "text in knots":
         document["knots"][2] = "a"
+    elif change == "numbers as text":  # np.array(..., float) read "0.5" as 0.5
+        document["control_points"] = [[str(x) for x in c] for c in document["control_points"]]
     elif change == "degree is text":
         document["degree"] = "3"
     elif change == "not manifold":
@@ -138,6 +140,7 @@ def _edit(document: dict, change: str) -> None:
     ("bad format", "not a patch-network document"),
     ("patch disagrees", r"patches\[2\].control_points disagrees"),
     ("text in knots", "knots is not a"),
+    ("numbers as text", "control_points is not a"),
     ("degree is text", "degree must be an integer"),
     ("not manifold", "invalid layout"),
 ])

@@ -126,6 +126,20 @@ def test_sigterm_to_the_parent_alone_with_jobs_prints_one_line(tmp_path):
 # --- the pieces ---------------------------------------------------------------------------------
 
 
+@pytest.fixture
+def python_ctrl_c():
+    """Python's own Ctrl-C (SIGINT raises KeyboardInterrupt, not blocked) for the test, whatever
+    the process inherited, and the handler and mask it had restored afterwards. A test process
+    started as a shell's background job (``cmd &`` without job control, nohup, some CI runners)
+    inherits SIGINT ignored, and Python then installs no handler: a replayed SIGINT did
+    nothing, and the test passed or failed by whether an earlier test had left a handler."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    mask = signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    yield
+    signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    signal.signal(signal.SIGINT, previous)
+
+
 def _blocked_signals() -> int:
     """This process's blocked signals (SigBlk of its main thread) as a bit mask."""
     status = Path("/proc/self/status").read_text()
@@ -136,7 +150,7 @@ def _report_blocked(queue: multiprocessing.Queue) -> None:
     queue.put(_blocked_signals())
 
 
-def test_processes_started_while_shielded_never_see_sigint():
+def test_processes_started_while_shielded_never_see_sigint(python_ctrl_c):
     """A thread started in the block, and a process spawned from it as Dask's nannies do (after
     multiprocessing's resource tracker, which unblocks SIGINT where it starts), keep SIGINT
     blocked; this thread's mask is restored afterwards."""
@@ -162,7 +176,7 @@ def test_processes_started_while_shielded_never_see_sigint():
     assert _blocked_signals() == before
 
 
-def test_signals_in_a_held_block_come_after_it():
+def test_signals_in_a_held_block_come_after_it(python_ctrl_c):
     with pytest.raises(KeyboardInterrupt), held_signals() as held:
         signal.raise_signal(signal.SIGINT)
         assert held == [signal.SIGINT]                 # not raised inside the block
