@@ -27,6 +27,7 @@ EXPORT_FORMATS = (
     ("Rhino 3DM", ".3dm", False),
     ("STEP", ".step", True),
     ("IGES", ".iges", True),
+    ("OpenCASCADE B-rep (solids)", ".brep", True),
     ("NURBS JSON", ".json", False),
     ("Wavefront OBJ (tessellated)", ".obj", False),
     ("STL (tessellated)", ".stl", False),

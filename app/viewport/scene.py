@@ -27,6 +27,7 @@ from app.display_types import FAR, FINE, FLIPPED, OVERLAP, DeviationMap, Display
 from app.viewport.deviation_colours import DeviationColours
 from app.viewport.network_layers import NetworkLayers
 from app.viewport.selection import SelectionTool
+from app.viewport.solid_layers import SolidLayers
 
 RENDER_INTERVAL_MS = 33
 DEVIATION_TITLE = "Deviation"
@@ -177,6 +178,8 @@ class SceneView(QObject):
         self._render_timer.timeout.connect(self.render_now)
         self.network = NetworkLayers(self.plotter, self.request_render,
                                      self._apply_deviation_surface)
+        #: the part route's solid (Solid mode)
+        self.solid = SolidLayers(self.plotter, self.request_render)
         #: the colour scale (signed or tolerance bands) the cloud and the deviation surface share
         self.deviation_colours = DeviationColours(self.plotter)
         #: box and lasso selection over the viewport (off until a mode is chosen)
@@ -384,9 +387,10 @@ class SceneView(QObject):
 
     # --- fit mode --------------------------------------------------------------------------------
     def set_mode(self, mode: str):
-        """"single" or "patches": which fit's layers are on show."""
+        """"single", "patches" or "solid": which fit's layers are on show."""
         self._mode = mode
         self.network.set_enabled(mode == "patches")
+        self.solid.set_enabled(mode == "solid")
         for name in SINGLE_FIT_LAYERS:
             self._apply_visibility(name)
         self._update_scalar_bar()
@@ -549,6 +553,9 @@ class SceneView(QObject):
         if layer in NETWORK_LAYERS:
             self.network.set_visible(layer, visible)
             return
+        if layer == "solid":
+            self.solid.set_visible(visible)
+            return
         self._visible[layer] = bool(visible)
         if layer in self._extra_meshes:
             for name in self._extra_meshes[layer]:
@@ -564,6 +571,8 @@ class SceneView(QObject):
         self.request_render()
 
     def is_visible(self, layer: str) -> bool:
+        if layer == "solid":
+            return self.solid.is_visible()
         return self.network.is_visible(layer) if layer in NETWORK_LAYERS else self._visible[layer]
 
     def set_note(self, text: str):
@@ -641,6 +650,7 @@ class SceneView(QObject):
         parts = [mesh.points for name, mesh in self._meshes.items()
                  if mesh.n_points and self._actors[name].GetVisibility() and name != "selection"]
         parts += self.network.visible_points()
+        parts += self.solid.visible_points()
         for group in ("patches", "offsets"):
             for name in self._extra_meshes[group]:
                 actor = self.plotter.actors.get(name)

@@ -62,6 +62,8 @@ class ExportPolicy(QObject):
         window = self._window
         if window.document.settings.fit_mode == "patches":
             return window.export_network(path)
+        if window.document.settings.fit_mode == "solid":
+            return window.export_solid(path)
         geometries = window.document.all_geometry()
         if not geometries:
             window.report("Nothing to export yet: run a fit or open NURBS files first.", error=True)
