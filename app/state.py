@@ -686,4 +686,6 @@ class Document(QObject):
         self.undo_stack.clear()
         self._apply_settings(session["settings"])
         self.set_fitted(session["fitted"])
+        if session.get("solid") is not None:
+            self.set_solid(session["solid"])
 

@@ -25,9 +25,9 @@ from PySide6.QtWidgets import (
 )
 
 from app.panels.result_text import length_text
+from app.solid_types import FaceRow, SolidReport
 from app.state import SOLID_CHOICES
 from app.viewport.solid_layers import COLOURINGS, TYPE_COLORS, TYPE_LABELS
-from app.workers.part_worker import FaceRow, SolidReport
 
 WARNING_COLOR = "#b00020"
 GOOD_COLOR = "#1b7f3b"

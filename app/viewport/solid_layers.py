@@ -12,8 +12,8 @@ from collections.abc import Callable
 import numpy as np
 import pyvista as pv
 
+from app.solid_types import SolidDisplay, SolidReport
 from app.viewport.color_scale import label_count, nice_ceiling
-from app.workers.part_worker import SolidDisplay, SolidReport
 
 #: a face's colour by its surface type (the engine's names; "freeform" is a NURBS face)
 TYPE_COLORS = {"plane": "#9fb4c8", "cylinder": "#f08c2e", "cone": "#3fae5a",

@@ -91,6 +91,7 @@ class SessionHost(Reporter, Protocol):
     document: Document
     controller: FitController
     patch_controller: PatchController
+    part_controller: PartController
     loss_plot: LossPlot
     recent: RecentDirectories
 

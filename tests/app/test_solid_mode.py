@@ -139,3 +139,152 @@ def test_stop_and_closing_the_window_mid_solid_are_safe(qtbot, window, plate_sca
     assert time.monotonic() - started < 2.0
     assert not window.part_controller.is_busy()
     _join_solid_jobs()
+
+
+def test_start_on_a_sphere_scan_on_auto_makes_a_solid_sphere(qtbot, window, tmp_path):
+    """The default setting (auto): one patch refuses the closed cloud, choose_route finds a
+    part-like scan (one analytic surface: a ball) and the window switches to Solid mode with
+    the solid; Undo returns to Single patch mode, Reset in Solid mode drops the solid."""
+    from nurbs_core import samples
+
+    path = tmp_path / "ball.xyz"
+    np.savetxt(path, samples.sphere(1500).points, fmt="%.8f")
+    open_by_drop(qtbot, window, [path])
+    shown = []
+    window.error_shown.connect(shown.append)
+    with qtbot.waitSignal(window.part_controller.solid_ready, timeout=SOLID_TIMEOUT_MS):
+        window.start_action.trigger()
+    assert shown == []  # no dialog: the refusal went on to the part route
+    assert window.document.settings.fit_mode == "solid"
+    assert window.solid_panel.face_types() == ["Sphere"]
+    assert window.solid_panel.table.item(0, 2).text().startswith("radius ")
+    assert window.scene.solid.legend_labels() == ["Sphere (1)"]
+    assert "a solid with analytic faces" in window.solid_panel.values["status"].toolTip()
+    purple = colorsys.rgb_to_hsv(0x9b / 255, 0x59 / 255, 0xd0 / 255)[0]
+    assert _hue_pixels(viewport_image(window), purple) > 50
+    window.undo_action.trigger()  # the switch to Solid mode
+    assert window.document.settings.fit_mode == "single"
+    assert not window.scene.solid.shown() and window.document.solid is not None
+    window.mode_selector.setCurrentIndex(window.mode_selector.findData("solid"))
+    assert window.scene.solid.shown()
+    window.reset_action.trigger()
+    assert window.document.solid is None and not window.scene.solid.shown()
+    assert window.solid_panel.face_types() == []
+
+
+# --- without running the part route: a box solid and its report, made here -------------------
+
+
+def _box_outcome(points: np.ndarray, problems: tuple[str, ...] = ()):
+    """A PartOutcome for a unit box (6 planes) measured against ``points`` (N, 3)."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    from app.workers.part_worker import FaceRow, PartOutcome, SolidReport, solid_display
+    from nurbs_core.brep.occ import face_kind, faces
+
+    shape = BRepPrimAPI_MakeBox(1.0, 1.0, 1.0).Shape()
+    kinds = [face_kind(face) for face in faces(shape)]
+    distances = np.full(len(points), 0.001)
+    point_faces = np.arange(len(points)) % len(kinds)
+    rows = tuple(FaceRow(kind, f"plane {k}", {"type": kind, "axis": [0.0, 0.0, 1.0]},
+                         int(np.count_nonzero(point_faces == k)), 0.001, 0.002)
+                 for k, kind in enumerate(kinds))
+    report = SolidReport(rows, True, True, 1.0, "warnings" if problems else "converged",
+                         problems, 0.001, 0.003, distances, point_faces, "a test box", 0.5)
+    return PartOutcome("a test box", shape, report, solid_display(shape, report.tolerance))
+
+
+def _open_box_cloud(qtbot, window, tmp_path) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    points = rng.random((600, 3))
+    points[np.arange(600), rng.integers(0, 3, 600)] = rng.integers(0, 2, 600)  # on the faces
+    path = tmp_path / "box.xyz"
+    np.savetxt(path, points)
+    open_by_drop(qtbot, window, [path])
+    return points
+
+
+def test_the_solid_setting_is_an_undoable_edit_mapped_to_choose_routes_part(qtbot, window):
+    from app.state import part_argument
+
+    assert [part_argument(v) for v in ("auto", "on", "off")] == [None, True, False]
+    with pytest.raises(ValueError, match="auto, on or off"):
+        part_argument("yes")
+    combo = window.solid_panel.setting
+    assert combo.currentData() == window.document.settings.solid == "auto"
+    combo.setCurrentIndex(combo.findData("off"))
+    assert window.document.settings.solid == "off"
+    window.undo_action.trigger()
+    assert window.document.settings.solid == "auto" and combo.currentData() == "auto"
+    # off: one patch's refusal of a closed cloud goes to the network, not the part route
+    combo.setCurrentIndex(combo.findData("off"))
+    assert not window.solid_policy.after_refusal() and not window.part_controller.is_busy()
+
+
+def test_a_session_keeps_the_solid_and_its_report(qtbot, window, tmp_path):
+    points = _open_box_cloud(qtbot, window, tmp_path)
+    window.document.edit_settings("Fit mode", fit_mode="solid")
+    window.document.set_solid(_box_outcome(points, problems=("a made-up warning",)))
+    panel = window.solid_panel
+    assert panel.face_types() == ["Plane"] * 6
+    assert panel.values["status"].text() == "fitted with warnings: a made-up warning"
+    assert "#b00020" in panel.values["status"].styleSheet()  # the warning colour
+    assert window.scene.solid.legend_labels() == ["Plane (6)"]
+    assert window.tree.shows_solid
+    path = tmp_path / "work.nstudio"
+    assert window.save_session(str(path))
+    window.part_controller.reset()
+    assert window.document.solid is None and not window.tree.shows_solid
+    assert window.open_session(str(path)), window.last_error
+    solid = window.document.solid
+    assert solid is not None and window.document.settings.fit_mode == "solid"
+    assert solid.report.problems == ("a made-up warning",)
+    np.testing.assert_array_equal(solid.report.point_faces, np.arange(600) % 6)
+    assert panel.face_types() == ["Plane"] * 6
+    assert window.scene.solid.legend_labels() == ["Plane (6)"]
+    from nurbs_core.brep.occ import is_valid, volume
+
+    assert is_valid(solid.solid) and volume(solid.solid) == pytest.approx(1.0)
+    # the B-rep export of the restored solid reads back
+    brep = tmp_path / "box.brep"
+    with qtbot.waitSignal(window.export_finished, timeout=30000) as blocker:
+        window.export_to(str(brep))
+    assert blocker.args == [str(brep), True], window.last_error
+    from app.solid_session import shape_from_brep
+
+    assert volume(shape_from_brep(brep.read_text())) == pytest.approx(1.0)
+
+
+def test_a_damaged_solid_in_a_session_is_refused_with_what_is_wrong(qtbot, window, tmp_path):
+    from app.solid_session import DISTANCES, POINT_FACES, solid_document, solid_from_document
+
+    points = _open_box_cloud(qtbot, window, tmp_path)
+    document, arrays = solid_document(_box_outcome(points))
+    assert solid_from_document(document, arrays).report.faces[0].kind == "plane"
+    for change, message in (({"brep": "DBRep_DrawableShape nonsense"}, "does not read"),
+                            ({"faces": []}, "needs its faces"),
+                            ({"status": "great"}, "converged or warnings"),
+                            ({"volume": float("nan")}, "finite number")):
+        with pytest.raises(ValueError, match=message):
+            solid_from_document({**document, **change}, arrays)
+    with pytest.raises(ValueError, match="one value per point"):
+        solid_from_document(document, {**arrays, DISTANCES: arrays[DISTANCES][:10]})
+    with pytest.raises(ValueError, match="faces it does not have"):
+        solid_from_document(document, {**arrays, POINT_FACES: arrays[POINT_FACES] + 6})
+    # in a session file: refused, the document left as it was
+    window.document.set_solid(_box_outcome(points))
+    path = tmp_path / "work.nstudio"
+    assert window.save_session(str(path))
+    import zipfile
+
+    damaged = tmp_path / "damaged.nstudio"
+    with zipfile.ZipFile(path) as source, zipfile.ZipFile(damaged, "w") as target:
+        for item in source.infolist():
+            data = source.read(item.filename)
+            if item.filename == "solid.json":
+                data = data.replace(b'"status": "converged"', b'"status": "great"')
+            target.writestr(item, data)
+    before = window.document.solid
+    assert not window.open_session(str(damaged))
+    assert "converged or warnings" in window.last_error
+    assert window.document.solid is before
