@@ -91,20 +91,22 @@ class SolidPanel(QWidget):
             choices.addWidget(widget)
         choices.addStretch(1)
         layout.addLayout(choices)
-        # the report in two columns: the face table below gets the height
+        # the report above the face table: the status and the distances take the whole width
         grid = QGridLayout()
+        grid.setVerticalSpacing(2)
         self.values: dict[str, QLabel] = {}
-        for index, (key, text) in enumerate((("status", "Status"), ("solid", "Solid"),
-                                             ("volume", "Volume"), ("distance", "Distance"))):
+        for key, text, row, column, span in (("status", "Status", 0, 0, 3),
+                                             ("solid", "Solid", 1, 0, 1),
+                                             ("volume", "Volume", 1, 2, 1),
+                                             ("distance", "Distance", 2, 0, 3)):
             label = QLabel("-")
             label.setWordWrap(True)
             label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
             self.values[key] = label
-            row, column = divmod(index, 2)
-            grid.addWidget(QLabel(text), row, 2 * column)
-            grid.addWidget(label, row, 2 * column + 1)
-        grid.setColumnStretch(1, 1)
-        grid.setColumnStretch(3, 2)
+            grid.addWidget(QLabel(text), row, column)
+            grid.addWidget(label, row, column + 1, 1, span)
+        grid.setColumnStretch(1, 2)
+        grid.setColumnStretch(3, 1)
         layout.addLayout(grid)
         self.table = QTableWidget(0, len(COLUMNS))
         self.table.setHorizontalHeaderLabels(COLUMNS)

@@ -16,7 +16,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from PySide6.QtCore import QObject, Slot
+from PySide6.QtCore import QObject, Qt, Slot
 
 from app.errors import describe
 from app.state import part_argument
@@ -27,6 +27,8 @@ if TYPE_CHECKING:
     from app.workers.part_worker import PartOutcome
 
 SOLID_STEP = "Solid from analytic faces"
+#: the Solid dock's height once a solid is shown (its report and about seven face rows)
+SOLID_DOCK_HEIGHT = 330
 
 
 class SolidPolicy(QObject):
@@ -96,6 +98,8 @@ class SolidPolicy(QObject):
         if window.document.settings.fit_mode != "solid":
             window.document.edit_settings(SOLID_STEP, fit_mode="solid")
         window.solid_dock.raise_()
+        # the face table wants the height of its rows: the bottom docks grow to it
+        window.resizeDocks([window.solid_dock], [SOLID_DOCK_HEIGHT], Qt.Orientation.Vertical)
         window.scene.reset_camera()
         verdict = report.status if not report.problems else (
             "fitted with warnings: " + "; ".join(report.problems))
