@@ -39,7 +39,8 @@ SETTING_HELP = ("Start makes a valid solid with exact planes, cylinders, cones, 
 
 
 def _vector(values) -> str:
-    return "(" + ", ".join(f"{v:.3f}" for v in values) + ")"
+    """(x, y, z) to three decimals, without "-0.000"."""
+    return "(" + ", ".join(f"{0.0 if abs(v) < 5e-4 else v:.3f}" for v in values) + ")"
 
 
 def parameter_text(face: FaceRow, units: str | None) -> str:

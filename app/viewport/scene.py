@@ -61,6 +61,8 @@ QUALITY_LABELS = {FLIPPED: "flipped (faces away from the cloud)", OVERLAP: "over
 QUALITY_PENDING = "Quality map: shown when the fit ends"
 
 #: Layers the document tree and the View menu toggle.
+#: the points' size in pixels, and over a solid (Solid mode)
+POINT_SIZE, SOLID_POINT_SIZE = 3.0, 1.5
 LAYERS = ("cloud", "surface", "curve", "control_net", "knot_lines", "patches", "offsets")
 #: Layers of the single-patch fit (hidden in Patches mode) and of the network (shown only then).
 SINGLE_FIT_LAYERS = ("surface", "curve", "control_net", "knot_lines")
@@ -221,7 +223,8 @@ class SceneView(QObject):
         mesh = pv.PolyData(np.zeros((0, 3)) if points is None else np.asarray(points, float))
         mesh.point_data[DEVIATION_TITLE] = np.zeros(mesh.n_points)
         if "cloud" not in self._meshes:
-            self._layer("cloud", mesh, color=COLORS["cloud"], point_size=3.0,
+            self._layer("cloud", mesh, color=COLORS["cloud"], point_size=(
+                SOLID_POINT_SIZE if self._mode == "solid" else POINT_SIZE),
                         scalars=DEVIATION_TITLE, clim=(-1.0, 1.0), show_scalar_bar=False)
             self.deviation_colours.attach(self._actors["cloud"].mapper)
         else:
@@ -391,6 +394,9 @@ class SceneView(QObject):
         self._mode = mode
         self.network.set_enabled(mode == "patches")
         self.solid.set_enabled(mode == "solid")
+        cloud = self._actors.get("cloud")
+        if cloud is not None:  # over a solid the points are finer: its face colours show
+            cloud.prop.point_size = SOLID_POINT_SIZE if mode == "solid" else POINT_SIZE
         for name in SINGLE_FIT_LAYERS:
             self._apply_visibility(name)
         self._update_scalar_bar()

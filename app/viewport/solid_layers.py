@@ -16,7 +16,7 @@ from app.solid_types import SolidDisplay, SolidReport
 from app.viewport.color_scale import label_count, nice_ceiling
 
 #: a face's colour by its surface type (the engine's names; "freeform" is a NURBS face)
-TYPE_COLORS = {"plane": "#9fb4c8", "cylinder": "#f08c2e", "cone": "#3fae5a",
+TYPE_COLORS = {"plane": "#6f9fd8", "cylinder": "#f08c2e", "cone": "#3fae5a",
                "sphere": "#9b59d0", "torus": "#e0457b", "freeform": "#e8d44d"}
 #: what the legend and the Solid dock call the types
 TYPE_LABELS = {"plane": "Plane", "cylinder": "Cylinder", "cone": "Cone", "sphere": "Sphere",
@@ -28,7 +28,7 @@ TYPE_ARRAY = "Face type"
 DEVIATION_ARRAY = "Face deviation"
 DEVIATION_COLORMAP = "YlOrRd"
 #: the legend's width and the height of an entry (normalised viewport coordinates)
-LEGEND_WIDTH, LEGEND_ENTRY_HEIGHT = 0.17, 0.045
+LEGEND_WIDTH, LEGEND_ENTRY_HEIGHT = 0.15, 0.04
 #: the deviation scale's top is never below this many sigmas (a clean solid stays pale)
 MIN_TOP_SIGMAS = 2.0
 
