@@ -564,6 +564,7 @@ class MainWindow(QMainWindow):
         ctl.fit_failed.connect(self._on_fit_failed)
         ctl.fit_finished.connect(self._on_fit_finished)
         ctl.state_changed.connect(self._start_network_after_refusal)
+        self.part_controller.state_changed.connect(self._start_network_after_refusal)
         self.solid_policy.connect()
 
     @Slot(str)
@@ -577,10 +578,7 @@ class MainWindow(QMainWindow):
                 return
             self.report("One open patch cannot hold this cloud: fitting it as a network of "
                         "patches (Patches mode; Undo returns to one patch).")
-            self.document.begin_fit_as_patches()
-            # the refused run's thread ends just after: the network starts when it has
-            self._network_after_refusal = True
-            self._start_network_after_refusal()
+            self.go_on_as_network()
             return
         self.report(message, error=True, offer_patches=self.controller.failure_needs_patches)
 
@@ -600,13 +598,19 @@ class MainWindow(QMainWindow):
             return
         self.report(f"One patch does not hold this cloud cleanly ({problems}): fitting it as "
                     "a network of patches (Patches mode; Undo returns to one patch).")
+        self.go_on_as_network()
+
+    def go_on_as_network(self) -> None:
+        """Switch to Patches mode (one undoable step with the network) and fit the network as
+        soon as the single patch's run has ended (a refused run's thread ends just after its
+        refusal)."""
         self.document.begin_fit_as_patches()
         self._network_after_refusal = True
         self._start_network_after_refusal()
 
     @Slot(str)
     def _start_network_after_refusal(self, *_state):
-        if self._network_after_refusal and not self.controller.is_busy():
+        if self._network_after_refusal and not self.is_fitting():
             self._network_after_refusal = False
             self.start_fit()
 

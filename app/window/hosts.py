@@ -71,6 +71,7 @@ class ExportHost(Reporter, Protocol):
 class LoadHost(Reporter, Protocol):
     document: Document
     controller: FitController
+    part_controller: PartController
     jobs: JobRunner
     loss_plot: LossPlot
     files_loaded: SignalInstance
@@ -172,6 +173,7 @@ class SelectionHost(Reporter, Protocol):
     document: Document
     controller: FitController
     patch_controller: PatchController
+    part_controller: PartController
     scene: SceneView
     knot_panel: KnotPanel
     status_labels: dict[str, QLabel]
@@ -198,5 +200,6 @@ class SolidHost(Reporter, Protocol):
 
     def rebuild_tree(self) -> None: ...
     def start_fit(self, *_args: object) -> bool: ...
+    def go_on_as_network(self) -> None: ...
     def resizeDocks(self, docks: Any, sizes: Any, orientation: Any) -> None: ...  # noqa: N802
     def update_fit_actions(self, *_state: object) -> None: ...

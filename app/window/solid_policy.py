@@ -112,8 +112,7 @@ class SolidPolicy(QObject):
         window = self._window
         window.report(f"No solid ({reason}): fitting a network of patches (Patches mode; "
                       "Undo returns to the mode before).")
-        window.document.begin_fit_as_patches()
-        window.start_fit()
+        window.go_on_as_network()
 
     @Slot(str)
     def on_failed(self, message: str) -> None:

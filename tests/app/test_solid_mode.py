@@ -172,6 +172,51 @@ def test_start_on_a_sphere_scan_on_auto_makes_a_solid_sphere(qtbot, window, tmp_
     assert window.solid_panel.face_types() == []
 
 
+def test_no_valid_solid_says_why_and_fits_the_network(qtbot, window, tmp_path, monkeypatch):
+    """When the part route builds no valid solid (here: its outcome stands in for the engine's
+    SolidError), the window says why and goes on as a network, as nurbs-fit does."""
+    from app import part_controller
+    from app.workers.part_worker import PartOutcome
+    from nurbs_core import samples
+
+    asked = []
+
+    def no_solid(points, part, max_hole=None, cancel=None):
+        asked.append(part)
+        return PartOutcome("closed", fallback="closed, but no valid solid results (test)")
+
+    monkeypatch.setattr(part_controller, "run_part_route", no_solid)
+    path = tmp_path / "ball.xyz"
+    np.savetxt(path, samples.sphere(1500).points, fmt="%.8f")
+    open_by_drop(qtbot, window, [path])
+    with qtbot.waitSignal(window.patch_controller.fit_finished, timeout=SOLID_TIMEOUT_MS):
+        window.start_action.trigger()
+    assert asked == [None]  # auto: choose_route decides
+    assert window.document.settings.fit_mode == "patches" and window.document.network is not None
+    assert window.document.solid is None
+    assert "No solid (closed, but no valid solid results (test))" in window.log_panel.toPlainText()
+
+
+def test_a_forced_solid_that_fails_reports_it_and_offers_patches(qtbot, window, tmp_path,
+                                                                monkeypatch):
+    from app import part_controller
+
+    def refuse(points, part, max_hole=None, cancel=None):
+        assert part is True  # Solid mode forces the route
+        raise ValueError("a solid needs a closed object, but the cloud encloses no volume")
+
+    monkeypatch.setattr(part_controller, "run_part_route", refuse)
+    _open_box_cloud(qtbot, window, tmp_path)
+    window.mode_selector.setCurrentIndex(window.mode_selector.findData("solid"))
+    with qtbot.waitSignal(window.error_shown, timeout=30000) as blocker:
+        window.start_action.trigger()
+    assert blocker.args[0].startswith("Cannot make a solid: a solid needs a closed object")
+    assert window.fit_as_patches_button is not None
+    assert window.part_controller.state == "idle" and window.start_action.isEnabled()
+    assert window.document.solid is None
+    window._message_box.reject()
+
+
 # --- without running the part route: a box solid and its report, made here -------------------
 
 
