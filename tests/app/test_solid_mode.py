@@ -333,3 +333,14 @@ def test_a_damaged_solid_in_a_session_is_refused_with_what_is_wrong(qtbot, windo
     assert not window.open_session(str(damaged))
     assert "converged or warnings" in window.last_error
     assert window.document.solid is before
+
+
+def test_the_deviation_report_of_a_solid_lists_its_faces(qtbot, window, tmp_path, monkeypatch):
+    from app_helpers import export_report
+
+    points = _open_box_cloud(qtbot, window, tmp_path)
+    window.document.edit_settings("Fit mode", fit_mode="solid")
+    window.document.set_solid(_box_outcome(points))
+    html = export_report(qtbot, window, monkeypatch, tmp_path / "solid.html")
+    assert "a solid (machined part)" in html and "6 (6 planes)" in html
+    assert "valid, closed" in html and "converged" in html
