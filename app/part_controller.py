@@ -36,8 +36,6 @@ class PartController(QObject):
     run_failed = Signal(str)
 
     JOB = "solid"
-    #: pause and resume do not apply (the actions stay disabled)
-    CAN_PAUSE = False
 
     def __init__(self, document: Document, jobs: JobRunner, parent: QObject | None = None):
         super().__init__(parent)
@@ -45,11 +43,6 @@ class PartController(QObject):
         self._job_id = 0
         self._state = "idle"
         self._is_shut_down = False
-        #: the forced route's ``part`` of the run under way (None: the scan decides)
-        self.part: bool | None = None
-        #: the shapes before the run (the live controllers' attribute: a solid is no undo step)
-        self.fit_before = None
-        self.latest_outcome: PartOutcome | None = None
 
     @property
     def state(self) -> str:
@@ -71,7 +64,6 @@ class PartController(QObject):
         if points is None:
             self.run_failed.emit("Nothing to fit: open or drop a point cloud first.")
             return False
-        self.part = part
         max_hole = self._document.settings.patches.max_hole
         cloud = np.array(points, np.float64)
 
@@ -104,7 +96,6 @@ class PartController(QObject):
     def reset(self) -> None:
         """Stop and forget the solid."""
         self.stop()
-        self.latest_outcome = None
         self._document.set_solid(None)
 
     def shutdown(self) -> None:
@@ -121,7 +112,6 @@ class PartController(QObject):
         if outcome.solid is None:
             self.fallback_chosen.emit(outcome.fallback)
             return
-        self.latest_outcome = outcome
         self._document.set_solid(outcome)
         self.solid_ready.emit(outcome)
 
