@@ -27,6 +27,7 @@ EXPORT_FORMATS = (
     ("Rhino 3DM", ".3dm", False),
     ("STEP", ".step", True),
     ("IGES", ".iges", True),
+    ("OpenCASCADE B-rep (solids)", ".brep", True),
     ("NURBS JSON", ".json", False),
     ("Wavefront OBJ (tessellated)", ".obj", False),
     ("STL (tessellated)", ".stl", False),
@@ -200,6 +201,31 @@ def export_report(path: str, points: np.ndarray, fitted: GeometryArrays | None, 
     content = ReportContent(title, status, points, vertices, faces,
                             measure_deviation(points, vertices, faces, tolerance), units, closed,
                             summary, settings, warnings)
+    write_report(path, content)
+    return float(content.deviation.within.mean())
+
+
+def export_solid_report(path: str, points: np.ndarray, solid, *, title: str,
+                        units: str | None = None) -> float:
+    """Write a deviation report (.html or .pdf) of the points (N, 3) against a solid of the
+    part route (a :class:`app.solid_types.PartOutcome`: its triangles, closed, outward), with
+    its faces and status as ``nurbs-fit --report`` writes them, the tolerance the solid's own.
+    Returns the share of the points within the tolerance."""
+    from nurbs_core.report.deviation import measure_deviation
+    from nurbs_core.report.document import ReportContent, write_report
+
+    report, display = solid.report, solid.display
+    kinds = ", ".join(f"{n} {k}{'s' if n > 1 else ''}" for k, n in report.face_types().items())
+    summary = [("route", "a solid (machined part)"), ("faces", f"{len(report.faces)} ({kinds})"),
+               ("solid", f"{'valid' if report.valid else 'INVALID'}, "
+                         f"{'closed' if report.closed else 'NOT closed'}"),
+               ("volume", f"{report.volume:.6g}"), ("time", f"{report.seconds:.1f} s")]
+    summary += [(f"face {k}", face.description) for k, face in enumerate(report.faces)]
+    points = np.asarray(points, np.float64)
+    content = ReportContent(title, report.status, points, display.vertices, display.triangles,
+                            measure_deviation(points, display.vertices, display.triangles,
+                                              report.tolerance),
+                            units, report.closed, summary, [], list(report.problems))
     write_report(path, content)
     return float(content.deviation.within.mean())
 

@@ -61,6 +61,8 @@ from app.panels.network_quality_panel import NetworkQualityPanel
 from app.panels.offset_panel import OffsetPanel
 from app.panels.patches_panel import ModeSelector, PatchesPanel
 from app.panels.quality_panel import QualityPanel
+from app.panels.solid_panel import SolidPanel
+from app.part_controller import PartController
 from app.patch_controller import PatchController
 from app.patch_view import PatchView
 from app.state import Document
@@ -72,6 +74,7 @@ from app.window.load_policy import LoadPolicy, RecentFiles
 from app.window.selection_policy import SelectionPolicy
 from app.window.session_policy import SessionPolicy
 from app.window.settings_policy import SettingsPolicy
+from app.window.solid_policy import SolidPolicy
 from app.window.units_policy import UnitsPolicy
 from app.workers.jobs import JobRunner
 
@@ -163,6 +166,7 @@ class MainWindow(QMainWindow):
         self.patch_controller = PatchController(self.document, self)
         self.document.network_report_source = self.patch_controller.network_report
         self.jobs = JobRunner(self)
+        self.part_controller = PartController(self.document, self.jobs, self)
         self.scene = SceneView(self)
         # the policies: what loading, a settings edit, export, sessions and a fit's progress
         # change (they use the widgets built below, once they exist)
@@ -174,6 +178,7 @@ class MainWindow(QMainWindow):
         self.selection_policy = SelectionPolicy(self)
         self.history_policy = HistoryPolicy(self)
         self.units_policy = UnitsPolicy(self)
+        self.solid_policy = SolidPolicy(self)
         self.setCentralWidget(self._native_container(self.scene.widget))
 
         self._build_docks()
@@ -239,6 +244,7 @@ class MainWindow(QMainWindow):
         self.loss_plot = LossPlot()
         self.quality_panel = QualityPanel()
         self.deviation_panel = DeviationPanel()
+        self.solid_panel = SolidPanel(self.document.edit_settings)
         self.log_panel = LogPanel()
         logging.getLogger().addHandler(self.log_panel.handler)
         if logging.getLogger().level > logging.INFO or logging.getLogger().level == 0:
@@ -259,11 +265,13 @@ class MainWindow(QMainWindow):
                                                bottom, "network_quality_dock", True)
         self.deviation_dock = self._dock("Deviation", self.deviation_panel, bottom,
                                          "deviation_dock", True)
+        self.solid_dock = self._dock("Solid", self.solid_panel, bottom, "solid_dock", True)
         self.log_dock = self._dock("Log", self.log_panel, bottom, "log_dock")
         self.splitDockWidget(self.loss_dock, self.quality_dock, Qt.Orientation.Horizontal)
         self.splitDockWidget(self.quality_dock, self.log_dock, Qt.Orientation.Horizontal)
         self.tabifyDockWidget(self.quality_dock, self.network_quality_dock)
         self.tabifyDockWidget(self.network_quality_dock, self.deviation_dock)
+        self.tabifyDockWidget(self.deviation_dock, self.solid_dock)
         self.quality_dock.raise_()
         self.resizeDocks([self.tree_dock, self.fit_dock], [240, 330], Qt.Orientation.Horizontal)
         # the Quality dock's rows need about 510 px with units: 44% of the width keeps them
@@ -330,7 +338,7 @@ class MainWindow(QMainWindow):
                                 ("control_net", "Control Net", False),
                                 ("knot_lines", "Knot Lines", True), ("patches", "Patches", True),
                                 ("offsets", "Offsets", True), ("network", "Patch Network", True),
-                                ("layout", "Patch Layout", True)):
+                                ("layout", "Patch Layout", True), ("solid", "Solid", True)):
             self.layer_actions[layer] = self._action(
                 text, lambda checked, layer=layer: self.set_layer_visible(layer, checked),
                 checkable=True, checked=on)
@@ -466,7 +474,8 @@ class MainWindow(QMainWindow):
         view_menu.addSeparator()
         for dock in (self.tree_dock, self.fit_dock, self.knot_dock, self.offset_dock,
                      self.patches_dock, self.loss_dock, self.quality_dock,
-                     self.network_quality_dock, self.deviation_dock, self.log_dock):
+                     self.network_quality_dock, self.deviation_dock, self.solid_dock,
+                     self.log_dock):
             view_menu.addAction(dock.toggleViewAction())
 
         help_menu = bar.addMenu("&Help")
@@ -555,6 +564,8 @@ class MainWindow(QMainWindow):
         ctl.fit_failed.connect(self._on_fit_failed)
         ctl.fit_finished.connect(self._on_fit_finished)
         ctl.state_changed.connect(self._start_network_after_refusal)
+        self.part_controller.state_changed.connect(self._start_network_after_refusal)
+        self.solid_policy.connect()
 
     @Slot(str)
     def _on_fit_failed(self, message: str):
@@ -563,12 +574,11 @@ class MainWindow(QMainWindow):
         patch) unless the user forced a single patch; anything else is reported."""
         if (self.controller.failure_needs_patches
                 and not self.document.settings.fit.single_patch):
+            if self.solid_policy.after_refusal():  # a machined part: a solid (auto)
+                return
             self.report("One open patch cannot hold this cloud: fitting it as a network of "
                         "patches (Patches mode; Undo returns to one patch).")
-            self.document.begin_fit_as_patches()
-            # the refused run's thread ends just after: the network starts when it has
-            self._network_after_refusal = True
-            self._start_network_after_refusal()
+            self.go_on_as_network()
             return
         self.report(message, error=True, offer_patches=self.controller.failure_needs_patches)
 
@@ -588,13 +598,19 @@ class MainWindow(QMainWindow):
             return
         self.report(f"One patch does not hold this cloud cleanly ({problems}): fitting it as "
                     "a network of patches (Patches mode; Undo returns to one patch).")
+        self.go_on_as_network()
+
+    def go_on_as_network(self) -> None:
+        """Switch to Patches mode (one undoable step with the network) and fit the network as
+        soon as the single patch's run has ended (a refused run's thread ends just after its
+        refusal)."""
         self.document.begin_fit_as_patches()
         self._network_after_refusal = True
         self._start_network_after_refusal()
 
     @Slot(str)
     def _start_network_after_refusal(self, *_state):
-        if self._network_after_refusal and not self.controller.is_busy():
+        if self._network_after_refusal and not self.is_fitting():
             self._network_after_refusal = False
             self.start_fit()
 
@@ -727,19 +743,30 @@ class MainWindow(QMainWindow):
                     "next Start.")
 
     # --- fit -------------------------------------------------------------------------------------
-    def active_controller(self) -> FitController | PatchController:
-        """The controller of the fit mode on show (what Start, Pause, Stop and Reset drive)."""
-        return self.patch_controller if self.document.settings.fit_mode == "patches" else (
-            self.controller)
+    def active_controller(self) -> FitController | PatchController | PartController:
+        """The controller of the fit mode on show (what Start, Pause, Stop and Reset drive); the
+        part route's while it runs (Stop cancels it)."""
+        mode = self.document.settings.fit_mode
+        if mode == "solid" or self.part_controller.is_busy():
+            return self.part_controller
+        return self.patch_controller if mode == "patches" else self.controller
+
+    def is_fitting(self) -> bool:
+        """Whether any fit (one patch, a network, a solid) runs."""
+        return (self.controller.is_busy() or self.patch_controller.is_busy()
+                or self.part_controller.is_busy())
 
     def start_fit(self, *_args) -> bool:
-        """Start the fit of the current mode (not while the other mode's fit still runs)."""
-        if self.controller.is_busy() or self.patch_controller.is_busy():
+        """Start the fit of the current mode (not while another fit still runs): in Solid mode
+        (or Single patch with "Solid from analytic faces" on) the part route."""
+        if self.is_fitting():
             return False
         if self.document.selection is not None:
             self.statusBar().showMessage(
                 f"Fitting the {self.document.selected_count():,} selected points only (Esc "
                 "clears the selection: Start then fits every point)", 8000)
+        if self.solid_policy.starts_with_solid():
+            return self.solid_policy.start_for_start()
         if self.active_controller() is self.patch_controller:
             self.network_quality_dock.raise_()
             # (its step keeps the curve shown before it: cleared once the run has begun)
@@ -760,6 +787,9 @@ class MainWindow(QMainWindow):
         """Stop the mode's fit and discard its shape: an undoable step (Undo brings back the
         shape from before a fit that was under way; that fit's result is dropped)."""
         controller = self.active_controller()
+        if controller is self.part_controller:
+            self.solid_policy.reset()
+            return
         before = controller.fit_before or self.document.shape_state()
         if controller is self.patch_controller:
             self.reset_patch_network()
@@ -785,10 +815,12 @@ class MainWindow(QMainWindow):
     def update_fit_actions(self, *_state):
         """Either controller's state changed: the actions follow the active one's (Start waits
         until neither runs)."""
-        state = self.active_controller().state
-        busy = self.controller.is_busy() or self.patch_controller.is_busy() or state != "idle"
+        active = self.active_controller()
+        state = active.state
+        busy = self.is_fitting() or state != "idle"
+        can_pause = active is not self.part_controller
         self.start_action.setEnabled(not busy)
-        self.pause_action.setEnabled(state == "running")
+        self.pause_action.setEnabled(state == "running" and can_pause)
         self.resume_action.setEnabled(state == "paused")
         self.stop_action.setEnabled(state in ("running", "paused"))
         self.status_labels["state"].setText(state.capitalize())
@@ -805,6 +837,11 @@ class MainWindow(QMainWindow):
         """Write the patch network with ``nurbs_core.io.write_network`` (format from the suffix:
         one joined B-rep in .3dm, a sewn solid in .step / .iges, our .json, a welded mesh)."""
         return self.export_policy.export_network(path)
+
+    def export_solid(self, path: str) -> bool:
+        """Write the solid of Solid mode with ``nurbs_core.io.solid_io.save_solid`` (.step,
+        .iges, .brep, .stl, .obj, .ply; atomic)."""
+        return self.solid_policy.export(path)
 
     def save_session(self, path: str) -> bool:
         """Write the session atomically: on failure the user is told and an existing file at
@@ -855,6 +892,11 @@ class MainWindow(QMainWindow):
 
     def result_status(self) -> tuple[str, list[str]]:
         """The status of the result the mode shows and its warnings, as the headline says."""
+        if self.document.settings.fit_mode == "solid":
+            solid = self.document.solid
+            if solid is None:
+                return "no solid", []
+            return solid.report.status, list(solid.report.problems)
         if self.document.settings.fit_mode == "patches":
             shown = self.patch_controller.latest_shown
             if shown is None or not shown.done:
@@ -875,6 +917,7 @@ class MainWindow(QMainWindow):
     # --- shutdown --------------------------------------------------------------------------------
     def live_timers(self) -> int:
         return (self.controller.live_timers() + self.patch_controller.live_timers()
+                + self.part_controller.live_timers()
                 + self.scene.live_timers()
                 + self.loss_plot.live_timers() + self.load_policy.live_timers())
 
@@ -891,6 +934,7 @@ class MainWindow(QMainWindow):
         self.patches_panel.cancel_pending()
         self.controller.shutdown()
         self.patch_controller.shutdown()  # joined before the render window goes
+        self.part_controller.shutdown()  # abandoned: its result is dropped
         self.jobs.shutdown()  # abandons the load at once, then waits for the short jobs
         self.loss_plot.stop()
         self._store.sync()

@@ -10,8 +10,10 @@ angles, then its signed deviation, and choosing what to fit: a lasso selection o
 (a second lasso being drawn), then the fit of the selected points alone, and units: a scan
 whose file states none (the Units box asks), then fitted in metres, and what the Fit settings
 dock says of the fit: the result beside the settings it started from, and a note before Start
-when a setting changes the route. ``--only single``, ``--only patches``, ``--only selection``,
-``--only units`` or ``--only controls`` makes one of the sets.
+when a setting changes the route, and Solid mode: a scanned plate with a through hole as a solid
+with analytic faces, coloured by type, then by each face's deviation. ``--only single``,
+``--only patches``, ``--only selection``, ``--only units``, ``--only controls`` or ``--only
+solid`` makes one of the sets.
 """
 
 from __future__ import annotations
@@ -70,13 +72,22 @@ def torus_cloud(path: Path) -> Path:
     return _write_points(path, samples.torus(3000).points)
 
 
+def plate_cloud(path: Path) -> Path:
+    """A machined plate with a through hole (``nurbs_core.brep.sample_parts.plate``) scanned:
+    20,000 points, noise 0.2% of its diagonal."""
+    from nurbs_core.brep.sample_parts import plate, scan_part
+
+    return _write_points(path, scan_part(plate(), 20_000, 0.002, 0)[0])
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path)
-    parser.add_argument("--only", choices=("single", "patches", "selection", "units", "controls"),
+    parser.add_argument("--only", choices=("single", "patches", "selection", "units", "controls",
+                                           "solid"),
                         help="make only the single-patch (01-07, 11), the Patches mode (08-09, 12), "
-                             "the selection (13-14), the units (15-17) or the Fit settings "
-                             "result and route note (18-19) set")
+                             "the selection (13-14), the units (15-17), the Fit settings "
+                             "result and route note (18-19) or the Solid mode (20-21) set")
     arguments = parser.parse_args(argv)
     arguments.out.mkdir(parents=True, exist_ok=True)
 
@@ -348,16 +359,38 @@ def main(argv: list[str] | None = None) -> int:
         window.fit_dock.widget().ensureWidgetVisible(window.fit_panel.route_notes["loss"])
         later(lambda: (shot("19_route_note.png"), window.undo_action.trigger(), next_step()))
 
+    # 20. Solid mode: a scanned plate with a through hole as a solid, faces coloured by type
+    # with the legend, the Solid dock listing them; 21. the faces by their p99 deviation
+    def solid_part():
+        window.set_quality_visible(False)
+        window.set_deviation_visible(False)
+
+        def loaded(ok):
+            window.document.edit_settings("Fit mode", fit_mode="solid")
+            once(window.part_controller.solid_ready, lambda outcome: later(lambda: (
+                window.scene.standard_view("iso"), window.solid_dock.raise_(),
+                later(lambda: (shot("20_solid_part.png"), next_step()), 600)), 600))
+            window.start_fit()
+        once(window.files_loaded, loaded)
+        window.open_files([str(plate_cloud(scratch / "plate_scan.xyz"))])
+
+    def solid_deviation():
+        panel = window.solid_panel
+        panel.colouring.setCurrentIndex(panel.colouring.findData("p99"))
+        later(lambda: (shot("21_solid_deviation.png"), next_step()), 600)
+
     single = [demo, converging, offsets, curve, quality_clean, quality_folded]
     patches = [patches_mode, seam_map, patches_deviation]
     choose = [selection, fit_selection]
     units = [units_import]
     controls = [fit_result]
+    solid = [solid_part, solid_deviation]
     steps.extend({"single": single, "patches": patches, "selection": choose, "units": units,
-                  "controls": controls}.get(arguments.only,
-                                            single + choose + units + controls + patches))
+                  "controls": controls, "solid": solid}.get(
+                      arguments.only, single + choose + units + controls + patches + solid))
     window.controller.fit_failed.connect(lambda message: failures.append(message))
     window.patch_controller.fit_failed.connect(lambda message: failures.append(message))
+    window.part_controller.run_failed.connect(lambda message: failures.append(message))
     next_step()
     qapp.exec()
     for message in failures:

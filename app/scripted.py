@@ -80,6 +80,9 @@ class ScriptedRun(QObject):
         # the automatic route: a cloud one patch cannot hold goes on as a network
         self.window.patch_controller.fit_finished.connect(self._on_network_finished)
         self.window.patch_controller.fit_failed.connect(self._on_network_failed)
+        # ... and a closed scan of a machined part as a solid
+        self.window.part_controller.solid_ready.connect(self._on_network_finished)
+        self.window.part_controller.run_failed.connect(self._on_network_failed)
         if not self.window.controller.start():
             self._finish(failed=self.window.last_error or "the fit did not start")
 
@@ -102,8 +105,9 @@ class ScriptedRun(QObject):
 
     @Slot(str)
     def _on_fit_failed(self, message: str):
-        if self.window.document.settings.fit_mode == "patches":
-            return  # the window went on as a network: its own end finishes the run
+        if (self.window.document.settings.fit_mode == "patches"
+                or self.window.part_controller.is_busy()):
+            return  # the window went on as a network or a solid: its own end finishes the run
         self._finish(failed=message)
 
     @Slot()

@@ -1,7 +1,9 @@
 """The session file: one zip archive (stored, not compressed) holding ``session.json`` (the
 settings, the length unit, the names, the fitted and loaded surfaces, the patch network's
-report) and the arrays as ``.npy`` members (the clouds' points, the network's deviation), and
-the patch network as our lossless network JSON (``network.json``, :mod:`nurbs_core.io.network_io`).
+report), the solid of Solid mode (``solid.json``: its B-rep text and face report,
+:mod:`app.solid_session`) and the arrays as ``.npy`` members (the clouds' points, the network's
+deviation, the solid's per-point distances and faces), and the patch network as our lossless
+network JSON (``network.json``, :mod:`nurbs_core.io.network_io`).
 
 Binary points make a 1,000,000-point session about 24 MB, written and read in a fraction of a
 second (JSON took 60 MB and 7 s). Reading is bounded and never runs code: members must be
@@ -154,13 +156,20 @@ def save_session(document: Document, path: str | Path,
             arrays["network_deviation"] = np.asarray(deviation, np.float64)
             report["deviation"] = "network_deviation"
         manifest["network_report"] = report
+    if document.solid is not None:
+        from app.solid_session import SOLID_MEMBER, solid_document
+
+        documents[SOLID_MEMBER], solid_arrays = solid_document(document.solid)
+        arrays.update(solid_arrays)
+        manifest["solid"] = SOLID_MEMBER
     write_archive(path, manifest, arrays, documents)
 
 
 def read_session(path: str | Path) -> dict[str, Any]:
     """Parse and check a session file (an archive, or a JSON session of the formats before it)
     without touching any document; raises ValueError naming the problem. Returns settings,
-    targets, patches, names, fitted, network (a PatchNetwork or None) and network_report (for
+    targets, patches, names, fitted, network (a PatchNetwork or None), network_report, solid (a
+    PartOutcome or None) (for
     :meth:`app.state.Document.apply_session`; the network is the window's to show) and units
     (the length unit, None: unknown)."""
     path = Path(path)
@@ -259,10 +268,26 @@ def _parsed_session(path: Path, data: dict[str, Any], archive: Any) -> dict[str,
         network, report = None, None
         if archive is not None and data.get("network") is not None:
             network, report = _session_network(path, data, archive)
+        solid = None
+        if archive is not None and data.get("solid") is not None:
+            solid = _session_solid(data, archive)
     except (KeyError, TypeError) as exc:
         raise ValueError(f"{type(exc).__name__}: {exc}") from None
     return {"settings": settings, "targets": targets, "patches": patches, "names": names,
-            "fitted": fitted, "network": network, "network_report": report, "units": units}
+            "fitted": fitted, "network": network, "network_report": report, "units": units,
+            "solid": solid}
+
+
+def _session_solid(data: dict[str, Any], archive: Any) -> Any:
+    """The session's solid (:mod:`app.solid_session`), checked."""
+    from app.solid_session import DISTANCES, POINT_FACES, solid_from_document
+
+    name = data["solid"]
+    if not isinstance(name, str):
+        raise ValueError("solid must name its member")
+    return solid_from_document(archive.document(name),
+                               {DISTANCES: archive.array(DISTANCES),
+                                POINT_FACES: archive.array(POINT_FACES)})
 
 
 def _geometry(name: str, data: Any) -> Any:

@@ -52,9 +52,21 @@ SOLVERS = tuple((name, SOLVER_LABELS.get(name, name)) for name in _SOLVERS)
 PARAMETERIZATIONS = tuple((name, name) for name in _PARAMETERIZATIONS)
 #: How Start fits the cloud: one NURBS surface (or curve), or a network of patches over a quad
 #: layout (closed objects: ``nurbs_core.patches``).
-FIT_MODES = (("single", "Single patch"), ("patches", "Patches"))
+FIT_MODES = (("single", "Single patch"), ("patches", "Patches"), ("solid", "Solid"))
+#: "Solid from analytic faces": whether Start makes a solid of a closed, part-like scan
+#: (:func:`nurbs_core.route.choose_route`'s ``part``: auto lets the scan decide)
+SOLID_CHOICES = (("auto", "auto"), ("on", "on"), ("off", "off"))
 TOLERANCE_HINT = ("Tolerance: a positive distance in the cloud's units (e.g. 0.01), or empty / "
                   "\"auto\" to derive it from the cloud's noise")
+
+
+def part_argument(solid: str) -> bool | None:
+    """``choose_route``'s ``part`` for the "Solid from analytic faces" setting: "auto" -> None
+    (the scan decides), "on" -> True (forced), "off" -> False. ValueError for anything else."""
+    choices = {"auto": None, "on": True, "off": False}
+    if solid not in choices:
+        raise ValueError(f"Solid from analytic faces is {solid!r}; choose auto, on or off")
+    return choices[solid]
 
 
 def control_grid_for(point_count: int, fit: FitConfig) -> tuple[int, int] | None:
@@ -90,8 +102,10 @@ class Settings:
 
     fit: FitConfig = field(default_factory=FitConfig)
     patches: PatchOptions = field(default_factory=PatchOptions)
-    #: "single" or "patches" (:data:`FIT_MODES`)
+    #: "single", "patches" or "solid" (:data:`FIT_MODES`)
     fit_mode: str = "single"
+    #: "Solid from analytic faces": "auto", "on" or "off" (:func:`part_argument`)
+    solid: str = "auto"
     offset_distance: float = 0.1
     constrain_shared_edges: bool = True
     show_offsets: bool = False
@@ -142,7 +156,7 @@ class Settings:
 
 
 #: The window's own settings (everything in Settings but the fit and the patch options).
-WINDOW_FIELDS = frozenset({"fit_mode", "offset_distance", "constrain_shared_edges",
+WINDOW_FIELDS = frozenset({"fit_mode", "solid", "offset_distance", "constrain_shared_edges",
                            "show_offsets"})
 FIT_FIELDS = frozenset(f.name for f in dataclasses.fields(FitConfig))
 
@@ -411,6 +425,7 @@ class Document(QObject):
     shapes_restored = Signal(bool, bool)
     selection_changed = Signal()
     units_changed = Signal()  # the document's length unit (replaced content sends it too)
+    solid_changed = Signal()  # the solid of the part route (Solid mode) replaced or dropped
 
     def __init__(self, parent: QObject | None = None):
         super().__init__(parent)
@@ -442,6 +457,9 @@ class Document(QObject):
         self.loss_history_source: Callable[[], LossHistory | None] = lambda: None
         #: the curves of the shapes an undo / redo just restored (None: an empty plot)
         self.restored_loss_history: LossHistory | None = None
+        #: the solid of the part route (:class:`app.workers.part_worker.PartOutcome`: the
+        #: OpenCASCADE shape, its report and triangles) or None; not part of the undo history
+        self.solid: Any = None
         #: the switch to Patches mode waiting for its network fit (begin_fit_as_patches)
         self._pending_switch: _ShapesCommand | None = None
 
@@ -540,8 +558,10 @@ class Document(QObject):
         self.patches = [from_mapping(p) for p in patches]
         self.fitted = self.fitted_account = None
         self.network = None
+        self.solid = None
         self.offsets = OffsetDisplay()
         self.content_changed.emit()
+        self.solid_changed.emit()
         self.fitted_changed.emit()
         self.offsets_changed.emit()
         self.selection_changed.emit()
@@ -565,6 +585,11 @@ class Document(QObject):
     def set_network(self, network: Any):
         """The patch network now shown (the newest of a live run, or None after Reset)."""
         self.network = network
+
+    def set_solid(self, solid: Any) -> None:
+        """The solid now shown (a PartOutcome with its solid), or None."""
+        self.solid = solid
+        self.solid_changed.emit()
 
     def set_offsets(self, offsets: OffsetDisplay):
         self.offsets = offsets
@@ -668,4 +693,6 @@ class Document(QObject):
         self.undo_stack.clear()
         self._apply_settings(session["settings"])
         self.set_fitted(session["fitted"])
+        if session.get("solid") is not None:
+            self.set_solid(session["solid"])
 

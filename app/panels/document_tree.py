@@ -1,4 +1,4 @@
-"""The document tree: point clouds, fitted shape, patch network, patches, offsets; checkboxes set
+"""The document tree: point clouds, fitted shape, patch network, solid, patches, offsets; checkboxes set
 visibility."""
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ class DocumentTree(QTreeWidget):
         self._updating = False
         self.shows_fit = False
         self.shows_network = False
+        self.shows_solid = False
         self.setHeaderLabels(["Document"])
         self.itemChanged.connect(self._item_changed)
 
@@ -72,6 +73,12 @@ class DocumentTree(QTreeWidget):
                            "patch boundaries and irregular corners (3 or 5+ patches meet)")
                 self._item(top, "Seam angle map", ("layer", "seam"), seam_visible,
                            "colour the network by the angle between neighbouring patches")
+            solid = document.solid
+            self.shows_solid = solid is not None
+            if solid is not None:
+                self._item(self, f"Solid: {solid.report.summary()}", ("layer", "solid"),
+                           layer_visible("solid"),
+                           "the solid with analytic faces (Solid mode): " + solid.report.status)
             if document.patches:
                 patches = self._item(self, f"Patches ({len(document.patches)})",
                                      ("layer", "patches"), layer_visible("patches"))

@@ -1,4 +1,4 @@
-"""The fit mode selector (single patch or patches) and the patch network settings.
+"""The fit mode selector (single patch, patches or solid) and the patch network settings.
 
 Both edit the document's settings through ``edit(text, **changes)`` (undoable, like every fit
 setting: the mode through ``Document.edit_settings``, the network through
@@ -49,7 +49,7 @@ def _auto_spin(auto: int, maximum: int) -> QSpinBox:
 
 
 class ModeSelector(QComboBox):
-    """What Start fits: one patch or a network of patches."""
+    """What Start fits: one patch, a network of patches or a solid."""
 
     def __init__(self, edit: Callable[..., bool], parent: QWidget | None = None):
         super().__init__(parent)
@@ -57,7 +57,9 @@ class ModeSelector(QComboBox):
         for value, label in FIT_MODES:
             self.addItem(label, value)
         self.setToolTip("Single patch: one NURBS surface (or curve). Patches: a network of "
-                        "patches for closed objects (settings in the Patches dock).")
+                        "patches for closed objects (settings in the Patches dock). Solid: a "
+                        "valid solid with exact planes, cylinders, cones, spheres and tori for "
+                        "a closed scan of a machined part (the Solid dock).")
         self.currentIndexChanged.connect(self._chosen)
 
     def _chosen(self, _index: int):

@@ -27,6 +27,7 @@ from app.display_types import FAR, FINE, FLIPPED, OVERLAP, DeviationMap, Display
 from app.viewport.deviation_colours import DeviationColours
 from app.viewport.network_layers import NetworkLayers
 from app.viewport.selection import SelectionTool
+from app.viewport.solid_layers import SolidLayers
 
 RENDER_INTERVAL_MS = 33
 DEVIATION_TITLE = "Deviation"
@@ -60,6 +61,8 @@ QUALITY_LABELS = {FLIPPED: "flipped (faces away from the cloud)", OVERLAP: "over
 QUALITY_PENDING = "Quality map: shown when the fit ends"
 
 #: Layers the document tree and the View menu toggle.
+#: the points' size in pixels, and over a solid (Solid mode)
+POINT_SIZE, SOLID_POINT_SIZE = 3.0, 1.5
 LAYERS = ("cloud", "surface", "curve", "control_net", "knot_lines", "patches", "offsets")
 #: Layers of the single-patch fit (hidden in Patches mode) and of the network (shown only then).
 SINGLE_FIT_LAYERS = ("surface", "curve", "control_net", "knot_lines")
@@ -177,6 +180,8 @@ class SceneView(QObject):
         self._render_timer.timeout.connect(self.render_now)
         self.network = NetworkLayers(self.plotter, self.request_render,
                                      self._apply_deviation_surface)
+        #: the part route's solid (Solid mode)
+        self.solid = SolidLayers(self.plotter, self.request_render)
         #: the colour scale (signed or tolerance bands) the cloud and the deviation surface share
         self.deviation_colours = DeviationColours(self.plotter)
         #: box and lasso selection over the viewport (off until a mode is chosen)
@@ -218,7 +223,8 @@ class SceneView(QObject):
         mesh = pv.PolyData(np.zeros((0, 3)) if points is None else np.asarray(points, float))
         mesh.point_data[DEVIATION_TITLE] = np.zeros(mesh.n_points)
         if "cloud" not in self._meshes:
-            self._layer("cloud", mesh, color=COLORS["cloud"], point_size=3.0,
+            self._layer("cloud", mesh, color=COLORS["cloud"], point_size=(
+                SOLID_POINT_SIZE if self._mode == "solid" else POINT_SIZE),
                         scalars=DEVIATION_TITLE, clim=(-1.0, 1.0), show_scalar_bar=False)
             self.deviation_colours.attach(self._actors["cloud"].mapper)
         else:
@@ -384,9 +390,13 @@ class SceneView(QObject):
 
     # --- fit mode --------------------------------------------------------------------------------
     def set_mode(self, mode: str):
-        """"single" or "patches": which fit's layers are on show."""
+        """"single", "patches" or "solid": which fit's layers are on show."""
         self._mode = mode
         self.network.set_enabled(mode == "patches")
+        self.solid.set_enabled(mode == "solid")
+        cloud = self._actors.get("cloud")
+        if cloud is not None:  # over a solid the points are finer: its face colours show
+            cloud.prop.point_size = SOLID_POINT_SIZE if mode == "solid" else POINT_SIZE
         for name in SINGLE_FIT_LAYERS:
             self._apply_visibility(name)
         self._update_scalar_bar()
@@ -549,6 +559,9 @@ class SceneView(QObject):
         if layer in NETWORK_LAYERS:
             self.network.set_visible(layer, visible)
             return
+        if layer == "solid":
+            self.solid.set_visible(visible)
+            return
         self._visible[layer] = bool(visible)
         if layer in self._extra_meshes:
             for name in self._extra_meshes[layer]:
@@ -564,6 +577,8 @@ class SceneView(QObject):
         self.request_render()
 
     def is_visible(self, layer: str) -> bool:
+        if layer == "solid":
+            return self.solid.is_visible()
         return self.network.is_visible(layer) if layer in NETWORK_LAYERS else self._visible[layer]
 
     def set_note(self, text: str):
@@ -641,6 +656,7 @@ class SceneView(QObject):
         parts = [mesh.points for name, mesh in self._meshes.items()
                  if mesh.n_points and self._actors[name].GetVisibility() and name != "selection"]
         parts += self.network.visible_points()
+        parts += self.solid.visible_points()
         for group in ("patches", "offsets"):
             for name in self._extra_meshes[group]:
                 actor = self.plotter.actors.get(name)

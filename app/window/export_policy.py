@@ -1,11 +1,12 @@
 """The export policy: what File > Export (and Save Screenshot) write, and what the user is told.
 
-It decides: Export writes what the mode shows (the patch network in Patches mode, else the
-fitted shape, loaded patches and offsets) in a job, refuses with a message when there is nothing
-to write, names the missing package when a writer needs one and says that an existing file was
-left as it was after a failure; .3dm, STEP and IGES declare the document's units (the report
-names them) and the message says which; every export ends with one ``export_finished(path, ok)``. The
-formats and writers are :mod:`app.loading`'s (``nurbs_core.io``'s).
+It decides: Export writes what the mode shows (the patch network in Patches mode, the solid in
+Solid mode, else the fitted shape, loaded patches and offsets) in a job, refuses with a message
+when there is nothing to write, names the missing package when a writer needs one and says that
+an existing file was left as it was after a failure; .3dm, STEP and IGES declare the document's
+units (the report names them) and the message says which; every export ends with one
+``export_finished(path, ok)``. The formats and writers are :mod:`app.loading`'s
+(``nurbs_core.io``'s).
 """
 
 from __future__ import annotations
@@ -62,6 +63,8 @@ class ExportPolicy(QObject):
         window = self._window
         if window.document.settings.fit_mode == "patches":
             return window.export_network(path)
+        if window.document.settings.fit_mode == "solid":
+            return window.export_solid(path)
         geometries = window.document.all_geometry()
         if not geometries:
             window.report("Nothing to export yet: run a fit or open NURBS files first.", error=True)
@@ -105,6 +108,8 @@ class ExportPolicy(QObject):
         window = self._window
         document = window.document
         clouds = [t.points for t in document.targets if t.visible]
+        if document.settings.fit_mode == "solid":
+            return self._export_solid_report(path, clouds)
         network = document.network if document.settings.fit_mode == "patches" else None
         fitted = None if network is not None else document.fitted
         if not clouds or (network is None and fitted is None):
@@ -124,6 +129,24 @@ class ExportPolicy(QObject):
                                path, points, fitted, network, title=title, status=status,
                                tolerance=tolerance, warnings=warnings, settings=rows,
                                units=document.units),
+                           lambda within: self._exported_report(path, within),
+                           lambda exc: self._failed(path, exc))
+        return True
+
+    def _export_solid_report(self, path: str, clouds: list[np.ndarray]) -> bool:
+        """The deviation report of the solid of Solid mode against the visible clouds."""
+        window = self._window
+        document = window.document
+        solid = document.solid
+        if not clouds or solid is None:
+            window.report("No solid to report yet: Start on a closed scan of a part in Solid "
+                          "mode first.", error=True)
+            window.export_finished.emit(path, False)
+            return False
+        points = np.concatenate(clouds)
+        title = " + ".join(t.name for t in document.targets if t.visible)
+        window.jobs.submit("report", lambda: loading.export_solid_report(
+                               path, points, solid, title=title, units=document.units),
                            lambda within: self._exported_report(path, within),
                            lambda exc: self._failed(path, exc))
         return True

@@ -28,6 +28,8 @@ if TYPE_CHECKING:
     from app.panels.offset_panel import OffsetPanel
     from app.panels.patches_panel import ModeSelector, PatchesPanel
     from app.panels.quality_panel import QualityPanel
+    from app.panels.solid_panel import SolidPanel
+    from app.part_controller import PartController
     from app.patch_controller import PatchController
     from app.state import Document
     from app.viewport.scene import SceneView
@@ -59,6 +61,7 @@ class ExportHost(Reporter, Protocol):
     def grab(self) -> Any: ...
     def export_to(self, path: str) -> bool: ...
     def export_network(self, path: str) -> bool: ...
+    def export_solid(self, path: str) -> bool: ...
     def export_report(self, path: str) -> bool: ...
     def result_status(self) -> tuple[str, list[str]]: ...
     def save_screenshot(self, path: str) -> bool: ...
@@ -68,6 +71,7 @@ class ExportHost(Reporter, Protocol):
 class LoadHost(Reporter, Protocol):
     document: Document
     controller: FitController
+    part_controller: PartController
     jobs: JobRunner
     loss_plot: LossPlot
     files_loaded: SignalInstance
@@ -88,6 +92,7 @@ class SessionHost(Reporter, Protocol):
     document: Document
     controller: FitController
     patch_controller: PatchController
+    part_controller: PartController
     loss_plot: LossPlot
     recent: RecentDirectories
 
@@ -113,6 +118,9 @@ class SettingsHost(Protocol):
     patches_dock: QDockWidget
     quality_dock: QDockWidget
     network_quality_dock: QDockWidget
+    part_controller: PartController
+    solid_panel: SolidPanel
+    solid_dock: QDockWidget
     def statusBar(self) -> QStatusBar: ...  # noqa: N802 (Qt's name)
     def rebuild_tree(self) -> None: ...
     def update_fit_actions(self, *_state: object) -> None: ...
@@ -165,6 +173,7 @@ class SelectionHost(Reporter, Protocol):
     document: Document
     controller: FitController
     patch_controller: PatchController
+    part_controller: PartController
     scene: SceneView
     knot_panel: KnotPanel
     status_labels: dict[str, QLabel]
@@ -177,3 +186,20 @@ class SelectionHost(Reporter, Protocol):
     def statusBar(self) -> QStatusBar: ...  # noqa: N802 (Qt's name)
     def rebuild_tree(self) -> None: ...
     def reset_patch_network(self) -> None: ...
+
+
+@runtime_checkable
+class SolidHost(Reporter, Protocol):
+    document: Document
+    part_controller: PartController
+    scene: SceneView
+    jobs: JobRunner
+    solid_panel: SolidPanel
+    solid_dock: QDockWidget
+    export_finished: SignalInstance
+
+    def rebuild_tree(self) -> None: ...
+    def start_fit(self, *_args: object) -> bool: ...
+    def go_on_as_network(self) -> None: ...
+    def resizeDocks(self, docks: Any, sizes: Any, orientation: Any) -> None: ...  # noqa: N802
+    def update_fit_actions(self, *_state: object) -> None: ...

@@ -195,6 +195,7 @@ class LoadPolicy(QObject):
         document = window.document
         window.controller.reset()
         window.reset_patch_network()
+        window.part_controller.reset()  # a solid under way was of the old clouds: dropped
         window.loss_plot.clear()
         for label in window.status_labels.values():
             label.setText("-")

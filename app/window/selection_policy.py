@@ -133,7 +133,8 @@ class SelectionPolicy(QObject):
         if document.selection is None:
             window.report(f"{what}: nothing is selected (Box select S, Lasso select L)")
             return False
-        if window.controller.is_busy() or window.patch_controller.is_busy():
+        if (window.controller.is_busy() or window.patch_controller.is_busy()
+                or window.part_controller.is_busy()):
             window.report(f"{what} refused: a fit is running on these points. Stop it first "
                           "(Stop, Shift+F5), then edit the points.")
             return False
@@ -160,6 +161,9 @@ class SelectionPolicy(QObject):
             if controller.is_busy():
                 controller.abandon()
                 stopped.append(what)
+        if window.part_controller.is_busy():
+            window.part_controller.stop()
+            stopped.append("the solid")
         points = document.target_points()
         window.scene.set_cloud(points)
         window.knot_panel.set_points(points)

@@ -1,7 +1,8 @@
 """The session policy: saving the document to a session file and opening one.
 
 It decides: a session keeps everything shown (the clouds, the fitted surface, loaded patches,
-the patch network with its quality report and deviation map, the settings); it is written
+the patch network with its quality report and deviation map, the solid with its face report,
+the settings); it is written
 atomically (a failed save leaves an existing file as it was and says so); a session file is
 read and checked before anything changes, so a bad file leaves the document and a running fit
 untouched; opening one resets both fits and the loss plot before the document takes the session,
@@ -61,6 +62,8 @@ class SessionPolicy(QObject):
         message = f"Session saved to {path}"
         if window.document.network is not None:
             message += f" (with the patch network: {window.document.network.patch_count} patches)"
+        if window.document.solid is not None:
+            message += f" (with the solid: {len(window.document.solid.report.faces)} faces)"
         window.report(message)
         return True
 
@@ -76,6 +79,7 @@ class SessionPolicy(QObject):
             return False
         window.controller.reset()
         window.reset_patch_network()
+        window.part_controller.reset()
         window.loss_plot.clear()
         window.document.apply_session(session)
         if session["network"] is not None:

@@ -37,6 +37,7 @@ class SettingsPolicy(QObject):
         window = self._window
         window.mode_selector.show_settings(settings)
         window.patches_panel.show_settings(settings.patches)
+        window.solid_panel.show_setting(settings.solid)
         window.scene.set_mode(settings.fit_mode)
         # the Deviation dock follows the mode on show (each mode has its own map)
         window.deviation_panel.show_map(window.scene.deviation_map(),
@@ -70,19 +71,28 @@ class SettingsPolicy(QObject):
         else:
             window.statusBar().showMessage("Settings changed: they apply at the next Start", 4000)
 
-    def _mode_changed(self, mode: str):
-        """The other fit stops (a run of the mode just left would draw where it is hidden)."""
+    def _controller_of(self, mode: str):
         window = self._window
-        other = window.controller if mode == "patches" else window.patch_controller
-        other.stop()
+        return {"patches": window.patch_controller, "solid": window.part_controller}.get(
+            mode, window.controller)
+
+    def _mode_changed(self, mode: str):
+        """The other fits stop (a run of the mode just left would draw where it is hidden)."""
+        window = self._window
+        for controller in (window.controller, window.patch_controller, window.part_controller):
+            if controller is not self._controller_of(mode):
+                controller.stop()
         if mode == "patches":
             window.patches_dock.raise_()
             window.network_quality_dock.raise_()
+        elif mode == "solid":
+            window.solid_dock.raise_()
         else:
             window.fit_dock.raise_()
             window.quality_dock.raise_()
         window.update_fit_actions()
         window.rebuild_tree()
         window.scene.reset_camera()
-        what = "a patch network" if mode == "patches" else "one patch"
+        what = {"patches": "a patch network", "solid": "a solid with analytic faces"}.get(
+            mode, "one patch")
         window.statusBar().showMessage(f"Mode: {dict(FIT_MODES)[mode]}: Start fits {what}.", 4000)

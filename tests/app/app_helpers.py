@@ -71,3 +71,12 @@ def export_report(qtbot, window, monkeypatch, path) -> str:
         window.report_action.trigger()
     assert blocker.args == [str(path), True], window.last_error
     return path.read_text()
+
+
+def solid_route_off(window) -> None:
+    """Turn "Solid from analytic faces" off (an undoable settings edit): a closed cloud one
+    patch refuses then goes on as a network of patches, as before the part route (with it on
+    auto, ``choose_route`` makes a solid of a part-like scan: a sphere is one)."""
+    combo = window.solid_panel.setting
+    combo.setCurrentIndex(combo.findData("off"))
+    assert window.document.settings.solid == "off"

@@ -6,7 +6,7 @@ grid goes on at the grown grid; the Quality dock and the toolbar read fully at 1
 from __future__ import annotations
 
 import numpy as np
-from app_helpers import QUICK, open_by_drop
+from app_helpers import QUICK, open_by_drop, solid_route_off
 from PySide6.QtWidgets import QApplication, QToolBar
 
 FIT_TIMEOUT_MS = 120_000
@@ -158,6 +158,7 @@ def test_a_patch_network_fit_is_one_undo_step_with_its_switch_to_patches(qtbot, 
     path = tmp_path / "sphere.xyz"
     np.savetxt(path, samples.sphere(1500).points, fmt="%.8f")
     open_by_drop(qtbot, window, [path])
+    solid_route_off(window)  # a sphere is a part: the network route is tested here
     steps = document.undo_stack.index()
     # one patch cannot hold a closed cloud: Start goes on as a network (the automatic route)
     first = _fit(qtbot, window, window.patch_controller)
@@ -251,6 +252,7 @@ def test_redo_of_a_network_shows_its_numbers_and_curve_and_claims_no_new_fit(qtb
     path = tmp_path / "sphere.xyz"
     np.savetxt(path, samples.sphere(1500).points, fmt="%.8f")
     open_by_drop(qtbot, window, [path])
+    solid_route_off(window)  # a sphere is a part: the network route is tested here
     _fit(qtbot, window, window.patch_controller)
     shown = {name: labels[name].text() for name in ("iteration", "loss", "rate", "remaining")}
     assert shown["loss"].startswith("RMS ") and shown["loss"] != "RMS -"
@@ -303,6 +305,7 @@ def test_the_window_opens_within_the_screen_and_the_patch_quality_dock_scrolls(q
     path = tmp_path / "sphere.xyz"
     np.savetxt(path, samples.sphere(1500).points, fmt="%.8f")
     open_by_drop(qtbot, window, [path])
+    solid_route_off(window)  # a sphere is a part: the network route is tested here
     window.document.set_units("mm")
     _fit(qtbot, window, window.patch_controller)
     QApplication.processEvents()

@@ -8,7 +8,7 @@ import threading
 
 import numpy as np
 import pytest
-from app_helpers import open_by_drop, viewport_image
+from app_helpers import open_by_drop, solid_route_off, viewport_image
 from hang_guard import hang_guard
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QFileDialog
@@ -270,11 +270,12 @@ def test_engine_refusals_show_a_message_not_a_traceback(qtbot, window, tmp_path)
 
 
 def test_start_on_a_closed_cloud_goes_on_as_a_network(qtbot, window, tmp_path):
-    """The automatic route: one patch cannot hold a closed cloud, so Start fits a network at
-    once (no refusal, no dialog); Undo returns to one patch."""
+    """The automatic route with the solid route off: one patch cannot hold a closed cloud, so
+    Start fits a network at once (no refusal, no dialog); Undo returns to one patch."""
     from nurbs_core import samples
 
     _open_cloud(qtbot, window, tmp_path, "sphere", samples.sphere(1500).points)
+    solid_route_off(window)  # on auto a sphere, a part-like scan, becomes a solid
     assert window.document.settings.fit_mode == "single"
     shown = []
     window.error_shown.connect(shown.append)
@@ -313,6 +314,7 @@ def test_the_dock_says_which_stray_points_the_network_left_out(qtbot, window, tm
 
     shape = samples.with_outliers(samples.sphere(3000), fraction=0.01, seed=3)
     _open_cloud(qtbot, window, tmp_path, "sphere_strays", shape.points)
+    solid_route_off(window)
     with qtbot.waitSignal(window.patch_controller.fit_finished, timeout=FIT_TIMEOUT_MS) as done:
         window.start_action.trigger()
     quality = done.args[0].quality

@@ -1,0 +1,115 @@
+"""A session's solid (:mod:`app.session_file`): the OpenCASCADE shape as its B-rep text (exact:
+OpenCASCADE's own format) and the face report as JSON, the per-point distances and nearest faces
+as arrays. Reading checks every value and rebuilds the viewport's triangles. Qt-free; OCP is
+imported when a solid is written or read.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.workers.part_worker import FaceRow, PartOutcome, SolidReport, solid_display
+
+#: the session's member holding the solid (a JSON document)
+SOLID_MEMBER = "solid.json"
+DISTANCES, POINT_FACES = "solid_distances", "solid_point_faces"
+
+
+def solid_document(outcome: PartOutcome) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The JSON document of a solid (its B-rep text and report) and its arrays (the distances
+    (N,) and nearest faces (N,), by member name)."""
+    from nurbs_core.io.solid_io import solid_bytes
+
+    report = outcome.report
+    assert report is not None and outcome.solid is not None
+    brep = solid_bytes(outcome.solid, "solid.brep", report.tolerance / 3).decode("ascii")
+    document = {
+        "brep": brep, "reason": report.reason, "seconds": report.seconds,
+        "valid": report.valid, "closed": report.closed, "volume": report.volume,
+        "status": report.status, "problems": list(report.problems), "noise": report.noise,
+        "tolerance": report.tolerance,
+        "faces": [{"kind": f.kind, "description": f.description, "parameters": f.parameters,
+                   "points": f.points, "mean": f.mean, "p99": f.p99} for f in report.faces],
+        "distances": DISTANCES, "point_faces": POINT_FACES,
+    }
+    return document, {DISTANCES: report.distances, POINT_FACES: report.point_faces}
+
+
+def shape_from_brep(text: str) -> Any:
+    from nurbs_core.io.errors import require_ocp
+
+    require_ocp("A session's solid")
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepTools import BRepTools
+    from OCP.TopoDS import TopoDS_Shape
+
+    handle, name = tempfile.mkstemp(suffix=".brep")
+    os.close(handle)
+    try:
+        Path(name).write_text(text, encoding="ascii")
+        shape = TopoDS_Shape()
+        if not BRepTools.Read_s(shape, name, BRep_Builder()) or shape.IsNull():
+            raise ValueError("the solid's B-rep does not read")
+        return shape
+    finally:
+        os.unlink(name)
+
+
+def _number(data: dict[str, Any], key: str) -> float:
+    value = data.get(key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ValueError(f"the solid's {key} must be a finite number")
+    return float(value)
+
+
+def _face(number: int, item: Any) -> FaceRow:
+    if not isinstance(item, dict) or not isinstance(item.get("kind"), str) or not isinstance(
+            item.get("description"), str) or not isinstance(item.get("parameters"), dict):
+        raise ValueError(f"the solid's face {number} needs a kind, a description and parameters")
+    points = item.get("points")
+    if isinstance(points, bool) or not isinstance(points, int) or points < 0:
+        raise ValueError(f"the solid's face {number} needs a point count")
+    return FaceRow(item["kind"], item["description"], dict(item["parameters"]), points,
+                   _number(item, "mean"), _number(item, "p99"))
+
+
+def solid_from_document(document: Any, arrays: dict[str, np.ndarray]) -> PartOutcome:
+    """The solid of a session: its shape, report and triangles, checked (ValueError naming the
+    problem). ``arrays``: the distances and nearest faces by member name, one value per point
+    the solid was fitted to (the selection, when one was fitted)."""
+    if not isinstance(document, dict) or not isinstance(document.get("brep"), str):
+        raise ValueError("the solid needs its B-rep text")
+    faces = document.get("faces")
+    if not isinstance(faces, list) or not faces:
+        raise ValueError("the solid needs its faces")
+    rows = tuple(_face(k, item) for k, item in enumerate(faces))
+    problems = document.get("problems", [])
+    if not isinstance(problems, list) or not all(isinstance(p, str) for p in problems):
+        raise ValueError("the solid's problems must be a list of text")
+    distances = np.asarray(arrays[DISTANCES], np.float64)
+    point_faces = np.asarray(arrays[POINT_FACES], np.int64)
+    if distances.ndim != 1 or point_faces.shape != distances.shape or not len(distances):
+        raise ValueError(f"the solid's per-point arrays have shapes {distances.shape} and "
+                         f"{point_faces.shape}: one value per point each")
+    if point_faces.min() < 0 or point_faces.max() >= len(rows):
+        raise ValueError("the solid's nearest faces name faces it does not have")
+    status = document.get("status")
+    if status not in ("converged", "warnings"):
+        raise ValueError("the solid's status must be converged or warnings")
+    reason = document.get("reason", "")
+    report = SolidReport(rows, bool(document.get("valid")), bool(document.get("closed")),
+                         _number(document, "volume"), status, tuple(problems),
+                         _number(document, "noise"), _number(document, "tolerance"),
+                         distances, point_faces, reason if isinstance(reason, str) else "",
+                         _number(document, "seconds"))
+    shape = shape_from_brep(document["brep"])
+    display = solid_display(shape, report.tolerance)
+    if len(display.owners) and int(display.owners.max()) >= len(rows):
+        raise ValueError(f"the solid's B-rep has more faces than its report ({len(rows)})")
+    return PartOutcome(report.reason, shape, report, display)

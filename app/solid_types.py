@@ -1,0 +1,84 @@
+"""The values of a solid made by the part route, as the window shows and keeps them: its faces
+(:class:`FaceRow`), its report (:class:`SolidReport`), its triangles (:class:`SolidDisplay`) and
+how a run ended (:class:`PartOutcome`). Plain data (numpy only): the panels and the viewport
+import them without the engine (the import contracts in ``pyproject.toml``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class FaceRow:
+    """One face of the solid as the Solid dock lists it: its surface type (plane, cylinder,
+    cone, sphere, torus, freeform), the engine's one-clause description of its parameters, the
+    parameters as plain values (radius, axis, half-angle...), the scan points nearest to it and
+    their mean and 99th-percentile distance to it (input units)."""
+
+    kind: str
+    description: str
+    parameters: dict[str, Any]
+    points: int
+    mean: float
+    p99: float
+
+
+@dataclass(frozen=True, eq=False)
+class SolidReport:
+    """What the window shows and a session keeps of a solid: its faces, whether it is valid and
+    closed, its volume, the fit's status ("converged" or "warnings") with its problems, the
+    noise sigma and tolerance the distances are measured against, the per-point distance to
+    the solid (N,) and nearest face (N,), the route's reason and the seconds it took."""
+
+    faces: tuple[FaceRow, ...]
+    valid: bool
+    closed: bool
+    volume: float
+    status: str
+    problems: tuple[str, ...]
+    noise: float
+    tolerance: float
+    distances: np.ndarray
+    point_faces: np.ndarray
+    reason: str = ""
+    seconds: float = 0.0
+
+    def face_types(self) -> dict[str, int]:
+        """How many faces of each type, types in alphabetical order."""
+        kinds = [face.kind for face in self.faces]
+        return {kind: kinds.count(kind) for kind in sorted(set(kinds))}
+
+    def summary(self) -> str:
+        """One line: "7 faces (1 cylinder, 6 planes), valid, closed"."""
+        kinds = ", ".join(f"{n} {k}{'s' if n > 1 else ''}" for k, n in self.face_types().items())
+        return (f"{len(self.faces)} faces ({kinds}), {'valid' if self.valid else 'INVALID'}, "
+                f"{'closed' if self.closed else 'NOT closed'}")
+
+
+@dataclass(frozen=True, eq=False)
+class SolidDisplay:
+    """The solid's triangles for the viewport: vertices (V, 3), triangles (T, 3) oriented
+    outwards and each triangle's face index (T,) into :attr:`SolidReport.faces`."""
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    owners: np.ndarray
+
+
+@dataclass
+class PartOutcome:
+    """How a run of the part route ended: ``solid`` (an OpenCASCADE shape) with its report and
+    display, or none, and ``fallback`` says why (the route chose a network, or no valid solid
+    results): the window fits the network then. ``route_reason``: the route's reason, as
+    ``nurbs-fit`` prints it."""
+
+    route_reason: str
+    solid: Any = None
+    report: SolidReport | None = None
+    display: SolidDisplay | None = None
+    fallback: str = ""
+    timings: dict[str, float] = field(default_factory=dict)

@@ -1,0 +1,168 @@
+"""The solid policy: when Start takes the part route, what its outcome changes in the window,
+and how the solid is written.
+
+It decides: Start in Solid mode runs the part route forced (``choose_route(part=True)``: the
+user asked for a solid); Start in Single patch mode with "Solid from analytic faces" on does
+the same; with it on auto, a closed cloud that one patch refuses goes to the part route with
+``part=None`` (:func:`nurbs_core.route.choose_route` decides, as for ``nurbs-fit``), and on off
+to the network as before. A solid switches the window to Solid mode (an undoable mode edit;
+the solid itself is no undo step) and fills the viewport, the Solid dock and the tree. When no
+valid solid results (or the route is not a part) the window says why and fits the network, as
+``nurbs-fit`` does; a forced route that fails reports the error with "Fit as patches".
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from PySide6.QtCore import QObject, Qt, Slot
+
+from app.errors import describe
+from app.state import part_argument
+from app.window.fit_display import cloud_units
+
+if TYPE_CHECKING:
+    from app.window.hosts import SolidHost
+    from app.workers.part_worker import PartOutcome
+
+SOLID_STEP = "Solid from analytic faces"
+#: the Solid dock's height once a solid is shown (its report and about seven face rows)
+SOLID_DOCK_HEIGHT = 330
+
+
+class SolidPolicy(QObject):
+    """Drives the part controller for the window (see the module docstring)."""
+
+    def __init__(self, window: SolidHost):
+        super().__init__(window)
+        self._window = window
+
+    def connect(self) -> None:
+        """Follow the part controller's and the document's signals (once the widgets exist)."""
+        window = self._window
+        controller = window.part_controller
+        controller.solid_ready.connect(self.on_solid_ready)
+        controller.fallback_chosen.connect(self.on_fallback)
+        controller.run_failed.connect(self.on_failed)
+        controller.state_changed.connect(window.update_fit_actions)
+        window.document.solid_changed.connect(self.show_solid)
+        window.solid_panel.colouring_changed.connect(window.scene.solid.set_colouring)
+
+    # --- starting ------------------------------------------------------------------------------
+    def start(self, part: bool | None) -> bool:
+        """Run the part route with ``choose_route``'s ``part`` (see the module)."""
+        window = self._window
+        started = window.part_controller.start(part)
+        if started:
+            window.solid_dock.raise_()
+            what = ("Making a solid with analytic faces" if part else
+                    "The cloud is closed: checking whether it is a machined part (segmenting it "
+                    "into analytic surfaces)")
+            window.report(f"{what}; this takes a few seconds (Stop cancels).")
+        return started
+
+    def starts_with_solid(self) -> bool:
+        """Whether Start goes to the part route at once: Solid mode, or Single patch with the
+        setting on (a surface fit)."""
+        settings = self._window.document.settings
+        return settings.fit_mode == "solid" or (
+            settings.fit_mode == "single" and settings.solid == "on"
+            and settings.fit.kind == "surface" and not settings.fit.single_patch)
+
+    def start_for_start(self) -> bool:
+        """Start's part route (when :meth:`starts_with_solid`): forced."""
+        return self.start(True)
+
+    def after_refusal(self) -> bool:
+        """One patch refused a closed cloud: the part route when the setting is auto and
+        OpenCASCADE is there (True: started; False: the window goes on to the network)."""
+        from nurbs_core.route import cad_available
+
+        settings = self._window.document.settings
+        if part_argument(settings.solid) is False or not cad_available():
+            return False
+        return self.start(part_argument(settings.solid))
+
+    def reset(self) -> None:
+        """Stop the part route and drop the solid."""
+        self._window.part_controller.reset()
+        self._window.report("Reset: the solid was discarded.")
+
+    # --- outcomes ------------------------------------------------------------------------------
+    @Slot(object)
+    def on_solid_ready(self, outcome: PartOutcome) -> None:
+        window = self._window
+        report = outcome.report
+        assert report is not None
+        if window.document.settings.fit_mode != "solid":
+            window.document.edit_settings(SOLID_STEP, fit_mode="solid")
+        window.solid_dock.raise_()
+        # the face table wants the height of its rows: the bottom docks grow to it
+        window.resizeDocks([window.solid_dock], [SOLID_DOCK_HEIGHT], Qt.Orientation.Vertical)
+        window.scene.reset_camera()
+        verdict = report.status if not report.problems else (
+            "fitted with warnings: " + "; ".join(report.problems))
+        window.report(f"Solid: {report.summary()}; {verdict} ({report.seconds:.1f} s). "
+                      "File > Export writes it (STEP, IGES, B-rep, STL, OBJ, PLY).")
+
+    @Slot(str)
+    def on_fallback(self, reason: str) -> None:
+        """No solid: say why and fit the network (the CLI's fallback)."""
+        window = self._window
+        window.report(f"No solid ({reason}): fitting a network of patches (Patches mode; "
+                      "Undo returns to the mode before).")
+        window.go_on_as_network()
+
+    @Slot(str)
+    def on_failed(self, message: str) -> None:
+        self._window.report(message, error=True, offer_patches=True)
+
+    @Slot()
+    def show_solid(self) -> None:
+        """The document's solid changed: the viewport, the Solid dock and the tree show it."""
+        window = self._window
+        outcome = window.document.solid
+        report = None if outcome is None else outcome.report
+        window.scene.solid.show(None if outcome is None else outcome.display, report)
+        window.solid_panel.show_report(report, cloud_units(window.document))
+        window.rebuild_tree()
+
+    # --- export --------------------------------------------------------------------------------
+    def export(self, path: str) -> bool:
+        """Write the solid with ``nurbs_core.io.solid_io.save_solid`` (atomic; STEP and IGES
+        keep the analytic faces and say the document's units), in a job."""
+        from nurbs_core.io.solid_io import SOLID_SUFFIXES, save_solid
+
+        window = self._window
+        outcome = window.document.solid
+        if outcome is None:
+            window.report("No solid to export yet: Start on a closed scan of a part in Solid "
+                          "mode first.", error=True)
+            window.export_finished.emit(path, False)
+            return False
+        if Path(path).suffix.lower() not in SOLID_SUFFIXES:
+            window.report(f"A solid is written as {', '.join(SOLID_SUFFIXES)}, not "
+                          f"{Path(path).suffix or 'a file without a suffix'}: choose one of "
+                          "them (or switch the mode to export the patches).", error=True)
+            window.export_finished.emit(path, False)
+            return False
+        shape, tolerance = outcome.solid, outcome.report.tolerance / 3
+        units = window.document.units
+        faces = len(outcome.report.faces)
+
+        def done(_result: object) -> None:
+            from app.window.export_policy import declared_units
+
+            window.report(f"Exported the solid ({faces} faces) to {path}"
+                          f"{declared_units(path, units)}")
+            window.export_finished.emit(path, True)
+
+        def failed(exc: Exception) -> None:
+            kept = "\nThe existing file was left as it was." if Path(path).exists() else ""
+            window.report(f"Export to {path} failed: {describe(exc)}{kept}", error=True, exc=exc)
+            window.export_finished.emit(path, False)
+
+        window.jobs.submit("export", lambda: save_solid(shape, [path], tolerance, units), done,
+                           failed)
+        return True
