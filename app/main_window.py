@@ -391,6 +391,13 @@ class MainWindow(QMainWindow):
             "delete": self._action("&Delete Selection", policy.delete,
                                    QKeySequence(Qt.Key.Key_Delete)),
         }
+        # the toolbar shows short labels (the whole toolbar fits 1280 pixels), the menus the
+        # full ones
+        for action, short in ((self.selection_tool_actions["box"], "Box"),
+                              (self.selection_tool_actions["lasso"], "Lasso"),
+                              (self.selection_actions["crop"], "Crop"),
+                              (self.selection_actions["delete"], "Delete")):
+            action.setIconText(short)
         self.selection_actions["crop"].setToolTip("Keep only the selected points (Ctrl+Z undoes)")
         self.selection_actions["delete"].setToolTip("Remove the selected points, e.g. outliers "
                                                     "(Ctrl+Z undoes)")

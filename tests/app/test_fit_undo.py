@@ -211,6 +211,13 @@ def test_the_quality_dock_and_the_toolbar_read_fully_at_1280_x_800(qtbot, window
     window.fit_panel.term_checks["hausdorff"].setChecked(True)
     assert button.text() == "Undo" and button.toolTip() == "Undo Loss"
     assert window.undo_action.text() == "&Undo Loss"
+    # every toolbar button is on show, none in the overflow menu (Delete Selection was)
+    for toolbar in window.findChildren(QToolBar):
+        if toolbar.isVisible():
+            for action in toolbar.actions():
+                widget = toolbar.widgetForAction(action)
+                if action.isVisible() and widget is not None and not action.isSeparator():
+                    assert widget.isVisible(), (toolbar.objectName(), action.text())
 
 
 def _curves(window) -> dict[str, np.ndarray]:
