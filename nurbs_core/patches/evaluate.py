@@ -157,7 +157,7 @@ def grid_points(network: PatchNetwork, resolution: int) -> np.ndarray:
 def on_side(uv: np.ndarray) -> np.ndarray:
     """(N,) whether each (u, v) (N, 2) lies on its patch's side (a foot there may lie on the
     neighbour across it)."""
-    return ((uv <= 0.0) | (uv >= 1.0)).any(axis=1)
+    return np.asarray(((uv <= 0.0) | (uv >= 1.0)).any(axis=1))
 
 
 def foot_points(network: PatchNetwork, points: np.ndarray, patch: np.ndarray | None = None,
