@@ -98,3 +98,49 @@ def test_a_regular_tube_layout_is_coarsened_by_whole_rings_and_stays_regular():
     ends = (np.abs(coarse_vertices[:, 2]) < 1e-9) | (np.abs(coarse_vertices[:, 2] - 6.0) < 1e-9)
     assert (valence[~ends] == 4).all() and (valence[ends] == 2).all()
     assert reach_ratios(coarse_vertices, coarse_quads, mesh_vertices).max() <= COVER + 1e-9
+
+
+def test_a_quads_facing_check_is_every_condition_of_its_definition():
+    """_Shape.facing (cheap corner checks first, the mesh's after) against the conditions
+    written out one quad at a time: faces the mesh's normal at its centre, no reflex corner,
+    every corner between MIN_CORNER and its supplement, every bilinear point near the mesh."""
+    from nurbs_core.patches.coarsen import COS_CORNER, OFF_MESH, _Shape
+
+    mesh = closed_mesh(samples.sphere(2000, noise=0.0).points)
+    shape = _Shape(mesh.vertices, mesh.vertex_normals())
+    layout = quad_layout(mesh.vertices, mesh.faces, 100)
+    rng = np.random.default_rng(2)
+    side = np.linalg.norm(layout.vertices[layout.quads[:, 0]]
+                          - layout.vertices[layout.quads[:, 1]], axis=1).mean()
+    t = np.linspace(0.0, 1.0, 4)
+
+    def reference(corners: np.ndarray) -> bool:
+        for quad in corners:
+            normal = np.cross(quad[2] - quad[0], quad[3] - quad[1])
+            if normal @ shape.normals[shape.tree.query(quad.mean(axis=0))[1]] <= 0:
+                return False
+            sides = np.linalg.norm(quad - np.roll(quad, 1, axis=0), axis=1).mean()
+            for k in range(4):
+                after, before = quad[(k + 1) % 4] - quad[k], quad[k - 1] - quad[k]
+                if np.cross(after, before) @ normal <= 0:
+                    return False
+                cos = after @ before / (np.linalg.norm(after) * np.linalg.norm(before))
+                if abs(cos) > COS_CORNER:
+                    return False
+            for u in t:
+                for v in t:
+                    point = ((1 - u) * (1 - v) * quad[0] + u * (1 - v) * quad[1]
+                             + u * v * quad[2] + (1 - u) * v * quad[3])
+                    if shape.tree.query(point)[0] > OFF_MESH * sides + shape.spacing:
+                        return False
+        return True
+
+    verdicts = []
+    for scale in (0.0, 0.2, 0.5, 1.0):
+        for _ in range(30):
+            pick = rng.choice(len(layout.quads), 3, replace=False)
+            corners = layout.vertices[layout.quads[pick]]
+            corners = corners + scale * side * rng.normal(size=corners.shape)
+            verdicts.append(shape.facing(corners))
+            assert verdicts[-1] == reference(corners)
+    assert any(verdicts) and not all(verdicts)        # both answers were tried
