@@ -18,10 +18,13 @@ in a subprocess with one thread (the route the user gets). The result is read ba
 * c2s: the cloud's mean distance to the fit (the engine's foot points, as in
   ``bench_patches``) / the same cloud's mean distance to the truth (the noise floor); <= 1.25;
 * area: fitted / true area, within 5%;
-* gap / diagonal (<= 1e-6) and seam angle p99 (<= 2 degrees) of a network;
+* gap / diagonal (<= 1e-6) and seam angle p99 (<= 2 degrees) of a network, over every seam
+  (an evaluator that does not know the engine's G0 crease seams: the heads are smooth) and, in
+  brackets, over the tangent-continuous seams alone (the engine's own figure);
 * STEP: OpenCASCADE reads it, ``BRepCheck_Analyzer`` finds it valid, and a closed object is one
   closed shell;
-* time: the wall seconds of the whole ``nurbs-fit`` process (imports included; CPU beside it),
+* time: the CPU seconds of the whole ``nurbs-fit`` process (imports included; one thread, so
+  on a quiet machine its wall time; the wall seconds beside them show how loaded it was),
   target <= 60 s.
 """
 
@@ -36,6 +39,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -122,7 +126,7 @@ def measure(case: bench.Case, fit_json: Path, output: str) -> dict[str, Any]:
     """Every judged measure of the fit in ``fit_json`` against the case's truth."""
     from nurbs_core.io import load
     from nurbs_core.io.network_io import read_network
-    from nurbs_core.patches.measures import network_quality, surface_samples
+    from nurbs_core.patches.measures import network_quality, seam_statistics, surface_samples
 
     tree = cKDTree(case.shape.truth)
     points = case.points if case.shape.outliers is None else case.points[~case.shape.outliers]
@@ -134,7 +138,9 @@ def measure(case: bench.Case, fit_json: Path, output: str) -> dict[str, Any]:
         positions, normals, weights = surface_samples(network)
         quality = network_quality(network, points)
         row["flipped"] = bench.flipped_against(positions, normals, weights, case, tree)
-        row.update(c2s=quality.c2s_mean, gap=quality.gap_relative, seam_p99=quality.seam.p99,
+        every = seam_statistics(replace(network, creases=frozenset()))
+        row.update(c2s=quality.c2s_mean, gap=quality.gap_relative, seam_p99=every.p99,
+                   seam_p99_g1=quality.seam.p99, crease_seams=len(network.creases),
                    patches=network.patch_count)
     else:
         from nurbs_core import samples
@@ -155,7 +161,7 @@ def passes(row: dict[str, Any], closed: bool) -> dict[str, bool]:
     """The issue's targets, per measure."""
     out = {"flipped": row["flipped"] <= TARGET_FLIPPED, "far": row["far"] <= TARGET_FAR,
            "c2s": row["c2s_ratio"] <= TARGET_C2S, "area": abs(row["area"] - 1) <= TARGET_AREA,
-           "time": row["wall_s"] <= TARGET_TIME,
+           "time": row["cpu_s"] <= TARGET_TIME,
            "step": bool(row.get("step_valid")) and (not closed or (
                row.get("shells") == 1 and row.get("closed_shells") == 1))}
     if "gap" in row:
@@ -187,7 +193,7 @@ def run(name: str, folder: Path) -> dict[str, Any]:
 def format_table(rows: list[dict[str, Any]]) -> str:
     """A markdown table: route, every judged measure, the failures named."""
     header = ["case", "points", "route", "status", "patches", "flip %", "far % diag",
-              "c2s / floor", "area / true", "gap / diag", "seam p99", "STEP", "wall s", "cpu s",
+              "c2s / floor", "area / true", "gap / diag", "seam p99 (G1 only)", "STEP", "wall s", "cpu s",
               "fails"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for r in rows:
@@ -200,7 +206,9 @@ def format_table(rows: list[dict[str, Any]]) -> str:
                 f"{'valid' if r['step_valid'] else 'INVALID'}, {r['closed_shells']}/"
                 f"{r['shells']} closed")
         failed = [k for k, ok in r["passes"].items() if not ok]
-        seams = (f"{r['gap']:.1e} | {r['seam_p99']:.2f}" if "gap" in r else "- | -")
+        g0 = f", {r['crease_seams']} G0" if r.get("crease_seams") else ""
+        seams = (f"{r['gap']:.1e} | {r['seam_p99']:.2f} ({r['seam_p99_g1']:.2f}{g0})"
+                 if "gap" in r else "- | -")
         lines.append(f"| {r['case']} | {r['points']} | {r['route']} | {r['status']} | "
                      f"{r['patches']} | {100 * r['flipped']:.2f} | {100 * r['far']:.2f} | "
                      f"{r['c2s_ratio']:.2f} | {r['area']:.3f} | {seams} | {step} | "
