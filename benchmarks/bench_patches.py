@@ -452,11 +452,33 @@ def case_builders() -> dict[str, Callable[..., Case]]:
     builders["box"] = _box("box")
     # stray returns: 1% of the head's points anywhere in its box
     builders["head_strays"] = _with_strays(_generated(g.head, "head"), "head_strays")
+    builders.update(unseen_heads())
     for label, files in MODELS.items():
         builders[label] = _model(label, files)
     builders["duck_body_by_parameter"] = _model("duck_body_by_parameter", MODELS["duck"][:1],
                                                 by_parameter=True)
     return builders
+
+
+#: heads of the family nobody tuned on (``bench_heads.py`` runs them through ``nurbs-fit``)
+UNSEEN_HEADS = range(4, 14)
+
+
+def unseen_heads() -> dict[str, Callable[..., Case]]:
+    """The unseen heads' cases: ``head_vN`` (the bench's point count), ``head_vN_4k`` and
+    ``head_vN_30k`` (a sparse and a dense scan), ``head_vN_noisy`` (noise 0.5% of the diagonal),
+    ``head_vN_holes`` (three holes) and ``head_vN_no_base`` (an open shell), for every N of
+    ``UNSEEN_HEADS``."""
+    g, out = samples, {}
+    for n in UNSEEN_HEADS:
+        name = f"head_v{n}"
+        out[name] = _generated(g.head, name, variant=n)
+        out[f"{name}_4k"] = _generated(g.head, f"{name}_4k", variant=n, count=4000)
+        out[f"{name}_30k"] = _generated(g.head, f"{name}_30k", variant=n, count=30_000)
+        out[f"{name}_noisy"] = _generated(g.head, f"{name}_noisy", variant=n, noise=0.005)
+        out[f"{name}_holes"] = _holed(_generated(g.head, name, variant=n), f"{name}_holes")
+        out[f"{name}_no_base"] = _cut(_generated(g.head, name, variant=n), f"{name}_no_base")
+    return out
 
 
 # --- measures ----------------------------------------------------------------------------------

@@ -15,6 +15,11 @@ reconstructed mesh's triangles (the reconstruction blurs a crease over a cell or
 * a crease turns at once: the turn over 2 d (probes at d) is nearly the turn over 4 d
   (``CONCENTRATION``), where a smooth bend of curvature k turns 2 d k, half as much (a crease
   a scan or a decimated mesh rounds over less than d still counts);
+* the kink must be more than noise: the points it explains beyond the quadric must exceed
+  what one more fitted column explains of pure noise by chance (``KINK_CHI2`` noise variances).
+  A sparse scan has a few dozen points within 2 d, and there the quadric already fits a narrow
+  smooth ridge (an ear's) to the noise level: the kinked fit's better ratio is the noise
+  fitted, not a crease;
 * hysteresis: a crease piece holds vertices turning more than ``STRONG`` degrees and grows
   through those turning more than ``WEAK``; pieces shorter than ``MIN_LENGTH`` d are dropped
   (a noisy bump, a corner's tip), as are turns above ``MAX_TURN`` (the two sides of a thin
@@ -57,6 +62,10 @@ CONCENTRATION = 0.0
 KINK_POINTS = 400
 KINK_REACH = 2.0
 KINK_GAIN = 1.5
+#: The least reduction of the residual sum of squares by the kink, in noise variances: the
+#: 0.1% tail of chi-squared with one degree of freedom (what one more column explains of pure
+#: noise). A box's edges explain hundreds, an unseen head's ear ridges at 4,000 points 4-11.
+KINK_CHI2 = 10.83
 #: A crease piece shorter than this many d is dropped.
 MIN_LENGTH = 3.0
 
@@ -177,9 +186,11 @@ def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip((a * b).sum(-1), -1.0, 1.0)))
 
 
-def detect_creases(mesh: ScanMesh, points: np.ndarray) -> Creases:
+def detect_creases(mesh: ScanMesh, points: np.ndarray, noise: float | None = None) -> Creases:
     """The creases of the scan ``points`` (N, 3) whose surface ``mesh`` reconstructs (see the
-    module docstring)."""
+    module docstring). ``noise``: the scan's noise sigma (None: estimated from the points)."""
+    from nurbs_core.surfacing.neighbours import estimate_noise
+
     points = np.asarray(points, np.float64)
     vertices = mesh.vertices
     if len(vertices) < 10 or len(points) < 4 * NORMAL_NEIGHBOURS:
@@ -215,12 +226,15 @@ def detect_creases(mesh: ScanMesh, points: np.ndarray) -> Creases:
     index = np.flatnonzero(candidate)
     bisector = na[index] + nb[index]
     bisector /= np.maximum(np.linalg.norm(bisector, axis=1, keepdims=True), 1e-12)
-    kink, gain = np.zeros(len(index)), np.ones(len(index))
+    kink, gain, explained = np.zeros(len(index)), np.ones(len(index)), np.zeros(len(index))
     for start in range(0, len(index), CHUNK):       # (chunk, KINK_POINTS, 7) at a time
         part = slice(start, start + CHUNK)
-        kink[part], gain[part] = _kink(points, cloud, vertices[index[part]], bisector[part],
-                                       on_line[index[part]], line[index[part]], KINK_REACH * d)
-    candidate[index] = (gain >= KINK_GAIN) & (kink > WEAK)
+        kink[part], gain[part], explained[part] = _kink(
+            points, cloud, vertices[index[part]], bisector[part], on_line[index[part]],
+            line[index[part]], KINK_REACH * d)
+    sigma = estimate_noise(points) if noise is None else noise
+    significant = explained >= KINK_CHI2 * sigma ** 2
+    candidate[index] = (gain >= KINK_GAIN) & (kink > WEAK) & significant
     turn[index] = kink
     keep = _hysteresis(on_line, turn, candidate, d)
     if not keep.any():
@@ -236,16 +250,19 @@ def detect_creases(mesh: ScanMesh, points: np.ndarray) -> Creases:
 
 
 def _kink(points: np.ndarray, tree: cKDTree, at: np.ndarray, normals: np.ndarray,
-          on_line: np.ndarray, line: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+          on_line: np.ndarray, line: np.ndarray, radius: float
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """How the cloud kinks along a candidate line near each position ``at`` (M, 3): the points
     within ``radius`` (at most ``KINK_POINTS``), as heights along ``normals`` (M, 3) (the
     bisector of the two sides' normals), are fitted by a quadric in (x, y) (x across the line,
     y along it) and by the quadric plus |s|, s the signed distance across the line (through
     ``on_line`` (M, 3) along ``line`` (M, 3)). Returns the kink angle (M,) in degrees (between
-    the two sides' slopes across the line) and the gain (M,): the quadric's residual sum of
-    squares over the kinked fit's (about 1 for a smooth bend, large for a crease)."""
+    the two sides' slopes across the line), the gain (M,): the quadric's residual sum of
+    squares over the kinked fit's (about 1 for a smooth bend, large for a crease), and what the
+    kink explains (M,): the quadric's residual sum of squares less the kinked fit's (squared
+    points' units; 0 where fewer than 12 points lie within ``radius``)."""
     if not len(at):
-        return np.zeros(0), np.zeros(0)
+        return np.zeros(0), np.zeros(0), np.zeros(0)
     count = int(min(KINK_POINTS, len(points)))
     distance, index = tree.query(at, k=count, distance_upper_bound=radius)
     inside = np.isfinite(distance)
@@ -276,7 +293,9 @@ def _kink(points: np.ndarray, tree: cKDTree, at: np.ndarray, normals: np.ndarray
     slope, bend = coefficients[:, 1] / scale, coefficients[:, 6] / scale
     angle = np.abs(np.degrees(np.arctan(slope + bend) - np.arctan(slope - bend)))
     gain = smooth / np.maximum(kinked, 1e-300)
-    return np.where(inside.sum(1) >= 12, angle, 0.0), np.where(inside.sum(1) >= 12, gain, 1.0)
+    enough = inside.sum(1) >= 12
+    return (np.where(enough, angle, 0.0), np.where(enough, gain, 1.0),
+            np.where(enough, smooth - kinked, 0.0))
 
 
 def _nearest_on_planes(x: np.ndarray, na: np.ndarray, ca: np.ndarray, nb: np.ndarray,
