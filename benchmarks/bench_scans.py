@@ -34,11 +34,8 @@ import argparse
 import os
 import platform
 import re
-import resource
-import subprocess
 import sys
 import tempfile
-import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -153,15 +150,11 @@ CASES: dict[str, Callable[[Path], Path]] = {
 
 def _run(arguments: list[str]) -> tuple[str, float, float]:
     """nurbs-fit ARGUMENTS in a subprocess with one thread: (stdout + stderr, wall s, CPU s)."""
-    environment = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    start = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "nurbs_core.cli", *arguments],
-                          capture_output=True, text=True, env=environment, check=False)
-    wall = time.perf_counter() - start
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return done.stdout + done.stderr + f"\nexit {done.returncode}", wall, cpu
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_heads import run_cli  # the same subprocess and clocks as the heads sweep
+
+    output, code, wall, cpu = run_cli(arguments)
+    return output + f"\nexit {code}", wall, cpu
 
 
 def _find(pattern: str, text: str, group: int = 1) -> str:
