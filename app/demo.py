@@ -33,7 +33,7 @@ def demo_points(count: int = DEMO_POINT_COUNT, noise: float = DEMO_NOISE,
 
 def write_demo(path: Path) -> Path:
     """Write the demo cloud as whitespace-separated ``x y z`` lines (atomically)."""
-    from nurbs_core.io.atomic import atomic_write
+    from nurbs_core.atomic import atomic_write
 
     path.parent.mkdir(parents=True, exist_ok=True)
     header = "NURBS Studio demo: z = sin(x) cos(y) on [-5, 5]^2, 4000 points, noise sigma 0.01"

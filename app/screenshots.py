@@ -33,7 +33,7 @@ PAPER_DATA = Path(os.environ.get("NURBS_STUDIO_DATA", "/work/shared/data")) / "n
 
 def _write_points(path: Path, points: np.ndarray) -> Path:
     """Scratch input clouds, written atomically like every file the app writes."""
-    from nurbs_core.io.atomic import atomic_write
+    from nurbs_core.atomic import atomic_write
 
     with atomic_write(path, "w") as handle:
         np.savetxt(handle, points, fmt="%.6f")

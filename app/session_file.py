@@ -47,7 +47,7 @@ def write_archive(path: str | Path, manifest: dict[str, Any], arrays: dict[str, 
     """Write the session atomically: ``manifest`` as ``session.json``, each array as
     ``<name>.npy``, each document as JSON under its name. JSON and arrays are encoded before the
     file is touched (a failure writes nothing and leaves an existing file as it was)."""
-    from nurbs_core.io.atomic import atomic_write
+    from nurbs_core.atomic import atomic_write
 
     texts = {MANIFEST: json.dumps(manifest, allow_nan=False)}
     texts.update({name: json.dumps(document, allow_nan=False)

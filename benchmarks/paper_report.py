@@ -21,7 +21,7 @@ Conventions (stated because the paper leaves them implicit):
   evaluations of L-BFGS (100 steps of 5 inner iterations, learning rate 1, as in the lab's
   surface-fitting script) and, for comparison, 500 Adam steps (learning rate 0.01).
 * "LSQ optimum": the exact linear least-squares fit with the same knots and parameters
-  (nurbs_core.fitting.least_squares_fit): no gradient method can go below it with fixed knots.
+  (nurbs_core.least_squares_fit): no gradient method can go below it with fixed knots.
 * Offsets: 20 x 20 samples for fitting and a 100 x 100 evaluation (25 times denser) for the
   normalised Chamfer distance of nurbs_core.offset.offset_chamfer (means instead of sums, divided
   by the smallest bounding-box edge of the base surface).

@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from nurbs_core.evaluate_arrays import dense_basis, homogeneous, surface_domain
-from nurbs_core.fitting.foot_points import project_onto_surface
+from nurbs_core.foot_points import project_onto_surface
 from nurbs_core.geometry_arrays import SurfaceArrays
 
 # the limits and warnings of the measures live with the status they decide (torch-free, for the
@@ -326,7 +326,7 @@ def surface_quality(surface: SurfaceArrays | NurbsSurface, points: np.ndarray, *
     """Quality of ``surface`` as a model of the cloud ``points`` (N, 3). All values are floats.
 
     Cloud to surface (all N points; ``distances`` (N,) when the caller has them, else
-    :func:`nurbs_core.fitting.foot_points.project_onto_surface`): ``mean``, ``rms``, ``max``.
+    :func:`nurbs_core.foot_points.project_onto_surface`): ``mean``, ``rms``, ``max``.
 
     Surface to cloud, from a ``samples x samples`` grid over the domain, each sample weighted by
     its area ``|S_u x S_v| du dv``, against a seeded random subset of at most ``max_points``

@@ -685,7 +685,7 @@ class SceneView(QObject):
     def screenshot(self, path: str):
         """The viewport alone as an image file, written atomically (the suffix picks the
         format)."""
-        from nurbs_core.io.atomic import atomic_path
+        from nurbs_core.atomic import atomic_path
 
         self.render_now()
         with atomic_path(path) as temporary:

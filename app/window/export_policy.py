@@ -166,7 +166,7 @@ class ExportPolicy(QObject):
     def save_screenshot(self, path: str) -> bool:
         """The whole window (viewport included) as an image (PNG; the format follows the
         suffix), written atomically: on failure an existing file is left as it was."""
-        from nurbs_core.io.atomic import atomic_path
+        from nurbs_core.atomic import atomic_path
 
         window = self._window
         window.loss_plot.flush()

@@ -78,13 +78,13 @@ def kill_processes(pids: Iterable[int | None]) -> None:
                 os.kill(pid, kill)
 
 
-#: A temporary file of :mod:`nurbs_core.io.atomic` (``.NAME.1a2b3c4d.tmpSUFFIX``).
+#: A temporary file of :mod:`nurbs_core.atomic` (``.NAME.1a2b3c4d.tmpSUFFIX``).
 _TEMPORARY = re.compile(r"\.(?P<name>.+)\.[0-9a-f]{8}\.tmp(?P<suffix>\.[^.]*)?")
 
 
 def remove_partial_writes(outputs: Iterable[str]) -> int:
     """Remove the temporary files that a killed writer of ``outputs`` left beside them (the names
-    :mod:`nurbs_core.io.atomic` gives them); the number removed. Call it only once every writer
+    :mod:`nurbs_core.atomic` gives them); the number removed. Call it only once every writer
     of these outputs has stopped."""
     wanted: dict[Path, set[str]] = {}
     for output in outputs:

@@ -84,7 +84,7 @@ def _cell(value: object) -> str:
 def write_summary(path: Path, records: list[dict]) -> None:
     """The summary, one row per input in input order: JSON Lines (``.jsonl``) or CSV (``.csv``,
     the union of the statistics as columns), written atomically."""
-    from nurbs_core.io.atomic import atomic_write
+    from nurbs_core.atomic import atomic_write
 
     if path.suffix.lower() == ".csv":
         columns = list(SUMMARY_COLUMNS)

@@ -11,7 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from nurbs_core.io.cad import subshapes, triangulate
+from nurbs_core.io.cad import triangulate
+from nurbs_core.occ_topology import subshapes
 
 #: OpenCASCADE objects (OCP ships no type information)
 OccShape = Any

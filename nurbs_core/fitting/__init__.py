@@ -3,7 +3,6 @@
 
 * ``config``        FitConfig, Loss, StopToken, FitSnapshot, FitResult (numpy only)
 * ``problem``       input checks, normalisation, initialisation (PCA plane, random, least squares)
-* ``least_squares`` the exact fixed-knot least-squares fit (the accuracy yardstick)
 * ``model``         trainable control points, positive weights, strictly increasing free knots
 * ``projection``    foot points (parameter correction) and per-point deviation
 * ``refinement``    knot insertion where the error is largest (``refine``)
@@ -14,6 +13,12 @@
                     ``schedule``, divergence ``guard`` and loss ``evaluation``
 * ``batched``       many fits with known parameters in one batch (``fit_batch``)
 * ``learned_start`` the start of init "learned" (a trained encoder's prediction)
+
+``least_squares_fit`` (the exact fixed-knot least-squares fit, the accuracy yardstick) lives
+below this package in :mod:`nurbs_core.least_squares`, beside the numpy foot points
+(:mod:`nurbs_core.foot_points`) and collocation matrices (:mod:`nurbs_core.collocation`) that
+the surfacing core, the quality measures and the learned start's data use too; it is handed on
+here for the public API.
 
 The names load on first use (PEP 562): ``from nurbs_core.fitting import FitConfig`` does not
 import torch; ``fit`` and ``iter_fit`` import it for the routes that need it (not for the
@@ -38,7 +43,7 @@ _LAZY = {
     "iter_fit": "run",
     "fit_batch": "batched",
     "statistics": "engine",
-    "least_squares_fit": "least_squares",
+    "least_squares_fit": "nurbs_core.least_squares",
     "conform": "problem",
     "deviation": "projection",
     "project": "projection",
@@ -49,7 +54,10 @@ _LAZY = {
 def __getattr__(name: str) -> Any:
     if name not in _LAZY:
         raise AttributeError(f"module 'nurbs_core.fitting' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"nurbs_core.fitting.{_LAZY[name]}"), name)
+    module = _LAZY[name]
+    if not module.startswith("nurbs_core."):
+        module = f"nurbs_core.fitting.{module}"
+    value = getattr(importlib.import_module(module), name)
     globals()[name] = value
     return value
 

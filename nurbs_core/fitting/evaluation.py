@@ -23,11 +23,11 @@ from nurbs_core.evaluate import (
     surface_points,
 )
 from nurbs_core.fitting.config import FitConfig
-from nurbs_core.fitting.least_squares import least_squares_fit
 from nurbs_core.fitting.model import TrainableGeometry
 from nurbs_core.fitting.problem import Problem
 from nurbs_core.fitting.projection import curve_newton, surface_gauss_newton
 from nurbs_core.geometry import NurbsCurve, NurbsSurface
+from nurbs_core.least_squares import least_squares_fit
 from nurbs_core.surfacing.core import MEMBRANE_RATIO
 from nurbs_core.surfacing.fairing import fairing_matrices
 

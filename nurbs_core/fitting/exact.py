@@ -18,9 +18,9 @@ import numpy as np
 
 from nurbs_core import losses as _losses
 from nurbs_core.fitting.config import FitConfig, FitSnapshot
-from nurbs_core.fitting.least_squares import least_squares_fit, surface_controls
 from nurbs_core.fitting.problem import Problem, _uniform_knots
 from nurbs_core.geometry import NurbsCurve, NurbsSurface
+from nurbs_core.least_squares import least_squares_fit, surface_controls
 
 #: loss terms whose minimiser at known parameters is the least-squares solution
 SQUARED_TERMS = frozenset({"mse", "p2s"})

@@ -54,7 +54,7 @@ from nurbs_core.surfacing.parameterize import interpolate_parameters
 from nurbs_core.surfacing.warp import pin_to_square
 
 #: The smoothing of the learned start's least-squares solve (the relative weight of
-#: :func:`~nurbs_core.fitting.least_squares.least_squares_fit`'s second-difference penalty). On a
+#: :func:`~nurbs_core.least_squares.least_squares_fit`'s second-difference penalty). On a
 #: round cloud the pinned map squeezes the square's corners onto smooth stretches of the outline,
 #: and an all but unsmoothed solve (the 1e-4 of other starts) sticks out there. Measured by
 #: ``bench_learned.py --table 0 --cad-table 0 --iterations 0 --starts`` (the 33 of 36 held-out

@@ -10,14 +10,14 @@ import numpy as np
 import torch
 from numpy.typing import ArrayLike
 
-from nurbs_core.fitting.collocation import grid_axes
+from nurbs_core.collocation import grid_axes
 from nurbs_core.fitting.config import FitConfig
-from nurbs_core.fitting.least_squares import least_squares_fit
 from nurbs_core.fitting.normalised import NormalisedCloud, normalise
 from nurbs_core.fitting.ordering import path_parameters
 from nurbs_core.fitting.principal import pca_parameters
 from nurbs_core.geometry import NurbsCurve, NurbsSurface, geometry_from_numpy
 from nurbs_core.knots import clamped_uniform, greville
+from nurbs_core.least_squares import least_squares_fit
 
 
 @dataclass

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from nurbs_core.evaluate import curve_derivatives
-from nurbs_core.fitting.foot_points import gauss_newton_steps, project_onto_surface
+from nurbs_core.foot_points import gauss_newton_steps, project_onto_surface
 from nurbs_core.geometry import NurbsCurve, NurbsSurface, geometry_from_numpy
 
 CHUNK = 131072
@@ -31,7 +31,7 @@ def _domain_of(knots: torch.Tensor, degree: int) -> tuple[float, float]:
 def surface_gauss_newton(surface: NurbsSurface, points: torch.Tensor, u: torch.Tensor,
                          v: torch.Tensor, steps: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
     """Refine foot-point parameters u, v (M,) of points (M, 3) by damped Gauss-Newton steps:
-    :func:`nurbs_core.fitting.foot_points.gauss_newton_steps` (float64 numpy) on tensors, plain
+    :func:`nurbs_core.foot_points.gauss_newton_steps` (float64 numpy) on tensors, plain
     steps (the gradient fit's update between iterations was tuned on them). The new u, v have the
     given ones' dtype and device. No gradient."""
     arrays = surface.detach().to(dtype=torch.float64, device="cpu").numpy()
@@ -74,7 +74,7 @@ def project(geometry: NurbsCurve | NurbsSurface | Mapping[str, Any], points: Arr
 
     geometry: NurbsCurve / NurbsSurface (unbatched) or its numpy twin; points (N, d) array-like.
     Returns (parameters, distances): surfaces (N, 2), curves (N,); distances (N,), numpy float64.
-    Surfaces: :func:`nurbs_core.fitting.foot_points.project_onto_surface`.
+    Surfaces: :func:`nurbs_core.foot_points.project_onto_surface`.
     """
     if isinstance(geometry, Mapping):
         geometry = geometry_from_numpy(geometry)

@@ -21,9 +21,9 @@ from scipy.spatial import cKDTree
 
 from nurbs_core.evaluate_arrays import surface_grid, surface_points
 from nurbs_core.fitting.config import FitConfig, FitSnapshot, StopToken
-from nurbs_core.fitting.foot_points import gauss_newton_steps, project_onto_surface
 from nurbs_core.fitting.normalised import NormalisedCloud
 from nurbs_core.fitting.principal import pca_parameters, principal_axes
+from nurbs_core.foot_points import gauss_newton_steps, project_onto_surface
 from nurbs_core.geometry_arrays import SurfaceArrays
 from nurbs_core.surfacing.core import CorePass, LeastSquaresCore
 from nurbs_core.surfacing.mesh import CloudMesh, median_spacing, points_to_map

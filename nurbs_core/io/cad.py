@@ -32,6 +32,7 @@ from numpy.typing import ArrayLike
 
 from nurbs_core.io.errors import FileFormatError, StrPath, require_ocp
 from nurbs_core.io.limits import configured_size
+from nurbs_core.occ_topology import subshapes
 
 if TYPE_CHECKING:
     from nurbs_core.geometry import NurbsCurve, NurbsSurface
@@ -51,20 +52,6 @@ def distinct_knots(knots: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
 
 
 _QUIETED = False
-
-
-def subshapes(shape: OccObject, kind: str) -> list[OccObject]:
-    """The distinct sub-shapes of ``kind`` ("FACE", "EDGE", "SHELL", "SOLID", ...) of a shape,
-    in a fixed order."""
-    from OCP.collections import IndexedMap_TopoDS_Shape_TopTools_ShapeMapHasher as ShapeMap
-    from OCP.TopAbs import TopAbs_ShapeEnum
-    from OCP.TopExp import TopExp
-    from OCP.TopoDS import TopoDS
-
-    found = ShapeMap()
-    TopExp.MapShapes_s(shape, getattr(TopAbs_ShapeEnum, "TopAbs_" + kind), found)
-    cast = getattr(TopoDS, kind.capitalize())
-    return [cast(found.FindKey(k)) for k in range(1, found.Size() + 1)]
 
 
 def triangulate(shape: OccObject, deflection: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -131,9 +131,9 @@ def save(geometry_or_list: GeometryInput | PatchNetwork | TrimmedSurface, path: 
 def save_all(jobs: Iterable[SaveJob]) -> None:
     """Write several files all-or-nothing: ``jobs`` is a sequence of (geometry, path, options
     dict). Every suffix is checked first; the files are written to temporaries and replace
-    their targets only when all of them were written (:func:`nurbs_core.io.atomic.atomic_paths`).
+    their targets only when all of them were written (:func:`nurbs_core.atomic.atomic_paths`).
     """
-    from nurbs_core.io.atomic import atomic_paths
+    from nurbs_core.atomic import atomic_paths
 
     checked = [(geometry, path, dict(options or {})) for geometry, path, options in jobs]
     for geometry, path, _ in checked:

@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import os
-from typing import TypeAlias
 
-#: What the readers and writers accept as a file name.
-StrPath: TypeAlias = "str | os.PathLike[str]"
+#: What the readers and writers accept as a file name (``str | os.PathLike[str]``).
+from nurbs_core.atomic import StrPath as StrPath
 
 CAD_INSTALL_HINT = 'pip install "nurbs-studio[cad]"  (or: pip install cadquery-ocp-novtk)'
 

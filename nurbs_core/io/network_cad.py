@@ -45,7 +45,7 @@ class OpenShellsWarning(UserWarning):
 
 
 def _count(shape: OccShape, kind: str) -> int:
-    from nurbs_core.io.cad import subshapes
+    from nurbs_core.occ_topology import subshapes
 
     return len(subshapes(shape, kind))
 

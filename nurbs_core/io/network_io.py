@@ -11,7 +11,7 @@
   samples per patch side, default 32; :mod:`nurbs_core.io.network_mesh`).
 
 ``write_network`` (like :func:`nurbs_core.io.save`) replaces the target atomically
-(:mod:`nurbs_core.io.atomic`): a failed write leaves an existing file untouched. The per-format
+(:mod:`nurbs_core.atomic`): a failed write leaves an existing file untouched. The per-format
 writers write to the path they are given.
 
 Our JSON (``"format": "nurbs-studio-network-v1"``)::
@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from nurbs_core.io.atomic import atomic_path
+from nurbs_core.atomic import atomic_path
 from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.io.suffixes import NETWORK_SUFFIXES
 

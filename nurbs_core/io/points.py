@@ -388,7 +388,7 @@ def save_points(cloud_or_array: PointCloud | ArrayLike, path: StrPath) -> None:
     attribute. Floats are written exactly (17 significant digits in text). The write is atomic
     (see :func:`nurbs_core.io.save`): a failed save leaves an existing file as it was.
     """
-    from nurbs_core.io.atomic import atomic_path
+    from nurbs_core.atomic import atomic_path
 
     cloud = cloud_or_array if isinstance(cloud_or_array, PointCloud) else PointCloud(
         np.asarray(cloud_or_array, dtype=np.float64))

@@ -1,7 +1,7 @@
 """Writing a solid (an OpenCASCADE shape from :mod:`nurbs_core.brep`): STEP and IGES keep its
 analytic faces exact (planes, cylinders, cones and spheres as such, not as NURBS), the IGES as
 B-rep entities; .brep is OpenCASCADE's own format; .stl/.obj/.ply a triangulation within a
-tolerance. Every write is atomic and all-or-nothing (:func:`nurbs_core.io.atomic.atomic_paths`).
+tolerance. Every write is atomic and all-or-nothing (:func:`nurbs_core.atomic.atomic_paths`).
 """
 
 from __future__ import annotations
@@ -72,7 +72,7 @@ def save_solid(shape: Any, paths: Sequence[StrPath], tolerance: float,
                units: str | None = None) -> None:
     """Write the solid to every path, all or nothing (see the module), STEP and IGES in
     ``units``."""
-    from nurbs_core.io.atomic import atomic_paths
+    from nurbs_core.atomic import atomic_paths
 
     for path in paths:
         check_solid_suffix(path)

@@ -37,7 +37,7 @@ point is evaluated exactly on the OCC surface. Gaussian noise of a random level 
 ``max_noise`` x the bounding-box diagonal is added, and the points are shuffled.
 
 ``control_points`` is the 20 x 20 (``grid``) clamped uniform bicubic B-spline that best fits the
-untrimmed window (:func:`nurbs_core.fitting.least_squares.least_squares_fit` on that 97 x 97
+untrimmed window (:func:`nurbs_core.least_squares.least_squares_fit` on that 97 x 97
 grid, the window's normalised UV as parameters), so the samples serve the supervised loss as
 well as the unsupervised one; ``parameters`` are the points' normalised window UV, where that
 grid surface approximates the face (typically to 1e-6 of the patch size, at worst a few 1e-4
@@ -239,7 +239,7 @@ def sample_face(face: OccObject, rng: np.random.Generator, point_count: int = 70
     from OCP.BRepTools import BRepTools
     from OCP.IntTools import IntTools_FClass2d
 
-    from nurbs_core.fitting.least_squares import least_squares_fit
+    from nurbs_core.least_squares import least_squares_fit
 
     adaptor = BRepAdaptor_Surface(face)
     bounds = BRepTools.UVBounds_s(face)

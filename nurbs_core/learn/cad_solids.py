@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from nurbs_core.io.cad import subshapes
+from nurbs_core.occ_topology import subshapes
 
 #: OpenCASCADE objects (OCP ships no type information)
 OccObject = Any

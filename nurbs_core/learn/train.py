@@ -178,7 +178,7 @@ def _load_weights(path: Path, model: SplineNet, device: torch.device,
 
 def _save(path: Path, payload: dict[str, Any]) -> None:
     """torch.save to a temporary file next to ``path``, then os.replace."""
-    from nurbs_core.io.atomic import atomic_write
+    from nurbs_core.atomic import atomic_write
 
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(path, "wb") as handle:

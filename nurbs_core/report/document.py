@@ -52,7 +52,7 @@ class ReportContent:
 
 def write_report(path: str | Path, content: ReportContent) -> None:
     """Write the report as HTML (``.html`` / ``.htm``) or PDF (``.pdf``), atomically."""
-    from nurbs_core.io.atomic import atomic_write
+    from nurbs_core.atomic import atomic_write
 
     path = Path(path)
     suffix = path.suffix.lower()

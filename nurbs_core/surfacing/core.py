@@ -24,13 +24,13 @@ import scipy.sparse
 import scipy.sparse.linalg
 from scipy.spatial import cKDTree
 
+from nurbs_core.collocation import normal_equations
 from nurbs_core.evaluate_arrays import surface_grid, surface_points
-from nurbs_core.fitting.collocation import normal_equations
-from nurbs_core.fitting.config import StopToken
-from nurbs_core.fitting.foot_points import gauss_newton_steps
+from nurbs_core.foot_points import gauss_newton_steps
 from nurbs_core.geometry_arrays import SurfaceArrays
 from nurbs_core.knot_vectors import uniform
 from nurbs_core.sparse_solve import solve_spd
+from nurbs_core.streaming import StopToken
 from nurbs_core.surfacing.fairing import energy, fairing_matrices
 
 #: Relative weight of the membrane energy inside the fairing term.

@@ -1,7 +1,7 @@
 """Exact fairing energies of a tensor-product B-spline surface as quadratic forms.
 
 For control points C (n, m, 3) flattened u-major (index i * m + j, as the collocation matrices of
-:mod:`nurbs_core.fitting.least_squares`), with ``G_r`` the Gram matrix of the r-th derivatives of
+:mod:`nurbs_core.least_squares`), with ``G_r`` the Gram matrix of the r-th derivatives of
 one direction's basis, ``G_r[i, k] = integral N_i^(r) N_k^(r)`` over the domain:
 
 * thin plate  ``integral |S_uu|^2 + 2 |S_uv|^2 + |S_vv|^2 = tr(C^T K_tp C)``,

@@ -21,9 +21,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from nurbs_core.fitting.config import FitConfig, StopToken
-from nurbs_core.fitting.foot_points import gauss_newton_steps
 from nurbs_core.fitting.normalised import normalise
 from nurbs_core.fitting.sheet import MESH_POINTS, is_height_field
+from nurbs_core.foot_points import gauss_newton_steps
 from nurbs_core.geometry_arrays import CurveArrays, SurfaceArrays
 from nurbs_core.surfacing.fairing import energy, fairing_matrices
 from nurbs_core.surfacing.mesh import cloud_mesh, voxel_subsample

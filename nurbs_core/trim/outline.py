@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nurbs_core.fitting.foot_points import gauss_newton_steps
+from nurbs_core.foot_points import gauss_newton_steps
 from nurbs_core.geometry_arrays import SurfaceArrays
 from nurbs_core.surfacing.disk import boundary_loops
 from nurbs_core.surfacing.mesh import CloudMesh

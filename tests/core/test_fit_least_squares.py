@@ -136,7 +136,7 @@ def test_the_normal_equations_by_knot_cell_are_scipys_collocation_products(grid)
     included."""
     from scipy.interpolate import BSpline
 
-    from nurbs_core.fitting.collocation import normal_equations
+    from nurbs_core.collocation import normal_equations
 
     rng = np.random.default_rng(sum(grid))
     (n, m), p, q = grid, 3, 2

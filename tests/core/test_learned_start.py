@@ -12,11 +12,11 @@ import torch
 from nurbs_core import samples
 from nurbs_core.fitting import FitConfig, StopToken, fit, iter_fit, statistics
 from nurbs_core.fitting import learned_start as learned
-from nurbs_core.fitting.least_squares import least_squares_fit
 from nurbs_core.fitting.problem import prepare
 from nurbs_core.fitting.projection import project
 from nurbs_core.fitting.sheet import sheet_start
 from nurbs_core.geometry import NurbsSurface, geometry_from_numpy
+from nurbs_core.least_squares import least_squares_fit
 from nurbs_core.quality import surface_quality
 
 

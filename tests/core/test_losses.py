@@ -135,8 +135,8 @@ def test_empty_sets_raise():
 
 def test_fairing_term_is_the_exact_thin_plate_energy_and_differentiable():
     # z = x^2 + y^2 over [0, 1]^2, a bicubic patch exactly: thin plate 8, membrane 2 + 8/3
-    from nurbs_core.fitting.least_squares import least_squares_fit
     from nurbs_core.knots import clamped_uniform
+    from nurbs_core.least_squares import least_squares_fit
     from nurbs_core.losses import LossInputs, fairing_energy, parse_loss
     from nurbs_core.surfacing.fairing import fairing_matrices
 

@@ -10,8 +10,8 @@ import stat
 import numpy as np
 import pytest
 
+from nurbs_core.atomic import atomic_path, atomic_write
 from nurbs_core.io import FileFormatError, load
-from nurbs_core.io.atomic import atomic_path, atomic_write
 from nurbs_core.io.network_io import (
     network_document,
     read_network,

@@ -13,8 +13,8 @@ from surface_cases import square_symmetry
 
 from nurbs_core import samples
 from nurbs_core.fitting import FitConfig, StopToken, fit, iter_fit
-from nurbs_core.fitting.least_squares import least_squares_fit
 from nurbs_core.knots import clamped_uniform
+from nurbs_core.least_squares import least_squares_fit
 from nurbs_core.surfacing.disk import classify
 from nurbs_core.surfacing.fairing import energy, fairing_matrices
 from nurbs_core.surfacing.mesh import cloud_mesh

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import torch
 
+from nurbs_core.collocation import compact_basis
 from nurbs_core.evaluate_arrays import curve_points, surface_derivatives, surface_grid
-from nurbs_core.fitting.collocation import compact_basis
-from nurbs_core.fitting.foot_points import project_onto_surface
+from nurbs_core.foot_points import project_onto_surface
 from nurbs_core.geometry import NurbsCurve, NurbsSurface
 from nurbs_core.knot_vectors import even_steps, uniform
 from nurbs_core.knots import clamped_uniform

@@ -198,7 +198,7 @@ def test_a_hole_becomes_an_inner_loop_in_step_and_iges(fits, tmp_path):
 
 def test_rhino3dm_reads_a_valid_trimmed_brep_of_the_same_area(fits, tmp_path):
     rhino3dm = pytest.importorskip("rhino3dm")
-    from nurbs_core.fitting.foot_points import project_onto_surface
+    from nurbs_core.foot_points import project_onto_surface
     from nurbs_core.geometry_arrays import CurveArrays, SurfaceArrays
     from nurbs_core.io import save
     from nurbs_core.trim.measures import areas

@@ -14,9 +14,10 @@ import os
 import secrets
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, TypeAlias
 
-from nurbs_core.io.errors import StrPath
+#: What the readers and writers accept as a file name.
+StrPath: TypeAlias = "str | os.PathLike[str]"
 
 _WRITE_MODES = ("w", "wb", "wt")
 

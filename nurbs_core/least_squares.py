@@ -14,7 +14,7 @@ import scipy.sparse
 import torch
 from numpy.typing import ArrayLike
 
-from nurbs_core.fitting.collocation import collocation_matrix, grid_axes
+from nurbs_core.collocation import collocation_matrix, grid_axes
 from nurbs_core.geometry import NurbsCurve, NurbsSurface
 from nurbs_core.knots import check_knots, clamped_uniform
 

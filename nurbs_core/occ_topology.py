@@ -1,0 +1,27 @@
+"""The sub-shapes of an OpenCASCADE shape (faces, edges, shells, solids) in a fixed order.
+
+Below the file formats (:mod:`nurbs_core.io.cad`), the solids (:mod:`nurbs_core.brep`) and the
+learned start's CAD data (:mod:`nurbs_core.learn.cad_solids`), which all walk a shape's topology.
+OCP is optional (the ``cad`` extra): it is imported inside the function.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+#: An OCP object (TopoDS_Shape and its kinds); typed loosely, OCP being optional.
+OccObject = Any
+
+
+def subshapes(shape: OccObject, kind: str) -> list[OccObject]:
+    """The distinct sub-shapes of ``kind`` ("FACE", "EDGE", "SHELL", "SOLID", ...) of a shape,
+    in a fixed order."""
+    from OCP.collections import IndexedMap_TopoDS_Shape_TopTools_ShapeMapHasher as ShapeMap
+    from OCP.TopAbs import TopAbs_ShapeEnum
+    from OCP.TopExp import TopExp
+    from OCP.TopoDS import TopoDS
+
+    found = ShapeMap()
+    TopExp.MapShapes_s(shape, getattr(TopAbs_ShapeEnum, "TopAbs_" + kind), found)
+    cast = getattr(TopoDS, kind.capitalize())
+    return [cast(found.FindKey(k)) for k in range(1, found.Size() + 1)]
