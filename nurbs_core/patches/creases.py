@@ -20,6 +20,13 @@ reconstructed mesh's triangles (the reconstruction blurs a crease over a cell or
   A sparse scan has a few dozen points within 2 d, and there the quadric already fits a narrow
   smooth ridge (an ear's) to the noise level: the kinked fit's better ratio is the noise
   fitted, not a crease;
+* the scan must be sampled there about as densely as d assumes: the kink window must hold at
+  least ``MIN_DENSITY`` of the points such a window holds at the cloud's median (d is set from
+  the median spacing). An unevenly sampled scan's sparse regions (the stretched parts of a
+  cloud sampled in a NURBS's parameters: an unseen head's ears at 4,000 points hold 0.2-0.7 of
+  it) see the window span fewer local spacings, and a smooth ridge rounded over less than
+  that kinks at this resolution: the data cannot tell it from a crease, and a
+  tangent-continuous network follows the ridge (no crease there);
 * hysteresis: a crease piece holds vertices turning more than ``STRONG`` degrees and grows
   through those turning more than ``WEAK``; pieces shorter than ``MIN_LENGTH`` d are dropped
   (a noisy bump, a corner's tip), as are turns above ``MAX_TURN`` (the two sides of a thin
@@ -66,6 +73,11 @@ KINK_GAIN = 1.5
 #: 0.1% tail of chi-squared with one degree of freedom (what one more column explains of pure
 #: noise). A box's edges explain hundreds, an unseen head's ear ridges at 4,000 points 4-11.
 KINK_CHI2 = 10.83
+#: The least share of the cloud's median number of points within the kink window (2 d) the
+#: window must hold: half, the local spacing at most sqrt(2) times the median one (a box's and
+#: the duck's creases hold 0.8-1.4 of it, the heads' ear ridges at 4,000 points 0.2-0.7; every
+#: share from 0.5 to 0.75 keeps and drops the same creases there).
+MIN_DENSITY = 0.5
 #: A crease piece shorter than this many d is dropped.
 MIN_LENGTH = 3.0
 
@@ -227,14 +239,16 @@ def detect_creases(mesh: ScanMesh, points: np.ndarray, noise: float | None = Non
     bisector = na[index] + nb[index]
     bisector /= np.maximum(np.linalg.norm(bisector, axis=1, keepdims=True), 1e-12)
     kink, gain, explained = np.zeros(len(index)), np.ones(len(index)), np.zeros(len(index))
+    count = np.zeros(len(index))
     for start in range(0, len(index), CHUNK):       # (chunk, KINK_POINTS, 7) at a time
         part = slice(start, start + CHUNK)
-        kink[part], gain[part], explained[part] = _kink(
+        kink[part], gain[part], explained[part], count[part] = _kink(
             points, cloud, vertices[index[part]], bisector[part], on_line[index[part]],
             line[index[part]], KINK_REACH * d)
     sigma = estimate_noise(points) if noise is None else noise
     significant = explained >= KINK_CHI2 * sigma ** 2
-    candidate[index] = (gain >= KINK_GAIN) & (kink > WEAK) & significant
+    resolved = count >= MIN_DENSITY * window_count(points, cloud, KINK_REACH * d)
+    candidate[index] = (gain >= KINK_GAIN) & (kink > WEAK) & significant & resolved
     turn[index] = kink
     keep = _hysteresis(on_line, turn, candidate, d)
     if not keep.any():
@@ -249,20 +263,30 @@ def detect_creases(mesh: ScanMesh, points: np.ndarray, noise: float | None = Non
     return Creases(on_line[kept], line[kept], turn[kept], d, pieces, sides, into)
 
 
+def window_count(points: np.ndarray, tree: cKDTree, radius: float) -> float:
+    """The median number of ``points`` (N, 3) within ``radius`` of a point of the cloud (over
+    up to 3,000 of them, at most ``KINK_POINTS``): what a kink window holds at the cloud's
+    median density."""
+    probe = points[:: max(1, len(points) // 3000)]
+    counts = tree.query_ball_point(probe, radius, return_length=True)
+    return float(np.median(np.minimum(counts, KINK_POINTS)))
+
+
 def _kink(points: np.ndarray, tree: cKDTree, at: np.ndarray, normals: np.ndarray,
           on_line: np.ndarray, line: np.ndarray, radius: float
-          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """How the cloud kinks along a candidate line near each position ``at`` (M, 3): the points
     within ``radius`` (at most ``KINK_POINTS``), as heights along ``normals`` (M, 3) (the
     bisector of the two sides' normals), are fitted by a quadric in (x, y) (x across the line,
     y along it) and by the quadric plus |s|, s the signed distance across the line (through
     ``on_line`` (M, 3) along ``line`` (M, 3)). Returns the kink angle (M,) in degrees (between
     the two sides' slopes across the line), the gain (M,): the quadric's residual sum of
-    squares over the kinked fit's (about 1 for a smooth bend, large for a crease), and what the
+    squares over the kinked fit's (about 1 for a smooth bend, large for a crease), what the
     kink explains (M,): the quadric's residual sum of squares less the kinked fit's (squared
-    points' units; 0 where fewer than 12 points lie within ``radius``)."""
+    points' units; 0 where fewer than 12 points lie within ``radius``), and the number of
+    points fitted (M,)."""
     if not len(at):
-        return np.zeros(0), np.zeros(0), np.zeros(0)
+        return np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0)
     count = int(min(KINK_POINTS, len(points)))
     distance, index = tree.query(at, k=count, distance_upper_bound=radius)
     inside = np.isfinite(distance)
@@ -295,7 +319,7 @@ def _kink(points: np.ndarray, tree: cKDTree, at: np.ndarray, normals: np.ndarray
     gain = smooth / np.maximum(kinked, 1e-300)
     enough = inside.sum(1) >= 12
     return (np.where(enough, angle, 0.0), np.where(enough, gain, 1.0),
-            np.where(enough, smooth - kinked, 0.0))
+            np.where(enough, smooth - kinked, 0.0), inside.sum(1).astype(np.float64))
 
 
 def _nearest_on_planes(x: np.ndarray, na: np.ndarray, ca: np.ndarray, nb: np.ndarray,
