@@ -90,6 +90,7 @@ class SettingsPolicy(QObject):
         else:
             window.fit_dock.raise_()
             window.quality_dock.raise_()
+        window.run_labels.switch_mode(mode)  # the labels of the fit now on show
         window.update_fit_actions()
         window.rebuild_tree()
         window.scene.reset_camera()
