@@ -271,6 +271,12 @@ def test_a_closed_cloud_forced_to_one_patch_shows_its_folds(qtbot, window, tmp_p
     # the headline does not promise what the checks deny: not "Converged"
     assert window.quality_panel.status.text().startswith("Fitted with warnings")
     assert "Fit fitted with warnings" in window.log_panel.toPlainText()
+    assert "color" in window.quality_panel.status.styleSheet()  # the headline in red
+    # another cloud: "No fit yet" in the ordinary colour, not in the last fit's red
+    with qtbot.waitSignal(window.files_loaded, timeout=20000):
+        window.open_demo()
+    assert window.quality_panel.status.text().startswith("No fit yet")
+    assert window.quality_panel.status.styleSheet() == ""
 
 
 def test_a_stopped_fit_is_measured(qtbot, window, ply_cloud):
