@@ -31,6 +31,8 @@ from nurbs_core.deviation_bands import BAND_COLOURS, Deviation, colour_limit, hi
 
 COLOUR_MODES = (("signed", "Signed distance"), ("bands", "Tolerance bands"))
 NO_MAP = "No deviation map yet: it appears when a fit ends."
+UNSIGNED = ("The points are coloured by their unsigned distance to the fit (a curve's, or a fit "
+            "under way): the signed map, its bands and histogram come with a surface fit's end.")
 
 
 class Histogram(QWidget):
@@ -100,6 +102,7 @@ class DeviationPanel(QWidget):
         self.map: DeviationMap | None = None
         self._units: str | None = None
         self._tolerance_edited = False
+        self._unsigned = False
         self.mode_box = QComboBox()
         for key, text in COLOUR_MODES:
             self.mode_box.addItem(text, key)
@@ -208,9 +211,11 @@ class DeviationPanel(QWidget):
             return None
         return Deviation(measured(self.map.distances), self.tolerance())
 
-    def show_map(self, deviation_map: DeviationMap | None, units: str | None = None) -> None:
-        """The signed map of the mode on show (None: none yet)."""
-        self.map, self._units = deviation_map, units
+    def show_map(self, deviation_map: DeviationMap | None, units: str | None = None,
+                 unsigned: bool = False) -> None:
+        """The signed map of the mode on show (None: none yet); ``unsigned``: without one, the
+        points show unsigned distances (said instead of "no map yet")."""
+        self.map, self._units, self._unsigned = deviation_map, units, unsigned
         for box in (self.tolerance_box, self.limit_box):
             box.setSuffix(f" {units}" if units else "")
         if not self._tolerance_edited:  # the fit's: none to show without a map
@@ -221,7 +226,8 @@ class DeviationPanel(QWidget):
         deviation = self.deviation()
         if deviation is None or not len(deviation.distances):
             self.histogram.set_data(np.zeros(0, np.int64), np.zeros(0), [], 0.0)
-            self.counts.setText(NO_MAP if deviation is None else "No point was measured.")
+            self.counts.setText((UNSIGNED if self._unsigned else NO_MAP) if deviation is None
+                                else "No point was measured.")
             if self.auto_limit.isChecked():
                 self.limit_box.setValue(0.0)  # "auto": no distances to take it from
             return

@@ -387,6 +387,12 @@ class SceneView(QObject):
         self._corner_text(UPPER_RIGHT, self._stats_text if self.deviation_shown() else "")
         self.request_render()
 
+    def unsigned_deviation_shown(self) -> bool:
+        """The points of the mode on show carry unsigned distances and no signed map (a curve's
+        fit, a surface fit under way)."""
+        return (self._has_deviation and self._mode == self._deviation_mode
+                and self.deviation_map() is None)
+
     def deviation_shown(self) -> bool:
         return (self._deviation_on and self._has_deviation
                 and self._mode == self._deviation_mode)

@@ -41,7 +41,8 @@ class SettingsPolicy(QObject):
         window.scene.set_mode(settings.fit_mode)
         # the Deviation dock follows the mode on show (each mode has its own map)
         window.deviation_panel.show_map(window.scene.deviation_map(),
-                                        cloud_units(window.document))
+                                        cloud_units(window.document),
+                                        window.scene.unsigned_deviation_shown())
         window.fit_panel.show_settings(settings.fit)
         show_route_note(window.fit_panel, window.document)  # what Start runs with them
         window.offset_panel.show_settings(settings)

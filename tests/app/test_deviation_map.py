@@ -195,7 +195,7 @@ def test_a_new_cloud_leaves_no_stale_tolerance_and_unsigned_distances_start_at_z
         qtbot, window, tmp_path):
     """After a fit, other files opened: the Deviation dock shows no number of the fit gone (its
     tolerance read on as if it judged the new cloud); a curve's unsigned distances are coloured
-    from 0 (white) up, with no negative half on the colour bar."""
+    from 0 (white) up, with no negative half on the colour bar, and the dock says so."""
     with qtbot.waitSignal(window.files_loaded, timeout=20000):
         window.open_demo()
     with qtbot.waitSignal(window.controller.fit_finished, timeout=120_000):
@@ -211,6 +211,7 @@ def test_a_new_cloud_leaves_no_stale_tolerance_and_unsigned_distances_start_at_z
     assert panel.map is None
     assert panel.tolerance_box.text() == "fit's" != fitted_tolerance
     assert panel.limit_box.text() == "auto"
+    assert panel.counts.text().startswith("No deviation map yet")
 
     window.document.edit_settings("quick curve", control_points_u=10, iterations=30)
     with qtbot.waitSignal(window.controller.fit_finished, timeout=120_000):
@@ -221,3 +222,5 @@ def test_a_new_cloud_leaves_no_stale_tolerance_and_unsigned_distances_start_at_z
     assert low == 0.0 and high > 0.0
     lowest = colours.table.values[0]  # white-ish at 0: not the signed scale's blue
     assert min(lowest[:3]) > 200, lowest
+    # the dock says what the colours are, not "no deviation map yet"
+    assert panel.map is None and "unsigned distance" in panel.counts.text()
