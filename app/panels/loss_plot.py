@@ -51,7 +51,7 @@ class LossPlot(QWidget):
         # the legend sits over the curves' top right: on a near-opaque white box, so the names
         # read where a curve runs behind them
         self.plot.addLegend(offset=(-10, 10), brush=pg.mkBrush(255, 255, 255, LEGEND_ALPHA),
-                            pen=pg.mkPen("#9aa4ae"))
+                            pen=pg.mkPen("#9aa4ae")).setVisible(False)  # until a curve
         self._empty_view()
         layout.addWidget(self.plot)
         self._x: list[float] = []
@@ -79,6 +79,7 @@ class LossPlot(QWidget):
         legend = self.plot.plotItem.legend
         if legend is not None:
             legend.clear()
+            legend.setVisible(False)  # an empty box otherwise
         self._curves = {}
         self._empty_view()
 
@@ -148,3 +149,6 @@ class LossPlot(QWidget):
                 curve = self.plot.plot(name=name, pen=pen, connect="finite")
                 self._curves[name] = curve
             curve.setData(x, y)
+        legend = self.plot.plotItem.legend
+        if legend is not None:
+            legend.setVisible(bool(self._curves))

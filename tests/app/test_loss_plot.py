@@ -23,10 +23,14 @@ def test_the_legend_sits_on_a_box_the_curves_do_not_show_through(qtbot):
     the Loss dock): a near-opaque white box behind them now."""
     plot = LossPlot()
     qtbot.addWidget(plot)
+    legend = plot.plot.plotItem.legend
+    assert not legend.isVisible()  # no curve: no empty box
     plot.append([{"iteration": i, "total": 1.0, "p2s": 0.9} for i in range(5)])
     plot.flush()
-    legend = plot.plot.plotItem.legend
+    assert legend.isVisible()
     assert [label.text for _, label in legend.items] == ["total", "p2s"]
     brush = legend.opts["brush"]
     assert brush is not None and brush.color().alpha() >= 230
     assert brush.color().lightness() == 255
+    plot.clear()
+    assert not legend.isVisible()
