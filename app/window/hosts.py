@@ -34,7 +34,6 @@ if TYPE_CHECKING:
     from app.state import Document
     from app.viewport.scene import SceneView
     from app.window.run_labels import RunLabels
-    from app.window.selection_policy import SelectionPolicy
     from app.workers.jobs import JobRunner
 
 
@@ -160,6 +159,12 @@ class UnitsHost(Reporter, Protocol):
     def rebuild_tree(self) -> None: ...
 
 
+class StoppedByEdit(Protocol):
+    """What the history policy asks of the selection policy."""
+
+    def take_stopped(self) -> list[str]: ...
+
+
 @runtime_checkable
 class HistoryHost(Reporter, Protocol):
     document: Document
@@ -167,7 +172,7 @@ class HistoryHost(Reporter, Protocol):
     patch_controller: PatchController
     loss_plot: LossPlot
     run_labels: RunLabels
-    selection_policy: SelectionPolicy
+    selection_policy: StoppedByEdit
 
     def rebuild_tree(self) -> None: ...
     def reset_patch_network(self) -> None: ...
