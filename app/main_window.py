@@ -71,6 +71,7 @@ from app.window.export_policy import ExportPolicy
 from app.window.fit_display import FitDisplay
 from app.window.history_policy import HistoryPolicy
 from app.window.load_policy import LoadPolicy, RecentFiles
+from app.window.run_labels import RunLabels
 from app.window.selection_policy import SelectionPolicy
 from app.window.session_policy import SessionPolicy
 from app.window.settings_policy import SettingsPolicy
@@ -190,6 +191,8 @@ class MainWindow(QMainWindow):
         self._build_actions()
         self._build_menus()
         self._build_status_bar()
+        self.run_labels = RunLabels(self.status_labels, self.document.settings.fit_mode)
+        self.document.run_texts_source = self.run_labels.kept_texts
         self.patch_view = PatchView(self.patch_controller, self.scene, self.network_quality_panel,
                                     self.status_labels, self.report, self)
         self._connect()

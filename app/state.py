@@ -290,6 +290,9 @@ class ShapeState:
     network: Any = None
     network_report: dict[str, Any] | None = None
     loss_history: LossHistory | None = None
+    #: the status bar's run labels as the fit that made the shapes left them: (fit mode,
+    #: iteration text, loss text); None: not known
+    run_texts: tuple[str, str, str] | None = None
 
     def same_shapes(self, other: ShapeState) -> bool:
         """Whether ``other`` holds these very shapes (a fit that changed nothing: no step)."""
@@ -332,16 +335,20 @@ class _PointsCommand(_ContentCommand):
     def __init__(self, document: Document, before: PointsState, after: PointsState, text: str):
         super().__init__(document, text)
         self._before, self._after = before, after
+        self._pushed = False
 
     def redo(self):
         if self._current():
-            self._document._apply_points(self._after)
+            # the push runs redo once: the edit itself, which its policy reports
+            self._document._apply_points(self._after, f"Redo {self.text()}" if self._pushed
+                                         else "")
+        self._pushed = True
 
     def undo(self):
         if self._current():
             document = self._document
             self._after = dataclasses.replace(self._after, shapes=document.shape_state())
-            document._apply_points(self._before)
+            document._apply_points(self._before, f"Undo {self.text()}")
 
 
 class _ShapesCommand(_ContentCommand):
@@ -371,7 +378,7 @@ class _ShapesCommand(_ContentCommand):
         if self._settings is not None:
             document._apply_settings(self._settings[1])
         if self._pushed and self._shapes_current():
-            document._apply_shapes(self._after)
+            document._apply_shapes(self._after, f"Redo {self.text()}")
         self._pushed = True
 
     def undo(self):
@@ -379,7 +386,7 @@ class _ShapesCommand(_ContentCommand):
         if document._pending_switch is self:
             document._pending_switch = None  # the fit under way no longer completes it
         if self._shapes_current():
-            document._apply_shapes(self._before)
+            document._apply_shapes(self._before, f"Undo {self.text()}")
         if self._settings is not None:
             document._apply_settings(self._settings[0])
 
@@ -455,8 +462,14 @@ class Document(QObject):
         self.restored_network_report: dict[str, Any] | None = None
         #: the loss plot's curves now (the window's loss plot answers): kept with each step
         self.loss_history_source: Callable[[], LossHistory | None] = lambda: None
+        #: the status bar's run labels now (the window's answer): kept with each step
+        self.run_texts_source: Callable[[], tuple[str, str, str] | None] = lambda: None
+        #: the run labels of the shapes an undo / redo just restored
+        self.restored_run_texts: tuple[str, str, str] | None = None
         #: the curves of the shapes an undo / redo just restored (None: an empty plot)
         self.restored_loss_history: LossHistory | None = None
+        #: what put the shapes back: "Undo Fit", "Redo Crop to ..." (the step's text)
+        self.restored_by = ""
         #: the solid of the part route (:class:`app.workers.part_worker.PartOutcome`: the
         #: OpenCASCADE shape, its report and triangles) or None; not part of the undo history
         self.solid: Any = None
@@ -501,7 +514,7 @@ class Document(QObject):
     def shape_state(self) -> ShapeState:
         """The fitted shapes now (what a fit's or Reset's step restores)."""
         return ShapeState(self.fitted, self.fitted_account, self.network, self.report_network(),
-                          self.loss_history_source())
+                          self.loss_history_source(), self.run_texts_source())
 
     def record_shapes(self, before: ShapeState, text: str, network_fit: bool = False) -> bool:
         """Push the change of the shapes since ``before`` (a fit has ended, Reset) as one
@@ -535,13 +548,15 @@ class Document(QObject):
         self._pending_switch = command
         return True
 
-    def _apply_shapes(self, state: ShapeState):
+    def _apply_shapes(self, state: ShapeState, by: str = ""):
         fitted_changed = (state.fitted is not self.fitted
                           or state.fitted_account != self.fitted_account)
         network_changed = state.network is not self.network
         self.fitted, self.fitted_account = state.fitted, state.fitted_account
         self.network, self.restored_network_report = state.network, state.network_report
         self.restored_loss_history = state.loss_history
+        self.restored_run_texts = state.run_texts
+        self.restored_by = by
         self.shapes_restored.emit(fitted_changed, network_changed)
         if fitted_changed:
             self.fitted_changed.emit()
@@ -659,7 +674,7 @@ class Document(QObject):
                            None if self.selection is None else self.selection.copy(),
                            tuple(t.visible for t in self.targets), self.shape_state())
 
-    def _apply_points(self, state: PointsState):
+    def _apply_points(self, state: PointsState, by: str = ""):
         for target, points in zip(self.targets, state.points, strict=True):
             target.points = points
         visible = tuple(t.visible for t in self.targets)
@@ -669,6 +684,8 @@ class Document(QObject):
         self.fitted, self.fitted_account = shapes.fitted, shapes.fitted_account
         self.network, self.restored_network_report = shapes.network, shapes.network_report
         self.restored_loss_history = shapes.loss_history
+        self.restored_run_texts = shapes.run_texts
+        self.restored_by = by
         self.points_changed.emit()
         self.selection_changed.emit()
         self.shapes_restored.emit(True, network_changed)

@@ -31,6 +31,8 @@ from nurbs_core.deviation_bands import BAND_COLOURS, Deviation, colour_limit, hi
 
 COLOUR_MODES = (("signed", "Signed distance"), ("bands", "Tolerance bands"))
 NO_MAP = "No deviation map yet: it appears when a fit ends."
+UNSIGNED = ("The points are coloured by their unsigned distance to the fit (a curve's, or a fit "
+            "under way): the signed map, its bands and histogram come with a surface fit's end.")
 
 
 class Histogram(QWidget):
@@ -100,6 +102,7 @@ class DeviationPanel(QWidget):
         self.map: DeviationMap | None = None
         self._units: str | None = None
         self._tolerance_edited = False
+        self._unsigned = False
         self.mode_box = QComboBox()
         for key, text in COLOUR_MODES:
             self.mode_box.addItem(text, key)
@@ -107,11 +110,13 @@ class DeviationPanel(QWidget):
                                  "shape), red above; Tolerance bands: green within +/- the "
                                  "tolerance, red above, blue below")
         self.tolerance_box = _length_box()
+        self.tolerance_box.setSpecialValueText("fit's")  # no map yet: nothing to show
         self.tolerance_box.setToolTip("The tolerance the bands judge by: the fit's unless you "
                                       "type one")
         self.fit_tolerance_button = QPushButton("Fit's")
         self.fit_tolerance_button.setToolTip("Use the fit's tolerance again")
         self.limit_box = _length_box()
+        self.limit_box.setSpecialValueText("auto")
         self.limit_box.setToolTip("The signed scale runs from -range to +range")
         self.auto_limit = QCheckBox("Auto")
         self.auto_limit.setChecked(True)
@@ -167,14 +172,16 @@ class DeviationPanel(QWidget):
             self._emit()
 
     def _tolerance_typed(self) -> None:
+        if self.tolerance_box.value() <= 0.0:  # emptied (0 shows as "fit's"): the fit's again
+            self._use_fit_tolerance()
+            return
         self._tolerance_edited = True
         self._refresh()
         self._emit()
 
     def _use_fit_tolerance(self) -> None:
         self._tolerance_edited = False
-        if self.map is not None:
-            self.tolerance_box.setValue(self.map.tolerance)
+        self.tolerance_box.setValue(0.0 if self.map is None else self.map.tolerance)
         self._refresh()
         self._emit()
 
@@ -204,20 +211,25 @@ class DeviationPanel(QWidget):
             return None
         return Deviation(measured(self.map.distances), self.tolerance())
 
-    def show_map(self, deviation_map: DeviationMap | None, units: str | None = None) -> None:
-        """The signed map of the mode on show (None: none yet)."""
-        self.map, self._units = deviation_map, units
+    def show_map(self, deviation_map: DeviationMap | None, units: str | None = None,
+                 unsigned: bool = False) -> None:
+        """The signed map of the mode on show (None: none yet); ``unsigned``: without one, the
+        points show unsigned distances (said instead of "no map yet")."""
+        self.map, self._units, self._unsigned = deviation_map, units, unsigned
         for box in (self.tolerance_box, self.limit_box):
             box.setSuffix(f" {units}" if units else "")
-        if deviation_map is not None and not self._tolerance_edited:
-            self.tolerance_box.setValue(deviation_map.tolerance)
+        if not self._tolerance_edited:  # the fit's: none to show without a map
+            self.tolerance_box.setValue(0.0 if deviation_map is None else deviation_map.tolerance)
         self._refresh()
 
     def _refresh(self) -> None:
         deviation = self.deviation()
         if deviation is None or not len(deviation.distances):
             self.histogram.set_data(np.zeros(0, np.int64), np.zeros(0), [], 0.0)
-            self.counts.setText(NO_MAP if deviation is None else "No point was measured.")
+            self.counts.setText((UNSIGNED if self._unsigned else NO_MAP) if deviation is None
+                                else "No point was measured.")
+            if self.auto_limit.isChecked():
+                self.limit_box.setValue(0.0)  # "auto": no distances to take it from
             return
         if self.auto_limit.isChecked():
             self.limit_box.setValue(colour_limit(deviation.distances, deviation.tolerance))
@@ -240,7 +252,7 @@ class DeviationPanel(QWidget):
 def _length_box() -> QDoubleSpinBox:
     box = QDoubleSpinBox()
     box.setDecimals(6)
-    box.setRange(1e-6, 1e9)
+    box.setRange(0.0, 1e9)  # 0: the special value (the fit's tolerance, the automatic range)
     box.setStepType(QDoubleSpinBox.StepType.AdaptiveDecimalStepType)
     box.setKeyboardTracking(False)
     return box

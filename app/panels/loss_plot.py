@@ -17,6 +17,9 @@ FLOOR = 1e-16
 REDRAW_INTERVAL_MS = 200  # log scale: zero or negative values are drawn at this floor
 
 
+LEGEND_ALPHA = 235  # of 255: the legend box's opacity
+
+
 class LossAxis(pg.AxisItem):
     """The log axis with labels on 1, 2 and 5 times a power of ten only: pyqtgraph labels
     every minor tick of a range within one or two decades, and 2..9 x 10^-7 overlap."""
@@ -45,7 +48,10 @@ class LossPlot(QWidget):
         self.plot.setLabel("left", "loss (normalised units)")
         # no "(x0.001)" SI rescaling of the log axis: the tick labels already carry the decades
         self.plot.getAxis("left").enableAutoSIPrefix(False)
-        self.plot.addLegend(offset=(-10, 10))
+        # the legend sits over the curves' top right: on a near-opaque white box, so the names
+        # read where a curve runs behind them
+        self.plot.addLegend(offset=(-10, 10), brush=pg.mkBrush(255, 255, 255, LEGEND_ALPHA),
+                            pen=pg.mkPen("#9aa4ae")).setVisible(False)  # until a curve
         self._empty_view()
         layout.addWidget(self.plot)
         self._x: list[float] = []
@@ -73,6 +79,7 @@ class LossPlot(QWidget):
         legend = self.plot.plotItem.legend
         if legend is not None:
             legend.clear()
+            legend.setVisible(False)  # an empty box otherwise
         self._curves = {}
         self._empty_view()
 
@@ -142,3 +149,6 @@ class LossPlot(QWidget):
                 curve = self.plot.plot(name=name, pen=pen, connect="finite")
                 self._curves[name] = curve
             curve.setData(x, y)
+        legend = self.plot.plotItem.legend
+        if legend is not None:
+            legend.setVisible(bool(self._curves))

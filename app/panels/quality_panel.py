@@ -106,6 +106,7 @@ class QualityPanel(QWidget):
     def clear(self, note: str = "No fit yet: the quality of the fitted surface shows here when "
                                 "a fit ends."):
         self.status.setText(note)
+        self.status.setStyleSheet("")  # a warned fit's red goes with it
         self._deviation = self._result = None
         for key in self.values:
             self._set(key, "-")
@@ -121,6 +122,7 @@ class QualityPanel(QWidget):
 
     def show_running(self):
         self.status.setText("Fitting... the quality is measured when the fit ends.")
+        self.status.setStyleSheet("")
         self._result = None
         for key in self.values:
             if key != "deviation":

@@ -2,7 +2,8 @@
 and its scalar bar.
 
 Two modes: "signed", a diverging scale (blue below, white at zero, red above: the report's
-``coolwarm``) over a symmetric range +/- limit, the robust default
+``coolwarm``) over a symmetric range +/- limit (unsigned distances, of a curve or of a run under
+way: its upper half, white to red over 0 to the limit), the robust default
 (:func:`nurbs_core.deviation_bands.colour_limit`) unless the user sets one; "bands", three
 colours (below, within, above the tolerance: the report's band colours) over +/- 3 tolerances,
 so the table's middle third is exactly [-tolerance, tolerance] (VTK interpolates the distances
@@ -109,10 +110,14 @@ class DeviationColours:
             self.table.values = np.array([[*_rgb(c), 255] for c in colours], np.uint8)
             self.range = (-3.0 * tolerance, 3.0 * tolerance)
             labels = 4  # -3t, -t, t, 3t: the band borders are labelled
-        else:
+        elif self._signed:
             self.table.apply_cmap(SIGNED_COLORMAP, 256)
             limit = self.limit()
             self.range = (-limit, limit)
+            labels = 5
+        else:  # unsigned distances (a curve, a run under way): 0 to the limit, white to red
+            self.table.values = unsigned_table()
+            self.range = (0.0, self.limit())
             labels = 5
         self.table.scalar_range = self.range
         for mapper in self._mappers:
@@ -122,6 +127,15 @@ class DeviationColours:
             self.bar.SetTitle(self.title())
             self.bar.SetNumberOfLabels(labels)
             self.bar.SetLookupTable(self.table)
+
+
+def unsigned_table() -> np.ndarray:
+    """The signed scale's upper half (white at 0 to red), 256 RGBA rows: an unsigned distance
+    is never below the surface, so no blue."""
+    from matplotlib import colormaps
+
+    rgba = colormaps[SIGNED_COLORMAP](np.linspace(0.5, 1.0, 256))
+    return np.round(rgba * 255).astype(np.uint8)
 
 
 def _rgb(colour: str) -> tuple[int, int, int]:

@@ -25,6 +25,7 @@ from pyvistaqt import QtInteractor
 
 from app.display_types import FAR, FINE, FLIPPED, OVERLAP, DeviationMap, DisplayGeometry
 from app.viewport.deviation_colours import DeviationColours
+from app.viewport.legend_box import label_contrasts, swatch_legend
 from app.viewport.network_layers import NetworkLayers
 from app.viewport.selection import SelectionTool
 from app.viewport.solid_layers import SolidLayers
@@ -59,6 +60,8 @@ QUALITY_COLORS = {FINE: COLORS["surface"], FAR: "#8a8a8a", OVERLAP: "#ffc107",
 QUALITY_LABELS = {FLIPPED: "flipped (faces away from the cloud)", OVERLAP: "overlapping sheets",
                   FAR: "far from the cloud (curtain)", FINE: "fine"}
 QUALITY_PENDING = "Quality map: shown when the fit ends"
+#: the quality legend's (left, bottom, width, height) in normalised viewport coordinates
+QUALITY_LEGEND_BOX = (0.01, 0.81, 0.36, 0.18)
 
 #: Layers the document tree and the View menu toggle.
 #: the points' size in pixels, and over a solid (Solid mode)
@@ -384,6 +387,12 @@ class SceneView(QObject):
         self._corner_text(UPPER_RIGHT, self._stats_text if self.deviation_shown() else "")
         self.request_render()
 
+    def unsigned_deviation_shown(self) -> bool:
+        """The points of the mode on show carry unsigned distances and no signed map (a curve's
+        fit, a surface fit under way)."""
+        return (self._has_deviation and self._mode == self._deviation_mode
+                and self.deviation_map() is None)
+
     def deviation_shown(self) -> bool:
         return (self._deviation_on and self._has_deviation
                 and self._mode == self._deviation_mode)
@@ -504,6 +513,11 @@ class SceneView(QObject):
         (x, y), (w, h) = self._legend.GetPosition(), self._legend.GetPosition2()
         return x, y, x + w, y + h
 
+    def quality_legend_contrasts(self) -> list[tuple[str, float]]:
+        """(label, contrast of its text against the legend's box) per entry of the quality
+        legend (:func:`app.viewport.legend_box.label_contrasts`); [] before a quality map."""
+        return [] if self._legend is None else label_contrasts(self._legend)
+
     def _update_legend(self, stats: dict):
         shares = {FLIPPED: stats.get("flipped_fraction"), OVERLAP: stats.get("overlap_fraction")}
         labels = []
@@ -511,12 +525,10 @@ class SceneView(QObject):
             text = QUALITY_LABELS[category]
             if shares.get(category) is not None and np.isfinite(shares[category]):
                 text += f" {100 * shares[category]:.1f}%"
-            labels.append([text, QUALITY_COLORS[category]])
-        # entries are written in their own colours: a dark box keeps the light ones readable
-        self._legend = self.plotter.add_legend(labels, bcolor="#2b2f33", border=True,
-                                               size=(0.34, 0.16), loc="upper left",
-                                               face="rectangle", background_opacity=0.85,
-                                               name="quality_legend")
+            labels.append((text, QUALITY_COLORS[category]))
+        self._legend = swatch_legend(labels, *QUALITY_LEGEND_BOX)
+        self.plotter.add_actor(self._legend, name="quality_legend", reset_camera=False,
+                               render=False)
         self._legend.SetVisibility(self.quality_shown())
 
     def _apply_quality(self):

@@ -14,6 +14,7 @@ import pyvista as pv
 
 from app.solid_types import SolidDisplay, SolidReport
 from app.viewport.color_scale import label_count, nice_ceiling
+from app.viewport.legend_box import label_contrasts, swatch_legend
 
 #: a face's colour by its surface type (the engine's names; "freeform" is a NURBS face)
 TYPE_COLORS = {"plane": "#6f9fd8", "cylinder": "#f08c2e", "cone": "#3fae5a",
@@ -122,28 +123,12 @@ class SolidLayers:
         self._apply()
 
     def _add_legend(self, kinds: list[str]) -> None:
-        """A legend box of the types present (its own actor: the scene's quality map keeps
-        pyvista's one legend)."""
-        from vtkmodules.vtkRenderingAnnotation import vtkLegendBoxActor
-
+        """A legend box of the types present (swatches, dark text on a light box)."""
         counts = {kind: kinds.count(kind) for kind in TYPE_COLORS if kind in kinds}
-        legend = vtkLegendBoxActor()
-        legend.SetNumberOfEntries(len(counts))
-        square = pv.Rectangle([(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 1.0, 0.0)])
-        for index, (kind, number) in enumerate(counts.items()):
-            legend.SetEntry(index, square, f"{TYPE_LABELS[kind]} ({number})",
-                            pv.Color(TYPE_COLORS[kind]).float_rgb)
-        # entries are written in their own colours: a dark box keeps the light ones readable
-        # (the quality map's legend does the same)
-        legend.UseBackgroundOn()
-        legend.SetBackgroundColor(pv.Color("#2b2f33").float_rgb)
-        legend.SetBackgroundOpacity(0.85)
-        legend.BorderOn()
         height = LEGEND_ENTRY_HEIGHT * len(counts)
-        legend.GetPositionCoordinate().SetCoordinateSystemToNormalizedViewport()
-        legend.GetPositionCoordinate().SetValue(0.01, 0.99 - height)
-        legend.GetPosition2Coordinate().SetCoordinateSystemToNormalizedViewport()
-        legend.GetPosition2Coordinate().SetValue(LEGEND_WIDTH, height)
+        legend = swatch_legend([(f"{TYPE_LABELS[kind]} ({number})", TYPE_COLORS[kind])
+                                for kind, number in counts.items()],
+                               0.01, 0.99 - height, LEGEND_WIDTH, height)
         self.plotter.add_actor(legend, name="solid_legend", reset_camera=False, render=False)
         self.legend = legend
 
@@ -169,6 +154,10 @@ class SolidLayers:
         if self.legend is None or not self.legend.GetVisibility():
             return []
         return [self.legend.GetEntryString(k) for k in range(self.legend.GetNumberOfEntries())]
+
+    def legend_contrasts(self) -> list[tuple[str, float]]:
+        """(label, contrast of its text against the box) per entry of the type legend."""
+        return [] if self.legend is None else label_contrasts(self.legend)
 
     def _apply(self) -> None:
         on = self.shown()

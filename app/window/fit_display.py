@@ -216,7 +216,8 @@ class FitDisplay(QObject):
         """The Deviation dock shows the map of the mode on show (after a mode change too)."""
         window = self._window
         window.deviation_panel.show_map(window.scene.deviation_map(),
-                                        cloud_units(window.document))
+                                        cloud_units(window.document),
+                                        window.scene.unsigned_deviation_shown())
 
     @Slot(dict)
     def on_progress(self, progress: dict) -> None:

@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     from app.patch_controller import PatchController
     from app.state import Document
     from app.viewport.scene import SceneView
+    from app.window.run_labels import RunLabels
     from app.workers.jobs import JobRunner
 
 
@@ -76,6 +77,7 @@ class LoadHost(Reporter, Protocol):
     loss_plot: LossPlot
     files_loaded: SignalInstance
     status_labels: dict[str, QLabel]
+    run_labels: RunLabels
     load_progress: QProgressBar
     load_indicator: QWidget
     cancel_load_action: QAction
@@ -121,6 +123,7 @@ class SettingsHost(Protocol):
     part_controller: PartController
     solid_panel: SolidPanel
     solid_dock: QDockWidget
+    run_labels: RunLabels
     def statusBar(self) -> QStatusBar: ...  # noqa: N802 (Qt's name)
     def rebuild_tree(self) -> None: ...
     def update_fit_actions(self, *_state: object) -> None: ...
@@ -156,13 +159,20 @@ class UnitsHost(Reporter, Protocol):
     def rebuild_tree(self) -> None: ...
 
 
+class StoppedByEdit(Protocol):
+    """What the history policy asks of the selection policy."""
+
+    def take_stopped(self) -> list[str]: ...
+
+
 @runtime_checkable
 class HistoryHost(Reporter, Protocol):
     document: Document
     controller: FitController
     patch_controller: PatchController
     loss_plot: LossPlot
-    status_labels: dict[str, QLabel]
+    run_labels: RunLabels
+    selection_policy: StoppedByEdit
 
     def rebuild_tree(self) -> None: ...
     def reset_patch_network(self) -> None: ...

@@ -200,6 +200,7 @@ class LoadPolicy(QObject):
         for label in window.status_labels.values():
             label.setText("-")
         window.status_labels["state"].setText("Idle")
+        window.run_labels.clear()
         units, units_note = units_of_load(loaded)  # the files' own unit, else unknown
         document.replace_content(loaded.targets, loaded.patches, loaded.patch_names, units)
         points = document.target_points()

@@ -45,6 +45,7 @@ class SelectionPolicy(QObject):
         self._window = window
         #: how long the newest region took to test against the cloud (ms), for the benchmarks
         self.last_selection_ms = 0.0
+        self._stopped: list[str] = []
 
     # --- tools -----------------------------------------------------------------------------------
     def set_tool(self, kind: str | None) -> None:
@@ -151,8 +152,9 @@ class SelectionPolicy(QObject):
 
     @Slot()
     def on_points_changed(self) -> None:
-        """A point edit, or its undo / redo: a fit of the old points stops; the cloud is shown
-        again (the shapes the edit restored are the history policy's and the fit display's)."""
+        """A point edit, or its undo / redo: a fit of the old points stops (the history policy
+        says so: :meth:`take_stopped`); the cloud is shown again (the shapes the edit restored
+        are the history policy's and the fit display's)."""
         window = self._window
         document = window.document
         stopped = []
@@ -167,9 +169,13 @@ class SelectionPolicy(QObject):
         points = document.target_points()
         window.scene.set_cloud(points)
         window.knot_panel.set_points(points)
-        if stopped:
-            window.report(f"The points changed: {' and '.join(stopped)} on the old points "
-                          "stopped")
+        # said by the history policy, with what was undone or redone (shapes_restored follows)
+        self._stopped = stopped
+
+    def take_stopped(self) -> list[str]:
+        """The runs the last point edit's undo / redo stopped ("the fit", ...), once."""
+        stopped, self._stopped = self._stopped, []
+        return stopped
 
     @Slot()
     def on_selection_changed(self) -> None:

@@ -41,7 +41,8 @@ class SettingsPolicy(QObject):
         window.scene.set_mode(settings.fit_mode)
         # the Deviation dock follows the mode on show (each mode has its own map)
         window.deviation_panel.show_map(window.scene.deviation_map(),
-                                        cloud_units(window.document))
+                                        cloud_units(window.document),
+                                        window.scene.unsigned_deviation_shown())
         window.fit_panel.show_settings(settings.fit)
         show_route_note(window.fit_panel, window.document)  # what Start runs with them
         window.offset_panel.show_settings(settings)
@@ -90,6 +91,7 @@ class SettingsPolicy(QObject):
         else:
             window.fit_dock.raise_()
             window.quality_dock.raise_()
+        window.run_labels.switch_mode(mode)  # the labels of the fit now on show
         window.update_fit_actions()
         window.rebuild_tree()
         window.scene.reset_camera()

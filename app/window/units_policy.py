@@ -115,5 +115,6 @@ class UnitsPolicy(QObject):
         window.network_quality_panel.set_units(units)
         window.offset_panel.set_units(units)
         window.fit_panel.set_units(units)
-        window.deviation_panel.show_map(window.scene.deviation_map(), units)
+        window.deviation_panel.show_map(window.scene.deviation_map(), units,
+                                        window.scene.unsigned_deviation_shown())
         window.rebuild_tree()

@@ -189,3 +189,38 @@ def test_patches_mode_paints_the_network_with_signed_bands(qtbot, window, tmp_pa
     window.mode_selector.setCurrentIndex(window.mode_selector.findData("single"))
     assert scene.deviation_map() is None and panel.map is None
     assert not scene.deviation_surface_shown()
+
+
+def test_a_new_cloud_leaves_no_stale_tolerance_and_unsigned_distances_start_at_zero(
+        qtbot, window, tmp_path):
+    """After a fit, other files opened: the Deviation dock shows no number of the fit gone (its
+    tolerance read on as if it judged the new cloud); a curve's unsigned distances are coloured
+    from 0 (white) up, with no negative half on the colour bar, and the dock says so."""
+    with qtbot.waitSignal(window.files_loaded, timeout=20000):
+        window.open_demo()
+    with qtbot.waitSignal(window.controller.fit_finished, timeout=120_000):
+        window.start_action.trigger()
+    panel = window.deviation_panel
+    assert panel.map is not None and panel.tolerance_box.value() > 0
+    fitted_tolerance = panel.tolerance_box.text()
+
+    x = np.linspace(0.0, 2.0 * np.pi, 300)
+    path = tmp_path / "curve.xyz"
+    np.savetxt(path, np.column_stack([x, np.sin(x), np.zeros_like(x)]), fmt="%.8f")
+    open_by_drop(qtbot, window, [path])
+    assert panel.map is None
+    assert panel.tolerance_box.text() == "fit's" != fitted_tolerance
+    assert panel.limit_box.text() == "auto"
+    assert panel.counts.text().startswith("No deviation map yet")
+
+    window.document.edit_settings("quick curve", control_points_u=10, iterations=30)
+    with qtbot.waitSignal(window.controller.fit_finished, timeout=120_000):
+        window.start_action.trigger()
+    colours = window.scene.deviation_colours
+    assert window.scene.deviation_shown() and colours.bar_shown()
+    low, high = colours.range
+    assert low == 0.0 and high > 0.0
+    lowest = colours.table.values[0]  # white-ish at 0: not the signed scale's blue
+    assert min(lowest[:3]) > 200, lowest
+    # the dock says what the colours are, not "no deviation map yet"
+    assert panel.map is None and "unsigned distance" in panel.counts.text()

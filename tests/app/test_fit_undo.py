@@ -277,8 +277,13 @@ def test_redo_of_a_network_shows_its_numbers_and_curve_and_claims_no_new_fit(qtb
     assert document.network is not None
     assert {name: labels[name].text() for name in shown} == shown
     _assert_same_curves(_curves(window), curves)
-    # shown again, not fitted again: the log has no second "fitted" line (nor its warnings)
-    assert window.log_panel.toPlainText() == log
+    # shown again, not fitted again: the log has no second "fitted" line (nor its warnings),
+    # only what was undone and redone
+    added = window.log_panel.toPlainText()[len(log):]
+    assert window.log_panel.toPlainText().startswith(log)
+    assert "Undo Fit as patches: no patch network" in added
+    assert "Redo Fit as patches: back to a patch network of " in added
+    assert "fitted" not in added and "warning" not in added.lower()
 
     # a second network fit (Patches mode): its Undo shows the first network's curve again
     _fit(qtbot, window, window.patch_controller)
@@ -326,3 +331,44 @@ def test_the_window_opens_within_the_screen_and_the_patch_quality_dock_scrolls(q
     for label in [*panel.values.values(), panel.warnings]:  # every row within what scrolls
         assert label.geometry().bottom() < panel.height()
     qtbot.waitUntil(lambda: window.jobs.active_count() == 0, timeout=30000)
+
+
+def _run_texts(window) -> tuple[str, ...]:
+    return tuple(window.status_labels[name].text()
+                 for name in ("iteration", "loss", "rate", "remaining"))
+
+
+def test_undo_and_redo_of_a_fit_say_in_the_status_bar_what_shows_now(qtbot, window):
+    """The status bar after Undo / Redo of a single-patch fit: its message names the step and
+    the shape now shown (it kept the fit's "Fit converged ..." line), its run labels the numbers
+    of the fit that made that shape ("-" everywhere before); switching modes shows each mode's
+    own numbers, never those of the fit hidden."""
+    with qtbot.waitSignal(window.files_loaded, timeout=20000):
+        window.open_demo()
+    snapshot = _fit(qtbot, window)
+    iteration, loss = _run_texts(window)[:2]
+    assert iteration == f"Least-squares pass {snapshot.iteration}" and loss.startswith("Loss ")
+    grid = " x ".join(map(str, snapshot.geometry.control_points.shape[:2]))
+
+    window.undo_action.trigger()
+    assert window.statusBar().currentMessage() == "Undo Fit: no fitted shape (Start fits afresh)"
+    assert _run_texts(window) == ("No fit", "-", "-", "-")
+
+    window.redo_action.trigger()
+    assert window.statusBar().currentMessage().startswith(
+        f"Redo Fit: back to one patch, {grid} control points (degree 3 x 3), least-squares core")
+    assert _run_texts(window) == (iteration, loss, "-", "-")  # as the fit left them
+    _measured(qtbot, window)
+
+    # Patches mode has no network yet: its labels are empty, not the hidden patch's numbers
+    window.document.edit_settings("Fit mode", fit_mode="patches")
+    assert _run_texts(window) == ("-", "-", "-", "-")
+    window.document.edit_settings("Fit mode", fit_mode="single")
+    assert _run_texts(window) == (iteration, loss, "-", "-")
+
+    # Reset, then Undo of the Reset: the fit's numbers come back with its shape
+    window.reset_fit()
+    window.undo_action.trigger()
+    assert window.statusBar().currentMessage().startswith("Undo Reset: back to one patch")
+    assert _run_texts(window)[:2] == (iteration, loss)
+    _measured(qtbot, window)

@@ -158,6 +158,13 @@ def test_default_fit_converges_and_the_readout_shows_its_quality(qtbot, window, 
         texts.append((item.text(0), item.checkState(0)))
         stack.extend(item.child(i) for i in range(item.childCount()))
     assert ("Quality map", Qt.CheckState.Checked) in texts
+    # the legend names the four categories, each label dark on a light box: readable (WCAG AA
+    # body text, contrast 4.5); it was each in its own colour on a dark box (magenta: 2.6)
+    contrasts = window.scene.quality_legend_contrasts()
+    assert [label.split(" 0.")[0] for label, _ in contrasts] == [
+        "flipped (faces away from the cloud)", "overlapping sheets",
+        "far from the cloud (curtain)", "fine"]
+    assert all(ratio >= 4.5 for _, ratio in contrasts), contrasts
 
 
 def _saddle_sheet(x_path: np.ndarray) -> dict:
@@ -264,6 +271,12 @@ def test_a_closed_cloud_forced_to_one_patch_shows_its_folds(qtbot, window, tmp_p
     # the headline does not promise what the checks deny: not "Converged"
     assert window.quality_panel.status.text().startswith("Fitted with warnings")
     assert "Fit fitted with warnings" in window.log_panel.toPlainText()
+    assert "color" in window.quality_panel.status.styleSheet()  # the headline in red
+    # another cloud: "No fit yet" in the ordinary colour, not in the last fit's red
+    with qtbot.waitSignal(window.files_loaded, timeout=20000):
+        window.open_demo()
+    assert window.quality_panel.status.text().startswith("No fit yet")
+    assert window.quality_panel.status.styleSheet() == ""
 
 
 def test_a_stopped_fit_is_measured(qtbot, window, ply_cloud):

@@ -90,6 +90,7 @@ def test_start_on_a_plate_scan_gives_a_solid_listed_drawn_and_exported(qtbot, wi
 
     # the viewport: the faces in their type colours (the cylinder orange) under a legend
     assert window.scene.solid.legend_labels() == ["Plane (6)", "Cylinder (1)"]
+    assert all(ratio >= 4.5 for _, ratio in window.scene.solid.legend_contrasts())  # readable
     window.scene.standard_view("iso")
     image = viewport_image(window)
     orange = colorsys.rgb_to_hsv(0xf0 / 255, 0x8c / 255, 0x2e / 255)[0]
