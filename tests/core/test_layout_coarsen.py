@@ -144,3 +144,44 @@ def test_a_quads_facing_check_is_every_condition_of_its_definition():
             verdicts.append(shape.facing(corners))
             assert verdicts[-1] == reference(corners)
     assert any(verdicts) and not all(verdicts)        # both answers were tried
+
+
+def _flat_grid() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A 3 x 3 quad layout on a plane (corners at integers 0..3, facing +z) and the plane's
+    mesh vertices, four per layout edge."""
+    i, j = np.meshgrid(np.arange(4.0), np.arange(4.0), indexing="ij")
+    vertices = np.stack([i.ravel(), j.ravel(), np.zeros(16)], -1)
+    quads = np.array([[a * 4 + b, (a + 1) * 4 + b, (a + 1) * 4 + b + 1, a * 4 + b + 1]
+                      for a in range(3) for b in range(3)])
+    t = np.linspace(0.0, 3.0, 13)
+    u, v = np.meshgrid(t, t, indexing="ij")
+    mesh = np.stack([u.ravel(), v.ravel(), np.zeros(u.size)], -1)
+    return vertices, quads, mesh
+
+
+def test_relaxing_moves_a_vertex_to_its_neighbours_mean_and_leaves_one_already_there(monkeypatch):
+    from nurbs_core.patches import coarsen as module
+
+    vertices, quads, mesh = _flat_grid()
+    vertices[5] = [1.25, 1.0, 0.0]          # an interior vertex a mesh vertex off its place
+    layout = module._Layout(vertices, quads)
+    shape = module._Shape(mesh, np.tile([0.0, 0.0, 1.0], (len(mesh), 1)))
+    shape.start(vertices[quads])
+    measured: list[int] = []
+    holds = module._Shape.holds
+
+    def counted(self, corners, ids, near, cover):
+        measured.append(len(ids))
+        return holds(self, corners, ids, near, cover)
+
+    monkeypatch.setattr(module._Shape, "holds", counted)
+    module._relax(layout, shape, COVER, iterations=1)
+    # the displaced vertex goes back to the mean of its neighbours; the other three interior
+    # vertices sit at theirs already and are neither moved nor measured again
+    assert np.array_equal(layout.positions[5], [1.0, 1.0, 0.0])
+    for v in (6, 9, 10):
+        assert np.array_equal(layout.positions[v], vertices[v])
+    assert len(measured) == 1
+    ratio = shape.ratio.copy()
+    module._relax(layout, shape, COVER, iterations=1)
+    assert len(measured) == 1 and np.array_equal(shape.ratio, ratio)
