@@ -441,16 +441,13 @@ def _relax(layout: _Layout, shape: _Shape, cover: float,
            iterations: int = RELAX_ITERATIONS) -> None:
     """Move every interior vertex towards the mean of its neighbours (snapped to the mesh)
     where its quads stay facing the mesh without a reflex corner: collapses leave skewed quads
-    that block the next ones. A vertex already at its target is left as it is, its mesh not
-    measured again (most of them after the first rounds: a fifth of the coarsening's time)."""
+    that block the next ones."""
     for _ in range(iterations):
         for v in list(layout.around):
             if v in layout.border:
                 continue
             ring = layout.neighbours(v)
             target = shape.snap(np.mean([layout.positions[w] for w in ring], axis=0))
-            if np.array_equal(target, layout.positions[v]):
-                continue                # already there: nothing moves
             ids = sorted(layout.around[v])
             moved = np.array([[target if w == v else layout.positions[w]
                                for w in layout.quads[o] or ()] for o in ids])
