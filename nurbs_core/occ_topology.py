@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from typing import Any
 
-#: An OCP object (TopoDS_Shape and its kinds); typed loosely, OCP being optional.
+#: OpenCASCADE objects (OCP ships no type information): shapes, geometry, arrays; the one
+#: alias every module that handles them uses.
 OccObject = Any
 
 

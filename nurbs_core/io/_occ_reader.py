@@ -28,11 +28,11 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
+from nurbs_core.occ_topology import OccObject
+
 if TYPE_CHECKING:  # the script imports only numpy at start (and nothing of nurbs_core: run with -I)
     import rhino3dm
 
-#: OpenCASCADE objects (OCP ships no type information): shapes, geometry, arrays.
-OccObject = Any
 #: One item of the reply .npz: key (without the ``_<k>`` suffix) -> array.
 Arrays = dict[str, np.ndarray]
 

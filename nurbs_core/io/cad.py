@@ -32,14 +32,12 @@ from numpy.typing import ArrayLike
 
 from nurbs_core.io.errors import FileFormatError, StrPath, require_ocp
 from nurbs_core.io.limits import configured_size
-from nurbs_core.occ_topology import subshapes
+from nurbs_core.occ_topology import OccObject, subshapes
 
 if TYPE_CHECKING:
     from nurbs_core.geometry import NurbsCurve, NurbsSurface
     from nurbs_core.io.geometry_io import GeometryInput, Writable
 
-#: OpenCASCADE objects (OCP ships no type information): shapes, geometry, arrays.
-OccObject = Any
 
 STEP_SUFFIXES = (".step", ".stp")
 IGES_SUFFIXES = (".iges", ".igs")

@@ -10,18 +10,18 @@ by ``BRepLib.BuildCurves3d_s``, tolerances settled by ``ShapeFix_Face``, and the
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from nurbs_core.io.cad import _array1_double, _array1_int, distinct_knots, occ_surface
 from nurbs_core.io.errors import StrPath, require_ocp
+from nurbs_core.occ_topology import OccObject
 
 if TYPE_CHECKING:
     from nurbs_core.geometry_arrays import CurveArrays
     from nurbs_core.trim.value import TrimmedSurface
 
-OccObject = Any
 
 
 def occ_curve_2d(curve: CurveArrays) -> OccObject:

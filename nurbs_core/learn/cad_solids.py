@@ -12,14 +12,9 @@ OCP is optional (``pip install "nurbs-studio[cad]"``): it is imported inside the
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
-from nurbs_core.occ_topology import subshapes
-
-#: OpenCASCADE objects (OCP ships no type information)
-OccObject = Any
+from nurbs_core.occ_topology import OccObject, subshapes
 
 #: the solid families :func:`random_solid` mixes
 SOLIDS = ("filleted_box", "primitive", "cut_box", "loft", "height_field", "revolution", "extrusion")
