@@ -212,7 +212,11 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
     low, high = points.min(axis=0), points.max(axis=0)
     extents = spans(segmentation.surfaces, points, segmentation.labels,
                     float(np.linalg.norm(high - low)), segmentation.tolerance)
-    solid, surfaces, fillets = _filleted(points, (mesh_vertices, mesh_triangles), segmentation)
+    solid, surfaces = _freeform(points, segmentation)
+    fillets = 0
+    if solid is None:
+        solid, surfaces, fillets = _filleted(points, (mesh_vertices, mesh_triangles),
+                                             segmentation)
     if solid is None:
         surfaces = crossing(segmentation.surfaces, segmentation.tolerance)
         solid = build_solid(surfaces, mesh_vertices, mesh_triangles, (low, high), extents,
@@ -262,3 +266,21 @@ def _filleted(points: np.ndarray, mesh: tuple[np.ndarray, np.ndarray],
         return None, [], 0
     own = [face_primitive(face) for face in faces(solid)]
     return solid, [s for s in own if s is not None], rounded
+
+
+def _freeform(points: np.ndarray, segmentation: Segmentation
+              ) -> tuple[OccShape | None, list[Primitive]]:
+    """The solid of a part with a freeform region (:mod:`nurbs_core.brep.freeform`) and the
+    planes its other faces lie on; (None, []) when the scan has no freeform region or the
+    solid cannot be built (the analytic surfaces then make it)."""
+    from nurbs_core.brep.freeform import freeform_region, freeform_solid
+    from nurbs_core.brep.solid import SolidError
+
+    region = freeform_region(segmentation, points)
+    if region is None:
+        return None, []
+    try:
+        solid = freeform_solid(points, segmentation, region)
+    except SolidError:
+        return None, []
+    return solid, [segmentation.surfaces[k] for k in region.planes]
