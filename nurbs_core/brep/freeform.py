@@ -6,9 +6,10 @@ tori, cylinders, each within the tolerance of its piece), and the arrangement of
 cuts the part into hundreds of faces. :func:`freeform_region` measures this before the
 arrangement is built: the points off the large planes (:data:`TRUSTED_PLANE` of the scan or
 more, at least one: they trim the face) form one connected region holding :data:`MIN_SHARE`
-of the scan, on
-:data:`MIN_FRAGMENTS` or more curved surfaces, most of whose points are no fillet
-(:func:`~nurbs_core.brep.fillets.find_blends`). :func:`freeform_solid` then
+of the scan, on :data:`MIN_FRAGMENTS` or more curved surfaces, most of whose points are no
+fillet (:func:`~nurbs_core.brep.fillets.find_blends`), and meeting every plane it touches at a
+sharp edge (:data:`MIN_EDGE_ANGLE`: a head scan's flat spots run smoothly into it).
+:func:`freeform_solid` then
 
 1. fits the region as one patch (a disk) or one tube (closed in one direction) with the
    least-squares core, without the points within a band of the planes (their normals blur at
@@ -44,6 +45,12 @@ MIN_SHARE = 0.2
 MIN_FRAGMENTS = 6
 #: ... and at most this share of its points lie on fillets and their corners
 MAX_BLEND_SHARE = 0.5
+#: a plane bounds the region at a sharp edge: the PCA normals of the region's points within
+#: :data:`EDGE_REACH` spacings of the plane's points make a median angle of at least this with
+#: its axis (degrees). Measured: a loft's caps 47-59 (the 90-degree edge blurs the normals
+#: beside it), the flat spots of a sparse head scan 19-21 (they run smoothly into the head)
+MIN_EDGE_ANGLE = 30.0
+EDGE_REACH = 3.0
 #: a split face is kept when this share of samples on it has a scan point within a point
 #: spacing and the tolerance
 MIN_SUPPORT = 0.6
@@ -86,9 +93,28 @@ def freeform_region(segmentation: Segmentation, points: np.ndarray) -> FreeformR
     rounded = [b.index for b in blends] + list(corners)
     if np.isin(own, rounded).mean() > MAX_BLEND_SHARE:
         return None
+    if not all(_sharp_edge(segmentation, points, k, region) for k in planes):
+        return None
     mask = np.zeros(count, bool)
     mask[region] = True
     return FreeformRegion(mask, planes)
+
+
+def _sharp_edge(segmentation: Segmentation, points: np.ndarray, plane: int,
+                region: np.ndarray) -> bool:
+    """Whether the plane ``plane`` meets the region (indices into the points (N, 3)) at a
+    sharp edge, or not at all (see :data:`MIN_EDGE_ANGLE`). A plane the region runs into
+    smoothly is a flat spot of a freeform shape, not a face of a machined part."""
+    own = np.flatnonzero(segmentation.labels == plane)
+    distance, _ = cKDTree(points[own]).query(points[region],
+                                            distance_upper_bound=EDGE_REACH
+                                            * segmentation.spacing)
+    beside = region[np.isfinite(distance)]
+    if len(beside) == 0:
+        return True
+    axis = segmentation.surfaces[plane].axis
+    cosine = float(np.median(np.abs(segmentation.normals[beside] @ axis)))
+    return cosine <= np.cos(np.radians(MIN_EDGE_ANGLE))
 
 
 def _continued(points: np.ndarray, normals: np.ndarray, planes: list[Primitive],
@@ -126,7 +152,10 @@ def fit_region(points: np.ndarray, segmentation: Segmentation,
     from nurbs_core.fitting.run import fit_arrays
 
     planes = [segmentation.surfaces[k] for k in region.planes]
-    gap = 2 * segmentation.tolerance + 2 * segmentation.spacing
+    # side points nearer a plane than twice the tolerance may be the cap's; beyond that the
+    # side's own points decide the surface (a wider gap left the rim to the continuation and
+    # put the edge 4-12 noise sigmas off the scan)
+    gap = 2 * segmentation.tolerance
     mine = region.mask.copy()
     if planes:
         mine &= np.min([p.distance(points) for p in planes], axis=0) > gap

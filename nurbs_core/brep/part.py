@@ -162,8 +162,9 @@ def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarr
                     tolerance: float) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """Each point's (N, 3) distance to the solid (N,) and nearest face (N,), and each face's
     surface index: the nearest face by a fine triangulation, the distance to that face's exact
-    surface (to the triangulation when the face lies on none of ``surfaces``)."""
+    surface (to the face's triangles when it lies on none of ``surfaces``)."""
     from nurbs_core.brep.solid import face_surfaces
+    from nurbs_core.mesh_distance import signed_distances
 
     vertices, triangles, owners = triangulate(solid, tolerance / 4)
     on_surface = face_surfaces(solid, surfaces, tolerance, (vertices, triangles, owners))
@@ -176,10 +177,12 @@ def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarr
     face = sample_face[nearest]
     distance = np.array(mesh_distance, np.float64)
     for index, surface_index in enumerate(on_surface):
-        if surface_index < 0:
-            continue
         mine = face == index
-        distance[mine] = surfaces[surface_index].distance(points[mine])
+        if surface_index >= 0:
+            distance[mine] = surfaces[surface_index].distance(points[mine])
+        elif mine.any():  # a freeform face: to its triangles, not to the nearest sample
+            signed, _ = signed_distances(points[mine], vertices, triangles[owners == index])
+            distance[mine] = np.abs(signed)
     return distance, face, on_surface
 
 

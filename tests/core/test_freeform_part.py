@@ -14,6 +14,7 @@ from nurbs_core.brep.occ import bounding_diagonal, count, faces, is_valid, volum
 from nurbs_core.brep.sample_parts import PARTS, loft, scan_part  # noqa: E402
 from nurbs_core.brep.segment import segment_subset  # noqa: E402
 from nurbs_core.cli import main  # noqa: E402
+from nurbs_core.occ_topology import subshapes  # noqa: E402
 
 NOISE = 0.002  # of the diagonal, as a sigma
 COUNT = 20_000
@@ -35,16 +36,21 @@ def _read_step(path):
     return reader.OneShape()
 
 
-def _distances(shape, points, deflection):
-    """The points' (N, 3) distances to a fine triangulation of the shape."""
-    import trimesh
+def _distances(shape, points):
+    """The points' (N,) exact distances to the shape's boundary (its shell, so that a point
+    inside a solid is not at 0), by OpenCASCADE's BRepExtrema."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeVertex
+    from OCP.BRepExtrema import BRepExtrema_DistShapeShape
+    from OCP.gp import gp_Pnt
 
-    from nurbs_core.io.cad import triangulate
-
-    vertices, triangles, _ = triangulate(shape, deflection)
-    mesh = trimesh.Trimesh(vertices, triangles, process=False)
-    _, distance, _ = trimesh.proximity.closest_point(mesh, points)
-    return np.asarray(distance)
+    (shell,) = subshapes(shape, "SHELL")
+    distance = np.empty(len(points))
+    for index, point in enumerate(points):
+        vertex = BRepBuilderAPI_MakeVertex(gp_Pnt(*map(float, point))).Vertex()
+        measure = BRepExtrema_DistShapeShape(vertex, shell)
+        assert measure.IsDone()
+        distance[index] = measure.Value()
+    return distance
 
 
 @pytest.fixture(scope="module")
@@ -74,6 +80,19 @@ def test_parts_of_primitives_have_no_freeform_region(name):
     assert freeform_region(segment_subset(points), points) is None
 
 
+def test_a_sparse_head_whose_flat_spots_run_smoothly_into_it_is_no_freeform_part():
+    """4,000 points of an unseen head with the uneven density of a real scan: 96% of them lie on
+    a dozen analytic fragments and two flat spots hold 5% each, but the head runs into those
+    planes smoothly (a median 19-21 degrees between their axes and the normals beside them),
+    so it is not a part's freeform face between caps (the network fits it; it cost a failed
+    solid before)."""
+    from nurbs_core import samples
+
+    points = samples.head(count=4000, noise=NOISE, variant=4).points
+    segmentation = segment_subset(points)
+    assert freeform_region(segmentation, points) is None
+
+
 def test_a_loft_becomes_one_solid_with_plane_caps_and_a_bspline_side(scanned, tmp_path,
                                                                      capsys):
     shape, points, owner, kinds = scanned
@@ -91,6 +110,7 @@ def test_a_loft_becomes_one_solid_with_plane_caps_and_a_bspline_side(scanned, tm
     assert types == ["GeomAbs_BSplineSurface", "GeomAbs_Plane", "GeomAbs_Plane"]
     assert abs(volume(read) / volume(shape) - 1) < 0.02
     sigma = NOISE * bounding_diagonal(shape)
-    distance = _distances(read, points, sigma / 4)
+    subset = np.random.default_rng(0).choice(len(points), 1500, replace=False)
+    distance = _distances(read, points[subset])
     assert distance.mean() <= 1.25 * sigma
     assert np.percentile(distance, 99) <= 4.5 * sigma
