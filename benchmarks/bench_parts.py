@@ -1,11 +1,13 @@
 """Scanned machined parts to solids: the part route against the parts OpenCASCADE built.
 
 Run: ``python benchmarks/bench_parts.py [--random N] [--points N] [--noise F] [--seed S]
-[--baseline] [--json OUT]``. Default: the five named parts of
-:data:`nurbs_core.brep.sample_parts.PARTS` and 20 random parts
+[--baseline] [--no-freeform] [--json OUT]``. Default: the named parts of
+:data:`nurbs_core.brep.sample_parts.PARTS`, 20 random parts
 (:func:`~nurbs_core.brep.sample_parts.random_part`: boxes with filleted edges, boxes cut by
 holes and dents with fillets or chamfers, cylinders, cones, spheres), 20,000 points each with
-Gaussian noise of 0.2 % of the diagonal (sigma), one torch thread.
+Gaussian noise of 0.2 % of the diagonal (sigma), one torch thread, and last the freeform parts
+of :data:`~nurbs_core.brep.sample_parts.FREEFORM_PARTS` (a loft with flat caps, a box with a
+bulged top; their freeform points count in no type accuracy).
 
 Each scan goes the default way (``choose_route``: a closed object, part-like or not), then
 ``fit_part`` when it is a part; a scan whose solid fails falls back to a network (as
@@ -42,7 +44,12 @@ from scipy.spatial import cKDTree
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from nurbs_core.brep.occ import bounding_diagonal, face_kind, faces  # noqa: E402
-from nurbs_core.brep.sample_parts import PARTS, random_part, scan_part  # noqa: E402
+from nurbs_core.brep.sample_parts import (  # noqa: E402
+    FREEFORM_PARTS,
+    PARTS,
+    random_part,
+    scan_part,
+)
 
 
 def _edge_points(points: np.ndarray, owner: np.ndarray) -> np.ndarray:
@@ -80,6 +87,7 @@ def _measure(name: str, shape: Any, count: int, noise: float, seed: int,
             true_kind = np.array(kinds)[owner]
             analytic = true_kind != "freeform"
             row["faces"] = len(out_kinds)
+            row["face_types"] = {str(k): int((out_kinds == k).sum()) for k in set(out_kinds)}
             row["type_accuracy"] = float((out_kinds[nearest][analytic]
                                           == true_kind[analytic]).mean())
             row["mean_sigma"] = float(distance.mean() / sigma)
@@ -115,6 +123,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--baseline", action="store_true",
                         help="also fit the named parts as networks (slow)")
+    parser.add_argument("--no-freeform", action="store_true",
+                        help="without the freeform parts (a loft with flat caps, a box with a "
+                        "bulged top)")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
     import torch
@@ -129,6 +140,8 @@ def main(argv: list[str] | None = None) -> int:
         family, shape = random_part(rng)
         if shape is not None and is_valid(shape):
             cases.append((f"{family}#{len(cases) - len(PARTS)}", shape, False))
+    if not args.no_freeform:  # last, so the rows above keep their seeds
+        cases += [(name, make(), args.baseline) for name, make in FREEFORM_PARTS.items()]
     print(f"# {platform.node()} {platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} CPUs, one torch thread; {args.points} points, noise "
           f"{args.noise:g} x diagonal")

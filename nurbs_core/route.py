@@ -119,6 +119,14 @@ def _part_or(route: Route, points: np.ndarray, forced: bool) -> Route:
     if part_like(segmentation) or forced:
         return Route("part", f"{route.finding}; {share} surfaces", route.mesh,
                      segmentation=segmentation)
+    if segmentation.coverage >= MIN_COVERAGE:
+        from nurbs_core.brep.freeform import freeform_region
+
+        region = freeform_region(segmentation, points)
+        if region is not None:
+            return Route("part", f"{route.finding}; {share} surfaces, a freeform region of "
+                         f"{region.mask.mean():.0%} of the points between "
+                         f"{len(region.planes)} planes", route.mesh, segmentation=segmentation)
     why = (f"under {MIN_COVERAGE:.0%}" if segmentation.coverage < MIN_COVERAGE
            else f"mostly spheres, cones and tori, over {MAX_CURVED:.0%}: a freeform shape")
     route.finding += f"; not a machined part ({share} surfaces, {why})"

@@ -101,12 +101,14 @@ def sample_shape(shape: OccShape, count: int, noise: float, rng: np.random.Gener
 
 
 def bounding_diagonal(shape: OccShape) -> float:
-    """The length of the shape's bounding box diagonal."""
+    """The length of the shape's bounding box diagonal: the exact box of its geometry, not of
+    a B-spline's control points (``BRepBndLib::Add`` before a shape is triangulated gave 5.79
+    for a 1.6 x 1.2 x 0.86 box with a B-spline top, 2.18 after)."""
     from OCP.Bnd import Bnd_Box
     from OCP.BRepBndLib import BRepBndLib
 
     box = Bnd_Box()
-    BRepBndLib.Add_s(shape, box)
+    BRepBndLib.AddOptimal_s(shape, box, False, False)
     return float(np.linalg.norm(np.subtract(box.CornerMax().Coord(), box.CornerMin().Coord())))
 
 

@@ -162,8 +162,9 @@ def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarr
                     tolerance: float) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """Each point's (N, 3) distance to the solid (N,) and nearest face (N,), and each face's
     surface index: the nearest face by a fine triangulation, the distance to that face's exact
-    surface (to the triangulation when the face lies on none of ``surfaces``)."""
+    surface (to the face's triangles when it lies on none of ``surfaces``)."""
     from nurbs_core.brep.solid import face_surfaces
+    from nurbs_core.mesh_distance import signed_distances
 
     vertices, triangles, owners = triangulate(solid, tolerance / 4)
     on_surface = face_surfaces(solid, surfaces, tolerance, (vertices, triangles, owners))
@@ -176,10 +177,12 @@ def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarr
     face = sample_face[nearest]
     distance = np.array(mesh_distance, np.float64)
     for index, surface_index in enumerate(on_surface):
-        if surface_index < 0:
-            continue
         mine = face == index
-        distance[mine] = surfaces[surface_index].distance(points[mine])
+        if surface_index >= 0:
+            distance[mine] = surfaces[surface_index].distance(points[mine])
+        elif mine.any():  # a freeform face: to its triangles, not to the nearest sample
+            signed, _ = signed_distances(points[mine], vertices, triangles[owners == index])
+            distance[mine] = np.abs(signed)
     return distance, face, on_surface
 
 
@@ -212,7 +215,11 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
     low, high = points.min(axis=0), points.max(axis=0)
     extents = spans(segmentation.surfaces, points, segmentation.labels,
                     float(np.linalg.norm(high - low)), segmentation.tolerance)
-    solid, surfaces, fillets = _filleted(points, (mesh_vertices, mesh_triangles), segmentation)
+    solid, surfaces = _freeform(points, segmentation)
+    fillets = 0
+    if solid is None:
+        solid, surfaces, fillets = _filleted(points, (mesh_vertices, mesh_triangles),
+                                             segmentation)
     if solid is None:
         surfaces = crossing(segmentation.surfaces, segmentation.tolerance)
         solid = build_solid(surfaces, mesh_vertices, mesh_triangles, (low, high), extents,
@@ -262,3 +269,21 @@ def _filleted(points: np.ndarray, mesh: tuple[np.ndarray, np.ndarray],
         return None, [], 0
     own = [face_primitive(face) for face in faces(solid)]
     return solid, [s for s in own if s is not None], rounded
+
+
+def _freeform(points: np.ndarray, segmentation: Segmentation
+              ) -> tuple[OccShape | None, list[Primitive]]:
+    """The solid of a part with a freeform region (:mod:`nurbs_core.brep.freeform`) and the
+    planes its other faces lie on; (None, []) when the scan has no freeform region or the
+    solid cannot be built (the analytic surfaces then make it)."""
+    from nurbs_core.brep.freeform import freeform_region, freeform_solid
+    from nurbs_core.brep.solid import SolidError
+
+    region = freeform_region(segmentation, points)
+    if region is None:
+        return None, []
+    try:
+        solid = freeform_solid(points, segmentation, region)
+    except SolidError:
+        return None, []
+    return solid, [segmentation.surfaces[k] for k in region.planes]

@@ -5,7 +5,9 @@ parts benchmark and users who want to try the part route.
 corner, a turned part (two cylinders and a cone), a block with every edge rounded (cylinders and
 corner spheres) and a countersunk block (a cone). :func:`random_part` draws from the families of
 :mod:`nurbs_core.learn.cad_solids` that make parts (a box with filleted edges, a box cut by holes
-and dents, a cylinder, cone or sphere). :func:`scan_part` samples one as a noisy cloud.
+and dents, a cylinder, cone or sphere). :data:`FREEFORM_PARTS` names two with a freeform face:
+a loft with flat caps and a box with a bulged top. :func:`scan_part` samples one as a noisy
+cloud.
 """
 
 from __future__ import annotations
@@ -140,6 +142,60 @@ PARTS: dict[str, Callable[[], OccShape]] = {
     "plate": plate, "bracket": bracket, "turned": turned, "rounded_block": rounded_block,
     "countersunk": countersunk, "thin_plate": thin_plate, "bent_plate": bent_plate}
 
+
+
+def _closed_section(radius: float, stretch: float, wobble: float, phase: float,
+                    offset: tuple[float, float], z: float) -> OccShape:
+    """A closed B-spline wire through 12 points of a wobbled ellipse at height ``z``."""
+    from nurbs_core.learn.cad_solids import _bspline_curve, _wire
+
+    theta = np.linspace(0.0, 2 * np.pi, 12, endpoint=False)
+    r = radius * (1.0 + wobble * np.cos(3 * theta + phase))
+    points = np.stack([r * np.cos(theta) + offset[0], stretch * r * np.sin(theta) + offset[1],
+                       np.full_like(theta, z)], -1)
+    return _wire(_bspline_curve(points, closed=True))
+
+
+def loft() -> OccShape:
+    """A freeform loft with flat caps: a smooth side through four closed B-spline sections
+    (wobbled ellipses of different sizes, offsets and turns) at heights 0, 0.5, 1 and 1.4,
+    closed by two planes (2 planes, 1 B-spline surface)."""
+    from OCP.BRepOffsetAPI import BRepOffsetAPI_ThruSections
+
+    maker = BRepOffsetAPI_ThruSections(True, False, 1e-6)
+    for radius, stretch, wobble, phase, offset, z in (
+            (0.8, 0.7, 0.08, 0.0, (0.0, 0.0), 0.0), (0.6, 0.9, 0.12, 0.8, (0.1, 0.05), 0.5),
+            (0.7, 0.65, 0.05, 1.9, (0.15, -0.05), 1.0), (0.45, 0.85, 0.1, 2.6, (0.0, 0.1), 1.4)):
+        maker.AddWire(_closed_section(radius, stretch, wobble, phase, offset, z))
+    maker.Build()
+    return maker.Shape()
+
+
+def bulged_box() -> OccShape:
+    """A 1.6 x 1.2 x 0.6 box whose top is a freeform bulge (a B-spline surface up to 0.25
+    above the flat top): 5 planes and 1 B-spline surface."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Common
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox, BRepPrimAPI_MakeHalfSpace
+    from OCP.collections import Array2_gp_Pnt
+    from OCP.GeomAbs import GeomAbs_Shape
+    from OCP.GeomAPI import GeomAPI_PointsToBSplineSurface
+
+    x, y = np.meshgrid(np.linspace(-0.4, 2.0, 9), np.linspace(-0.4, 1.6, 9), indexing="ij")
+    z = 0.6 + 0.22 * np.exp(-((x - 0.6) ** 2 + (y - 0.7) ** 2) / 0.3) + 0.05 * np.sin(2 * x)
+    grid = Array2_gp_Pnt(1, 9, 1, 9)
+    for i in range(9):
+        for j in range(9):
+            grid.SetValue(i + 1, j + 1, _pnt(float(x[i, j]), float(y[i, j]), float(z[i, j])))
+    surface = GeomAPI_PointsToBSplineSurface(grid, 3, 8, GeomAbs_Shape.GeomAbs_C2, 1e-4).Surface()
+    top = BRepBuilderAPI_MakeFace(surface, 1e-6).Face()
+    below = BRepPrimAPI_MakeHalfSpace(top, _pnt(0.8, 0.6, -5.0)).Solid()
+    box = BRepPrimAPI_MakeBox(_pnt(0, 0, 0), 1.6, 1.2, 1.2).Shape()
+    return BRepAlgoAPI_Common(box, below).Shape()
+
+
+#: freeform parts: a NURBS face where no primitive fits
+FREEFORM_PARTS: dict[str, Callable[[], OccShape]] = {"loft": loft, "bulged_box": bulged_box}
 
 def random_part(rng: np.random.Generator) -> tuple[str, OccShape | None]:
     """(family, shape or None when OpenCASCADE failed) from the part families of
