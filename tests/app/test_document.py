@@ -260,3 +260,40 @@ def test_a_dropped_session_opens_whole(qtbot, window, tmp_path):
         assert window.open_files([str(broken)])
     assert outcome.args == [False]
     np.testing.assert_array_equal(window.document.targets[0].points, points)  # unchanged
+
+
+def test_the_tree_greys_a_result_the_mode_does_not_draw(qtbot, window, tmp_path):
+    """A reopened Patches session listed its single patch as a checked "Fitted surface" that
+    Patches mode never draws: each fit's result is listed in its own mode, greyed in the
+    others (no checkbox), naming the mode that shows it; the session keeps it all the same."""
+    from PySide6.QtCore import Qt
+
+    from nurbs_core.patches.network import build_network
+
+    corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    quads = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4],
+                      [1, 5, 7, 3]])
+    grid = np.stack(np.meshgrid(np.linspace(0, 1, 4), np.linspace(0, 1, 4), indexing="ij"), -1)
+    knots = [0.0] * 4 + [1.0] * 4
+    window.document.set_fitted({"kind": "surface", "degree_u": 3, "degree_v": 3,
+                                "knots_u": knots, "knots_v": knots, "weights": np.ones((4, 4)),
+                                "control_points": np.concatenate(
+                                    [grid, np.zeros((4, 4, 1))], -1)})
+    window.document.set_network(build_network(corners, quads, size=4, degree=3))
+    window.document.edit_settings("Fit mode", fit_mode="patches")
+    save_session(qtbot, window, tmp_path / "work.nstudio")
+    window.document.edit_settings("Fit mode", fit_mode="single")
+    open_session(qtbot, window, tmp_path / "work.nstudio")  # reopened in Patches mode
+
+    def rows():
+        items = [window.tree.topLevelItem(k) for k in range(window.tree.topLevelItemCount())]
+        return {item.text(0): item for item in items}
+
+    assert window.document.settings.fit_mode == "patches" and window.document.fitted is not None
+    held = rows()["Fitted surface: shown in Single patch mode"]
+    assert not held.flags() & Qt.ItemFlag.ItemIsEnabled and held.childCount() == 0
+    assert not held.flags() & Qt.ItemFlag.ItemIsUserCheckable
+    assert "Patch network (6 patches)" in rows() and "Fitted surface" not in rows()
+    window.document.edit_settings("Fit mode", fit_mode="single")
+    assert "Fitted surface" in rows() and "Patch network (6 patches): shown in Patches mode" in (
+        rows())
