@@ -1,9 +1,11 @@
 """The settings policy: what an edit of the settings restarts, defers or switches in the window.
 
 It decides: every panel shows the new settings; a change of fit mode stops the other mode's fit
-and raises the mode's docks; a changed fit (or patch network) setting restarts a running or
-paused run of that fit, else applies at the next Start; a changed offset setting recomputes the
-offsets. The settings themselves (their values and limits) are :mod:`app.state`'s.
+and raises the mode's docks (Solid mode hides the Patches dock, none of whose settings a solid
+uses, and leaving it brings the dock back when Solid mode hid it); a changed fit (or patch
+network) setting restarts a running or paused run of that fit, else applies at the next Start;
+a changed offset setting recomputes the offsets. The settings themselves (their values and
+limits) are :mod:`app.state`'s.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ class SettingsPolicy(QObject):
     def __init__(self, window: SettingsHost):
         super().__init__(window)
         self._window = window
+        self._patches_dock_hidden = False  # Solid mode hid it (leaving Solid mode shows it)
 
     def show(self, settings: Settings) -> None:
         """Every panel (and the viewport's mode) shows ``settings``."""
@@ -83,10 +86,18 @@ class SettingsPolicy(QObject):
         for controller in (window.controller, window.patch_controller, window.part_controller):
             if controller is not self._controller_of(mode):
                 controller.stop()
+        if mode == "solid":
+            if not window.patches_dock.isHidden():
+                window.patches_dock.hide()
+                self._patches_dock_hidden = True
+        elif self._patches_dock_hidden:
+            window.patches_dock.show()
+            self._patches_dock_hidden = False
         if mode == "patches":
             window.patches_dock.raise_()
             window.network_quality_dock.raise_()
         elif mode == "solid":
+            window.fit_dock.raise_()
             window.solid_dock.raise_()
         else:
             window.fit_dock.raise_()

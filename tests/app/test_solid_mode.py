@@ -345,3 +345,21 @@ def test_the_deviation_report_of_a_solid_lists_its_faces(qtbot, window, tmp_path
     html = export_report(qtbot, window, monkeypatch, tmp_path / "solid.html")
     assert "a solid (machined part)" in html and "6 (6 planes)" in html
     assert "valid, closed" in html and "converged" in html
+
+
+def test_solid_mode_hides_the_patches_dock_and_gives_it_back(qtbot, window):
+    """None of the Patches dock's settings makes a solid: Solid mode showed it on the right
+    (raised by Patches mode before); it hides there and comes back on leaving Solid mode."""
+    dock = window.patches_dock
+    window.document.edit_settings("Fit mode", fit_mode="patches")
+    assert dock.isVisible() and not dock.visibleRegion().isEmpty()  # the raised tab
+    window.document.edit_settings("Fit mode", fit_mode="solid")
+    assert dock.isHidden() and window.solid_dock.isVisible()
+    assert not window.fit_dock.visibleRegion().isEmpty()  # the right side's first tab instead
+    window.document.edit_settings("Fit mode", fit_mode="single")
+    assert not dock.isHidden()
+    # a dock the user closed stays closed
+    dock.close()
+    window.document.edit_settings("Fit mode", fit_mode="solid")
+    window.document.edit_settings("Fit mode", fit_mode="patches")
+    assert dock.isHidden()
