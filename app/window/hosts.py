@@ -130,6 +130,8 @@ class SettingsHost(Protocol):
     patches_panel: PatchesPanel
     mode_selector: ModeSelector
     fit_dock: QDockWidget
+    knot_dock: QDockWidget
+    offset_dock: QDockWidget
     patches_dock: QDockWidget
     quality_dock: QDockWidget
     network_quality_dock: QDockWidget

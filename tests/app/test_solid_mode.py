@@ -347,19 +347,21 @@ def test_the_deviation_report_of_a_solid_lists_its_faces(qtbot, window, tmp_path
     assert "valid, closed" in html and "converged" in html
 
 
-def test_solid_mode_hides_the_patches_dock_and_gives_it_back(qtbot, window):
-    """None of the Patches dock's settings makes a solid: Solid mode showed it on the right
-    (raised by Patches mode before); it hides there and comes back on leaving Solid mode."""
-    dock = window.patches_dock
+def test_solid_mode_hides_the_settings_docks_and_gives_them_back(qtbot, window):
+    """None of the right-hand docks' settings (Fit settings, Knots, Offsets, Patches) makes a
+    solid: Solid mode showed the Patches dock there (raised by Patches mode before); they hide,
+    the viewport takes their room, and they come back on leaving Solid mode."""
+    right = [window.fit_dock, window.knot_dock, window.offset_dock, window.patches_dock]
     window.document.edit_settings("Fit mode", fit_mode="patches")
-    assert dock.isVisible() and not dock.visibleRegion().isEmpty()  # the raised tab
+    assert not window.patches_dock.visibleRegion().isEmpty()  # the raised tab
+    width = window.scene.widget.width()
     window.document.edit_settings("Fit mode", fit_mode="solid")
-    assert dock.isHidden() and window.solid_dock.isVisible()
-    assert not window.fit_dock.visibleRegion().isEmpty()  # the right side's first tab instead
+    assert all(dock.isHidden() for dock in right) and window.solid_dock.isVisible()
+    qtbot.waitUntil(lambda: window.scene.widget.width() > width + 100, timeout=5000)
     window.document.edit_settings("Fit mode", fit_mode="single")
-    assert not dock.isHidden()
+    assert not any(dock.isHidden() for dock in right)
     # a dock the user closed stays closed
-    dock.close()
+    window.patches_dock.close()
     window.document.edit_settings("Fit mode", fit_mode="solid")
     window.document.edit_settings("Fit mode", fit_mode="patches")
-    assert dock.isHidden()
+    assert window.patches_dock.isHidden() and not window.fit_dock.isHidden()
