@@ -32,7 +32,8 @@ def test_the_jobs_table_has_a_row_per_job(qtbot, capsys, tmp_path):
             (line.split("|") for line in lines[3:])}
     assert list(rows) == ["idle window (baseline)", "load the cloud (.npy)",
                           "surface fit (default route)", "export the fit (.step)",
-                          "deviation report (.html)", "save the session", "open the session"]
+                          "export again (OCP loaded)", "deviation report (.html)",
+                          "save the session", "open the session"]
     for seconds, ticks, median, p99, longest, frame in rows.values():
         assert float(seconds) > 0 and int(ticks) >= 1
         assert 0 < float(median) <= float(p99) <= float(longest) + 1 and float(frame) >= 0
