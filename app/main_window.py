@@ -70,6 +70,7 @@ from app.viewport.scene import SceneView
 from app.window.export_policy import ExportPolicy
 from app.window.fit_display import FitDisplay
 from app.window.history_policy import HistoryPolicy
+from app.window.job_indicator import JobIndicator
 from app.window.load_policy import LoadPolicy, RecentFiles
 from app.window.run_labels import RunLabels
 from app.window.selection_policy import SelectionPolicy
@@ -139,6 +140,7 @@ class MainWindow(QMainWindow):
 
     files_loaded = Signal(bool)  # True: the document now holds the files; False: load failed
     export_finished = Signal(str, bool)  # path, success
+    session_saved = Signal(str, bool)  # path, success (False: failed or cancelled)
     offsets_updated = Signal(bool)
     error_shown = Signal(str)
 
@@ -302,11 +304,13 @@ class MainWindow(QMainWindow):
         self.open_action = self._action("&Open...", self.load_policy.open_dialog,
                                         QKeySequence.StandardKey.Open, pixmap.SP_DialogOpenButton)
         self.demo_action = self._action("Open &Demo", self.open_demo)
-        self.cancel_load_action = self._action("&Cancel Loading", self.cancel_load,
+        # cancels the job the status bar shows (reading files or a session, saving a session)
+        self.cancel_load_action = self._action("&Cancel Loading",
+                                               lambda *_: self.job_indicator.cancel(),
                                                QKeySequence(Qt.Key.Key_Escape),
                                                pixmap.SP_DialogCancelButton)
-        self.cancel_load_action.setToolTip("Stop reading the files (Esc); the document stays "
-                                           "as it was")
+        self.cancel_load_action.setToolTip("Stop reading or saving (Esc); the document and "
+                                           "the files stay as they were")
         self.cancel_load_action.setEnabled(False)
         self.open_session_action = self._action("Open &Session...", self.session_policy.open_dialog)
         self.save_session_action = self._action("&Save Session...", self.session_policy.save_dialog,
@@ -533,7 +537,9 @@ class MainWindow(QMainWindow):
         layout.addWidget(self.load_progress)
         layout.addWidget(self.load_cancel_button)
         self.statusBar().addPermanentWidget(self.load_indicator)
-        self.load_indicator.hide()  # shown by the load policy while a load runs
+        self.load_indicator.hide()  # shown while a load or a session's save runs
+        self.job_indicator = JobIndicator(self.load_indicator, self.load_progress,
+                                          self.cancel_load_action, self)
         self.status_labels = {}
         selection = QLabel("")  # "12,345 of 1,000,000 points selected" while any are
         selection.setStyleSheet("QLabel { background: #ffc400; color: #111111; "
@@ -854,13 +860,15 @@ class MainWindow(QMainWindow):
         return self.solid_policy.export(path)
 
     def save_session(self, path: str) -> bool:
-        """Write the session atomically: on failure the user is told and an existing file at
+        """Save the session in a job, atomically (ends with ``session_saved(path, ok)``): on
+        failure or cancel the user is told and an existing file at
         ``path`` is left byte for byte as it was."""
         return self.session_policy.save(path)
 
     def open_session(self, path: str) -> bool:
-        """Open a session; a file that does not read leaves the document and the fit unchanged."""
-        return self.session_policy.open(path)
+        """Open a session in a load job (ends with ``files_loaded(ok)``); a file that does not
+        read leaves the document and the fit unchanged."""
+        return self.load_policy.open_session(path)
 
     def shortcut_table(self) -> list[tuple[str, str]]:
         """(what, keys) of every action with a shortcut, in menu order: Help > Keyboard
@@ -929,7 +937,7 @@ class MainWindow(QMainWindow):
         return (self.controller.live_timers() + self.patch_controller.live_timers()
                 + self.part_controller.live_timers()
                 + self.scene.live_timers()
-                + self.loss_plot.live_timers() + self.load_policy.live_timers())
+                + self.loss_plot.live_timers() + self.job_indicator.live_timers())
 
     def shutdown(self):
         """Stop the worker, jobs and timers and release the render window; idempotent.
@@ -940,6 +948,7 @@ class MainWindow(QMainWindow):
             return
         self._is_shut_down = True
         self.load_policy.shut_down()
+        self.job_indicator.shut_down()
         self.fit_panel.cancel_pending()
         self.patches_panel.cancel_pending()
         self.controller.shutdown()

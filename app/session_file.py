@@ -18,6 +18,8 @@ import io
 import json
 import os
 import zipfile
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -42,24 +44,62 @@ def is_archive(path: str | Path) -> bool:
         return False
 
 
+#: Bytes written between two progress reports and cancel checks while an array is written.
+WRITE_CHUNK = 1 << 20
+
+
+class _ReportingWriter:
+    """A zip member's writer that writes in :data:`WRITE_CHUNK` pieces, calling ``step(bytes)``
+    after each (progress, and a cancel check that may raise)."""
+
+    def __init__(self, member: Any, step: Callable[[int], None]):
+        self._member, self._step = member, step
+
+    def write(self, data: Any) -> int:
+        view = memoryview(data).cast("B")
+        for start in range(0, len(view), WRITE_CHUNK):
+            piece = view[start:start + WRITE_CHUNK]
+            self._member.write(piece)
+            self._step(len(piece))
+        return len(view)
+
+
 def write_archive(path: str | Path, manifest: dict[str, Any], arrays: dict[str, np.ndarray],
-                  documents: dict[str, dict[str, Any]]) -> None:
+                  documents: dict[str, dict[str, Any]],
+                  report: Callable[[float], None] | None = None,
+                  check: Callable[[], None] | None = None) -> None:
     """Write the session atomically: ``manifest`` as ``session.json``, each array as
     ``<name>.npy``, each document as JSON under its name. JSON and arrays are encoded before the
-    file is touched (a failure writes nothing and leaves an existing file as it was)."""
+    file is touched (a failure writes nothing and leaves an existing file as it was).
+    ``report(fraction)``: told how much of the data is written; ``check()``: called between
+    pieces of about :data:`WRITE_CHUNK` bytes, may raise to stop (a cancel): the file is then
+    left as it was too."""
     from nurbs_core.atomic import atomic_write
 
     texts = {MANIFEST: json.dumps(manifest, allow_nan=False)}
     texts.update({name: json.dumps(document, allow_nan=False)
                   for name, document in documents.items()})
+    total = max(1, sum(len(text) for text in texts.values())
+                + sum(int(array.nbytes) for array in arrays.values()))
+    written = 0
+
+    def step(count: int) -> None:
+        nonlocal written
+        written += count
+        if check is not None:
+            check()
+        if report is not None:
+            report(written / total)
+
     with atomic_write(path, "wb") as handle, \
             zipfile.ZipFile(handle, "w", zipfile.ZIP_STORED, allowZip64=True) as archive:
         for name, text in texts.items():
             archive.writestr(name, text)
+            step(len(text))
         for name, array in arrays.items():
             with archive.open(f"{name}.npy", "w", force_zip64=True) as member:
-                np.lib.format.write_array(member, np.ascontiguousarray(array),
-                                          allow_pickle=False)
+                np.lib.format.write_array(_ReportingWriter(member, step),
+                                          np.ascontiguousarray(array), allow_pickle=False)
 
 
 class SessionArchive:
@@ -126,12 +166,26 @@ class SessionArchive:
             raise ValueError(f"{name}.npy is damaged ({exc})") from None
 
 
-def save_session(document: Document, path: str | Path,
-                 network_report: dict[str, Any] | None = None) -> None:
-    """Write ``document`` as a session (see the module docstring) with its patch network when one
-    is shown and ``network_report`` (its quality, warnings, pass count, time and per-point
-    ``deviation`` (N,)), atomically: ``path`` is replaced only by a complete file (a failed
-    write raises and leaves an existing file as it was)."""
+@dataclass(frozen=True)
+class SessionContent:
+    """What a save writes, taken from the document at one moment (on the GUI thread, cheaply:
+    the arrays and the network and solid are referenced, never copied; the app replaces them,
+    it never changes them in place). ``manifest``: the session's JSON; ``arrays``: name -> array
+    (the clouds' points (N, 3), the network's deviation (N,), the solid's per-point arrays);
+    ``network`` (a PatchNetwork) and ``solid`` (a PartOutcome) are turned into their documents
+    by :func:`write_session`, off the GUI thread."""
+
+    manifest: dict[str, Any]
+    arrays: dict[str, np.ndarray]
+    network: Any = None
+    solid: Any = None
+
+
+def session_content(document: Document,
+                    network_report: dict[str, Any] | None = None) -> SessionContent:
+    """The session of ``document`` with its patch network when one is shown and
+    ``network_report`` (its quality, warnings, pass count, time and per-point ``deviation``
+    (N,)), ready for :func:`write_session`."""
     arrays = {f"targets/{k}": t.points for k, t in enumerate(document.targets)}
     manifest: dict[str, Any] = {
         "format": ARCHIVE_FORMAT,
@@ -144,11 +198,7 @@ def save_session(document: Document, path: str | Path,
         "fitted": None if document.fitted is None else document.fitted.to_json(),
         "network": None, "network_report": None,
     }
-    documents = {}
     if document.network is not None:
-        from nurbs_core.io.network_io import network_document
-
-        documents["network.json"] = network_document(document.network)
         manifest["network"] = "network.json"
         report = dict(network_report or {})
         deviation = report.pop("deviation", None)
@@ -157,12 +207,36 @@ def save_session(document: Document, path: str | Path,
             report["deviation"] = "network_deviation"
         manifest["network_report"] = report
     if document.solid is not None:
-        from app.solid_session import SOLID_MEMBER, solid_document
+        from app.solid_session import SOLID_MEMBER
 
-        documents[SOLID_MEMBER], solid_arrays = solid_document(document.solid)
-        arrays.update(solid_arrays)
         manifest["solid"] = SOLID_MEMBER
-    write_archive(path, manifest, arrays, documents)
+    return SessionContent(manifest, arrays, document.network, document.solid)
+
+
+def write_session(content: SessionContent, path: str | Path,
+                  report: Callable[[float], None] | None = None,
+                  check: Callable[[], None] | None = None) -> None:
+    """Write ``content`` as a session file, atomically: ``path`` is replaced only by a complete
+    file (a failed write, or ``check()`` raising, leaves an existing file as it was).
+    ``report`` and ``check``: as :func:`write_archive` takes them."""
+    arrays, documents = dict(content.arrays), {}
+    if content.network is not None:
+        from nurbs_core.io.network_io import network_document
+
+        documents[content.manifest["network"]] = network_document(content.network)
+    if content.solid is not None:
+        from app.solid_session import solid_document
+
+        documents[content.manifest["solid"]], solid_arrays = solid_document(content.solid)
+        arrays.update(solid_arrays)
+    write_archive(path, content.manifest, arrays, documents, report, check)
+
+
+def save_session(document: Document, path: str | Path,
+                 network_report: dict[str, Any] | None = None) -> None:
+    """Write ``document`` as a session (see the module docstring and :func:`session_content`)
+    in this thread, atomically."""
+    write_session(session_content(document, network_report), path)
 
 
 def read_session(path: str | Path) -> dict[str, Any]:

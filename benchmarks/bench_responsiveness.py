@@ -7,9 +7,18 @@ long gap is the GUI thread busy (drawing a snapshot, handling the worker's signa
 only check that the event loop keeps processing events during a fit; how quickly it does is
 measured here.
 
+With ``--jobs`` it measures, on a cloud of ``--points`` points (1,000,000 by default), each job
+a user waits on, probed from the click until its outcome is drawn: loading the cloud, the
+default surface fit, exporting the fit (STEP; the first export imports OpenCASCADE, so it runs
+twice), the deviation report, saving the session and opening it again; one row per job with
+its seconds (click to outcome), the longest stall of the event loop and the slowest frame the
+viewport drew meanwhile (a stall as long as a frame is drawing, on the GUI thread by nature),
+beside the idle window holding the same cloud.
+
 Run (needs a display; under a headless machine use xvfb-run)::
 
     xvfb-run -a python benchmarks/bench_responsiveness.py [--ticks 300] [--patches]
+    xvfb-run -a python benchmarks/bench_responsiveness.py --jobs [--points 1000000]
 """
 
 from __future__ import annotations
@@ -82,11 +91,131 @@ def _row(label: str, gaps: np.ndarray) -> str:
             f"{ms.max():>9.1f}")
 
 
+def probe_job(app, window, start, finished, timeout: float, interval_ms: int = 10
+              ) -> tuple[float, np.ndarray]:
+    """Run ``start()`` from the event loop and tick an ``interval_ms`` timer until ``finished()``
+    holds and the viewport has drawn the outcome (no redraw pending); returns the job's seconds
+    and the gaps between ticks (seconds). ``start`` returning False ends the run."""
+    from PySide6.QtCore import QEventLoop, QTimer
+
+    stamps: list[float] = []
+    loop = QEventLoop()
+    begun: list[float] = []
+    ended: list[float] = []
+    window.scene.last_render_ms = 0.0
+    frames: list[float] = []  # the slowest frame drawn so far, at each tick
+
+    def begin():
+        begun.append(time.perf_counter())
+        stamps.append(begun[0])  # a stall right after the click counts too
+        if start() is False:
+            raise SystemExit(f"bench_responsiveness: a job did not start: {window.last_error}")
+
+    def tick():
+        now = time.perf_counter()
+        stamps.append(now)
+        frames.append(window.scene.last_render_ms)
+        if not begun:
+            return
+        if not ended and finished():
+            ended.append(now)
+        # a few ticks after the end, with no redraw pending: the outcome is on screen
+        if ended and not window.scene.live_timers() and now - ended[0] > 0.1:
+            loop.quit()
+        if now - begun[0] > timeout:
+            raise SystemExit("bench_responsiveness: gave up waiting for a job")
+
+    timer = QTimer()
+    timer.setInterval(interval_ms)
+    timer.timeout.connect(tick)
+    timer.start()
+    QTimer.singleShot(0, begin)
+    loop.exec()
+    timer.stop()
+    return ended[0] - begun[0], np.diff(stamps), max(frames, default=0.0)
+
+
+def _job_row(label: str, seconds: float, gaps: np.ndarray, frame_ms: float) -> str:
+    ms = gaps * 1000
+    return (f"| {label} | {seconds:.2f} | {len(gaps)} | {np.median(ms):.1f} | "
+            f"{np.percentile(ms, 99):.1f} | {ms.max():.0f} | {frame_ms:.0f} |")
+
+
+def _settle(app, window) -> None:
+    """Draw what is pending and wait until no frame is due: a probe then starts quiet."""
+    window.scene.render_now()
+    _wait(app, lambda: not window.scene.live_timers(), 60, "the viewport to settle")
+
+
+def measure_jobs(app, window, folder: Path, points: int, ticks: int) -> list[str]:
+    """One row per job on a cloud of ``points`` points (see the module docstring)."""
+    rows = []
+    cloud = folder / "scan.npy"
+    xy = np.random.default_rng(3).uniform(-3.0, 3.0, size=(points, 2))
+    np.save(cloud, np.column_stack([xy, np.sin(xy[:, 0]) * np.cos(xy[:, 1])]))
+    loaded: list[bool] = []
+    window.files_loaded.connect(loaded.append)
+    rows.append(_job_row("load the cloud (.npy)", *probe_job(
+        app, window, lambda: window.open_files([str(cloud)]), lambda: bool(loaded), 600)))
+    if loaded != [True]:
+        raise SystemExit(f"bench_responsiveness: could not open the cloud: {window.last_error}")
+    window.units_policy.choose("mm")
+    _settle(app, window)
+    window.scene.last_render_ms = 0.0
+    gaps = probe_gaps(app, ticks)
+    rows.insert(0, _job_row("idle window (baseline)", float(gaps.sum()), gaps,
+                            window.scene.last_render_ms))
+
+    controller = window.controller
+    finished: list[object] = []
+    controller.fit_finished.connect(finished.append)
+    _settle(app, window)
+    rows.append(_job_row("surface fit (default route)", *probe_job(
+        app, window, window.start_fit,
+        lambda: bool(finished) and window.deviation_panel.map is not None, 1800)))
+
+    exported: list[bool] = []
+    window.export_finished.connect(lambda _path, ok: exported.append(ok))
+    _settle(app, window)
+    rows.append(_job_row("export the fit (.step)", *probe_job(
+        app, window, lambda: window.export_to(str(folder / "fit.step")),
+        lambda: bool(exported), 600)))
+    # the first export imports OpenCASCADE (OCP): its modules' initialisation holds the GIL
+    _settle(app, window)
+    rows.append(_job_row("export again (OCP loaded)", *probe_job(
+        app, window, lambda: window.export_to(str(folder / "fit_again.step")),
+        lambda: len(exported) >= 2, 600)))
+    rows.append(_job_row("deviation report (.html)", *probe_job(
+        app, window, lambda: window.export_report(str(folder / "report.html")),
+        lambda: len(exported) >= 3, 600)))
+    if exported != [True, True, True]:
+        raise SystemExit(f"bench_responsiveness: an export failed: {window.last_error}")
+
+    saved: list[bool] = []
+    window.session_saved.connect(lambda _path, ok: saved.append(ok))
+    session = folder / "work.nstudio"
+    _settle(app, window)
+    rows.append(_job_row("save the session", *probe_job(
+        app, window, lambda: window.save_session(str(session)), lambda: bool(saved), 600)))
+    loaded.clear()
+    rows.append(_job_row("open the session", *probe_job(
+        app, window, lambda: window.open_session(str(session)), lambda: bool(loaded), 600)))
+    if saved != [True] or loaded != [True]:
+        raise SystemExit(f"bench_responsiveness: the session failed: {window.last_error}")
+    return rows
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--ticks", type=int, default=300, help="probe ticks per condition")
     parser.add_argument("--patches", action="store_true", help="also probe during a patch fit")
+    parser.add_argument("--jobs", action="store_true",
+                        help="measure the jobs on a large cloud instead (see --points)")
+    parser.add_argument("--points", type=int, default=1_000_000,
+                        help="the cloud's points for --jobs")
     args = parser.parse_args(argv)
+    if args.jobs:
+        return main_jobs(args.points, args.ticks)
 
     from PySide6.QtCore import QSettings
     from PySide6.QtWidgets import QApplication
@@ -132,6 +261,34 @@ def main(argv=None) -> int:
             app.processEvents()
     print(f"Gaps between ticks of a 10 ms QTimer (ms); {args.ticks} ticks per condition")
     print(f"{'condition':<28} {'gaps':>6} {'median':>9} {'p99':>9} {'max':>9}")
+    for row in rows:
+        print(row)
+    return 0
+
+
+def main_jobs(points: int, ticks: int) -> int:
+    """The --jobs table: the longest event-loop stall of each job on ``points`` points."""
+    from PySide6.QtCore import QSettings
+    from PySide6.QtWidgets import QApplication
+
+    from app.main_window import MainWindow
+
+    app = QApplication.instance() or QApplication([])
+    with tempfile.TemporaryDirectory(prefix="bench_responsiveness_") as folder:
+        store = QSettings(str(Path(folder) / "settings.ini"), QSettings.Format.IniFormat)
+        window = MainWindow(settings_store=store)
+        window.resize(1280, 800)
+        window.show()
+        try:
+            rows = measure_jobs(app, window, Path(folder), points, ticks)
+        finally:
+            window.close()
+            app.processEvents()
+    print(f"Jobs on {points} points: seconds from the click to the outcome; until it is drawn, "
+          "the gaps between ticks of a 10 ms QTimer (ms) and the slowest frame the viewport "
+          "drew (ms)")
+    print("| job | seconds | ticks | median gap | p99 gap | longest stall | slowest frame |")
+    print("|---|---|---|---|---|---|---|")
     for row in rows:
         print(row)
     return 0

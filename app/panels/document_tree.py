@@ -1,5 +1,7 @@
 """The document tree: point clouds, fitted shape, patch network, solid, patches, offsets; checkboxes set
-visibility."""
+visibility. Each fit's result is drawn only in its own mode (the single patch in Single patch,
+the network in Patches, the solid in Solid): in the other modes it is listed greyed, without a
+checkbox, saying which mode shows it (the document still holds it; sessions keep it)."""
 
 from __future__ import annotations
 
@@ -8,7 +10,7 @@ from collections.abc import Callable
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QTreeWidget, QTreeWidgetItem
 
-from app.state import Document
+from app.state import FIT_MODES, Document
 
 ROLE = Qt.ItemDataRole.UserRole
 
@@ -35,6 +37,15 @@ class DocumentTree(QTreeWidget):
         item.setToolTip(0, tooltip or text)
         return item
 
+    def _held(self, text: str, mode: str) -> QTreeWidgetItem:
+        """A result the current mode does not draw: greyed, no checkbox, naming its mode."""
+        name = dict(FIT_MODES)[mode]
+        item = QTreeWidgetItem(self, [f"{text}: shown in {name} mode"])
+        item.setFlags(Qt.ItemFlag.NoItemFlags)
+        item.setToolTip(0, f"kept in the document (a saved session keeps it); Mode > {name} "
+                           "shows it")
+        return item
+
     def rebuild(self, document: Document, layer_visible: Callable[[str], bool],
                 deviation_visible: bool, quality_visible: bool = False,
                 seam_visible: bool = False):
@@ -48,9 +59,13 @@ class DocumentTree(QTreeWidget):
             for index, target in enumerate(document.targets):
                 self._item(clouds, f"{target.name} ({len(target.points)} points)",
                            ("target", index), target.visible, target.path)
+            mode = document.settings.fit_mode
             fitted = document.fitted
             self.shows_fit = fitted is not None
-            if fitted is not None:
+            if fitted is not None and mode != "single":
+                self._held("Fitted surface" if fitted.kind == "surface" else "Fitted curve",
+                           "single")
+            elif fitted is not None:
                 kind = fitted.kind
                 label = "Fitted surface" if kind == "surface" else "Fitted curve"
                 top = self._item(self, label, ("layer", kind), layer_visible(kind))
@@ -65,7 +80,9 @@ class DocumentTree(QTreeWidget):
                                "far from the cloud")
             network = document.network
             self.shows_network = network is not None
-            if network is not None:
+            if network is not None and mode != "patches":
+                self._held(f"Patch network ({network.patch_count} patches)", "patches")
+            elif network is not None:
                 top = self._item(self, f"Patch network ({network.patch_count} patches)",
                                  ("layer", "network"), layer_visible("network"),
                                  "the fitted patch network (Patches mode)")
@@ -75,7 +92,9 @@ class DocumentTree(QTreeWidget):
                            "colour the network by the angle between neighbouring patches")
             solid = document.solid
             self.shows_solid = solid is not None
-            if solid is not None:
+            if solid is not None and mode != "solid":
+                self._held(f"Solid: {solid.report.summary()}", "solid")
+            elif solid is not None:
                 self._item(self, f"Solid: {solid.report.summary()}", ("layer", "solid"),
                            layer_visible("solid"),
                            "the solid with analytic faces (Solid mode): " + solid.report.status)

@@ -73,8 +73,8 @@ class NetworkLayers:
         self.scalar_bar = self.plotter.add_scalar_bar(
             SEAM_TITLE, mapper=actor.mapper, render=False, vertical=True, position_x=0.85,
             position_y=0.12, height=0.55, width=0.07, fmt="%.2g", color="#222222",
-            n_labels=label_count(SEAM_MIN_TOP), title_font_size=14, label_font_size=13,
-            above_label=f"> {SEAM_MIN_TOP:g}")
+            n_labels=label_count(SEAM_MIN_TOP), title_font_size=14, label_font_size=13)
+        self._label_bar(SEAM_MIN_TOP)
         self._meshes["layout"] = pv.PolyData()
         self._actors["layout"] = self.plotter.add_mesh(
             self._meshes["layout"], name="layout", color=COLORS["layout"], line_width=2.0,
@@ -114,12 +114,32 @@ class NetworkLayers:
                 mapper = self._actors["network"].mapper
                 if mapper.scalar_range[1] != top:  # relabelling the bar costs a slow frame
                     mapper.scalar_range = (0.0, top)
-                    self.scalar_bar.SetNumberOfLabels(label_count(top))
-                    self.scalar_bar.SetAboveRangeAnnotation(f"> {top:g}")
+                    self._label_bar(top)
             self._show_lines(display)
             self._meshes["corners"].copy_from(pv.PolyData(display.corners.copy())
                                               if len(display.corners) else pv.PolyData())
         self._apply()
+
+    def _label_bar(self, top: float) -> None:
+        """Label the seam bar from 0 to ``top`` at round steps, and its above-range swatch
+        "> top", all on one side of the bar: as annotations, which VTK lays out without
+        overlaps (tick labels and annotations sit on opposite sides, so the swatch's "> top"
+        stood level with the tick "top" across the bar, over the shape)."""
+        from vtkmodules.vtkRenderingAnnotation import vtkScalarBarActor
+
+        bar = self.scalar_bar
+        table = self._actors["network"].mapper.lookup_table
+        table.ResetAnnotations()
+        count = label_count(top)
+        for step in range(count):
+            value = top * step / (count - 1)
+            table.SetAnnotation(value, f"{value:.2g}")
+        bar.SetTextPosition(vtkScalarBarActor.PrecedeScalarBar)  # annotations to the right
+        bar.DrawTickLabelsOff()
+        bar.SetDrawAnnotations(True)
+        bar.SetAnnotationTextScaling(False)
+        bar.SetDrawAboveRangeSwatch(True)
+        bar.SetAboveRangeAnnotation(f"> {top:g}")
 
     def _show_lines(self, display: NetworkDisplay):
         lines = self._meshes["layout"]

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 if TYPE_CHECKING:
     from PySide6.QtCore import SignalInstance
     from PySide6.QtGui import QAction
-    from PySide6.QtWidgets import QDockWidget, QLabel, QProgressBar, QStatusBar, QWidget
+    from PySide6.QtWidgets import QDockWidget, QLabel, QStatusBar
 
     from app.controller import FitController
     from app.offsets import OffsetController
@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     from app.patch_controller import PatchController
     from app.state import Document
     from app.viewport.scene import SceneView
+    from app.window.job_indicator import JobIndicator
     from app.window.run_labels import RunLabels
     from app.workers.jobs import JobRunner
 
@@ -69,18 +70,25 @@ class ExportHost(Reporter, Protocol):
 
 
 @runtime_checkable
+class SessionOpener(Protocol):
+    """What becomes of a session file the load policy has read (the session policy)."""
+
+    def apply(self, path: str, session: dict[str, Any]) -> None: ...
+    def failed(self, path: str, exc: BaseException) -> None: ...
+
+
+@runtime_checkable
 class LoadHost(Reporter, Protocol):
     document: Document
     controller: FitController
     part_controller: PartController
     jobs: JobRunner
+    job_indicator: JobIndicator
+    session_policy: SessionOpener
     loss_plot: LossPlot
     files_loaded: SignalInstance
     status_labels: dict[str, QLabel]
     run_labels: RunLabels
-    load_progress: QProgressBar
-    load_indicator: QWidget
-    cancel_load_action: QAction
 
     def statusBar(self) -> QStatusBar: ...  # noqa: N802 (Qt's name)
     def setWindowTitle(self, title: str) -> None: ...  # noqa: N802 (Qt's name)
@@ -97,6 +105,11 @@ class SessionHost(Reporter, Protocol):
     part_controller: PartController
     loss_plot: LossPlot
     recent: RecentDirectories
+    jobs: JobRunner
+    job_indicator: JobIndicator
+    session_saved: SignalInstance
+
+    def statusBar(self) -> QStatusBar: ...  # noqa: N802 (Qt's name)
 
     def reset_patch_network(self) -> None: ...
     def save_session(self, path: str) -> bool: ...
@@ -117,6 +130,8 @@ class SettingsHost(Protocol):
     patches_panel: PatchesPanel
     mode_selector: ModeSelector
     fit_dock: QDockWidget
+    knot_dock: QDockWidget
+    offset_dock: QDockWidget
     patches_dock: QDockWidget
     quality_dock: QDockWidget
     network_quality_dock: QDockWidget

@@ -1,8 +1,9 @@
 """The load policy: how files are opened, and what a newly loaded cloud changes.
 
 It decides: a load runs in an abandonable thread and the newest request wins (a running load is
-cancelled); the progress indicator shows only when a load lasts longer than
-:data:`LOAD_INDICATOR_DELAY_MS`; the document changes only when every file reads, and takes the
+cancelled); the status bar's indicator (:class:`app.window.job_indicator.JobIndicator`) shows it
+with Cancel; a session file is read in the same way, and what it changes is the session
+policy's; the document changes only when every file reads, and takes the
 length unit the files state (:func:`app.window.units_policy.units_of_load`); a load resets
 both fits; a planar cloud switches the fit to a curve and a small cloud gets the smaller control
 grid :func:`app.state.control_grid_for` asks for (both undoable settings edits); what the user is
@@ -15,16 +16,16 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from PySide6.QtCore import QObject, QSettings, QTimer, Slot
+from PySide6.QtCore import QObject, QSettings
 from PySide6.QtWidgets import QFileDialog, QMenu
 
 from app import loading
 from app.demo import demo_path
 from app.errors import describe, is_expected
-from app.session_file import SESSION_SUFFIX
+from app.session_file import SESSION_SUFFIX, read_session
 from app.state import control_grid_for
 from app.window.text import format_seconds, names
 from app.window.units_policy import units_of_load
@@ -33,17 +34,16 @@ if TYPE_CHECKING:
     from app.window.hosts import LoadHost
 
 MAX_RECENT = 10
-#: a load that ends sooner shows no progress indicator (no flicker for small files)
-LOAD_INDICATOR_DELAY_MS = 300
 
 
 @dataclass
 class _Load:
-    """The load in progress: its detached job and what it reads."""
+    """The load in progress: its detached job, what it reads and its indicator's token."""
 
     job_id: int
     paths: list[str]
     started: float
+    token: int
 
 
 class RecentFiles:
@@ -91,39 +91,65 @@ class LoadPolicy(QObject):
         self.message = ""  # one line: how the latest load ended (opened, failed, cancelled)
         self._load: _Load | None = None
         self._closed = False
-        self._indicator_timer = QTimer(self)
-        self._indicator_timer.setSingleShot(True)
-        self._indicator_timer.setInterval(LOAD_INDICATOR_DELAY_MS)
-        self._indicator_timer.timeout.connect(self._show_indicator)
 
     def open_files(self, paths: list[str]) -> bool:
         """Read the files in an abandonable worker thread; the document changes only if every
         file reads. A load still running is cancelled (the newest request wins). Every load
         started here ends with one ``files_loaded``: True when applied, False when it failed or
         was cancelled (none when the window closes first)."""
-        window = self._window
         paths = [str(p) for p in paths]
         if not paths or self._closed:
             return False
+        if len(paths) == 1 and paths[0].lower().endswith(SESSION_SUFFIX):
+            # a session (dropped, opened, on the command line) opens whole
+            return self.open_session(paths[0])
+        return self._start("load", paths, lambda cancel: loading.load_files(paths, cancel),
+                           lambda loaded: self._apply(paths, loaded),
+                           lambda exc: self._failed(paths, exc))
+
+    def open_session(self, path: str) -> bool:
+        """Read and check a session file in an abandonable worker thread, as a load (the newest
+        request wins, Cancel and Esc drop it); the session policy applies it when it reads, and
+        a file that does not read changes nothing. Ends with one ``files_loaded``."""
+        path = str(path)
+        if self._closed:
+            return False
+        policy = self._window.session_policy
+
+        def opened(session: dict[str, Any]) -> None:
+            policy.apply(path, session)
+            self.message = f"Opened the session {Path(path).name}"
+            self._window.files_loaded.emit(True)
+
+        def failed(exc: BaseException) -> None:
+            policy.failed(path, exc)
+            self.message = f"Cannot open the session {Path(path).name}"
+            self._window.files_loaded.emit(False)
+
+        return self._start("open-session", [path], lambda _cancel: read_session(path), opened,
+                           failed)
+
+    def _start(self, name: str, paths: list[str], read: Callable[[Any], Any],
+               apply: Callable[[Any], None], fail: Callable[[BaseException], None]) -> bool:
+        """Run ``read(cancel_event)`` as the load in progress; ``apply(result)`` or
+        ``fail(exc)`` follow on the GUI thread once it ends (neither when it is cancelled)."""
+        window = self._window
         if self._load is not None:
             self.cancel()
-        if len(paths) == 1 and paths[0].lower().endswith(SESSION_SUFFIX):
-            # a session (dropped, opened, on the command line) opens whole; its outcome arrives
-            # as any load's does
-            opened = window.open_session(paths[0])
-            self.message = (f"Opened the session {Path(paths[0]).name}" if opened
-                            else f"Cannot open the session {Path(paths[0]).name}")
-            QTimer.singleShot(0, lambda: window.files_loaded.emit(opened))
-            return True
-        job_id = window.jobs.submit_detached(
-            "load", lambda cancel: loading.load_files(paths, cancel),
-            lambda loaded: self._on_done(paths, loaded),
-            lambda exc: self._on_error(paths, exc))
+
+        def done(result: Any) -> None:
+            self._ended()
+            apply(result)
+
+        def error(exc: BaseException) -> None:
+            self._ended()
+            fail(exc)
+
+        job_id = window.jobs.submit_detached(name, read, done, error)
         if not job_id:
             return False
-        self._load = _Load(job_id, paths, time.monotonic())
-        window.cancel_load_action.setEnabled(True)
-        self._indicator_timer.start()
+        token = window.job_indicator.begin("&Cancel Loading", self.cancel)
+        self._load = _Load(job_id, paths, time.monotonic(), token)
         window.statusBar().showMessage(f"Reading {names([Path(p).name for p in paths])}... "
                                        "(Esc cancels)")
         return True
@@ -158,37 +184,16 @@ class LoadPolicy(QObject):
         if paths:
             self._window.open_files(paths)
 
-    def live_timers(self) -> int:
-        return int(self._indicator_timer.isActive())
-
     def shut_down(self) -> None:
         """The window closes: the load in progress is dropped (not waited for), no new one starts."""
         self._closed = True
-        self._indicator_timer.stop()
         self._load = None
 
     def _ended(self):
         """No load runs any more: its indicator and Cancel go."""
-        window = self._window
+        if self._load is not None:
+            self._window.job_indicator.end(self._load.token)
         self._load = None
-        self._indicator_timer.stop()
-        window.load_indicator.hide()
-        window.load_progress.setRange(0, 1)  # stops the style's busy animation
-        window.cancel_load_action.setEnabled(False)
-
-    def _on_done(self, paths: list[str], loaded: loading.LoadedFiles):
-        self._ended()
-        self._apply(paths, loaded)
-
-    def _on_error(self, paths: list[str], exc: BaseException):
-        self._ended()
-        self._failed(paths, exc)
-
-    @Slot()
-    def _show_indicator(self):
-        if self._load is not None and not self._closed:
-            self._window.load_progress.setRange(0, 0)  # busy: readers do not report progress
-            self._window.load_indicator.show()
 
     def _apply(self, paths: list[str], loaded: loading.LoadedFiles):
         window = self._window

@@ -1,9 +1,12 @@
 """The settings policy: what an edit of the settings restarts, defers or switches in the window.
 
 It decides: every panel shows the new settings; a change of fit mode stops the other mode's fit
-and raises the mode's docks; a changed fit (or patch network) setting restarts a running or
-paused run of that fit, else applies at the next Start; a changed offset setting recomputes the
-offsets. The settings themselves (their values and limits) are :mod:`app.state`'s.
+and raises the mode's docks (Solid mode hides the settings docks on the right, Fit settings,
+Knots, Offsets and Patches, none of which makes a solid: the viewport takes their room, and the
+Solid dock holds the solid's setting and faces; leaving Solid mode brings back those it hid); a
+changed fit (or patch network) setting restarts a running or paused run of that fit, else
+applies at the next Start; a changed offset setting recomputes the offsets. The settings
+themselves (their values and limits) are :mod:`app.state`'s.
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from PySide6.QtCore import QObject, Slot
+from PySide6.QtWidgets import QDockWidget
 
 from app.controller import FitController
 from app.patch_controller import PatchController
@@ -31,6 +35,7 @@ class SettingsPolicy(QObject):
     def __init__(self, window: SettingsHost):
         super().__init__(window)
         self._window = window
+        self._hidden_by_solid: list[QDockWidget] = []  # leaving Solid mode shows them again
 
     def show(self, settings: Settings) -> None:
         """Every panel (and the viewport's mode) shows ``settings``."""
@@ -83,6 +88,16 @@ class SettingsPolicy(QObject):
         for controller in (window.controller, window.patch_controller, window.part_controller):
             if controller is not self._controller_of(mode):
                 controller.stop()
+        if mode == "solid":
+            for dock in (window.fit_dock, window.knot_dock, window.offset_dock,
+                         window.patches_dock):
+                if not dock.isHidden():
+                    dock.hide()
+                    self._hidden_by_solid.append(dock)
+        else:
+            for dock in self._hidden_by_solid:
+                dock.show()
+            self._hidden_by_solid.clear()
         if mode == "patches":
             window.patches_dock.raise_()
             window.network_quality_dock.raise_()

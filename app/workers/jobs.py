@@ -7,6 +7,9 @@ Two kinds:
 
 * :meth:`JobRunner.submit`: short, bounded work (tessellation, offsets, export) in a QThread.
   ``shutdown()`` waits for these: none outlives the window, and an export in progress completes.
+  :meth:`JobRunner.submit_with_progress` is the same kind for work that reports how far it got
+  (a :class:`JobProgress`, throttled at the source) and may be cancelled cooperatively (saving a
+  session): a cancel asks it to stop at its next check, and its ``on_error`` then runs.
 * :meth:`JobRunner.submit_detached`: work of unbounded length on untrusted input (reading files:
   a huge scan, a reader stuck in C code). A Python thread cannot be killed, so such a job runs in
   a *daemon* ``threading.Thread`` that can be *abandoned*: :meth:`JobRunner.cancel` and
@@ -25,6 +28,7 @@ import atexit
 import itertools
 import logging
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -126,9 +130,44 @@ class _DetachedJob:
                 _abandoned.append(self.thread)
 
 
+class JobCancelled(Exception):
+    """A cooperative job stopped at a check because it was cancelled."""
+
+
+#: Seconds between two progress reports a job sends to the GUI thread (throttled at the source).
+PROGRESS_INTERVAL = 0.05
+
+
+class JobProgress:
+    """What a job that reports progress is handed (in its own thread): :meth:`report` how far it
+    got (sent to the GUI thread at most every :data:`PROGRESS_INTERVAL` seconds, and always at
+    the end), :meth:`check` between steps (raises :class:`JobCancelled` once cancelled)."""
+
+    def __init__(self) -> None:
+        self.cancel_event = threading.Event()
+        self._send: Callable[[float], None] = lambda fraction: None
+        self._last_sent = float("-inf")
+
+    def _bind(self, send: Callable[[float], None]) -> None:
+        self._send = send
+
+    def report(self, fraction: float) -> None:
+        """``fraction`` of the work done (0 to 1)."""
+        now = time.monotonic()
+        if fraction >= 1.0 or now - self._last_sent >= PROGRESS_INTERVAL:
+            self._last_sent = now
+            self._send(min(max(float(fraction), 0.0), 1.0))
+
+    def check(self) -> None:
+        """Raise :class:`JobCancelled` when the job was cancelled."""
+        if self.cancel_event.is_set():
+            raise JobCancelled("cancelled")
+
+
 class _Job(QObject):
     succeeded = Signal(int, object)
     failed = Signal(int, object)
+    progressed = Signal(int, float)  # job id, fraction done (queued into the GUI thread)
 
     def __init__(self, job_id: int, function: Callable[[], Any]):
         super().__init__()
@@ -155,15 +194,23 @@ class JobRunner(QObject):
         super().__init__(parent)
         self._ids = itertools.count(1)
         self._jobs: dict[int, tuple[QThread, _Job, str, Callable, Callable]] = {}
+        self._progress: dict[int, JobProgress] = {}
+        self._on_progress: dict[int, Callable[[float], None]] = {}
         self._detached: dict[int, tuple[_DetachedJob, Callable, Callable]] = {}
         self._bridge = _DetachedBridge(self)
         self._bridge.finished.connect(self._on_detached_finished)
         self._closed = False
 
     def submit(self, name: str, function: Callable[[], Any], on_done: Callable[[Any], None],
-               on_error: Callable[[Exception], None]) -> bool:
+               on_error: Callable[[Exception], None]) -> int:
+        """Run ``function()`` in a QThread; returns the job id (0 when the runner is shut
+        down)."""
+        return self._start(name, function, on_done, on_error, None)
+
+    def _start(self, name: str, function: Callable[[], Any], on_done: Callable[[Any], None],
+               on_error: Callable[[Exception], None], progress: JobProgress | None) -> int:
         if self._closed:
-            return False
+            return 0
         job_id = next(self._ids)
         thread = QThread()
         thread.setObjectName(f"job-{name}")
@@ -172,9 +219,27 @@ class JobRunner(QObject):
         thread.started.connect(job.run)
         job.succeeded.connect(self._on_succeeded)
         job.failed.connect(self._on_failed)
+        job.progressed.connect(self._on_progressed)
+        if progress is not None:  # reports go out through the job's own signal (queued)
+            progress._bind(lambda fraction: job.progressed.emit(job_id, fraction))
+            self._progress[job_id] = progress
         self._jobs[job_id] = (thread, job, name, on_done, on_error)
         thread.start()
-        return True
+        return job_id
+
+    def submit_with_progress(self, name: str, function: Callable[[JobProgress], Any],
+                             on_done: Callable[[Any], None],
+                             on_error: Callable[[Exception], None],
+                             on_progress: Callable[[float], None]) -> int:
+        """Run ``function(progress)`` as :meth:`submit` does (``shutdown()`` waits for it);
+        ``on_progress(fraction)`` runs on the GUI thread as reports arrive. :meth:`cancel` asks
+        it to stop (``progress.check()`` raises); ``on_error`` then gets the
+        :class:`JobCancelled`. Returns the job id (0 when the runner is shut down)."""
+        progress = JobProgress()
+        job_id = self._start(name, lambda: function(progress), on_done, on_error, progress)
+        if job_id:
+            self._on_progress[job_id] = on_progress
+        return job_id
 
     def submit_detached(self, name: str, function: Callable[[threading.Event], Any],
                         on_done: Callable[[Any], None],
@@ -191,8 +256,15 @@ class JobRunner(QObject):
         return job_id
 
     def cancel(self, job_id: int) -> bool:
-        """Abandon a detached job: returns at once; its callbacks will not run. False when the
-        job is not running (finished, cancelled, or not a detached job)."""
+        """Abandon a detached job: returns at once; its callbacks will not run. Ask a job of
+        :meth:`submit_with_progress` to stop: it ends at its next check and its ``on_error``
+        gets a :class:`JobCancelled`. False when the job is not running (finished, cancelled,
+        or a job of :meth:`submit`)."""
+        progress = self._progress.get(job_id)
+        if progress is not None:
+            already = progress.cancel_event.is_set()
+            progress.cancel_event.set()
+            return not already
         entry = self._detached.pop(job_id, None)
         if entry is None:
             return False
@@ -223,7 +295,20 @@ class JobRunner(QObject):
             log.exception("handling the outcome of %s failed", name)
         self.job_finished.emit(name)
 
+    @Slot(int, float)
+    def _on_progressed(self, job_id: int, fraction: float):
+        progress, on_progress = self._progress.get(job_id), self._on_progress.get(job_id)
+        if progress is None or on_progress is None or self._closed or (
+                progress.cancel_event.is_set()):
+            return
+        try:
+            on_progress(fraction)
+        except Exception:  # noqa: BLE001 - a slot must never raise into Qt
+            log.exception("showing the progress of job %d failed", job_id)
+
     def _finish(self, job_id: int) -> tuple[str, Callable, Callable] | None:
+        self._progress.pop(job_id, None)
+        self._on_progress.pop(job_id, None)
         entry = self._jobs.pop(job_id, None)
         if entry is None:
             return None
@@ -253,6 +338,9 @@ class JobRunner(QObject):
         self._closed = True
         for job_id in list(self._detached):
             self.cancel(job_id)
+        # a job reporting progress (a session's save) is not cancelled: it completes
+        self._progress.clear()
+        self._on_progress.clear()
         for job_id in list(self._jobs):
             thread, *_ = self._jobs.pop(job_id)
             thread.quit()

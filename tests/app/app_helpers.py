@@ -80,3 +80,17 @@ def solid_route_off(window) -> None:
     combo = window.solid_panel.setting
     combo.setCurrentIndex(combo.findData("off"))
     assert window.document.settings.solid == "off"
+
+
+def save_session(qtbot, window, path, expect: bool = True, timeout: int = 60000) -> None:
+    """Save the session to ``path`` (a job) and wait for its end; it must end as ``expect``."""
+    with qtbot.waitSignal(window.session_saved, timeout=timeout) as blocker:
+        assert window.save_session(str(path))
+    assert blocker.args == [str(path), expect], window.last_error
+
+
+def open_session(qtbot, window, path, expect: bool = True, timeout: int = 60000) -> None:
+    """Open the session ``path`` (a load job) and wait for its end; it must end as ``expect``."""
+    with qtbot.waitSignal(window.files_loaded, timeout=timeout) as blocker:
+        assert window.open_session(str(path))
+    assert blocker.args == [expect], window.last_error

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from app_helpers import app_process_env, open_by_drop
+from app_helpers import app_process_env, open_by_drop, save_session
 from hang_guard import hang_guard
 from PySide6.QtCore import QCoreApplication, Qt
 
@@ -390,7 +390,7 @@ def test_a_failed_session_save_leaves_the_previous_file_intact(qtbot, window, pl
     folder.mkdir()
     target = folder / "work.json"
     open_by_drop(qtbot, window, [ply_cloud[0]])
-    assert window.save_session(str(target))
+    save_session(qtbot, window, target)
     before = target.read_bytes()
     assert b"nurbs-studio-session" in before
 
@@ -410,7 +410,7 @@ def test_a_failed_session_save_leaves_the_previous_file_intact(qtbot, window, pl
             raise OSError(errno.EIO, "Input/output error")
 
         monkeypatch.setattr(os, "fsync", fsync_failing)
-    assert not window.save_session(str(target))
+    save_session(qtbot, window, target, expect=False)
     monkeypatch.undo()
     assert target.read_bytes() == before  # byte for byte
     assert sorted(p.name for p in folder.iterdir()) == ["work.json"]  # no temporary left

@@ -138,6 +138,17 @@ def test_patch_fit_is_drawn_measured_and_exported(qtbot, window, tmp_path, monke
     assert layers.seam_shown() and layers.scalar_bar.GetVisibility()
     assert "degrees" in layers.scalar_bar.GetTitle()
     assert _changed(plain, viewport_image(window)) > 0.05
+    # every label on one side of the bar, the dark swatch's "> top" above the top step: tick
+    # labels and annotations go to opposite sides, so the swatch's label stood level with the
+    # top tick across the bar, over the shape
+    from app.viewport.network_layers import seam_range_top
+
+    bar, table = layers.scalar_bar, layers._actors["network"].mapper.lookup_table
+    top = seam_range_top(window.patch_controller.latest_shown.display.seam)
+    assert not bar.GetDrawTickLabels() and bar.GetDrawAnnotations()
+    labels = [table.GetAnnotation(k) for k in range(table.GetNumberOfAnnotatedValues())]
+    assert labels[0] == "0" and float(labels[-1]) == top and len(labels) >= 5
+    assert bar.GetDrawAboveRangeSwatch() and bar.GetAboveRangeAnnotation() == f"> {top:g}"
 
     # export: JSON read back exactly, .3dm one closed B-rep (rhino3dm), STEP through the menu
     written = {}

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from app_helpers import open_by_drop, viewport_image
+from app_helpers import open_by_drop, open_session, save_session, viewport_image
 from PySide6.QtCore import Qt
 
 #: generous upper bounds for whole fits on a busy machine (the tests wait on signals)
@@ -98,7 +98,7 @@ def test_surfacing_controls_edit_settings_undoably_and_reach_the_fit_config(qtbo
 
     # sessions keep them; undoing every edit brings the defaults back, widgets included
     session = tmp_path / "surfacing.nstudio"
-    assert window.save_session(str(session))
+    save_session(qtbot, window, session)
     saved = window.document.settings
     from app.session_file import MANIFEST, SessionArchive
 
@@ -109,7 +109,7 @@ def test_surfacing_controls_edit_settings_undoably_and_reach_the_fit_config(qtbo
     assert window.document.settings == Settings()
     assert panel.tolerance.text() == "" and panel.grow_grid.isChecked()
     assert not panel.single_patch.isChecked() and panel.stiffness.label.text() == "0.001"
-    assert window.open_session(str(session))
+    open_session(qtbot, window, session)
     assert window.document.settings == saved
     assert panel.single_patch.isChecked() and panel.max_control_points.value() == 24
 
@@ -228,8 +228,9 @@ def test_quality_map_paints_a_folded_surface_and_not_a_clean_one(qtbot, window, 
     seen = {}
     for name, fitted in shapes.items():
         session = _session_with_fit(tmp_path / f"{name}.json", points, fitted)
-        with qtbot.waitSignal(window.jobs.job_finished, timeout=FIT_TIMEOUT_MS):
-            assert window.open_session(str(session))
+        with qtbot.waitSignal(window.jobs.job_finished, timeout=FIT_TIMEOUT_MS,
+                              check_params_cb=lambda name: name == "fitted"):  # tessellated
+            open_session(qtbot, window, session)
         window.scene.reset_camera()
         window.set_quality_visible(False)
         plain = viewport_image(window)

@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 import pytest
-from app_helpers import open_by_drop, viewport_image
+from app_helpers import open_by_drop, open_session, save_session, viewport_image
 
 pytest.importorskip("OCP")
 
@@ -278,10 +278,10 @@ def test_a_session_keeps_the_solid_and_its_report(qtbot, window, tmp_path):
     assert window.scene.solid.legend_labels() == ["Plane (6)"]
     assert window.tree.shows_solid
     path = tmp_path / "work.nstudio"
-    assert window.save_session(str(path))
+    save_session(qtbot, window, path)
     window.part_controller.reset()
     assert window.document.solid is None and not window.tree.shows_solid
-    assert window.open_session(str(path)), window.last_error
+    open_session(qtbot, window, path)
     solid = window.document.solid
     assert solid is not None and window.document.settings.fit_mode == "solid"
     assert solid.report.problems == ("a made-up warning",)
@@ -320,7 +320,7 @@ def test_a_damaged_solid_in_a_session_is_refused_with_what_is_wrong(qtbot, windo
     # in a session file: refused, the document left as it was
     window.document.set_solid(_box_outcome(points))
     path = tmp_path / "work.nstudio"
-    assert window.save_session(str(path))
+    save_session(qtbot, window, path)
     import zipfile
 
     damaged = tmp_path / "damaged.nstudio"
@@ -331,7 +331,7 @@ def test_a_damaged_solid_in_a_session_is_refused_with_what_is_wrong(qtbot, windo
                 data = data.replace(b'"status": "converged"', b'"status": "great"')
             target.writestr(item, data)
     before = window.document.solid
-    assert not window.open_session(str(damaged))
+    open_session(qtbot, window, damaged, expect=False)
     assert "converged or warnings" in window.last_error
     assert window.document.solid is before
 
@@ -345,3 +345,23 @@ def test_the_deviation_report_of_a_solid_lists_its_faces(qtbot, window, tmp_path
     html = export_report(qtbot, window, monkeypatch, tmp_path / "solid.html")
     assert "a solid (machined part)" in html and "6 (6 planes)" in html
     assert "valid, closed" in html and "converged" in html
+
+
+def test_solid_mode_hides_the_settings_docks_and_gives_them_back(qtbot, window):
+    """None of the right-hand docks' settings (Fit settings, Knots, Offsets, Patches) makes a
+    solid: Solid mode showed the Patches dock there (raised by Patches mode before); they hide,
+    the viewport takes their room, and they come back on leaving Solid mode."""
+    right = [window.fit_dock, window.knot_dock, window.offset_dock, window.patches_dock]
+    window.document.edit_settings("Fit mode", fit_mode="patches")
+    assert not window.patches_dock.visibleRegion().isEmpty()  # the raised tab
+    width = window.scene.widget.width()
+    window.document.edit_settings("Fit mode", fit_mode="solid")
+    assert all(dock.isHidden() for dock in right) and window.solid_dock.isVisible()
+    qtbot.waitUntil(lambda: window.scene.widget.width() > width + 100, timeout=5000)
+    window.document.edit_settings("Fit mode", fit_mode="single")
+    assert not any(dock.isHidden() for dock in right)
+    # a dock the user closed stays closed
+    window.patches_dock.close()
+    window.document.edit_settings("Fit mode", fit_mode="solid")
+    window.document.edit_settings("Fit mode", fit_mode="patches")
+    assert window.patches_dock.isHidden() and not window.fit_dock.isHidden()

@@ -14,7 +14,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from app_helpers import export_report, open_by_drop, sin_cos_cloud
+from app_helpers import export_report, open_by_drop, open_session, save_session, sin_cos_cloud
 
 from app.session_file import MANIFEST, read_session
 from app.window.units_policy import UNKNOWN_STYLE
@@ -154,11 +154,11 @@ def test_units_through_fit_display_session_and_exports(qtbot, window, tmp_path, 
 
     # the session keeps the units
     session = tmp_path / "work.nstudio"
-    assert window.save_session(str(session))
+    save_session(qtbot, window, session)
     assert read_session(session)["units"] == "m"
     open_by_drop(qtbot, window, [path])  # another document, units unknown
     assert window.document.units is None
-    assert window.open_session(str(session))
+    open_session(qtbot, window, session)
     assert window.document.units == "m" and window.units_policy.box.currentText() == "m"
     qtbot.waitUntil(lambda: window.deviation_panel.map is not None, timeout=30000)
     assert _lengths(window.quality_panel.values["deviation"].text(), "m") == 3
