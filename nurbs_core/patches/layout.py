@@ -82,11 +82,14 @@ def euler_characteristic(faces: np.ndarray | Sequence[Sequence[int]]) -> int:
 
 
 def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
-                retry: bool = True, crease_angle: float = -1.0) -> QuadLayout:
+                retry: bool = True, crease_angle: float = -1.0,
+                finest: float | None = None) -> QuadLayout:
     """A quad layout of about ``patches`` quads of the triangle mesh (vertices (N, 3), faces
     (F, 3), consistently oriented). ``crease_angle``: Instant Meshes aligns its fields to the
-    mesh's edges whose faces turn by more than so many degrees (negative: none). Raises
-    :class:`LayoutError` when no valid layout results."""
+    mesh's edges whose faces turn by more than so many degrees (negative: none). ``finest``:
+    the retries ask for at most so many quads (a caller whose own search covers the finer
+    counts; None: every factor of ``RETRY_FACTORS``). Raises :class:`LayoutError` when no
+    valid layout results."""
     import pyinstantmeshes
 
     vertices = np.asarray(vertices, np.float64)
@@ -102,7 +105,10 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
         target = os.path.join(folder, "quads.obj")
         digest = hashlib.blake2b(np.asarray(vertices.shape + faces.shape).tobytes()
                                  + vertices.tobytes() + faces.tobytes(), digest_size=16).digest()
-        for factor in RETRY_FACTORS if retry else (1.0,):
+        factors: tuple[float, ...] = RETRY_FACTORS if retry else (1.0,)
+        if finest is not None:
+            factors = tuple(f for f in factors if f == 1.0 or patches * f <= finest)
+        for factor in factors:
             count = max(2, int(round(patches * factor / QUADS_PER_TARGET_FACE)))
             key = (digest, count, float(crease_angle))
             if key not in _REMESHED:
