@@ -115,3 +115,14 @@ def test_the_retries_ask_for_no_more_quads_than_the_finest_allowed(monkeypatch):
     with pytest.raises(LayoutError):
         quad_layout(vertices, faces, 100)                    # the whole ladder
     assert len(asked) == len(layout_module.RETRY_FACTORS)
+
+
+@pytest.mark.slow
+def test_the_duck_keeps_the_crease_layout_its_retry_found(load_bench, paper_data):
+    # bench_patches' duck (the paper's three patches, 10,000 points): one short crease, and the
+    # layout along it that the whole search accepts comes from a retry (1.25 times a target)
+    with load_bench("bench_patches") as bench:
+        case = bench.case_builders()["duck"](10_000, 1000, paper_data)
+    chosen, whole, creases = _chosen_and_whole(case.points)
+    _same_layout(chosen, whole)
+    assert chosen.creases and coverage(chosen, creases) >= pipeline.MIN_COVERAGE
