@@ -68,39 +68,52 @@ class QuadLayout:
         return np.flatnonzero(self.valence != 4)
 
 
-def euler_characteristic(faces: Sequence[Sequence[int]]) -> int:
-    """V - E + F of a polygon mesh (faces: a sequence of vertex-index sequences)."""
+def euler_characteristic(faces: np.ndarray | Sequence[Sequence[int]]) -> int:
+    """V - E + F of a polygon mesh (faces: an (F, k) array of vertex indices, or a sequence of
+    vertex-index sequences of any lengths); V counts the vertices the faces use."""
+    if isinstance(faces, np.ndarray) or (len(faces) and len({len(f) for f in faces}) == 1):
+        array = np.asarray(faces, np.int64).reshape(len(faces), -1)
+        sides = np.sort(np.stack([array, np.roll(array, -1, axis=1)], axis=-1).reshape(-1, 2),
+                        axis=1)
+        return len(np.unique(array)) - len(np.unique(sides, axis=0)) + len(array)
     edges = {tuple(sorted((f[k], f[(k + 1) % len(f)]))) for f in faces for k in range(len(f))}
     vertices = {v for f in faces for v in f}
     return len(vertices) - len(edges) + len(faces)
 
 
 def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
-                retry: bool = True, crease_angle: float = -1.0) -> QuadLayout:
+                retry: bool = True, crease_angle: float = -1.0,
+                finest: float | None = None) -> QuadLayout:
     """A quad layout of about ``patches`` quads of the triangle mesh (vertices (N, 3), faces
     (F, 3), consistently oriented). ``crease_angle``: Instant Meshes aligns its fields to the
-    mesh's edges whose faces turn by more than so many degrees (negative: none). Raises
-    :class:`LayoutError` when no valid layout results."""
+    mesh's edges whose faces turn by more than so many degrees (negative: none). ``finest``:
+    the retries ask for at most so many quads (a caller whose own search covers the finer
+    counts; None: every factor of ``RETRY_FACTORS``). Raises :class:`LayoutError` when no
+    valid layout results."""
     import pyinstantmeshes
 
     vertices = np.asarray(vertices, np.float64)
     faces = np.asarray(faces, np.int64)
     if patches < 4:
         raise LayoutError(f"a quad layout needs at least 4 patches, got {patches}")
-    chi = euler_characteristic(faces.tolist())
+    chi = euler_characteristic(faces)
     normals = _face_normals(vertices, faces)
     tree = cKDTree(vertices[faces].mean(axis=1))
     attempts: list[str] = []
     with tempfile.TemporaryDirectory(prefix="nurbs-layout-") as folder:
         source = os.path.join(folder, "mesh.obj")
         target = os.path.join(folder, "quads.obj")
-        _write_obj(source, vertices, faces)
         digest = hashlib.blake2b(np.asarray(vertices.shape + faces.shape).tobytes()
                                  + vertices.tobytes() + faces.tobytes(), digest_size=16).digest()
-        for factor in RETRY_FACTORS if retry else (1.0,):
+        factors: tuple[float, ...] = RETRY_FACTORS if retry else (1.0,)
+        if finest is not None:
+            factors = tuple(f for f in factors if f == 1.0 or patches * f <= finest)
+        for factor in factors:
             count = max(2, int(round(patches * factor / QUADS_PER_TARGET_FACE)))
             key = (digest, count, float(crease_angle))
             if key not in _REMESHED:
+                if not os.path.exists(source):     # written once, when a run needs it
+                    _write_obj(source, vertices, faces)
                 with _silenced_stdout():
                     pyinstantmeshes.remesh_file(source, target, target_face_count=count,
                                                 pure_quad=True, deterministic=True,
@@ -113,9 +126,10 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
             try:
                 quads_v, quads = _without_small_corners(*_clean(raw_vertices, raw_faces))
                 check_manifold(quads)
-                if euler_characteristic(quads.tolist()) != chi:
-                    raise LayoutError(f"Euler characteristic {euler_characteristic(quads.tolist())} "
-                                      f"differs from the mesh's {chi}")
+                layout_chi = euler_characteristic(quads)
+                if layout_chi != chi:
+                    raise LayoutError(f"Euler characteristic {layout_chi} differs from the "
+                                      f"mesh's {chi}")
                 quads = _orient_like(quads_v, quads, tree, normals)
             except LayoutError as error:
                 attempts.append(f"target {count}: {error}")
@@ -151,9 +165,10 @@ def _silenced_stdout() -> Iterator[None]:
 
 
 def _write_obj(path: str | os.PathLike[str], vertices: np.ndarray, faces: np.ndarray) -> None:
+    """The triangle mesh (V, 3), (F, 3) as OBJ text, every coordinate to 17 digits (exact)."""
     with open(path, "w") as handle:
-        handle.write("".join(f"v {x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in vertices))
-        handle.write("".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces))
+        handle.write(("v %.17g %.17g %.17g\n" * len(vertices)) % tuple(vertices.ravel().tolist()))
+        handle.write(("f %d %d %d\n" * len(faces)) % tuple((faces + 1).ravel().tolist()))
 
 
 def _read_obj(path: str | os.PathLike[str]) -> tuple[np.ndarray, list[list[int]]]:
@@ -174,22 +189,28 @@ def _clean(vertices: np.ndarray, faces: list[list[int]]) -> tuple[np.ndarray, np
     """Pure quads without interior valence-2 vertices, unused vertices dropped."""
     if not faces or any(len(f) != 4 for f in faces):
         raise LayoutError("the layout is not made of quads only")
-    faces = [list(f) for f in faces]
+    quads = np.asarray(faces, np.int64)
     for _ in range(len(faces)):
-        uses = Counter(v for f in faces for v in f)
+        flat = quads.ravel()
+        uses = np.bincount(flat, minlength=len(vertices))
         # on an open layout a border vertex of two quads is regular: leave it
-        sides = Counter(tuple(sorted((f[k], f[(k + 1) % 4]))) for f in faces for k in range(4))
-        border = {v for side, c in sides.items() if c == 1 for v in side}
-        twos = [v for v, c in uses.items() if c == 2 and v not in border]
-        if not twos:
+        sides = np.sort(np.stack([quads, np.roll(quads, -1, axis=1)], axis=-1).reshape(-1, 2),
+                        axis=1)
+        unique_sides, side_uses = np.unique(sides, axis=0, return_counts=True)
+        border = np.zeros(len(vertices), bool)
+        border[unique_sides[side_uses == 1].ravel()] = True
+        twos = (uses == 2) & ~border
+        where = np.flatnonzero(twos[flat])
+        if not len(where):
             break
-        v = twos[0]
-        pair = [k for k, f in enumerate(faces) if v in f]
-        merged = merge_doublet(faces[pair[0]], faces[pair[1]], v)
+        # the valence-2 vertex used first (the quads' order): merges are made in that order
+        v = int(flat[where[0]])
+        pair = np.flatnonzero((quads == v).any(axis=1))
+        merged = merge_doublet(quads[pair[0]].tolist(), quads[pair[-1]].tolist(), v) \
+            if len(pair) == 2 else None
         if merged is None:
             raise LayoutError("a valence-2 vertex whose quads cannot be merged")
-        faces = [f for k, f in enumerate(faces) if k not in pair] + [merged]
-    quads = np.asarray(faces, np.int64)
+        quads = np.concatenate([np.delete(quads, pair, axis=0), np.asarray([merged], np.int64)])
     used = np.unique(quads)
     remap = np.full(len(vertices), -1, np.int64)
     remap[used] = np.arange(len(used))

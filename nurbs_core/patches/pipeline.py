@@ -10,6 +10,7 @@ until the tolerance is met.
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import math
 import time
@@ -164,6 +165,13 @@ def layout_turn(layout: QuadLayout) -> float:
 CREASE_ANGLES = (20.0, 30.0)
 CREASE_TARGETS = (24, 38, 61, 98, 157)
 CREASE_BAND = 3.0
+#: In ``auto``, a crease target's retries (:data:`nurbs_core.patches.layout.RETRY_FACTORS`)
+#: ask for at most this many times the largest crease target: the targets cover the range
+#: themselves (each 1.6 times the last), and the retries beyond (up to 6.4 times the largest,
+#: ten times the plain layout's count) were Instant Meshes runs that no network used: 19 of
+#: the search's 48 runs on the bunny's mesh (all failing the layout checks), 8 of 42 on the
+#: machined plate (failing, or layouts of 230-380 patches that the search rejected).
+CREASE_FINEST = 1.25
 #: The least share of the crease points a layout's crease edges must cover to be used (a noisy
 #: box: 0.71 with 24 patches, aligned; 0.46 on the snapped plain layout, whose G1 seams then
 #: cross the rest of the creases: seam p99 0.89 -> 1.99, max 2.6 -> 18.6 degrees, c2s ratio
@@ -190,14 +198,23 @@ def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None,
     sharp = sharpened(mesh, creases)
     targets = [int(patches)] if patches != "auto" else \
         [t for t in CREASE_TARGETS if t <= 2 * len(layout.quads)]
+    finest = None if patches != "auto" or not targets else CREASE_FINEST * max(targets)
     if best_cover >= GOOD_COVERAGE:
         targets = []
+    seen: set[bytes] = set()
     for target, angle in itertools.product(targets, CREASE_ANGLES):
         try:
-            candidate = snap_to_creases(quad_layout(sharp.vertices, sharp.faces, target,
-                                                    crease_angle=angle), creases)
+            aligned = quad_layout(sharp.vertices, sharp.faces, target, crease_angle=angle,
+                                  finest=finest)
         except LayoutError:
             continue
+        # targets whose retries end at the same Instant Meshes run give the same layout: it
+        # was judged already (best_cover only grows, the limits stay)
+        digest = _layout_digest(aligned)
+        if digest in seen:
+            continue
+        seen.add(digest)
+        candidate = snap_to_creases(aligned, creases)
         cover = coverage(candidate, creases)
         if cover > best_cover and _turn_off_creases(candidate, creases) <= turn and \
                 layout_reach(candidate, mesh) <= reach:
@@ -207,6 +224,13 @@ def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None,
     # a layout that follows the creases only in part leaves the rest crossing its G1 seams,
     # moved vertices beside them: the plain layout rounds every crease alike, and fits better
     return best if best_cover >= MIN_COVERAGE else layout
+
+
+def _layout_digest(layout: QuadLayout) -> bytes:
+    """A digest of the layout's vertices and quads (equal layouts, equal digests)."""
+    shapes = np.asarray(layout.vertices.shape + layout.quads.shape)
+    return hashlib.blake2b(shapes.tobytes() + layout.vertices.tobytes() + layout.quads.tobytes(),
+                           digest_size=16).digest()
 
 
 def _turn_off_creases(layout: QuadLayout, creases: Creases) -> float:
