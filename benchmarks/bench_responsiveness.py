@@ -24,6 +24,7 @@ Run (needs a display; under a headless machine use xvfb-run)::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import tempfile
@@ -205,6 +206,28 @@ def measure_jobs(app, window, folder: Path, points: int, ticks: int) -> list[str
     return rows
 
 
+@contextlib.contextmanager
+def bench_window(width: int, height: int):
+    """(app, window, folder): a shown main window with its own settings file in a temporary
+    folder, closed afterwards."""
+    from PySide6.QtCore import QSettings
+    from PySide6.QtWidgets import QApplication
+
+    from app.main_window import MainWindow
+
+    app = QApplication.instance() or QApplication([])
+    with tempfile.TemporaryDirectory(prefix="bench_responsiveness_") as folder:
+        store = QSettings(str(Path(folder) / "settings.ini"), QSettings.Format.IniFormat)
+        window = MainWindow(settings_store=store)
+        window.resize(width, height)
+        window.show()
+        try:
+            yield app, window, Path(folder)
+        finally:
+            window.close()
+            app.processEvents()
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--ticks", type=int, default=300, help="probe ticks per condition")
@@ -217,48 +240,35 @@ def main(argv=None) -> int:
     if args.jobs:
         return main_jobs(args.points, args.ticks)
 
-    from PySide6.QtCore import QSettings
-    from PySide6.QtWidgets import QApplication
-
-    from app.main_window import MainWindow
     from app.screenshots import torus_cloud
 
-    app = QApplication.instance() or QApplication([])
     rows = []
-    with tempfile.TemporaryDirectory(prefix="bench_responsiveness_") as folder:
-        store = QSettings(str(Path(folder) / "settings.ini"), QSettings.Format.IniFormat)
-        window = MainWindow(settings_store=store)
-        window.resize(1200, 800)
-        window.show()
-        try:
-            rng = np.random.default_rng(3)
-            xy = rng.uniform(-3.0, 3.0, size=(1500, 2))
-            cloud = Path(folder) / "scan.xyz"
-            np.savetxt(cloud, np.column_stack([xy, np.sin(xy[:, 0]) * np.cos(xy[:, 1])]))
-            _open(app, window, cloud)
-            rows.append(_row("idle window (baseline)", probe_gaps(app, args.ticks)))
+    with bench_window(1200, 800) as (app, window, folder):
+        rng = np.random.default_rng(3)
+        xy = rng.uniform(-3.0, 3.0, size=(1500, 2))
+        cloud = folder / "scan.xyz"
+        np.savetxt(cloud, np.column_stack([xy, np.sin(xy[:, 0]) * np.cos(xy[:, 1])]))
+        _open(app, window, cloud)
+        rows.append(_row("idle window (baseline)", probe_gaps(app, args.ticks)))
 
-            window.document.edit_settings("quick", **QUICK)
-            controller = window.controller
-            controller.start()
-            _wait(app, lambda: controller.snapshots_shown >= 2, 120, "the fit's first snapshots")
-            rows.append(_row("surface fit running", probe_gaps(app, args.ticks)))
-            controller.stop()
-            _wait(app, lambda: controller.state == "idle", 60, "the fit to stop")
+        window.document.edit_settings("quick", **QUICK)
+        controller = window.controller
+        controller.start()
+        _wait(app, lambda: controller.snapshots_shown >= 2, 120, "the fit's first snapshots")
+        rows.append(_row("surface fit running", probe_gaps(app, args.ticks)))
+        controller.stop()
+        _wait(app, lambda: controller.state == "idle", 60, "the fit to stop")
 
-            if args.patches:
-                _open(app, window, torus_cloud(Path(folder) / "torus.xyz"))
-                window.mode_selector.setCurrentIndex(window.mode_selector.findData("patches"))
-                rows.append(_row("idle, patches mode", probe_gaps(app, args.ticks)))
-                patches = window.patch_controller
-                window.start_fit()
-                _wait(app, lambda: patches.latest_shown is not None
-                      and patches.latest_shown.event == "pass", 300, "the first patch pass")
-                if patches.is_busy():
-                    rows.append(_row("patch fit running", probe_gaps(app, args.ticks)))
-        finally:
-            window.close()
-            app.processEvents()
+        if args.patches:
+            _open(app, window, torus_cloud(folder / "torus.xyz"))
+            window.mode_selector.setCurrentIndex(window.mode_selector.findData("patches"))
+            rows.append(_row("idle, patches mode", probe_gaps(app, args.ticks)))
+            patches = window.patch_controller
+            window.start_fit()
+            _wait(app, lambda: patches.latest_shown is not None
+                  and patches.latest_shown.event == "pass", 300, "the first patch pass")
+            if patches.is_busy():
+                rows.append(_row("patch fit running", probe_gaps(app, args.ticks)))
     print(f"Gaps between ticks of a 10 ms QTimer (ms); {args.ticks} ticks per condition")
     print(f"{'condition':<28} {'gaps':>6} {'median':>9} {'p99':>9} {'max':>9}")
     for row in rows:
@@ -268,22 +278,8 @@ def main(argv=None) -> int:
 
 def main_jobs(points: int, ticks: int) -> int:
     """The --jobs table: the longest event-loop stall of each job on ``points`` points."""
-    from PySide6.QtCore import QSettings
-    from PySide6.QtWidgets import QApplication
-
-    from app.main_window import MainWindow
-
-    app = QApplication.instance() or QApplication([])
-    with tempfile.TemporaryDirectory(prefix="bench_responsiveness_") as folder:
-        store = QSettings(str(Path(folder) / "settings.ini"), QSettings.Format.IniFormat)
-        window = MainWindow(settings_store=store)
-        window.resize(1280, 800)
-        window.show()
-        try:
-            rows = measure_jobs(app, window, Path(folder), points, ticks)
-        finally:
-            window.close()
-            app.processEvents()
+    with bench_window(1280, 800) as (app, window, folder):
+        rows = measure_jobs(app, window, folder, points, ticks)
     print(f"Jobs on {points} points: seconds from the click to the outcome; until it is drawn, "
           "the gaps between ticks of a 10 ms QTimer (ms) and the slowest frame the viewport "
           "drew (ms)")
