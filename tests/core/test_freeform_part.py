@@ -61,13 +61,16 @@ def scanned():
 
 
 def test_the_freeform_region_is_the_loft_side(scanned):
-    """The region taken for freeform is the lofted side (its points, not a cap's)."""
+    """The region taken for freeform is the lofted side (its points, not a cap's: a cap holds
+    8-18% of the scan, so taking one in would bring the share below 0.85; the caps' rim points
+    within the noise of the edge make 2.5-3.5% and vary with the segmentation's CPU-time
+    limit on a busy machine)."""
     shape, points, owner, kinds = scanned
     segmentation = segment_subset(points)
     region = freeform_region(segmentation, points)
     assert region is not None
     side = np.array(kinds)[owner] == "freeform"
-    assert side[region.mask].mean() >= 0.97
+    assert side[region.mask].mean() >= 0.95
     assert region.mask[side].mean() >= 0.9
     assert len(region.planes) == 2
 
