@@ -62,7 +62,7 @@ def scanned():
 
 def test_the_freeform_region_is_the_loft_side(scanned):
     """The region taken for freeform is the lofted side (its points, not a cap's: a cap holds
-    8-18% of the scan, so taking one in would bring the share below 0.85; the caps' rim points
+    8-18% of the scan, so taking one in would bring the share to 0.90 or below; the caps' rim points
     within the noise of the edge make 2.5-3.5% and vary with the segmentation's CPU-time
     limit on a busy machine)."""
     shape, points, owner, kinds = scanned
