@@ -77,9 +77,12 @@ class NetworkQuality:
     s2c_max: float = 0.0
     far_fraction: float = 0.0
     far_limit: float = 0.0
-    #: the patches with a fold of their own (:func:`fold_samples`) and their folded Gauss points
-    folded_patches: list[int] = field(default_factory=list)
+    #: how many patches fold over themselves (:func:`fold_samples`), and their folded Gauss
+    #: points in all
+    folded_patches: int = 0
     fold_samples: int = 0
+    #: (P,) folded Gauss points per patch (left out of :meth:`as_dict`)
+    folds: np.ndarray | None = field(default=None, repr=False)
     #: (N,) foot-point distance of each measured point (left out of :meth:`as_dict`)
     distances: np.ndarray | None = field(default=None, repr=False)
 
@@ -89,8 +92,8 @@ class NetworkQuality:
 
     def as_dict(self) -> dict:
         """Every scalar measure (and the seam statistics) as plain values."""
-        out = asdict(replace(self, distances=None))
-        del out["distances"]
+        out = asdict(replace(self, distances=None, folds=None))
+        del out["distances"], out["folds"]
         out["gap_relative"] = self.gap_relative
         return out
 
@@ -232,7 +235,7 @@ def network_quality(network: PatchNetwork, points: np.ndarray,
                           float(c2s.mean()), float(np.sqrt(np.mean(c2s ** 2))),
                           float(np.percentile(c2s, 99)), float(np.average(s2c, weights=area)),
                           float(np.percentile(s2c, 99)), diagonal, float(s2c.max()), far, limit,
-                          np.flatnonzero(folds).tolist(), int(folds.sum()), c2s)
+                          int((folds > 0).sum()), int(folds.sum()), folds, c2s)
 
 
 #: Surface farther from every point than FAR_DIAGONAL x the diagonal, and than FAR_SPACINGS x

@@ -17,6 +17,8 @@ Any warning makes the status "fitted with warnings" instead of "converged"
 
 from __future__ import annotations
 
+import numpy as np
+
 from nurbs_core.patches.defaults import WARN_SEAM, WARN_SEAM_MAX
 from nurbs_core.patches.measures import NetworkQuality
 from nurbs_core.status import WARN_FLIPPED
@@ -46,10 +48,11 @@ def network_warnings(quality: NetworkQuality, noise: float) -> list[str]:
                         f"{WARN_SEAM_MAX:.0f}, where the seams' 99th percentile is "
                         f"{seam.p99:.1f}): a fold or an edge the network does not follow")
     if quality.folded_patches:
-        named = ", ".join(str(p) for p in quality.folded_patches[:NAMED_PATCHES])
-        more = len(quality.folded_patches) - NAMED_PATCHES
+        folded = [] if quality.folds is None else np.flatnonzero(quality.folds).tolist()
+        named = ", ".join(str(p) for p in folded[:NAMED_PATCHES]) or str(quality.folded_patches)
+        more = len(folded) - NAMED_PATCHES
         named += f" and {more} more" if more > 0 else ""
-        which = (f"patches {named} fold over themselves" if len(quality.folded_patches) > 1
+        which = (f"patches {named} fold over themselves" if quality.folded_patches > 1
                  else f"patch {named} folds over itself")
         warnings.append(f"{which} ({quality.fold_samples} samples on a pleat, where the surface "
                         "turns back)")

@@ -60,7 +60,7 @@ def test_a_flat_network_has_no_fold_and_converges():
     network = _flat_network()
     assert (fold_samples(network) == 0).all()
     quality = network_quality(network, _points())
-    assert quality.folded_patches == [] and quality.fold_samples == 0
+    assert quality.folded_patches == 0 and quality.fold_samples == 0
     warnings = network_warnings(quality, noise=0.0)
     assert warnings == [] and reported_status(CONVERGED, warnings) == CONVERGED
 
@@ -72,7 +72,10 @@ def test_a_folded_patch_is_found_and_the_network_is_not_converged():
     folds = fold_samples(network)
     assert folds[2] > 0 and (np.delete(folds, 2) == 0).all()
     quality = network_quality(network, _points())
-    assert quality.folded_patches == [2]
+    assert quality.folded_patches == 1 and quality.folds is not None
+    assert np.flatnonzero(quality.folds).tolist() == [2]
+    assert quality.fold_samples == folds[2]
+    assert 'folds' not in quality.as_dict() and quality.as_dict()['folded_patches'] == 1
     # the seams do not give it away: the fold measure alone finds it
     assert quality.seam.max < WARN_SEAM_MAX
     warnings = network_warnings(quality, noise=0.0)
