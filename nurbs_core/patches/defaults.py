@@ -14,3 +14,7 @@ SEAM_WEIGHT = 2.0
 #: Seam angle 99th percentile (degrees) above which a network's report warns (and its status is
 #: not "converged"); the fit polishes its seams while they are above it and still straighten.
 WARN_SEAM = 2.0
+#: Largest angle (degrees) of a G1 seam anywhere above which a network's report warns: 15 times
+#: the 99th percentile's limit, a visible edge or a fold (a pleat turns its seam by 90 degrees
+#: and more) that a small percentile hides.
+WARN_SEAM_MAX = 30.0

@@ -10,6 +10,9 @@
   counted apart: how many, and the range of their mean angles;
 * **flipped area**: the fraction of the area whose normal points against the reference's
   oriented normals (outward on a closed object), at Gauss points of every patch;
+* **folds**: per patch, its Gauss points on a fold of its own (a pleat): where its normal turns
+  by more than ``FOLD_TURN`` from a neighbouring Gauss point's, or ``|S_u x S_v|`` all but
+  vanishes. A pleat has little area (the flipped area misses it) and needs no reference;
 * **volume**: the signed volume the network encloses (positive: normals outward).
 """
 
@@ -74,6 +77,12 @@ class NetworkQuality:
     s2c_max: float = 0.0
     far_fraction: float = 0.0
     far_limit: float = 0.0
+    #: how many patches fold over themselves (:func:`fold_samples`), and their folded Gauss
+    #: points in all
+    folded_patches: int = 0
+    fold_samples: int = 0
+    #: (P,) folded Gauss points per patch (left out of :meth:`as_dict`)
+    folds: np.ndarray | None = field(default=None, repr=False)
     #: (N,) foot-point distance of each measured point (left out of :meth:`as_dict`)
     distances: np.ndarray | None = field(default=None, repr=False)
 
@@ -83,8 +92,8 @@ class NetworkQuality:
 
     def as_dict(self) -> dict:
         """Every scalar measure (and the seam statistics) as plain values."""
-        out = asdict(replace(self, distances=None))
-        del out["distances"]
+        out = asdict(replace(self, distances=None, folds=None))
+        del out["distances"], out["folds"]
         out["gap_relative"] = self.gap_relative
         return out
 
@@ -138,9 +147,27 @@ def corner_angles(network: PatchNetwork) -> np.ndarray:
     return out
 
 
+#: Two neighbouring Gauss points of one patch whose normals turn by more than this (degrees)
+#: lie on a fold: 1/16 of a smooth patch apart they turn a few degrees, across a pleat (where
+#: S_u x S_v passes through zero) their normals are about opposite.
+FOLD_TURN = 90.0
+#: ... and a Gauss point whose |S_u x S_v| is below this share of the network's median is a
+#: fold's line itself (the scanned bunny's pleat: 0.0003 against a median 0.56).
+FOLD_JACOBIAN = 0.01
+
+
 def surface_samples(network: PatchNetwork, count: int = GAUSS_POINTS
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Gauss points of every patch: positions (M, 3), unit normals (M, 3), area weights (M,)."""
+    """Gauss points of every patch: positions (M, 3), unit normals (M, 3), area weights (M,)
+    (M = P count^2, patch-major, then u-major)."""
+    s, cross, weights = _gauss_samples(network, count)
+    return s, unit(cross), np.linalg.norm(cross, axis=1) * weights
+
+
+def _gauss_samples(network: PatchNetwork, count: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gauss points of every patch: positions (M, 3), S_u x S_v (M, 3), quadrature weights
+    (M,) on the unit square."""
     nodes, weights = np.polynomial.legendre.leggauss(count)
     t, w = 0.5 * (nodes + 1.0), 0.5 * weights
     uu, vv = np.meshgrid(t, t, indexing="ij")
@@ -149,9 +176,30 @@ def surface_samples(network: PatchNetwork, count: int = GAUSS_POINTS
     u = np.tile(uu.ravel(), network.patch_count)
     v = np.tile(vv.ravel(), network.patch_count)
     s, su, sv = evaluate(network, patches, u, v)
-    cross = np.cross(su, sv)
-    jac = np.linalg.norm(cross, axis=1)
-    return s, unit(cross), jac * np.tile(ww, network.patch_count)
+    return s, np.cross(su, sv), np.tile(ww, network.patch_count)
+
+
+def fold_samples(network: PatchNetwork, count: int = GAUSS_POINTS) -> np.ndarray:
+    """(P,) per patch, how many of its count x count Gauss points lie on a fold of the patch
+    (see the module docstring: ``FOLD_TURN``, ``FOLD_JACOBIAN``); 0 on a fold-free patch."""
+    _, cross, _ = _gauss_samples(network, count)
+    return _folds(cross.reshape(network.patch_count, count, count, 3))
+
+
+def _folds(cross: np.ndarray) -> np.ndarray:
+    """(P,) folded samples per patch from S_u x S_v on each patch's grid (P, n, n, 3)."""
+    jacobian = np.linalg.norm(cross, axis=-1)
+    normals = unit(cross)
+    folded = jacobian < FOLD_JACOBIAN * float(np.median(jacobian)) if jacobian.size else \
+        np.zeros(jacobian.shape, bool)
+    limit = np.cos(np.radians(FOLD_TURN))
+    across_u = (normals[:, 1:] * normals[:, :-1]).sum(-1) < limit
+    across_v = (normals[:, :, 1:] * normals[:, :, :-1]).sum(-1) < limit
+    folded[:, 1:] |= across_u
+    folded[:, :-1] |= across_u
+    folded[:, :, 1:] |= across_v
+    folded[:, :, :-1] |= across_v
+    return folded.reshape(len(cross), -1).sum(axis=1)
 
 
 def network_quality(network: PatchNetwork, points: np.ndarray,
@@ -164,7 +212,9 @@ def network_quality(network: PatchNetwork, points: np.ndarray,
     distances."""
     points = np.asarray(points, np.float64)
     seam = seam_statistics(network)
-    s, normals, area = surface_samples(network)
+    s, cross, weights = _gauss_samples(network, GAUSS_POINTS)
+    normals, area = unit(cross), np.linalg.norm(cross, axis=1) * weights
+    folds = _folds(cross.reshape(network.patch_count, GAUSS_POINTS, GAUSS_POINTS, 3))
     total = float(area.sum())
     flipped = float("nan")
     if reference is not None:
@@ -185,7 +235,7 @@ def network_quality(network: PatchNetwork, points: np.ndarray,
                           float(c2s.mean()), float(np.sqrt(np.mean(c2s ** 2))),
                           float(np.percentile(c2s, 99)), float(np.average(s2c, weights=area)),
                           float(np.percentile(s2c, 99)), diagonal, float(s2c.max()), far, limit,
-                          c2s)
+                          int((folds > 0).sum()), int(folds.sum()), folds, c2s)
 
 
 #: Surface farther from every point than FAR_DIAGONAL x the diagonal, and than FAR_SPACINGS x

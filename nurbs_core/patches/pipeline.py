@@ -24,14 +24,14 @@ from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
 from nurbs_core.patches.coarsen import coarsen, reach_ratios
 from nurbs_core.patches.crease_layout import coverage, layout_edges, snap_to_creases
 from nurbs_core.patches.creases import Creases, detect_creases, no_creases, sharpened
-from nurbs_core.patches.defaults import WARN_SEAM
 from nurbs_core.patches.fit import NetworkPass, fit_network
 from nurbs_core.patches.layout import LayoutError, QuadLayout, quad_layout
 from nurbs_core.patches.measures import NetworkQuality, network_quality
 from nurbs_core.patches.network import PatchNetwork
 from nurbs_core.patches.options import PatchOptions, check_patch_count
 from nurbs_core.patches.scan_mesh import ScanMesh
-from nurbs_core.status import WARN_FLIPPED, reported_status
+from nurbs_core.patches.verdict import network_warnings
+from nurbs_core.status import reported_status
 from nurbs_core.streaming import RunStatus, Stop, cancelled, should_stop
 from nurbs_core.surfacing.neighbours import (
     STRAY_MAX_POINTS,
@@ -69,15 +69,6 @@ MIN_POINTS_PER_PATCH = 25
 #: Points the fit passes use at most (a random subset of larger clouds), and the quality.
 PASS_POINTS = 20_000
 QUALITY_POINTS = 200_000
-#: The share of the area far from every point (:func:`nurbs_core.patches.measures.far_limit`)
-#: above which a warning is given (and the status is not "converged"); seams:
-#: :data:`nurbs_core.patches.defaults.WARN_SEAM`; folds: :data:`nurbs_core.status.WARN_FLIPPED`.
-WARN_FAR = 0.005
-#: Mean point-to-network distance, in estimated noise sigmas, above which a warning is given
-#: (pure noise averages 0.8 sigma; a clean fit of a scan measures 0.9, a watertight STL's
-#: tessellation 1.9; a network whose layout passed the scanned bunny's ears by, 2.9-3.9; the
-#: coarsened layout that follows them, about 2.3).
-WARN_NOISE = 2.5
 
 
 @dataclass
@@ -475,20 +466,7 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     warnings = [last.message] if last.message else []
     if stopped:
         warnings.insert(0, f"stopped after {last.index + 1} passes: the network as it stood")
-    if quality.seam.p99 > WARN_SEAM:
-        warnings.append(f"seams are not tangent everywhere: 99th percentile angle "
-                        f"{quality.seam.p99:.1f} degrees")
-    if quality.flipped_fraction > WARN_FLIPPED:
-        warnings.append(f"{quality.flipped_fraction:.1%} of the area faces inward (folds)")
-    if quality.far_fraction > WARN_FAR:
-        warnings.append(f"{quality.far_fraction:.1%} of the surface lies farther than "
-                        f"{quality.far_limit:.3g} from every point (up to {quality.s2c_max:.3g}, "
-                        f"{quality.s2c_max / max(quality.diagonal, 1e-300):.1%} of the diagonal): "
-                        "a part the scan does not hold")
-    if noise > 0 and quality.c2s_mean > WARN_NOISE * noise:
-        warnings.append(f"the points lie {quality.c2s_mean / noise:.1f} noise sigmas from the "
-                        f"network on average (noise about {noise:.3g}): details finer than its "
-                        "patches (thin parts, creases) are smoothed over")
+    warnings += network_warnings(quality, noise)
     outliers = int((~inliers).sum())
     if outliers > MAX_OUTLIERS * len(everything):
         warnings.append(f"{outliers} points ({outliers / len(everything):.1%}) lie farther than "
