@@ -2,7 +2,8 @@
 
 It decides: every panel shows the new settings; a change of fit mode stops the other mode's fit
 and raises the mode's docks (Solid mode hides the settings docks on the right, Fit settings,
-Knots, Offsets and Patches, none of which makes a solid: the viewport takes their room, and the
+Knots, Offsets and Patches, none of which makes a solid, and the Loss plot, which a solid (one
+build, no iterations) leaves empty: the viewport and the Solid dock take their room, and the
 Solid dock holds the solid's setting and faces; leaving Solid mode brings back those it hid); a
 changed fit (or patch network) setting restarts a running or paused run of that fit, else
 applies at the next Start; a changed offset setting recomputes the offsets. The settings
@@ -90,7 +91,7 @@ class SettingsPolicy(QObject):
                 controller.stop()
         if mode == "solid":
             for dock in (window.fit_dock, window.knot_dock, window.offset_dock,
-                         window.patches_dock):
+                         window.patches_dock, window.loss_dock):
                 if not dock.isHidden():
                     dock.hide()
                     self._hidden_by_solid.append(dock)

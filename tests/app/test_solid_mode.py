@@ -350,8 +350,10 @@ def test_the_deviation_report_of_a_solid_lists_its_faces(qtbot, window, tmp_path
 def test_solid_mode_hides_the_settings_docks_and_gives_them_back(qtbot, window):
     """None of the right-hand docks' settings (Fit settings, Knots, Offsets, Patches) makes a
     solid: Solid mode showed the Patches dock there (raised by Patches mode before); they hide,
-    the viewport takes their room, and they come back on leaving Solid mode."""
-    right = [window.fit_dock, window.knot_dock, window.offset_dock, window.patches_dock]
+    the viewport takes their room, and they come back on leaving Solid mode. So does the Loss
+    plot, which a solid leaves empty."""
+    right = [window.fit_dock, window.knot_dock, window.offset_dock, window.patches_dock,
+             window.loss_dock]
     window.document.edit_settings("Fit mode", fit_mode="patches")
     assert not window.patches_dock.visibleRegion().isEmpty()  # the raised tab
     width = window.scene.widget.width()
