@@ -61,6 +61,9 @@ class Route:
     seconds: float = 0.0
     #: a part's analytic regions (:class:`nurbs_core.brep.segment.Segmentation`)
     segmentation: Any = None
+    #: the part's freeform region when the route found one
+    #: (:class:`nurbs_core.brep.freeform.FreeformRegion`: the fit takes it, not measured twice)
+    freeform: Any = None
 
     @property
     def reason(self) -> str:
@@ -126,7 +129,8 @@ def _part_or(route: Route, points: np.ndarray, forced: bool) -> Route:
         if region is not None:
             return Route("part", f"{route.finding}; {share} surfaces, a freeform region of "
                          f"{region.mask.mean():.0%} of the points between "
-                         f"{len(region.planes)} planes", route.mesh, segmentation=segmentation)
+                         f"{len(region.planes)} planes", route.mesh, segmentation=segmentation,
+                         freeform=region)
     why = (f"under {MIN_COVERAGE:.0%}" if segmentation.coverage < MIN_COVERAGE
            else f"mostly spheres, cones and tori, over {MAX_CURVED:.0%}: a freeform shape")
     route.finding += f"; not a machined part ({share} surfaces, {why})"

@@ -80,7 +80,8 @@ def run_part_route(points: np.ndarray, part: bool | None, max_hole: float | None
     assert route.mesh is not None
     started = time.perf_counter()
     try:
-        result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation)
+        result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
+                          route.freeform)
         if result.problems and not part:
             raise SolidError("the solid fails its checks: "
                              + "; ".join(result.problems.values()))

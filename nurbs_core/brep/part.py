@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -30,6 +30,9 @@ from nurbs_core.brep.occ import (
 )
 from nurbs_core.brep.primitives import Primitive
 from nurbs_core.brep.segment import Segmentation, segment
+
+if TYPE_CHECKING:
+    from nurbs_core.brep.freeform import FreeformRegion
 
 #: a part-like scan has at least this share of its points on analytic surfaces
 MIN_COVERAGE = 0.9
@@ -188,11 +191,13 @@ def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarr
 
 def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
              mesh_triangles: np.ndarray | None = None,
-             segmentation: Segmentation | None = None) -> PartResult:
+             segmentation: Segmentation | None = None,
+             freeform: FreeformRegion | None = None) -> PartResult:
     """The solid of a scanned part (N, 3) (see the module). ``mesh_vertices`` (V, 3) and
     ``mesh_triangles`` (T, 3): the scan's closed mesh that decides which cells are inside (None:
     built from the points, :func:`nurbs_core.patches.closed_mesh.closed_mesh`);
-    ``segmentation``: when already computed. Raises SolidError when no valid solid results
+    ``segmentation``: when already computed; ``freeform``: its freeform region when the route
+    found one (None: looked for here). Raises SolidError when no valid solid results
     (also when the points enclose no volume). ``result.solid`` is written by
     :func:`nurbs_core.io.solid_io.save_solid`."""
     from nurbs_core.brep.solid import SolidError, build_solid, spans
@@ -215,7 +220,7 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
     low, high = points.min(axis=0), points.max(axis=0)
     extents = spans(segmentation.surfaces, points, segmentation.labels,
                     float(np.linalg.norm(high - low)), segmentation.tolerance)
-    solid, surfaces = _freeform(points, segmentation)
+    solid, surfaces = _freeform(points, segmentation, freeform)
     fillets = 0
     if solid is None:
         solid, surfaces, fillets = _filleted(points, (mesh_vertices, mesh_triangles),
@@ -271,15 +276,17 @@ def _filleted(points: np.ndarray, mesh: tuple[np.ndarray, np.ndarray],
     return solid, [s for s in own if s is not None], rounded
 
 
-def _freeform(points: np.ndarray, segmentation: Segmentation
-              ) -> tuple[OccShape | None, list[Primitive]]:
+def _freeform(points: np.ndarray, segmentation: Segmentation,
+              region: FreeformRegion | None) -> tuple[OccShape | None, list[Primitive]]:
     """The solid of a part with a freeform region (:mod:`nurbs_core.brep.freeform`) and the
     planes its other faces lie on; (None, []) when the scan has no freeform region or the
-    solid cannot be built (the analytic surfaces then make it)."""
+    solid cannot be built (the analytic surfaces then make it). ``region``: the region when
+    already found (None: looked for)."""
     from nurbs_core.brep.freeform import freeform_region, freeform_solid
     from nurbs_core.brep.solid import SolidError
 
-    region = freeform_region(segmentation, points)
+    if region is None:
+        region = freeform_region(segmentation, points)
     if region is None:
         return None, []
     try:

@@ -42,7 +42,8 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
     from nurbs_core.io.solid_io import save_solid
 
     assert route.mesh is not None and route.segmentation is not None
-    result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation)
+    result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
+                      route.freeform)
     if result.problems and not job.part:
         from nurbs_core.brep.solid import SolidError
 

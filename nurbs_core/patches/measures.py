@@ -77,11 +77,8 @@ class NetworkQuality:
     s2c_max: float = 0.0
     far_fraction: float = 0.0
     far_limit: float = 0.0
-    #: how many patches fold over themselves (:func:`fold_samples`), and their folded Gauss
-    #: points in all
-    folded_patches: int = 0
-    fold_samples: int = 0
-    #: (P,) folded Gauss points per patch (left out of :meth:`as_dict`)
+    #: (P,) folded Gauss points per patch (:func:`fold_samples`; in :meth:`as_dict` as the
+    #: counts :attr:`folded_patches` and :attr:`fold_samples`)
     folds: np.ndarray | None = field(default=None, repr=False)
     #: (N,) foot-point distance of each measured point (left out of :meth:`as_dict`)
     distances: np.ndarray | None = field(default=None, repr=False)
@@ -90,11 +87,22 @@ class NetworkQuality:
     def gap_relative(self) -> float:
         return self.seam.gap / self.diagonal if self.diagonal > 0 else 0.0
 
+    @property
+    def folded_patches(self) -> int:
+        """How many patches fold over themselves."""
+        return 0 if self.folds is None else int((self.folds > 0).sum())
+
+    @property
+    def fold_samples(self) -> int:
+        """The folded Gauss points of all patches."""
+        return 0 if self.folds is None else int(self.folds.sum())
+
     def as_dict(self) -> dict:
         """Every scalar measure (and the seam statistics) as plain values."""
         out = asdict(replace(self, distances=None, folds=None))
         del out["distances"], out["folds"]
         out["gap_relative"] = self.gap_relative
+        out["folded_patches"], out["fold_samples"] = self.folded_patches, self.fold_samples
         return out
 
 
@@ -235,7 +243,7 @@ def network_quality(network: PatchNetwork, points: np.ndarray,
                           float(c2s.mean()), float(np.sqrt(np.mean(c2s ** 2))),
                           float(np.percentile(c2s, 99)), float(np.average(s2c, weights=area)),
                           float(np.percentile(s2c, 99)), diagonal, float(s2c.max()), far, limit,
-                          int((folds > 0).sum()), int(folds.sum()), folds, c2s)
+                          folds, c2s)
 
 
 #: Surface farther from every point than FAR_DIAGONAL x the diagonal, and than FAR_SPACINGS x

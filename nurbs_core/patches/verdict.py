@@ -47,9 +47,9 @@ def network_warnings(quality: NetworkQuality, noise: float) -> list[str]:
         warnings.append(f"a seam turns by {seam.max:.0f} degrees at its worst (over "
                         f"{WARN_SEAM_MAX:.0f}, where the seams' 99th percentile is "
                         f"{seam.p99:.1f}): a fold or an edge the network does not follow")
-    if quality.folded_patches:
-        folded = [] if quality.folds is None else np.flatnonzero(quality.folds).tolist()
-        named = ", ".join(str(p) for p in folded[:NAMED_PATCHES]) or str(quality.folded_patches)
+    if quality.folds is not None and quality.folded_patches:
+        folded = np.flatnonzero(quality.folds).tolist()
+        named = ", ".join(str(p) for p in folded[:NAMED_PATCHES])
         more = len(folded) - NAMED_PATCHES
         named += f" and {more} more" if more > 0 else ""
         which = (f"patches {named} fold over themselves" if quality.folded_patches > 1
