@@ -81,6 +81,13 @@ def euler_characteristic(faces: np.ndarray | Sequence[Sequence[int]]) -> int:
     return len(vertices) - len(edges) + len(faces)
 
 
+def mesh_digest(vertices: np.ndarray, faces: np.ndarray) -> bytes:
+    """A digest of a mesh's vertices (V, 3) and faces (F, k): equal meshes, equal digests."""
+    shapes = np.asarray(vertices.shape + faces.shape)
+    return hashlib.blake2b(shapes.tobytes() + vertices.tobytes() + faces.tobytes(),
+                           digest_size=16).digest()
+
+
 def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
                 retry: bool = True, crease_angle: float = -1.0,
                 finest: float | None = None) -> QuadLayout:
@@ -103,8 +110,7 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
     with tempfile.TemporaryDirectory(prefix="nurbs-layout-") as folder:
         source = os.path.join(folder, "mesh.obj")
         target = os.path.join(folder, "quads.obj")
-        digest = hashlib.blake2b(np.asarray(vertices.shape + faces.shape).tobytes()
-                                 + vertices.tobytes() + faces.tobytes(), digest_size=16).digest()
+        digest = mesh_digest(vertices, faces)
         factors: tuple[float, ...] = RETRY_FACTORS if retry else (1.0,)
         if finest is not None:
             factors = tuple(f for f in factors if f == 1.0 or patches * f <= finest)

@@ -10,7 +10,6 @@ until the tolerance is met.
 
 from __future__ import annotations
 
-import hashlib
 import itertools
 import math
 import time
@@ -25,7 +24,7 @@ from nurbs_core.patches.coarsen import coarsen, reach_ratios
 from nurbs_core.patches.crease_layout import coverage, layout_edges, snap_to_creases
 from nurbs_core.patches.creases import Creases, detect_creases, no_creases, sharpened
 from nurbs_core.patches.fit import NetworkPass, fit_network
-from nurbs_core.patches.layout import LayoutError, QuadLayout, quad_layout
+from nurbs_core.patches.layout import LayoutError, QuadLayout, mesh_digest, quad_layout
 from nurbs_core.patches.measures import NetworkQuality, network_quality
 from nurbs_core.patches.network import PatchNetwork
 from nurbs_core.patches.options import PatchOptions, check_patch_count
@@ -201,7 +200,7 @@ def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None,
             continue
         # targets whose retries end at the same Instant Meshes run give the same layout: it
         # was judged already (best_cover only grows, the limits stay)
-        digest = _layout_digest(aligned)
+        digest = mesh_digest(aligned.vertices, aligned.quads)
         if digest in seen:
             continue
         seen.add(digest)
@@ -215,13 +214,6 @@ def choose_layout(mesh: ScanMesh, patches: int | str, points: int | None = None,
     # a layout that follows the creases only in part leaves the rest crossing its G1 seams,
     # moved vertices beside them: the plain layout rounds every crease alike, and fits better
     return best if best_cover >= MIN_COVERAGE else layout
-
-
-def _layout_digest(layout: QuadLayout) -> bytes:
-    """A digest of the layout's vertices and quads (equal layouts, equal digests)."""
-    shapes = np.asarray(layout.vertices.shape + layout.quads.shape)
-    return hashlib.blake2b(shapes.tobytes() + layout.vertices.tobytes() + layout.quads.tobytes(),
-                           digest_size=16).digest()
 
 
 def _turn_off_creases(layout: QuadLayout, creases: Creases) -> float:
