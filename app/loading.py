@@ -11,6 +11,7 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -92,6 +93,13 @@ def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
     from nurbs_core.io.units import units_of_file, units_of_items
 
     _check(cancel)
+    mesh_file = _mesh_file(path)
+    if mesh_file is not None:
+        points, mesh, note = mesh_file
+        loaded.targets.append(Target(path.name, points, str(path), mesh=mesh, mesh_note=note,
+                                     read_points=points))
+        loaded.stated_units[path.name] = units_of_file(path)
+        return
     result = _read(path)  # the engine's reader checks the file (missing, link loop, folder...)
     _check(cancel)
     if isinstance(result, (list, tuple)):
@@ -108,6 +116,29 @@ def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
             raise ValueError(f"{path}: needs at least 4 points, has {len(points)}")
         loaded.targets.append(Target(path.name, points, str(path)))
         loaded.stated_units[path.name] = units_of_file(path)  # E57: metres
+
+
+def _mesh_file(path: Path) -> tuple[np.ndarray, Any, str] | None:
+    """A mesh file (STL, OBJ, OFF, PLY with faces, ...) read as ``nurbs-fit`` reads it
+    (:func:`nurbs_core.jobs.network.surface_input`): the points to fit (N, 3) (sampled over
+    its area when it has few vertices, never reduced to its vertices), its own closed mesh or
+    None, and why that mesh cannot serve; None for any other file."""
+    from nurbs_core.io.points import MESH_SUFFIXES, suffix_of
+
+    suffix = suffix_of(str(path))
+    if suffix not in MESH_SUFFIXES and suffix != ".ply":
+        return None
+    if suffix == ".ply":
+        from nurbs_core.io.ply import has_faces
+
+        if not path.is_file() or not has_faces(str(path)):
+            return None          # a PLY cloud (or no file: the reader below says so)
+    from nurbs_core.jobs.network import surface_input
+
+    points, mesh, note = surface_input(str(path), quiet=True)
+    if len(points) < 4:
+        raise ValueError(f"{path}: needs at least 4 points, has {len(points)}")
+    return points, mesh, note
 
 
 def tessellate(geometries: list[GeometryArrays]) -> list[DisplayGeometry]:

@@ -61,6 +61,7 @@ class PartController(QObject):
         if self._is_shut_down or self.is_busy():
             return False
         points, _selection = self._document.fit_points()
+        file_mesh, file_mesh_note = self._document.file_mesh()
         if points is None:
             self.run_failed.emit("Nothing to fit: open or drop a point cloud first.")
             return False
@@ -71,7 +72,7 @@ class PartController(QObject):
             from app.workers.live_worker import lower_thread_priority
 
             lower_thread_priority()
-            return run_part_route(cloud, part, max_hole, cancel)
+            return run_part_route(cloud, part, max_hole, cancel, file_mesh, file_mesh_note)
 
         job_id = self._jobs.submit_detached("solid", work, self._finished, self._failed)
         if not job_id:

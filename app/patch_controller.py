@@ -28,7 +28,8 @@ class PatchController(LiveController):
     def _request(self, run_id: int, points: np.ndarray) -> PatchRequest:
         options = self._document.settings.patches
         options.validate()
-        return PatchRequest(run_id, points, options)
+        mesh, _note = self._document.file_mesh()
+        return PatchRequest(run_id, points, options, mesh)
 
     def _worker_for(self, request: PatchRequest, stop_token: StopToken) -> PatchWorker:
         return PatchWorker(request, stop_token)

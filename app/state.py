@@ -232,14 +232,22 @@ class FitAccount:
                    None if grid_setting is None else tuple(grid_setting))
 
 
-@dataclass
+@dataclass(eq=False)
 class Target:
-    """A point cloud to fit: points (N, 3) float64."""
+    """A point cloud to fit: points (N, 3) float64. A mesh file's cloud (points sampled over
+    its triangles when it has few vertices, as ``nurbs-fit`` reads it) keeps the file's own
+    closed mesh for the route and a network's layout (``mesh``, a
+    :class:`nurbs_core.patches.scan_mesh.ScanMesh`; None for a cloud or a mesh that cannot
+    serve, ``mesh_note`` then saying why) while its points are the ones read
+    (``read_points``: an edit replaces them, and the mesh no longer stands for them)."""
 
     name: str
     points: np.ndarray
     path: str = ""
     visible: bool = True
+    mesh: Any = None
+    mesh_note: str = ""
+    read_points: np.ndarray | None = field(default=None, repr=False)
 
 
 @dataclass
@@ -633,6 +641,19 @@ class Document(QObject):
 
     def selected_count(self) -> int:
         return 0 if self.selection is None else int(np.count_nonzero(self.selection))
+
+    def file_mesh(self) -> tuple[Any, str]:
+        """The input file's own mesh for the route of what Start fits (a ScanMesh or None) and
+        why a mesh file's mesh cannot serve (``choose_route``'s ``file_mesh`` and
+        ``file_mesh_note``): those of the one visible cloud while it is fitted whole and as
+        read (no selection, no points deleted); (None, "") otherwise."""
+        visible = [t for t in self.targets if t.visible and len(t.points)]
+        if len(visible) != 1 or self.selection is not None:
+            return None, ""
+        target = visible[0]
+        if target.read_points is None or target.points is not target.read_points:
+            return None, ""
+        return target.mesh, target.mesh_note
 
     def fit_points(self) -> tuple[np.ndarray | None, np.ndarray | None]:
         """What Start fits: (the selected points (M, 3), the selection (N,)) while points are

@@ -31,9 +31,17 @@ from app.window.text import format_seconds, names
 from app.window.units_policy import units_of_load
 
 if TYPE_CHECKING:
+    from app.state import Target
     from app.window.hosts import LoadHost
 
 MAX_RECENT = 10
+
+
+def mesh_words(target: Target) -> str:
+    """What a mesh file's cloud is, for the message of its load ("" for a cloud)."""
+    if target.mesh is not None:
+        return " (its mesh is closed: its own triangles lay out the patches)"
+    return f" ({target.mesh_note}: the points' own mesh is built)" if target.mesh_note else ""
 
 
 @dataclass
@@ -221,7 +229,7 @@ class LoadPolicy(QObject):
                           f"{grid[0]} x {grid[1]} (Edit > Undo to keep the larger grid).")
         for path in paths:
             self.recent.add(path)
-        counts = [f"{len(t.points)} points in {t.name}" for t in loaded.targets]
+        counts = [f"{len(t.points)} points in {t.name}{mesh_words(t)}" for t in loaded.targets]
         if loaded.patch_names:
             sources = sorted({Path(p).name for p in paths} - {t.name for t in loaded.targets})
             counts.append(f"{len(loaded.patch_names)} NURBS shape(s) from {names(sources)}")

@@ -60,9 +60,11 @@ def _check(cancel: threading.Event | None) -> None:
 
 
 def run_part_route(points: np.ndarray, part: bool | None, max_hole: float | None = None,
-                   cancel: threading.Event | None = None) -> PartOutcome:
+                   cancel: threading.Event | None = None, file_mesh: Any = None,
+                   file_mesh_note: str = "") -> PartOutcome:
     """The part route for a cloud (N, 3): :func:`nurbs_core.route.choose_route` with ``part``
-    (None: the scan decides, True: forced, False: never), then the solid. ``fallback`` is set
+    (None: the scan decides, True: forced, False: never) and the input file's own mesh
+    (``file_mesh``, ``file_mesh_note``: see ``choose_route``), then the solid. ``fallback`` is set
     when no solid results: the route is not a part, or no valid solid results, or (unless
     forced) the solid fails its quality checks (``nurbs-fit``'s rule: the automatic route
     promises a clean result). ValueError when a forced part route cannot run (an open cloud,
@@ -72,7 +74,7 @@ def run_part_route(points: np.ndarray, part: bool | None, max_hole: float | None
     from nurbs_core.route import choose_route, without_solid
 
     points = np.asarray(points, np.float64)
-    route = choose_route(points, max_hole=max_hole, part=part)
+    route = choose_route(points, file_mesh, file_mesh_note, max_hole=max_hole, part=part)
     _check(cancel)
     timings = {"route": route.seconds}
     if route.kind != "part":

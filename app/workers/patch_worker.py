@@ -35,11 +35,14 @@ RMS_TERM = "RMS / diagonal"
 
 @dataclass
 class PatchRequest:
-    """One run: the cloud (N, 3) and the engine's ``PatchOptions``."""
+    """One run: the cloud (N, 3), the engine's ``PatchOptions`` and the input file's own
+    closed mesh of that cloud (a ScanMesh: it lays out the patches, as ``nurbs-fit`` does;
+    None: the engine builds the mesh from the points)."""
 
     run_id: int
     points: np.ndarray
     options: Any
+    mesh: Any = None
 
 
 @dataclass
@@ -112,8 +115,8 @@ class PatchWorker(LiveWorker):
 
         started = time.monotonic()
         # a stop ends the events after the pass under way; the network it left is measured here
-        events = iter_patch_fit(request.points, request.options, stop=self._stop,
-                                measure_stopped=False)
+        events = iter_patch_fit(request.points, request.options, mesh=request.mesh,
+                                stop=self._stop, measure_stopped=False)
         mesh, last_pass, last_sent, cost = None, None, -math.inf, 0.0
         stages: Counter[str] = Counter()
         points = np.asarray(request.points, np.float64)
