@@ -151,7 +151,10 @@ def fit_region(points: np.ndarray, segmentation: Segmentation,
     from nurbs_core.fitting.config import FitConfig
     from nurbs_core.fitting.run import fit_arrays
 
-    planes = [segmentation.surfaces[k] for k in region.planes]
+    # the planes among the surfaces that trim it (a region forced to NURBS by the user is
+    # trimmed by every surface of the part, :mod:`nurbs_core.brep.face_edits`)
+    planes = [segmentation.surfaces[k] for k in region.planes
+              if segmentation.surfaces[k].kind == "plane"]
     # side points nearer a plane than twice the tolerance may be the cap's; beyond that the
     # side's own points decide the surface (a wider gap left the rim to the continuation and
     # put the edge 4-12 noise sigmas off the scan)
