@@ -95,13 +95,14 @@ class PartRegions:
     """The regions a solid is built from: ``segmentation`` (its analytic surfaces and each
     point's surface in ``labels`` (N,), -1 for none and for the freeform region's points);
     ``freeform``: the freeform region's points (a mask (N,)) or None; ``edits``: the edits that
-    made these regions from the segmentation, in order; ``misfits``: per analytic surface, a
-    problem when an edit gave it a type that does not meet the tolerance ("" otherwise)."""
+    made these regions from the segmentation, in order; ``misfits``: per analytic surface, None
+    when the segmentation made it, else (an edit made it) a problem when its type does not meet
+    the tolerance, "" when it does."""
 
     segmentation: Segmentation
     freeform: np.ndarray | None = None
     edits: tuple[FaceEdit, ...] = ()
-    misfits: tuple[str, ...] = field(default=())
+    misfits: tuple[str | None, ...] = field(default=())
 
     @property
     def count(self) -> int:
@@ -120,6 +121,10 @@ class PartRegions:
         """The misfits of the edited regions, in the order of the surfaces."""
         return [text for text in self.misfits if text]
 
+    def edited(self, region: int) -> bool:
+        """Whether an edit made this analytic region (not the segmentation)."""
+        return region < len(self.misfits) and self.misfits[region] is not None
+
 
 def initial_regions(segmentation: Segmentation, freeform: np.ndarray | None = None,
                     planes: list[int] | None = None) -> PartRegions:
@@ -128,12 +133,12 @@ def initial_regions(segmentation: Segmentation, freeform: np.ndarray | None = No
     only those planes stay analytic regions (the curved fragments under the freeform face are
     its points)."""
     if freeform is None:
-        return PartRegions(segmentation, None, (), ("",) * len(segmentation.surfaces))
+        return PartRegions(segmentation, None, (), (None,) * len(segmentation.surfaces))
     keep = list(range(len(segmentation.surfaces))) if planes is None else list(planes)
     labels = _relabelled(segmentation.labels, keep)
     labels[freeform] = -1
     return PartRegions(_with(segmentation, [segmentation.surfaces[k] for k in keep], labels),
-                       np.asarray(freeform, bool).copy(), (), ("",) * len(keep))
+                       np.asarray(freeform, bool).copy(), (), (None,) * len(keep))
 
 
 def deviation(surface: Primitive, points: np.ndarray) -> float:

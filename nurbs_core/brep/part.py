@@ -152,9 +152,24 @@ def part_problems(result: PartResult) -> dict[str, str]:
                                 f"solid on average (limit {MEAN_LIMIT:g}): some of the scan is "
                                 "not on its analytic faces")
     misfits = result.regions.problems() if result.regions is not None else []
-    if misfits:
-        problems["edits"] = "; ".join(misfits)
+    faceless = _faceless_edits(result)
+    if misfits or faceless:
+        problems["edits"] = "; ".join(misfits + faceless)
     return problems
+
+
+def _faceless_edits(result: PartResult) -> list[str]:
+    """The regions an edit made whose surface bounds no face of the solid (a plane forced
+    through a hole fills it): their points went to other faces."""
+    regions = result.regions
+    if regions is None:
+        return []
+    with_face = {face.region for face in result.faces}
+    return [f"region {k} (a {surface.kind} an edit made, {size} points) bounds no face of the "
+            "solid: its points lie on other faces"
+            for k, (surface, size) in enumerate(zip(regions.segmentation.surfaces,
+                                                    regions.segmentation.region_sizes))
+            if regions.edited(k) and k not in with_face]
 
 
 def part_like(segmentation: Segmentation) -> bool:

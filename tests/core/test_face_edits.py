@@ -127,6 +127,8 @@ def test_an_impossible_type_is_reported_with_its_deviation(plate):
     result = _rebuilt(points, mesh, edited)
     assert result.status == "warnings"
     assert "forced to a plane" in result.problems["edits"]
+    # the plane through the hole bounds nothing (the hole is filled): said too
+    assert "bounds no face of the solid" in result.problems["edits"]
     # the plane really misses the hole's points
     mine = edited.segmentation.labels == len(edited.segmentation.surfaces) - 1
     assert edited.segmentation.surfaces[-1].distance(points[mine]).mean() > (
