@@ -67,13 +67,13 @@ class FaceEditActions(QObject):
 
 
 class FaceEditBar(QWidget):
-    """The buttons under the face table: Merge, Split and a Type menu button."""
+    """The buttons for the face table's selection: Merge, Split and a Type menu button."""
 
     def __init__(self, actions: FaceEditActions, parent: QWidget | None = None):
         super().__init__(parent)
         layout = QHBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
-        label = QLabel("Selected faces:")
+        label = QLabel("   Selected faces:")
         label.setToolTip(HELP)
         layout.addWidget(label)
         self.merge_button = QPushButton("Merge")

@@ -2,7 +2,7 @@
 colours the faces, and the report of the solid the part route made: per face its type,
 parameters (radius, axis, half-angle), points and their mean and 99th-percentile distance; the
 solid's status (converged, or warnings in the warning colour with the problems), validity,
-closedness and volume; under the table the face edits of the selected rows (Merge, Split, Type:
+closedness and volume; beside the colouring the face edits of the selected rows (Merge, Split, Type:
 :mod:`app.panels.face_edit_bar`, also the table's context menu). It shows what it is given and
 emits edits; nothing is decided here.
 """
@@ -129,8 +129,9 @@ class SolidPanel(QWidget):
         self.edit_actions = FaceEditActions(self)
         self.edit_actions.edit_requested.connect(
             lambda action, kind: self.face_edit_requested.emit(action, self.selected_rows(), kind))
+        # beside the colouring, not under the table: the dock is low, the table scrolls
         self.edit_bar = FaceEditBar(self.edit_actions)
-        layout.addWidget(self.edit_bar)
+        choices.insertWidget(choices.count() - 1, self.edit_bar)
         self._editable = False
         self.table.itemSelectionChanged.connect(self._selection_changed)
         self.table.setContextMenuPolicy(Qt.ContextMenuPolicy.CustomContextMenu)

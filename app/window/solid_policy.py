@@ -29,7 +29,6 @@ from app.viewport.solid_layers import TYPE_LABELS
 from app.window.fit_display import cloud_units
 
 if TYPE_CHECKING:
-    from app.solid_types import FaceRow
     from app.window.hosts import SolidHost
     from app.workers.part_worker import PartOutcome
 
@@ -38,16 +37,17 @@ SOLID_STEP = "Solid from analytic faces"
 SOLID_DOCK_HEIGHT = 330
 
 
-def _edit_text(action: str, faces: list[FaceRow], rows: list[int], kind: str | None) -> str:
-    """The undo step's name: "Merge faces 2, 5", "Split face 3", "Face 4 as a cylinder"."""
+def _edit_text(action: str, rows: list[int], kind: str | None) -> str:
+    """The undo step's name: "Merge faces 2, 5", "Split face 3", "Face 4 as a cylinder",
+    "Face 0 as NURBS"."""
     listed = ", ".join(map(str, rows))
     named = f"face{'s' if len(rows) > 1 else ''} {listed}"
-    label = TYPE_LABELS.get(kind or "", kind or "").lower()
+    label = "NURBS" if kind == "freeform" else f"a {TYPE_LABELS.get(kind or '', kind)}".lower()
     if action == "merge":
-        return f"Merge {named}" + (f" as one {label}" if kind else "")
+        return f"Merge {named}" + (f" as {label.replace('a ', 'one ', 1)}" if kind else "")
     if action == "split":
         return f"Split {named}"
-    return f"{named[0].upper()}{named[1:]} as a {label}"
+    return f"{named[0].upper()}{named[1:]} as {label}"
 
 
 class SolidPolicy(QObject):
@@ -186,7 +186,7 @@ class SolidPolicy(QObject):
         if action == "type" and len(regions) > 1:
             action = "merge"  # several surfaces given one type: one surface of that type
         edit = {"action": action, "regions": regions, "kind": kind}
-        text = _edit_text(action, [faces[row] for row in rows], rows, kind)
+        text = _edit_text(action, rows, kind)
         started = window.part_controller.edit(edit, text)
         if started:
             window.report(f"{text}: refitting and building the solid again (Stop cancels).")

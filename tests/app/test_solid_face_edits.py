@@ -70,7 +70,7 @@ def test_face_edits_in_the_solid_dock_are_refitted_undoable_and_exported(qtbot, 
     assert actions.split.isEnabled() and not actions.merge.isEnabled()
     assert panel.edit_bar.split_button.isEnabled() and panel.edit_bar.type_button.isEnabled()
     text = _edit(qtbot, window, actions.type_actions["freeform"].trigger)
-    assert text == f"Face {cylinder} as a nurbs"
+    assert text == f"Face {cylinder} as NURBS"
     assert sorted(panel.face_types()) == ["NURBS"] + ["Plane"] * 6
     assert panel.values["status"].text() == "converged"
     assert window.scene.solid.legend_labels() == ["Plane (6)", "NURBS (1)"]
@@ -88,7 +88,7 @@ def test_face_edits_in_the_solid_dock_are_refitted_undoable_and_exported(qtbot, 
     window.undo_action.trigger()
     assert window.document.solid is first
     assert sorted(panel.face_types()) == ["Cylinder"] + ["Plane"] * 6
-    assert window.statusBar().currentMessage().startswith(f"Undo Face {cylinder} as a nurbs: 7 faces")
+    assert window.statusBar().currentMessage().startswith(f"Undo Face {cylinder} as NURBS: 7 faces")
     window.document.undo_stack.redo()
     assert window.document.solid is edited
 
