@@ -35,6 +35,7 @@ from nurbs_core.brep.segment import Segmentation, segment
 if TYPE_CHECKING:
     from nurbs_core.brep.face_edits import PartRegions
     from nurbs_core.brep.freeform import FreeformRegion
+    from nurbs_core.brep.solid import Span
 
 #: a part-like scan has at least this share of its points on analytic surfaces
 MIN_COVERAGE = 0.9
@@ -280,18 +281,20 @@ def rebuild_part(points: np.ndarray, mesh_vertices: np.ndarray, mesh_triangles: 
     fillets = 0
     what = regions.edits[-1].describe() if regions.edits else "the regions"
     try:
+        low, high = points.min(axis=0), points.max(axis=0)
+        extents = spans(segmentation.surfaces, points, segmentation.labels,
+                        float(np.linalg.norm(high - low)), segmentation.tolerance)
         if regions.freeform is not None:
-            everything = list(range(len(segmentation.surfaces)))
-            solid = freeform_solid(points, segmentation,
-                                   FreeformRegion(regions.freeform, everything))
+            region = FreeformRegion(regions.freeform, list(range(len(segmentation.surfaces))))
+            solid = _nurbs_cells(points, (mesh_vertices, mesh_triangles), segmentation, region,
+                                 extents)
+            if solid is None:
+                solid = freeform_solid(points, segmentation, region, extents)
             surfaces = list(segmentation.surfaces)
         else:
             solid, surfaces, fillets = _filleted(points, (mesh_vertices, mesh_triangles),
                                                  segmentation)
             if solid is None:
-                low, high = points.min(axis=0), points.max(axis=0)
-                extents = spans(segmentation.surfaces, points, segmentation.labels,
-                                float(np.linalg.norm(high - low)), segmentation.tolerance)
                 surfaces = crossing(segmentation.surfaces, segmentation.tolerance)
                 solid = build_solid(surfaces, mesh_vertices, mesh_triangles, (low, high),
                                     extents, segmentation.tolerance)
@@ -299,6 +302,35 @@ def rebuild_part(points: np.ndarray, mesh_vertices: np.ndarray, mesh_triangles: 
         raise SolidError(f"{what} gives no valid solid ({error})") from None
     timings = {"solid": time.perf_counter() - started}
     return _measured(points, solid, surfaces, segmentation, regions, timings, fillets)
+
+
+def _nurbs_cells(points: np.ndarray, mesh: tuple[np.ndarray, np.ndarray],
+                 segmentation: Segmentation, region: FreeformRegion,
+                 extents: list[Span | None]) -> OccShape | None:
+    """The solid of the arrangement of the analytic surfaces and the freeform region's NURBS
+    face (fitted past the planes around it, :func:`~nurbs_core.brep.freeform.fit_region`),
+    its cells inside the scan's closed mesh kept (:func:`~nurbs_core.brep.solid.build_solid`);
+    None when OpenCASCADE cannot build it or the NURBS face bounds no cell (the freeform
+    route's fuse of the faces then tries). The cells' inside test keeps no stray piece of a
+    surface that runs along another, which the fuse's test by the points' support keeps (a
+    turned part's cone along its cylinder)."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+
+    from nurbs_core.brep.freeform import fit_region
+    from nurbs_core.brep.solid import SolidError, build_solid
+    from nurbs_core.io.cad import occ_surface
+
+    low, high = points.min(axis=0), points.max(axis=0)
+    try:
+        face = BRepBuilderAPI_MakeFace(occ_surface(fit_region(points, segmentation, region)),
+                                       1e-6).Face()
+        solid = build_solid(list(segmentation.surfaces), *mesh, (low, high), extents,
+                            segmentation.tolerance, (face,))
+    except SolidError:
+        return None
+    # a NURBS face that separates no cells (a tube whose seam leaves a gap) bounds nothing:
+    # the region asked to be NURBS would be missing from the solid
+    return solid if any(face_kind(f) == "freeform" for f in faces(solid)) else None
 
 
 def _measured(points: np.ndarray, solid: OccShape, surfaces: list[Primitive],
