@@ -11,9 +11,10 @@ dock and the tree. When no valid solid results (or the route is not a part) the 
 and fits the network, as ``nurbs-fit`` does; a forced route that fails reports the error with
 "Fit as patches".
 
-The Solid dock's face edits (Merge, Split, Type of the selected rows) go to the regions the rows'
-faces lie on; several regions given one type are merged as that type. The edit runs in the part
-controller's job; its solid is an undoable step; one that fails leaves the solid as it was.
+The Solid dock's face edits (Merge, Split, Type of the selected rows; a click on a face in the
+viewport selects its row, Ctrl+click adds it) go to the regions the rows' faces lie on; several
+regions given one type are merged as that type. The edit runs in the part controller's job; its
+solid is an undoable step; one that fails leaves the solid as it was.
 """
 
 from __future__ import annotations
@@ -72,6 +73,7 @@ class SolidPolicy(QObject):
         controller.solid_edited.connect(self.on_solid_edited)
         controller.edit_failed.connect(self.on_edit_failed)
         controller.state_changed.connect(lambda _state: self._follow_editable())
+        window.scene.face_picker.face_clicked.connect(self.on_face_clicked)
 
     # --- starting ------------------------------------------------------------------------------
     def start(self, part: bool | None) -> bool:
@@ -191,6 +193,22 @@ class SolidPolicy(QObject):
         if started:
             window.report(f"{text}: refitting and building the solid again (Stop cancels).")
         return started
+
+    @Slot(int, bool)
+    def on_face_clicked(self, face: int, additive: bool) -> None:
+        """A face clicked in the viewport: its row selected (Ctrl: added to the selection, or
+        taken out when it was in)."""
+        panel = self._window.solid_panel
+        rows = panel.selected_rows()
+        if not additive:
+            rows = [face]
+        elif face in rows:
+            rows.remove(face)
+        else:
+            rows.append(face)
+        panel.select_rows(rows)
+        if rows:
+            panel.table.scrollToItem(panel.table.item(face, 0))
 
     @Slot(object, str)
     def on_solid_edited(self, outcome: PartOutcome, text: str) -> None:

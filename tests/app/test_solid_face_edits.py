@@ -1,8 +1,8 @@
-"""The Solid dock's face edits in the real window: rows selected in the face table, Type, Merge
-(buttons and context menu share the actions) run in the part controller's job, the viewport and
-the table follow, Undo and Redo swap the solids, an edit whose solid fails leaves the solid as it
-was, File > Export writes the edited solid, and a session keeps the edits (replayed when the
-loaded solid is edited again)."""
+"""The Solid dock's face edits in the real window: rows selected in the face table (or by a click on
+the face in the viewport), Type, Merge (buttons and context menu share the actions) run in the
+part controller's job, the viewport and the table follow, Undo and Redo swap the solids, an edit
+whose solid fails leaves the solid as it was, File > Export writes the edited solid, and a
+session keeps the edits (replayed when the loaded solid is edited again)."""
 
 from __future__ import annotations
 
@@ -43,6 +43,33 @@ def _step_surface_types(path) -> list[str]:
     return sorted(BRepAdaptor_Surface(face).GetType().name for face in faces(shape))
 
 
+def _click_a_face(qtbot, window) -> int:
+    """Click (a real Qt mouse click on the viewport) the centre of the front-most of the
+    solid's larger triangles; the face it belongs to."""
+    from PySide6.QtCore import QPoint, Qt
+
+    display = window.document.solid.display
+    vertices, triangles = display.vertices, display.triangles
+    corners = vertices[triangles]
+    areas = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                    corners[:, 2] - corners[:, 0]), axis=1)
+    large = np.flatnonzero(areas >= np.median(areas))
+    renderer = window.scene.plotter.renderer
+    projected = []
+    for centre in corners[large].mean(axis=1):
+        renderer.SetWorldPoint(*centre, 1.0)
+        renderer.WorldToDisplay()
+        projected.append(renderer.GetDisplayPoint())
+    front = int(np.argmin([z for _, _, z in projected]))
+    x, y, _ = projected[front]
+    widget = window.scene.plotter
+    width, height = renderer.GetRenderWindow().GetSize()
+    qtbot.mouseClick(widget, Qt.MouseButton.LeftButton,
+                     pos=QPoint(round(x * widget.width() / width),
+                                round(widget.height() - y * widget.height() / height)))
+    return int(display.owners[large[front]])
+
+
 def _edit(qtbot, window, trigger) -> str:
     """Trigger an edit and wait for its solid; the edit's text."""
     with qtbot.waitSignal(window.part_controller.solid_edited, timeout=TIMEOUT_MS) as blocker:
@@ -63,6 +90,14 @@ def test_face_edits_in_the_solid_dock_are_refitted_undoable_and_exported(qtbot, 
     assert sorted(panel.face_types()) == ["Cylinder"] + ["Plane"] * 6
     first = window.document.solid
     assert not actions.merge.isEnabled() and not actions.types.isEnabled()  # nothing selected
+
+    # a click on a face in the viewport selects its row
+    window.scene.standard_view("iso")
+    window.scene.render_now()
+    with qtbot.waitSignal(window.scene.face_picker.face_clicked, timeout=5000) as blocker:
+        clicked = _click_a_face(qtbot, window)
+    assert blocker.args == [clicked, False] and panel.selected_rows() == [clicked]
+    assert actions.split.isEnabled()
 
     # the cylinder as NURBS: one row selected, Type > NURBS
     cylinder = panel.face_types().index("Cylinder")
