@@ -1,5 +1,6 @@
 """The part route's controller (GUI thread): runs :func:`app.workers.part_worker.run_part_route`
-in an abandonable job and hands its outcome on.
+in an abandonable job and hands its outcome on; the face edits of its solid
+(:func:`app.workers.part_worker.run_face_edit`: merge, split, a type) run the same way.
 
 The engine's solid builder has no stop token and cannot be paused: Stop (and Reset, a new
 cloud, closing the window) abandons the job at once; its thread ends by itself after the stage
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from typing import Any
 
 import numpy as np
 from PySide6.QtCore import QObject, Signal
@@ -18,7 +20,7 @@ from PySide6.QtCore import QObject, Signal
 from app.errors import describe
 from app.state import Document
 from app.workers.jobs import JobRunner
-from app.workers.part_worker import PartCancelled, PartOutcome, run_part_route
+from app.workers.part_worker import PartCancelled, PartOutcome, run_face_edit, run_part_route
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +36,10 @@ class PartController(QObject):
     fallback_chosen = Signal(str)
     #: the run could not run (a forced route on an open cloud, no OpenCASCADE) or broke
     run_failed = Signal(str)
+    #: a face edit made a new solid (the PartOutcome, shown and undoable; the edit's text)
+    solid_edited = Signal(object, str)
+    #: a face edit could not be made (why); the solid before it stays
+    edit_failed = Signal(str)
 
     JOB = "solid"
 
@@ -75,6 +81,60 @@ class PartController(QObject):
             return run_part_route(cloud, part, max_hole, cancel, file_mesh, file_mesh_note)
 
         job_id = self._jobs.submit_detached("solid", work, self._finished, self._failed)
+        if not job_id:
+            return False
+        self._job_id = job_id
+        self._set_state("running")
+        return True
+
+    def edit(self, edit: dict[str, Any], text: str) -> bool:
+        """Edit the faces of the solid shown (``edit``: ``{"action", "regions", "kind"}`` of
+        :mod:`nurbs_core.brep.face_edits`) in an abandonable job, as the part route runs: the
+        regions refitted and the solid built again; the new solid becomes an undoable step
+        named ``text``. False when it cannot start (``edit_failed`` says why)."""
+        if self._is_shut_down or self.is_busy():
+            return False
+        before = self._document.solid
+        if before is None or before.solid is None:
+            self.edit_failed.emit("No solid to edit: Start on a closed scan of a part first.")
+            return False
+        points, _selection = self._document.fit_points()
+        cloud = None if points is None else np.array(points, np.float64)
+        if before.source is None and cloud is None:
+            self.edit_failed.emit("The solid's points are gone: open the scan again.")
+            return False
+
+        def work(cancel: threading.Event) -> PartOutcome:
+            from app.workers.live_worker import lower_thread_priority
+
+            lower_thread_priority()
+            return run_face_edit(before, cloud if cloud is not None else before.source.points,
+                                 edit, cancel)
+
+        def finished(outcome: PartOutcome) -> None:
+            self._job_id = 0
+            self._set_state("idle")
+            if self._is_shut_down:
+                return
+            if self._document.solid is not before:  # replaced meanwhile: the edit is stale
+                self.edit_failed.emit(f"{text}: the solid changed meanwhile; the edit was "
+                                      "dropped")
+                return
+            self._document.record_solid_edit(before, outcome, text)
+            self.solid_edited.emit(outcome, text)
+
+        def failed(error: BaseException) -> None:
+            self._job_id = 0
+            self._set_state("idle")
+            if self._is_shut_down or isinstance(error, PartCancelled):
+                return
+            if not isinstance(error, (ValueError, ImportError)):
+                log.error("the face edit failed",
+                          exc_info=(type(error), error, error.__traceback__))
+            self.edit_failed.emit(f"{text} was not made: {describe(error)}. The solid stays "
+                                  "as it was.")
+
+        job_id = self._jobs.submit_detached("solid", work, finished, failed)
         if not job_id:
             return False
         self._job_id = job_id

@@ -12,7 +12,8 @@ as an open network with its seam angles, and choosing what to fit: a lasso selec
 whose file states none (the Units box asks), then fitted in metres, and what the Fit settings
 dock says of the fit: the result beside the settings it started from, and a note before Start
 when a setting changes the route, and Solid mode: a scanned plate with a through hole as a solid
-with analytic faces, coloured by type, then by each face's deviation. ``--only single``,
+with analytic faces, coloured by type, then by each face's deviation, then its hole made a NURBS
+face in the Solid dock. ``--only single``,
 ``--only patches``, ``--only selection``, ``--only units``, ``--only controls`` or ``--only
 solid`` makes one of the sets.
 """
@@ -422,18 +423,32 @@ def main(argv: list[str] | None = None) -> int:
         panel.colouring.setCurrentIndex(panel.colouring.findData("p99"))
         later(lambda: (shot("21_solid_deviation.png"), next_step()), 600)
 
+    # 23. a face edit: the hole's cylinder forced to a NURBS face (Type > NURBS on its row)
+    def solid_face_edit():
+        panel = window.solid_panel
+        panel.colouring.setCurrentIndex(panel.colouring.findData("type"))
+        panel.select_rows([panel.face_types().index("Cylinder")])
+
+        def edited(_outcome, _text):
+            panel.select_rows([panel.face_types().index("NURBS")])
+            later(lambda: (shot("23_solid_face_edit.png"), next_step()), 600)
+        once(window.part_controller.solid_edited, lambda *args: later(lambda: edited(*args),
+                                                                        600))
+        panel.edit_actions.type_actions["freeform"].trigger()
+
     single = [demo, converging, offsets, curve, quality_clean, quality_folded]
     patches = [patches_mode, seam_map, patches_deviation, open_thin_parts]
     choose = [selection, fit_selection]
     units = [units_import]
     controls = [fit_result]
-    solid = [solid_part, solid_deviation]
+    solid = [solid_part, solid_deviation, solid_face_edit]
     steps.extend({"single": single, "patches": patches, "selection": choose, "units": units,
                   "controls": controls, "solid": solid}.get(
                       arguments.only, single + choose + units + controls + patches + solid))
     window.controller.fit_failed.connect(lambda message: failures.append(message))
     window.patch_controller.fit_failed.connect(lambda message: failures.append(message))
     window.part_controller.run_failed.connect(lambda message: failures.append(message))
+    window.part_controller.edit_failed.connect(lambda message: failures.append(message))
     next_step()
     qapp.exec()
     for message in failures:

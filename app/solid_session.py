@@ -1,7 +1,8 @@
 """A session's solid (:mod:`app.session_file`): the OpenCASCADE shape as its B-rep text (exact:
-OpenCASCADE's own format) and the face report as JSON, the per-point distances and nearest faces
-as arrays. Reading checks every value and rebuilds the viewport's triangles. Qt-free; OCP is
-imported when a solid is written or read.
+OpenCASCADE's own format) and the face report as JSON (with the face edits that made it, replayed
+when the solid is edited again), the per-point distances and nearest faces as arrays. Reading
+checks every value and rebuilds the viewport's triangles. Qt-free; OCP is imported when a solid
+is written or read.
 """
 
 from __future__ import annotations
@@ -35,7 +36,9 @@ def solid_document(outcome: PartOutcome) -> tuple[dict[str, Any], dict[str, np.n
         "status": report.status, "problems": list(report.problems), "noise": report.noise,
         "tolerance": report.tolerance,
         "faces": [{"kind": f.kind, "description": f.description, "parameters": f.parameters,
-                   "points": f.points, "mean": f.mean, "p99": f.p99} for f in report.faces],
+                   "points": f.points, "mean": f.mean, "p99": f.p99, "region": f.region}
+                  for f in report.faces],
+        "edits": [dict(edit) for edit in report.edits],
         "distances": DISTANCES, "point_faces": POINT_FACES,
     }
     return document, {DISTANCES: report.distances, POINT_FACES: report.point_faces}
@@ -75,8 +78,21 @@ def _face(number: int, item: Any) -> FaceRow:
     points = item.get("points")
     if isinstance(points, bool) or not isinstance(points, int) or points < 0:
         raise ValueError(f"the solid's face {number} needs a point count")
+    region = item.get("region", -1)  # sessions before face edits have none
+    if isinstance(region, bool) or not isinstance(region, int) or region < -1:
+        raise ValueError(f"the solid's face {number} has a region that is no index")
     return FaceRow(item["kind"], item["description"], dict(item["parameters"]), points,
-                   _number(item, "mean"), _number(item, "p99"))
+                   _number(item, "mean"), _number(item, "p99"), region)
+
+
+def _edits(document: dict[str, Any]) -> tuple[dict[str, Any], ...]:
+    """The solid's face edits, each checked as the engine reads it (ValueError)."""
+    from nurbs_core.brep.face_edits import FaceEdit
+
+    edits = document.get("edits", [])
+    if not isinstance(edits, list):
+        raise ValueError("the solid's edits must be a list")
+    return tuple(FaceEdit.from_dict(edit).as_dict() for edit in edits)
 
 
 def solid_from_document(document: Any, arrays: dict[str, np.ndarray]) -> PartOutcome:
@@ -107,7 +123,7 @@ def solid_from_document(document: Any, arrays: dict[str, np.ndarray]) -> PartOut
                          _number(document, "volume"), status, tuple(problems),
                          _number(document, "noise"), _number(document, "tolerance"),
                          distances, point_faces, reason if isinstance(reason, str) else "",
-                         _number(document, "seconds"))
+                         _number(document, "seconds"), _edits(document))
     shape = shape_from_brep(document["brep"])
     display = solid_display(shape, report.tolerance)
     if len(display.owners) and int(display.owners.max()) >= len(rows):

@@ -25,6 +25,9 @@ class FaceRow:
     points: int
     mean: float
     p99: float
+    #: the region of the part's segmentation the face lies on (what a face edit edits; -1:
+    #: none, e.g. a solid from an older session)
+    region: int = -1
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,6 +49,9 @@ class SolidReport:
     point_faces: np.ndarray
     reason: str = ""
     seconds: float = 0.0
+    #: the face edits that made this solid from the segmentation, in order (each a plain
+    #: ``{"action", "regions", "kind"}``, :class:`nurbs_core.brep.face_edits.FaceEdit`'s)
+    edits: tuple[dict[str, Any], ...] = ()
 
     def face_types(self) -> dict[str, int]:
         """How many faces of each type, types in alphabetical order."""
@@ -82,3 +88,7 @@ class PartOutcome:
     display: SolidDisplay | None = None
     fallback: str = ""
     timings: dict[str, float] = field(default_factory=dict)
+    #: what a face edit starts from (:class:`app.workers.part_worker.EditSource`: the points,
+    #: closed mesh and regions; None for a solid from a session, whose edits are replayed on
+    #: the scan segmented again)
+    source: Any = None

@@ -5,7 +5,8 @@ edit can be undone and redone; so do point edits (crop to the selection, delete 
 whose undo also brings back the fitted surface of the points as they were, and the fitted
 shapes: a finished (or stopped) fit, a patch network fit and Reset are each one step holding the
 shapes before and after (:class:`ShapeState`: control points, no points), pushed when the fit has
-ended. Loading files replaces the content and is not an undoable edit. The selection (which
+ended; a face edit of the solid (merge, split, a type) is one step holding the solids before and
+after. Loading files replaces the content and is not an undoable edit. The selection (which
 points of the visible clouds are picked) is the document's too, but not an edit: it is not
 undone, and Start fits only the selected points while there are any.
 Geometry is held as the engine's numpy twins (:mod:`nurbs_core.geometry_arrays`: what
@@ -416,6 +417,34 @@ class _UnitsCommand(_ContentCommand):
             self._document._apply_units(self._old)
 
 
+class _SolidCommand(QUndoCommand):
+    """A face edit of the solid (merge, split, a type): undo puts back the solid before, redo
+    the edited one. Each applies only while the document still shows the solid it replaces (a
+    new run of the part route, Reset or other files make the step obsolete)."""
+
+    def __init__(self, document: Document, before: Any, after: Any, text: str):
+        super().__init__(text)
+        self._document, self._before, self._after = document, before, after
+        self._pushed = False
+
+    def redo(self):
+        if self._pushed:
+            self._swap(self._before, self._after, f"Redo {self.text()}")
+        else:  # the push: the edit itself, which its policy reports
+            self._document.set_solid(self._after)
+        self._pushed = True
+
+    def undo(self):
+        self._swap(self._after, self._before, f"Undo {self.text()}")
+
+    def _swap(self, shown: Any, new: Any, by: str) -> None:
+        if self._document.solid is not shown:
+            self.setObsolete(True)
+            return
+        self._document.set_solid(new)
+        self._document.solid_restored.emit(by)
+
+
 class _SettingsCommand(QUndoCommand):
     def __init__(self, document: Document, old: Settings, new: Settings, text: str):
         super().__init__(text)
@@ -441,6 +470,8 @@ class Document(QObject):
     selection_changed = Signal()
     units_changed = Signal()  # the document's length unit (replaced content sends it too)
     solid_changed = Signal()  # the solid of the part route (Solid mode) replaced or dropped
+    #: an undo / redo of a face edit put a solid back: "Undo Merge regions 2, 5"
+    solid_restored = Signal(str)
 
     def __init__(self, parent: QObject | None = None):
         super().__init__(parent)
@@ -479,7 +510,8 @@ class Document(QObject):
         #: what put the shapes back: "Undo Fit", "Redo Crop to ..." (the step's text)
         self.restored_by = ""
         #: the solid of the part route (:class:`app.workers.part_worker.PartOutcome`: the
-        #: OpenCASCADE shape, its report and triangles) or None; not part of the undo history
+        #: OpenCASCADE shape, its report and triangles) or None; a run of the part route is no
+        #: step of the undo history, a face edit of its solid is (:meth:`record_solid_edit`)
         self.solid: Any = None
         #: the switch to Patches mode waiting for its network fit (begin_fit_as_patches)
         self._pending_switch: _ShapesCommand | None = None
@@ -613,6 +645,11 @@ class Document(QObject):
         """The solid now shown (a PartOutcome with its solid), or None."""
         self.solid = solid
         self.solid_changed.emit()
+
+    def record_solid_edit(self, before: Any, after: Any, text: str) -> None:
+        """A face edit made ``after`` (a PartOutcome) of ``before``, the solid shown: shows it,
+        as an undoable step named ``text``."""
+        self.undo_stack.push(_SolidCommand(self, before, after, text))
 
     def set_offsets(self, offsets: OffsetDisplay):
         self.offsets = offsets

@@ -2,7 +2,9 @@
 colours the faces, and the report of the solid the part route made: per face its type,
 parameters (radius, axis, half-angle), points and their mean and 99th-percentile distance; the
 solid's status (converged, or warnings in the warning colour with the problems), validity,
-closedness and volume. It shows what it is given and emits edits; nothing is decided here.
+closedness and volume; beside the colouring the face edits of the selected rows (Merge, Split, Type:
+:mod:`app.panels.face_edit_bar`, also the table's context menu). It shows what it is given and
+emits edits; nothing is decided here.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from app.panels.face_edit_bar import FaceEditActions, FaceEditBar
 from app.panels.result_text import length_text
 from app.solid_types import FaceRow, SolidReport
 from app.state import SOLID_CHOICES
@@ -68,6 +71,8 @@ class SolidPanel(QWidget):
 
     #: "type", "mean" or "p99": how the viewport colours the faces
     colouring_changed = Signal(str)
+    #: a face edit asked for: ("merge" | "split" | "type", the selected rows, the type or None)
+    face_edit_requested = Signal(str, object, object)
 
     def __init__(self, edit: Callable[..., bool], parent: QWidget | None = None):
         super().__init__(parent)
@@ -118,7 +123,20 @@ class SolidPanel(QWidget):
             header.setSectionResizeMode(column, QHeaderView.ResizeMode.ResizeToContents)
         header.setSectionResizeMode(2, QHeaderView.ResizeMode.Stretch)
         self.table.setMinimumHeight(120)
+        self.table.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
+        self.table.setSelectionMode(QAbstractItemView.SelectionMode.ExtendedSelection)
         layout.addWidget(self.table, 1)
+        self.edit_actions = FaceEditActions(self)
+        self.edit_actions.edit_requested.connect(
+            lambda action, kind: self.face_edit_requested.emit(action, self.selected_rows(), kind))
+        # beside the colouring, not under the table: the dock is low, the table scrolls
+        self.edit_bar = FaceEditBar(self.edit_actions)
+        choices.insertWidget(choices.count() - 1, self.edit_bar)
+        self._editable = False
+        self.table.itemSelectionChanged.connect(self._selection_changed)
+        self.table.setContextMenuPolicy(Qt.ContextMenuPolicy.CustomContextMenu)
+        self.table.customContextMenuRequested.connect(self._context_menu)
+        self._menu = self.edit_actions.context_menu()
         self.show_report(None, None)
 
     def _setting_chosen(self, _index: int) -> None:
@@ -182,6 +200,33 @@ class SolidPanel(QWidget):
                     item.setTextAlignment(Qt.AlignmentFlag.AlignRight
                                           | Qt.AlignmentFlag.AlignVCenter)
                 self.table.setItem(row, column, item)
+
+    def selected_rows(self) -> list[int]:
+        """The face rows selected, top to bottom."""
+        return sorted({index.row() for index in self.table.selectionModel().selectedRows()})
+
+    def select_rows(self, rows: list[int]) -> None:
+        """Select these face rows (the others not)."""
+        self.table.clearSelection()
+        mode = self.table.selectionMode()
+        self.table.setSelectionMode(QAbstractItemView.SelectionMode.MultiSelection)
+        try:
+            for row in rows:
+                self.table.selectRow(row)
+        finally:
+            self.table.setSelectionMode(mode)
+
+    def set_editable(self, editable: bool) -> None:
+        """Whether a face edit can start now (a solid shown, no job under way)."""
+        self._editable = editable
+        self._selection_changed()
+
+    def _selection_changed(self) -> None:
+        self.edit_actions.enable(len(self.selected_rows()), self._editable)
+
+    def _context_menu(self, position) -> None:
+        if self.table.rowCount():
+            self._menu.popup(self.table.viewport().mapToGlobal(position))
 
     def face_types(self) -> list[str]:
         """The Type column as shown, top to bottom (for tests and scripts)."""

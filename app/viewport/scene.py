@@ -25,6 +25,7 @@ from pyvistaqt import QtInteractor
 
 from app.display_types import FAR, FINE, FLIPPED, OVERLAP, DeviationMap, DisplayGeometry
 from app.viewport.deviation_colours import DeviationColours
+from app.viewport.face_pick import FacePicker
 from app.viewport.legend_box import label_contrasts, swatch_legend
 from app.viewport.network_layers import NetworkLayers
 from app.viewport.selection import SelectionTool
@@ -192,6 +193,9 @@ class SceneView(QObject):
         #: box and lasso selection over the viewport (off until a mode is chosen)
         self.selection_tool = SelectionTool(self.plotter, self.plotter.renderer,
                                             self.request_render, self)
+        #: a click on the solid names its face (Solid mode)
+        self.face_picker = FacePicker(self.plotter, self.plotter.renderer, self.solid,
+                                      self.selection_tool, self)
 
     @property
     def widget(self) -> QWidget:

@@ -149,6 +149,24 @@ class SolidLayers:
         """A solid is drawn and on show."""
         return self._enabled and self._visible and self.mesh.n_points > 0
 
+    def face_at(self, x: float, y: float) -> int | None:
+        """The face (an index into the report's faces) drawn at display pixel (x, y) (VTK's:
+        from the bottom left), or None (no solid on show, or none there). A ray cast against
+        the solid's triangles alone (the points over it are not hit)."""
+        from vtkmodules.vtkRenderingCore import vtkCellPicker
+
+        if not self.shown() or self.actor is None or self._display is None:
+            return None
+        picker = vtkCellPicker()
+        picker.SetTolerance(1e-4)
+        picker.PickFromListOn()
+        picker.AddPickList(self.actor)
+        if not picker.Pick(x, y, 0.0, self.plotter.renderer):
+            return None
+        cell = picker.GetCellId()
+        owners = self._display.owners
+        return int(owners[cell]) if 0 <= cell < len(owners) else None
+
     def legend_labels(self) -> list[str]:
         """The legend's entries on show ([] when hidden)."""
         if self.legend is None or not self.legend.GetVisibility():

@@ -14,14 +14,15 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from app.solid_types import FaceRow, PartOutcome, SolidDisplay, SolidReport
 
-__all__ = ["FaceRow", "PartCancelled", "PartOutcome", "SolidDisplay", "SolidReport",
-           "run_part_route", "solid_display", "solid_report"]
+__all__ = ["EditSource", "FaceRow", "PartCancelled", "PartOutcome", "SolidDisplay", "SolidReport",
+           "run_face_edit", "run_part_route", "solid_display", "solid_report"]
 
 #: the viewport's triangles lie within this share of the segmentation's tolerance of the faces
 #: (what ``nurbs-fit`` writes a solid's meshes with: a third of the tolerance)
@@ -32,16 +33,30 @@ class PartCancelled(Exception):
     """The run was cancelled (its outcome is dropped)."""
 
 
+@dataclass(frozen=True, eq=False)
+class EditSource:
+    """What a face edit of a solid starts from: the points (N, 3) it was fitted to, the scan's
+    closed mesh (V, 3), (T, 3) and the regions it was built from
+    (:class:`nurbs_core.brep.face_edits.PartRegions`, with the edits so far)."""
+
+    points: np.ndarray
+    mesh_vertices: np.ndarray
+    mesh_triangles: np.ndarray
+    regions: Any
+
+
 def solid_report(result: Any, reason: str = "") -> SolidReport:
     """The report of a :class:`nurbs_core.brep.part.PartResult`."""
     faces = tuple(FaceRow(face.kind, face.description, dict(face.parameters), int(face.points),
-                          float(face.mean), float(face.p99)) for face in result.faces)
+                          float(face.mean), float(face.p99), int(face.region))
+                  for face in result.faces)
+    edits = () if result.regions is None else tuple(e.as_dict() for e in result.regions.edits)
     return SolidReport(faces, bool(result.valid), bool(result.closed), float(result.volume),
                        str(result.status), tuple(result.problems.values()), float(result.noise),
                        float(result.segmentation.tolerance),
                        np.asarray(result.distances, np.float64),
                        np.asarray(result.point_faces, np.int64), reason,
-                       float(sum(result.timings.values())))
+                       float(sum(result.timings.values())), edits)
 
 
 def solid_display(solid: Any, tolerance: float) -> SolidDisplay:
@@ -99,4 +114,61 @@ def run_part_route(points: np.ndarray, part: bool | None, max_hole: float | None
     display = solid_display(result.solid, report.tolerance)
     timings["triangles"] = time.perf_counter() - started
     _check(cancel)
-    return PartOutcome(route.reason, result.solid, report, display, timings=timings)
+    source = EditSource(points, route.mesh.vertices, route.mesh.faces, result.regions)
+    return PartOutcome(route.reason, result.solid, report, display, timings=timings,
+                       source=source)
+
+
+def run_face_edit(outcome: PartOutcome, points: np.ndarray, edit: dict[str, Any],
+                  cancel: threading.Event | None = None) -> PartOutcome:
+    """The solid of ``outcome`` after one face edit (``{"action", "regions", "kind"}``, see
+    :mod:`nurbs_core.brep.face_edits`): the regions edited and the solid built again from them
+    (:func:`nurbs_core.brep.part.rebuild_part`), not segmented again. A solid from a session
+    (no :class:`EditSource`) is first made again from ``points`` (N, 3): the forced part route
+    and its recorded edits replayed. ValueError (the engine's EditError and SolidError) says
+    why the edit cannot be made; the solid it started from stays the caller's."""
+    from nurbs_core.brep.face_edits import FaceEdit, apply_edit
+    from nurbs_core.brep.part import rebuild_part
+
+    started = time.perf_counter()
+    source = outcome.source
+    if source is None:
+        source = _source_again(np.asarray(points, np.float64), outcome, cancel)
+    _check(cancel)
+    regions = apply_edit(source.regions, source.points, FaceEdit.from_dict(edit))
+    _check(cancel)
+    result = rebuild_part(source.points, source.mesh_vertices, source.mesh_triangles, regions)
+    timings = {"solid": time.perf_counter() - started}
+    _check(cancel)
+    report = solid_report(result, outcome.route_reason)
+    display = solid_display(result.solid, report.tolerance)
+    _check(cancel)
+    return PartOutcome(outcome.route_reason, result.solid, report, display, timings=timings,
+                       source=EditSource(source.points, source.mesh_vertices,
+                                         source.mesh_triangles, regions))
+
+
+def _source_again(points: np.ndarray, outcome: PartOutcome,
+                  cancel: threading.Event | None) -> EditSource:
+    """The edit source of a solid from a session: the forced part route on the points (its
+    segmentation is seeded: the same regions as when the solid was made) and the report's
+    edits applied again."""
+    from nurbs_core.brep.face_edits import FaceEdit, apply_edit
+    from nurbs_core.brep.part import fit_part
+    from nurbs_core.route import choose_route
+
+    assert outcome.report is not None
+    if len(points) != len(outcome.report.distances):
+        raise ValueError(f"the solid was made from {len(outcome.report.distances)} points, "
+                         f"not the {len(points)} Start fits now: Start makes a new solid")
+    route = choose_route(points, part=True)
+    _check(cancel)
+    if route.kind != "part" or route.mesh is None or route.segmentation is None:
+        raise ValueError(f"the scan is no part any more ({route.reason}): Start makes a new "
+                         "solid")
+    regions = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
+                       route.freeform).regions
+    for edit in outcome.report.edits:
+        _check(cancel)
+        regions = apply_edit(regions, points, FaceEdit.from_dict(edit))
+    return EditSource(points, route.mesh.vertices, route.mesh.faces, regions)

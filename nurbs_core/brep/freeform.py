@@ -27,6 +27,7 @@ arrangement of every surface instead.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse
@@ -36,6 +37,9 @@ from scipy.spatial import cKDTree
 from nurbs_core.brep.occ import OccShape, faces, is_valid, sample_triangles, subshapes, triangulate
 from nurbs_core.brep.primitives import Primitive
 from nurbs_core.brep.segment import Segmentation
+
+if TYPE_CHECKING:
+    from nurbs_core.brep.solid import Span
 
 #: a plane holding at least this share of the scan is a face of the part
 TRUSTED_PLANE = 0.05
@@ -151,7 +155,10 @@ def fit_region(points: np.ndarray, segmentation: Segmentation,
     from nurbs_core.fitting.config import FitConfig
     from nurbs_core.fitting.run import fit_arrays
 
-    planes = [segmentation.surfaces[k] for k in region.planes]
+    # the planes among the surfaces that trim it (a region forced to NURBS by the user is
+    # trimmed by every surface of the part, :mod:`nurbs_core.brep.face_edits`)
+    planes = [segmentation.surfaces[k] for k in region.planes
+              if segmentation.surfaces[k].kind == "plane"]
     # side points nearer a plane than twice the tolerance may be the cap's; beyond that the
     # side's own points decide the surface (a wider gap left the rim to the continuation and
     # put the edge 4-12 noise sigmas off the scan)
@@ -184,13 +191,17 @@ def _supported(face: OccShape, tree: cKDTree, reach: float, deflection: float,
 
 
 def freeform_solid(points: np.ndarray, segmentation: Segmentation,
-                   region: FreeformRegion) -> OccShape:
-    """The solid of a part with a freeform region (see the module). SolidError when no valid
-    closed solid results."""
+                   region: FreeformRegion, extents: list[Span | None] | None = None
+                   ) -> OccShape:
+    """The solid of a part with a freeform region (see the module). ``extents``: where each
+    surface's face ends (:func:`~nurbs_core.brep.solid.spans`, by surface index; None: across
+    the scan's box): a cone or cylinder the user kept beside a NURBS face must end near its
+    region, or its far part runs along another surface, within reach of that surface's points,
+    and is kept as a face of its own. SolidError when no valid closed solid results."""
     from nurbs_core.brep.solid import SolidError
 
     try:
-        return _freeform_solid(points, segmentation, region)
+        return _freeform_solid(points, segmentation, region, extents)
     except SolidError:
         raise
     except Exception as exc:  # OpenCASCADE's Standard_Failure family
@@ -199,7 +210,7 @@ def freeform_solid(points: np.ndarray, segmentation: Segmentation,
 
 
 def _freeform_solid(points: np.ndarray, segmentation: Segmentation,
-                    region: FreeformRegion) -> OccShape:
+                    region: FreeformRegion, extents: list[Span | None] | None) -> OccShape:
     from OCP.BOPAlgo import BOPAlgo_Builder
     from OCP.BRepBuilderAPI import (
         BRepBuilderAPI_MakeFace,
@@ -221,7 +232,7 @@ def _freeform_solid(points: np.ndarray, segmentation: Segmentation,
     builder.AddArgument(BRepBuilderAPI_MakeFace(surface, 1e-6).Face())
     for index in region.planes:
         builder.AddArgument(surface_face(segmentation.surfaces[index], (low + high) / 2,
-                                         diagonal))
+                                         diagonal, None if extents is None else extents[index]))
     builder.SetRunParallel(False)
     builder.Perform()
     if builder.HasErrors():

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from nurbs_core.brep.face_edits import initial_regions
 from nurbs_core.brep.occ import (
     OccShape,
     count,
@@ -32,7 +33,9 @@ from nurbs_core.brep.primitives import Primitive
 from nurbs_core.brep.segment import Segmentation, segment
 
 if TYPE_CHECKING:
+    from nurbs_core.brep.face_edits import PartRegions
     from nurbs_core.brep.freeform import FreeformRegion
+    from nurbs_core.brep.solid import Span
 
 #: a part-like scan has at least this share of its points on analytic surfaces
 MIN_COVERAGE = 0.9
@@ -69,6 +72,9 @@ class PartFace:
     max: float
     area: float = 0.0
     expected: float = 0.0
+    #: the region (:meth:`~nurbs_core.brep.face_edits.PartRegions.region_labels`) most of
+    #: its nearest points belong to, -1 when none: what an edit of this face edits
+    region: int = -1
 
 
 @dataclass
@@ -89,6 +95,9 @@ class PartResult:
     #: edges rounded as fillets (:mod:`nurbs_core.brep.fillets`; 0: built from
     #: the arrangement of every surface)
     fillets: int = 0
+    #: the regions the solid was built from, with the user's edits
+    #: (:mod:`nurbs_core.brep.face_edits`; None: not recorded)
+    regions: PartRegions | None = None
 
     @property
     def noise(self) -> float:
@@ -143,7 +152,25 @@ def part_problems(result: PartResult) -> dict[str, str]:
         problems["distance"] = (f"the points lie {mean / result.noise:.2f} noise sigmas from the "
                                 f"solid on average (limit {MEAN_LIMIT:g}): some of the scan is "
                                 "not on its analytic faces")
+    misfits = result.regions.problems() if result.regions is not None else []
+    faceless = _faceless_edits(result)
+    if misfits or faceless:
+        problems["edits"] = "; ".join(misfits + faceless)
     return problems
+
+
+def _faceless_edits(result: PartResult) -> list[str]:
+    """The regions an edit made whose surface bounds no face of the solid (a plane forced
+    through a hole fills it): their points went to other faces."""
+    regions = result.regions
+    if regions is None:
+        return []
+    with_face = {face.region for face in result.faces}
+    return [f"region {k} (a {surface.kind} an edit made, {size} points) bounds no face of the "
+            "solid: its points lie on other faces"
+            for k, (surface, size) in enumerate(zip(regions.segmentation.surfaces,
+                                                    regions.segmentation.region_sizes))
+            if regions.edited(k) and k not in with_face]
 
 
 def part_like(segmentation: Segmentation) -> bool:
@@ -220,7 +247,7 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
     low, high = points.min(axis=0), points.max(axis=0)
     extents = spans(segmentation.surfaces, points, segmentation.labels,
                     float(np.linalg.norm(high - low)), segmentation.tolerance)
-    solid, surfaces = _freeform(points, segmentation, freeform)
+    solid, surfaces, freeform_used = _freeform(points, segmentation, freeform)
     fillets = 0
     if solid is None:
         solid, surfaces, fillets = _filleted(points, (mesh_vertices, mesh_triangles),
@@ -230,10 +257,93 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
         solid = build_solid(surfaces, mesh_vertices, mesh_triangles, (low, high), extents,
                             segmentation.tolerance)
     timings["solid"] = time.perf_counter() - started
+    regions = initial_regions(segmentation, None if freeform_used is None else freeform_used.mask,
+                              None if freeform_used is None else freeform_used.planes)
+    return _measured(points, solid, surfaces, segmentation, regions, timings, fillets)
+
+
+def rebuild_part(points: np.ndarray, mesh_vertices: np.ndarray, mesh_triangles: np.ndarray,
+                 regions: PartRegions) -> PartResult:
+    """The solid of a scan (N, 3) built from edited regions
+    (:mod:`nurbs_core.brep.face_edits`) without segmenting it again: with the freeform region
+    as a NURBS face trimmed by the analytic surfaces (:func:`~nurbs_core.brep.freeform.
+    freeform_solid`) when there is one, else the analytic surfaces' solid (filleted when the
+    regions have blends, as :func:`fit_part` builds it). ``mesh_vertices`` (V, 3) and
+    ``mesh_triangles`` (T, 3): the scan's closed mesh. SolidError, saying which edit's solid
+    fails, when no valid solid results: the caller keeps the solid it had."""
+    from nurbs_core.brep.freeform import FreeformRegion, freeform_solid
+    from nurbs_core.brep.solid import SolidError, build_solid, spans
+    from nurbs_core.brep.tangency import crossing
+
+    points = np.asarray(points, np.float64)
+    segmentation = regions.segmentation
+    started = time.perf_counter()
+    fillets = 0
+    what = regions.edits[-1].describe() if regions.edits else "the regions"
+    try:
+        low, high = points.min(axis=0), points.max(axis=0)
+        extents = spans(segmentation.surfaces, points, segmentation.labels,
+                        float(np.linalg.norm(high - low)), segmentation.tolerance)
+        if regions.freeform is not None:
+            region = FreeformRegion(regions.freeform, list(range(len(segmentation.surfaces))))
+            solid = _nurbs_cells(points, (mesh_vertices, mesh_triangles), segmentation, region,
+                                 extents)
+            if solid is None:
+                solid = freeform_solid(points, segmentation, region, extents)
+            surfaces = list(segmentation.surfaces)
+        else:
+            solid, surfaces, fillets = _filleted(points, (mesh_vertices, mesh_triangles),
+                                                 segmentation)
+            if solid is None:
+                surfaces = crossing(segmentation.surfaces, segmentation.tolerance)
+                solid = build_solid(surfaces, mesh_vertices, mesh_triangles, (low, high),
+                                    extents, segmentation.tolerance)
+    except SolidError as error:
+        raise SolidError(f"{what} gives no valid solid ({error})") from None
+    timings = {"solid": time.perf_counter() - started}
+    return _measured(points, solid, surfaces, segmentation, regions, timings, fillets)
+
+
+def _nurbs_cells(points: np.ndarray, mesh: tuple[np.ndarray, np.ndarray],
+                 segmentation: Segmentation, region: FreeformRegion,
+                 extents: list[Span | None]) -> OccShape | None:
+    """The solid of the arrangement of the analytic surfaces and the freeform region's NURBS
+    face (fitted past the planes around it, :func:`~nurbs_core.brep.freeform.fit_region`),
+    its cells inside the scan's closed mesh kept (:func:`~nurbs_core.brep.solid.build_solid`);
+    None when OpenCASCADE cannot build it or the NURBS face bounds no cell (the freeform
+    route's fuse of the faces then tries). The cells' inside test keeps no stray piece of a
+    surface that runs along another, which the fuse's test by the points' support keeps (a
+    turned part's cone along its cylinder)."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+
+    from nurbs_core.brep.freeform import fit_region
+    from nurbs_core.brep.solid import SolidError, build_solid
+    from nurbs_core.io.cad import occ_surface
+
+    low, high = points.min(axis=0), points.max(axis=0)
+    try:
+        face = BRepBuilderAPI_MakeFace(occ_surface(fit_region(points, segmentation, region)),
+                                       1e-6).Face()
+        solid = build_solid(list(segmentation.surfaces), *mesh, (low, high), extents,
+                            segmentation.tolerance, (face,))
+    except SolidError:
+        return None
+    # a NURBS face that separates no cells (a tube whose seam leaves a gap) bounds nothing:
+    # the region asked to be NURBS would be missing from the solid
+    return solid if any(face_kind(f) == "freeform" for f in faces(solid)) else None
+
+
+def _measured(points: np.ndarray, solid: OccShape, surfaces: list[Primitive],
+              segmentation: Segmentation, regions: PartRegions, timings: dict[str, float],
+              fillets: int) -> PartResult:
+    """The result of a solid built from ``regions`` of ``segmentation``: each point's (N, 3)
+    distance to the solid measured against the ``surfaces`` its faces lie on, each face's report
+    and region."""
     started = time.perf_counter()
     # measured against the surfaces the solid is made of (fillets as enlarged to cross)
     distance, nearest, on_surface = solid_distances(solid, surfaces, points,
                                                     segmentation.tolerance)
+    region_labels = regions.region_labels()
     part_faces = []
     areas = [face_area(face) for face in faces(solid)]
     for index, face in enumerate(faces(solid)):
@@ -242,15 +352,19 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
         surface = on_surface[index]
         parameters = surfaces[surface].parameters() if surface >= 0 else {"type": kind}
         description = surfaces[surface].describe() if surface >= 0 else kind
+        owned = region_labels[nearest == index]
+        owned = owned[owned >= 0]
+        region = int(np.bincount(owned).argmax()) if len(owned) else -1
         part_faces.append(PartFace(kind, parameters, description, int(len(mine)),
                                    float(mine.mean()) if len(mine) else 0.0,
                                    float(np.percentile(mine, 99)) if len(mine) else 0.0,
                                    float(mine.max()) if len(mine) else 0.0, areas[index],
-                                   len(points) * areas[index] / max(sum(areas), 1e-300)))
+                                   len(points) * areas[index] / max(sum(areas), 1e-300),
+                                   region))
     timings["measure"] = time.perf_counter() - started
     closed = count(solid, "SHELL") == 1 and count(solid, "SOLID") == 1
     return PartResult(solid, part_faces, segmentation, distance, nearest, is_valid(solid), closed,
-                      volume(solid), timings, fillets)
+                      volume(solid), timings, fillets, regions)
 
 
 def _filleted(points: np.ndarray, mesh: tuple[np.ndarray, np.ndarray],
@@ -277,20 +391,21 @@ def _filleted(points: np.ndarray, mesh: tuple[np.ndarray, np.ndarray],
 
 
 def _freeform(points: np.ndarray, segmentation: Segmentation,
-              region: FreeformRegion | None) -> tuple[OccShape | None, list[Primitive]]:
+              region: FreeformRegion | None
+              ) -> tuple[OccShape | None, list[Primitive], FreeformRegion | None]:
     """The solid of a part with a freeform region (:mod:`nurbs_core.brep.freeform`) and the
-    planes its other faces lie on; (None, []) when the scan has no freeform region or the
-    solid cannot be built (the analytic surfaces then make it). ``region``: the region when
-    already found (None: looked for)."""
+    planes its other faces lie on and the region; (None, [], None) when the scan has no
+    freeform region or the solid cannot be built (the analytic surfaces then make it).
+    ``region``: the region when already found (None: looked for)."""
     from nurbs_core.brep.freeform import freeform_region, freeform_solid
     from nurbs_core.brep.solid import SolidError
 
     if region is None:
         region = freeform_region(segmentation, points)
     if region is None:
-        return None, []
+        return None, [], None
     try:
         solid = freeform_solid(points, segmentation, region)
     except SolidError:
-        return None, []
-    return solid, [segmentation.surfaces[k] for k in region.planes]
+        return None, [], None
+    return solid, [segmentation.surfaces[k] for k in region.planes], region

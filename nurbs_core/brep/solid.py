@@ -238,14 +238,17 @@ def _boundary(cells: list[OccShape], inside: list[bool]) -> OccShape:
 def build_solid(surfaces: list[Primitive], mesh_vertices: np.ndarray,
                 mesh_triangles: np.ndarray, box: tuple[np.ndarray, np.ndarray],
                 extents: list[Span | None] | None = None,
-                tolerance: float = 0.0) -> OccShape:
+                tolerance: float = 0.0, extra_faces: tuple[OccShape, ...] = ()) -> OccShape:
     """The solid bounded by ``surfaces`` that the closed mesh (V, 3), (T, 3) of the scan
     encloses (see the module); ``box``: the scan's bounding box (low (3,), high (3,));
     ``extents``: the cylinders' and cones' spans (:func:`spans`; None: across the box);
-    ``tolerance``: cells thinner than this are slivers (see :func:`_classify`).
+    ``tolerance``: cells thinner than this are slivers (see :func:`_classify`);
+    ``extra_faces``: faces that cut the cells besides the surfaces' (a NURBS face reaching
+    past the surfaces that trim it).
     SolidError when no single valid closed solid results (OpenCASCADE's failures included)."""
     try:
-        return _build_solid(surfaces, mesh_vertices, mesh_triangles, box, extents, tolerance)
+        return _build_solid(surfaces, mesh_vertices, mesh_triangles, box, extents, tolerance,
+                            extra_faces)
     except SolidError:
         raise
     except Exception as exc:  # OpenCASCADE's Standard_Failure family
@@ -311,7 +314,7 @@ def _classify(arrangement: OccShape, cells: list[OccShape], mesh_vertices: np.nd
 def _build_solid(surfaces: list[Primitive], mesh_vertices: np.ndarray,
                  mesh_triangles: np.ndarray, box: tuple[np.ndarray, np.ndarray],
                  extents: list[Span | None] | None = None,
-                 tolerance: float = 0.0) -> OccShape:
+                 tolerance: float = 0.0, extra_faces: tuple[OccShape, ...] = ()) -> OccShape:
     """The solid bounded by ``surfaces`` that the closed mesh (V, 3), (T, 3) of the scan
     encloses (see the module); ``box``: the scan's bounding box (low (3,), high (3,));
     ``extents``: the cylinders' and cones' spans (:func:`spans`; None: across the box).
@@ -324,7 +327,7 @@ def _build_solid(surfaces: list[Primitive], mesh_vertices: np.ndarray,
     from nurbs_core.io.cad import quiet_occ
 
     quiet_occ()
-    if not surfaces:
+    if not surfaces and not extra_faces:
         raise SolidError("no analytic surface was found")
     low, high = (np.asarray(c, np.float64) for c in box)
     margin = 0.05 * float(np.linalg.norm(high - low))
@@ -335,6 +338,8 @@ def _build_solid(surfaces: list[Primitive], mesh_vertices: np.ndarray,
     for index, surface in enumerate(surfaces):
         span = extents[index] if extents is not None else None
         arguments.Append(surface_face(surface, centre, reach, span))
+    for face in extra_faces:
+        arguments.Append(face)
     maker = BOPAlgo_MakerVolume()
     maker.SetArguments(arguments)
     maker.SetRunParallel(False)
