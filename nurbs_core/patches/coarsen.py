@@ -34,10 +34,11 @@ stays where it is). Plain numpy and scipy.
 
 from __future__ import annotations
 
+import functools
 import heapq
 import math
 from collections.abc import Callable
-from typing import Literal, overload
+from typing import Any, Literal, TypeVar, overload
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -159,6 +160,36 @@ def _mean_sides(corners: np.ndarray) -> np.ndarray:
     return np.sqrt((step * step).sum(axis=2)).mean(axis=1)
 
 
+_Result = TypeVar("_Result")
+#: Most results a :func:`_remembered` method keeps (then it starts afresh).
+REMEMBERED = 20_000
+
+
+def _remembered(method: Callable[..., _Result]) -> Callable[..., _Result]:
+    """A method of :class:`_Shape` that depends on its arguments (arrays, id lists) and the
+    fixed mesh alone, its results kept by the bytes of its arguments: the coarsening checks the
+    same quads again and again (a relaxation sweep tries every vertex where it tried it before,
+    a round every quad), and on the bunny 35-60% of these calls repeat an earlier one. Arrays
+    come back read-only (a copy for :meth:`_Shape.snap`, whose point becomes a position)."""
+    name = method.__name__
+
+    @functools.wraps(method)
+    def remembered(shape: _Shape, *arguments: Any) -> _Result:
+        key = tuple(a.tobytes() if isinstance(a, np.ndarray) else tuple(a) for a in arguments)
+        results = shape.results.setdefault(name, {})
+        if key not in results:
+            if len(results) >= REMEMBERED:
+                results.clear()
+            result = method(shape, *arguments)
+            for part in result if isinstance(result, tuple) else (result,):
+                if isinstance(part, np.ndarray):
+                    part.setflags(write=False)
+            results[key] = result
+        return results[key]
+
+    return remembered
+
+
 class _Shape:
     """The mesh a layout must stay on (its vertices, outward unit normals and a tree) and how
     the layout covers it: per mesh vertex its distance to the nearest quad over that quad's
@@ -173,10 +204,17 @@ class _Shape:
         # its nearest vertex
         self.spacing = float(np.median(self.tree.query(self.vertices, k=2)[0][:, 1])) \
             if len(self.vertices) > 1 else 0.0
+        self.results: dict[str, dict[tuple[Any, ...], Any]] = {}
 
     def snap(self, point: np.ndarray) -> np.ndarray:
+        """The mesh vertex (3,) nearest to ``point`` (3,)."""
+        return self._nearest_vertex(np.asarray(point, np.float64)).copy()
+
+    @_remembered
+    def _nearest_vertex(self, point: np.ndarray) -> np.ndarray:
         return self.vertices[self.tree.query(point)[1]]
 
+    @_remembered
     def facing(self, corners: np.ndarray) -> bool:
         """Every quad (Q, 4, 3) lies on the mesh (:meth:`on_mesh`), faces the mesh's way at its
         centre, has no reflex corner and no corner sharper than ``MIN_CORNER`` degrees or flatter
@@ -207,6 +245,7 @@ class _Shape:
         distance = self.tree.query(samples.reshape(-1, 3))[0].reshape(len(corners), -1)
         return bool((distance <= (OFF_MESH * sides + self.spacing)[:, None]).all())
 
+    @_remembered
     def measure(self, corners: np.ndarray, ids: list[int],
                 near: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per mesh vertex in ``near``: its distance to the bilinear quads (Q, 4, 3) over the
@@ -222,8 +261,8 @@ class _Shape:
     def start(self, corners: np.ndarray) -> None:
         """Measure the fine layout's quads (P, 4, 3), ids 0..P-1."""
         everything = np.arange(len(self.vertices))
-        self.ratio, self.owner, self.cos = self.measure(corners, list(range(len(corners))),
-                                                        everything)
+        measured = self.measure(corners, list(range(len(corners))), everything)
+        self.ratio, self.owner, self.cos = (part.copy() for part in measured)
 
     def watched(self, quad_ids: set[int], corners: np.ndarray) -> np.ndarray:
         """The mesh vertices a change of the quads ``quad_ids`` (their corners (Q, 4, 3) after
@@ -276,8 +315,8 @@ def reach_ratios(vertices: np.ndarray, quads: np.ndarray, mesh_vertices: np.ndar
     ratio, owner, _ = shape.measure(corners, list(range(len(quads))),
                                     np.arange(len(shape.vertices)))
     if not sides:
-        return ratio
-    return ratio, _mean_sides(corners)[owner]
+        return ratio.copy()
+    return ratio.copy(), _mean_sides(corners)[owner]
 
 
 def coarsen(vertices: np.ndarray, quads: np.ndarray, mesh_vertices: np.ndarray,
