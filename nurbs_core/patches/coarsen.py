@@ -706,13 +706,16 @@ def _hexagon(layout: _Layout, pair: list[int], x: int, y: int) -> list[int] | No
 
 
 def _edges_of(quads_by_id: dict, ids: set[int]) -> dict[tuple[int, int], list[int]]:
+    """The edges (lower, higher vertex) of every quad that shares a vertex with the quads
+    ``ids``, each with the quads (by id) along it."""
     out: dict[tuple[int, int], list[int]] = {}
     vertices = {v for o in ids for v in quads_by_id[o]}
     for o, quad in quads_by_id.items():
-        if not quad or not vertices & set(quad):
+        if not quad or vertices.isdisjoint(quad):
             continue
-        for k in range(4):
-            out.setdefault(_edge_key(quad[k], quad[(k + 1) % 4]), []).append(o)
+        a, b, c, d = quad
+        for x, y in ((a, b), (b, c), (c, d), (d, a)):
+            out.setdefault((x, y) if x < y else (y, x), []).append(o)
     return out
 
 
@@ -723,14 +726,17 @@ def _largest_turn(quads_by_id: dict, ids: set[int],
     ids = {o for o in ids if quads_by_id.get(o)}
     if not ids:
         return 0.0
-    edges = _edges_of(quads_by_id, ids)
-    involved = sorted({o for owners in edges.values() for o in owners})
-    normals = dict(zip(involved, _normals_of(corners(quads_by_id, involved)).tolist(), strict=True))
-    worst = 0.0
-    for owners in edges.values():
-        if len(owners) == 2 and (owners[0] in ids or owners[1] in ids):
-            worst = max(worst, _angle(normals[owners[0]], normals[owners[1]]))
-    return worst
+    pairs = [owners for owners in _edges_of(quads_by_id, ids).values()
+             if len(owners) == 2 and (owners[0] in ids or owners[1] in ids)]
+    if not pairs:
+        return 0.0
+    involved = sorted({o for owners in pairs for o in owners})
+    normals = _normals_of(corners(quads_by_id, involved))
+    row = {o: k for k, o in enumerate(involved)}
+    first, second = np.array([[row[a], row[b]] for a, b in pairs]).T
+    # the angle falls as the cosine grows: the largest angle is the smallest cosine's
+    cosine = float(((normals[first] * normals[second]).sum(axis=1)).min())
+    return math.degrees(math.acos(max(-1.0, min(1.0, cosine))))
 
 
 def _edge_overuse(quads_by_id: dict) -> bool:
@@ -746,10 +752,6 @@ def _edge_overuse(quads_by_id: dict) -> bool:
                 return True
             directed.add(directed_edge)
     return False
-
-
-def _angle(n: list[float], m: list[float]) -> float:
-    return math.degrees(math.acos(max(-1.0, min(1.0, n[0] * m[0] + n[1] * m[1] + n[2] * m[2]))))
 
 
 __all__ = ["COVER", "MAX_TURN", "MAX_VALENCE", "coarsen", "quad_normals", "reach_ratios"]
