@@ -269,13 +269,13 @@ class _Shape:
         it) may move away from: those these quads were nearest to, and those around them."""
         middle = corners.mean(axis=1)
         radius = np.sqrt(((corners - middle[:, None]) ** 2).sum(axis=2)).max(axis=1)
-        balls = self.tree.query_ball_point(middle, radius)
-        ball = np.unique(np.concatenate([np.asarray(b, np.int64) for b in balls]
-                                        + [np.zeros(0, np.int64)]))
         mark = np.zeros(max(int(self.owner.max()), max(quad_ids, default=0)) + 1, bool)
         mark[list(quad_ids)] = True
-        owned = np.flatnonzero(mark[self.owner])
-        return np.union1d(ball, owned)
+        near = mark[self.owner]
+        # marks, not sorted unions: the same sorted indices without a sort per call
+        for ball in self.tree.query_ball_point(middle, radius):
+            near[ball] = True
+        return np.flatnonzero(near)
 
     def holds(self, corners: np.ndarray, ids: list[int], near: np.ndarray,
               cover: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
