@@ -347,6 +347,7 @@ def _chord(layout: _Layout, q: int, k: int) -> tuple[list[int], list[tuple[int, 
     opposite sides): its quads and its rungs (the sides it crosses, as vertex pairs), or None
     when it crosses itself."""
     quads, rungs = [q], []
+    walked = {q}                            # the quads of quads and path, for membership
     closed = False
     for side in (k, (k + 2) % 4):
         current, leaving = q, side
@@ -363,9 +364,10 @@ def _chord(layout: _Layout, q: int, k: int) -> tuple[list[int], list[tuple[int, 
             if current == q:
                 closed = True               # a loop: both directions walked at once
                 break
-            if current in path or current in quads:
+            if current in walked:
                 return None
             path.append(current)
+            walked.add(current)
             nxt = layout.quads[current]
             assert nxt is not None
             leaving = (nxt.index(b) + 2) % 4   # the side opposite (b, a)
@@ -488,13 +490,13 @@ def _relax(layout: _Layout, shape: _Shape, cover: float,
             ring = layout.neighbours(v)
             target = shape.snap(np.mean([layout.positions[w] for w in ring], axis=0))
             ids = sorted(layout.around[v])
-            moved = np.array([[target if w == v else layout.positions[w]
-                               for w in layout.quads[o] or ()] for o in ids])
+            moved = np.concatenate([target if w == v else layout.positions[w]
+                                    for o in ids for w in layout.quads[o] or ()]).reshape(-1, 4, 3)
             if not shape.facing(moved):
                 continue
             region = sorted({o for w in ring | {v} for o in layout.around[w]})
-            corners = np.array([[target if w == v else layout.positions[w]
-                                 for w in layout.quads[o] or ()] for o in region])
+            corners = np.concatenate([target if w == v else layout.positions[w] for o in region
+                                      for w in layout.quads[o] or ()]).reshape(-1, 4, 3)
             near = shape.watched(set(ids), moved)
             measured = shape.holds(corners, region, near, cover)
             if measured is not None:
@@ -598,8 +600,10 @@ def _commit(layout: _Layout, before: dict[int, list[int] | None], after: dict[in
         return None
 
     def corners(quads_by_id: dict, ids: list[int]) -> np.ndarray:
-        return np.array([[positions[v] if v in positions else layout.positions[v]
-                          for v in quads_by_id[o]] for o in ids]).reshape(-1, 4, 3)
+        # one flat concatenation (half the time of an array from nested lists)
+        return np.concatenate([positions[v] if v in positions else layout.positions[v]
+                               for o in ids for v in quads_by_id[o]]
+                              or [np.zeros(0)]).reshape(-1, 4, 3)
 
     changed_ids = sorted(changed)
     if not shape.facing(corners(after, changed_ids)):
