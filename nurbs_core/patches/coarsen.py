@@ -172,12 +172,15 @@ def _remembered(method: Callable[..., _Result]) -> Callable[..., _Result]:
     fixed mesh alone, its results kept by the bytes of its arguments: the coarsening checks the
     same quads again and again (a relaxation sweep tries every vertex where it tried it before,
     a round every quad), and on the bunny 35-60% of these calls repeat an earlier one. Arrays
-    come back read-only (a copy for :meth:`_Shape.snap`, whose point becomes a position)."""
+    come back read-only (a copy for :meth:`_Shape.snap`, whose point becomes a position). A
+    check that comes to read the layout's state (valences, the measures kept per mesh vertex)
+    must take it as an argument, or lose this decorator."""
     name = method.__name__
 
     @functools.wraps(method)
     def remembered(shape: _Shape, *arguments: Any) -> _Result:
-        key = tuple(a.tobytes() if isinstance(a, np.ndarray) else tuple(a) for a in arguments)
+        key = tuple(a.tobytes() if isinstance(a, np.ndarray) else
+                    tuple(a) if isinstance(a, list | tuple) else a for a in arguments)
         results = shape.results.setdefault(name, {})
         if key not in results:
             if len(results) >= REMEMBERED:
