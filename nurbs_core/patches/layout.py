@@ -75,7 +75,10 @@ def euler_characteristic(faces: np.ndarray | Sequence[Sequence[int]]) -> int:
         array = np.asarray(faces, np.int64).reshape(len(faces), -1)
         sides = np.sort(np.stack([array, np.roll(array, -1, axis=1)], axis=-1).reshape(-1, 2),
                         axis=1)
-        return len(np.unique(array)) - len(np.unique(sides, axis=0)) + len(array)
+        # each side as one integer: a 1-D unique, several times faster than one over rows
+        base = int(array.max(initial=-1)) + 1
+        return len(np.unique(array)) - len(np.unique(sides[:, 0] * base + sides[:, 1])) + \
+            len(array)
     edges = {tuple(sorted((f[k], f[(k + 1) % len(f)]))) for f in faces for k in range(len(f))}
     vertices = {v for f in faces for v in f}
     return len(vertices) - len(edges) + len(faces)

@@ -48,6 +48,21 @@ def test_coarsening_a_fine_sphere_layout_keeps_it_valid_and_on_the_sphere():
     assert reach_ratios(vertices, quads, mesh.vertices).max() <= COVER + 1e-9
 
 
+def test_remembering_the_shape_checks_changes_no_decision(monkeypatch):
+    # the coarsening keeps the results of its pure checks (facing, measure, the nearest vertex)
+    # by their arguments; with every result forgotten at once it must reach the same layout
+    from nurbs_core.patches import coarsen as coarsen_module
+
+    mesh = closed_mesh(samples.sphere(3000, noise=0.002, seed=3).points)
+    fine = quad_layout(mesh.vertices, mesh.faces, 500)
+    remembered = coarsen(fine.vertices, fine.quads, mesh.vertices, mesh.vertex_normals())
+    monkeypatch.setattr(coarsen_module, "REMEMBERED", 0)
+    forgotten = coarsen(fine.vertices, fine.quads, mesh.vertices, mesh.vertex_normals())
+    assert len(remembered[1]) < len(fine.quads)
+    np.testing.assert_array_equal(remembered[0], forgotten[0])
+    np.testing.assert_array_equal(remembered[1], forgotten[1])
+
+
 def test_a_layout_that_passes_the_bunnys_ears_by_is_replaced_by_one_that_follows_them():
     import trimesh
 

@@ -82,6 +82,21 @@ def test_build_network_rejects_bad_layouts():
         build_network(CUBE_VERTICES, CUBE_QUADS, size=3)
 
 
+def test_euler_characteristic_matches_trimesh():
+    import trimesh
+
+    torus = trimesh.creation.torus(1.0, 0.3)
+    open_box = trimesh.creation.box()
+    open_box = trimesh.Trimesh(open_box.vertices, open_box.faces[2:], process=False)
+    for mesh in (torus, trimesh.creation.icosphere(2), open_box):
+        assert euler_characteristic(np.asarray(mesh.faces)) == mesh.euler_number
+    # quads and mixed polygons count each side once too: a cube of quads, one split in two
+    assert euler_characteristic(CUBE_QUADS) == 2
+    split = [list(q) for q in CUBE_QUADS[:5]] + [list(CUBE_QUADS[5, :3]),
+                                                [CUBE_QUADS[5, 0], *CUBE_QUADS[5, 2:]]]
+    assert euler_characteristic(split) == 2
+
+
 @pytest.mark.parametrize("name, genus", [("sphere", 0), ("torus", 1)])
 def test_closed_mesh_and_layout_keep_the_genus(name, genus):
     shape = samples.GENERATORS[name](4000, noise=0.002, truth_count=20000)
