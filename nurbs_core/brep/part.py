@@ -1,11 +1,13 @@
 """A scanned machined part as a valid solid with exact analytic faces: segmentation
 (:mod:`nurbs_core.brep.segment`), the solid of the surfaces' arrangement
-(:mod:`nurbs_core.brep.solid`) and the measures that say whether it holds the scan.
+(:mod:`nurbs_core.brep.solid`) and the measures that say whether it holds the scan. A scan
+open on one side (a part on a table) becomes an open shell (:mod:`nurbs_core.brep.open_shell`).
 
 :func:`part_like` is the cheap test the route asks first (most of the scan on a few large
 analytic regions); :func:`fit_part` builds and measures the solid. Its status is ``converged``
-only when the quality checks hold (:func:`part_problems`): one valid closed solid, and the
-points at most :data:`MEAN_LIMIT` noise sigmas from it on average.
+only when the quality checks hold (:func:`part_problems`): one valid closed solid (one valid
+open shell from an open scan), and the points at most :data:`MEAN_LIMIT` noise sigmas from it
+on average.
 """
 
 from __future__ import annotations
@@ -73,9 +75,10 @@ class PartFace:
 
 @dataclass
 class PartResult:
-    """The solid (an OpenCASCADE shape), its faces, the segmentation, the points' distances to
-    the solid (N,) and nearest faces (N,, indices into ``faces``), its validity, closedness,
-    volume and the timings (seconds per stage)."""
+    """The solid (an OpenCASCADE shape: a solid, or a shell from an open scan), its faces, the
+    segmentation, the points' distances to the solid (N,) and nearest faces (N,, indices into
+    ``faces``), its validity, closedness, volume (NaN for an open shell) and the timings
+    (seconds per stage)."""
 
     solid: OccShape
     faces: list[PartFace]
@@ -89,6 +92,11 @@ class PartResult:
     #: edges rounded as fillets (:mod:`nurbs_core.brep.fillets`; 0: built from
     #: the arrangement of every surface)
     fillets: int = 0
+    #: an open shell from an open scan (:mod:`nurbs_core.brep.open_shell`): not closed by design
+    open_shell: bool = False
+    #: an open shell's border: each point of the scan's border loops' (B,) distance to the
+    #: shell's free edges (empty for a solid)
+    border_distances: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def noise(self) -> float:
@@ -108,15 +116,20 @@ class PartResult:
         """Plain values for the report, the batch summary and tests."""
         d = self.distances
         kinds = [face.kind for face in self.faces]
-        return {"kind": "solid", "fit_status": self.status, "points": len(d),
+        border = ({"border_mean": float(self.border_distances.mean()),
+                   "border_p99": float(np.percentile(self.border_distances, 99))}
+                  if len(self.border_distances) else {})
+        return {"kind": "open shell" if self.open_shell else "solid",
+                "fit_status": self.status, "points": len(d),
                 "faces": len(self.faces),
                 "face_types": {k: kinds.count(k) for k in sorted(set(kinds))},
-                "valid": self.valid, "closed": self.closed, "volume": self.volume,
+                "valid": self.valid, "closed": self.closed,
+                "volume": None if self.open_shell else self.volume,
                 "noise": self.noise, "coverage": self.segmentation.coverage,
                 "mean": float(d.mean()), "rms": float(np.sqrt((d ** 2).mean())),
                 "p99": float(np.percentile(d, 99)), "max": float(d.max()),
                 "fit_seconds": sum(self.timings.values()), "fillets": self.fillets,
-                "warnings": list(self.problems.values())}
+                "warnings": list(self.problems.values()), **border}
 
 
 def part_problems(result: PartResult) -> dict[str, str]:
@@ -124,7 +137,7 @@ def part_problems(result: PartResult) -> dict[str, str]:
     problems = {}
     if not result.valid:
         problems["valid"] = "OpenCASCADE's checker finds the solid invalid"
-    if not result.closed:
+    if not result.closed and not result.open_shell:
         problems["closed"] = "the solid's shell is not closed"
     unseen = [k for k, face in enumerate(result.faces)
               if face.area >= UNSEEN_AREA * sum(f.area for f in result.faces)
@@ -192,19 +205,25 @@ def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarr
 def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
              mesh_triangles: np.ndarray | None = None,
              segmentation: Segmentation | None = None,
-             freeform: FreeformRegion | None = None) -> PartResult:
+             freeform: FreeformRegion | None = None,
+             border: list[np.ndarray] | None = None) -> PartResult:
     """The solid of a scanned part (N, 3) (see the module). ``mesh_vertices`` (V, 3) and
     ``mesh_triangles`` (T, 3): the scan's closed mesh that decides which cells are inside (None:
-    built from the points, :func:`nurbs_core.patches.closed_mesh.closed_mesh`);
-    ``segmentation``: when already computed; ``freeform``: its freeform region when the route
-    found one (None: looked for here). Raises SolidError when no valid solid results
-    (also when the points enclose no volume). ``result.solid`` is written by
+    built from the points, :func:`nurbs_core.patches.closed_mesh.closed_mesh`), or with
+    ``border`` the open scan's bounded mesh (:func:`nurbs_core.patches.open_mesh.open_mesh`)
+    and its border loops (each (L, 3)): then the result is an open shell
+    (:mod:`nurbs_core.brep.open_shell`); ``segmentation``: when already computed;
+    ``freeform``: its freeform region when the route found one (None: looked for here, on a
+    closed scan). Raises SolidError when no valid solid results (also when the points enclose
+    no volume and no border is given). ``result.solid`` is written by
     :func:`nurbs_core.io.solid_io.save_solid`."""
     from nurbs_core.brep.solid import SolidError, build_solid, spans
     from nurbs_core.brep.tangency import crossing
 
     points = np.asarray(points, np.float64)
     if mesh_vertices is None or mesh_triangles is None:
+        if border:
+            raise SolidError("an open shell needs the open scan's mesh with its border")
         from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
 
         try:
@@ -217,21 +236,48 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
         segmentation = segment(points)
     timings["segmentation"] = segmentation.seconds
     started = time.perf_counter()
+    caps: list[Primitive] = []
+    building = segmentation
+    if border:
+        from dataclasses import replace
+
+        from nurbs_core.brep.open_shell import border_caps, capped_mesh
+
+        caps, _ = border_caps(border, points, segmentation.tolerance)
+        mesh_vertices, mesh_triangles = capped_mesh(mesh_vertices, mesh_triangles, caps)
+        # the caps are surfaces with no points: planes across the whole box
+        building = replace(segmentation, surfaces=segmentation.surfaces + caps)
     low, high = points.min(axis=0), points.max(axis=0)
-    extents = spans(segmentation.surfaces, points, segmentation.labels,
+    extents = spans(building.surfaces, points, building.labels,
                     float(np.linalg.norm(high - low)), segmentation.tolerance)
-    solid, surfaces = _freeform(points, segmentation, freeform)
+    solid, surfaces = (None, []) if caps else _freeform(points, segmentation, freeform)
     fillets = 0
     if solid is None:
-        solid, surfaces, fillets = _filleted(points, (mesh_vertices, mesh_triangles),
-                                             segmentation)
+        solid, surfaces, fillets = _filleted(points, (mesh_vertices, mesh_triangles), building)
     if solid is None:
-        surfaces = crossing(segmentation.surfaces, segmentation.tolerance)
+        surfaces = crossing(building.surfaces, segmentation.tolerance)
         solid = build_solid(surfaces, mesh_vertices, mesh_triangles, (low, high), extents,
                             segmentation.tolerance)
+    if caps:
+        from nurbs_core.brep.open_shell import shell_without_caps
+
+        solid = shell_without_caps(solid, caps, segmentation.tolerance)
     timings["solid"] = time.perf_counter() - started
     started = time.perf_counter()
-    # measured against the surfaces the solid is made of (fillets as enlarged to cross)
+    result = _measured(solid, surfaces, points, segmentation, fillets)
+    if caps:
+        result.open_shell, result.volume = True, float("nan")
+        result.border_distances = _border_distances(solid, border, segmentation.spacing)
+    timings["measure"] = time.perf_counter() - started
+    result.timings = timings
+    return result
+
+
+def _measured(solid: OccShape, surfaces: list[Primitive], points: np.ndarray,
+              segmentation: Segmentation, fillets: int) -> PartResult:
+    """The result of a built solid (or open shell): per face its type, parameters, points and
+    their distances (measured against ``surfaces``, the ones the solid is made of: fillets as
+    enlarged to cross), validity, closedness and volume."""
     distance, nearest, on_surface = solid_distances(solid, surfaces, points,
                                                     segmentation.tolerance)
     part_faces = []
@@ -247,10 +293,21 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
                                    float(np.percentile(mine, 99)) if len(mine) else 0.0,
                                    float(mine.max()) if len(mine) else 0.0, areas[index],
                                    len(points) * areas[index] / max(sum(areas), 1e-300)))
-    timings["measure"] = time.perf_counter() - started
     closed = count(solid, "SHELL") == 1 and count(solid, "SOLID") == 1
     return PartResult(solid, part_faces, segmentation, distance, nearest, is_valid(solid), closed,
-                      volume(solid), timings, fillets)
+                      volume(solid), {}, fillets)
+
+
+def _border_distances(shell: OccShape, border: list[np.ndarray], spacing: float) -> np.ndarray:
+    """Each point of the scan's border loops' (each (L, 3)) distance to the shell's free edges
+    (sampled every fifth of a point ``spacing``)."""
+    from nurbs_core.brep.open_shell import free_edge_samples
+
+    samples = free_edge_samples(shell, spacing / 5)
+    loops = np.concatenate(border)
+    if len(samples) == 0:
+        return np.full(len(loops), np.inf)
+    return np.asarray(cKDTree(samples).query(loops)[0], np.float64)
 
 
 def _filleted(points: np.ndarray, mesh: tuple[np.ndarray, np.ndarray],
