@@ -81,7 +81,7 @@ def run_part_route(points: np.ndarray, part: bool | None, max_hole: float | None
     started = time.perf_counter()
     try:
         result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
-                          route.freeform)
+                          route.freeform, border=route.mesh.border or None)
         if result.problems and not part:
             raise SolidError("the solid fails its checks: "
                              + "; ".join(result.problems.values()))

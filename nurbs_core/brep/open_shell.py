@@ -183,12 +183,12 @@ def shell_without_caps(solid: OccShape, caps: list[Primitive], tolerance: float)
 
 def _pieces(shell: OccShape) -> int:
     """How many edge-connected pieces the shell's faces form."""
-    from OCP.TopAbs import TopAbs_ShapeEnum
-    from OCP.TopExp import TopExp
     from OCP.collections import (
         IndexedDataMap_TopoDS_Shape_List_TopoDS_Shape_TopTools_ShapeMapHasher as Ancestors,  # noqa: E501
     )
     from OCP.collections import IndexedMap_TopoDS_Shape_TopTools_ShapeMapHasher as ShapeMap
+    from OCP.TopAbs import TopAbs_ShapeEnum
+    from OCP.TopExp import TopExp
 
     numbered = ShapeMap()  # a face's index: numbered.FindIndex(face) - 1
     for face in faces(shell):
@@ -210,12 +210,12 @@ def free_edge_samples(shell: OccShape, spacing: float) -> np.ndarray:
     """Points (M, 3) every ``spacing`` along the shell's free edges (those of one face: where
     the scan stops)."""
     from OCP.BRepAdaptor import BRepAdaptor_Curve
-    from OCP.GCPnts import GCPnts_AbscissaPoint
-    from OCP.TopAbs import TopAbs_ShapeEnum
-    from OCP.TopExp import TopExp
     from OCP.collections import (
         IndexedDataMap_TopoDS_Shape_List_TopoDS_Shape_TopTools_ShapeMapHasher as Ancestors,  # noqa: E501
     )
+    from OCP.GCPnts import GCPnts_AbscissaPoint
+    from OCP.TopAbs import TopAbs_ShapeEnum
+    from OCP.TopExp import TopExp
     from OCP.TopoDS import TopoDS
 
     ancestors = Ancestors()

@@ -54,6 +54,11 @@ UNSEEN_AREA = 0.01
 UNSEEN_SHARE = 0.1
 #: a solid with more than this many faces per surface (and 4) has faces split into pieces
 FRAGMENTS = 2
+#: two regions meet at a sharp edge when their surfaces' normals where they touch differ by
+#: more than this many degrees (median over the touching points); smooth junctions are ~0
+SHARP_ANGLE = 30.0
+#: ... and touch at at least this many points (pairs of neighbours on the two regions)
+SHARP_CONTACTS = 10
 
 
 @dataclass
@@ -174,6 +179,32 @@ def part_like(segmentation: Segmentation) -> bool:
     return float(np.isin(segmentation.labels, curved).mean()) <= MAX_CURVED
 
 
+def sharp_edges(segmentation: Segmentation, points: np.ndarray) -> int:
+    """How many pairs of regions meet at a sharp edge: touch (a point of one among the 8
+    nearest of a point of the other, :data:`SHARP_CONTACTS` times) with their surfaces' normals
+    there :data:`SHARP_ANGLE` or more apart (the median over the touching points). A part's
+    faces meet at edges; the analytic pieces of a smooth freeform sheet (a curled sheet held by
+    six cylinders and planes) meet tangentially. ``points`` (N, 3): the segmentation's."""
+    labels = segmentation.labels
+    _, near = cKDTree(points).query(points, k=9)
+    first = np.repeat(np.arange(len(points)), 8)
+    second = near[:, 1:].ravel()
+    touch = (labels[first] >= 0) & (labels[second] >= 0) & (labels[first] < labels[second])
+    first, second = first[touch], second[touch]
+    pairs = labels[first] * len(segmentation.surfaces) + labels[second]
+    sharp = 0
+    for pair in np.unique(pairs):
+        mine = pairs == pair
+        if mine.sum() < SHARP_CONTACTS:
+            continue
+        a, b = divmod(int(pair), len(segmentation.surfaces))
+        contact = 0.5 * (points[first[mine]] + points[second[mine]])
+        cosine = np.abs(np.einsum("ij,ij->i", segmentation.surfaces[a].normals(contact),
+                                  segmentation.surfaces[b].normals(contact)))
+        sharp += bool(np.median(cosine) < np.cos(np.radians(SHARP_ANGLE)))
+    return sharp
+
+
 def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarray,
                     tolerance: float) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """Each point's (N, 3) distance to the solid (N,) and nearest face (N,), and each face's
@@ -265,7 +296,7 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
     timings["solid"] = time.perf_counter() - started
     started = time.perf_counter()
     result = _measured(solid, surfaces, points, segmentation, fillets)
-    if caps:
+    if border:
         result.open_shell, result.volume = True, float("nan")
         result.border_distances = _border_distances(solid, border, segmentation.spacing)
     timings["measure"] = time.perf_counter() - started
