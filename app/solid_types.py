@@ -32,7 +32,8 @@ class SolidReport:
     """What the window shows and a session keeps of a solid: its faces, whether it is valid and
     closed, its volume, the fit's status ("converged" or "warnings") with its problems, the
     noise sigma and tolerance the distances are measured against, the per-point distance to
-    the solid (N,) and nearest face (N,), the route's reason and the seconds it took."""
+    the solid (N,) and nearest face (N,), the route's reason and the seconds it took;
+    ``open_shell``: an open scan's open shell (not closed by design; its volume is 0)."""
 
     faces: tuple[FaceRow, ...]
     valid: bool
@@ -46,6 +47,7 @@ class SolidReport:
     point_faces: np.ndarray
     reason: str = ""
     seconds: float = 0.0
+    open_shell: bool = False
 
     def face_types(self) -> dict[str, int]:
         """How many faces of each type, types in alphabetical order."""
@@ -55,8 +57,14 @@ class SolidReport:
     def summary(self) -> str:
         """One line: "7 faces (1 cylinder, 6 planes), valid, closed"."""
         kinds = ", ".join(f"{n} {k}{'s' if n > 1 else ''}" for k, n in self.face_types().items())
-        return (f"{len(self.faces)} faces ({kinds}), {'valid' if self.valid else 'INVALID'}, "
-                f"{'closed' if self.closed else 'NOT closed'}")
+        shape = ("an open shell, open where the scan stops" if self.open_shell
+                 else "closed" if self.closed else "NOT closed")
+        return f"{len(self.faces)} faces ({kinds}), {'valid' if self.valid else 'INVALID'}, {shape}"
+
+    @property
+    def sound(self) -> bool:
+        """Valid, and closed unless it is an open shell."""
+        return self.valid and (self.closed or self.open_shell)
 
 
 @dataclass(frozen=True, eq=False)

@@ -36,12 +36,13 @@ def solid_report(result: Any, reason: str = "") -> SolidReport:
     """The report of a :class:`nurbs_core.brep.part.PartResult`."""
     faces = tuple(FaceRow(face.kind, face.description, dict(face.parameters), int(face.points),
                           float(face.mean), float(face.p99)) for face in result.faces)
-    return SolidReport(faces, bool(result.valid), bool(result.closed), float(result.volume),
+    return SolidReport(faces, bool(result.valid), bool(result.closed),
+                       0.0 if result.open_shell else float(result.volume),
                        str(result.status), tuple(result.problems.values()), float(result.noise),
                        float(result.segmentation.tolerance),
                        np.asarray(result.distances, np.float64),
                        np.asarray(result.point_faces, np.int64), reason,
-                       float(sum(result.timings.values())))
+                       float(sum(result.timings.values())), bool(result.open_shell))
 
 
 def solid_display(solid: Any, tolerance: float) -> SolidDisplay:
