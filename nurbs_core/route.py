@@ -17,7 +17,8 @@
   tangentially, and one surface alone is a sheet one patch holds) and every border loop of its
   bounded mesh lies on a plane (where the scan stops): an open shell
   (:mod:`nurbs_core.brep.open_shell`). A height field over its principal plane is not asked
-  (one patch holds it; a part's walls are not height fields).
+  (one patch holds it; a part's walls are not height fields). A part-like scan the wrap closed
+  over an opening wider than ``max_hole`` is such an open scan too (:func:`_sealed_opening`).
 * ``single_patch``: everything else (an open sheet, a shell, a tube): one patch, the fold-free
   least-squares core (:mod:`nurbs_core.fitting.sheet`), **when it holds the surface cleanly**.
   An open surface whose map to one patch crowds part of it over ``MAX_MAP_CROWDING`` times
@@ -105,7 +106,7 @@ def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
     started = time.perf_counter()
     route = _decide(points, file_mesh, file_mesh_note, max_hole, part)
     if route.kind == "network" and not route.open_network and part is not False:
-        route = _part_or(route, points, forced=bool(part))
+        route = _part_or(route, points, forced=bool(part), max_hole=max_hole)
     elif part and route.kind != "part":
         raise ValueError(f"a solid or open shell needs a closed object or an open surface "
                          f"with a border, but {route.finding}")
@@ -120,9 +121,11 @@ def cad_available() -> bool:
     return importlib.util.find_spec("OCP") is not None
 
 
-def _part_or(route: Route, points: np.ndarray, forced: bool) -> Route:
+def _part_or(route: Route, points: np.ndarray, forced: bool,
+             max_hole: float | None = None) -> Route:
     """The part route when the closed object's scan is part-like (or ``forced``), else
-    ``route`` unchanged."""
+    ``route`` unchanged; an open shell when the wrap sealed an opening wider than ``max_hole``
+    (see :func:`_sealed_opening`)."""
     if not cad_available():
         if forced:
             from nurbs_core.io.errors import require_ocp
@@ -135,6 +138,13 @@ def _part_or(route: Route, points: np.ndarray, forced: bool) -> Route:
     segmentation = segment_subset(points, give_up=0.0 if forced else 0.02)
     share = f"{segmentation.coverage:.0%} of the points on {len(segmentation.surfaces)} analytic"
     if part_like(segmentation) or forced:
+        opening = _sealed_opening(points, segmentation, max_hole)
+        if opening is not None:
+            mesh, planes, width, limit = opening
+            return Route("part", f"{route.finding}; {share} surfaces; but its bounded mesh keeps "
+                                 f"an opening {width:.4g} wide (sealed openings: up to "
+                                 f"{limit:.4g}), the scan ending on {planes} plane"
+                                 f"{'s' if planes > 1 else ''}", mesh, segmentation=segmentation)
         return Route("part", f"{route.finding}; {share} surfaces", route.mesh,
                      segmentation=segmentation)
     if segmentation.coverage >= MIN_COVERAGE:
@@ -150,6 +160,36 @@ def _part_or(route: Route, points: np.ndarray, forced: bool) -> Route:
            else f"mostly spheres, cones and tori, over {MAX_CURVED:.0%}: a freeform shape")
     route.finding += f"; not a machined part ({share} surfaces, {why})"
     return route
+
+
+def _sealed_opening(points: np.ndarray, segmentation: Any, max_hole: float | None
+                    ) -> tuple[ScanMesh, int, float, float] | None:
+    """When the wrap closed a part's scan (N, 3) over an opening wider than ``max_hole`` (the
+    closed mesh's own limit; a plate scanned from above was sealed under its 2 x 1.5 underside
+    on one scan of three): the scan's bounded mesh, its number of cap planes, the opening's
+    width (the smaller in-plane extent of its widest border loop) and the limit; None when the
+    bounded mesh has no border (a closed scan), no opening that wide, or a border on no planes."""
+    from nurbs_core.brep.open_shell import border_caps
+    from nurbs_core.brep.solid import SolidError
+    from nurbs_core.patches.closed_mesh import MAX_HOLE
+    from nurbs_core.patches.open_mesh import NotASurfaceError, open_mesh
+
+    limit = (MAX_HOLE * float(np.linalg.norm(np.ptp(points, axis=0))) if max_hole is None
+             else float(max_hole))
+    try:
+        mesh = open_mesh(points, max_hole=max_hole)
+    except NotASurfaceError:
+        return None
+    widths = [float(np.ptp((loop - loop.mean(axis=0))
+                           @ np.linalg.svd(loop - loop.mean(axis=0), full_matrices=False)[2][1]))
+              for loop in mesh.border]
+    if not widths or max(widths) <= limit:
+        return None
+    try:
+        caps, _ = border_caps(mesh.border, points, segmentation.tolerance)
+    except SolidError:
+        return None
+    return mesh, len(caps), max(widths), limit
 
 
 def _decide(points: np.ndarray, file_mesh: ScanMesh | None, file_mesh_note: str,
