@@ -247,10 +247,17 @@ def export_solid_report(path: str, points: np.ndarray, solid, *, title: str,
 
     report, display = solid.report, solid.display
     kinds = ", ".join(f"{n} {k}{'s' if n > 1 else ''}" for k, n in report.face_types().items())
-    summary = [("route", "a solid (machined part)"), ("faces", f"{len(report.faces)} ({kinds})"),
-               ("solid", f"{'valid' if report.valid else 'INVALID'}, "
-                         f"{'closed' if report.closed else 'NOT closed'}"),
-               ("volume", f"{report.volume:.6g}"), ("time", f"{report.seconds:.1f} s")]
+    if report.open_shell:
+        summary = [("route", "an open shell (machined part)"),
+                   ("faces", f"{len(report.faces)} ({kinds})"),
+                   ("open shell", f"{'valid' if report.valid else 'INVALID'}, open where the "
+                                  "scan stops"), ("time", f"{report.seconds:.1f} s")]
+    else:
+        summary = [("route", "a solid (machined part)"),
+                   ("faces", f"{len(report.faces)} ({kinds})"),
+                   ("solid", f"{'valid' if report.valid else 'INVALID'}, "
+                             f"{'closed' if report.closed else 'NOT closed'}"),
+                   ("volume", f"{report.volume:.6g}"), ("time", f"{report.seconds:.1f} s")]
     summary += [(f"face {k}", face.description) for k, face in enumerate(report.faces)]
     points = np.asarray(points, np.float64)
     content = ReportContent(title, report.status, points, display.vertices, display.triangles,

@@ -33,6 +33,7 @@ def solid_document(outcome: PartOutcome) -> tuple[dict[str, Any], dict[str, np.n
     document = {
         "brep": brep, "reason": report.reason, "seconds": report.seconds,
         "valid": report.valid, "closed": report.closed, "volume": report.volume,
+        "open_shell": report.open_shell,
         "status": report.status, "problems": list(report.problems), "noise": report.noise,
         "tolerance": report.tolerance,
         "faces": [{"kind": f.kind, "description": f.description, "parameters": f.parameters,
@@ -123,7 +124,8 @@ def solid_from_document(document: Any, arrays: dict[str, np.ndarray]) -> PartOut
                          _number(document, "volume"), status, tuple(problems),
                          _number(document, "noise"), _number(document, "tolerance"),
                          distances, point_faces, reason if isinstance(reason, str) else "",
-                         _number(document, "seconds"), _edits(document))
+                         _number(document, "seconds"), _edits(document),
+                         bool(document.get("open_shell")))
     shape = shape_from_brep(document["brep"])
     display = solid_display(shape, report.tolerance)
     if len(display.owners) and int(display.owners.max()) >= len(rows):

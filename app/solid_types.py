@@ -35,7 +35,8 @@ class SolidReport:
     """What the window shows and a session keeps of a solid: its faces, whether it is valid and
     closed, its volume, the fit's status ("converged" or "warnings") with its problems, the
     noise sigma and tolerance the distances are measured against, the per-point distance to
-    the solid (N,) and nearest face (N,), the route's reason and the seconds it took."""
+    the solid (N,) and nearest face (N,), the route's reason and the seconds it took;
+    ``open_shell``: an open scan's open shell (not closed by design; its volume is 0)."""
 
     faces: tuple[FaceRow, ...]
     valid: bool
@@ -52,6 +53,7 @@ class SolidReport:
     #: the face edits that made this solid from the segmentation, in order (each a plain
     #: ``{"action", "regions", "kind"}``, :class:`nurbs_core.brep.face_edits.FaceEdit`'s)
     edits: tuple[dict[str, Any], ...] = ()
+    open_shell: bool = False
 
     def face_types(self) -> dict[str, int]:
         """How many faces of each type, types in alphabetical order."""
@@ -61,8 +63,14 @@ class SolidReport:
     def summary(self) -> str:
         """One line: "7 faces (1 cylinder, 6 planes), valid, closed"."""
         kinds = ", ".join(f"{n} {k}{'s' if n > 1 else ''}" for k, n in self.face_types().items())
-        return (f"{len(self.faces)} faces ({kinds}), {'valid' if self.valid else 'INVALID'}, "
-                f"{'closed' if self.closed else 'NOT closed'}")
+        shape = ("an open shell, open where the scan stops" if self.open_shell
+                 else "closed" if self.closed else "NOT closed")
+        return f"{len(self.faces)} faces ({kinds}), {'valid' if self.valid else 'INVALID'}, {shape}"
+
+    @property
+    def sound(self) -> bool:
+        """Valid, and closed unless it is an open shell."""
+        return self.valid and (self.closed or self.open_shell)
 
 
 @dataclass(frozen=True, eq=False)

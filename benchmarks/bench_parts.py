@@ -7,7 +7,10 @@ Run: ``python benchmarks/bench_parts.py [--random N] [--points N] [--noise F] [-
 holes and dents with fillets or chamfers, cylinders, cones, spheres), 20,000 points each with
 Gaussian noise of 0.2 % of the diagonal (sigma), one torch thread, and last the freeform parts
 of :data:`~nurbs_core.brep.sample_parts.FREEFORM_PARTS` (a loft with flat caps, a box with a
-bulged top; their freeform points count in no type accuracy).
+bulged top; their freeform points count in no type accuracy), and after them the plate, the
+bracket and the turned part scanned from above
+(:func:`~nurbs_core.brep.sample_parts.scan_part_from_above`: no underside, an open scan), whose
+route should give an open shell (``--no-open`` leaves them out).
 
 Each scan goes the default way (``choose_route``: a closed object, part-like or not), then
 ``fit_part`` when it is a part; a scan whose solid fails falls back to a network (as
@@ -20,6 +23,9 @@ Each scan goes the default way (``choose_route``: a closed object, part-like or 
 * mean / sigma: the points' mean distance to the solid over the noise sigma (target 1.25);
 * edge p99 / sigma: the 99th percentile at the sharp edges (points with a neighbour among their
   10 nearest on another face of the true part) over sigma (target 4);
+* for the open scans, solid means one valid open shell (BRepCheck_Analyzer) and edge p99 / sigma
+  is the 99th percentile of its free edges' distance to the true part's section where the scan
+  stops (z = 0), over sigma;
 * sec, cpu s: route decision plus solid, wall and CPU seconds of this process, one thread (the
   machine is shared: CPU over wall says how much it was).
 
@@ -49,7 +55,11 @@ from nurbs_core.brep.sample_parts import (  # noqa: E402
     PARTS,
     random_part,
     scan_part,
+    scan_part_from_above,
 )
+
+#: the parts scanned from above (open scans)
+OPEN_PARTS = ("plate", "bracket", "turned")
 
 
 def _edge_points(points: np.ndarray, owner: np.ndarray) -> np.ndarray:
@@ -99,6 +109,78 @@ def _measure(name: str, shape: Any, count: int, noise: float, seed: int,
     return row
 
 
+def _section_samples(shape: Any, step: float) -> np.ndarray:
+    """Points every ``step`` along the true part's section by the plane z = 1e-7 (the table)."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Section
+    from OCP.gp import gp_Dir, gp_Pln, gp_Pnt
+
+    from nurbs_core.occ_topology import subshapes
+
+    section = BRepAlgoAPI_Section(shape, gp_Pln(gp_Pnt(0, 0, 1e-7), gp_Dir(0, 0, 1)))
+    section.Build()
+    return _along(subshapes(section.Shape(), "EDGE"), step)
+
+
+def _along(edges: list[Any], step: float) -> np.ndarray:
+    from OCP.BRepAdaptor import BRepAdaptor_Curve
+    from OCP.GCPnts import GCPnts_AbscissaPoint
+    from OCP.TopoDS import TopoDS
+
+    found = []
+    for edge in edges:
+        curve = BRepAdaptor_Curve(TopoDS.Edge(edge))
+        length = GCPnts_AbscissaPoint.Length_s(curve)
+        for t in np.linspace(curve.FirstParameter(), curve.LastParameter(),
+                             max(2, int(length / step) + 1)):
+            found.append(curve.Value(float(t)).Coord())
+    return np.array(found).reshape(-1, 3)
+
+
+def _measure_open(name: str, shape: Any, count: int, noise: float, seed: int) -> dict[str, Any]:
+    """The part scanned from above through the default route: an open shell when it is one."""
+    from OCP.ShapeAnalysis import ShapeAnalysis_FreeBounds
+
+    from nurbs_core.brep.part import fit_part
+    from nurbs_core.brep.solid import SolidError
+    from nurbs_core.occ_topology import subshapes
+    from nurbs_core.route import choose_route
+
+    points, owner, kinds = scan_part_from_above(shape, count, noise, seed)
+    sigma = noise * bounding_diagonal(shape)
+    seen = sorted(set(owner.tolist()))
+    row: dict[str, Any] = {"part": f"{name} (open)", "true_faces": len(seen)}
+    started = time.perf_counter()
+    route = choose_route(points)
+    row["route"] = "shell" if route.open_shell else route.kind
+    row["solid"] = False
+    if route.open_shell:
+        assert route.mesh is not None
+        try:
+            result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
+                              border=route.mesh.border)
+        except SolidError as error:
+            row["error"] = str(error)
+        else:
+            row["seconds"] = time.perf_counter() - started
+            shell = result.solid
+            row["solid"] = (result.valid and len(subshapes(shell, "SHELL")) == 1
+                            and not subshapes(shell, "SOLID"))
+            row["status"] = result.status
+            out_kinds = np.array([face_kind(f) for f in faces(shell)])
+            true_kind = np.array(kinds)[owner]
+            row["faces"] = len(out_kinds)
+            row["type_accuracy"] = float((out_kinds[result.point_faces] == true_kind).mean())
+            row["mean_sigma"] = float(result.distances.mean() / sigma)
+            bounds = ShapeAnalysis_FreeBounds(shell)
+            free = _along(subshapes(bounds.GetClosedWires(), "EDGE")
+                          + subshapes(bounds.GetOpenWires(), "EDGE"), sigma / 2)
+            truth = _section_samples(shape, sigma / 2)
+            row["edge_p99_sigma"] = float(np.percentile(cKDTree(truth).query(free)[0], 99)
+                                          / sigma)
+    row.setdefault("seconds", time.perf_counter() - started)
+    return row
+
+
 def _network_baseline(points: np.ndarray, edge: np.ndarray, sigma: float) -> dict[str, Any]:
     from nurbs_core.patches.options import PatchOptions
     from nurbs_core.patches.pipeline import fit_patches
@@ -126,6 +208,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-freeform", action="store_true",
                         help="without the freeform parts (a loft with flat caps, a box with a "
                         "bulged top)")
+    parser.add_argument("--no-open", action="store_true",
+                        help="without the parts scanned from above (open shells)")
+    parser.add_argument("--only-open", action="store_true",
+                        help="only the parts scanned from above (open shells)")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
     import torch
@@ -135,13 +221,17 @@ def main(argv: list[str] | None = None) -> int:
 
     cases: list[tuple[str, Any, bool]] = [(name, make(), args.baseline)
                                           for name, make in PARTS.items()]
+    if args.only_open:
+        cases, args.random, args.no_freeform = [], 0, True
     rng = np.random.default_rng(args.seed)
-    while len(cases) < len(PARTS) + args.random:
+    while not args.only_open and len(cases) < len(PARTS) + args.random:
         family, shape = random_part(rng)
         if shape is not None and is_valid(shape):
             cases.append((f"{family}#{len(cases) - len(PARTS)}", shape, False))
     if not args.no_freeform:  # last, so the rows above keep their seeds
         cases += [(name, make(), args.baseline) for name, make in FREEFORM_PARTS.items()]
+    if not args.no_open:  # last again
+        cases += [(f"{name}:open", PARTS[name](), False) for name in OPEN_PARTS]
     print(f"# {platform.node()} {platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} CPUs, one torch thread; {args.points} points, noise "
           f"{args.noise:g} x diagonal")
@@ -151,7 +241,12 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for index, (name, shape, baseline) in enumerate(cases):
         cpu = time.process_time()
-        row = _measure(name, shape, args.points, args.noise, args.seed + index, baseline)
+        # an open scan's seed does not depend on the rows before it (--only-open gives the same)
+        row = (_measure_open(name.split(":")[0], shape, args.points, args.noise,
+                             args.seed + OPEN_PARTS.index(name.split(":")[0]))
+               if name.endswith(":open") else
+               _measure(name, shape, args.points, args.noise, args.seed + index, baseline))
+        name = row["part"]
         row["cpu_seconds"] = time.process_time() - cpu
         rows.append(row)
         faces_text = f"{row.get('faces', '-')}/{row['true_faces']}"
@@ -168,11 +263,13 @@ def main(argv: list[str] | None = None) -> int:
               flush=True)
     solid = [r for r in rows if r["solid"]]
     good = [r for r in solid if r.get("status") == "converged"]
-    print(f"# converged (valid closed solid, every quality check holds): {len(good)}/{len(rows)} "
+    print(f"# converged (valid closed solid or open shell, every quality check holds): "
+          f"{len(good)}/{len(rows)} "
           f"({len(good) / len(rows):.0%})")
-    print(f"# valid closed solids: {len(solid)}/{len(rows)} ({len(solid) / len(rows):.0%}); "
-          f"routes: " + ", ".join(f"{k} {sum(r['route'] == k for r in rows)}"
-                                  for k in ("part", "network", "single_patch")))
+    print(f"# valid closed solids or open shells: {len(solid)}/{len(rows)} "
+          f"({len(solid) / len(rows):.0%}); routes: "
+          + ", ".join(f"{k} {sum(r['route'] == k for r in rows)}"
+                      for k in ("part", "shell", "network", "single_patch")))
     if solid:
         accuracy = [r["type_accuracy"] for r in solid]
         print(f"# over the solids: type accuracy median {np.median(accuracy):.3f} (min "

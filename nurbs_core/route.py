@@ -11,6 +11,14 @@
   ``part=True`` forces it on a closed object. A cloud above 50,000 points is segmented on a
   seeded subset of that size (:func:`nurbs_core.brep.segment.segment_subset`), so the check
   costs seconds whatever the cloud's size.
+  An *open* scan (a part scanned from above, its underside on the table) takes the part route
+  when the same measure holds, two of its regions meet at a sharp edge
+  (:func:`nurbs_core.brep.part.sharp_edges`: a smooth sheet's analytic pieces meet
+  tangentially, and one surface alone is a sheet one patch holds) and every border loop of its
+  bounded mesh lies on a plane (where the scan stops): an open shell
+  (:mod:`nurbs_core.brep.open_shell`). A height field over its principal plane is not asked
+  (one patch holds it; a part's walls are not height fields). A part-like scan the wrap closed
+  over an opening wider than ``max_hole`` is such an open scan too (:func:`_sealed_opening`).
 * ``single_patch``: everything else (an open sheet, a shell, a tube): one patch, the fold-free
   least-squares core (:mod:`nurbs_core.fitting.sheet`), **when it holds the surface cleanly**.
   An open surface whose map to one patch crowds part of it over ``MAX_MAP_CROWDING`` times
@@ -71,9 +79,15 @@ class Route:
         if self.kind == "single_patch":
             return f"{self.finding}: one patch"
         if self.kind == "part":
-            return f"{self.finding}: a solid with analytic faces"
+            return f"{self.finding}: " + ("an open shell with analytic faces" if self.open_shell
+                                          else "a solid with analytic faces")
         return f"{self.finding}: " + ("an open network of patches" if self.open_network
                                       else "a network of patches")
+
+    @property
+    def open_shell(self) -> bool:
+        """Whether the route is a part over an open scan's bounded mesh: an open shell."""
+        return self.kind == "part" and self.mesh is not None and not self.mesh.closed
 
     @property
     def open_network(self) -> bool:
@@ -85,15 +99,17 @@ def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
                  file_mesh_note: str = "", max_hole: float | None = None,
                  part: bool | None = None) -> Route:
     """The route for a surface cloud (N, 3) with no route forced (see :func:`_decide`), timed.
-    ``part``: None tries the part route on a closed object, False skips it, True takes it
-    whatever the segmentation finds (ValueError when the cloud is not a closed object or
-    OpenCASCADE is missing)."""
+    ``part``: None tries the part route on a closed object and on an open scan that is not a
+    height field, False skips it, True takes it whatever the segmentation finds (an open shell
+    on an open scan; ValueError when the cloud has no bounded mesh or OpenCASCADE is
+    missing)."""
     started = time.perf_counter()
-    route = _decide(points, file_mesh, file_mesh_note, max_hole)
+    route = _decide(points, file_mesh, file_mesh_note, max_hole, part)
     if route.kind == "network" and not route.open_network and part is not False:
-        route = _part_or(route, points, forced=bool(part))
-    elif part:
-        raise ValueError(f"a solid needs a closed object, but {route.finding}")
+        route = _part_or(route, points, forced=bool(part), max_hole=max_hole)
+    elif part and route.kind != "part":
+        raise ValueError(f"a solid or open shell needs a closed object or an open surface "
+                         f"with a border, but {route.finding}")
     route.seconds = time.perf_counter() - started
     return route
 
@@ -105,9 +121,11 @@ def cad_available() -> bool:
     return importlib.util.find_spec("OCP") is not None
 
 
-def _part_or(route: Route, points: np.ndarray, forced: bool) -> Route:
+def _part_or(route: Route, points: np.ndarray, forced: bool,
+             max_hole: float | None = None) -> Route:
     """The part route when the closed object's scan is part-like (or ``forced``), else
-    ``route`` unchanged."""
+    ``route`` unchanged; an open shell when the wrap sealed an opening wider than ``max_hole``
+    (see :func:`_sealed_opening`)."""
     if not cad_available():
         if forced:
             from nurbs_core.io.errors import require_ocp
@@ -120,6 +138,13 @@ def _part_or(route: Route, points: np.ndarray, forced: bool) -> Route:
     segmentation = segment_subset(points, give_up=0.0 if forced else 0.02)
     share = f"{segmentation.coverage:.0%} of the points on {len(segmentation.surfaces)} analytic"
     if part_like(segmentation) or forced:
+        opening = _sealed_opening(points, segmentation, max_hole)
+        if opening is not None:
+            mesh, planes, width, limit = opening
+            return Route("part", f"{route.finding}; {share} surfaces; but its bounded mesh keeps "
+                                 f"an opening {width:.4g} wide (sealed openings: up to "
+                                 f"{limit:.4g}), the scan ending on {planes} plane"
+                                 f"{'s' if planes > 1 else ''}", mesh, segmentation=segmentation)
         return Route("part", f"{route.finding}; {share} surfaces", route.mesh,
                      segmentation=segmentation)
     if segmentation.coverage >= MIN_COVERAGE:
@@ -137,12 +162,43 @@ def _part_or(route: Route, points: np.ndarray, forced: bool) -> Route:
     return route
 
 
+def _sealed_opening(points: np.ndarray, segmentation: Any, max_hole: float | None
+                    ) -> tuple[ScanMesh, int, float, float] | None:
+    """When the wrap closed a part's scan (N, 3) over an opening wider than ``max_hole`` (the
+    closed mesh's own limit; a plate scanned from above was sealed under its 2 x 1.5 underside
+    on one scan of three): the scan's bounded mesh, its number of cap planes, the opening's
+    width (the smaller in-plane extent of its widest border loop) and the limit; None when the
+    bounded mesh has no border (a closed scan), no opening that wide, or a border on no planes."""
+    from nurbs_core.brep.open_shell import border_caps
+    from nurbs_core.brep.solid import SolidError
+    from nurbs_core.patches.closed_mesh import MAX_HOLE
+    from nurbs_core.patches.open_mesh import NotASurfaceError, open_mesh
+
+    limit = (MAX_HOLE * float(np.linalg.norm(np.ptp(points, axis=0))) if max_hole is None
+             else float(max_hole))
+    try:
+        mesh = open_mesh(points, max_hole=max_hole)
+    except NotASurfaceError:
+        return None
+    widths = [float(np.ptp((loop - loop.mean(axis=0))
+                           @ np.linalg.svd(loop - loop.mean(axis=0), full_matrices=False)[2][1]))
+              for loop in mesh.border]
+    if not widths or max(widths) <= limit:
+        return None
+    try:
+        caps, _ = border_caps(mesh.border, points, segmentation.tolerance)
+    except SolidError:
+        return None
+    return mesh, len(caps), max(widths), limit
+
+
 def _decide(points: np.ndarray, file_mesh: ScanMesh | None, file_mesh_note: str,
-            max_hole: float | None) -> Route:
+            max_hole: float | None, part: bool | None = None) -> Route:
     """The route for a surface cloud (N, 3) with no route forced. ``file_mesh``: the input
     file's own closed mesh when it has a usable one (:func:`mesh_from_faces`); otherwise
     ``file_mesh_note`` says why not (it goes into the reason). ``max_hole``: the widest opening
-    sealed to close an object (see :func:`closed_mesh`)."""
+    sealed to close an object (see :func:`closed_mesh`); ``part``: an open scan's part route
+    (as :func:`choose_route`'s)."""
     if file_mesh is not None:
         return Route("network", "the file's mesh is closed (watertight)", file_mesh)
     points = np.asarray(points, np.float64)
@@ -152,19 +208,20 @@ def _decide(points: np.ndarray, file_mesh: ScanMesh | None, file_mesh_note: str,
     try:
         mesh = closed_mesh(points, max_hole=max_hole)
     except NotClosedError:
-        return _open_surface(points, why, max_hole)
+        return _open_surface(points, why, max_hole, part)
     holes = (f" once its openings up to {mesh.max_hole:.4g} wide are sealed"
              if mesh.filled_fraction > 0 else "")
     return Route("network", f"{why}the cloud encloses a volume{holes} (a closed object)", mesh)
 
 
-def _open_surface(points: np.ndarray, why: str, max_hole: float | None) -> Route:
-    """The route of a cloud (N, 3) that encloses no volume: one patch, unless its map to one
-    patch crowds part of it over ``MAX_MAP_CROWDING`` times; then the open network over the
+def _open_surface(points: np.ndarray, why: str, max_hole: float | None,
+                  part: bool | None = None) -> Route:
+    """The route of a cloud (N, 3) that encloses no volume: an open shell when it is a part
+    (:func:`_open_part`; ``part`` as :func:`choose_route`'s), else one patch, unless its map to
+    one patch crowds part of it over ``MAX_MAP_CROWDING`` times; then the open network over the
     scan's bounded mesh, built here (one patch when no such mesh can be built). ``why``: the
     finding's opening words."""
-    from nurbs_core.fitting.sheet import MESH_POINTS, is_height_field
-    from nurbs_core.surfacing.map_crowding import map_crowding
+    from nurbs_core.fitting.sheet import is_height_field
     from nurbs_core.surfacing.neighbours import stray_points
 
     finding = f"{why}the cloud encloses no volume (an open surface"
@@ -172,7 +229,26 @@ def _open_surface(points: np.ndarray, why: str, max_hole: float | None) -> Route
     # the fit builds that map again: handing it down through the fit's layers (normalised
     # coordinates, the prepared job) is not worth ~0.4 s, the mesh's cost on a sheet
     surface = points[~stray_points(points)]
-    if is_height_field(surface):
+    height_field = is_height_field(surface)
+    if part or (part is None and not height_field):
+        shell = _open_part(points, finding, max_hole, forced=bool(part))
+        if isinstance(shell, Route):
+            return shell
+        route = _open_surface_route(surface, finding, height_field, max_hole)
+        route.finding += f"; {shell}"
+        return route
+    return _open_surface_route(surface, finding, height_field, max_hole)
+
+
+def _open_surface_route(surface: np.ndarray, finding: str, height_field: bool,
+                        max_hole: float | None) -> Route:
+    """:func:`_open_surface`'s route when the cloud is not a part: one patch or the open
+    network. ``surface`` (N, 3): the cloud without its strays; ``height_field``: whether it is
+    one over its principal plane."""
+    from nurbs_core.fitting.sheet import MESH_POINTS
+    from nurbs_core.surfacing.map_crowding import map_crowding
+
+    if height_field:
         # one patch holds a height field over its plane without crowding (a plane's map): the
         # map is not built twice for it (0.27 of 1.2 CPU s on a 4,000-point sheet)
         return Route("single_patch", f"{finding}; a height field over its principal plane)")
@@ -191,6 +267,48 @@ def _open_surface(points: np.ndarray, why: str, max_hole: float | None) -> Route
                                             "built for a network)")
 
 
+def _open_part(points: np.ndarray, finding: str, max_hole: float | None, forced: bool
+               ) -> Route | str:
+    """The open-shell route of an open cloud (N, 3) that is a part (see the module; its
+    ``finding`` extended), or the clause that says why it is not. ``forced``: taken whatever
+    the segmentation finds (ValueError when no bounded mesh with a planar border can be built
+    or OpenCASCADE is missing)."""
+    from nurbs_core.brep.open_shell import border_caps
+    from nurbs_core.brep.part import MIN_COVERAGE, SHARP_ANGLE, part_like, sharp_edges
+    from nurbs_core.brep.segment import segment_subset
+    from nurbs_core.brep.solid import SolidError
+    from nurbs_core.patches.open_mesh import NotASurfaceError, open_mesh
+
+    if not cad_available():
+        if forced:
+            from nurbs_core.io.errors import require_ocp
+
+            require_ocp("An open shell with analytic faces")
+        return "no OpenCASCADE for a part"
+    segmentation = segment_subset(points, give_up=0.0 if forced else 0.02)
+    surfaces = len(segmentation.surfaces)
+    share = (f"{segmentation.coverage:.0%} of the points on {surfaces} analytic surface"
+             + ("s" if surfaces != 1 else ""))
+    if not forced:
+        why = (f"under {MIN_COVERAGE:.0%}" if segmentation.coverage < MIN_COVERAGE
+               else "mostly curved: a freeform shape" if not part_like(segmentation)
+               else "one surface: a sheet" if surfaces < 2
+               else "" if sharp_edges(segmentation, points)
+               else f"meeting at no edge sharper than {SHARP_ANGLE:g} degrees: a smooth sheet")
+        if why:
+            return f"not a machined part ({share}, {why})"
+    try:
+        mesh = open_mesh(points, max_hole=max_hole)
+        caps, _ = border_caps(mesh.border, points, segmentation.tolerance)
+    except (NotASurfaceError, SolidError) as error:
+        if forced:
+            raise ValueError(f"an open shell needs a scan that ends on planes, but {finding}): "
+                             f"{error}") from None
+        return f"not an open shell (a part: {share}; but {error})"
+    return Route("part", f"{finding}; {share}, the scan ending on {len(caps)} "
+                         f"plane{'s' if len(caps) > 1 else ''})", mesh, segmentation=segmentation)
+
+
 def _times(factor: float) -> str:
     """A crowding factor for the report: "4.2 x", "35,000 x"."""
     return f"{factor:.1f} x" if factor < 10 else f"{float(f'{factor:.2g}'):,.0f} x"
@@ -198,7 +316,11 @@ def _times(factor: float) -> str:
 
 def without_solid(route: Route, error: Exception) -> Route:
     """The closed object's network after its part route built no valid solid, with the
-    reason."""
+    reason; an open scan's single patch (which turns to the open network when it does not hold
+    the scan cleanly) after no valid open shell results."""
+    if route.open_shell:
+        return Route("single_patch", f"{route.finding}, but no valid open shell results "
+                                     f"({error})")
     return Route("network", f"{route.finding}, but no valid solid results ({error})",
                  route.mesh)
 

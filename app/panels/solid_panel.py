@@ -167,10 +167,10 @@ class SolidPanel(QWidget):
         status = report.status if not warned else (
             "fitted with warnings: " + "; ".join(report.problems))
         self._set("status", status, WARNING_COLOR if warned else GOOD_COLOR)
-        self._set("solid", report.summary(),
-                  None if report.valid and report.closed else WARNING_COLOR)
+        self._set("solid", report.summary(), None if report.sound else WARNING_COLOR)
         unit3 = f" {units}\N{SUPERSCRIPT THREE}" if units else ""
-        self._set("volume", f"{report.volume:.6g}{unit3}")
+        self._set("volume", "none (an open shell)" if report.open_shell
+                  else f"{report.volume:.6g}{unit3}")
         d = report.distances
         noise = max(report.noise, 1e-300)
         if len(d):

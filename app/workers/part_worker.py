@@ -51,12 +51,13 @@ def solid_report(result: Any, reason: str = "") -> SolidReport:
                           float(face.mean), float(face.p99), int(face.region))
                   for face in result.faces)
     edits = () if result.regions is None else tuple(e.as_dict() for e in result.regions.edits)
-    return SolidReport(faces, bool(result.valid), bool(result.closed), float(result.volume),
+    return SolidReport(faces, bool(result.valid), bool(result.closed),
+                       0.0 if result.open_shell else float(result.volume),
                        str(result.status), tuple(result.problems.values()), float(result.noise),
                        float(result.segmentation.tolerance),
                        np.asarray(result.distances, np.float64),
                        np.asarray(result.point_faces, np.int64), reason,
-                       float(sum(result.timings.values())), edits)
+                       float(sum(result.timings.values())), edits, bool(result.open_shell))
 
 
 def solid_display(solid: Any, tolerance: float) -> SolidDisplay:
@@ -98,7 +99,7 @@ def run_part_route(points: np.ndarray, part: bool | None, max_hole: float | None
     started = time.perf_counter()
     try:
         result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
-                          route.freeform)
+                          route.freeform, border=route.mesh.border or None)
         if result.problems and not part:
             raise SolidError("the solid fails its checks: "
                              + "; ".join(result.problems.values()))

@@ -1,11 +1,13 @@
 """A scanned machined part as a valid solid with exact analytic faces: segmentation
 (:mod:`nurbs_core.brep.segment`), the solid of the surfaces' arrangement
-(:mod:`nurbs_core.brep.solid`) and the measures that say whether it holds the scan.
+(:mod:`nurbs_core.brep.solid`) and the measures that say whether it holds the scan. A scan
+open on one side (a part on a table) becomes an open shell (:mod:`nurbs_core.brep.open_shell`).
 
 :func:`part_like` is the cheap test the route asks first (most of the scan on a few large
 analytic regions); :func:`fit_part` builds and measures the solid. Its status is ``converged``
-only when the quality checks hold (:func:`part_problems`): one valid closed solid, and the
-points at most :data:`MEAN_LIMIT` noise sigmas from it on average.
+only when the quality checks hold (:func:`part_problems`): one valid closed solid (one valid
+open shell from an open scan), and the points at most :data:`MEAN_LIMIT` noise sigmas from it
+on average.
 """
 
 from __future__ import annotations
@@ -55,6 +57,11 @@ UNSEEN_AREA = 0.01
 UNSEEN_SHARE = 0.1
 #: a solid with more than this many faces per surface (and 4) has faces split into pieces
 FRAGMENTS = 2
+#: two regions meet at a sharp edge when their surfaces' normals where they touch differ by
+#: more than this many degrees (median over the touching points); smooth junctions are ~0
+SHARP_ANGLE = 30.0
+#: ... and touch at at least this many points (pairs of neighbours on the two regions)
+SHARP_CONTACTS = 10
 
 
 @dataclass
@@ -79,9 +86,10 @@ class PartFace:
 
 @dataclass
 class PartResult:
-    """The solid (an OpenCASCADE shape), its faces, the segmentation, the points' distances to
-    the solid (N,) and nearest faces (N,, indices into ``faces``), its validity, closedness,
-    volume and the timings (seconds per stage)."""
+    """The solid (an OpenCASCADE shape: a solid, or a shell from an open scan), its faces, the
+    segmentation, the points' distances to the solid (N,) and nearest faces (N,, indices into
+    ``faces``), its validity, closedness, volume (NaN for an open shell) and the timings
+    (seconds per stage)."""
 
     solid: OccShape
     faces: list[PartFace]
@@ -98,6 +106,11 @@ class PartResult:
     #: the regions the solid was built from, with the user's edits
     #: (:mod:`nurbs_core.brep.face_edits`; None: not recorded)
     regions: PartRegions | None = None
+    #: an open shell from an open scan (:mod:`nurbs_core.brep.open_shell`): not closed by design
+    open_shell: bool = False
+    #: an open shell's border: each point of the scan's border loops' (B,) distance to the
+    #: shell's free edges (empty for a solid)
+    border_distances: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def noise(self) -> float:
@@ -117,15 +130,20 @@ class PartResult:
         """Plain values for the report, the batch summary and tests."""
         d = self.distances
         kinds = [face.kind for face in self.faces]
-        return {"kind": "solid", "fit_status": self.status, "points": len(d),
+        border = ({"border_mean": float(self.border_distances.mean()),
+                   "border_p99": float(np.percentile(self.border_distances, 99))}
+                  if len(self.border_distances) else {})
+        return {"kind": "open shell" if self.open_shell else "solid",
+                "fit_status": self.status, "points": len(d),
                 "faces": len(self.faces),
                 "face_types": {k: kinds.count(k) for k in sorted(set(kinds))},
-                "valid": self.valid, "closed": self.closed, "volume": self.volume,
+                "valid": self.valid, "closed": self.closed,
+                "volume": None if self.open_shell else self.volume,
                 "noise": self.noise, "coverage": self.segmentation.coverage,
                 "mean": float(d.mean()), "rms": float(np.sqrt((d ** 2).mean())),
                 "p99": float(np.percentile(d, 99)), "max": float(d.max()),
                 "fit_seconds": sum(self.timings.values()), "fillets": self.fillets,
-                "warnings": list(self.problems.values())}
+                "warnings": list(self.problems.values()), **border}
 
 
 def part_problems(result: PartResult) -> dict[str, str]:
@@ -133,7 +151,7 @@ def part_problems(result: PartResult) -> dict[str, str]:
     problems = {}
     if not result.valid:
         problems["valid"] = "OpenCASCADE's checker finds the solid invalid"
-    if not result.closed:
+    if not result.closed and not result.open_shell:
         problems["closed"] = "the solid's shell is not closed"
     unseen = [k for k, face in enumerate(result.faces)
               if face.area >= UNSEEN_AREA * sum(f.area for f in result.faces)
@@ -188,6 +206,32 @@ def part_like(segmentation: Segmentation) -> bool:
     return float(np.isin(segmentation.labels, curved).mean()) <= MAX_CURVED
 
 
+def sharp_edges(segmentation: Segmentation, points: np.ndarray) -> int:
+    """How many pairs of regions meet at a sharp edge: touch (a point of one among the 8
+    nearest of a point of the other, :data:`SHARP_CONTACTS` times) with their surfaces' normals
+    there :data:`SHARP_ANGLE` or more apart (the median over the touching points). A part's
+    faces meet at edges; the analytic pieces of a smooth freeform sheet (a curled sheet held by
+    six cylinders and planes) meet tangentially. ``points`` (N, 3): the segmentation's."""
+    labels = segmentation.labels
+    _, near = cKDTree(points).query(points, k=9)
+    first = np.repeat(np.arange(len(points)), 8)
+    second = near[:, 1:].ravel()
+    touch = (labels[first] >= 0) & (labels[second] >= 0) & (labels[first] < labels[second])
+    first, second = first[touch], second[touch]
+    pairs = labels[first] * len(segmentation.surfaces) + labels[second]
+    sharp = 0
+    for pair in np.unique(pairs):
+        mine = pairs == pair
+        if mine.sum() < SHARP_CONTACTS:
+            continue
+        a, b = divmod(int(pair), len(segmentation.surfaces))
+        contact = 0.5 * (points[first[mine]] + points[second[mine]])
+        cosine = np.abs(np.einsum("ij,ij->i", segmentation.surfaces[a].normals(contact),
+                                  segmentation.surfaces[b].normals(contact)))
+        sharp += bool(np.median(cosine) < np.cos(np.radians(SHARP_ANGLE)))
+    return sharp
+
+
 def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarray,
                     tolerance: float) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """Each point's (N, 3) distance to the solid (N,) and nearest face (N,), and each face's
@@ -219,19 +263,25 @@ def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarr
 def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
              mesh_triangles: np.ndarray | None = None,
              segmentation: Segmentation | None = None,
-             freeform: FreeformRegion | None = None) -> PartResult:
+             freeform: FreeformRegion | None = None,
+             border: list[np.ndarray] | None = None) -> PartResult:
     """The solid of a scanned part (N, 3) (see the module). ``mesh_vertices`` (V, 3) and
     ``mesh_triangles`` (T, 3): the scan's closed mesh that decides which cells are inside (None:
-    built from the points, :func:`nurbs_core.patches.closed_mesh.closed_mesh`);
-    ``segmentation``: when already computed; ``freeform``: its freeform region when the route
-    found one (None: looked for here). Raises SolidError when no valid solid results
-    (also when the points enclose no volume). ``result.solid`` is written by
+    built from the points, :func:`nurbs_core.patches.closed_mesh.closed_mesh`), or with
+    ``border`` the open scan's bounded mesh (:func:`nurbs_core.patches.open_mesh.open_mesh`)
+    and its border loops (each (L, 3)): then the result is an open shell
+    (:mod:`nurbs_core.brep.open_shell`); ``segmentation``: when already computed;
+    ``freeform``: its freeform region when the route found one (None: looked for here, on a
+    closed scan). Raises SolidError when no valid solid results (also when the points enclose
+    no volume and no border is given). ``result.solid`` is written by
     :func:`nurbs_core.io.solid_io.save_solid`."""
     from nurbs_core.brep.solid import SolidError, build_solid, spans
     from nurbs_core.brep.tangency import crossing
 
     points = np.asarray(points, np.float64)
     if mesh_vertices is None or mesh_triangles is None:
+        if border:
+            raise SolidError("an open shell needs the open scan's mesh with its border")
         from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
 
         try:
@@ -244,22 +294,41 @@ def fit_part(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
         segmentation = segment(points)
     timings["segmentation"] = segmentation.seconds
     started = time.perf_counter()
+    caps: list[Primitive] = []
+    building = segmentation
+    if border:
+        from dataclasses import replace
+
+        from nurbs_core.brep.open_shell import border_caps, capped_mesh
+
+        caps, _ = border_caps(border, points, segmentation.tolerance)
+        mesh_vertices, mesh_triangles = capped_mesh(mesh_vertices, mesh_triangles, caps)
+        # the caps are surfaces with no points: planes across the whole box
+        building = replace(segmentation, surfaces=segmentation.surfaces + caps)
     low, high = points.min(axis=0), points.max(axis=0)
-    extents = spans(segmentation.surfaces, points, segmentation.labels,
+    extents = spans(building.surfaces, points, building.labels,
                     float(np.linalg.norm(high - low)), segmentation.tolerance)
-    solid, surfaces, freeform_used = _freeform(points, segmentation, freeform)
+    solid, surfaces, freeform_used = (None, [], None) if caps else \
+        _freeform(points, segmentation, freeform)
     fillets = 0
     if solid is None:
-        solid, surfaces, fillets = _filleted(points, (mesh_vertices, mesh_triangles),
-                                             segmentation)
+        solid, surfaces, fillets = _filleted(points, (mesh_vertices, mesh_triangles), building)
     if solid is None:
-        surfaces = crossing(segmentation.surfaces, segmentation.tolerance)
+        surfaces = crossing(building.surfaces, segmentation.tolerance)
         solid = build_solid(surfaces, mesh_vertices, mesh_triangles, (low, high), extents,
                             segmentation.tolerance)
+    if caps:
+        from nurbs_core.brep.open_shell import shell_without_caps
+
+        solid = shell_without_caps(solid, caps, segmentation.tolerance)
     timings["solid"] = time.perf_counter() - started
     regions = initial_regions(segmentation, None if freeform_used is None else freeform_used.mask,
                               None if freeform_used is None else freeform_used.planes)
-    return _measured(points, solid, surfaces, segmentation, regions, timings, fillets)
+    result = _measured(points, solid, surfaces, segmentation, regions, timings, fillets)
+    if border:
+        result.open_shell, result.volume = True, float("nan")
+        result.border_distances = _border_distances(solid, border, segmentation.spacing)
+    return result
 
 
 def rebuild_part(points: np.ndarray, mesh_vertices: np.ndarray, mesh_triangles: np.ndarray,
@@ -336,9 +405,9 @@ def _nurbs_cells(points: np.ndarray, mesh: tuple[np.ndarray, np.ndarray],
 def _measured(points: np.ndarray, solid: OccShape, surfaces: list[Primitive],
               segmentation: Segmentation, regions: PartRegions, timings: dict[str, float],
               fillets: int) -> PartResult:
-    """The result of a solid built from ``regions`` of ``segmentation``: each point's (N, 3)
-    distance to the solid measured against the ``surfaces`` its faces lie on, each face's report
-    and region."""
+    """The result of a solid (or open shell) built from ``regions`` of ``segmentation``: each
+    point's (N, 3) distance to the solid measured against the ``surfaces`` its faces lie on,
+    each face's report and region."""
     started = time.perf_counter()
     # measured against the surfaces the solid is made of (fillets as enlarged to cross)
     distance, nearest, on_surface = solid_distances(solid, surfaces, points,
@@ -365,6 +434,18 @@ def _measured(points: np.ndarray, solid: OccShape, surfaces: list[Primitive],
     closed = count(solid, "SHELL") == 1 and count(solid, "SOLID") == 1
     return PartResult(solid, part_faces, segmentation, distance, nearest, is_valid(solid), closed,
                       volume(solid), timings, fillets, regions)
+
+
+def _border_distances(shell: OccShape, border: list[np.ndarray], spacing: float) -> np.ndarray:
+    """Each point of the scan's border loops' (each (L, 3)) distance to the shell's free edges
+    (sampled every fifth of a point ``spacing``)."""
+    from nurbs_core.brep.open_shell import free_edge_samples
+
+    samples = free_edge_samples(shell, spacing / 5)
+    loops = np.concatenate(border)
+    if len(samples) == 0:
+        return np.full(len(loops), np.inf)
+    return np.asarray(cKDTree(samples).query(loops)[0], np.float64)
 
 
 def _filleted(points: np.ndarray, mesh: tuple[np.ndarray, np.ndarray],

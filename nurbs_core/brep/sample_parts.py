@@ -7,7 +7,7 @@ corner spheres) and a countersunk block (a cone). :func:`random_part` draws from
 :mod:`nurbs_core.learn.cad_solids` that make parts (a box with filleted edges, a box cut by holes
 and dents, a cylinder, cone or sphere). :data:`FREEFORM_PARTS` names two with a freeform face:
 a loft with flat caps and a box with a bulged top. :func:`scan_part` samples one as a noisy
-cloud.
+cloud, :func:`scan_part_from_above` as a scanner above it sees it (no underside: an open scan).
 """
 
 from __future__ import annotations
@@ -222,3 +222,34 @@ def scan_part(shape: OccShape, count: int = 20_000, noise: float = 0.002,
     and the faces' types (see :func:`nurbs_core.brep.occ.sample_shape`)."""
     rng = np.random.default_rng(seed)
     return sample_shape(shape, count, noise * bounding_diagonal(shape), rng)
+
+
+def scan_part_from_above(shape: OccShape, count: int = 20_000, noise: float = 0.002,
+                         seed: int = 0, above: float | None = None
+                         ) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """A scan of a part lying on a table, seen from above (+z): ``count`` points uniform by
+    area over the faces whose outward normal does not point down (the part's fine
+    triangulation, within 1e-4 of its diagonal: its triangles' normals; walls are kept) and, with
+    ``above``, only where the exact surface lies at z >= ``above`` (a scan cut across the
+    walls); Gaussian noise of ``noise`` x the diagonal (sigma). Returns the points (count, 3),
+    each point's face (count,) and the faces' types, as :func:`scan_part`."""
+    from nurbs_core.brep.occ import face_kind, faces, sample_triangles
+    from nurbs_core.io.cad import triangulate
+
+    rng = np.random.default_rng(seed)
+    diagonal = bounding_diagonal(shape)
+    vertices, triangles, owners = triangulate(shape, 1e-4 * diagonal)
+    corners = vertices[triangles]
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    seen = normal[:, 2] >= -1e-6 * np.linalg.norm(normal, axis=1)
+    if above is not None:
+        seen &= corners[:, :, 2].max(axis=1) >= above
+    points = np.zeros((0, 3))
+    face = np.zeros(0, np.int64)
+    while len(points) < count:  # a cut drops the samples below it: drawn again until enough
+        drawn, drawn_face = sample_triangles(vertices, triangles[seen], owners[seen], count, rng)
+        keep = drawn[:, 2] >= above if above is not None else np.ones(count, bool)
+        points = np.concatenate([points, drawn[keep]])[:count]
+        face = np.concatenate([face, drawn_face[keep]])[:count]
+    points = points + rng.normal(scale=noise * diagonal, size=points.shape)
+    return points, face, [face_kind(f) for f in faces(shape)]

@@ -80,6 +80,10 @@ SMALL_REGION = 0.02
 MIN_TUBE_ARC = 0.52
 #: candidates are refined within a round on at most this many of their points
 ROUND_REFINE_POINTS = 1000
+#: a first round whose candidates are all refused (implausible, biased) draws new ones this many
+#: times before the search ends (a turned part scanned from above lost its whole segmentation to
+#: one such round); later rounds end the search as before (a freeform scan's second round)
+EMPTY_ROUND_RETRIES = 2
 #: a candidate's points count this much less per step along SIMPLICITY (a torus needs about
 #: 1.5 times the points of a plane to win a round)
 COMPLEXITY = 0.9
@@ -260,12 +264,18 @@ def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
     surfaces: list[Primitive] = []
     smallest = min_region(count)
     rounds = 0
+    empty = 0
     while (free.sum() >= smallest and len(surfaces) < MAX_REGIONS
            and time.process_time() - cpu_started < time_limit):
         rounds += 1
         found = _detect_one(points, normals, tree, free, free & smooth if (
             free & smooth).sum() >= smallest else free, neighbours, graph, rng, tolerance,
                             0.25 * diagonal)
+        if found is None and not surfaces and empty < EMPTY_ROUND_RETRIES:
+            empty += 1
+            rounds -= 1
+            continue
+        empty = 0
         if found is None or len(found[1]) < smallest:
             break
         surface, members = found

@@ -1,5 +1,7 @@
 """A machined part as a solid (:mod:`nurbs_core.brep`): whether the route may make one, the
-solid's fit, its report (per face its type, parameters, points and deviation) and its files."""
+solid's fit, its report (per face its type, parameters, points and deviation) and its files. An
+open scan's part is an open shell (:mod:`nurbs_core.brep.open_shell`): the report says so and
+gives no volume."""
 
 from __future__ import annotations
 
@@ -43,22 +45,26 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
 
     assert route.mesh is not None and route.segmentation is not None
     result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
-                      route.freeform)
+                      route.freeform, border=route.mesh.border or None)
+    what = "open shell" if result.open_shell else "solid"
     if result.problems and not job.part:
         from nurbs_core.brep.solid import SolidError
 
         # the automatic route promises a clean result: a solid that fails its checks gives
         # way to the network (--part keeps it, with its warnings)
-        raise SolidError("the solid fails its checks: " + "; ".join(result.problems.values()))
+        raise SolidError(f"the {what} fails its checks: "
+                         + "; ".join(result.problems.values()))
     result.timings["route"] = route.seconds - result.timings["segmentation"]
     statistics = result.statistics()
     noise = result.noise
     print(f"status: {result.status}")
     kinds = ", ".join(f"{n} {k}{'s' if n > 1 else ''}"
                       for k, n in statistics["face_types"].items())
-    print(f"solid: {len(result.faces)} faces ({kinds}); "
-          f"{'valid' if result.valid else 'INVALID'}, "
-          f"{'closed' if result.closed else 'NOT closed'}; volume {result.volume:.6g}; "
+    shape = (f"{'valid' if result.valid else 'INVALID'}, open where the scan stops"
+             if result.open_shell else
+             f"{'valid' if result.valid else 'INVALID'}, "
+             f"{'closed' if result.closed else 'NOT closed'}; volume {result.volume:.6g}")
+    print(f"{what}: {len(result.faces)} faces ({kinds}); {shape}; "
           f"{sum(result.timings.values()):.2f} s "
           f"({', '.join(f'{k} {v:.1f} s' for k, v in result.timings.items())})")
     print(f"segmentation: {result.segmentation.coverage:.1%} of the points on analytic "
@@ -67,6 +73,11 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
     print(f"point-to-solid distance: mean {d.mean():.6g} ({d.mean() / noise:.2f} sigma), rms "
           f"{np.sqrt((d ** 2).mean()):.6g}, 99th percentile {np.percentile(d, 99):.6g} "
           f"({np.percentile(d, 99) / noise:.2f} sigma), max {d.max():.6g}")
+    if result.open_shell:
+        border = result.border_distances
+        print(f"border (the scan's border loops to the shell's free edges): mean "
+              f"{border.mean():.6g} ({border.mean() / noise:.2f} sigma), 99th percentile "
+              f"{np.percentile(border, 99):.6g} ({np.percentile(border, 99) / noise:.2f} sigma)")
     for index, face in enumerate(result.faces):
         print(f"face {index}: {face.description}; {face.points} points, mean "
               f"{face.mean:.4g}, 99th percentile {face.p99:.4g}")
@@ -82,12 +93,17 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
         from nurbs_core.jobs.deviation_report import write_fit_report
 
         vertices, faces, _ = triangulate(result.solid, result.segmentation.tolerance / 3)
-        summary = [("route", "a solid (machined part)"),
-                   ("faces", f"{len(result.faces)} ({kinds})"),
-                   ("solid", f"{'valid' if result.valid else 'INVALID'}, "
-                             f"{'closed' if result.closed else 'NOT closed'}"),
-                   ("volume", f"{result.volume:.6g}"),
-                   ("time", f"{sum(result.timings.values()):.1f} s")]
+        summary = [("route", f"{'an open shell' if result.open_shell else 'a solid'} "
+                             "(machined part)"),
+                   ("faces", f"{len(result.faces)} ({kinds})")]
+        if result.open_shell:
+            summary += [("open shell", f"{'valid' if result.valid else 'INVALID'}, open where "
+                                       "the scan stops")]
+        else:
+            summary += [("solid", f"{'valid' if result.valid else 'INVALID'}, "
+                                  f"{'closed' if result.closed else 'NOT closed'}"),
+                        ("volume", f"{result.volume:.6g}")]
+        summary += [("time", f"{sum(result.timings.values()):.1f} s")]
         summary += [(f"face {index}", face.description) for index, face in enumerate(result.faces)]
         write_fit_report(job, points, vertices, faces, status=result.status, summary=summary,
                          warnings=list(result.problems.values()), closed=result.closed,

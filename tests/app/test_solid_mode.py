@@ -301,6 +301,28 @@ def test_a_session_keeps_the_solid_and_its_report(qtbot, window, tmp_path):
     assert volume(shape_from_brep(brep.read_text())) == pytest.approx(1.0)
 
 
+def test_an_open_shell_is_shown_as_one_and_kept_by_a_session(qtbot, window, tmp_path):
+    """An open scan's open shell (not closed by design): no warning colour, no volume, and a
+    session gives it back as an open shell."""
+    from dataclasses import replace
+
+    points = _open_box_cloud(qtbot, window, tmp_path)
+    window.document.edit_settings("Fit mode", fit_mode="solid")
+    outcome = _box_outcome(points)
+    outcome.report = replace(outcome.report, closed=False, volume=0.0, open_shell=True)
+    window.document.set_solid(outcome)
+    panel = window.solid_panel
+    assert "an open shell, open where the scan stops" in panel.values["solid"].text()
+    assert "#b00020" not in panel.values["solid"].styleSheet()
+    assert panel.values["volume"].text() == "none (an open shell)"
+    path = tmp_path / "shell.nstudio"
+    save_session(qtbot, window, path)
+    window.part_controller.reset()
+    open_session(qtbot, window, path)
+    assert window.document.solid is not None and window.document.solid.report.open_shell
+    assert panel.values["volume"].text() == "none (an open shell)"
+
+
 def test_a_damaged_solid_in_a_session_is_refused_with_what_is_wrong(qtbot, window, tmp_path):
     from app.solid_session import DISTANCES, POINT_FACES, solid_document, solid_from_document
 

@@ -209,8 +209,9 @@ def test_bad_part_requests_are_refused_before_any_fit(tmp_path, capsys):
 
     sheet = tmp_path / "sheet.xyz"
     np.savetxt(sheet, samples.saddle(2000).points)
+    # an open sheet may be an open shell, but a saddle's border lies on no plane
     assert main([str(sheet), "-o", str(tmp_path / "a.step"), "--part"]) == 1
-    assert "needs a closed object" in capsys.readouterr().err
+    assert "an open shell needs a scan that ends on planes" in capsys.readouterr().err
     assert main([str(sheet), "-o", str(tmp_path / "a.json"), "--part"]) == 1
     assert "cannot save a solid as '.json'" in capsys.readouterr().err
     assert main([str(sheet), "-o", str(tmp_path / "a.step"), "--part", "--patches", "auto"]) == 1

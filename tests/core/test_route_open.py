@@ -123,7 +123,9 @@ def test_a_clean_open_sheet_stays_one_patch_well_within_the_limit(make):
         return
     assert route.reason.startswith("the cloud encloses no volume (an open surface; its map to "
                                    "one patch crowds part of it ")
-    assert route.reason.endswith(f"within {MAX_MAP_CROWDING:.0f} x): one patch")
+    assert f"within {MAX_MAP_CROWDING:.0f} x)" in route.reason
+    # not a height field, so the open part route was asked, and said why not
+    assert route.reason.endswith("): one patch") and "; not a machined part (" in route.reason
 
 
 @pytest.mark.parametrize(("patch", "by_parameter"), [("stabilizer/smesh.4.dat", False),
@@ -147,12 +149,13 @@ def test_the_bunnys_head_goes_straight_to_the_open_network_with_its_mesh(bunny_h
     route = choose_route(bunny_head)
     assert route.kind == "network" and route.open_network
     assert route.mesh is not None and not route.mesh.closed and len(route.mesh.border) >= 1
-    assert route.segmentation is None                 # an open surface is never tried as a part
+    assert route.segmentation is None                 # not a part: no segmentation kept
+    assert "; not a machined part (" in route.reason  # (an open part would be an open shell)
     assert route.reason.startswith("the cloud encloses no volume (an open surface), and its map "
                                    "to one patch crowds part of it ")
     assert f"(over {MAX_MAP_CROWDING:.0f} x); its mesh ends at" in route.reason
     assert route.reason.endswith(": an open network of patches")
-    with pytest.raises(ValueError, match="a solid needs a closed object"):
+    with pytest.raises(ValueError, match="an open shell needs a scan that ends on planes"):
         choose_route(bunny_head, part=True)
 
 
