@@ -182,7 +182,7 @@ def test_no_valid_solid_says_why_and_fits_the_network(qtbot, window, tmp_path, m
 
     asked = []
 
-    def no_solid(points, part, max_hole=None, cancel=None):
+    def no_solid(points, part, max_hole=None, cancel=None, file_mesh=None, file_mesh_note=""):
         asked.append(part)
         return PartOutcome("closed", fallback="closed, but no valid solid results (test)")
 
@@ -202,7 +202,7 @@ def test_a_forced_solid_that_fails_reports_it_and_offers_patches(qtbot, window, 
                                                                 monkeypatch):
     from app import part_controller
 
-    def refuse(points, part, max_hole=None, cancel=None):
+    def refuse(points, part, max_hole=None, cancel=None, file_mesh=None, file_mesh_note=""):
         assert part is True  # Solid mode forces the route
         raise ValueError("a solid needs a closed object, but the cloud encloses no volume")
 
