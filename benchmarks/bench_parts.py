@@ -122,18 +122,9 @@ def _section_samples(shape: Any, step: float) -> np.ndarray:
 
 
 def _along(edges: list[Any], step: float) -> np.ndarray:
-    from OCP.BRepAdaptor import BRepAdaptor_Curve
-    from OCP.GCPnts import GCPnts_AbscissaPoint
-    from OCP.TopoDS import TopoDS
+    from nurbs_core.brep.occ import edge_samples
 
-    found = []
-    for edge in edges:
-        curve = BRepAdaptor_Curve(TopoDS.Edge(edge))
-        length = GCPnts_AbscissaPoint.Length_s(curve)
-        for t in np.linspace(curve.FirstParameter(), curve.LastParameter(),
-                             max(2, int(length / step) + 1)):
-            found.append(curve.Value(float(t)).Coord())
-    return np.array(found).reshape(-1, 3)
+    return edge_samples(edges, step)
 
 
 def _measure_open(name: str, shape: Any, count: int, noise: float, seed: int) -> dict[str, Any]:

@@ -112,6 +112,23 @@ def bounding_diagonal(shape: OccShape) -> float:
     return float(np.linalg.norm(np.subtract(box.CornerMax().Coord(), box.CornerMin().Coord())))
 
 
+def edge_samples(edges: list[OccShape], spacing: float) -> np.ndarray:
+    """Points (M, 3) every ``spacing`` (or closer) along each of the ``edges``, their ends
+    included."""
+    from OCP.BRepAdaptor import BRepAdaptor_Curve
+    from OCP.GCPnts import GCPnts_AbscissaPoint
+    from OCP.TopoDS import TopoDS
+
+    samples = []
+    for edge in edges:
+        curve = BRepAdaptor_Curve(TopoDS.Edge(edge))
+        length = GCPnts_AbscissaPoint.Length_s(curve)
+        for t in np.linspace(curve.FirstParameter(), curve.LastParameter(),
+                             max(2, int(np.ceil(length / spacing)) + 1)):
+            samples.append(curve.Value(float(t)).Coord())
+    return np.array(samples, np.float64).reshape(-1, 3)
+
+
 def is_valid(shape: OccShape) -> bool:
     """OpenCASCADE's checker (BRepCheck_Analyzer) finds the shape valid."""
     from OCP.BRepCheck import BRepCheck_Analyzer

@@ -38,7 +38,7 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
 
-from nurbs_core.brep.occ import OccShape, faces
+from nurbs_core.brep.occ import OccShape, edge_samples, faces
 from nurbs_core.brep.primitives import Primitive
 from nurbs_core.brep.solid import SolidError
 
@@ -209,25 +209,15 @@ def _pieces(shell: OccShape) -> int:
 def free_edge_samples(shell: OccShape, spacing: float) -> np.ndarray:
     """Points (M, 3) every ``spacing`` along the shell's free edges (those of one face: where
     the scan stops)."""
-    from OCP.BRepAdaptor import BRepAdaptor_Curve
     from OCP.collections import (
         IndexedDataMap_TopoDS_Shape_List_TopoDS_Shape_TopTools_ShapeMapHasher as Ancestors,  # noqa: E501
     )
-    from OCP.GCPnts import GCPnts_AbscissaPoint
     from OCP.TopAbs import TopAbs_ShapeEnum
     from OCP.TopExp import TopExp
-    from OCP.TopoDS import TopoDS
 
     ancestors = Ancestors()
     TopExp.MapShapesAndAncestors_s(shell, TopAbs_ShapeEnum.TopAbs_EDGE,
                                    TopAbs_ShapeEnum.TopAbs_FACE, ancestors)
-    samples = []
-    for k in range(1, ancestors.Extent() + 1):
-        if ancestors.FindFromIndex(k).Size() != 1:
-            continue
-        curve = BRepAdaptor_Curve(TopoDS.Edge(ancestors.FindKey(k)))
-        first, last = curve.FirstParameter(), curve.LastParameter()
-        length = GCPnts_AbscissaPoint.Length_s(curve)
-        for t in np.linspace(first, last, max(2, int(np.ceil(length / spacing)) + 1)):
-            samples.append(curve.Value(float(t)).Coord())
-    return np.array(samples, np.float64).reshape(-1, 3)
+    free = [ancestors.FindKey(k) for k in range(1, ancestors.Extent() + 1)
+            if ancestors.FindFromIndex(k).Size() == 1]
+    return edge_samples(free, spacing)
