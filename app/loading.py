@@ -123,18 +123,10 @@ def _mesh_file(path: Path) -> tuple[np.ndarray, Any, str] | None:
     (:func:`nurbs_core.jobs.network.surface_input`): the points to fit (N, 3) (sampled over
     its area when it has few vertices, never reduced to its vertices), its own closed mesh or
     None, and why that mesh cannot serve; None for any other file."""
-    from nurbs_core.io.points import MESH_SUFFIXES, suffix_of
+    from nurbs_core.jobs.network import is_mesh_file, surface_input
 
-    suffix = suffix_of(str(path))
-    if suffix not in MESH_SUFFIXES and suffix != ".ply":
+    if not is_mesh_file(str(path)):
         return None
-    if suffix == ".ply":
-        from nurbs_core.io.ply import has_faces
-
-        if not path.is_file() or not has_faces(str(path)):
-            return None          # a PLY cloud (or no file: the reader below says so)
-    from nurbs_core.jobs.network import surface_input
-
     points, mesh, note = surface_input(str(path), quiet=True)
     if len(points) < 4:
         raise ValueError(f"{path}: needs at least 4 points, has {len(points)}")

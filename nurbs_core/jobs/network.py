@@ -27,6 +27,22 @@ if TYPE_CHECKING:
 FILE_MESH_SAMPLES = 10_000
 
 
+def is_mesh_file(path: str) -> bool:
+    """Whether ``path`` names a mesh file (STL, OBJ, OFF, glTF, or a PLY that declares faces):
+    read with its triangles by :func:`surface_input` (a PLY cloud goes to the fast PLY reader).
+    A PLY that is not there is no mesh file (its reader says what is wrong)."""
+    from nurbs_core.io.points import MESH_SUFFIXES, suffix_of
+
+    suffix = suffix_of(path)
+    if suffix in MESH_SUFFIXES:
+        return True
+    if suffix != ".ply" or not Path(path).is_file():
+        return False
+    from nurbs_core.io.ply import has_faces
+
+    return has_faces(path)
+
+
 def surface_input(path: str, quiet: bool) -> tuple[np.ndarray, ScanMesh | None, str]:
     """The points to fit a surface or network to (N, 3), the input file's own closed mesh for a
     network's layout or None, and why a mesh file's mesh cannot serve ("" for a cloud). A mesh
@@ -35,16 +51,10 @@ def surface_input(path: str, quiet: bool) -> tuple[np.ndarray, ScanMesh | None, 
     from nurbs_core.io import load_points
     from nurbs_core.io.cloud import check_points
     from nurbs_core.io.meshes import read_mesh_faces, sample_mesh_points
-    from nurbs_core.io.points import MESH_SUFFIXES, suffix_of
+    from nurbs_core.io.points import suffix_of
 
-    suffix = suffix_of(path)
-    arrays = None
-    if suffix in MESH_SUFFIXES or suffix == ".ply":
-        from nurbs_core.io.ply import has_faces
-
-        if suffix != ".ply" or has_faces(path):  # (a PLY cloud is read by the fast PLY reader)
-            arrays = read_mesh_faces(path, suffix)
-    if arrays is None:
+    arrays = read_mesh_faces(path, suffix_of(path)) if is_mesh_file(path) else None
+    if arrays is None:      # a cloud, or a mesh format holding no faces (an OBJ of points)
         return load_points(path).points, None, ""
     from nurbs_core.patches.closed_mesh import mesh_from_faces
 
