@@ -1,4 +1,4 @@
-"""``nurbs-studio [FILE...] [--units U] [--fit] [--iterations N] [--screenshot OUT.png] [--quit]``.
+"""``nurbs-studio [FILE...] [--units U] [--up z|y] [--fit] [--iterations N] [--screenshot OUT.png] [--quit]``.
 
 With no file the built-in demo (z = sin(x) cos(y) as a point cloud) opens, ready to fit. The
 scripted options run the real window: open the files, fit, save a screenshot, quit; the exit
@@ -41,6 +41,10 @@ def parse_arguments(argv: list[str] | None = None) -> argparse.Namespace:
                         help="the length unit of the files' coordinates, as the Units box sets "
                              "it (default: what the files state, else unknown); nothing is "
                              "scaled")
+    parser.add_argument("--up", choices=("z", "y"), default=None,
+                        help="the axis up on screen for this run: z (CAD) or y (many scanners' "
+                             "files, MeshLab) (default: the choice under View > Up Axis, z at "
+                             "first); the data is not rotated")
     parser.add_argument("--quit", action="store_true",
                         help="exit when done (status 0 on success, 1 on failure)")
     parser.add_argument("--load-timeout", type=float, default=60.0, metavar="SECONDS",
@@ -157,6 +161,8 @@ def _main(argv: list[str] | None) -> int:
     application.setApplicationName("NURBS Studio")
     application.setOrganizationName("NURBS Studio")
     window = MainWindow()
+    if arguments.up is not None:
+        window.up_axis_policy.choose(arguments.up, remember=False)
     interrupt = _Interrupt(application, window)
     window.show()
     run = ScriptedRun(window, arguments.files, fit=arguments.fit,

@@ -78,6 +78,7 @@ from app.window.session_policy import SessionPolicy
 from app.window.settings_policy import SettingsPolicy
 from app.window.solid_policy import SolidPolicy
 from app.window.units_policy import UnitsPolicy
+from app.window.up_axis_policy import UpAxisPolicy
 from app.workers.jobs import JobRunner
 
 log = logging.getLogger("app")
@@ -182,6 +183,7 @@ class MainWindow(QMainWindow):
         self.history_policy = HistoryPolicy(self)
         self.units_policy = UnitsPolicy(self)
         self.solid_policy = SolidPolicy(self)
+        self.up_axis_policy = UpAxisPolicy(self.scene, self._store, self)
         self.setCentralWidget(self._native_container(self.scene.widget))
 
         self._build_docks()
@@ -485,6 +487,8 @@ class MainWindow(QMainWindow):
         standard = view_menu.addMenu("&Standard Views")
         for action in self.view_actions.values():
             standard.addAction(action)
+        self.up_axis_menu = view_menu.addMenu("&Up Axis")
+        self.up_axis_policy.fill_menu(self.up_axis_menu)
         view_menu.addSeparator()
         for dock in (self.tree_dock, self.fit_dock, self.knot_dock, self.offset_dock,
                      self.patches_dock, self.loss_dock, self.quality_dock,

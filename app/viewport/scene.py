@@ -30,6 +30,7 @@ from app.viewport.legend_box import label_contrasts, swatch_legend
 from app.viewport.network_layers import NetworkLayers
 from app.viewport.selection import SelectionTool
 from app.viewport.solid_layers import SolidLayers
+from app.viewport.view_frame import first_view, standard_view
 
 RENDER_INTERVAL_MS = 33
 DEVIATION_TITLE = "Deviation"
@@ -48,7 +49,6 @@ COLORS = {
 UPPER_LEFT, UPPER_RIGHT, LOWER_RIGHT = 2, 3, 1  # vtkCornerAnnotation corner indices
 #: the view's principal axes come from at most about this many of the visible points
 CAMERA_SAMPLE = 50_000
-VIEW_ELEVATION_DEG = 50.0  # camera height above the best-fit plane of what is shown
 
 #: neighbouring patches get different colours, so shared edges show
 PATCH_COLORS = ("#8fb3d9", "#b7c7a4", "#c9a9c9", "#d9c38f", "#9fc9c4")
@@ -133,18 +133,6 @@ def control_net_mesh(net: np.ndarray) -> pv.PolyData:
 
 
 
-#: The standard views: name -> (unit direction from the shape to the camera, the view's up).
-STANDARD_VIEWS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
-    "front": ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)),
-    "back": ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0)),
-    "right": ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
-    "left": ((-1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
-    "top": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
-    "bottom": ((0.0, 0.0, -1.0), (0.0, -1.0, 0.0)),
-    "iso": ((0.57735026919, -0.57735026919, 0.57735026919), (0.0, 0.0, 1.0)),
-}
-
-
 class SceneView(QObject):
     """Owns the QtInteractor and every mesh in it."""
 
@@ -159,6 +147,9 @@ class SceneView(QObject):
         self.plotter.set_background("#fbfbfd", top="#c9d6e3")
         self.plotter.enable_lightkit()
         self.plotter.add_axes(interactive=False)
+        #: which world axis is up on screen ("z": CAD's convention, "y": many scanners'); the
+        #: window sets it from the user's choice (View > Up Axis)
+        self.up_axis = "z"
         self._meshes: dict[str, pv.PolyData] = {}
         self._actors: dict[str, object] = {}
         self._visible = {layer: True for layer in LAYERS}
@@ -613,44 +604,37 @@ class SceneView(QObject):
         return self._corners.GetText(corner) or ""
 
     # --- camera and drawing --------------------------------------------------------------------
-    def reset_camera(self):
-        """Frame everything visible, looking at the shape's broad side.
+    def set_up_axis(self, up_axis: str) -> None:
+        """Which world axis ("z" or "y") is up on screen: the standard views and Fit View follow
+        it (:mod:`app.viewport.view_frame`); the data is not rotated. The view is framed anew."""
+        standard_view("front", up_axis)  # checks the name
+        self.up_axis = up_axis
+        self.reset_camera()
 
-        The view comes from the principal axes of the visible points: a planar (2D) cloud is seen
-        straight on (from +z, x to the right, when it lies in the xy plane); a compact height field
-        keeps the isometric view; anything else is seen from 50 degrees above its best-fit plane
-        with its longest axis across the screen, so long thin parts (a blade) fill the view
-        instead of running diagonally through it.
-        """
+    def reset_camera(self):
+        """Frame everything visible, upright for the chosen up axis, looking at the shape's broad
+        side (:func:`app.viewport.view_frame.first_view`: from the principal axes of the visible
+        points)."""
         points = self._visible_points()
-        self.plotter.view_isometric(render=False)
         if points is not None and len(points) > CAMERA_SAMPLE:
             # the axes of an even sample: the SVD of 1,000,000 points held the GUI thread 0.5 s
             points = points[::len(points) // CAMERA_SAMPLE]
-        if points is not None and len(points) >= 3:
+        direction, up = first_view(points, self.up_axis)
+        if points is not None and len(points):
             centre = points.mean(axis=0)
-            _, spread, axes = np.linalg.svd(points - centre, full_matrices=False)
-            normal = axes[2] if axes[2][2] >= 0 else -axes[2]
             size = float(np.linalg.norm(np.ptp(points, axis=0))) or 1.0
-            if spread[2] <= 1e-9 * max(spread[0], 1e-300):  # planar
-                if abs(normal[2]) > 0.9:
-                    self.plotter.view_xy(render=False)
-                    self._frame_all()
-                    self.request_render()
-                    return
-                direction, up = normal, axes[1]
-            elif abs(normal[2]) > 0.8 and spread[1] > 0.5 * spread[0]:
-                self._frame_all()  # a compact height field: isometric
-                self.request_render()
-                return
-            else:
-                elevation = np.radians(VIEW_ELEVATION_DEG)
-                direction = np.sin(elevation) * normal - np.cos(elevation) * axes[1]
-                up = normal
-            camera = self.plotter.camera
-            camera.focal_point = tuple(centre)
-            camera.position = tuple(centre + direction * size * 2.0)
-            camera.up = tuple(up)
+        else:
+            centre, size = np.zeros(3), 1.0
+        self._look(centre, direction, up, size)
+
+    def _look(self, centre: np.ndarray, direction: np.ndarray, up: np.ndarray,
+              size: float) -> None:
+        """Look at ``centre`` (3,) from ``direction`` (3,, unit) with ``up`` (3,) up on screen,
+        then frame everything visible."""
+        camera = self.plotter.camera
+        camera.focal_point = tuple(centre)
+        camera.position = tuple(centre + np.asarray(direction, float) * size * 2.0)
+        camera.up = tuple(up)
         self._frame_all()
         self.request_render()
 
@@ -661,23 +645,18 @@ class SceneView(QObject):
         self.plotter.renderer.reset_camera(render=False)
 
     def standard_view(self, name: str):
-        """Look along a coordinate axis (CAD's standard views: "front" from -y, "back" from +y,
-        "right" from +x, "left" from -x, "top" from +z, "bottom" from -z, z up except from
-        above and below, where +y is up) or from (1, -1, 1) ("iso"), everything framed."""
-        direction, up = STANDARD_VIEWS[name]
+        """Look along a coordinate axis, everything framed: CAD's standard views ("front",
+        "back", "right", "left", "top", "bottom") or from the isometric corner ("iso"), with
+        the chosen up axis up (:func:`app.viewport.view_frame.standard_view`: with z up the
+        front view looks from -y, with y up from +z)."""
+        direction, up = standard_view(name, self.up_axis)
         points = self._visible_points()
         if points is not None and len(points):
             low, high = points.min(axis=0), points.max(axis=0)
         else:
             low, high = -np.ones(3), np.ones(3)
-        centre = 0.5 * (low + high)
         size = float(np.linalg.norm(high - low)) or 1.0
-        camera = self.plotter.camera
-        camera.focal_point = tuple(centre)
-        camera.position = tuple(centre + np.asarray(direction, float) * size * 2.0)
-        camera.up = tuple(up)
-        self._frame_all()
-        self.request_render()
+        self._look(0.5 * (low + high), direction, up, size)
 
     def _visible_points(self) -> np.ndarray | None:
         parts = [mesh.points for name, mesh in self._meshes.items()
