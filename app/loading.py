@@ -202,10 +202,11 @@ def export_geometry(geometries: list[GeometryArrays], path: str,
 def export_report(path: str, points: np.ndarray, fitted: GeometryArrays | None, network,
                   *, title: str, status: str, tolerance: float | None,
                   warnings: list[str], settings: list[tuple[str, str]],
-                  units: str | None = None) -> float:
+                  units: str | None = None, tolerance_source: str = "") -> float:
     """Write a deviation report (:mod:`nurbs_core.report`: .html or .pdf) of the points (N, 3)
     against the patch network (when given) or the fitted surface; ``tolerance`` None: three
-    estimated noise sigmas; ``units`` the length unit the report names (None: not given).
+    estimated noise sigmas; ``tolerance_source`` where it came from (a Result row when given);
+    ``units`` the length unit the report names (None: not given).
     Returns the share of the points within the tolerance."""
     from nurbs_core.report.deviation import measure_deviation
     from nurbs_core.report.document import ReportContent, write_report
@@ -220,10 +221,12 @@ def export_report(path: str, points: np.ndarray, fitted: GeometryArrays | None, 
         counts = np.shape(fitted["control_points"])[:-1]
         summary = [("route", "one patch"),
                    ("control points", " x ".join(str(int(n)) for n in counts))]
+    if tolerance_source:
+        summary.append(("tolerance", tolerance_source))
     points = np.asarray(points, np.float64)
     content = ReportContent(title, status, points, vertices, faces,
                             measure_deviation(points, vertices, faces, tolerance), units, closed,
-                            summary, settings, warnings)
+                            summary, settings, warnings, program="nurbs-studio")
     write_report(path, content)
     return float(content.deviation.within.mean())
 
@@ -255,7 +258,8 @@ def export_solid_report(path: str, points: np.ndarray, solid, *, title: str,
     content = ReportContent(title, report.status, points, display.vertices, display.triangles,
                             measure_deviation(points, display.vertices, display.triangles,
                                               report.tolerance),
-                            units, report.closed, summary, [], list(report.problems))
+                            units, report.closed, summary, [], list(report.problems),
+                            program="nurbs-studio")
     write_report(path, content)
     return float(content.deviation.within.mean())
 

@@ -199,6 +199,11 @@ class DeviationPanel(QWidget):
     def mode(self) -> str:
         return str(self.mode_box.currentData())
 
+    @property
+    def tolerance_typed(self) -> bool:
+        """The bands judge by a tolerance the user typed (else the fit's)."""
+        return self._tolerance_edited
+
     def tolerance(self) -> float:
         """The tolerance the bands use now."""
         if self._tolerance_edited or self.map is None:

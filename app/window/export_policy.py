@@ -12,7 +12,7 @@ units (the report names them) and the message says which; every export ends with
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from PySide6.QtCore import QObject
@@ -38,6 +38,25 @@ def declared_units(path: str, units: str | None) -> str:
     return (" with no unit (the units are unknown: choose them under Units)"
             if Path(path).suffix.lower() == ".3dm" else
             " in mm, the format's default (the units are unknown: choose them under Units)")
+
+
+def changed_settings(settings: dict[str, Any], defaults: dict[str, Any]
+                     ) -> list[tuple[str, str]]:
+    """A report's settings rows: the settings (a config's JSON form) that differ from the
+    defaults, named in words ("max control points"), None read as "auto"; one row saying so
+    when none differs. The grid the fit ended with is the report's Result, not a setting."""
+    rows = []
+    for name, value in settings.items():
+        if name in defaults and value == defaults[name]:
+            continue
+        if value is None:
+            text = "auto"
+        elif isinstance(value, list | tuple):
+            text = " ".join(str(v) for v in value)
+        else:
+            text = str(value)
+        rows.append((name.replace("_", " "), text))
+    return rows or [("settings", "the defaults")]
 
 
 class ExportPolicy(QObject):
@@ -118,17 +137,25 @@ class ExportPolicy(QObject):
             return False
         points = np.concatenate(clouds)
         settings = document.settings
-        tolerance = (settings.patches.tolerance if network is not None
-                     else settings.fit.tolerance)
+        # one tolerance on screen and in the report: the Deviation dock's (the fit's, or the
+        # one the user typed there)
+        panel = window.deviation_panel
+        if panel.map is not None:
+            tolerance: float | None = panel.tolerance()
+            source = ("typed in the Deviation dock" if panel.tolerance_typed
+                      else "the fit's, as in the Deviation dock")
+        else:
+            tolerance = (settings.patches.tolerance if network is not None
+                         else settings.fit.tolerance)
+            source = "the fit's setting" if tolerance is not None else "3 noise sigmas"
         title = " + ".join(t.name for t in document.targets if t.visible)
         status, warnings = window.result_status()
-        rows = [(name, str(value)) for name, value in
-                (settings.patches.to_json() if network is not None
-                 else settings.fit.to_json()).items()]
+        config = settings.patches if network is not None else settings.fit
+        rows = changed_settings(config.to_json(), type(config)().to_json())
         window.jobs.submit("report", lambda: loading.export_report(
                                path, points, fitted, network, title=title, status=status,
-                               tolerance=tolerance, warnings=warnings, settings=rows,
-                               units=document.units),
+                               tolerance=tolerance, tolerance_source=source,
+                               warnings=warnings, settings=rows, units=document.units),
                            lambda within: self._exported_report(path, within),
                            lambda exc: self._failed(path, exc))
         return True

@@ -58,6 +58,7 @@ class ExportHost(Reporter, Protocol):
     jobs: JobRunner
     scene: SceneView
     loss_plot: LossPlot
+    deviation_panel: DeviationPanel
     export_finished: SignalInstance
 
     def grab(self) -> Any: ...

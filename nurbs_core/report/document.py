@@ -34,7 +34,8 @@ SUFFIXES = (".html", ".htm", ".pdf")
 class ReportContent:
     """What a report says. ``points`` (N, 3) the scan; ``vertices`` (V, 3) and ``faces`` (F, 3)
     the fit as triangles; ``deviation`` the points' signed distances to them; ``summary`` and
-    ``settings`` (label, value) rows; ``units`` the length unit (None: not given)."""
+    ``settings`` (label, value) rows; ``units`` the length unit (None: not given); ``program``
+    the front end that made it ("nurbs-fit", "nurbs-studio")."""
 
     title: str
     status: str
@@ -48,6 +49,7 @@ class ReportContent:
     summary: list[tuple[str, str]] = field(default_factory=list)
     settings: list[tuple[str, str]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    program: str = "nurbs-fit"
 
 
 def write_report(path: str | Path, content: ReportContent) -> None:
@@ -208,7 +210,7 @@ img {{ max-width: 100%; }}
 </style></head><body>
 <h1>Deviation report: {escape(content.title)}</h1>
 <p class="status">{escape(content.status)}</p>
-<p>Made {escape(when)} by NURBS Studio (nurbs-fit). Units: {escape(units)}. Distances are
+<p>Made {escape(when)} by NURBS Studio ({escape(content.program)}). Units: {escape(units)}. Distances are
 signed along the fitted surface's normal (positive outside a closed result).</p>
 {f"<h2>Warnings</h2><ul>{warnings}</ul>" if warnings else ""}
 <div class="columns">

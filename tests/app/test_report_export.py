@@ -7,6 +7,7 @@ import base64
 import io
 import re
 
+import pytest
 from app_helpers import export_report, open_by_drop
 from PIL import Image
 
@@ -33,3 +34,44 @@ def test_a_report_with_nothing_fitted_says_so(qtbot, window, tmp_path):
     assert blocker.args == [str(report), False]
     assert "No fit to report yet" in window.last_error
     assert not report.exists()
+
+
+def _rows(text: str, section: str) -> dict[str, str]:
+    """The (label, value) rows of a report's table after the heading ``section``."""
+    part = text.split(f"<h2>{section}</h2>", 1)[1].split("</table>", 1)[0]
+    return dict(re.findall(r"<tr><th>([^<]*)</th><td>([^<]*)</td></tr>", part))
+
+
+def test_the_report_judges_by_the_docks_tolerance_and_names_what_the_fit_used(
+        qtbot, window, ply_cloud, tmp_path, monkeypatch):
+    path, points = ply_cloud
+    open_by_drop(qtbot, window, [path])
+    window.units_policy.choose("mm")
+    window.document.edit_settings("Stiffness", stiffness=0.002)
+    with qtbot.waitSignal(window.controller.fit_finished, timeout=60000):
+        window.start_action.trigger()
+    panel = window.deviation_panel
+    fit_tolerance = panel.tolerance()
+    assert fit_tolerance > 0
+    text = export_report(qtbot, window, monkeypatch, tmp_path / "fit.html")
+    deviation = _rows(text, "Deviation")
+    assert deviation["tolerance (+/-)"] == f"{fit_tolerance:.4g} mm"  # the dock's, the fit's
+    # the user judges by another tolerance in the Deviation dock: the report says the same
+    panel.set_tolerance(0.5 * fit_tolerance)
+    text = export_report(qtbot, window, monkeypatch, tmp_path / "typed.html")
+    deviation = _rows(text, "Deviation")
+    assert deviation["tolerance (+/-)"] == f"{0.5 * fit_tolerance:.4g} mm"
+    from nurbs_core.deviation_bands import Deviation
+
+    shown = panel.deviation()
+    assert isinstance(shown, Deviation)
+    # the report measures to the fit's triangles, the dock to the surface: nearly the same share
+    within = float(deviation["within the tolerance"].rstrip("%")) / 100.0
+    assert within == pytest.approx(float(shown.within.mean()), abs=0.02)
+    assert "Deviation dock" in _rows(text, "Result")["tolerance"]
+    # the settings: what differs from the defaults, in words, and no Python None
+    settings = _rows(text, "Settings")
+    assert settings["stiffness"] == "0.002"
+    assert "None" not in settings.values() and "snapshot interval" not in settings
+    assert "control points u" not in settings  # unchanged: the result's grid is in Result
+    assert "(nurbs-studio)" in text and "(nurbs-fit)" not in text
