@@ -202,11 +202,13 @@ def export_geometry(geometries: list[GeometryArrays], path: str,
 def export_report(path: str, points: np.ndarray, fitted: GeometryArrays | None, network,
                   *, title: str, status: str, tolerance: float | None,
                   warnings: list[str], settings: list[tuple[str, str]],
-                  units: str | None = None, tolerance_source: str = "") -> float:
+                  units: str | None = None, tolerance_source: str = "",
+                  up_axis: str = "z") -> float:
     """Write a deviation report (:mod:`nurbs_core.report`: .html or .pdf) of the points (N, 3)
     against the patch network (when given) or the fitted surface; ``tolerance`` None: three
     estimated noise sigmas; ``tolerance_source`` where it came from (a Result row when given);
-    ``units`` the length unit the report names (None: not given).
+    ``units`` the length unit the report names (None: not given); ``up_axis`` the axis up in
+    its views (the viewport's).
     Returns the share of the points within the tolerance."""
     from nurbs_core.report.deviation import measure_deviation
     from nurbs_core.report.document import ReportContent, write_report
@@ -226,16 +228,18 @@ def export_report(path: str, points: np.ndarray, fitted: GeometryArrays | None, 
     points = np.asarray(points, np.float64)
     content = ReportContent(title, status, points, vertices, faces,
                             measure_deviation(points, vertices, faces, tolerance), units, closed,
-                            summary, settings, warnings, program="nurbs-studio")
+                            summary, settings, warnings, program="nurbs-studio",
+                            up_axis=up_axis)
     write_report(path, content)
     return float(content.deviation.within.mean())
 
 
 def export_solid_report(path: str, points: np.ndarray, solid, *, title: str,
-                        units: str | None = None) -> float:
+                        units: str | None = None, up_axis: str = "z") -> float:
     """Write a deviation report (.html or .pdf) of the points (N, 3) against a solid of the
     part route (a :class:`app.solid_types.PartOutcome`: its triangles, closed, outward), with
-    its faces and status as ``nurbs-fit --report`` writes them, the tolerance the solid's own.
+    its faces and status as ``nurbs-fit --report`` writes them, the tolerance the solid's own,
+    ``up_axis`` up in its views.
     Returns the share of the points within the tolerance."""
     from nurbs_core.report.deviation import measure_deviation
     from nurbs_core.report.document import ReportContent, write_report
@@ -259,7 +263,7 @@ def export_solid_report(path: str, points: np.ndarray, solid, *, title: str,
                             measure_deviation(points, display.vertices, display.triangles,
                                               report.tolerance),
                             units, report.closed, summary, [], list(report.problems),
-                            program="nurbs-studio")
+                            program="nurbs-studio", up_axis=up_axis)
     write_report(path, content)
     return float(content.deviation.within.mean())
 

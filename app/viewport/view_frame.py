@@ -13,14 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-UP_AXES = ("z", "y")
+from nurbs_core.up_axis import UP_AXES, to_frame
 
-#: world coordinates -> the up axis's frame, whose +z is up and whose front view looks from -y
-_TO_FRAME: dict[str, np.ndarray] = {
-    "z": np.eye(3),
-    # world +y (up) -> frame +z, world +z (towards the front viewer) -> frame -y
-    "y": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]),
-}
+__all__ = ["UP_AXES", "first_view", "standard_view"]
 
 #: the standard views in the +z-up frame: name -> (direction from the shape to the camera, up)
 _FRAME_VIEWS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
@@ -41,19 +36,13 @@ VIEW_ELEVATION_DEG = 50.0
 SHEET_THICKNESS_RATIO = 0.5
 
 
-def _check_axis(up_axis: str) -> None:
-    if up_axis not in _TO_FRAME:
-        raise ValueError(f"unknown up axis {up_axis!r}: use one of {', '.join(UP_AXES)}")
-
-
 def standard_view(name: str, up_axis: str = "z") -> tuple[np.ndarray, np.ndarray]:
     """The standard view ``name`` ("front", "back", "right", "left", "top", "bottom", "iso")
     with ``up_axis`` ("z" or "y") up: (direction from the shape to the camera (3,), the view's
     up (3,)), unit vectors in world coordinates."""
-    _check_axis(up_axis)
+    to_world = to_frame(up_axis).T
     if name not in _FRAME_VIEWS:
         raise ValueError(f"unknown view {name!r}: use one of {', '.join(_FRAME_VIEWS)}")
-    to_world = _TO_FRAME[up_axis].T
     direction, up = _FRAME_VIEWS[name]
     return to_world @ np.asarray(direction), to_world @ np.asarray(up)
 
@@ -68,12 +57,11 @@ def first_view(points: np.ndarray | None, up_axis: str = "z") -> tuple[np.ndarra
     axis across the screen, so that it fills the view instead of showing its edge; everything
     else (a level height field, a solid object) from the isometric corner, upright.
     """
-    _check_axis(up_axis)
     iso = standard_view("iso", up_axis)
     if points is None or len(points) < 3:
         return iso
-    to_frame = _TO_FRAME[up_axis]
-    local = np.asarray(points, dtype=float) @ to_frame.T
+    rotation = to_frame(up_axis)
+    local = np.asarray(points, dtype=float) @ rotation.T
     _, spread, axes = np.linalg.svd(local - local.mean(axis=0), full_matrices=False)
     normal = axes[2] if axes[2][2] >= 0 else -axes[2]
     if spread[2] <= 1e-9 * max(spread[0], 1e-300):  # planar
@@ -89,4 +77,4 @@ def first_view(points: np.ndarray | None, up_axis: str = "z") -> tuple[np.ndarra
         direction = np.sin(elevation) * normal - np.cos(elevation) * axes[1]
         up = normal
     direction = direction / np.linalg.norm(direction)
-    return to_frame.T @ direction, to_frame.T @ up
+    return rotation.T @ direction, rotation.T @ up

@@ -155,7 +155,8 @@ class ExportPolicy(QObject):
         window.jobs.submit("report", lambda: loading.export_report(
                                path, points, fitted, network, title=title, status=status,
                                tolerance=tolerance, tolerance_source=source,
-                               warnings=warnings, settings=rows, units=document.units),
+                               warnings=warnings, settings=rows, units=document.units,
+                               up_axis=window.scene.up_axis),
                            lambda within: self._exported_report(path, within),
                            lambda exc: self._failed(path, exc))
         return True
@@ -173,7 +174,8 @@ class ExportPolicy(QObject):
         points = np.concatenate(clouds)
         title = " + ".join(t.name for t in document.targets if t.visible)
         window.jobs.submit("report", lambda: loading.export_solid_report(
-                               path, points, solid, title=title, units=document.units),
+                               path, points, solid, title=title, units=document.units,
+                               up_axis=window.scene.up_axis),
                            lambda within: self._exported_report(path, within),
                            lambda exc: self._failed(path, exc))
         return True

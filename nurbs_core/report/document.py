@@ -20,13 +20,14 @@ from typing import Any
 import numpy as np
 
 from nurbs_core.deviation_bands import BAND_COLOURS, Deviation, histogram
+from nurbs_core.up_axis import to_frame
 
 #: Points and triangles drawn in each view at most (a random sample; the statistics use all).
 VIEW_POINTS = 12_000
 VIEW_TRIANGLES = 6_000
-#: (name, elevation, azimuth) of each view, degrees (matplotlib's 3-D axes: z up).
-VIEWS = (("front (from -y)", 0.0, -90.0), ("top (from +z)", 90.0, -90.0),
-         ("right (from +x)", 0.0, 0.0), ("iso", 28.0, -55.0))
+#: (name, elevation, azimuth) of each view, degrees (matplotlib's 3-D axes: z up), in the up
+#: axis's frame (:mod:`nurbs_core.up_axis`); :func:`view_titles` names them in world axes.
+VIEWS = (("front", 0.0, -90.0), ("top", 90.0, -90.0), ("right", 0.0, 0.0), ("iso", 28.0, -55.0))
 SUFFIXES = (".html", ".htm", ".pdf")
 
 
@@ -35,7 +36,8 @@ class ReportContent:
     """What a report says. ``points`` (N, 3) the scan; ``vertices`` (V, 3) and ``faces`` (F, 3)
     the fit as triangles; ``deviation`` the points' signed distances to them; ``summary`` and
     ``settings`` (label, value) rows; ``units`` the length unit (None: not given); ``program``
-    the front end that made it ("nurbs-fit", "nurbs-studio")."""
+    the front end that made it ("nurbs-fit", "nurbs-studio"); ``up_axis`` the axis up in the
+    four views ("z", CAD's, or "y", as in the app's View > Up Axis)."""
 
     title: str
     status: str
@@ -50,6 +52,8 @@ class ReportContent:
     settings: list[tuple[str, str]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     program: str = "nurbs-fit"
+    #: the world axis up in the views ("z" or "y"; :mod:`nurbs_core.up_axis`)
+    up_axis: str = "z"
 
 
 def write_report(path: str | Path, content: ReportContent) -> None:
@@ -94,14 +98,41 @@ def _figure(width: float, height: float) -> Any:
     return Figure(figsize=(width, height), dpi=110)
 
 
+def view_titles(up_axis: str = "z") -> list[str]:
+    """The four views' titles with ``up_axis`` up, naming the world axis each looks from:
+    "front (from -y)", "top (from +z)", "right (from +x)", "iso" with z up; "front (from +z)",
+    "top (from +y)" with y up."""
+    to_world = to_frame(up_axis).T
+    titles = []
+    for name, elevation, azimuth in VIEWS:
+        if name == "iso":
+            titles.append(name)
+            continue
+        towards = to_world @ _towards(elevation, azimuth)
+        axis = int(np.argmax(np.abs(towards)))
+        titles.append(f"{name} (from {'+' if towards[axis] > 0 else '-'}{'xyz'[axis]})")
+    return titles
+
+
+def _towards(elevation: float, azimuth: float) -> np.ndarray:
+    """matplotlib's camera direction (3,) for ``elevation`` and ``azimuth`` (degrees)."""
+    e, a = np.radians(elevation), np.radians(azimuth)
+    return np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+
+
 def _views_figure(content: ReportContent) -> Any:
-    """The four views: the fit in light grey, the points coloured by signed distance."""
+    """The four views: the fit in light grey, the points coloured by signed distance; drawn in
+    the up axis's frame (the coordinates turned so that the chosen axis is matplotlib's z)."""
     from matplotlib import colors
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     rng = np.random.default_rng(0)
-    points, d = content.points, content.deviation.distances
+    rotation = to_frame(content.up_axis)
+    turned = content.points @ rotation.T
+    points, d = turned, content.deviation.distances
     normals = content.deviation.normals if content.closed else None
+    if normals is not None:
+        normals = normals @ rotation.T
     if len(points) > 4 * VIEW_POINTS:
         keep = rng.choice(len(points), 4 * VIEW_POINTS, replace=False)
         points, d = points[keep], d[keep]
@@ -109,14 +140,15 @@ def _views_figure(content: ReportContent) -> Any:
     faces = content.faces
     if len(faces) > VIEW_TRIANGLES:
         faces = faces[rng.choice(len(faces), VIEW_TRIANGLES, replace=False)]
-    triangles = content.vertices[faces]
+    triangles = (content.vertices @ rotation.T)[faces]
     reach = 2.0 * max(content.deviation.tolerance, 1e-300)
     norm = colors.TwoSlopeNorm(vcenter=0.0, vmin=-reach, vmax=reach)
     figure = _figure(11.0, 9.0)
-    low, high = content.points.min(axis=0), content.points.max(axis=0)
+    low, high = turned.min(axis=0), turned.max(axis=0)
     centre, half = 0.5 * (low + high), 0.5 * float((high - low).max()) or 1.0
     scatter = None
-    for index, (name, elevation, azimuth) in enumerate(VIEWS):
+    for index, ((_, elevation, azimuth), name) in enumerate(
+            zip(VIEWS, view_titles(content.up_axis), strict=True)):
         axes = figure.add_subplot(2, 2, index + 1, projection="3d")
         axes.add_collection3d(Poly3DCollection(triangles, facecolor="#b9c0cc", edgecolor="none",
                                                alpha=0.5))
@@ -147,9 +179,7 @@ def _facing(points: np.ndarray, normals: np.ndarray | None, elevation: float, az
     the viewer (all when the normals are not known: an open sheet has no back)."""
     index = np.arange(len(points))
     if normals is not None:
-        e, a = np.radians(elevation), np.radians(azimuth)
-        towards = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
-        index = index[normals @ towards > 0.0]
+        index = index[normals @ _towards(elevation, azimuth) > 0.0]
     if len(index) > VIEW_POINTS:
         index = np.sort(rng.choice(index, VIEW_POINTS, replace=False))
     return index
@@ -218,7 +248,7 @@ signed along the fitted surface's normal (positive outside a closed result).</p>
 <div><h2>Result</h2><table>{_rows(content.summary)}</table></div>
 </div>
 <h2>Views</h2>
-<img alt="the scan coloured by signed distance, from the front, top, right and iso"
+<img alt="the scan coloured by signed distance: {escape(', '.join(view_titles(content.up_axis)))}"
  src="data:image/png;base64,{pictures[0]}">
 <h2>Histogram</h2>
 <img alt="histogram of the signed distances" src="data:image/png;base64,{pictures[1]}">

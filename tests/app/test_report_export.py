@@ -56,11 +56,15 @@ def test_the_report_judges_by_the_docks_tolerance_and_names_what_the_fit_used(
     text = export_report(qtbot, window, monkeypatch, tmp_path / "fit.html")
     deviation = _rows(text, "Deviation")
     assert deviation["tolerance (+/-)"] == f"{fit_tolerance:.4g} mm"  # the dock's, the fit's
-    # the user judges by another tolerance in the Deviation dock: the report says the same
+    assert "front (from -y)" in text                     # the views with z up, as on screen
+    # the user judges by another tolerance in the Deviation dock: the report says the same;
+    # with View > Up Axis > Y Up, its views are the viewport's
+    window.up_axis_policy.choose("y")
     panel.set_tolerance(0.5 * fit_tolerance)
     text = export_report(qtbot, window, monkeypatch, tmp_path / "typed.html")
     deviation = _rows(text, "Deviation")
     assert deviation["tolerance (+/-)"] == f"{0.5 * fit_tolerance:.4g} mm"
+    assert "front (from +z), top (from +y)" in text
     from nurbs_core.deviation_bands import Deviation
 
     shown = panel.deviation()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import base64
 import io
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -123,3 +124,40 @@ def test_a_network_report_measures_the_closed_network_from_outside(tmp_path):
     above = float(re.search(r"<th>above \(outside\)</th><td>([0-9.]+)%", text).group(1))
     below = float(re.search(r"<th>below \(inside\)</th><td>([0-9.]+)%", text).group(1))
     assert abs(above - below) < 2.0
+
+
+BUNNY = Path(__file__).resolve().parents[1] / "data" / "stanford_bunny_1839.ply"
+
+
+@pytest.mark.parametrize("up_axis", ["z", "y"])
+def test_the_views_stand_the_scan_on_its_up_axis(up_axis):
+    from mpl_toolkits.mplot3d import proj3d
+
+    from nurbs_core.report.deviation import measure_deviation
+    from nurbs_core.report.document import ReportContent, _views_figure, view_titles
+    from nurbs_core.up_axis import to_frame
+
+    mesh = trimesh.load(BUNNY)                     # +y up: ears at the top, a flat base at y = 0
+    points = np.asarray(mesh.vertices, float)
+    content = ReportContent("bunny", "converged", points, points, np.asarray(mesh.faces),
+                            measure_deviation(points, points, np.asarray(mesh.faces), 0.01),
+                            closed=True, up_axis=up_axis)
+    figure = _views_figure(content)
+    assert [a.get_title() for a in figure.axes[:4]] == view_titles(up_axis)
+    assert view_titles(up_axis)[:3] == (
+        ["front (from -y)", "top (from +z)", "right (from +x)"] if up_axis == "z"
+        else ["front (from +z)", "top (from +y)", "right (from +x)"])
+    height = np.ptp(points[:, 1])
+    base = points[points[:, 1] < points[:, 1].min() + 0.05 * height].mean(axis=0)
+    ears = points[points[:, 1] > points[:, 1].max() - 0.05 * height].mean(axis=0)
+    front = figure.axes[0]
+    on_screen = []
+    for point in (base, ears):
+        x, y, z = point @ to_frame(up_axis).T            # the frame the report draws in
+        px, py, _ = proj3d.proj_transform(x, y, z, front.get_proj())
+        on_screen.append(np.array([px, py]))
+    step = on_screen[1] - on_screen[0]
+    upright = step[1] / np.linalg.norm(step)
+    # with y up the ears stand straight above the base in the front view; with z up (CAD's
+    # convention) this y-up scan lies on its side, its height running into the page
+    assert upright > 0.95 if up_axis == "y" else upright < 0.7
