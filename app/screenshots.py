@@ -103,10 +103,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path)
     parser.add_argument("--only", choices=("single", "patches", "selection", "units", "controls",
-                                           "solid"),
+                                           "solid", "views"),
                         help="make only the single-patch (01-07, 11), the Patches mode (08-10, 12), "
                              "the selection (13-14), the units (15-17), the Fit settings "
-                             "result and route note (18-19) or the Solid mode (20-21) set")
+                             "result and route note (18-19), the Solid mode (20-21, 23) or the "
+                             "up axis (24) set")
     arguments = parser.parse_args(argv)
     arguments.out.mkdir(parents=True, exist_ok=True)
 
@@ -436,15 +437,34 @@ def main(argv: list[str] | None = None) -> int:
                                                                         600))
         panel.edit_actions.type_actions["freeform"].trigger()
 
+    # 24. the scanned Stanford bunny (its file has +y up) with View > Up Axis > Y Up: upright,
+    # front view from +z
+    def up_axis_y():
+        mesh = Path(__file__).resolve().parents[1] / "tests" / "data" / "stanford_bunny_1839.ply"
+        if not mesh.is_file():
+            print("the bunny mesh is not here: no screenshot 24")
+            next_step()
+            return
+
+        def loaded(ok):
+            window.up_axis_policy.choose("y")
+            window.view_actions["front"].trigger()
+            later(lambda: (shot("24_up_axis_y.png"), window.up_axis_policy.choose("z"),
+                           next_step()), 600)
+        once(window.files_loaded, loaded)
+        window.open_files([str(mesh)])
+
     single = [demo, converging, offsets, curve, quality_clean, quality_folded]
     patches = [patches_mode, seam_map, patches_deviation, open_thin_parts]
     choose = [selection, fit_selection]
     units = [units_import]
     controls = [fit_result]
     solid = [solid_part, solid_deviation, solid_face_edit]
+    views = [up_axis_y]
     steps.extend({"single": single, "patches": patches, "selection": choose, "units": units,
-                  "controls": controls, "solid": solid}.get(
-                      arguments.only, single + choose + units + controls + patches + solid))
+                  "controls": controls, "solid": solid, "views": views}.get(
+                      arguments.only,
+                      single + choose + units + controls + patches + solid + views))
     window.controller.fit_failed.connect(lambda message: failures.append(message))
     window.patch_controller.fit_failed.connect(lambda message: failures.append(message))
     window.part_controller.run_failed.connect(lambda message: failures.append(message))
