@@ -94,6 +94,12 @@ class PatchView(QObject):
             seam = snapshot.quality["seam"]
             self._labels["rate"].setText(f"seam p99 {seam['p99']:.2f}\N{DEGREE SIGN}, max "
                                          f"{seam['max']:.2f}\N{DEGREE SIGN}")
+            # the final measure's RMS (the dock's and the deviation corner's), not the last
+            # pass's residual, measured before the final foot points
+            rms = float(snapshot.quality.get("c2s_rms", math.nan))
+            if math.isfinite(rms):
+                unit = f" {self._panel.units}" if self._panel.units else ""
+                self._labels["loss"].setText(f"RMS {rms:.4g}{unit}")
         if snapshot.restored:
             return  # shown again, not fitted now: its fit was told when it ended
         text = f"Patch network {what}: {snapshot.patch_count} patches, {snapshot.size}x" \

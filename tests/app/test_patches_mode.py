@@ -123,6 +123,16 @@ def test_patch_fit_is_drawn_measured_and_exported(qtbot, window, tmp_path, monke
     assert f"p99 {quality['seam']['p99']:.2f}" in panel.values["seam"].text()
     # the status bar says the same (it showed the last pass's max beside the dock's p99)
     assert f"p99 {quality['seam']['p99']:.2f}" in window.status_labels["rate"].text()
+    # and the RMS the dock and the deviation corner show (it showed the last pass's residual,
+    # measured before the final foot points: 0.01104 against the dock's 0.01105 on the bunny)
+    assert window.status_labels["loss"].text() == f"RMS {quality['c2s_rms']:.4g}"
+    assert f"RMS {quality['c2s_rms']:.4g}" in panel.values["c2s"].text()
+    # a fit whose last pass's residual differs from the final measure (here that of a session
+    # holding both): the status bar still shows the dock's
+    report = window.patch_controller.network_report()
+    report["rms"] = 0.98 * quality["c2s_rms"]
+    window.patch_controller.show_saved(network, report, restored=True)
+    assert window.status_labels["loss"].text() == f"RMS {quality['c2s_rms']:.4g}"
     assert f"{quality['gap_relative']:.4g} of the diagonal" in panel.values["gap"].text()
     assert panel.values["flipped"].text() == f"{100 * quality['flipped_fraction']:.2f}%"
     assert panel.values["area"].text() == f"{quality['area']:.4g}"
