@@ -32,8 +32,11 @@ ROWS = (
     ("c2s", "Cloud to surface", "mean, RMS and 99th percentile distance of the cloud's points "
                                 "to the network"),
     ("s2c", "Surface to cloud", "mean and largest distance from the network to the nearest "
-                                "point, and the share of its area farther from every point than "
-                                "the limit shown (a part the scan does not hold: a flap, a horn)"),
+                                "point (the mean also in the cloud's median point spacings: a "
+                                "surface between the points lies up to about half a spacing "
+                                "from the nearest however well it fits), and the share of its "
+                                "area farther from every point than the limit shown (a part the "
+                                "scan does not hold: a flap, a horn)"),
     ("scan", "Scan", "what the fit did to the scan: stray points off the reconstructed surface "
                      "left out of the fit and its measures, and the share of the surface on "
                      "caps over the scan's holes"),
@@ -144,7 +147,10 @@ class NetworkQualityPanel(QWidget):
                                    f"{_length(get('c2s_rms'), units)}, p99 "
                                    f"{_length(get('c2s_p99'), units)}")
         far = get("far_fraction")
-        self.values["s2c"].setText(f"mean {_length(get('s2c_mean'), units)}, max "
+        spacing = get("spacing")  # (sessions from before it was kept have none)
+        in_spacings = (f" ({get('s2c_mean') / spacing:.1f} spacings)"
+                       if math.isfinite(spacing) and spacing > 0 else "")
+        self.values["s2c"].setText(f"mean {_length(get('s2c_mean'), units)}{in_spacings}, max "
                                    f"{_length(get('s2c_max'), units)}; {far:.2%} farther than "
                                    f"{_length(get('far_limit'), units)}")
         self.values["s2c"].setStyleSheet(f"QLabel {{ color: {WARNING_COLOR}; }}" if far > 0.005

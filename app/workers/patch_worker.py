@@ -168,7 +168,8 @@ class PatchWorker(LiveWorker):
                         # with what the fit did to the scan: strays left out, holes capped
                         quality={**result.quality.as_dict(), "outliers": result.outliers,
                                  "points": len(request.points),
-                                 "filled_fraction": result.mesh.filled_fraction},
+                                 "filled_fraction": result.mesh.filled_fraction,
+                                 "spacing": cloud_spacing(request.points)},
                         warnings=list(result.warnings), done=True,
                         deviation=result.deviation, signed=signed))
                     return
@@ -193,7 +194,8 @@ class PatchWorker(LiveWorker):
         snapshot = self._pass_snapshot(request.run_id, fit_pass, fit_pass.stage, 0, elapsed)
         snapshot.event, snapshot.done = "stopped", True
         quality = network_quality(fit_pass.network, request.points)
-        snapshot.quality, snapshot.deviation = quality.as_dict(), quality.distances
+        snapshot.quality = {**quality.as_dict(), "spacing": cloud_spacing(request.points)}
+        snapshot.deviation = quality.distances
         snapshot.signed = network_signed_map(fit_pass.network, snapshot.display,
                                              np.asarray(request.points, np.float64),
                                              quality.distances, request.options.tolerance)
@@ -202,3 +204,13 @@ class PatchWorker(LiveWorker):
     def _emit(self, snapshot: PatchSnapshot):
         snapshot.losses, self._rows = self._rows, []
         super()._emit(snapshot)
+
+
+def cloud_spacing(points: np.ndarray) -> float:
+    """The cloud's (N, 3) median distance between neighbouring points: the scale of the
+    network's distance to the nearest point (a surface between points lies up to about half a
+    spacing from the nearest one however well it fits), which the Patch quality dock states it
+    in."""
+    from nurbs_core.surfacing.mesh import median_spacing
+
+    return median_spacing(np.asarray(points, np.float64))

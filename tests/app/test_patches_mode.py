@@ -137,6 +137,14 @@ def test_patch_fit_is_drawn_measured_and_exported(qtbot, window, tmp_path, monke
     assert panel.values["flipped"].text() == f"{100 * quality['flipped_fraction']:.2f}%"
     assert panel.values["area"].text() == f"{quality['area']:.4g}"
     assert panel.values["c2s"].text().startswith(f"mean {quality['c2s_mean']:.4g}")
+    # the surface's distance to the nearest point, in the cloud's point spacings too (the
+    # bunny's 0.07483 m read as an error; it is half its spacing)
+    from scipy.spatial import cKDTree
+
+    cloud = window.document.target_points()
+    spacing = float(np.median(cKDTree(cloud).query(cloud, k=2)[0][:, 1]))
+    assert (f"mean {quality['s2c_mean']:.4g} ({quality['s2c_mean'] / spacing:.1f} spacings)"
+            in panel.values["s2c"].text())
     assert "irregular max" in panel.values["corners"].text()
     assert panel.warnings.text() == "\n".join(f"Warning: {w}" for w in snapshot.warnings)
 
