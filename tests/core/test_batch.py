@@ -705,7 +705,7 @@ def test_hidden_files_of_a_killed_save_are_not_inputs(tmp_path):
     assert len(_summary(out / "summary.jsonl")) == GOOD
 
 
-@pytest.mark.timeout(120)
+@pytest.mark.timeout(180)  # above its own waits (90 s for two results, 60 s to exit)
 def test_sigterm_stops_a_batch_like_ctrl_c_with_its_summary(tmp_path):
     """SIGTERM (a scheduler's, a shutdown's): the batch stops, keeps its results, writes its
     summary and exits 130, without a traceback."""
