@@ -29,7 +29,7 @@ from nurbs_core.patches.measures import NetworkQuality, network_quality
 from nurbs_core.patches.network import PatchNetwork
 from nurbs_core.patches.options import PatchOptions, check_patch_count
 from nurbs_core.patches.scan_mesh import ScanMesh
-from nurbs_core.patches.verdict import network_warnings
+from nurbs_core.patches.verdict import network_warnings, thin_scan_note
 from nurbs_core.status import reported_status
 from nurbs_core.streaming import RunStatus, Stop, cancelled, should_stop
 from nurbs_core.surfacing.neighbours import (
@@ -459,6 +459,9 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     if stopped:
         warnings.insert(0, f"stopped after {last.index + 1} passes: the network as it stood")
     warnings += network_warnings(quality, noise)
+    thin = thin_scan_note(mesh.between, mesh.cell)
+    if warnings and thin:  # it explains the warnings; alone it is no fault of the network
+        warnings.append(thin)
     outliers = int((~inliers).sum())
     if outliers > MAX_OUTLIERS * len(everything):
         warnings.append(f"{outliers} points ({outliers / len(everything):.1%}) lie farther than "

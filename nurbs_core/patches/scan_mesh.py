@@ -33,6 +33,10 @@ class ScanMesh:
     #: the scan's border on an open mesh: one ordered, closed loop (L, 3) per opening that stays
     #: open (pulled onto the outermost points and smoothed); empty on a closed mesh
     border: list[np.ndarray] = field(default_factory=list)
+    #: on an open mesh whose points lie in two layers either side of it (a part thinner than the
+    #: reconstruction resolves: the mesh runs between its sides): the points' median distance to
+    #: the mesh; 0 otherwise (:func:`nurbs_core.patches.open_mesh.sheet_between`)
+    between: float = 0.0
 
     @property
     def closed(self) -> bool:

@@ -68,3 +68,15 @@ def network_warnings(quality: NetworkQuality, noise: float) -> list[str]:
                         f"network on average (noise about {noise:.3g}): details finer than its "
                         "patches (thin parts, creases) are smoothed over")
     return warnings
+
+
+def thin_scan_note(between: float, cell: float) -> str | None:
+    """Why the network of an open scan whose mesh runs between two sides of it
+    (:attr:`nurbs_core.patches.scan_mesh.ScanMesh.between`: the points' median distance to the
+    mesh, 0 when it follows them) folds; None when the mesh follows the points."""
+    if between <= 0.0:
+        return None
+    return (f"the points lie in two layers either side of the reconstructed mesh (median "
+            f"distance {between:.3g}, {between / cell:.2f} of its cells): a part thinner than the "
+            "reconstruction resolves (like a wing's skins) is one sheet between its two sides, "
+            "which the fit pulls both ways")

@@ -233,3 +233,60 @@ def test_the_bunnys_ears_are_fitted_as_two_ears_without_a_web(bunny_head):
     quality = fit_patches(region).quality
     assert quality.far_fraction < 0.001            # no web: the surface stays on the scan
     assert quality.flipped_fraction < 0.025        # 3.1% before
+
+
+def _flat_tube(half_thickness: float, count: int = 6000) -> np.ndarray:
+    """An open tube of elliptical section (width 2, thickness 2 x ``half_thickness``, length 3,
+    open at both ends: a wing without its tip), its two skins sampled evenly, noise 0.2% of the
+    diagonal."""
+    rng = np.random.default_rng(0)
+    x, z = rng.uniform(-1.0, 1.0, count), rng.uniform(0.0, 3.0, count)
+    y = rng.choice([-1.0, 1.0], count) * half_thickness * np.sqrt(1.0 - x ** 2)
+    points = np.c_[x, y, z]
+    return points + rng.normal(0.0, 0.002 * np.linalg.norm(np.ptp(points, axis=0)), points.shape)
+
+
+@pytest.mark.parametrize("half_thickness", [0.03, 0.06])
+def test_a_part_thinner_than_the_mesh_resolves_is_found_and_explained(half_thickness):
+    """Skins closer than about two cells: the open mesh is one sheet between them (about half
+    the skins' area), and the mesh says so, with the points' median distance to it."""
+    from nurbs_core.patches.verdict import thin_scan_note
+
+    mesh = open_mesh(_flat_tube(half_thickness))
+    assert mesh.area < 0.75 * 12.0                     # one sheet (2 x 3), not two skins (~12)
+    assert 0.5 * half_thickness < mesh.between < 1.5 * half_thickness
+    note = thin_scan_note(mesh.between, mesh.cell)
+    assert note is not None and "two layers either side" in note
+
+
+@pytest.mark.parametrize("make", ["thick tube", "open head"])
+def test_a_mesh_that_follows_its_points_is_not_called_thin(make, open_head):
+    """Skins three cells apart are two sheets of the mesh; an open head's one layer of noisy
+    points lies on its mesh: neither is 'between'."""
+    from nurbs_core.patches.verdict import thin_scan_note
+
+    points = _flat_tube(0.15) if make == "thick tube" else open_head[1]
+    mesh = open_mesh(points)
+    if make == "thick tube":
+        assert mesh.area > 0.9 * 12.0                  # both skins
+    assert mesh.between == 0.0 and thin_scan_note(mesh.between, mesh.cell) is None
+
+
+@pytest.mark.slow
+def test_the_stabilisers_folds_are_explained_by_its_thin_skins(paper_data, tmp_path, capsys):
+    """The paper's stabiliser (27 patches of a wing, 10,000 points, noise 0.2% of the
+    diagonal): its skins lie closer than the reconstruction resolves over most of it, so its
+    open network folds; the report says why, beside the folds."""
+    from nurbs_core.cli import main
+    from nurbs_core.io import load
+    from nurbs_core.samples import _make, _nurbs_chart, _Shape
+
+    surfaces = [load(paper_data / "stabilizer" / f"smesh.{i}.dat")[0] for i in range(1, 28)]
+    shape = _make("stabilizer", _Shape([_nurbs_chart(s) for s in surfaces]), 10_000, 0.002, 0,
+                  closed=True, height_field=False, kind="model", truth_count=10_000)
+    cloud = tmp_path / "stabilizer.xyz"
+    np.savetxt(cloud, shape.points)
+    assert main([str(cloud), "-o", str(tmp_path / "fit.json")]) == 0
+    out = capsys.readouterr().out
+    assert "status: fitted with warnings" in out
+    assert "two layers either side of the reconstructed mesh" in out
