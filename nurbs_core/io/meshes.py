@@ -486,7 +486,8 @@ def read_mesh_points(path: StrPath, suffix: str, mesh_mode: str = "vertices",
 @_quiet_trimesh()
 def read_mesh_faces(path: StrPath, suffix: str) -> tuple[np.ndarray, np.ndarray] | None:
     """The file's triangle mesh as (vertices (V, 3) float64, faces (F, 3) int64), duplicate
-    vertices merged (STL), or None when the file has no faces."""
+    vertices merged (STL), or None when the file has no faces. Its vertices are checked as a
+    cloud's points are (finite, within the fit's range: FileFormatError)."""
     import trimesh
 
     mesh = _load_trimesh(path, suffix)
@@ -494,6 +495,9 @@ def read_mesh_faces(path: StrPath, suffix: str) -> tuple[np.ndarray, np.ndarray]
     if not isinstance(mesh, trimesh.Trimesh) or len(faces) == 0:
         return None
     vertices = np.asarray(mesh.vertices, np.float64)
+    # before trimesh's processing, which drops NaN / inf vertices and their triangles without a
+    # word (a closed mesh became an open one and took another route)
+    check_points(path, vertices)
     _check_faces(path, faces, len(vertices))
     try:
         merged = trimesh.Trimesh(vertices, faces, process=True)
