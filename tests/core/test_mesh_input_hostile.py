@@ -66,3 +66,26 @@ def test_a_non_finite_vertex_is_refused_not_dropped(tmp_path, suffix, bad):
     with pytest.raises(FileFormatError, match="NaN or infinite") as refused:
         surface_input(str(path), quiet=True)
     assert str(path) in str(refused.value) and "\n" not in str(refused.value)
+
+
+@pytest.mark.parametrize("face", ["f 0 1 2", "f 1 2 0", "f 3 0/1 2", "f 1 2 00", "  f 2 1 0//4"])
+def test_an_obj_face_naming_vertex_zero_is_refused_with_its_line(tmp_path, face):
+    from nurbs_core.io.errors import FileFormatError
+    from nurbs_core.io.meshes import read_mesh_faces
+
+    vertices, faces = _octahedron()
+    path = tmp_path / "zero.obj"
+    _write(path, vertices, faces)
+    path.write_text(path.read_text() + face + "\n")
+    # before: trimesh read "f 0 1 2" as the triangle (0, 0, 1), without a word
+    with pytest.raises(FileFormatError, match=r"zero\.obj:15: a face refers to vertex 0"):
+        read_mesh_faces(path, ".obj")
+
+
+@pytest.mark.parametrize("face", ["f 10 20 30", "f -1 -2 -3", "f 1/10 2/20 3/30", "f 4//0 5//1 6//2"])
+def test_obj_faces_with_zeros_elsewhere_are_not_refused(tmp_path, face):
+    from nurbs_core.io.meshes import _check_obj
+
+    path = tmp_path / "fine.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n" + face + "\nvt 0 0\n")
+    _check_obj(path)  # a normal or texture index 0 is not a vertex (trimesh decides on those)
