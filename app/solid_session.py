@@ -46,6 +46,9 @@ def solid_document(outcome: PartOutcome) -> tuple[dict[str, Any], dict[str, np.n
 
 
 def shape_from_brep(text: str) -> Any:
+    """The shape of OpenCASCADE's B-rep ``text``; ValueError when it does not read (its counts
+    are checked first: :func:`nurbs_core.io.brep_text.check_brep_text`)."""
+    from nurbs_core.io.brep_text import check_brep_text
     from nurbs_core.io.errors import require_ocp
 
     require_ocp("A session's solid")
@@ -53,12 +56,21 @@ def shape_from_brep(text: str) -> Any:
     from OCP.BRepTools import BRepTools
     from OCP.TopoDS import TopoDS_Shape
 
+    try:
+        check_brep_text(text)
+    except ValueError as exc:
+        raise ValueError(f"the solid's B-rep does not read: {exc}") from None
     handle, name = tempfile.mkstemp(suffix=".brep")
     os.close(handle)
     try:
         Path(name).write_text(text, encoding="ascii")
         shape = TopoDS_Shape()
-        if not BRepTools.Read_s(shape, name, BRep_Builder()) or shape.IsNull():
+        try:
+            read = BRepTools.Read_s(shape, name, BRep_Builder())
+        except Exception as exc:  # OpenCASCADE's exceptions (Standard_OutOfRange, ...)
+            raise ValueError(f"the solid's B-rep does not read ({type(exc).__name__}: "
+                             f"{str(exc)[:200]})") from None
+        if not read or shape.IsNull():
             raise ValueError("the solid's B-rep does not read")
         return shape
     finally:
@@ -70,6 +82,27 @@ def _number(data: dict[str, Any], key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ValueError(f"the solid's {key} must be a finite number")
     return float(value)
+
+
+def _positive(data: dict[str, Any], key: str) -> float:
+    value = _number(data, key)
+    if value <= 0:
+        raise ValueError(f"the solid's {key} must be positive, got {value:g}")
+    return value
+
+
+def _check_tolerance(tolerance: float, shape: Any) -> None:
+    """The tolerance the viewport's triangles are made within, against the solid's size: the
+    part route never makes one finer than :data:`~nurbs_core.brep.segment.MIN_TOLERANCE` of
+    the scan's diagonal (half of it allowed: the solid's box is not the scan's), and a finer
+    one would have OpenCASCADE's mesher make millions of triangles."""
+    from nurbs_core.brep.occ import bounding_diagonal
+    from nurbs_core.brep.segment import MIN_TOLERANCE
+
+    diagonal = bounding_diagonal(shape)
+    if tolerance < 0.5 * MIN_TOLERANCE * diagonal:
+        raise ValueError(f"the solid's tolerance {tolerance:.3g} is finer than the part route "
+                         f"makes ({MIN_TOLERANCE:g} of its size, {diagonal:.4g})")
 
 
 def _face(number: int, item: Any) -> FaceRow:
@@ -110,10 +143,16 @@ def solid_from_document(document: Any, arrays: dict[str, np.ndarray]) -> PartOut
     if not isinstance(problems, list) or not all(isinstance(p, str) for p in problems):
         raise ValueError("the solid's problems must be a list of text")
     distances = np.asarray(arrays[DISTANCES], np.float64)
+    if np.asarray(arrays[POINT_FACES]).dtype.kind not in "iu":
+        raise ValueError(f"the solid's nearest faces are {np.asarray(arrays[POINT_FACES]).dtype}"
+                         ", not face numbers")
     point_faces = np.asarray(arrays[POINT_FACES], np.int64)
     if distances.ndim != 1 or point_faces.shape != distances.shape or not len(distances):
         raise ValueError(f"the solid's per-point arrays have shapes {distances.shape} and "
                          f"{point_faces.shape}: one value per point each")
+    if not np.isfinite(distances).all():
+        raise ValueError(f"the solid's distances hold {int((~np.isfinite(distances)).sum())} "
+                         "NaN or infinite values: every point's distance is measured")
     if point_faces.min() < 0 or point_faces.max() >= len(rows):
         raise ValueError("the solid's nearest faces name faces it does not have")
     status = document.get("status")
@@ -122,11 +161,12 @@ def solid_from_document(document: Any, arrays: dict[str, np.ndarray]) -> PartOut
     reason = document.get("reason", "")
     report = SolidReport(rows, bool(document.get("valid")), bool(document.get("closed")),
                          _number(document, "volume"), status, tuple(problems),
-                         _number(document, "noise"), _number(document, "tolerance"),
+                         _positive(document, "noise"), _positive(document, "tolerance"),
                          distances, point_faces, reason if isinstance(reason, str) else "",
                          _number(document, "seconds"), _edits(document),
                          bool(document.get("open_shell")))
     shape = shape_from_brep(document["brep"])
+    _check_tolerance(report.tolerance, shape)
     display = solid_display(shape, report.tolerance)
     if len(display.owners) and int(display.owners.max()) >= len(rows):
         raise ValueError(f"the solid's B-rep has more faces than its report ({len(rows)})")
