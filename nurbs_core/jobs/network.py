@@ -11,7 +11,7 @@ import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from nurbs_core.jobs.report import plain, print_patch_event, print_units, units_of
+from nurbs_core.jobs.report import length_unit, plain, print_patch_event, print_units, units_of
 from nurbs_core.jobs.settings import FitJob
 from nurbs_core.streaming import StopToken
 
@@ -122,8 +122,10 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
     free = len(result.network.free_sides())
     shape = ("closed (watertight)" if result.network.closed
              else f"open: {free} patch sides on the scan's border")
-    print(f"seams: largest gap {seam.gap:.3g} ({quality.gap_relative:.2g} of the diagonal "
-          f"{quality.diagonal:.6g}); {shape}")
+    units = units_of(job)
+    u = length_unit(units)
+    print(f"seams: largest gap {seam.gap:.3g}{u} ({quality.gap_relative:.2g} of the diagonal "
+          f"{quality.diagonal:.6g}{u}); {shape}")
     print(f"seam angle: median {seam.median:.3f}, 99th percentile {seam.p99:.3f}, max "
           f"{seam.max:.3f} degrees; corners: regular max {seam.regular_corner_max:.3f}, "
           f"irregular max {seam.irregular_corner_max:.3f} degrees"
@@ -133,13 +135,13 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
     if creases is not None and len(creases) and not seam.crease_seams:
         print(f"creases: the scan has {creases.count} sharp edges ({creases.angles.min():.0f}-"
               f"{creases.angles.max():.0f} degrees) no layout followed: patches round them")
-    print(f"point-to-surface distance: mean {quality.c2s_mean:.6g}, rms {quality.c2s_rms:.6g}, "
-          f"99th percentile {quality.c2s_p99:.6g}")
-    print(f"surface-to-cloud distance: mean {quality.s2c_mean:.6g}, 99th percentile "
-          f"{quality.s2c_p99:.6g}, max {quality.s2c_max:.6g}; {quality.far_fraction:.2%} of the "
-          f"area farther than {quality.far_limit:.4g} from every point")
-    print(f"flipped area: {quality.flipped_fraction:.2%}; area {quality.area:.6g}; "
-          f"enclosed volume {quality.volume:.6g}")
+    print(f"point-to-surface distance: mean {quality.c2s_mean:.6g}{u}, rms "
+          f"{quality.c2s_rms:.6g}{u}, 99th percentile {quality.c2s_p99:.6g}{u}")
+    print(f"surface-to-cloud distance: mean {quality.s2c_mean:.6g}{u}, 99th percentile "
+          f"{quality.s2c_p99:.6g}{u}, max {quality.s2c_max:.6g}{u}; {quality.far_fraction:.2%} "
+          f"of the area farther than {quality.far_limit:.4g}{u} from every point")
+    print(f"flipped area: {quality.flipped_fraction:.2%}; area {quality.area:.6g}"
+          f"{length_unit(units, 2)}; enclosed volume {quality.volume:.6g}{length_unit(units, 3)}")
     if result.mesh.filled_fraction > 0:
         print(f"holes filled: {result.mesh.filled_fraction:.2%} of the surface lies on caps over "
               f"the scan's openings (the widest sealed: {result.mesh.max_hole:.4g}; set with "
@@ -149,7 +151,6 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
               "the reconstructed surface: left out of the fit and its measures")
     for warning in result.warnings:
         print(f"warning: {warning}")
-    units = units_of(job)
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
         save_all([(result.network, path, {"units": units}) for path in outputs])

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from nurbs_core.jobs.report import plain, print_units, units_of
+from nurbs_core.jobs.report import length_unit, plain, print_units, units_of
 from nurbs_core.jobs.settings import FitJob
 
 if TYPE_CHECKING:
@@ -70,9 +70,10 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
     print(f"segmentation: {result.segmentation.coverage:.1%} of the points on analytic "
           f"surfaces; noise sigma {noise:.4g} (tolerance {result.segmentation.tolerance:.4g})")
     d = result.distances
-    print(f"point-to-solid distance: mean {d.mean():.6g} ({d.mean() / noise:.2f} sigma), rms "
-          f"{np.sqrt((d ** 2).mean()):.6g}, 99th percentile {np.percentile(d, 99):.6g} "
-          f"({np.percentile(d, 99) / noise:.2f} sigma), max {d.max():.6g}")
+    u = length_unit(units_of(job))
+    print(f"point-to-solid distance: mean {d.mean():.6g}{u} ({d.mean() / noise:.2f} sigma), rms "
+          f"{np.sqrt((d ** 2).mean()):.6g}{u}, 99th percentile {np.percentile(d, 99):.6g}{u} "
+          f"({np.percentile(d, 99) / noise:.2f} sigma), max {d.max():.6g}{u}")
     if result.open_shell:
         border = result.border_distances
         print(f"border (the scan's border loops to the shell's free edges): mean "

@@ -64,22 +64,30 @@ class Progress:
         print(line, file=sys.stderr, flush=True)
 
 
-def quality_text(stats: dict, diagonal: float) -> str:
-    """The quality block of the report: surface-to-cloud, orientation, overlap, area, fairness."""
+def length_unit(units: str | None, power: int = 1) -> str:
+    """The suffix of a length (``power`` 2: an area, 3: a volume) in ``units``: " m", " m²";
+    empty when the units are not known."""
+    return f" {units}{'' if power == 1 else '²' if power == 2 else '³'}" if units else ""
+
+
+def quality_text(stats: dict, diagonal: float, units: str | None = None) -> str:
+    """The quality block of the report: surface-to-cloud, orientation, overlap, area, fairness;
+    lengths in ``units`` when known."""
+    u, area = length_unit(units), length_unit(units, 2)
     lines = [
-        f"surface-to-cloud distance: 95th percentile {stats['s2c_p95']:.6g}, max "
-        f"{stats['s2c_max']:.6g}  (cloud spacing {stats['spacing']:.6g})",
+        f"surface-to-cloud distance: 95th percentile {stats['s2c_p95']:.6g}{u}, max "
+        f"{stats['s2c_max']:.6g}{u}  (cloud spacing {stats['spacing']:.6g}{u})",
         f"flipped area: {stats['flipped_fraction']:.2%}; overlapping sheets over "
         f"{stats['overlap_fraction']:.2%} of the cloud; coverage {stats['coverage']:.2%}",
-        f"area: {stats['area']:.6g} = {stats['area_ratio']:.4f} x the cloud mesh's "
-        f"{stats['reference_area']:.6g}",
+        f"area: {stats['area']:.6g}{area} = {stats['area_ratio']:.4f} x the cloud mesh's "
+        f"{stats['reference_area']:.6g}{area}",
         f"fairness: bending energy {stats['bending_energy']:.4g}, max curvature "
         f"{stats['max_curvature']:.4g} (x diagonal: {stats['max_curvature'] * diagonal:.4g})",
     ]
     if "tolerance" in stats:
-        lines.append(f"tolerance {stats['tolerance']:.6g} "
+        lines.append(f"tolerance {stats['tolerance']:.6g}{u} "
                      f"({'met' if stats.get('tolerance_met') else 'not met'}); estimated noise "
-                     f"{stats['noise']:.6g}")
+                     f"{stats['noise']:.6g}{u}")
     return "\n".join(lines)
 
 

@@ -14,7 +14,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
 from nurbs_core.jobs.checks import check_before_work, offset_path
-from nurbs_core.jobs.report import FitFailed, Progress, plain, print_units, quality_text, units_of
+from nurbs_core.jobs.report import (
+    FitFailed,
+    Progress,
+    length_unit,
+    plain,
+    print_units,
+    quality_text,
+    units_of,
+)
 from nurbs_core.jobs.settings import FitJob, fit_config
 
 if TYPE_CHECKING:
@@ -191,14 +199,17 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
     status = reported_status(result.status, quality_warnings(stats))
     print(f"status: {status} after {result.iterations} iterations in "
           f"{result.elapsed:.2f} s" + (f" ({result.message})" if result.message else ""))
-    print(f"point-to-{config.kind} distance: mean {stats['mean']:.6g}, rms {stats['rms']:.6g}, "
-          f"max {stats['max']:.6g}  (bounding-box diagonal {diagonal:.6g})")
+    units = units_of(job)
+    u = length_unit(units)
+    print(f"point-to-{config.kind} distance: mean {stats['mean']:.6g}{u}, rms "
+          f"{stats['rms']:.6g}{u}, max {stats['max']:.6g}{u}  (bounding-box diagonal "
+          f"{diagonal:.6g}{u})")
     if "paired_mean" in stats:
-        print(f"at the known parameters: mean {stats['paired_mean']:.6g}, "
-              f"rms {stats['paired_rms']:.6g}, max {stats['paired_max']:.6g}")
-    print(f"chamfer distance: {chamfer:.6g} ({chamfer / diagonal:.3%} of the diagonal)")
+        print(f"at the known parameters: mean {stats['paired_mean']:.6g}{u}, "
+              f"rms {stats['paired_rms']:.6g}{u}, max {stats['paired_max']:.6g}{u}")
+    print(f"chamfer distance: {chamfer:.6g}{u} ({chamfer / diagonal:.3%} of the diagonal)")
     if "flipped_fraction" in stats:
-        print(quality_text(stats, diagonal))
+        print(quality_text(stats, diagonal, units))
     if prepared.flat_z:
         geometry = _lift(cast("CurveArrays", geometry), float(prepared.points[0, 2]))
     offset = None
@@ -207,7 +218,6 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
         from nurbs_core.offset import offset_surface
 
         offset = offset_surface(NurbsSurface.from_numpy(geometry), job.offset)
-    units = units_of(job)
     jobs: list[tuple[NurbsSurface | GeometryArrays, Path, dict[str, Any]]] = [
         (geometry, path, {"units": units}) for path in prepared.outputs]
     if offset is not None:

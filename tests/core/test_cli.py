@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
@@ -390,11 +391,18 @@ def test_units_reach_the_files_that_carry_them(tmp_path, capsys):
     np.savetxt(cloud, samples.saddle(400, seed=2).points)
     assert main([str(cloud), "-o", str(tmp_path / "a.3dm"), str(tmp_path / "a.obj"), "-q",
                  "--units", "in"]) == 0
-    assert "units: in (declared in a.3dm)" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "units: in (declared in a.3dm)" in out
+    # every length of the report carries its unit (an area its square)
+    number = r"[-+0-9.e]+"
+    assert re.search(rf"point-to-surface distance: mean {number} in, rms {number} in, ", out)
+    assert re.search(rf"area:? {number} in²", out)
     assert rhino3dm.File3dm.Read(str(tmp_path / "a.3dm")).Settings.ModelUnitSystem.name == \
         "Inches"
     assert main([str(cloud), "-o", str(tmp_path / "b.3dm"), "-q"]) == 0
-    assert "units: not given (--units)" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "units: not given (--units)" in out
+    assert re.search(rf"point-to-surface distance: mean {number}, rms {number}, ", out)
     assert rhino3dm.File3dm.Read(str(tmp_path / "b.3dm")).Settings.ModelUnitSystem.name == "None"
 
 
