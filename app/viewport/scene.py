@@ -47,6 +47,9 @@ COLORS = {
     "selection": "#ffc400",
 }
 
+#: a big cloud's colour under eye-dome lighting (the shading darkens the points)
+SHADED_CLOUD_COLOR = "#98a4b0"
+
 UPPER_LEFT, UPPER_RIGHT, LOWER_RIGHT = 2, 3, 1  # vtkCornerAnnotation corner indices
 #: the view's principal axes come from at most about this many of the visible points
 CAMERA_SAMPLE = 50_000
@@ -157,6 +160,8 @@ class SceneView(QObject):
         self._cloud_count = 0
         self._cloud_shown: np.ndarray | None = None
         self.display_budget = DISPLAY_BUDGET
+        #: whether eye-dome lighting shades the view (on while a big cloud is drawn reduced)
+        self.eye_dome_lighting = False
         self._actors: dict[str, object] = {}
         self._visible = {layer: True for layer in LAYERS}
         self._visible["control_net"] = False
@@ -239,7 +244,22 @@ class SceneView(QObject):
             self.deviation_colours.attach(self._actors["cloud"].mapper)
         else:
             self._layer("cloud", mesh)
+        self._set_eye_dome(self._cloud_shown is not None)
         self.set_deviation(None)
+
+    def _set_eye_dome(self, on: bool) -> None:
+        """Eye-dome lighting (VTK's screen-space shading of depth edges) while a big cloud is
+        drawn: a million points of one colour are a flat silhouette, the shading shows their
+        shape. It works under software OpenGL (Xvfb's llvmpipe) at little cost per frame."""
+        # lighter points: the shading darkens them where the depth changes
+        self._actors["cloud"].prop.color = SHADED_CLOUD_COLOR if on else COLORS["cloud"]
+        if on == self.eye_dome_lighting:
+            return
+        if on:
+            self.plotter.enable_eye_dome_lighting()
+        else:
+            self.plotter.disable_eye_dome_lighting()
+        self.eye_dome_lighting = on
 
     def shown_points(self) -> tuple[int, int]:
         """(points drawn, points in the cloud)."""

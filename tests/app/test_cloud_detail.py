@@ -40,6 +40,7 @@ def test_a_million_points_draw_at_most_the_budget(window):
     assert mesh.n_points <= DISPLAY_BUDGET
     assert window.scene.shown_points() == (mesh.n_points, 1_000_000)
     assert window.scene.shown_points_text() == f"showing {mesh.n_points:,} of 1,000,000 points"
+    assert window.scene.eye_dome_lighting  # the shading that shows a big cloud's shape
     # the deviation of every point is accepted; the drawn points show their own values
     deviation = np.linalg.norm(points, axis=1)
     window.scene.set_deviation(deviation)
@@ -54,6 +55,7 @@ def test_a_cloud_over_the_budget_is_drawn_reduced_and_selected_whole(qtbot, wind
     open_by_drop(qtbot, window, [path])
     mesh = window.scene._meshes["cloud"]
     assert 400 < mesh.n_points <= 500
+    assert window.scene.eye_dome_lighting
     assert len(window.document.target_points()) == len(points)  # the document keeps them all
     assert f"showing {mesh.n_points:,} of 1,600 points" in window.statusBar().currentMessage()
     # every drawn point is one of the cloud's
@@ -84,3 +86,4 @@ def test_a_cloud_over_the_budget_is_drawn_reduced_and_selected_whole(qtbot, wind
     open_by_drop(qtbot, window, [path])
     assert window.scene.shown_points() == (1600, 1600)
     assert "showing" not in window.statusBar().currentMessage()
+    assert not window.scene.eye_dome_lighting
