@@ -31,6 +31,10 @@ def test_the_subset_is_within_the_budget_near_it_and_even():
     share = 100 * 100 * len(shown) / count
     assert np.all(np.abs(blocks - share) < 0.05 * share)
     np.testing.assert_array_equal(shown_indices(count, budget), shown)  # same cloud, same view
+    # one point over: one point fewer drawn, and not always the last one
+    over = shown_indices(DISPLAY_BUDGET + 1)
+    assert over is not None and len(over) == DISPLAY_BUDGET and len(np.unique(over)) == len(over)
+    assert over[-1] == DISPLAY_BUDGET or len(np.setdiff1d(np.arange(DISPLAY_BUDGET), over)) == 1
 
 
 def test_a_million_points_draw_at_most_the_budget(window):
