@@ -24,6 +24,7 @@ from PySide6.QtWidgets import QWidget
 from pyvistaqt import QtInteractor
 
 from app.display_types import FAR, FINE, FLIPPED, OVERLAP, DeviationMap, DisplayGeometry
+from app.viewport.cloud_detail import DISPLAY_BUDGET, shown_indices, shown_text
 from app.viewport.deviation_colours import DeviationColours
 from app.viewport.face_pick import FacePicker
 from app.viewport.legend_box import label_contrasts, swatch_legend
@@ -45,6 +46,9 @@ COLORS = {
     "offset": "#f2a33a",
     "selection": "#ffc400",
 }
+
+#: a big cloud's colour under eye-dome lighting (the shading darkens the points)
+SHADED_CLOUD_COLOR = "#98a4b0"
 
 UPPER_LEFT, UPPER_RIGHT, LOWER_RIGHT = 2, 3, 1  # vtkCornerAnnotation corner indices
 #: the view's principal axes come from at most about this many of the visible points
@@ -151,6 +155,13 @@ class SceneView(QObject):
         #: window sets it from the user's choice (View > Up Axis)
         self.up_axis = "z"
         self._meshes: dict[str, pv.PolyData] = {}
+        #: the cloud's points (all of them, drawn or not) and the indices of those drawn (None:
+        #: all; a big cloud draws at most ``display_budget``: :mod:`app.viewport.cloud_detail`)
+        self._cloud_count = 0
+        self._cloud_shown: np.ndarray | None = None
+        self.display_budget = DISPLAY_BUDGET
+        #: whether eye-dome lighting shades the view (on while a big cloud is drawn reduced)
+        self.eye_dome_lighting = False
         self._actors: dict[str, object] = {}
         self._visible = {layer: True for layer in LAYERS}
         self._visible["control_net"] = False
@@ -219,8 +230,12 @@ class SceneView(QObject):
             self._apply_deviation_surface()
 
     def set_cloud(self, points: np.ndarray | None):
-        """The (stacked) target cloud (N, 3); resets its deviation colouring."""
-        mesh = pv.PolyData(np.zeros((0, 3)) if points is None else np.asarray(points, float))
+        """The (stacked) target cloud (N, 3); resets its deviation colouring. Above the display
+        budget only an even subset of the points is drawn (:meth:`shown_points`)."""
+        points = np.zeros((0, 3)) if points is None else np.asarray(points, float)
+        self._cloud_count = len(points)
+        self._cloud_shown = shown_indices(len(points), self.display_budget)
+        mesh = pv.PolyData(points if self._cloud_shown is None else points[self._cloud_shown])
         mesh.point_data[DEVIATION_TITLE] = np.zeros(mesh.n_points)
         if "cloud" not in self._meshes:
             self._layer("cloud", mesh, color=COLORS["cloud"], point_size=(
@@ -229,14 +244,40 @@ class SceneView(QObject):
             self.deviation_colours.attach(self._actors["cloud"].mapper)
         else:
             self._layer("cloud", mesh)
+        self._set_eye_dome(self._cloud_shown is not None)
         self.set_deviation(None)
+
+    def _set_eye_dome(self, on: bool) -> None:
+        """Eye-dome lighting (VTK's screen-space shading of depth edges) while a big cloud is
+        drawn: a million points of one colour are a flat silhouette, the shading shows their
+        shape. It works under software OpenGL (Xvfb's llvmpipe) at little cost per frame."""
+        # lighter points: the shading darkens them where the depth changes
+        self._actors["cloud"].prop.color = SHADED_CLOUD_COLOR if on else COLORS["cloud"]
+        if on == self.eye_dome_lighting:
+            return
+        if on:
+            self.plotter.enable_eye_dome_lighting()
+        else:
+            self.plotter.disable_eye_dome_lighting()
+        self.eye_dome_lighting = on
+
+    def shown_points(self) -> tuple[int, int]:
+        """(points drawn, points in the cloud)."""
+        shown = self._cloud_count if self._cloud_shown is None else len(self._cloud_shown)
+        return shown, self._cloud_count
+
+    def shown_points_text(self) -> str:
+        """"showing N of M points" when a big cloud is drawn reduced, else ""."""
+        return shown_text(*self.shown_points())
 
     def show_selection(self, points: np.ndarray | None):
         """The selected points (M, 3) drawn over the cloud, larger and in the highlight colour
         (None or empty: no highlight); hidden with the cloud."""
         if (points is None or not len(points)) and "selection" not in self._meshes:
             return  # created with the first selection: drawn after the cloud, so on top of it
-        mesh = pv.PolyData(np.zeros((0, 3)) if points is None else np.asarray(points, float))
+        points = np.zeros((0, 3)) if points is None else np.asarray(points, float)
+        shown = shown_indices(len(points), self.display_budget)  # a big selection drawn reduced
+        mesh = pv.PolyData(points if shown is None else points[shown])
         self._layer("selection", mesh, color=COLORS["selection"], point_size=5.0)
         self._apply_visibility("selection")
         self.request_render()
@@ -250,7 +291,8 @@ class SceneView(QObject):
         mesh = self._meshes.get("cloud")
         if mesh is None:
             return
-        valid = deviation is not None and len(deviation) == mesh.n_points and mesh.n_points > 0
+        count = self._cloud_count
+        valid = deviation is not None and len(deviation) == count and count > 0
         self._has_deviation = bool(valid)
         self._deviation_mode = mode
         self._deviation_map = None
@@ -268,8 +310,11 @@ class SceneView(QObject):
         self.request_render()
 
     def _write_cloud_values(self, values: np.ndarray):
+        """One value per cloud point (all of them): the drawn points' go to the mesh."""
         mesh = self._meshes["cloud"]
-        mesh.point_data[DEVIATION_TITLE][:] = values
+        values = np.asarray(values)
+        mesh.point_data[DEVIATION_TITLE][:] = (values if self._cloud_shown is None
+                                               else values[self._cloud_shown])
         mesh.point_data[DEVIATION_TITLE] = mesh.point_data[DEVIATION_TITLE]  # mark modified
 
     def set_deviation_map(self, deviation_map: DeviationMap | None):
@@ -280,14 +325,14 @@ class SceneView(QObject):
         mesh = self._meshes.get("cloud")
         if mesh is None:
             return
-        if deviation_map is None or len(deviation_map.distances) != mesh.n_points:
+        if deviation_map is None or len(deviation_map.distances) != self._cloud_count:
             self._deviation_map = None
             self._show_deviation_surface(None)
             self._update_scalar_bar()
             self.request_render()
             return
         self._deviation_map = deviation_map
-        self._has_deviation = mesh.n_points > 0
+        self._has_deviation = self._cloud_count > 0
         self._deviation_mode = deviation_map.mode
         self._write_cloud_values(deviation_map.distances)
         self.deviation_colours.set_values(deviation_map.distances, signed=True,

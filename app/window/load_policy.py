@@ -233,7 +233,8 @@ class LoadPolicy(QObject):
         if loaded.patch_names:
             sources = sorted({Path(p).name for p in paths} - {t.name for t in loaded.targets})
             counts.append(f"{len(loaded.patch_names)} NURBS shape(s) from {names(sources)}")
-        self.message = f"Opened {'; '.join(counts)}"
+        shown = window.scene.shown_points_text()  # a big cloud is drawn reduced
+        self.message = f"Opened {'; '.join(counts)}" + (f" ({shown})" if shown else "")
         window.report(f"{self.message}. {units_note}")
         window.setWindowTitle(f"NURBS Studio - {names([Path(p).name for p in paths])}")
         window.files_loaded.emit(True)

@@ -1,0 +1,93 @@
+"""Reduced detail for big clouds (issue 28, item 6): the viewport draws at most its display
+budget of points, while the document, selection and deviation keep every point."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from app_helpers import open_by_drop
+from test_selection import _drag, _grid_cloud, _vtk_display
+
+from app.viewport.cloud_detail import DISPLAY_BUDGET, shown_indices, shown_text
+
+
+def test_small_clouds_are_drawn_whole():
+    assert shown_indices(DISPLAY_BUDGET) is None
+    assert shown_indices(10, budget=10) is None
+    assert shown_text(10, 10) == ""
+    with pytest.raises(ValueError):
+        shown_indices(10, budget=0)
+
+
+def test_the_subset_is_within_the_budget_near_it_and_even():
+    count, budget = 1_000_000, 250_000
+    shown = shown_indices(count, budget)
+    assert shown is not None and 0.99 * budget < len(shown) <= budget
+    assert np.all(np.diff(shown) > 0) and shown[0] >= 0 and shown[-1] < count
+    # a 1000 x 1000 grid in row-major order (a scanner's order): every 100 x 100 block keeps
+    # its share, so the subset has no holes and no stripes
+    rows, columns = np.divmod(shown, 1000)
+    blocks = np.bincount((rows // 100) * 10 + columns // 100, minlength=100)
+    share = 100 * 100 * len(shown) / count
+    assert np.all(np.abs(blocks - share) < 0.05 * share)
+    np.testing.assert_array_equal(shown_indices(count, budget), shown)  # same cloud, same view
+    # one point over: one point fewer drawn, and not always the last one
+    over = shown_indices(DISPLAY_BUDGET + 1)
+    assert over is not None and len(over) == DISPLAY_BUDGET and len(np.unique(over)) == len(over)
+    assert over[-1] == DISPLAY_BUDGET or len(np.setdiff1d(np.arange(DISPLAY_BUDGET), over)) == 1
+
+
+def test_a_million_points_draw_at_most_the_budget(window):
+    points = np.random.default_rng(1).uniform(-1.0, 1.0, (1_000_000, 3))
+    window.scene.set_cloud(points)
+    mesh = window.scene._meshes["cloud"]
+    assert mesh.n_points <= DISPLAY_BUDGET
+    assert window.scene.shown_points() == (mesh.n_points, 1_000_000)
+    assert window.scene.shown_points_text() == f"showing {mesh.n_points:,} of 1,000,000 points"
+    assert window.scene.eye_dome_lighting  # the shading that shows a big cloud's shape
+    # the deviation of every point is accepted; the drawn points show their own values
+    deviation = np.linalg.norm(points, axis=1)
+    window.scene.set_deviation(deviation)
+    assert window.scene.deviation_shown()
+    drawn = np.asarray(mesh.point_data["Deviation"])
+    np.testing.assert_allclose(drawn, np.linalg.norm(np.asarray(mesh.points), axis=1))
+
+
+def test_a_cloud_over_the_budget_is_drawn_reduced_and_selected_whole(qtbot, window, tmp_path):
+    path, points = _grid_cloud(tmp_path / "grid.xyz")  # 1,600 points
+    window.scene.display_budget = 500
+    open_by_drop(qtbot, window, [path])
+    mesh = window.scene._meshes["cloud"]
+    assert 400 < mesh.n_points <= 500
+    assert window.scene.eye_dome_lighting
+    assert len(window.document.target_points()) == len(points)  # the document keeps them all
+    assert f"showing {mesh.n_points:,} of 1,600 points" in window.statusBar().currentMessage()
+    # every drawn point is one of the cloud's
+    drawn = np.asarray(mesh.points)
+    nearest = np.min(np.linalg.norm(drawn[:, None, :] - points[None, :, :], axis=2), axis=1)
+    assert nearest.max() < 1e-9
+
+    # a box picks every point inside it, drawn or not (VTK's projection of all 1,600 points)
+    window.scene.standard_view("top")
+    window.scene.render_now()
+    reference = _vtk_display(window, points)
+    window.box_select_action.trigger()
+    low, high = reference.min(axis=0), reference.max(axis=0)
+    corner_a, corner_b = low + 0.2 * (high - low), low + 0.6 * (high - low)
+    _drag(window, [corner_a, corner_b])
+    a, b = np.round(corner_a), np.round(corner_b)
+    inside = np.all((reference >= np.minimum(a, b)) & (reference <= np.maximum(a, b)), axis=1)
+    assert inside.sum() > 150
+    np.testing.assert_array_equal(window.document.selection, inside)
+    drawn_inside = np.all((_vtk_display(window, drawn) >= np.minimum(a, b))
+                          & (_vtk_display(window, drawn) <= np.maximum(a, b)), axis=1)
+    assert inside.sum() > drawn_inside.sum()  # more were selected than drawn there
+    label = window.status_labels["selection"]
+    assert label.text() == f"{inside.sum():,} of 1,600 points selected"
+
+    # the load message of a small cloud says nothing of it
+    window.scene.display_budget = DISPLAY_BUDGET
+    open_by_drop(qtbot, window, [path])
+    assert window.scene.shown_points() == (1600, 1600)
+    assert "showing" not in window.statusBar().currentMessage()
+    assert not window.scene.eye_dome_lighting
