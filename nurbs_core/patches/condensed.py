@@ -25,7 +25,7 @@ import scipy.sparse
 
 from nurbs_core.patches.evaluate import LocalRows, global_rows
 from nurbs_core.patches.network import PatchNetwork
-from nurbs_core.sparse_solve import DriftingSpdSolver, solve_spd
+from nurbs_core.sparse_solve import solve_spd
 
 
 @dataclass
@@ -211,8 +211,7 @@ class _SchurPattern:
     """Where each patch's Schur block (P, nb, nb) adds into the CSR matrix on the shared control
     points: shared (S,) their global indices, columns (P, nb) each patch's border unknowns
     there (3 per point), slot (P nb^2,) each block entry's place in the CSR data, indices and
-    indptr the CSR structure, diagonal the diagonal's places; solver: the passes' solves on
-    this pattern (one factorisation reused while the values drift little)."""
+    indptr the CSR structure, diagonal the diagonal's places."""
 
     def __init__(self, index: np.ndarray, bi: np.ndarray, bj: np.ndarray) -> None:
         self.index = index
@@ -228,7 +227,6 @@ class _SchurPattern:
         row, self.indices = np.divmod(entries, count)
         self.indptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=count))])
         self.diagonal = np.flatnonzero(row == self.indices)
-        self.solver = DriftingSpdSolver()
 
     def matrix(self, blocks: np.ndarray, ridge: float) -> scipy.sparse.csr_matrix:
         """The sum of the blocks (P, nb, nb) plus ``ridge`` on the diagonal, (count, count)."""
@@ -361,9 +359,8 @@ class _Condensed:
         patches = network.patch_count
         pattern = self.work.pattern(network.index, self.bi, self.bj)
         columns = pattern.columns
-        border = pattern.solver.solve(
-            pattern.matrix(self.schur, ridge),
-            np.bincount(columns.ravel(), self.b_b.ravel(), minlength=pattern.count))
+        border = solve_spd(pattern.matrix(self.schur, ridge),
+                           np.bincount(columns.ravel(), self.b_b.ravel(), minlength=pattern.count))
         control = np.zeros((len(network.control_points), 3))
         control[pattern.shared] = border.reshape(-1, 3)
         if self.ni:
