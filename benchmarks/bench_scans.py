@@ -18,6 +18,7 @@ the issue lists):
 * ``bunny_mesh_holes``: the same mesh with four holes cut into its base (not watertight: the
   route rebuilds it from the mesh's points);
 * ``bunny_cloud``: 10,000 points sampled on the bunny, noise 5e-4 of the diagonal;
+* ``bunny_cloud_20k``: the same with 20,000 points (issue 27's network speed target);
 * ``bunny_head``: the 45% of that cloud above y's 55th percentile (an open scan with two thin
   ears);
 * ``head``: ``samples.head``, a closed NURBS sampled uniformly in its parameters (uneven);
@@ -45,11 +46,12 @@ ROOT = Path(__file__).resolve().parents[1]
 BUNNY = ROOT / "tests" / "data" / "stanford_bunny_1839.ply"
 
 
-def _bunny_cloud() -> np.ndarray:
+def _bunny_cloud(count: int = 10_000) -> np.ndarray:
+    """(count, 3) points sampled on the bunny's mesh by area, with Gaussian noise."""
     import trimesh
 
     bunny = trimesh.load(BUNNY, process=False)
-    points, _ = trimesh.sample.sample_surface(bunny, 10_000, seed=1)
+    points, _ = trimesh.sample.sample_surface(bunny, count, seed=1)
     sigma = 5e-4 * float(np.linalg.norm(np.ptp(points, axis=0)))
     return points + np.random.default_rng(0).normal(0.0, sigma, points.shape)
 
@@ -81,6 +83,10 @@ def _bunny_mesh_holes(folder: Path) -> Path:
 
 def _bunny_cloud_file(folder: Path) -> Path:
     return _write_points(folder / "bunny_cloud.xyz", _bunny_cloud())
+
+
+def _bunny_cloud_20k_file(folder: Path) -> Path:
+    return _write_points(folder / "bunny_cloud_20k.xyz", _bunny_cloud(20_000))
 
 
 def _bunny_head(folder: Path) -> Path:
@@ -138,6 +144,7 @@ CASES: dict[str, Callable[[Path], Path]] = {
     "bunny_mesh": _bunny_mesh,
     "bunny_mesh_holes": _bunny_mesh_holes,
     "bunny_cloud": _bunny_cloud_file,
+    "bunny_cloud_20k": _bunny_cloud_20k_file,
     "bunny_head": _bunny_head,
     "head": _head,
     "head_holes": _head_holes,

@@ -611,7 +611,8 @@ def _commit(layout: _Layout, before: dict[int, list[int] | None], after: dict[in
                               or [np.zeros(0)]).reshape(-1, 4, 3)
 
     changed_ids = sorted(changed)
-    if not shape.facing(corners(after, changed_ids)):
+    changed_corners = corners(after, changed_ids)
+    if not shape.facing(changed_corners):
         return None
     removed = set(before) - set(after)
     if _edge_overuse(after):
@@ -623,7 +624,7 @@ def _commit(layout: _Layout, before: dict[int, list[int] | None], after: dict[in
         return None
     # coverage: the mesh vertices near the changed quads stay close to the layout
     live_ids = sorted(after)
-    near = shape.watched(changed | removed, corners(after, changed_ids))
+    near = shape.watched(changed | removed, changed_corners)
     measured = shape.holds(corners(after, live_ids), live_ids, near, cover)
     if measured is None:
         return None
