@@ -435,6 +435,55 @@ def _check_faces(path: StrPath, faces: np.ndarray, vertex_count: int) -> None:
                                     f"{vertex_count} vertices")
 
 
+#: an OBJ face line of 5 or more corners (trimesh splits it into a fan of triangles)
+_OBJ_POLYGON = re.compile(rb"^[ \t]*f((?:[ \t]+[^ \t\r\n]+){5,})[ \t]*\r?$", re.MULTILINE)
+#: a fan triangle turned further than this from its polygon's normal (cosine of 60 degrees)
+_FAN_MIN_COSINE = 0.5
+
+
+def _polygons(path: StrPath, suffix: str, mesh: trimesh.Trimesh) -> Iterator[np.ndarray]:
+    """The corner indices of every face of 5 or more corners of an OBJ or PLY file (indices
+    into ``mesh.vertices``; trimesh has already checked they are in range)."""
+    vertex_count = len(mesh.vertices)
+    if suffix == ".obj":
+        with open(path, "rb") as handle:
+            data = handle.read()
+        for found in _OBJ_POLYGON.finditer(data):
+            corners = np.array([int(token.split(b"/")[0]) for token in found.group(1).split()])
+            yield np.where(corners < 0, corners + vertex_count, corners - 1)
+    elif suffix == ".ply":
+        raw = mesh.metadata.get("_ply_raw", {}).get("face", {}).get("data", {})
+        lists = raw.get("vertex_indices", raw.get("vertex_index")) if isinstance(raw, dict) else None
+        if lists is None or (isinstance(lists, np.ndarray) and lists.dtype != object
+                             and (lists.ndim != 2 or lists.shape[1] < 5)):
+            return
+        for corners in lists:
+            if len(corners) >= 5:
+                yield np.asarray(corners, np.int64)
+
+
+def _check_polygons(path: StrPath, suffix: str, mesh: trimesh.Trimesh) -> None:
+    """trimesh splits a face of many corners into a fan of triangles from its first corner:
+    when the corners are not on one plane (or the polygon turns back on itself), the fan's
+    triangles cut through the shape as slivers, and sampling them gives a tangle of points that
+    no surface fits (a 162-corner face of a sphere's vertices took 10 minutes). Such a face is
+    refused with its size, before any sampling."""
+    vertices = np.asarray(mesh.vertices, np.float64)
+    for corners in _polygons(path, suffix, mesh):
+        if corners.min() < 0 or corners.max() >= len(vertices):
+            continue  # refused by _check_faces with the vertex it names
+        points = vertices[corners]
+        fan = np.cross(points[1:-1] - points[0], points[2:] - points[0])
+        normal = fan.sum(axis=0)
+        lengths = np.linalg.norm(fan, axis=1)
+        scale = float(np.linalg.norm(normal)) * lengths
+        kept = scale > 0
+        if not kept.any() or not np.all(fan[kept] @ normal >= _FAN_MIN_COSINE * scale[kept]):
+            raise FileFormatError(path, f"a face of {len(corners)} corners is not a flat polygon, "
+                                        "so its triangles would cut through the shape; save the "
+                                        "mesh as triangles, or the scan as points")
+
+
 def _sample(path: StrPath, mesh: trimesh.Trimesh, count: int, seed: int) -> PointCloud:
     """``count`` points uniform over the area of a trimesh.Trimesh (trimesh's area-weighted
     sampling) with their face normals and face indices."""
@@ -515,6 +564,7 @@ def read_mesh_faces(path: StrPath, suffix: str) -> tuple[np.ndarray, np.ndarray]
     if not isinstance(mesh, trimesh.Trimesh) or len(faces) == 0:
         return None
     vertices = np.asarray(mesh.vertices, np.float64)
+    _check_polygons(path, suffix, mesh)
     # before trimesh's processing, which drops NaN / inf vertices and their triangles without a
     # word (a closed mesh became an open one and took another route)
     check_points(path, vertices)

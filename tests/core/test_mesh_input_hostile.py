@@ -89,3 +89,47 @@ def test_obj_faces_with_zeros_elsewhere_are_not_refused(tmp_path, face):
     path = tmp_path / "fine.obj"
     path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n" + face + "\nvt 0 0\n")
     _check_obj(path)  # a normal or texture index 0 is not a vertex (trimesh decides on those)
+
+
+def _write_one_polygon(path, vertices: np.ndarray) -> None:
+    corners = range(len(vertices))
+    if path.suffix == ".obj":
+        path.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in vertices)
+                        + "f " + " ".join(f"{i + 1}" for i in corners) + "\n")
+    else:
+        path.write_text(f"ply\nformat ascii 1.0\nelement vertex {len(vertices)}\n"
+                        "property float x\nproperty float y\nproperty float z\n"
+                        "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                        + "".join(f"{x} {y} {z}\n" for x, y, z in vertices)
+                        + f"{len(vertices)} " + " ".join(map(str, corners)) + "\n")
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".obj"])
+def test_a_face_of_many_corners_off_one_plane_is_refused_at_once(tmp_path, suffix):
+    import time
+
+    from nurbs_core.io.errors import FileFormatError
+    from nurbs_core.jobs.network import surface_input
+
+    sphere = np.random.default_rng(0).normal(size=(162, 3))
+    sphere /= np.linalg.norm(sphere, axis=1, keepdims=True)
+    path = tmp_path / f"polygon{suffix}"
+    _write_one_polygon(path, sphere)
+    started = time.perf_counter()
+    # before: trimesh's fan of 160 slivers through the sphere was sampled into a tangle of
+    # 10,000 points; nurbs-fit took 597 s and 670 MB to end "fitted with warnings"
+    with pytest.raises(FileFormatError, match="162 corners is not a flat polygon") as refused:
+        surface_input(str(path), quiet=True)
+    assert time.perf_counter() - started < 10
+    assert str(path) in str(refused.value) and "\n" not in str(refused.value)
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".obj"])
+def test_a_flat_face_of_many_corners_keeps_its_triangles(tmp_path, suffix):
+    from nurbs_core.io.meshes import read_mesh_faces
+
+    angles = np.linspace(0, 2 * np.pi, 162, endpoint=False)
+    path = tmp_path / f"disc{suffix}"
+    _write_one_polygon(path, np.c_[np.cos(angles), np.sin(angles), np.zeros(162)])
+    read = read_mesh_faces(path, suffix)
+    assert read is not None and len(read[1]) == 160
