@@ -65,6 +65,15 @@ class SheetStart:
     closed: str | None = None
 
 
+#: the fewest points a cloud's map is built on (surfacing.mesh.cloud_mesh's minimum)
+MIN_MAP_POINTS = 8
+
+
+class TooLittleSurface(ValueError):
+    """A large cloud gathered in a few tiny spots (two small triangles far apart): at the
+    map's resolution there is no surface between them to fit."""
+
+
 def sheet_start(cloud: NormalisedCloud, config: FitConfig) -> SheetStart:
     """The fold-free start (see the module docstring). Raises ValueError (with the reason and a
     pointer to multi-patch surfacing) for closed shapes and shapes with handles unless
@@ -82,7 +91,12 @@ def sheet_start(cloud: NormalisedCloud, config: FitConfig) -> SheetStart:
     # a large cloud: mesh and map the centroids of about MESH_POINTS voxels, then fit the points
     # themselves (a seeded random subset of PASS_POINTS of them when there are more), whose
     # (u, v) come from the map's triangles
-    start = _sheet_start(points_to_map(points, MESH_POINTS), config, corners)
+    mapped = points_to_map(points, MESH_POINTS)
+    if len(mapped) < MIN_MAP_POINTS:
+        raise TooLittleSurface(f"its points hold too little surface to fit: they gather in "
+                               f"only {len(mapped)} small spots far apart (a surface needs "
+                               f"them spread over at least {MIN_MAP_POINTS})")
+    start = _sheet_start(mapped, config, corners)
     subset = None
     if len(points) > PASS_POINTS:
         subset = np.sort(np.random.default_rng(config.seed).choice(len(points), PASS_POINTS,

@@ -32,6 +32,15 @@ def fit_one(job: FitJob, points: np.ndarray | None = None,
 
     The three steps, :func:`prepare_fit`, :func:`run_fit` and :func:`finish_fit`, are also run
     apart (a batch fits many prepared inputs at once with ``fit_batch``)."""
+    from nurbs_core.fitting.sheet import TooLittleSurface
+
+    try:
+        return _fit_one(job, points, stoppable)
+    except TooLittleSurface as exc:  # the engine does not know the file: the user needs it
+        raise ValueError(f"{job.input}: {exc}") from None
+
+
+def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[str, Any]:
     if job.trim:
         from nurbs_core.jobs.single import fit_trimmed_job
 

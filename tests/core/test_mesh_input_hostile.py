@@ -133,3 +133,18 @@ def test_a_flat_face_of_many_corners_keeps_its_triangles(tmp_path, suffix):
     _write_one_polygon(path, np.c_[np.cos(angles), np.sin(angles), np.zeros(162)])
     read = read_mesh_faces(path, suffix)
     assert read is not None and len(read[1]) == 160
+
+
+def test_two_small_triangles_far_apart_are_refused_naming_the_file(tmp_path, capsys):
+    from nurbs_core.cli import main
+
+    triangle = np.array([[0, 0, 0], [0.01, 0, 0], [0, 0.01, 0]])
+    vertices = np.concatenate([triangle, triangle + [100, 0, 0]])
+    path = tmp_path / "two.stl"
+    _write(path, vertices, np.array([[0, 1, 2], [3, 4, 5]]))
+    # before: "nurbs-fit: error: a mesh needs at least 8 points of shape (N, 3), got (2, 3)"
+    assert main([str(path), "-o", str(tmp_path / "two.json"), "-q"]) != 0
+    errors = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert len(errors) == 1 and str(path) in errors[0]
+    assert "too little surface to fit" in errors[0] and "(N, 3)" not in errors[0]
+    assert not (tmp_path / "two.json").exists()
