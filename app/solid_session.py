@@ -105,7 +105,22 @@ def _check_tolerance(tolerance: float, shape: Any) -> None:
                          f"makes ({MIN_TOLERANCE:g} of its size, {diagonal:.4g})")
 
 
-def _face(number: int, item: Any) -> FaceRow:
+#: the most face edits a session may hold: each one is replayed (a refit of its regions and a
+#: rebuild of the solid, seconds each) when the solid is edited again; a user makes tens
+MAX_EDITS = 1_000
+
+
+def _all_finite(value: Any, depth: int = 0) -> bool:
+    """Whether every number in a face's parameter (a number, text, or a list of them, nested
+    at most a few deep) is finite."""
+    if isinstance(value, float):
+        return math.isfinite(value)
+    if isinstance(value, list) and depth < 4:
+        return all(_all_finite(item, depth + 1) for item in value)
+    return isinstance(value, (int, str)) or value is None
+
+
+def _face(number: int, item: Any, point_count: int) -> FaceRow:
     if not isinstance(item, dict) or not isinstance(item.get("kind"), str) or not isinstance(
             item.get("description"), str) or not isinstance(item.get("parameters"), dict):
         raise ValueError(f"the solid's face {number} needs a kind, a description and parameters")
@@ -115,18 +130,36 @@ def _face(number: int, item: Any) -> FaceRow:
     region = item.get("region", -1)  # sessions before face edits have none
     if isinstance(region, bool) or not isinstance(region, int) or region < -1:
         raise ValueError(f"the solid's face {number} has a region that is no index")
+    if region >= point_count:  # every region holds points of the scan
+        raise ValueError(f"the solid's face {number} lies on region {region}, but the solid "
+                         f"was fitted to {point_count} points: there is no such region")
+    bad = next((key for key, value in item["parameters"].items() if not _all_finite(value)),
+               None)
+    if bad is not None:
+        raise ValueError(f"the solid's face {number} has a parameter {str(bad)[:40]!r} that is "
+                         "not a finite number")
     return FaceRow(item["kind"], item["description"], dict(item["parameters"]), points,
                    _number(item, "mean"), _number(item, "p99"), region)
 
 
-def _edits(document: dict[str, Any]) -> tuple[dict[str, Any], ...]:
-    """The solid's face edits, each checked as the engine reads it (ValueError)."""
+def _edits(document: dict[str, Any], point_count: int) -> tuple[dict[str, Any], ...]:
+    """The solid's face edits (at most :data:`MAX_EDITS`), each checked as the engine reads it
+    and its regions against the ``point_count`` points the solid was fitted to (ValueError)."""
     from nurbs_core.brep.face_edits import FaceEdit
 
     edits = document.get("edits", [])
     if not isinstance(edits, list):
         raise ValueError("the solid's edits must be a list")
-    return tuple(FaceEdit.from_dict(edit).as_dict() for edit in edits)
+    if len(edits) > MAX_EDITS:
+        raise ValueError(f"the solid holds {len(edits)} face edits, more than the {MAX_EDITS} a "
+                         "session may replay")
+    checked = tuple(FaceEdit.from_dict(edit) for edit in edits)
+    for number, edit in enumerate(checked):
+        wrong = [r for r in edit.regions if not 0 <= r < point_count]
+        if wrong:
+            raise ValueError(f"the solid's face edit {number} names region {wrong[0]}, but the "
+                             f"solid was fitted to {point_count} points: there is no such region")
+    return tuple(edit.as_dict() for edit in checked)
 
 
 def solid_from_document(document: Any, arrays: dict[str, np.ndarray]) -> PartOutcome:
@@ -138,7 +171,6 @@ def solid_from_document(document: Any, arrays: dict[str, np.ndarray]) -> PartOut
     faces = document.get("faces")
     if not isinstance(faces, list) or not faces:
         raise ValueError("the solid needs its faces")
-    rows = tuple(_face(k, item) for k, item in enumerate(faces))
     problems = document.get("problems", [])
     if not isinstance(problems, list) or not all(isinstance(p, str) for p in problems):
         raise ValueError("the solid's problems must be a list of text")
@@ -150,6 +182,7 @@ def solid_from_document(document: Any, arrays: dict[str, np.ndarray]) -> PartOut
     if distances.ndim != 1 or point_faces.shape != distances.shape or not len(distances):
         raise ValueError(f"the solid's per-point arrays have shapes {distances.shape} and "
                          f"{point_faces.shape}: one value per point each")
+    rows = tuple(_face(k, item, len(distances)) for k, item in enumerate(faces))
     if not np.isfinite(distances).all():
         raise ValueError(f"the solid's distances hold {int((~np.isfinite(distances)).sum())} "
                          "NaN or infinite values: every point's distance is measured")
@@ -163,7 +196,7 @@ def solid_from_document(document: Any, arrays: dict[str, np.ndarray]) -> PartOut
                          _number(document, "volume"), status, tuple(problems),
                          _positive(document, "noise"), _positive(document, "tolerance"),
                          distances, point_faces, reason if isinstance(reason, str) else "",
-                         _number(document, "seconds"), _edits(document),
+                         _number(document, "seconds"), _edits(document, len(distances)),
                          bool(document.get("open_shell")))
     shape = shape_from_brep(document["brep"])
     _check_tolerance(report.tolerance, shape)

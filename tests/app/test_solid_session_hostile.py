@@ -114,3 +114,40 @@ def test_fractional_nearest_faces_are_refused_not_truncated(box_solid):
 
     document, arrays = box_solid
     _refused(document, {**arrays, POINT_FACES: np.full(600, 0.7)}, "not face numbers")
+
+
+@pytest.mark.parametrize("region", [10**30, 600])
+def test_a_face_on_a_region_the_scan_cannot_have_is_refused_on_load(box_solid, region):
+    # before: region 10**30 opened, and was refused only when an edit used it
+    document, arrays = box_solid
+    faces = [dict(face) for face in document["faces"]]
+    faces[2]["region"] = region
+    _refused({**document, "faces": faces}, arrays, f"face 2 lies on region {region}, but")
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), [0.0, float("nan"), 1.0]])
+def test_a_non_finite_face_parameter_is_refused_on_load(box_solid, value):
+    # before: a NaN radius or axis opened and was shown in the face table
+    document, arrays = box_solid
+    faces = [dict(face) for face in document["faces"]]
+    faces[4]["parameters"] = {**faces[4]["parameters"], "radius": value}
+    _refused({**document, "faces": faces}, arrays, "face 4 has a parameter 'radius' that is "
+                                                   "not a finite number")
+
+
+def test_an_edit_naming_a_region_the_scan_cannot_have_is_refused_on_load(box_solid):
+    document, arrays = box_solid
+    edits = [{"action": "merge", "regions": [0, 10**30], "kind": None}]
+    _refused({**document, "edits": edits}, arrays, "face edit 0 names region 10000000000")
+
+
+def test_more_face_edits_than_a_session_replays_are_refused(box_solid):
+    from app.solid_session import MAX_EDITS, solid_from_document
+
+    # before: 100,000 edits opened, each to be replayed (a refit and a rebuild) on the next edit
+    document, arrays = box_solid
+    edit = {"action": "type", "regions": [1], "kind": "plane"}
+    _refused({**document, "edits": [edit] * 100_000}, arrays, "holds 100000 face edits, more "
+                                                               f"than the {MAX_EDITS}")
+    kept = solid_from_document({**document, "edits": [edit] * MAX_EDITS}, arrays)
+    assert len(kept.report.edits) == MAX_EDITS
