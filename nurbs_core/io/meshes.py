@@ -441,16 +441,46 @@ _OBJ_POLYGON = re.compile(rb"^[ \t]*f((?:[ \t]+[^ \t\r\n]+){5,})[ \t]*\r?$", re.
 _FAN_MIN_COSINE = 0.5
 
 
+def _whole_numbers(words: list[str] | list[bytes]) -> np.ndarray | None:
+    """The words as whole numbers (K,) int64, or None when one is not."""
+    try:
+        return np.array([int(word) for word in words], np.int64)
+    except (ValueError, OverflowError):
+        return None
+
+
+def _off_polygons(path: StrPath) -> Iterator[np.ndarray]:
+    """The corners of an OFF file's faces of 5 or more corners (its face lines: a corner count
+    then the corners' vertex indices; trimesh has read the file, so its counts are good)."""
+    with open(path, "rb") as handle:
+        text = re.sub(r"#[^\n]*", "", handle.read().decode("utf-8", errors="replace"))
+    found = re.search(r"(COFF|OFF)", text)
+    if found is None:
+        return
+    lines = [line.split() for line in text[found.end():].splitlines() if line.strip()]
+    if not lines or len(lines[0]) < 2:
+        return
+    vertex_count, face_count = int(lines[0][0]), int(lines[0][1])
+    for words in lines[1 + vertex_count:1 + vertex_count + face_count]:
+        if len(words) > 5 and words[0].isdigit() and int(words[0]) >= 5:
+            corners = _whole_numbers(words[1:1 + int(words[0])])
+            if corners is not None:
+                yield corners
+
+
 def _polygons(path: StrPath, suffix: str, mesh: trimesh.Trimesh) -> Iterator[np.ndarray]:
-    """The corner indices of every face of 5 or more corners of an OBJ or PLY file (indices
-    into ``mesh.vertices``; trimesh has already checked they are in range)."""
+    """The corner indices of every face of 5 or more corners of an OBJ, OFF or PLY file
+    (indices into ``mesh.vertices``; out-of-range ones are refused by the caller)."""
     vertex_count = len(mesh.vertices)
     if suffix == ".obj":
         with open(path, "rb") as handle:
             data = handle.read()
         for found in _OBJ_POLYGON.finditer(data):
-            corners = np.array([int(token.split(b"/")[0]) for token in found.group(1).split()])
-            yield np.where(corners < 0, corners + vertex_count, corners - 1)
+            corners = _whole_numbers([token.split(b"/")[0] for token in found.group(1).split()])
+            if corners is not None:  # trimesh has read the face; its checks name bad ones
+                yield np.where(corners < 0, corners + vertex_count, corners - 1)
+    elif suffix == ".off":
+        yield from _off_polygons(path)
     elif suffix == ".ply":
         raw = mesh.metadata.get("_ply_raw", {}).get("face", {}).get("data", {})
         lists = raw.get("vertex_indices", raw.get("vertex_index")) if isinstance(raw, dict) else None

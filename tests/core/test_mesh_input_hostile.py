@@ -96,6 +96,10 @@ def _write_one_polygon(path, vertices: np.ndarray) -> None:
     if path.suffix == ".obj":
         path.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in vertices)
                         + "f " + " ".join(f"{i + 1}" for i in corners) + "\n")
+    elif path.suffix == ".off":
+        path.write_text(f"OFF\n# one polygon\n{len(vertices)} 1 0\n"
+                        + "".join(f"{x} {y} {z}\n" for x, y, z in vertices)
+                        + f"{len(vertices)} " + " ".join(map(str, corners)) + "\n")
     else:
         path.write_text(f"ply\nformat ascii 1.0\nelement vertex {len(vertices)}\n"
                         "property float x\nproperty float y\nproperty float z\n"
@@ -104,7 +108,7 @@ def _write_one_polygon(path, vertices: np.ndarray) -> None:
                         + f"{len(vertices)} " + " ".join(map(str, corners)) + "\n")
 
 
-@pytest.mark.parametrize("suffix", [".ply", ".obj"])
+@pytest.mark.parametrize("suffix", [".ply", ".obj", ".off"])
 def test_a_face_of_many_corners_off_one_plane_is_refused_at_once(tmp_path, suffix):
     import time
 
@@ -124,7 +128,7 @@ def test_a_face_of_many_corners_off_one_plane_is_refused_at_once(tmp_path, suffi
     assert str(path) in str(refused.value) and "\n" not in str(refused.value)
 
 
-@pytest.mark.parametrize("suffix", [".ply", ".obj"])
+@pytest.mark.parametrize("suffix", [".ply", ".obj", ".off"])
 def test_a_flat_face_of_many_corners_keeps_its_triangles(tmp_path, suffix):
     from nurbs_core.io.meshes import read_mesh_faces
 
