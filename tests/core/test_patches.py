@@ -338,3 +338,21 @@ def test_the_bunnys_seams_are_polished_until_they_meet_the_reports_limit():
     assert quality.seam.p99 <= WARN_SEAM
     assert quality.flipped_fraction <= 0.01
     assert result.status == "converged", result.warnings
+
+
+def test_an_instant_meshes_failure_is_a_failed_attempt_not_a_crash(monkeypatch):
+    import pyinstantmeshes
+
+    from nurbs_core.patches import layout
+
+    def extraction_fails(*args, **kwargs):
+        raise RuntimeError("Internal error in extraction")
+
+    # before: the RuntimeError ended nurbs-fit with "internal error (RuntimeError: Internal error
+    # in extraction)" on a mesh of slivers
+    monkeypatch.setattr(pyinstantmeshes, "remesh_file", extraction_fails)
+    monkeypatch.setattr(layout, "_REMESHED", {})
+    shape = samples.GENERATORS["sphere"](2000, noise=0.002, truth_count=4000)
+    mesh = closed_mesh(shape.points)
+    with pytest.raises(LayoutError, match="Instant Meshes failed .Internal error in extraction"):
+        quad_layout(mesh.vertices, mesh.faces, 24)
