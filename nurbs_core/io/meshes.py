@@ -569,6 +569,7 @@ def read_mesh_points(path: StrPath, suffix: str, mesh_mode: str = "vertices",
     if mesh_mode == "sample" and isinstance(mesh, trimesh.Trimesh) and len(faces) > 0:
         check_points(path, vertices)
         _check_faces(path, faces, len(vertices))
+        _check_polygons(path, suffix, mesh)
         return _sample(path, mesh, sample_count, seed)
     if suffix == ".stl":  # STL repeats each vertex once per triangle
         vertices, first = np.unique(vertices, axis=0, return_index=True)

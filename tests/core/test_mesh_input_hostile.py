@@ -152,3 +152,16 @@ def test_two_small_triangles_far_apart_are_refused_naming_the_file(tmp_path, cap
     assert len(errors) == 1 and str(path) in errors[0]
     assert "too little surface to fit" in errors[0] and "(N, 3)" not in errors[0]
     assert not (tmp_path / "two.json").exists()
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".obj", ".off"])
+def test_sampling_a_face_off_one_plane_is_refused_its_vertices_still_read(tmp_path, suffix):
+    from nurbs_core.io import load_points
+    from nurbs_core.io.errors import FileFormatError
+
+    sphere = np.random.default_rng(1).normal(size=(40, 3))
+    path = tmp_path / f"polygon{suffix}"
+    _write_one_polygon(path, sphere)
+    with pytest.raises(FileFormatError, match="40 corners is not a flat polygon"):
+        load_points(path, mesh_mode="sample", sample_count=1000)
+    assert load_points(path).points.shape == (40, 3)
