@@ -6,10 +6,12 @@ oriented by propagation over a minimum spanning tree of the k-nearest-neighbour 
 weight ``1 - |n_i . n_j|``: across nearly parallel normals first, so a sign decision is never
 taken across a sharp bend when a smoother path exists. The graph keeps each point's 6 lightest
 edges among its k neighbours (the MST takes every point's lightest edge anyway; Kruskal's sort of
-all N k edges would be most of the cost). numpy + scipy.sparse.csgraph only, no Python loop over
-points: each tree edge gets the sign ``sign(n_i . n_parent)`` and the orientation of a
-node, the product of the signs on its path to the root, is computed by pointer jumping (each pass
-doubles the path length covered, so ``log2(depth)`` vectorised passes).
+all N k edges would be most of the cost), plus the kNN edges that join pieces this pruning cut
+apart (a sparse corner of an open sheet), so the forest has the kNN graph's components.
+numpy + scipy.sparse.csgraph only, no Python loop over points: each tree edge gets the sign
+``sign(n_i . n_parent)`` and the orientation of a node, the product of the signs on its path to
+the root, is computed by pointer jumping (each pass doubles the path length covered, so
+``log2(depth)`` vectorised passes).
 """
 
 from __future__ import annotations
