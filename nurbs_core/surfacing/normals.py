@@ -6,10 +6,12 @@ oriented by propagation over a minimum spanning tree of the k-nearest-neighbour 
 weight ``1 - |n_i . n_j|``: across nearly parallel normals first, so a sign decision is never
 taken across a sharp bend when a smoother path exists. The graph keeps each point's 6 lightest
 edges among its k neighbours (the MST takes every point's lightest edge anyway; Kruskal's sort of
-all N k edges would be most of the cost). numpy + scipy.sparse.csgraph only, no Python loop over
-points: each tree edge gets the sign ``sign(n_i . n_parent)`` and the orientation of a
-node, the product of the signs on its path to the root, is computed by pointer jumping (each pass
-doubles the path length covered, so ``log2(depth)`` vectorised passes).
+all N k edges would be most of the cost), plus the kNN edges that join pieces this pruning cut
+apart (a sparse corner of an open sheet), so the forest has the kNN graph's components.
+numpy + scipy.sparse.csgraph only, no Python loop over points: each tree edge gets the sign
+``sign(n_i . n_parent)`` and the orientation of a node, the product of the signs on its path to
+the root, is computed by pointer jumping (each pass doubles the path length covered, so
+``log2(depth)`` vectorised passes).
 """
 
 from __future__ import annotations
@@ -57,6 +59,7 @@ def oriented_normals(points: np.ndarray, frames: LocalFrames | None = None,
     unit32 = normals.astype(np.float32)
     dots = np.matmul(unit32[neighbours], unit32[:, :, None])[..., 0]          # (N, k)
     weights = (1.0 - np.abs(dots)).clip(0.0) + np.float32(_EDGE_FLOOR)
+    all_neighbours, all_weights = neighbours, weights
     if kk > LIGHTEST_EDGES:
         keep = np.argpartition(weights, LIGHTEST_EDGES - 1, axis=1)[:, :LIGHTEST_EDGES]
         weights = np.take_along_axis(weights, keep, 1)
@@ -64,6 +67,7 @@ def oriented_normals(points: np.ndarray, frames: LocalFrames | None = None,
         kk = LIGHTEST_EDGES
     graph = csr_matrix((weights.ravel().astype(np.float64), neighbours.ravel(),
                         np.arange(0, n * kk + 1, kk)), shape=(n, n))
+    graph = _rejoin(graph, all_neighbours, all_weights)
     tree = minimum_spanning_tree(graph).tocoo()
 
     # One breadth-first traversal of the whole forest from a virtual node n joined to one root
@@ -95,3 +99,24 @@ def oriented_normals(points: np.ndarray, frames: LocalFrames | None = None,
     flip = np.bincount(labels, weights=outward, minlength=count) < 0
     oriented[flip[labels]] *= -1.0
     return oriented
+
+
+def _rejoin(graph: csr_matrix, neighbours: np.ndarray, weights: np.ndarray) -> csr_matrix:
+    """``graph`` (N, N), the pruned kNN graph, with every kNN edge (``neighbours`` (N, k),
+    ``weights`` (N, k)) that joins two of its components added back. Pruning to the lightest
+    edges can cut a sparse corner of an open sheet off the rest (each of its points' lightest
+    edges lead to each other); oriented on its own, such a piece takes an arbitrary sign (the
+    centroid rule means nothing on an open sheet) and reads as a fold. With the joining edges
+    the spanning tree orients it across its lightest link, as the full kNN graph would."""
+    count, labels = connected_components(graph, directed=False)
+    if count == 1:
+        return graph
+    n, k = neighbours.shape
+    rows = np.repeat(np.arange(n), k)
+    cols = neighbours.ravel()
+    joining = labels[rows] != labels[cols]
+    if not joining.any():
+        return graph
+    extra = csr_matrix((weights.ravel()[joining].astype(np.float64),
+                        (rows[joining], cols[joining])), shape=(n, n))
+    return (graph + extra).tocsr()
