@@ -6,6 +6,7 @@ grid goes on at the grown grid; the Quality dock and the toolbar read fully at 1
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from app_helpers import QUICK, open_by_drop, solid_route_off
 from PySide6.QtWidgets import QApplication, QToolBar
 
@@ -250,6 +251,7 @@ def test_undo_and_redo_of_a_fit_bring_its_loss_curve_with_the_shape(qtbot, windo
     _measured(qtbot, window)
 
 
+@pytest.mark.slow
 def test_redo_of_a_network_shows_its_numbers_and_curve_and_claims_no_new_fit(qtbot, window,
                                                                           tmp_path):
     from app.workers.patch_worker import RMS_TERM

@@ -335,6 +335,7 @@ def test_start_on_a_closed_cloud_goes_on_as_a_network(qtbot, window, tmp_path):
     assert not window.scene.deviation_shown()  # it measured the network, not a single patch
 
 
+@pytest.mark.slow
 def test_the_dock_says_which_stray_points_the_network_left_out(qtbot, window, tmp_path):
     """A closed scan with 1% stray points anywhere in its box: the network leaves the isolated
     ones out of its fit and measures, and the Patch quality dock says how many; the deviation
@@ -423,6 +424,7 @@ def test_patches_mode_fits_an_open_sheet_as_an_open_network(qtbot, window, tmp_p
     assert network is not None and not network.closed and network.free_sides()
 
 
+@pytest.mark.slow
 def test_start_on_an_open_head_goes_on_as_an_open_network_when_one_patch_is_poor(
         qtbot, window, tmp_path):
     """A head scanned without its base: one patch leaves part of it uncovered (the route's own

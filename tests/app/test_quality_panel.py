@@ -253,6 +253,7 @@ def test_quality_map_paints_a_folded_surface_and_not_a_clean_one(qtbot, window, 
     assert window.scene.quality_shown()
 
 
+@pytest.mark.slow
 def test_a_closed_cloud_forced_to_one_patch_shows_its_folds(qtbot, window, tmp_path):
     """Forced (Force single patch: the automatic route would fit a network), one patch covers
     the sphere by folding: the readout and the map say so."""

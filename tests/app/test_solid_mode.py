@@ -173,6 +173,7 @@ def test_start_on_a_sphere_scan_on_auto_makes_a_solid_sphere(qtbot, window, tmp_
     assert window.solid_panel.face_types() == []
 
 
+@pytest.mark.slow
 def test_no_valid_solid_says_why_and_fits_the_network(qtbot, window, tmp_path, monkeypatch):
     """When the part route builds no valid solid (here: its outcome stands in for the engine's
     SolidError), the window says why and goes on as a network, as nurbs-fit does."""

@@ -311,6 +311,7 @@ def _dask_cluster(tmp_path: Path, workers: int, nanny: bool = True):
                 process.wait()
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(180)
 def test_scheduler_option_runs_on_a_cluster_started_with_dask_commands(tmp_path, reference):
     with _dask_cluster(tmp_path, 2) as (address, _):

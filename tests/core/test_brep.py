@@ -104,7 +104,9 @@ def test_winding_number_of_a_closed_mesh_is_one_inside_and_zero_outside():
     np.testing.assert_allclose(numbers, [1, 1, 0, 0, 0], atol=1e-9)
 
 
-@pytest.fixture(scope="module", params=["plate", "bracket", "turned", "countersunk"])
+# the bracket (the longest: about 80 CPU s of segmentation and solid) runs in the slow set
+@pytest.fixture(scope="module", params=["plate", pytest.param("bracket", marks=pytest.mark.slow),
+                                        "turned", "countersunk"])
 def scanned(request):
     shape = PARTS[request.param]()
     points, owner, kinds = scan_part(shape, COUNT, NOISE, seed=1)
@@ -118,7 +120,8 @@ def fitted(scanned):
     return fit_part(points, mesh.vertices, mesh.faces)
 
 
-@pytest.mark.parametrize("name, seed", [("thin_plate", 1), ("thin_plate", 2),
+@pytest.mark.parametrize("name, seed", [("thin_plate", 1),
+                                        pytest.param("thin_plate", 2, marks=pytest.mark.slow),
                                         ("bent_plate", 1)])
 def test_a_thin_part_becomes_its_exact_solid(name, seed):
     """A 2 x 1.2 x 0.08 sheet and a bent one: their sides lie closer than the wrap's balls (it
@@ -221,6 +224,7 @@ def test_bad_part_requests_are_refused_before_any_fit(tmp_path, capsys):
     assert not list(tmp_path.glob("a.*"))
 
 
+@pytest.mark.slow
 def test_a_freeform_closed_scan_is_not_taken_for_a_part():
     from nurbs_core import samples
     from nurbs_core.route import choose_route

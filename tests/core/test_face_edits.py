@@ -182,6 +182,7 @@ def test_a_plane_does_not_split_and_bad_edits_say_why(plate):
         FaceEdit.from_dict({"action": "split", "regions": "0"})
 
 
+@pytest.mark.slow
 def test_an_edit_whose_solid_fails_names_the_edit(plate):
     points, _, mesh, fitted = plate
     # the two large parallel faces as one NURBS face: no closed shell of the plate results

@@ -178,6 +178,7 @@ def test_the_bunnys_ears_are_two_sheets_that_reach_their_tips():
     assert corner_angles(result.network).max() < 60.0
 
 
+@pytest.mark.slow
 def test_the_bunnys_head_and_ears_scanned_alone_keep_two_separate_ears():
     # The same thin parts in an open scan (the head and ears without the body): the open
     # network was laid out on Instant Meshes' uniform layout, which passes the ears by, and one
