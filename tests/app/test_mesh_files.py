@@ -70,6 +70,7 @@ def test_an_edit_of_a_mesh_files_points_drops_its_mesh_until_undone(qtbot, windo
     assert document.file_mesh() == (None, "")       # a selection is fitted on its own
 
 
+@pytest.mark.slow
 def test_start_on_a_scanned_mesh_file_ends_with_a_closed_network(qtbot, window, tmp_path):
     # the scanned bunny's PLY (1,839 vertices, 3,674 triangles) was read as its vertices; the
     # route then found no closed surface and sent it to an open network, which refused it as

@@ -197,6 +197,7 @@ def test_a_part_report_names_the_solid_and_its_faces(tmp_path):
     assert within > 95.0
 
 
+@pytest.mark.slow
 def test_no_part_and_outputs_that_hold_no_solid_keep_the_network(tmp_path, capsys):
     points, _, _ = scan_part(PARTS["plate"](), 6000, NOISE, seed=2)
     cloud = tmp_path / "plate.xyz"

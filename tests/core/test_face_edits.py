@@ -135,6 +135,7 @@ def test_an_impossible_type_is_reported_with_its_deviation(plate):
         fitted.segmentation.tolerance)
 
 
+@pytest.mark.slow
 def test_two_merged_cylinders_split_back_into_the_parts_cylinders():
     points, true_kinds, mesh, fitted = _fitted("turned", 10_000, 1)
     cylinders = tuple(sorted({f.region for f in fitted.faces if f.kind == "cylinder"}))

@@ -75,7 +75,7 @@ def test_the_freeform_region_is_the_loft_side(scanned):
     assert len(region.planes) == 2
 
 
-@pytest.mark.parametrize("name", ["bracket", "rounded_block"])
+@pytest.mark.parametrize("name", ["bracket", pytest.param("rounded_block", marks=pytest.mark.slow)])
 def test_parts_of_primitives_have_no_freeform_region(name):
     """A fillet between two planes, and a block whose rounded edges and corners make one
     smooth band of 20 curved faces, are no freeform region."""
@@ -96,6 +96,7 @@ def test_a_sparse_head_whose_flat_spots_run_smoothly_into_it_is_no_freeform_part
     assert freeform_region(segmentation, points) is None
 
 
+@pytest.mark.slow
 def test_a_loft_becomes_one_solid_with_plane_caps_and_a_bspline_side(scanned, tmp_path,
                                                                      capsys):
     shape, points, owner, kinds = scanned

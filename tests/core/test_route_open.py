@@ -200,6 +200,7 @@ def test_forced_single_patch_skips_the_route(bunny_head, tmp_path, capsys):
     assert len(geometry) == 1 and "control_points" in geometry[0]
 
 
+@pytest.mark.slow
 def test_an_open_network_with_no_layout_is_not_tried_twice(bunny_head, tmp_path, capsys,
                                                            monkeypatch):
     """When the crowded cloud's open network finds no layout, one patch is fitted (with its
