@@ -136,17 +136,23 @@ def _two_sided_share(points: np.ndarray, frames: LocalFrames, tree: cKDTree,
 TWO_LAYERS = 5 / 9
 
 
-def _two_layers(heights: np.ndarray) -> bool:
-    """Whether ``heights`` (K,) fall in two separate layers (the two sides of a thin part) rather
-    than one spread out by noise: Sarle's bimodality coefficient (skewness^2 + 1) / kurtosis
-    above :data:`TWO_LAYERS`."""
-    centred = heights - heights.mean()
+def bimodality(values: np.ndarray) -> float:
+    """Sarle's bimodality coefficient (skewness^2 + 1) / kurtosis of ``values`` (K,): 1/3 for a
+    Gaussian, 5/9 for the uniform distribution, near 1 for two thin layers; 0 for fewer than 4
+    values or no spread."""
+    centred = values - values.mean()
     variance = float((centred ** 2).mean())
-    if len(heights) < 4 or variance <= 0.0:
-        return False
+    if len(values) < 4 or variance <= 0.0:
+        return 0.0
     skewness = float((centred ** 3).mean()) / variance ** 1.5
     kurtosis = float((centred ** 4).mean()) / variance ** 2
-    return (skewness ** 2 + 1.0) / kurtosis > TWO_LAYERS
+    return (skewness ** 2 + 1.0) / kurtosis
+
+
+def _two_layers(heights: np.ndarray) -> bool:
+    """Whether ``heights`` (K,) fall in two separate layers (the two sides of a thin part) rather
+    than one spread out by noise: :func:`bimodality` above :data:`TWO_LAYERS`."""
+    return bimodality(heights) > TWO_LAYERS
 
 
 #: Holes narrower than this fraction of the diagonal are sealed by default (a bunny's base, a

@@ -40,6 +40,7 @@ from nurbs_core.patches.closed_mesh import (
     WRAP_POINTS,
     _grid,
     _largest_piece,
+    bimodality,
     compacted,
     tangent_plane_distance,
 )
@@ -168,13 +169,9 @@ def sheet_between(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray,
     sample = points[rng.choice(len(points), min(len(points), BETWEEN_SAMPLE), replace=False)]
     signed, _ = signed_distances(sample, vertices, faces)
     median = float(np.median(np.abs(signed)))
-    centred = signed - signed.mean()
-    variance = float((centred ** 2).mean())
-    if median <= BETWEEN_DISTANCE * cell or variance <= 0.0:
+    if median <= BETWEEN_DISTANCE * cell:
         return 0.0
-    skewness = float((centred ** 3).mean()) / variance ** 1.5
-    kurtosis = float((centred ** 4).mean()) / variance ** 2
-    return median if (skewness ** 2 + 1.0) / kurtosis > BETWEEN_LAYERS else 0.0
+    return median if bimodality(signed) > BETWEEN_LAYERS else 0.0
 
 
 def _zero_set(distance: np.ndarray, band: np.ndarray, mask: np.ndarray, grid: VoxelGrid,
