@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from nurbs_core.patches.border_layout import trim_to_border
 from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
 from nurbs_core.patches.coarsen import coarsen, reach_ratios
 from nurbs_core.patches.crease_layout import coverage, layout_edges, snap_to_creases
@@ -419,6 +420,10 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     start = time.perf_counter()
     creases = detect_creases(mesh, points) if options.creases else no_creases()
     layout = choose_layout(mesh, options.patches, len(points), creases)
+    border = border_points(mesh)
+    if border is not None:
+        # no border row on the skirt the open mesh runs on past the scan's last points
+        layout = trim_to_border(layout, border, points)
     timings["layout"] = time.perf_counter() - start
     yield PatchEvent("layout", mesh=mesh, layout=layout)
     if should_stop(stop):
@@ -440,7 +445,7 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     for last in fit_network(fitted, layout.vertices, layout.quads, reference,
                             size=options.size, stiffness=options.stiffness,
                             seam_weight=options.seam_weight, tolerance=options.tolerance,
-                            max_size=options.max_size, border=border_points(mesh), noise=noise,
+                            max_size=options.max_size, border=border, noise=noise,
                             creases=layout.creases):
         yield PatchEvent("pass", layout=layout, fit_pass=last)
         if should_stop(stop):
