@@ -10,9 +10,11 @@ wrong way).
 
 :func:`trim_to_border` removes the layout quads on a free side that lie mostly beyond the border
 (their bilinear samples behind the border curve, seen from the scan's side), row after row,
-keeping the layout one connected manifold: the new free sides lie inside the scan, and the
-border term stretches them out to the border instead of squeezing a row. Only quads are removed:
-the layout is not rebuilt, so it stays the same everywhere else.
+keeping the layout one connected manifold with no new notch, no more corners and no quad free
+on opposite sides (a lone quad removed from the bunny's head and ears left a notch whose quads
+folded back by 179 degrees): the new free sides lie inside the scan, and the border term
+stretches them out to the border instead of squeezing a row. Only quads are removed: the
+layout is not rebuilt, so it stays the same everywhere else.
 """
 
 from __future__ import annotations
@@ -77,6 +79,17 @@ def _free_quads(quads: np.ndarray) -> np.ndarray:
                      for q in quads.tolist()], bool)
 
 
+def _stranded(quads: np.ndarray) -> np.ndarray:
+    """(P,) bool: the quads (P, 4) free on two opposite sides or on three (a strip one quad
+    wide, a tongue: the fit folds those back)."""
+    uses = _edge_uses(quads)
+    out = np.zeros(len(quads), bool)
+    for k, q in enumerate(quads.tolist()):
+        free = [uses[(min(a, b), max(a, b))] == 1 for a, b in zip(q, q[1:] + q[:1])]
+        out[k] = sum(free) > 2 or (free[0] and free[2]) or (free[1] and free[3])
+    return out
+
+
 def _clean(quads: np.ndarray) -> bool:
     """Whether the quads (P, 4) form one connected manifold with a border: no edge used more
     than twice, at most two free edges at a vertex (no two fans touching at a point)."""
@@ -109,11 +122,48 @@ def _clean(quads: np.ndarray) -> bool:
     return len(seen) == len(quads)
 
 
+def _corners(quads: np.ndarray) -> tuple[set[int], set[int]]:
+    """The border vertices of the quads (P, 4) that one quad holds (the layout's corners) and
+    that three or more share (notches)."""
+    uses = _edge_uses(quads)
+    on_border = {v for (a, b), n in uses.items() if n == 1 for v in (a, b)}
+    valence = Counter(quads.ravel().tolist())
+    return ({v for v in on_border if valence[v] == 1},
+            {v for v in on_border if valence[v] >= 3})
+
+
+def _without_notches(quads: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """``keep`` (P,) with removed quads put back until the kept quads leave no new notch on the
+    border, no more corners than before (:func:`_corners`: drawn onto a smooth border, the
+    quads there fold; a corner may move with a removed row) and no quad stranded
+    (:func:`_stranded`) that was not; all of them back when that fails."""
+    corners_before, notches_before = _corners(quads)
+    stranded_before = {tuple(q) for q in quads[_stranded(quads)].tolist()}
+    keep = keep.copy()
+    while not keep.all():
+        kept = quads[keep]
+        corners, notches = _corners(kept)
+        bad = notches - notches_before
+        new_corners = corners - corners_before
+        if len(new_corners) > len(corners_before - corners):
+            bad |= new_corners
+        stranded = [q for q in kept[_stranded(kept)].tolist() if tuple(q) not in stranded_before]
+        if not bad and not stranded:
+            return keep if _clean(kept) else np.ones(len(quads), bool)
+        bad |= {v for q in stranded for v in q}
+        back = ~keep & np.isin(quads, list(bad)).any(axis=1)
+        if not back.any():
+            break
+        keep |= back
+    return np.ones(len(quads), bool)
+
+
 def trim_to_border(layout: QuadLayout, border: np.ndarray, points: np.ndarray) -> QuadLayout:
     """``layout`` without the quads on a free side that lie mostly beyond the scan's border
     (see the module docstring): ``border`` (B, 3) dense points along every border loop (in
     order along each), ``points`` (N, 3) the cloud. Quads go one at a time, the most outside
-    first, each only when the rest stays one connected manifold; at least ``MIN_KEPT`` of the
+    first, each only when the rest stays one connected manifold; then removed quads are put
+    back where they left a notch or a stranded quad (:func:`_without_notches`); at least ``MIN_KEPT`` of the
     quads stay. The layout unchanged when no quad is that far out."""
     inward = border_inward(border, points)
     quads = np.asarray(layout.quads, np.int64)
@@ -128,6 +178,7 @@ def trim_to_border(layout: QuadLayout, border: np.ndarray, points: np.ndarray) -
             keep[p] = False
             if not _clean(quads[keep]):
                 keep[p] = True
+        keep = _without_notches(quads, keep)
         if keep.all():
             break
         quads = quads[keep]
