@@ -17,6 +17,7 @@ import numpy as np
 
 from app.display_types import DeviationMap
 from app.state import OffsetDisplay, Target
+from app.viewport.cloud_detail import shown_indices
 from app.workers.deviation_map import fit_triangles
 from app.workers.display import DisplayGeometry, display_geometry
 from app.workers.fit_worker import FINAL_DEVIATION_POINTS, sampled_deviation, signed_map
@@ -85,6 +86,9 @@ def load_files(paths: list[str], cancel: threading.Event | None = None) -> Loade
                 pass
             raise
     _check(cancel)
+    # the viewport's draw of a big cloud's display subset, made here rather than on the GUI
+    # thread (kept by count: the window finds it ready when it stacks the new targets)
+    shown_indices(sum(len(t.points) for t in loaded.targets))
     return loaded
 
 
