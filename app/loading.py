@@ -86,10 +86,15 @@ def load_files(paths: list[str], cancel: threading.Event | None = None) -> Loade
                 pass
             raise
     _check(cancel)
-    # the viewport's draw of a big cloud's display subset, made here rather than on the GUI
-    # thread (kept by count: the window finds it ready when it stacks the new targets)
-    shown_indices(sum(len(t.points) for t in loaded.targets))
+    draw_display_subset(loaded.targets)
     return loaded
+
+
+def draw_display_subset(targets: list[Target]) -> None:
+    """Draw the viewport's display subset of the visible targets' stacked points here (a load
+    job) rather than on the GUI thread: :func:`app.viewport.cloud_detail.shown_indices` keeps
+    it by count, so the window finds it ready when it shows these targets."""
+    shown_indices(sum(len(t.points) for t in targets if t.visible))
 
 
 def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):

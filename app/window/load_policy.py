@@ -140,8 +140,12 @@ class LoadPolicy(QObject):
             self.message = f"Cannot open the session {Path(path).name}"
             self._window.files_loaded.emit(False)
 
-        return self._start("open-session", [path], lambda _cancel: read_session(path), opened,
-                           failed)
+        def read(_cancel: Any) -> dict[str, Any]:
+            session = read_session(path)
+            loading.draw_display_subset(session["targets"])
+            return session
+
+        return self._start("open-session", [path], read, opened, failed)
 
     def _start(self, name: str, paths: list[str], read: Callable[[Any], Any],
                apply: Callable[[Any], None], fail: Callable[[BaseException], None]) -> bool:
