@@ -132,6 +132,20 @@ def test_a_new_load_during_the_first_frame_leaves_no_stale_cloud(qtbot, window, 
     assert np.asarray(mesh.points)[:, 0].min() > 8.0  # the second cloud's points only
     assert [name for name in scene.plotter.actors if "cloud" in name] == ["cloud"]
 
+    # a load started and cancelled while a big cloud waits for its second step: the big cloud
+    # is still drawn whole
+    open_by_drop(qtbot, window, [tmp_path / "first.npy"])
+    assert scene.detail_pending()
+    with qtbot.waitSignal(window.files_loaded, timeout=20000) as blocker:
+        assert window.open_files([str(tmp_path / "second.npy")])
+        assert window.cancel_load(quiet=True)
+    assert blocker.args == [False]
+    qtbot.waitUntil(lambda: not scene.detail_pending() and not scene.live_timers(),
+                    timeout=20000)
+    assert scene.shown_points()[1] == 300_000 and scene.eye_dome_lighting
+    assert mesh.n_points == scene.shown_points()[0]
+    assert np.asarray(mesh.points)[:, 0].max() < 2.0  # the first cloud's points only
+
     # a small cloud loaded while a big one waits for its second step: drawn whole, unshaded,
     # and the big one's second step never comes
     open_by_drop(qtbot, window, [tmp_path / "first.npy"])
