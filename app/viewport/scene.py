@@ -10,6 +10,8 @@ and the other way round.
 Meshes are created once per layer and then updated in place (``mesh.points = ...`` or
 ``copy_from`` when the topology changes), never re-added per frame. Rendering is explicit
 (``auto_update=False``) and coalesced: ``request_render()`` draws at most ~30 times a second.
+A big cloud is drawn in two steps (:mod:`app.viewport.cloud_detail`): a first frame of a small
+subset, then, once it is on screen and the event loop has run, the whole display subset.
 Only the GUI thread calls into this module.
 """
 
@@ -24,7 +26,7 @@ from PySide6.QtWidgets import QWidget
 from pyvistaqt import QtInteractor
 
 from app.display_types import FAR, FINE, FLIPPED, OVERLAP, DeviationMap, DisplayGeometry
-from app.viewport.cloud_detail import DISPLAY_BUDGET, shown_indices, shown_text
+from app.viewport.cloud_detail import DISPLAY_BUDGET, first_frame_positions, shown_indices, shown_text
 from app.viewport.deviation_colours import DeviationColours
 from app.viewport.face_pick import FacePicker
 from app.viewport.legend_box import label_contrasts, swatch_legend
@@ -159,6 +161,18 @@ class SceneView(QObject):
         #: all; a big cloud draws at most ``display_budget``: :mod:`app.viewport.cloud_detail`)
         self._cloud_count = 0
         self._cloud_shown: np.ndarray | None = None
+        #: the points of the display subset (K, 3), the indices in the cloud of those the mesh
+        #: holds now (None: all K; fewer in a big cloud's first frame) and the newest values
+        #: written per cloud point (N,) (redrawn with the whole subset)
+        self._cloud_display = np.zeros((0, 3))
+        self._cloud_drawn: np.ndarray | None = None
+        self._cloud_values: np.ndarray | None = None
+        #: the whole display subset is drawn once the first frame is on screen (two steps)
+        self._detail_pending = False
+        self._detail_timer = QTimer(self)
+        self._detail_timer.setSingleShot(True)
+        self._detail_timer.setInterval(0)
+        self._detail_timer.timeout.connect(self._draw_full_detail)
         self.display_budget = DISPLAY_BUDGET
         #: whether eye-dome lighting shades the view (on while a big cloud is drawn reduced)
         self.eye_dome_lighting = False
@@ -185,7 +199,7 @@ class SceneView(QObject):
         self._render_timer = QTimer(self)
         self._render_timer.setSingleShot(True)
         self._render_timer.setInterval(RENDER_INTERVAL_MS)
-        self._render_timer.timeout.connect(self.render_now)
+        self._render_timer.timeout.connect(self._draw_frame)
         self.network = NetworkLayers(self.plotter, self.request_render,
                                      self._apply_deviation_surface)
         #: the part route's solid (Solid mode)
@@ -231,12 +245,34 @@ class SceneView(QObject):
 
     def set_cloud(self, points: np.ndarray | None):
         """The (stacked) target cloud (N, 3); resets its deviation colouring. Above the display
-        budget only an even subset of the points is drawn (:meth:`shown_points`)."""
+        budget only an even subset of the points is drawn (:meth:`shown_points`); above
+        :data:`~app.viewport.cloud_detail.FIRST_FRAME_POINTS` drawn points the first frame
+        holds a smaller subset with the same bounds, unshaded, and the next the whole display
+        subset (:meth:`detail_pending` until then)."""
         points = np.zeros((0, 3)) if points is None else np.asarray(points, float)
         self._cloud_count = len(points)
         self._cloud_shown = shown_indices(len(points), self.display_budget)
-        mesh = pv.PolyData(points if self._cloud_shown is None else points[self._cloud_shown])
-        mesh.point_data[DEVIATION_TITLE] = np.zeros(mesh.n_points)
+        self._cloud_display = points if self._cloud_shown is None else points[self._cloud_shown]
+        self._cloud_values = None
+        first = first_frame_positions(self._cloud_display)
+        self._detail_pending = first is not None
+        self._detail_timer.stop()
+        if first is None:
+            self._cloud_drawn = self._cloud_shown
+        else:
+            self._cloud_drawn = first if self._cloud_shown is None else self._cloud_shown[first]
+        self._draw_cloud(self._cloud_display if first is None else self._cloud_display[first])
+        self.set_deviation(None)
+
+    def _draw_cloud(self, drawn: np.ndarray) -> None:
+        """Put the points ``drawn`` (M, 3) in the cloud's mesh with the newest values, shaded
+        (eye-dome lighting) when they are the whole display subset of a reduced cloud."""
+        mesh = pv.PolyData(drawn)
+        values = np.zeros(mesh.n_points)
+        if self._cloud_values is not None:
+            values[:] = (self._cloud_values if self._cloud_drawn is None
+                         else self._cloud_values[self._cloud_drawn])
+        mesh.point_data[DEVIATION_TITLE] = values
         if "cloud" not in self._meshes:
             self._layer("cloud", mesh, color=COLORS["cloud"], point_size=(
                 SOLID_POINT_SIZE if self._mode == "solid" else POINT_SIZE),
@@ -244,8 +280,21 @@ class SceneView(QObject):
             self.deviation_colours.attach(self._actors["cloud"].mapper)
         else:
             self._layer("cloud", mesh)
-        self._set_eye_dome(self._cloud_shown is not None)
-        self.set_deviation(None)
+        self._set_eye_dome(self._cloud_shown is not None and not self._detail_pending)
+
+    def _draw_full_detail(self) -> None:
+        """The second step of a big cloud: its whole display subset, from the next frame on."""
+        if not self._detail_pending or self._closed:
+            return
+        self._detail_pending = False
+        self._cloud_drawn = self._cloud_shown
+        self._draw_cloud(self._cloud_display)
+        self._apply_visibility("cloud")
+        self.request_render()
+
+    def detail_pending(self) -> bool:
+        """Whether a big cloud's first frame still waits for its whole display subset."""
+        return self._detail_pending
 
     def _set_eye_dome(self, on: bool) -> None:
         """Eye-dome lighting (VTK's screen-space shading of depth edges) while a big cloud is
@@ -262,7 +311,7 @@ class SceneView(QObject):
         self.eye_dome_lighting = on
 
     def shown_points(self) -> tuple[int, int]:
-        """(points drawn, points in the cloud)."""
+        """(points drawn once the cloud is drawn whole, points in the cloud)."""
         shown = self._cloud_count if self._cloud_shown is None else len(self._cloud_shown)
         return shown, self._cloud_count
 
@@ -313,8 +362,9 @@ class SceneView(QObject):
         """One value per cloud point (all of them): the drawn points' go to the mesh."""
         mesh = self._meshes["cloud"]
         values = np.asarray(values)
-        mesh.point_data[DEVIATION_TITLE][:] = (values if self._cloud_shown is None
-                                               else values[self._cloud_shown])
+        self._cloud_values = values
+        mesh.point_data[DEVIATION_TITLE][:] = (values if self._cloud_drawn is None
+                                               else values[self._cloud_drawn])
         mesh.point_data[DEVIATION_TITLE] = mesh.point_data[DEVIATION_TITLE]  # mark modified
 
     def set_deviation_map(self, deviation_map: DeviationMap | None):
@@ -704,7 +754,9 @@ class SceneView(QObject):
         self._look(0.5 * (low + high), direction, up, size)
 
     def _visible_points(self) -> np.ndarray | None:
-        parts = [mesh.points for name, mesh in self._meshes.items()
+        # the cloud's whole display subset, also while its first frame holds fewer
+        parts = [self._cloud_display if name == "cloud" else mesh.points
+                 for name, mesh in self._meshes.items()
                  if mesh.n_points and self._actors[name].GetVisibility() and name != "selection"]
         parts += self.network.visible_points()
         parts += self.solid.visible_points()
@@ -720,6 +772,14 @@ class SceneView(QObject):
             self._render_timer.start()
 
     def render_now(self):
+        """Draw now, a big cloud whole (its second step taken at once: a screenshot, a test)."""
+        if self._detail_pending:
+            self._draw_full_detail()
+        self._draw_frame()
+
+    def _draw_frame(self):
+        """Draw what the scene holds (the render timer's frame); a big cloud's first frame
+        schedules its second step after it, once the event loop has run."""
         if self._closed:
             return
         started = time.perf_counter()
@@ -732,6 +792,8 @@ class SceneView(QObject):
         # timers and the other widgets are answered between frames
         self._render_timer.setInterval(int(max(RENDER_INTERVAL_MS, 2.5 * spent_ms)))
         self.last_render_ms = spent_ms
+        if self._detail_pending:
+            self._detail_timer.start()
 
     def screenshot(self, path: str):
         """The viewport alone as an image file, written atomically (the suffix picks the
@@ -743,7 +805,7 @@ class SceneView(QObject):
             self.plotter.screenshot(str(temporary))
 
     def live_timers(self) -> int:
-        return int(self._render_timer.isActive())
+        return int(self._render_timer.isActive()) + int(self._detail_timer.isActive())
 
     def close(self):
         """Stop drawing and release the render window; idempotent."""
@@ -751,4 +813,5 @@ class SceneView(QObject):
             return
         self._closed = True
         self._render_timer.stop()
+        self._detail_timer.stop()
         self.plotter.close()

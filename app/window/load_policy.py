@@ -18,7 +18,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 from PySide6.QtCore import QObject, QSettings
 from PySide6.QtWidgets import QFileDialog, QMenu
 
@@ -42,6 +41,13 @@ def mesh_words(target: Target) -> str:
     if target.mesh is not None:
         return " (its mesh is closed: its own triangles lay out the patches)"
     return f" ({target.mesh_note}: the points' own mesh is built)" if target.mesh_note else ""
+
+
+def flat_in_z(targets: list[Target]) -> bool:
+    """Whether the visible targets' points (each (N_i, 3)) all lie at one height (a planar
+    cloud: fitted as a curve)."""
+    heights = [t.points[:, 2] for t in targets if t.visible and len(t.points)]
+    return bool(heights) and max(h.max() for h in heights) == min(h.min() for h in heights)
 
 
 @dataclass
@@ -134,8 +140,12 @@ class LoadPolicy(QObject):
             self.message = f"Cannot open the session {Path(path).name}"
             self._window.files_loaded.emit(False)
 
-        return self._start("open-session", [path], lambda _cancel: read_session(path), opened,
-                           failed)
+        def read(_cancel: Any) -> dict[str, Any]:
+            session = read_session(path)
+            loading.draw_display_subset(session["targets"])
+            return session
+
+        return self._start("open-session", [path], read, opened, failed)
 
     def _start(self, name: str, paths: list[str], read: Callable[[Any], Any],
                apply: Callable[[Any], None], fail: Callable[[BaseException], None]) -> bool:
@@ -216,16 +226,15 @@ class LoadPolicy(QObject):
         window.run_labels.clear()
         units, units_note = units_of_load(loaded)  # the files' own unit, else unknown
         document.replace_content(loaded.targets, loaded.patches, loaded.patch_names, units)
-        points = document.target_points()
-        if points is not None and np.ptp(points[:, 2]) == 0 and document.settings.fit.kind != (
-                "curve"):
+        count = document.visible_point_count()  # not stacked again: the viewport just did
+        if count and flat_in_z(document.targets) and document.settings.fit.kind != "curve":
             document.edit_settings("Kind (planar cloud)", kind="curve")
             window.report("The cloud is planar: switched to curve fitting (2D).")
-        grid = None if points is None else control_grid_for(len(points), document.settings.fit)
+        grid = control_grid_for(count, document.settings.fit) if count else None
         if grid is not None:
             document.edit_settings("Control grid (small cloud)", control_points_u=grid[0],
                                    control_points_v=grid[1])
-            window.report(f"{len(points)} points are few for the control grid: reduced it to "
+            window.report(f"{count} points are few for the control grid: reduced it to "
                           f"{grid[0]} x {grid[1]} (Edit > Undo to keep the larger grid).")
         for path in paths:
             self.recent.add(path)

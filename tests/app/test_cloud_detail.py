@@ -8,7 +8,13 @@ import pytest
 from app_helpers import open_by_drop
 from test_selection import _drag, _grid_cloud, _vtk_display
 
-from app.viewport.cloud_detail import DISPLAY_BUDGET, shown_indices, shown_text
+from app.viewport.cloud_detail import (
+    DISPLAY_BUDGET,
+    FIRST_FRAME_POINTS,
+    first_frame_positions,
+    shown_indices,
+    shown_text,
+)
 
 
 def test_small_clouds_are_drawn_whole():
@@ -37,20 +43,118 @@ def test_the_subset_is_within_the_budget_near_it_and_even():
     assert over[-1] == DISPLAY_BUDGET or len(np.setdiff1d(np.arange(DISPLAY_BUDGET), over)) == 1
 
 
-def test_a_million_points_draw_at_most_the_budget(window):
+def test_the_first_frame_is_a_small_subset_with_the_same_bounds():
+    points = np.random.default_rng(2).normal(size=(150_000, 3))
+    first = first_frame_positions(points)
+    assert first is not None and FIRST_FRAME_POINTS < len(first) <= FIRST_FRAME_POINTS + 6
+    assert np.all(np.diff(first) > 0)
+    np.testing.assert_array_equal(points[first].min(axis=0), points.min(axis=0))
+    np.testing.assert_array_equal(points[first].max(axis=0), points.max(axis=0))
+    assert first_frame_positions(points[:FIRST_FRAME_POINTS]) is None  # drawn whole at once
+
+
+def test_a_million_points_draw_at_most_the_budget(qtbot, window):
+    scene = window.scene
     points = np.random.default_rng(1).uniform(-1.0, 1.0, (1_000_000, 3))
-    window.scene.set_cloud(points)
-    mesh = window.scene._meshes["cloud"]
-    assert mesh.n_points <= DISPLAY_BUDGET
-    assert window.scene.shown_points() == (mesh.n_points, 1_000_000)
-    assert window.scene.shown_points_text() == f"showing {mesh.n_points:,} of 1,000,000 points"
-    assert window.scene.eye_dome_lighting  # the shading that shows a big cloud's shape
-    # the deviation of every point is accepted; the drawn points show their own values
+    scene.set_cloud(points)
+    mesh = scene._meshes["cloud"]
+    # the first frame: a small subset, unshaded; the whole display subset follows it
+    assert scene.detail_pending() and mesh.n_points <= FIRST_FRAME_POINTS + 6
+    assert not scene.eye_dome_lighting
+    # the deviation of every point is accepted meanwhile; the drawn points show their own values
     deviation = np.linalg.norm(points, axis=1)
-    window.scene.set_deviation(deviation)
-    assert window.scene.deviation_shown()
+    scene.set_deviation(deviation)
+    assert scene.deviation_shown()
+    qtbot.waitUntil(lambda: not scene.detail_pending() and not scene.live_timers(),
+                    timeout=20000)
+    assert FIRST_FRAME_POINTS < mesh.n_points <= DISPLAY_BUDGET
+    assert scene.shown_points() == (mesh.n_points, 1_000_000)
+    assert scene.shown_points_text() == f"showing {mesh.n_points:,} of 1,000,000 points"
+    assert scene.eye_dome_lighting  # the shading that shows a big cloud's shape
     drawn = np.asarray(mesh.point_data["Deviation"])
     np.testing.assert_allclose(drawn, np.linalg.norm(np.asarray(mesh.points), axis=1))
+
+
+def _frames(scene) -> list[tuple[int, bool]]:
+    """(the cloud's drawn points, eye-dome lighting on) at every frame the scene draws from
+    now on."""
+    frames: list[tuple[int, bool]] = []
+    render = scene.plotter.render
+
+    def counted(*args, **kwargs):
+        mesh = scene._meshes.get("cloud")
+        frames.append((0 if mesh is None else mesh.n_points, scene.eye_dome_lighting))
+        return render(*args, **kwargs)
+
+    scene.plotter.render = counted
+    return frames
+
+
+def test_a_big_load_draws_a_small_first_frame_then_the_display_budget(qtbot, window,
+                                                                       tmp_path):
+    scene = window.scene
+    points = np.random.default_rng(4).uniform(-1.0, 1.0, (400_000, 3))
+    np.save(tmp_path / "big.npy", points)
+    frames = _frames(scene)
+    open_by_drop(qtbot, window, [tmp_path / "big.npy"])
+    qtbot.waitUntil(lambda: not scene.detail_pending() and not scene.live_timers(),
+                    timeout=20000)
+    shown = scene.shown_points()[0]
+    assert FIRST_FRAME_POINTS < shown <= DISPLAY_BUDGET
+    drawn = [frame for frame in frames if frame[0]]
+    # the load's first frame holds at most FIRST_FRAME_POINTS (and the bounds' six), unshaded
+    assert drawn[0][0] <= FIRST_FRAME_POINTS + 6 and not drawn[0][1]
+    assert drawn[-1] == (shown, True)  # then the whole display subset, shaded
+    assert f"showing {shown:,} of 400,000 points" in window.statusBar().currentMessage()
+    # the camera was framed (during the first frame) as on the whole display subset
+    camera = scene.plotter.camera
+    framed = (camera.position, camera.focal_point, camera.up)
+    scene.reset_camera()
+    np.testing.assert_allclose(framed, (camera.position, camera.focal_point, camera.up),
+                               atol=1e-9)
+
+
+def test_a_new_load_during_the_first_frame_leaves_no_stale_cloud(qtbot, window, tmp_path):
+    scene = window.scene
+    rng = np.random.default_rng(5)
+    np.save(tmp_path / "first.npy", rng.uniform(-1.0, 1.0, (300_000, 3)))
+    second = rng.uniform(-1.0, 1.0, (200_000, 3)) + [10.0, 0.0, 0.0]
+    np.save(tmp_path / "second.npy", second)
+    small = rng.uniform(-1.0, 1.0, (2_000, 3)) + [0.0, 20.0, 0.0]
+    np.save(tmp_path / "small.npy", small)
+    open_by_drop(qtbot, window, [tmp_path / "first.npy"])
+    assert scene.detail_pending()  # its first frame is not even drawn yet
+    open_by_drop(qtbot, window, [tmp_path / "second.npy"])  # replaced before its second step
+    qtbot.waitUntil(lambda: not scene.detail_pending() and not scene.live_timers(),
+                    timeout=20000)
+    mesh = scene._meshes["cloud"]
+    assert mesh.n_points == scene.shown_points()[0] and scene.shown_points()[1] == 200_000
+    assert np.asarray(mesh.points)[:, 0].min() > 8.0  # the second cloud's points only
+    assert [name for name in scene.plotter.actors if "cloud" in name] == ["cloud"]
+
+    # a load started and cancelled while a big cloud waits for its second step: the big cloud
+    # is still drawn whole
+    open_by_drop(qtbot, window, [tmp_path / "first.npy"])
+    assert scene.detail_pending()
+    with qtbot.waitSignal(window.files_loaded, timeout=20000) as blocker:
+        assert window.open_files([str(tmp_path / "second.npy")])
+        assert window.cancel_load(quiet=True)
+    assert blocker.args == [False]
+    qtbot.waitUntil(lambda: not scene.detail_pending() and not scene.live_timers(),
+                    timeout=20000)
+    assert scene.shown_points()[1] == 300_000 and scene.eye_dome_lighting
+    assert mesh.n_points == scene.shown_points()[0]
+    assert np.asarray(mesh.points)[:, 0].max() < 2.0  # the first cloud's points only
+
+    # a small cloud loaded while a big one waits for its second step: drawn whole, unshaded,
+    # and the big one's second step never comes
+    open_by_drop(qtbot, window, [tmp_path / "first.npy"])
+    assert scene.detail_pending()
+    open_by_drop(qtbot, window, [tmp_path / "small.npy"])
+    assert not scene.detail_pending()
+    qtbot.waitUntil(lambda: not scene.live_timers(), timeout=20000)
+    np.testing.assert_array_equal(np.asarray(mesh.points), small)
+    assert not scene.eye_dome_lighting and scene.shown_points() == (2_000, 2_000)
 
 
 def test_a_cloud_over_the_budget_is_drawn_reduced_and_selected_whole(qtbot, window, tmp_path):
