@@ -1,13 +1,15 @@
 """Scanned machined parts to solids: the part route against the parts OpenCASCADE built.
 
 Run: ``python benchmarks/bench_parts.py [--random N] [--points N] [--noise F] [--seed S]
-[--baseline] [--no-freeform] [--json OUT]``. Default: the named parts of
-:data:`nurbs_core.brep.sample_parts.PARTS`, 20 random parts
+[--baseline] [--no-freeform] [--no-holed] [--no-open] [--only-open] [--json OUT]``. Default:
+the named parts of :data:`nurbs_core.brep.sample_parts.PARTS`, 20 random parts
 (:func:`~nurbs_core.brep.sample_parts.random_part`: boxes with filleted edges, boxes cut by
 holes and dents with fillets or chamfers, cylinders, cones, spheres), 20,000 points each with
 Gaussian noise of 0.2 % of the diagonal (sigma), one torch thread, and last the freeform parts
 of :data:`~nurbs_core.brep.sample_parts.FREEFORM_PARTS` (a loft with flat caps, a box with a
-bulged top; their freeform points count in no type accuracy), and after them the plate, the
+bulged top; their freeform points count in no type accuracy), the parts with bores and holes
+of :data:`~nurbs_core.brep.sample_parts.HOLED_PARTS` (``--no-holed`` leaves them out), and after
+them the plate, the
 bracket and the turned part scanned from above
 (:func:`~nurbs_core.brep.sample_parts.scan_part_from_above`: no underside, an open scan), whose
 route should give an open shell (``--no-open`` leaves them out).
@@ -52,6 +54,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from nurbs_core.brep.occ import bounding_diagonal, face_kind, faces  # noqa: E402
 from nurbs_core.brep.sample_parts import (  # noqa: E402
     FREEFORM_PARTS,
+    HOLED_PARTS,
     PARTS,
     random_part,
     scan_part,
@@ -199,6 +202,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-freeform", action="store_true",
                         help="without the freeform parts (a loft with flat caps, a box with a "
                         "bulged top)")
+    parser.add_argument("--no-holed", action="store_true",
+                        help="without the parts with bores and holes (a cone frustum with a "
+                        "bore, a flange, a plate with a boss and a counterbore, a tilted hole)")
     parser.add_argument("--no-open", action="store_true",
                         help="without the parts scanned from above (open shells)")
     parser.add_argument("--only-open", action="store_true",
@@ -213,7 +219,7 @@ def main(argv: list[str] | None = None) -> int:
     cases: list[tuple[str, Any, bool]] = [(name, make(), args.baseline)
                                           for name, make in PARTS.items()]
     if args.only_open:
-        cases, args.random, args.no_freeform = [], 0, True
+        cases, args.random, args.no_freeform, args.no_holed = [], 0, True, True
     rng = np.random.default_rng(args.seed)
     while not args.only_open and len(cases) < len(PARTS) + args.random:
         family, shape = random_part(rng)
@@ -221,6 +227,8 @@ def main(argv: list[str] | None = None) -> int:
             cases.append((f"{family}#{len(cases) - len(PARTS)}", shape, False))
     if not args.no_freeform:  # last, so the rows above keep their seeds
         cases += [(name, make(), args.baseline) for name, make in FREEFORM_PARTS.items()]
+    if not args.no_holed:  # after them, for the same reason
+        cases += [(name, make(), args.baseline) for name, make in HOLED_PARTS.items()]
     if not args.no_open:  # last again
         cases += [(f"{name}:open", PARTS[name](), False) for name in OPEN_PARTS]
     print(f"# {platform.node()} {platform.processor() or platform.machine()}, "

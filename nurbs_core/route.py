@@ -137,7 +137,7 @@ def _part_or(route: Route, points: np.ndarray, forced: bool,
 
     segmentation = segment_subset(points, give_up=0.0 if forced else 0.02)
     share = f"{segmentation.coverage:.0%} of the points on {len(segmentation.surfaces)} analytic"
-    if part_like(segmentation) or forced:
+    if part_like(segmentation, points) or forced:
         opening = _sealed_opening(points, segmentation, max_hole)
         if opening is not None:
             mesh, planes, width, limit = opening
@@ -157,7 +157,8 @@ def _part_or(route: Route, points: np.ndarray, forced: bool,
                          f"{len(region.planes)} planes", route.mesh, segmentation=segmentation,
                          freeform=region)
     why = (f"under {MIN_COVERAGE:.0%}" if segmentation.coverage < MIN_COVERAGE
-           else f"mostly spheres, cones and tori, over {MAX_CURVED:.0%}: a freeform shape")
+           else f"mostly spheres, cones and tori, over {MAX_CURVED:.0%}, meeting mostly "
+                f"smoothly: a freeform shape")
     route.finding += f"; not a machined part ({share} surfaces, {why})"
     return route
 
@@ -291,7 +292,7 @@ def _open_part(points: np.ndarray, finding: str, max_hole: float | None, forced:
              + ("s" if surfaces != 1 else ""))
     if not forced:
         why = (f"under {MIN_COVERAGE:.0%}" if segmentation.coverage < MIN_COVERAGE
-               else "mostly curved: a freeform shape" if not part_like(segmentation)
+               else "mostly curved: a freeform shape" if not part_like(segmentation, points)
                else "one surface: a sheet" if surfaces < 2
                else "" if sharp_edges(segmentation, points)
                else f"meeting at no edge sharper than {SHARP_ANGLE:g} degrees: a smooth sheet")

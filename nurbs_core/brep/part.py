@@ -62,6 +62,12 @@ FRAGMENTS = 2
 SHARP_ANGLE = 30.0
 #: ... and touch at at least this many points (pairs of neighbours on the two regions)
 SHARP_CONTACTS = 10
+#: a scan mostly on spheres, cones and tori is still a part when at least this share of the
+#: contacts between its regions lie on sharp edges (a cone frustum with a bore: 1.0; a noisy
+#: head or blob that a dozen spheres and cones hold: 0.03-0.21, their pieces meet smoothly)
+MIN_SHARP_SHARE = 0.5
+#: the contacts are counted on at most this many points (a seeded subset)
+CONTACT_POINTS = 50_000
 
 
 @dataclass
@@ -191,35 +197,41 @@ def _faceless_edits(result: PartResult) -> list[str]:
             if regions.edited(k) and k not in with_face]
 
 
-def part_like(segmentation: Segmentation) -> bool:
+def part_like(segmentation: Segmentation, points: np.ndarray | None = None) -> bool:
     """Whether the scan is a part: most of its points (:data:`MIN_COVERAGE`) on analytic
-    surfaces, and either a primitive (at most 3 surfaces: a ball, a torus, a capsule) or
-    mostly planes and cylinders (at most :data:`MAX_CURVED` of the points on spheres, cones and
-    tori). Organic shapes pass the first test when the noise is large: a sparse head's scan lies
-    within 3 sigmas of a dozen spheres and cones, which no machined part is made of."""
+    surfaces, and either a primitive (at most 3 surfaces: a ball, a torus, a capsule), mostly
+    planes and cylinders (at most :data:`MAX_CURVED` of the points on spheres, cones and tori),
+    or, given the segmentation's ``points`` (N, 3), regions that meet mostly at sharp edges
+    (:func:`sharp_share` at least :data:`MIN_SHARP_SHARE`: a cone frustum with a bore, a turned
+    part of cones). Organic shapes pass the first test when the noise is large: a sparse head's
+    scan lies within 3 sigmas of a dozen spheres and cones, which meet each other smoothly."""
     if not segmentation.surfaces or segmentation.coverage < MIN_COVERAGE:
         return False
     if len(segmentation.surfaces) <= 3:
         return True
     curved = [k for k, s in enumerate(segmentation.surfaces)
               if s.kind in ("sphere", "cone", "torus")]
-    return float(np.isin(segmentation.labels, curved).mean()) <= MAX_CURVED
+    if float(np.isin(segmentation.labels, curved).mean()) <= MAX_CURVED:
+        return True
+    return points is not None and sharp_share(segmentation, points) >= MIN_SHARP_SHARE
 
 
-def sharp_edges(segmentation: Segmentation, points: np.ndarray) -> int:
-    """How many pairs of regions meet at a sharp edge: touch (a point of one among the 8
-    nearest of a point of the other, :data:`SHARP_CONTACTS` times) with their surfaces' normals
-    there :data:`SHARP_ANGLE` or more apart (the median over the touching points). A part's
-    faces meet at edges; the analytic pieces of a smooth freeform sheet (a curled sheet held by
-    six cylinders and planes) meet tangentially. ``points`` (N, 3): the segmentation's."""
+def _contacts(segmentation: Segmentation, points: np.ndarray) -> list[tuple[int, float]]:
+    """Per pair of regions that touch (a point of one among the 8 nearest of a point of the
+    other, at least :data:`SHARP_CONTACTS` times): (how many such neighbour pairs, the median
+    angle in degrees between their surfaces' normals there). ``points`` (N, 3): the
+    segmentation's; at most :data:`CONTACT_POINTS` of them are used (a seeded subset)."""
     labels = segmentation.labels
+    if len(points) > CONTACT_POINTS:
+        subset = np.random.default_rng(0).choice(len(points), CONTACT_POINTS, replace=False)
+        points, labels = points[subset], labels[subset]
     _, near = cKDTree(points).query(points, k=9)
     first = np.repeat(np.arange(len(points)), 8)
     second = near[:, 1:].ravel()
     touch = (labels[first] >= 0) & (labels[second] >= 0) & (labels[first] < labels[second])
     first, second = first[touch], second[touch]
     pairs = labels[first] * len(segmentation.surfaces) + labels[second]
-    sharp = 0
+    found = []
     for pair in np.unique(pairs):
         mine = pairs == pair
         if mine.sum() < SHARP_CONTACTS:
@@ -228,8 +240,28 @@ def sharp_edges(segmentation: Segmentation, points: np.ndarray) -> int:
         contact = 0.5 * (points[first[mine]] + points[second[mine]])
         cosine = np.abs(np.einsum("ij,ij->i", segmentation.surfaces[a].normals(contact),
                                   segmentation.surfaces[b].normals(contact)))
-        sharp += bool(np.median(cosine) < np.cos(np.radians(SHARP_ANGLE)))
-    return sharp
+        found.append((int(mine.sum()), float(np.degrees(np.arccos(min(np.median(cosine),
+                                                                      1.0))))))
+    return found
+
+
+def sharp_edges(segmentation: Segmentation, points: np.ndarray) -> int:
+    """How many pairs of regions meet at a sharp edge: touch (see :func:`_contacts`) with their
+    surfaces' normals there :data:`SHARP_ANGLE` or more apart (the median over the touching
+    points). A part's faces meet at edges; the analytic pieces of a smooth freeform sheet (a
+    curled sheet held by six cylinders and planes) meet tangentially. ``points`` (N, 3): the
+    segmentation's."""
+    return sum(angle >= SHARP_ANGLE for _, angle in _contacts(segmentation, points))
+
+
+def sharp_share(segmentation: Segmentation, points: np.ndarray) -> float:
+    """The share of the contacts between regions (neighbour pairs, :func:`_contacts`) that lie
+    where the two surfaces meet at :data:`SHARP_ANGLE` or more; 0 when no regions touch.
+    ``points`` (N, 3): the segmentation's."""
+    contacts = _contacts(segmentation, points)
+    total = sum(count for count, _ in contacts)
+    return sum(count for count, angle in contacts if angle >= SHARP_ANGLE) / total if total \
+        else 0.0
 
 
 def solid_distances(solid: OccShape, surfaces: list[Primitive], points: np.ndarray,

@@ -11,9 +11,9 @@ from scipy.spatial import cKDTree
 pytest.importorskip("OCP")
 
 from nurbs_core.brep.occ import face_kind, faces, is_valid, volume  # noqa: E402
-from nurbs_core.brep.part import fit_part, part_like  # noqa: E402
+from nurbs_core.brep.part import MIN_SHARP_SHARE, fit_part, part_like, sharp_share  # noqa: E402
 from nurbs_core.brep.primitives import Primitive, fit_kind, refine  # noqa: E402
-from nurbs_core.brep.sample_parts import PARTS, scan_part  # noqa: E402
+from nurbs_core.brep.sample_parts import HOLED_PARTS, PARTS, scan_part  # noqa: E402
 from nurbs_core.brep.segment import segment, segment_subset  # noqa: E402
 from nurbs_core.brep.solid import winding_numbers  # noqa: E402
 from nurbs_core.cli import main  # noqa: E402
@@ -235,8 +235,28 @@ def test_a_freeform_closed_scan_is_not_taken_for_a_part():
     assert route.kind == "network"
     assert "not a machined part" in route.finding
     # with noise of 0.2% of the diagonal a dozen spheres and cones hold a sparse head within
-    # 3 sigmas; a part is made mostly of planes and cylinders
-    assert not part_like(segment(head, give_up=0.02))
+    # 3 sigmas; a part is made mostly of planes and cylinders, or its faces meet at sharp edges
+    segmentation = segment(head, give_up=0.02)
+    assert not part_like(segmentation, head)
+    assert sharp_share(segmentation, head) < MIN_SHARP_SHARE / 2
+
+
+def test_a_part_mostly_on_a_cone_is_a_part_because_its_faces_meet_at_sharp_edges():
+    """A cone frustum with a bore has over half its points on the cone, which once made it "a
+    freeform shape" (a network of 92 patches, every edge rounded); its four regions meet at
+    sharp edges (68 and 90 degrees), which the spheres and cones that hold a head do not."""
+    shape = HOLED_PARTS["bored_cone"]()
+    points, owner, kinds = scan_part(shape, COUNT, NOISE, seed=1)
+    segmentation = segment(points, give_up=0.02)
+    assert sorted(s.kind for s in segmentation.surfaces) == sorted(kinds)
+    assert not part_like(segmentation)  # mostly a cone: planes and cylinders alone refuse it
+    assert sharp_share(segmentation, points) > 0.9
+    assert part_like(segmentation, points)
+    mesh = closed_mesh(points)
+    fitted = fit_part(points, mesh.vertices, mesh.faces, segmentation)
+    assert fitted.valid and fitted.closed and fitted.status == "converged", fitted.problems
+    assert sorted(face_kind(f) for f in faces(fitted.solid)) == sorted(kinds)
+    assert abs(volume(fitted.solid) / volume(shape) - 1) < 0.01
 
 
 def test_a_large_cloud_is_segmented_on_a_subset_whose_surfaces_label_every_point():
