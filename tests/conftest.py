@@ -99,3 +99,45 @@ def no_thread_left_behind_by_fixtures():
     before = set(threading.enumerate())
     yield
     _check_no_thread_left(before, "a module- or session-scoped fixture")
+
+
+# --- the quick loop: tests measured as long are marked 'long' ------------------------------------
+def _long_test_ids() -> frozenset[str]:
+    """The node ids in ``tests/long_tests.txt`` (written by ``scripts/long_tests.py`` from a run's
+    JUnit report)."""
+    listed = ROOT / "tests" / "long_tests.txt"
+    if not listed.is_file():
+        return frozenset()
+    lines = (line.strip() for line in listed.read_text().splitlines())
+    return frozenset(line for line in lines if line and not line.startswith("#"))
+
+
+def _shared_fixtures(item: pytest.Item) -> set[tuple[str, object]]:
+    """The module-scoped fixtures of its own file the test uses, each with the parameter it
+    takes: a test sharing one with a long test would build it alone in the quick loop."""
+    params = getattr(getattr(item, "callspec", None), "params", {})
+    info = getattr(item, "_fixtureinfo", None)
+    if info is None:
+        return set()
+    module = item.nodeid.split("::")[0]
+    return {(name, repr(params.get(name))) for name, definitions in info.name2fixturedefs.items()
+            if definitions and definitions[-1].scope in ("module", "class")
+            and definitions[-1].baseid == module}
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark ``long`` the tests listed in ``tests/long_tests.txt`` and the tests of the same file
+    that share a module-scoped fixture (with the same parameter) with one of them:
+    ``pytest -m "not slow and not long"`` is the quick loop (README, "Run the tests")."""
+    listed = _long_test_ids()
+    if not listed:
+        return
+    costly: set[tuple[str, str, object]] = set()
+    for item in items:
+        if item.nodeid in listed:
+            costly |= {(item.nodeid.split("::")[0], *shared) for shared in _shared_fixtures(item)}
+    for item in items:
+        module = item.nodeid.split("::")[0]
+        if item.nodeid in listed or any((module, *shared) in costly
+                                        for shared in _shared_fixtures(item)):
+            item.add_marker(pytest.mark.long)
