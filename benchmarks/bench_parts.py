@@ -28,6 +28,9 @@ Each scan goes the default way (``choose_route``: a closed object, part-like or 
 * for the open scans, solid means one valid open shell (BRepCheck_Analyzer) and edge p99 / sigma
   is the 99th percentile of its free edges' distance to the true part's section where the scan
   stops (z = 0), over sigma;
+* in ``--json`` only: each row's ``problems`` (the failed checks) and ``face_p99_noise`` (each
+  face's own points' 99th percentile distance over the route's noise estimate, the per-face
+  check of ``part_problems``);
 * sec, cpu s: route decision plus solid, wall and CPU seconds of this process, one thread (the
   machine is shared: CPU over wall says how much it was).
 
@@ -72,7 +75,7 @@ def _edge_points(points: np.ndarray, owner: np.ndarray) -> np.ndarray:
 
 def _measure(name: str, shape: Any, count: int, noise: float, seed: int,
              baseline: bool) -> dict[str, Any]:
-    from nurbs_core.brep.part import fit_part
+    from nurbs_core.brep.part import face_sigmas, fit_part
     from nurbs_core.brep.solid import SolidError
     from nurbs_core.route import choose_route
 
@@ -95,6 +98,8 @@ def _measure(name: str, shape: Any, count: int, noise: float, seed: int,
             row["seconds"] = time.perf_counter() - started
             row["solid"] = result.valid and result.closed
             row["status"] = result.status
+            row["problems"] = list(result.problems)
+            row["face_p99_noise"] = [round(float(v), 2) for v in face_sigmas(result)]
             distance, nearest = result.distances, result.point_faces
             out_kinds = np.array([face_kind(f) for f in faces(result.solid)])
             true_kind = np.array(kinds)[owner]
@@ -134,7 +139,7 @@ def _measure_open(name: str, shape: Any, count: int, noise: float, seed: int) ->
     """The part scanned from above through the default route: an open shell when it is one."""
     from OCP.ShapeAnalysis import ShapeAnalysis_FreeBounds
 
-    from nurbs_core.brep.part import fit_part
+    from nurbs_core.brep.part import face_sigmas, fit_part
     from nurbs_core.brep.solid import SolidError
     from nurbs_core.occ_topology import subshapes
     from nurbs_core.route import choose_route
@@ -160,6 +165,8 @@ def _measure_open(name: str, shape: Any, count: int, noise: float, seed: int) ->
             row["solid"] = (result.valid and len(subshapes(shell, "SHELL")) == 1
                             and not subshapes(shell, "SOLID"))
             row["status"] = result.status
+            row["problems"] = list(result.problems)
+            row["face_p99_noise"] = [round(float(v), 2) for v in face_sigmas(result)]
             out_kinds = np.array([face_kind(f) for f in faces(shell)])
             true_kind = np.array(kinds)[owner]
             row["faces"] = len(out_kinds)
