@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
+from app.cloud_detail import shown_indices
 from app.display_types import DeviationMap
 from app.state import OffsetDisplay, Target
-from app.viewport.cloud_detail import shown_indices
 from app.workers.deviation_map import fit_triangles
 from app.workers.display import DisplayGeometry, display_geometry
 from app.workers.fit_worker import FINAL_DEVIATION_POINTS, sampled_deviation, signed_map
@@ -92,7 +92,7 @@ def load_files(paths: list[str], cancel: threading.Event | None = None) -> Loade
 
 def draw_display_subset(targets: list[Target]) -> None:
     """Draw the viewport's display subset of the visible targets' stacked points here (a load
-    job) rather than on the GUI thread: :func:`app.viewport.cloud_detail.shown_indices` keeps
+    job) rather than on the GUI thread: :func:`app.cloud_detail.shown_indices` keeps
     it by count, so the window finds it ready when it shows these targets."""
     shown_indices(sum(len(t.points) for t in targets if t.visible))
 

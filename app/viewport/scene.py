@@ -10,7 +10,7 @@ and the other way round.
 Meshes are created once per layer and then updated in place (``mesh.points = ...`` or
 ``copy_from`` when the topology changes), never re-added per frame. Rendering is explicit
 (``auto_update=False``) and coalesced: ``request_render()`` draws at most ~30 times a second.
-A big cloud is drawn in two steps (:mod:`app.viewport.cloud_detail`): a first frame of a small
+A big cloud is drawn in two steps (:mod:`app.cloud_detail`): a first frame of a small
 subset, then, once it is on screen and the event loop has run, the whole display subset.
 Only the GUI thread calls into this module.
 """
@@ -25,8 +25,8 @@ from PySide6.QtCore import QObject, QTimer
 from PySide6.QtWidgets import QWidget
 from pyvistaqt import QtInteractor
 
+from app.cloud_detail import DISPLAY_BUDGET, first_frame_positions, shown_indices, shown_text
 from app.display_types import FAR, FINE, FLIPPED, OVERLAP, DeviationMap, DisplayGeometry
-from app.viewport.cloud_detail import DISPLAY_BUDGET, first_frame_positions, shown_indices, shown_text
 from app.viewport.deviation_colours import DeviationColours
 from app.viewport.face_pick import FacePicker
 from app.viewport.legend_box import label_contrasts, swatch_legend
@@ -158,7 +158,7 @@ class SceneView(QObject):
         self.up_axis = "z"
         self._meshes: dict[str, pv.PolyData] = {}
         #: the cloud's points (all of them, drawn or not) and the indices of those drawn (None:
-        #: all; a big cloud draws at most ``display_budget``: :mod:`app.viewport.cloud_detail`)
+        #: all; a big cloud draws at most ``display_budget``: :mod:`app.cloud_detail`)
         self._cloud_count = 0
         self._cloud_shown: np.ndarray | None = None
         #: the points of the display subset (K, 3), the indices in the cloud of those the mesh
@@ -246,7 +246,7 @@ class SceneView(QObject):
     def set_cloud(self, points: np.ndarray | None):
         """The (stacked) target cloud (N, 3); resets its deviation colouring. Above the display
         budget only an even subset of the points is drawn (:meth:`shown_points`); above
-        :data:`~app.viewport.cloud_detail.FIRST_FRAME_POINTS` drawn points the first frame
+        :data:`~app.cloud_detail.FIRST_FRAME_POINTS` drawn points the first frame
         holds a smaller subset with the same bounds, unshaded, and the next the whole display
         subset (:meth:`detail_pending` until then)."""
         points = np.zeros((0, 3)) if points is None else np.asarray(points, float)

@@ -8,7 +8,7 @@ import pytest
 from app_helpers import open_by_drop
 from test_selection import _drag, _grid_cloud, _vtk_display
 
-from app.viewport.cloud_detail import (
+from app.cloud_detail import (
     DISPLAY_BUDGET,
     FIRST_FRAME_POINTS,
     first_frame_positions,
