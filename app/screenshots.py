@@ -21,7 +21,6 @@ solid`` makes one of the sets.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import tempfile
 from pathlib import Path
@@ -29,8 +28,10 @@ from pathlib import Path
 import numpy as np
 
 import app  # noqa: F401 - sets QT_API
+from nurbs_core.paper_data import paper_data_dir
 
-PAPER_DATA = Path(os.environ.get("NURBS_STUDIO_DATA", "/work/shared/data")) / "nurbsdiff_paper"
+#: NURBS_STUDIO_DATA, or shared/data beside the checkout (nurbs_core.paper_data)
+PAPER_DATA = paper_data_dir() or Path("shared/data/nurbsdiff_paper")
 
 
 def _write_points(path: Path, points: np.ndarray) -> Path:

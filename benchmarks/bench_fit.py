@@ -148,7 +148,9 @@ def default_loss_cases() -> list[tuple[str, np.ndarray, int]]:
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    data = Path("/work/shared/data/nurbsdiff_paper")
+    from nurbs_core.paper_data import paper_data_dir
+
+    data = paper_data_dir(root) or root / "missing-paper-data"
     files = [("demo sin_cos.xyz (4000, noisy)", root / "resources" / "demo" / "sin_cos.xyz", 12),
              ("scan c5dataReg (11330)", data / "step_fitting" / "c5dataReg.txt", 12),
              ("valve data.1 (273)", data / "valve_reconstruction" / "data.1.txt", 8),

@@ -5,7 +5,7 @@ then loads each one in a fresh Python process per loader so every peak RSS is th
 alone, and prints a table: seconds, peak RSS, RSS added by the load (peak minus the RSS after
 imports) and that as a multiple of the file's vertex data.
 
-    /work/venv/bin/python benchmarks/bench_io_ply.py [--points 10000000] [--repeat 3]
+    .venv/bin/python benchmarks/bench_io_ply.py [--points 10000000] [--repeat 3]
 """
 
 from __future__ import annotations

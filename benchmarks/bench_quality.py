@@ -71,6 +71,7 @@ from scipy.spatial import cKDTree
 
 from nurbs_core import samples
 from nurbs_core.fitting import FitConfig, fit
+from nurbs_core.paper_data import paper_data_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -86,14 +87,7 @@ QUICK = ("valve_data.1", "saddle", "curled_sheet", "sphere")
 
 def find_data() -> Path | None:
     """``shared/data/nurbsdiff_paper`` (NURBS_STUDIO_DATA overrides), as tests/conftest.py."""
-    env = os.environ.get("NURBS_STUDIO_DATA")
-    candidates = [Path(env)] if env else []
-    candidates += [parent / "shared" / "data" for parent in ROOT.parents]
-    candidates.append(Path("/work/shared/data"))
-    for candidate in candidates:
-        if (candidate / "nurbsdiff_paper").is_dir():
-            return candidate / "nurbsdiff_paper"
-    return None
+    return paper_data_dir(ROOT)
 
 
 # --- cases -------------------------------------------------------------------------------------

@@ -1,8 +1,8 @@
 """Rerun the NURBS-Diff paper's fitting experiments and print our numbers beside the paper's.
 
-    /work/venv/bin/python benchmarks/paper_report.py            # full run (a few minutes)
-    /work/venv/bin/python benchmarks/paper_report.py --quick    # smaller grids, about a minute
-    /work/venv/bin/python benchmarks/paper_report.py --sections offset curves
+    .venv/bin/python benchmarks/paper_report.py            # full run (a few minutes)
+    .venv/bin/python benchmarks/paper_report.py --quick    # smaller grids, about a minute
+    .venv/bin/python benchmarks/paper_report.py --sections offset curves
 
 Paper values are transcribed from shared/paper/nurbs-diff.tex (tables Tab:CtrlPtsMSE,
 Tab:EvalPtsMSE, Tab:DegreeMSE, Tab:SurfaceFitting, Tab:Offset, Tab:CurveFitting). Every row
@@ -271,9 +271,11 @@ def section_surface_fitting(args) -> None:
 
 
 def _data_dir() -> Path:
-    for candidate in [ROOT.parent / "shared" / "data", Path("/work/shared/data")]:
-        if (candidate / "nurbsdiff_paper").is_dir():
-            return candidate / "nurbsdiff_paper"
+    from nurbs_core.paper_data import paper_data_dir
+
+    found = paper_data_dir(ROOT)
+    if found is not None:
+        return found
     raise SystemExit("the paper's data (shared/data/nurbsdiff_paper) is not on this machine")
 
 

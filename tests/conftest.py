@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from nurbs_core.paper_data import paper_data_dir
+
 ROOT = Path(__file__).resolve().parents[1]
 
 # One torch (OpenMP) thread per test process, and for the processes the tests start: pytest-xdist
@@ -21,18 +23,7 @@ for _variable in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")
 
 
-def _find_shared_data() -> Path | None:
-    env = os.environ.get("NURBS_STUDIO_DATA")
-    candidates = [Path(env)] if env else []
-    candidates += [parent / "shared" / "data" for parent in ROOT.parents]
-    candidates.append(Path("/work/shared/data"))
-    for candidate in candidates:
-        if (candidate / "nurbsdiff_paper").is_dir():
-            return candidate / "nurbsdiff_paper"
-    return None
-
-
-SHARED_DATA = _find_shared_data()
+SHARED_DATA = paper_data_dir(ROOT)
 
 
 @pytest.fixture(scope="session")
