@@ -169,6 +169,9 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
     points = np.asarray(points, np.float64)
     diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
     max_hole = MAX_HOLE * diagonal if max_hole is None else float(max_hole)
+    # no opening of the scan is wider than its bounding box's diagonal: a larger setting seals
+    # the same holes (and would only stretch the grid's margin, to overflow for a huge one)
+    max_hole = min(max_hole, diagonal)
     if len(points) > WRAP_POINTS:
         # the grid holds about CELLS_PER_DIAGONAL cells across: voxel centroids (the noise
         # averaged) carry all a denser cloud says at that resolution, at a fraction of the cost
@@ -195,11 +198,10 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
             return thin
     sealed_mesh = None
     if max_hole > 0:
-        grid = _grid(points, max_hole)
-        sealed = wrap(points, grid, tree, hole_radius=0.5 * max_hole, frames=frames)
+        sealed, sealed_hole = _sealed_wrap(points, tree, frames, max_hole, cell)
         if sealed.encloses:
             try:
-                sealed_mesh = _zero_set(points, normals, sealed, tree, max_hole)
+                sealed_mesh = _zero_set(points, normals, sealed, tree, sealed_hole)
             except NotClosedError:
                 if missed is None:
                     raise
@@ -219,6 +221,30 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
                          f"openings are wider than {max_hole:.4g}, the largest hole filled); a "
                          "patch network needs a closed object, and an open sheet is fitted as "
                          "one patch (the single-patch fit)")
+
+
+#: a closing that does not seal is tried again with balls this much smaller (see _sealed_wrap)
+SEAL_STEP = 1.5
+
+
+def _sealed_wrap(points: np.ndarray, tree: cKDTree, frames: LocalFrames, max_hole: float,
+                 cell: float) -> tuple[Wrap, float]:
+    """The wrap of ``points`` (N, 3) with its openings up to ``max_hole`` sealed, and the hole
+    size whose closing sealed them.
+
+    A closing by a ball wider than the object's own inside opens the hole again from within (the
+    erosion reaches the rim from the hollow: a ball of 0.85 radii seals no hole of a sphere), so
+    a setting larger than the object needs sealed nothing while a smaller one did. When the
+    closing by ``max_hole`` encloses nothing, balls ``SEAL_STEP`` times smaller are tried, down
+    to a few cells of the default grid (``cell``): every hole a smaller setting seals, a larger
+    one seals too."""
+    hole = max_hole
+    while True:
+        sealed = wrap(points, _grid(points, hole), tree, hole_radius=0.5 * hole, frames=frames)
+        smaller = hole / SEAL_STEP
+        if sealed.encloses or smaller < 4 * cell:
+            return sealed, hole
+        hole = smaller
 
 
 def _on_finer_grids(points: np.ndarray, normals: np.ndarray | None, tree: cKDTree,

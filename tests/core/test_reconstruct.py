@@ -326,6 +326,31 @@ def test_holes_up_to_max_hole_are_sealed_and_wider_ones_stay_open(holed_blob):
         closed_mesh(points, max_hole=0.0)
 
 
+def _is_closed_manifold(mesh) -> bool:
+    edges = np.sort(np.concatenate([mesh.faces[:, [0, 1]], mesh.faces[:, [1, 2]],
+                                    mesh.faces[:, [2, 0]]]), 1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    return bool((counts == 2).all() and len(mesh.vertices) - len(unique) + len(mesh.faces) == 2)
+
+
+def test_a_larger_max_hole_seals_every_hole_a_smaller_one_seals():
+    """A closing by a ball wider than the object's inside opens the hole again from within: a
+    sphere whose cap was cut off (an opening a quarter of the diagonal wide) was sealed with
+    --max-hole 0.3 diagonals and refused with 0.5, and 1e308 overflowed the voxel grid."""
+    shape = samples.sphere(2000, seed=0, truth_count=20_000)
+    points = shape.points[shape.points[:, 2] < 0.9 * shape.points[:, 2].max()]
+    diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
+    with pytest.raises(NotClosedError):
+        closed_mesh(points, max_hole=0.2 * diagonal)  # narrower than the opening
+    for setting in (0.3, 0.5, 1.0, 1e300):
+        mesh = closed_mesh(points, max_hole=setting * diagonal)
+        assert _is_closed_manifold(mesh), setting
+        assert 0 < mesh.filled_fraction < 0.05, setting
+        # the cap lies where the sphere was
+        away = cKDTree(shape.truth).query(mesh.vertices)[0]
+        assert away.max() < 0.03 * shape.diagonal, setting
+
+
 @pytest.mark.slow
 def test_nurbs_fit_seals_the_holes_of_a_scan_and_says_so(holed_blob, tmp_path, capsys):
     from nurbs_core.cli import main
