@@ -198,7 +198,8 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
             return thin
     sealed_mesh = None
     if max_hole > 0:
-        sealed, sealed_hole = _sealed_wrap(points, tree, frames, max_hole, cell)
+        sealed, sealed_hole = _sealed_wrap(points, tree, frames, max_hole,
+                                           max(MAX_HOLE * diagonal, 4 * cell))
         if sealed.encloses:
             try:
                 sealed_mesh = _zero_set(points, normals, sealed, tree, sealed_hole)
@@ -228,21 +229,21 @@ SEAL_STEP = 1.5
 
 
 def _sealed_wrap(points: np.ndarray, tree: cKDTree, frames: LocalFrames, max_hole: float,
-                 cell: float) -> tuple[Wrap, float]:
+                 smallest: float) -> tuple[Wrap, float]:
     """The wrap of ``points`` (N, 3) with its openings up to ``max_hole`` sealed, and the hole
     size whose closing sealed them.
 
     A closing by a ball wider than the object's own inside opens the hole again from within (the
     erosion reaches the rim from the hollow: a ball of 0.85 radii seals no hole of a sphere), so
-    a setting larger than the object needs sealed nothing while a smaller one did. When the
-    closing by ``max_hole`` encloses nothing, balls ``SEAL_STEP`` times smaller are tried, down
-    to a few cells of the default grid (``cell``): every hole a smaller setting seals, a larger
-    one seals too."""
+    a setting larger than the object needed sealed nothing while a smaller one did. When the
+    closing by ``max_hole`` encloses nothing, balls ``SEAL_STEP`` times smaller are tried down
+    to ``smallest`` (the default setting's: a default run wraps once, as before), so a larger
+    setting seals every hole the default or a smaller one seals."""
     hole = max_hole
     while True:
         sealed = wrap(points, _grid(points, hole), tree, hole_radius=0.5 * hole, frames=frames)
         smaller = hole / SEAL_STEP
-        if sealed.encloses or smaller < 4 * cell:
+        if sealed.encloses or smaller < smallest:
             return sealed, hole
         hole = smaller
 

@@ -246,3 +246,20 @@ def test_nurbs_fit_takes_the_bunnys_head_straight_to_the_open_network(bunny_head
     assert "an open network of patches" in routes[0]
     assert "fitting a surface" not in captured.err
     assert "fitting a network of bicubic patches" in captured.err
+
+
+def test_a_dense_noisy_height_field_is_still_one_over_its_plane():
+    """Where the noise is larger than the point spacing, twelve neighbours' normals point
+    anywhere: a 300,000-point height field with noise twice its spacing was judged no height
+    field (and a million points spent 9.6 CPU s on their local frames). It is judged on an even
+    subset; a sheet that turns back over itself still is not one."""
+    from nurbs_core.fitting.sheet import HEIGHT_FIELD_POINTS, is_height_field
+
+    rng = np.random.default_rng(0)
+    count = 6 * HEIGHT_FIELD_POINTS
+    xy = rng.uniform(0, 3, (count, 2))
+    spacing = 3 / np.sqrt(count)
+    z = 0.3 * np.sin(2 * xy[:, 0]) * np.cos(2 * xy[:, 1]) + rng.normal(0, 2 * spacing, count)
+    assert is_height_field(np.column_stack([xy, z]))
+    curled = samples.curled_sheet(count, seed=0, truth_count=1000).points
+    assert not is_height_field(curled)
