@@ -2,10 +2,10 @@
 its status say so?
 
 Run: ``python benchmarks/bench_curled_sweep.py [--counts 700 1500 4000] [--seeds 0 1 2 3 4 5]
-[--noise 0.002] [--json OUT]`` (18 fits, about 1-2 minutes on one thread).
+[--noise 0.002] [--json OUT]`` (18 fits, about 30 s on one thread).
 
 Each cloud is :func:`nurbs_core.samples.curled_sheet` (1.5 turns) sampled uniformly in its
-parameters (``by_parameter=True``: the outer turn is about 3.8 times sparser per area than the
+parameters (``by_parameter=True``: the outer turn is about 3.7 times sparser per area than the
 inner end), noise 0.2% of the diagonal, fitted with the single patch's defaults
 (``fit(points, FitConfig(threads=1))``). Per fit:
 

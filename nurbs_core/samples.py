@@ -523,7 +523,7 @@ def curled_sheet(count: int = 4000, noise: float = 0.002, seed: int = 0, *, r0: 
     extruded along z over [0, height]. Where the turns overlap they are 2 pi pitch apart (0.94
     with the defaults, about 17 % of the diagonal, 85 noise sigmas at the default noise).
     ``by_parameter``: the cloud uniform in (theta, z) instead of by area, so the outer turn
-    (radius up to 1.91) is about 3.8 times sparser per area than the inner end (radius 0.5)."""
+    (radius up to 1.91) is about 3.7 times sparser per area than the inner end (radius 0.5)."""
     def mapping(theta: np.ndarray, z: np.ndarray) -> np.ndarray:
         r = r0 + pitch * theta
         return np.stack([r * np.cos(theta), r * np.sin(theta), z], -1)

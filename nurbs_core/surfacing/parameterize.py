@@ -1,17 +1,16 @@
 """A fold-free parameterisation of a disk-like cloud over the unit square.
 
 The cloud's mesh (:mod:`nurbs_core.surfacing.mesh`) has one outer boundary loop; its four corners
-(of several candidates: :func:`corner_candidates`, the one with the least area distortion) go to
-the corners of [0, 1]^2 and the sides in between are laid out by chord length. Inner holes are
-closed by a cone vertex. The interior solves Floater's mean-value map (2003): every vertex is the
-mean-value combination of its neighbours, whose weights are positive, so with a convex boundary
-no triangle can flip (Tutte / Floater). The map is checked anyway; every cloud point then takes
-its (u, v) by barycentric interpolation in the mesh triangle it lies over.
+(:func:`~nurbs_core.surfacing.disk.choose_corners`) go to the corners of [0, 1]^2 and the sides in
+between are laid out by chord length. Inner holes are closed by a cone vertex. The interior solves
+Floater's mean-value map (2003): every vertex is the mean-value combination of its neighbours,
+whose weights are positive, so with a convex boundary no triangle can flip (Tutte / Floater). The
+map is checked anyway; every cloud point then takes its (u, v) by barycentric interpolation in
+the mesh triangle it lies over.
 """
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -20,7 +19,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 from scipy.spatial import cKDTree
 
-from nurbs_core.surfacing.disk import Topology, choose_corners, classify, loop_length, turn_peaks
+from nurbs_core.surfacing.disk import Topology, choose_corners, classify, loop_length
 from nurbs_core.surfacing.mesh import CloudMesh, cloud_mesh, without_faces
 from nurbs_core.surfacing.tube import cut_open, shortest_seam
 
@@ -153,26 +152,15 @@ def _map(points: np.ndarray, mesh: CloudMesh, corners: np.ndarray | None,
                             closed)
 
 
-#: the boundary's sharpest turns whose every four are corner candidates (15 sets)
-TURN_CANDIDATES = 6
-
-
 def corner_candidates(vertices: np.ndarray, loop: np.ndarray, faces: np.ndarray,
                       rotations: int = 8) -> list[np.ndarray]:
     """Candidate corner positions along ``loop`` (each (4,) sorted): the boundary's sharpest
-    turns (:func:`choose_corners`), every four of its ``TURN_CANDIDATES`` sharpest turns (a
-    sparse scan's ragged border has notches as sharp as its true corners: a notch taken for a
-    corner, or corners put mid-side by the quarters, let the patch's corner run past the scan
-    as a flap) and arc-length quarters at ``rotations`` offsets over a quarter turn. The map
-    keeps the candidate with the least area distortion."""
+    turns (:func:`choose_corners`) and arc-length quarters at ``rotations`` offsets over a
+    quarter turn. The map keeps the candidate with the least area distortion."""
     points = vertices[loop]
     segment = np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1)
     arc = np.r_[0.0, np.cumsum(segment)[:-1]] / max(segment.sum(), 1e-300)
     candidates = [np.asarray(choose_corners(vertices, loop, faces))]
-    peaks, _ = turn_peaks(vertices, loop, faces, TURN_CANDIDATES)
-    for four in itertools.combinations(peaks.tolist(), 4):
-        if len(set(four)) == 4:
-            candidates.append(np.sort(np.asarray(four)))
     for k in range(rotations):
         offset = 0.25 * k / rotations
         quarter = [int(np.argmin(np.minimum(np.abs(arc - (offset + q) % 1.0),
