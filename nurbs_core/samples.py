@@ -518,10 +518,12 @@ def saddle(count: int = 4000, noise: float = 0.002, seed: int = 0, *,
 
 def curled_sheet(count: int = 4000, noise: float = 0.002, seed: int = 0, *, r0: float = 0.5,
                  pitch: float = 0.15, height: float = 2.0,
-                 truth_count: int = TRUTH_COUNT) -> SampledShape:
+                 truth_count: int = TRUTH_COUNT, by_parameter: bool = False) -> SampledShape:
     """A sheet rolled 1.5 turns: the spiral r = r0 + pitch * theta, theta in [0, 3 pi],
     extruded along z over [0, height]. Where the turns overlap they are 2 pi pitch apart (0.94
-    with the defaults, about 17 % of the diagonal, 85 noise sigmas at the default noise)."""
+    with the defaults, about 17 % of the diagonal, 85 noise sigmas at the default noise).
+    ``by_parameter``: the cloud uniform in (theta, z) instead of by area, so the outer turn
+    (radius up to 1.91) is about 3.7 times sparser per area than the inner end (radius 0.5)."""
     def mapping(theta: np.ndarray, z: np.ndarray) -> np.ndarray:
         r = r0 + pitch * theta
         return np.stack([r * np.cos(theta), r * np.sin(theta), z], -1)
@@ -529,7 +531,7 @@ def curled_sheet(count: int = 4000, noise: float = 0.002, seed: int = 0, *, r0: 
     shape = _Shape([_analytic_chart(mapping, (0.0, 3 * np.pi), (0.0, height))])
     return _make("curled_sheet", shape, count, noise, seed, closed=False, height_field=False,
                  kind="sheet", truth_count=truth_count,
-                 info={"layer_gap": 2 * np.pi * pitch})
+                 info={"layer_gap": 2 * np.pi * pitch}, by_parameter=by_parameter)
 
 
 def bowl(count: int = 4000, noise: float = 0.002, seed: int = 0, *, radius: float = 1.0,

@@ -142,6 +142,47 @@ def choose_corners(vertices: np.ndarray, loop: np.ndarray, faces: np.ndarray) ->
     space) and summed over a short window; four clear turns (a rectangular scan, a terrain tile)
     become the corners, otherwise the corners split the boundary into arc-length quarters
     starting at its sharpest turn (a round leaflet)."""
+    peaks, windowed = turn_peaks(vertices, loop, faces, 4)
+    if len(peaks) == 4 and windowed[3] > np.radians(50):
+        return np.sort(peaks)
+    points = vertices[loop]
+    segment = np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1)
+    arc = np.r_[0.0, np.cumsum(segment)[:-1]]
+    total = float(segment.sum())
+    first = int(np.argmax(_windowed_turning(vertices, loop, faces)))
+    quarters = [int(np.argmin(np.abs(((arc - arc[first]) % total) - q * total)))
+                for q in (0.0, 0.25, 0.5, 0.75)]
+    return np.sort(np.asarray(quarters))
+
+
+#: the boundary's turning is summed over +-TURN_WINDOW of its perimeter; distinct turns lie
+#: more than TURN_SEPARATION of the perimeter apart
+TURN_WINDOW = 0.025
+TURN_SEPARATION = 0.05
+
+
+def _windowed_turning(vertices: np.ndarray, loop: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(L,) the intrinsic turning of the boundary ``loop`` summed over +-TURN_WINDOW of the
+    perimeter around each of its vertices (cyclic)."""
+    points = vertices[loop]
+    segment = np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1)
+    arc = np.r_[0.0, np.cumsum(segment)[:-1]]
+    total = float(segment.sum())
+    turn = np.pi - _angle_sums(vertices, faces)[loop]
+    window = TURN_WINDOW * total
+    s = np.r_[arc - total, arc, arc + total]
+    cumulative = np.r_[0.0, np.cumsum(np.tile(turn, 3))]
+    lo = np.searchsorted(s, arc - window, side="left")
+    hi = np.searchsorted(s, arc + window, side="right")
+    return cumulative[hi] - cumulative[lo]          # indices into the tripled arrays
+
+
+def turn_peaks(vertices: np.ndarray, loop: np.ndarray, faces: np.ndarray,
+               count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The boundary's ``count`` sharpest distinct turns, sharpest first: (positions along
+    ``loop`` (K,), each the tip of its turn (:func:`_tip`), and their windowed turning in
+    radians (K,)); K <= count when the loop has fewer turns more than TURN_SEPARATION of its
+    perimeter apart."""
     points = vertices[loop]
     n = len(loop)
     if n < 4:
@@ -149,27 +190,16 @@ def choose_corners(vertices: np.ndarray, loop: np.ndarray, faces: np.ndarray) ->
     segment = np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1)
     arc = np.r_[0.0, np.cumsum(segment)[:-1]]
     total = float(segment.sum())
-    turn = np.pi - _angle_sums(vertices, faces)[loop]
-    # windowed sum of the turning, cyclic, over +-2.5% of the perimeter
-    window = 0.025 * total
-    s = np.r_[arc - total, arc, arc + total]
-    cumulative = np.r_[0.0, np.cumsum(np.tile(turn, 3))]
-    lo = np.searchsorted(s, arc - window, side="left")
-    hi = np.searchsorted(s, arc + window, side="right")
-    windowed = cumulative[hi] - cumulative[lo]          # indices into the tripled arrays
+    windowed = _windowed_turning(vertices, loop, faces)
     candidates: list[int] = []
     for i in np.argsort(-windowed):
-        if all(min(abs(arc[i] - arc[j]), total - abs(arc[i] - arc[j])) > 0.05 * total
+        if all(min(abs(arc[i] - arc[j]), total - abs(arc[i] - arc[j])) > TURN_SEPARATION * total
                for j in candidates):
             candidates.append(int(i))
-        if len(candidates) == 4:
+        if len(candidates) == count:
             break
-    if len(candidates) == 4 and windowed[candidates[3]] > np.radians(50):
-        return np.sort(np.asarray([_tip(points, arc, total, c, window) for c in candidates]))
-    first = int(np.argmax(windowed))
-    quarters = [int(np.argmin(np.abs(((arc - arc[first]) % total) - q * total)))
-                for q in (0.0, 0.25, 0.5, 0.75)]
-    return np.sort(np.asarray(quarters))
+    tips = [_tip(points, arc, total, c, TURN_WINDOW * total) for c in candidates]
+    return np.asarray(tips, dtype=np.int64), windowed[candidates]
 
 
 def _tip(points: np.ndarray, arc: np.ndarray, total: float, centre: int, window: float) -> int:

@@ -93,6 +93,28 @@ def test_true_areas_of_other_shapes():
     assert sheet.true_area == pytest.approx(2.0 * (primitive(theta) - primitive(0)), rel=1e-8)
 
 
+def test_a_curled_sheet_sampled_by_parameter_is_sparse_on_its_outer_turn():
+    # uniform in (theta, z): points per area go as 1 / |S_theta| (about 1 / r), so a band of
+    # the outer turn holds fewer points per area than one of the inner end, by the ratio of the
+    # bands' arc lengths (r dtheta integrated: 0.5 theta + 0.075 theta^2)
+    def arc(t):
+        return 0.5 * t + 0.075 * t ** 2
+
+    def per_area(shape, low, high):
+        theta = (np.hypot(shape.clean[:, 0], shape.clean[:, 1]) - 0.5) / 0.15
+        inside = (theta >= low) & (theta < high)
+        return inside.sum() / (2.0 * (arc(high) - arc(low)))
+
+    even = samples.curled_sheet(count=20000, truth_count=1000)
+    uneven = samples.curled_sheet(count=20000, truth_count=1000, by_parameter=True)
+    assert uneven.info["density"] == "by parameter"
+    ends = (0.0, 1.0), (3 * np.pi - 1.0, 3 * np.pi)
+    assert per_area(even, *ends[0]) / per_area(even, *ends[1]) == pytest.approx(1.0, abs=0.1)
+    expected = (arc(ends[1][1]) - arc(ends[1][0])) / (arc(ends[0][1]) - arc(ends[0][0]))  # 3.2
+    assert per_area(uneven, *ends[0]) / per_area(uneven, *ends[1]) == pytest.approx(expected,
+                                                                                   rel=0.1)
+
+
 def test_nurbs_area_matches_plane_and_cylinder():
     assert samples.surface_area(_plane(3.0, 0.5)) == pytest.approx(1.5, rel=1e-10)
     # a rational quarter cylinder: radius 2, height 3
