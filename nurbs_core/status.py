@@ -43,5 +43,12 @@ def quality_problems(stats: Mapping[str, float]) -> dict[str, str]:
 
 def quality_warnings(stats: Mapping[str, float]) -> list[str]:
     """Plain-language warnings for the measures of :func:`nurbs_core.quality.surface_quality`
-    that say the surface is not a clean sheet over the cloud (empty when it is)."""
-    return list(quality_problems(stats).values())
+    that say the surface is not a clean sheet over the cloud, and for a tolerance the user set
+    that the fit does not meet (``stats``' "tolerance_set" and "tolerance_met"; an automatic
+    tolerance is the fit's own stopping rule, not a promise to the user): empty when none."""
+    warnings = list(quality_problems(stats).values())
+    if stats.get("tolerance_set", 0.0) and not stats.get("tolerance_met", 1.0):
+        warnings.append(f"the tolerance set, {stats.get('tolerance', float('nan')):.4g}, is not "
+                        "met (more than the allowed share of the points or of the surface lies "
+                        "farther from the other)")
+    return warnings

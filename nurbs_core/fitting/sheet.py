@@ -177,7 +177,7 @@ def core_snapshots(cloud: NormalisedCloud, config: FitConfig, start: SheetStart,
     ((N, 2) for every point, None when a large cloud was fitted on a subset), "distances" (N,)
     for every point,
     "iteration", "status", "message", "records", "tolerance" and "noise" (input units),
-    "fairing_scale" and "tolerance_met"."""
+    "fairing_scale", "tolerance_met" and "tolerance_set" (the user gave it)."""
     points = cloud.points
     subset = start.subset
     pass_points = points if subset is None else points[subset]
@@ -264,7 +264,7 @@ def core_snapshots(cloud: NormalisedCloud, config: FitConfig, start: SheetStart,
                   message=last.message if not start.message else f"{start.message}; {last.message}",
                   tolerance=tolerance * cloud.scale, noise=noise * cloud.scale,
                   fairing_scale=core.fairing_scale or 1.0,
-                  tolerance_met=bool(last.met))
+                  tolerance_met=bool(last.met), tolerance_set=config.tolerance is not None)
 
 
 def _record(report: CorePass, fairing_scale: float | None) -> dict[str, float]:

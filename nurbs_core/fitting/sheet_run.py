@@ -117,7 +117,8 @@ def core_final(cloud: NormalisedCloud, start: SheetStart, result: dict,
     stats = surface_statistics(snapshot_geometry, cloud.points_input, mesh=start.mesh,
                                scale=cloud.scale, distances=result["distances"] * cloud.scale)
     stats.update(tolerance=result["tolerance"], noise=result["noise"],
-                 tolerance_met=float(result["tolerance_met"]))
+                 tolerance_met=float(result["tolerance_met"]),
+                 tolerance_set=float(result["tolerance_set"]))
     return FitSnapshot(iteration=result["iteration"], geometry=snapshot_geometry,
                        losses=result["records"], elapsed=time.perf_counter() - started,
                        done=True, status=result["status"],

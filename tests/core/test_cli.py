@@ -280,6 +280,22 @@ def test_closed_cloud_becomes_a_network_by_default_and_a_forced_patch_is_not_con
     assert report.startswith("status: fitted with warnings")
 
 
+def test_a_tolerance_the_user_set_and_the_fit_misses_is_not_converged(tmp_path, capsys):
+    """An automatic tolerance is the fit's own stopping rule; a tolerance the user set is a
+    promise: missing it was reported as "converged (tolerance not met)"."""
+    from nurbs_core import samples
+
+    source = tmp_path / "sheet.xyz"
+    np.savetxt(source, samples.sine_field(2000, seed=0).points)
+    out = tmp_path / "sheet.json"
+    assert main([str(source), "-o", str(out), "--tolerance", "1e-6", "-q"]) == 0
+    report = capsys.readouterr().out
+    assert report.startswith("status: fitted with warnings")
+    assert "the tolerance set, 1e-06, is not met" in report
+    assert main([str(source), "-o", str(out), "--tolerance", "0.5", "-q"]) == 0
+    assert capsys.readouterr().out.startswith("status: converged")
+
+
 def test_a_sheet_with_stray_points_is_one_clean_patch(tmp_path, capsys):
     # 1% of a height field's points thrown anywhere in its box: one patch folded towards them
     # (4.3% of its area), the route went on to an open network with warnings; the isolated ones
