@@ -7,7 +7,7 @@ under software OpenGL (llvmpipe) at any point count.
 
 A point's normal is the direction of least spread of its :data:`NEIGHBOURS` nearest drawn
 points (principal component analysis over a SciPy k-d tree). Its sign is arbitrary: the
-viewport lights both sides. Estimating them for 100,000 points takes 0.4-1 s, so the
+viewport lights both sides. Estimating them for 50,000 points takes 0.2-0.5 s, so the
 load job computes them (:func:`display_normals` keeps its newest answers, keyed by the points'
 bytes) and the GUI thread finds them ready (:func:`ready_normals`); elsewhere (a crop, a
 hidden cloud) :func:`normals_job` computes them on a worker thread while the view waits.

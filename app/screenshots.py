@@ -469,7 +469,7 @@ def main(argv: list[str] | None = None) -> int:
         once(window.files_loaded, loaded)
         window.open_files([str(mesh)])
 
-    # 25. a dense scan: the bunny sampled at 1,000,000 points, drawn as its 100,000-point
+    # 25. a dense scan: the bunny sampled at 1,000,000 points, drawn as its 50,000-point
     # display subset lit by the points' normals (app.cloud_normals), upright (+y up)
     def big_cloud():
         path = dense_bunny_cloud(scratch / "bunny_dense.npy")

@@ -16,6 +16,7 @@ from app.cloud_detail import (
     shown_text,
 )
 from app.cloud_normals import ready_normals
+from app.viewport.scene import POINT_SIZE, REDUCED_POINT_SIZE
 
 
 def test_small_clouds_are_drawn_whole():
@@ -59,7 +60,8 @@ def test_a_million_points_draw_at_most_the_budget(qtbot, window):
     points = np.random.default_rng(1).uniform(-1.0, 1.0, (1_000_000, 3))
     scene.set_cloud(points)
     mesh = scene._meshes["cloud"]
-    # the first frame: a small subset, unshaded; the whole display subset follows it
+    # the first frame: a small subset, unlit (the normals of points no load job has read are
+    # estimated meanwhile); the whole display subset, lit, follows it
     assert scene.detail_pending() and mesh.n_points <= FIRST_FRAME_POINTS + 6
     assert not scene.points_lit
     # the deviation of every point is accepted meanwhile; the drawn points show their own values
@@ -105,8 +107,9 @@ def test_a_big_load_draws_a_small_first_frame_then_the_display_budget(qtbot, win
     shown = scene.shown_points()[0]
     assert FIRST_FRAME_POINTS < shown <= DISPLAY_BUDGET
     drawn = [frame for frame in frames if frame[0]]
-    # the load's first frame holds at most FIRST_FRAME_POINTS (and the bounds' six), unshaded
-    assert drawn[0][0] <= FIRST_FRAME_POINTS + 6 and not drawn[0][1]
+    # the load's first frame holds at most FIRST_FRAME_POINTS (and the bounds' six), lit
+    # already: the load job estimated the normals
+    assert drawn[0][0] <= FIRST_FRAME_POINTS + 6 and drawn[0][1]
     assert drawn[-1] == (shown, True)  # then the whole display subset, lit
     mesh = scene._meshes["cloud"]
     assert np.asarray(mesh.point_data["Normals"]).shape == (shown, 3)
@@ -169,6 +172,8 @@ def test_a_cloud_over_the_budget_is_drawn_reduced_and_selected_whole(qtbot, wind
     mesh = window.scene._meshes["cloud"]
     assert 400 < mesh.n_points <= 500
     assert window.scene.points_lit
+    cloud = window.scene._actors["cloud"]
+    assert cloud.prop.point_size == REDUCED_POINT_SIZE > POINT_SIZE  # fewer points, larger
     assert len(window.document.target_points()) == len(points)  # the document keeps them all
     assert f"showing {mesh.n_points:,} of 1,600 points" in window.statusBar().currentMessage()
     # every drawn point is one of the cloud's
@@ -199,7 +204,7 @@ def test_a_cloud_over_the_budget_is_drawn_reduced_and_selected_whole(qtbot, wind
     open_by_drop(qtbot, window, [path])
     assert window.scene.shown_points() == (1600, 1600)
     assert "showing" not in window.statusBar().currentMessage()
-    assert not window.scene.points_lit
+    assert not window.scene.points_lit and cloud.prop.point_size == POINT_SIZE
 
 
 def test_a_cloud_whose_normals_fail_is_drawn_unlit(qtbot, window, monkeypatch):
@@ -260,3 +265,33 @@ def test_a_drag_of_the_view_draws_the_first_frame_subset_until_it_ends(qtbot, wi
     _mouse(widget, QEvent.Type.MouseButtonRelease, path[-1])
     qtbot.waitUntil(lambda: not scene.live_timers(), timeout=20000)
     assert mesh.n_points == shown and all(count == shown for count, _ in frames if count)
+
+
+def test_a_frame_due_during_a_busy_spell_lets_the_queued_events_go_first(qtbot, window):
+    import time
+
+    from PySide6.QtCore import Qt, QTimer
+
+    scene = window.scene
+    scene.set_cloud(np.random.default_rng(10).uniform(-1.0, 1.0, (2_000, 3)))
+    scene.render_now()
+    qtbot.waitUntil(lambda: not scene.live_timers(), timeout=20000)
+    order: list[str] = []
+    scene.plotter.renderer.GetRenderWindow().AddObserver(
+        "StartEvent", lambda *_: order.append("frame"))
+    scene.request_render()
+    time.sleep(0.1)  # the GUI thread busy (a load applied) past the frame's time
+    # a timer due just after the busy spell (a progress bar's, a probe's tick), due after the
+    # late frame: it still goes first
+    queued = QTimer()
+    queued.setSingleShot(True)
+    queued.setTimerType(Qt.TimerType.PreciseTimer)
+    queued.timeout.connect(lambda: order.append("queued"))
+    queued.start(1)
+    qtbot.waitUntil(lambda: "frame" in order and not scene.live_timers(), timeout=20000)
+    assert order == ["queued", "frame"]
+
+    order.clear()  # on time, the frame comes when due
+    scene.request_render()
+    qtbot.waitUntil(lambda: "frame" in order and not scene.live_timers(), timeout=20000)
+    assert order == ["frame"]
