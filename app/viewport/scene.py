@@ -12,7 +12,8 @@ Meshes are created once per layer and then updated in place (``mesh.points = ...
 (``auto_update=False``) and coalesced: ``request_render()`` draws at most ~30 times a second.
 A big cloud is drawn in two steps (:mod:`app.cloud_detail`): a first frame of a small
 subset, then, once it is on screen and the event loop has run and its normals are ready
-(:mod:`app.cloud_normals`), the whole display subset lit by them.
+(:mod:`app.cloud_normals`), the whole display subset lit by them; while a mouse button drags
+the view (:mod:`app.viewport.view_drag`) the first frame's subset again.
 Only the GUI thread calls into this module.
 """
 
