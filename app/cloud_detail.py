@@ -13,11 +13,10 @@ budget loses its excess at random (not its last points). It costs one uniform dr
 the whole index range (250 ms).
 
 A cloud above :data:`FIRST_FRAME_POINTS` is drawn in two steps (:mod:`app.viewport.scene`): a
-first frame of at most that many of the drawn points (:func:`first_frame_positions`, without
-eye-dome lighting, whose full-window passes cost llvmpipe about 0.1-0.2 s a frame at any point
-count), then the whole display subset from the next frame on. The draw of the display subset
-itself is made in the load job (:func:`shown_indices` keeps its newest answers), so the GUI
-thread finds it ready.
+first frame of at most that many of the drawn points (:func:`first_frame_positions`), then,
+once their normals are ready (:mod:`app.cloud_normals`), the whole display subset lit by them.
+The draw of the display subset itself, and its normals, are made in the load job
+(:func:`shown_indices` keeps its newest answers), so the GUI thread finds them ready.
 """
 
 from __future__ import annotations
@@ -26,9 +25,11 @@ from functools import lru_cache
 
 import numpy as np
 
-#: the most points the viewport draws: frames cost about linearly in points, and llvmpipe drew
-#: 1,000,000 in about 0.7 s (issue 28), so this is about 100 ms a frame on a quiet machine
-DISPLAY_BUDGET = 150_000
+#: the most points the viewport draws: frames cost about linearly in points (llvmpipe drew
+#: 1,000,000 in about 0.7 s, issue 28); under Xvfb on the shared 2-core machine 100,000 lit
+#: points drew in 40-180 ms as the other jobs came and went, 50,000 (drawn larger:
+#: app.viewport.scene.REDUCED_POINT_SIZE) in about two thirds of that
+DISPLAY_BUDGET = 50_000
 #: the most points of a big cloud's first frame: about 40 ms under llvmpipe on a busy machine
 FIRST_FRAME_POINTS = 25_000
 

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from app.cloud_detail import shown_indices
+from app.cloud_normals import display_normals
 from app.display_types import DeviationMap
 from app.state import OffsetDisplay, Target
 from app.workers.deviation_map import fit_triangles
@@ -91,10 +92,15 @@ def load_files(paths: list[str], cancel: threading.Event | None = None) -> Loade
 
 
 def draw_display_subset(targets: list[Target]) -> None:
-    """Draw the viewport's display subset of the visible targets' stacked points here (a load
-    job) rather than on the GUI thread: :func:`app.cloud_detail.shown_indices` keeps
-    it by count, so the window finds it ready when it shows these targets."""
-    shown_indices(sum(len(t.points) for t in targets if t.visible))
+    """Draw the viewport's display subset of the visible targets' stacked points, and the
+    normals that light it, here (a load job) rather than on the GUI thread:
+    :func:`app.cloud_detail.shown_indices` keeps the subset by count and
+    :func:`app.cloud_normals.display_normals` the normals by points, so the window finds them
+    ready when it shows these targets."""
+    clouds = [t.points for t in targets if t.visible and len(t.points)]
+    shown = shown_indices(sum(len(points) for points in clouds))
+    if shown is not None:
+        display_normals(np.concatenate(clouds, axis=0)[shown])
 
 
 def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):

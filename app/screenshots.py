@@ -13,7 +13,8 @@ whose file states none (the Units box asks), then fitted in metres, and what the
 dock says of the fit: the result beside the settings it started from, and a note before Start
 when a setting changes the route, and Solid mode: a scanned plate with a through hole as a solid
 with analytic faces, coloured by type, then by each face's deviation, then its hole made a NURBS
-face in the Solid dock. ``--only single``,
+face in the Solid dock, and views: the bunny upright with +y up, then sampled at 1,000,000
+points (its display subset lit by its normals). ``--only single``,
 ``--only patches``, ``--only selection``, ``--only units``, ``--only controls`` or ``--only
 solid`` makes one of the sets.
 """
@@ -92,6 +93,20 @@ def bunny_head_cloud(path: Path) -> Path | None:
     return _write_points(path, points[points[:, 1] > np.percentile(points[:, 1], 55)])
 
 
+def dense_bunny_cloud(path: Path, count: int = 1_000_000) -> Path | None:
+    """The Stanford bunny as a dense scan: ``count`` points sampled on its mesh
+    (``tests/data``), as ``.npy``. None when the mesh is not here."""
+    import trimesh
+
+    mesh_path = Path(__file__).resolve().parents[1] / "tests" / "data" / "stanford_bunny_1839.ply"
+    if not mesh_path.is_file():
+        return None
+    points, _ = trimesh.sample.sample_surface(trimesh.load(mesh_path, process=False), count,
+                                              seed=2)
+    np.save(path, np.asarray(points, dtype=np.float64))
+    return path
+
+
 def plate_cloud(path: Path) -> Path:
     """A machined plate with a through hole (``nurbs_core.brep.sample_parts.plate``) scanned:
     20,000 points, noise 0.2% of its diagonal."""
@@ -108,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="make only the single-patch (01-07, 11), the Patches mode (08-10, 12), "
                              "the selection (13-14), the units (15-17), the Fit settings "
                              "result and route note (18-19), the Solid mode (20-21, 23) or the "
-                             "up axis (24) set")
+                             "up axis and big cloud (24-25) set")
     arguments = parser.parse_args(argv)
     arguments.out.mkdir(parents=True, exist_ok=True)
 
@@ -455,13 +470,31 @@ def main(argv: list[str] | None = None) -> int:
         once(window.files_loaded, loaded)
         window.open_files([str(mesh)])
 
+    # 25. a dense scan: the bunny sampled at 1,000,000 points, drawn as its 50,000-point
+    # display subset lit by the points' normals (app.cloud_normals), upright (+y up)
+    def big_cloud():
+        path = dense_bunny_cloud(scratch / "bunny_dense.npy")
+        if path is None:
+            print("the bunny mesh is not here: no screenshot 25")
+            next_step()
+            return
+
+        def loaded(ok):
+            window.units_policy.choose("m")
+            window.up_axis_policy.choose("y")
+            window.view_actions["front"].trigger()
+            later(lambda: (shot("25_big_cloud_lit.png"), window.up_axis_policy.choose("z"),
+                           next_step()), 600)
+        once(window.files_loaded, loaded)
+        window.open_files([str(path)])
+
     single = [demo, converging, offsets, curve, quality_clean, quality_folded]
     patches = [patches_mode, seam_map, patches_deviation, open_thin_parts]
     choose = [selection, fit_selection]
     units = [units_import]
     controls = [fit_result]
     solid = [solid_part, solid_deviation, solid_face_edit]
-    views = [up_axis_y]
+    views = [up_axis_y, big_cloud]
     steps.extend({"single": single, "patches": patches, "selection": choose, "units": units,
                   "controls": controls, "solid": solid, "views": views}.get(
                       arguments.only,

@@ -8,9 +8,10 @@ only check that the event loop keeps processing events during a fit; how quickly
 measured here.
 
 With ``--jobs`` it measures, on a cloud of ``--points`` points (1,000,000 by default), each job
-a user waits on, probed from the click until its outcome is drawn: loading the cloud, the
-default surface fit, exporting the fit (STEP; the first export imports OpenCASCADE, so it runs
-twice), the deviation report, saving the session and opening it again; one row per job with
+a user waits on, probed from the click until its outcome is drawn: loading the cloud, a
+rotation of the view (a mouse drag), the default surface fit, exporting the fit (STEP; the first
+export imports OpenCASCADE, so it runs twice), the deviation report, saving the session and
+opening it again; one row per job with
 its seconds (click to outcome), the longest stall of the event loop and the slowest frame the
 viewport drew meanwhile (a stall as long as a frame is drawing, on the GUI thread by nature),
 beside the idle window holding the same cloud.
@@ -18,7 +19,9 @@ beside the idle window holding the same cloud.
 Run (needs a display; under a headless machine use xvfb-run)::
 
     xvfb-run -a python benchmarks/bench_responsiveness.py [--ticks 300] [--patches]
-    xvfb-run -a python benchmarks/bench_responsiveness.py --jobs [--points 1000000]
+    xvfb-run -a python benchmarks/bench_responsiveness.py --jobs [--points 1000000] [--view]
+
+(``--view``: only the load and the rotation.)
 """
 
 from __future__ import annotations
@@ -103,8 +106,7 @@ def probe_job(app, window, start, finished, timeout: float, interval_ms: int = 1
     loop = QEventLoop()
     begun: list[float] = []
     ended: list[float] = []
-    window.scene.last_render_ms = 0.0
-    frames: list[float] = []  # the slowest frame drawn so far, at each tick
+    window.scene.slowest_frame_ms = 0.0  # every frame is timed, the mouse's too
 
     def begin():
         begun.append(time.perf_counter())
@@ -115,7 +117,6 @@ def probe_job(app, window, start, finished, timeout: float, interval_ms: int = 1
     def tick():
         now = time.perf_counter()
         stamps.append(now)
-        frames.append(window.scene.last_render_ms)
         if not begun:
             return
         if not ended and finished():
@@ -133,7 +134,7 @@ def probe_job(app, window, start, finished, timeout: float, interval_ms: int = 1
     QTimer.singleShot(0, begin)
     loop.exec()
     timer.stop()
-    return ended[0] - begun[0], np.diff(stamps), max(frames, default=0.0)
+    return ended[0] - begun[0], np.diff(stamps), window.scene.slowest_frame_ms
 
 
 def _job_row(label: str, seconds: float, gaps: np.ndarray, frame_ms: float) -> str:
@@ -148,8 +149,53 @@ def _settle(app, window) -> None:
     _wait(app, lambda: not window.scene.live_timers(), 60, "the viewport to settle")
 
 
-def measure_jobs(app, window, folder: Path, points: int, ticks: int) -> list[str]:
-    """One row per job on a cloud of ``points`` points (see the module docstring)."""
+#: the viewport's property that holds while :func:`drag_rotation` drags
+DRAGGING = "bench_dragging"
+
+
+def drag_rotation(window, moves: int = 40, step_px: int = 6, interval_ms: int = 15) -> None:
+    """Rotate the view as a user does: a left-drag across the viewport from its centre, one
+    mouse move every ``interval_ms`` (a move waits for the frame before it, as a real drag's
+    do: Qt merges the moves that pile up meanwhile), ``moves`` moves of ``step_px``; the
+    viewport's :data:`DRAGGING` property holds until the release."""
+    from PySide6.QtCore import QEvent, QPointF, Qt, QTimer
+    from PySide6.QtGui import QMouseEvent
+    from PySide6.QtWidgets import QApplication
+
+    widget = window.scene.plotter
+    centre = QPointF(widget.width() / 2, widget.height() / 2)
+    left, none = Qt.MouseButton.LeftButton, Qt.MouseButton.NoButton
+
+    def send(kind, position: QPointF) -> None:
+        button = none if kind == QEvent.Type.MouseMove else left
+        held = none if kind == QEvent.Type.MouseButtonRelease else left
+        QApplication.sendEvent(widget, QMouseEvent(kind, position, widget.mapToGlobal(position),
+                                                   button, held, Qt.KeyboardModifier.NoModifier))
+
+    sent = [0]
+    timer = QTimer(widget)
+    timer.setInterval(interval_ms)
+
+    def step() -> None:
+        sent[0] += 1
+        position = centre + QPointF(step_px * sent[0], 0.4 * step_px * sent[0])
+        if sent[0] <= moves:
+            send(QEvent.Type.MouseMove, position)
+            return
+        timer.stop()
+        send(QEvent.Type.MouseButtonRelease, position)
+        widget.setProperty(DRAGGING, False)
+
+    widget.setProperty(DRAGGING, True)
+    send(QEvent.Type.MouseButtonPress, centre)
+    timer.timeout.connect(step)
+    timer.start()
+
+
+def measure_jobs(app, window, folder: Path, points: int, ticks: int,
+                 view_only: bool = False) -> list[str]:
+    """One row per job on a cloud of ``points`` points (see the module docstring); with
+    ``view_only`` only the idle window, the load and the rotation."""
     rows = []
     cloud = folder / "scan.npy"
     xy = np.random.default_rng(3).uniform(-3.0, 3.0, size=(points, 2))
@@ -165,10 +211,16 @@ def measure_jobs(app, window, folder: Path, points: int, ticks: int) -> list[str
         raise SystemExit(f"bench_responsiveness: could not open the cloud: {window.last_error}")
     window.units_policy.choose("mm")
     _settle(app, window)
-    window.scene.last_render_ms = 0.0
+    window.scene.slowest_frame_ms = 0.0
     gaps = probe_gaps(app, ticks)
     rows.insert(0, _job_row("idle window (baseline)", float(gaps.sum()), gaps,
-                            window.scene.last_render_ms))
+                            window.scene.slowest_frame_ms))
+    _settle(app, window)
+    rows.append(_job_row("rotate the view (drag)", *probe_job(
+        app, window, lambda: drag_rotation(window), lambda: not window.scene.plotter.property(
+            DRAGGING), 60)))
+    if view_only:
+        return rows
 
     controller = window.controller
     finished: list[object] = []
@@ -239,9 +291,11 @@ def main(argv=None) -> int:
                         help="measure the jobs on a large cloud instead (see --points)")
     parser.add_argument("--points", type=int, default=1_000_000,
                         help="the cloud's points for --jobs")
+    parser.add_argument("--view", action="store_true",
+                        help="with --jobs: only the load and a rotation (no fit, no files)")
     args = parser.parse_args(argv)
     if args.jobs:
-        return main_jobs(args.points, args.ticks)
+        return main_jobs(args.points, args.ticks, args.view)
 
     from app.screenshots import torus_cloud
 
@@ -279,10 +333,10 @@ def main(argv=None) -> int:
     return 0
 
 
-def main_jobs(points: int, ticks: int) -> int:
+def main_jobs(points: int, ticks: int, view_only: bool = False) -> int:
     """The --jobs table: the longest event-loop stall of each job on ``points`` points."""
     with bench_window(1280, 800) as (app, window, folder):
-        rows = measure_jobs(app, window, folder, points, ticks)
+        rows = measure_jobs(app, window, folder, points, ticks, view_only)
     print(f"Jobs on {points} points: seconds from the click to the outcome; until it is drawn, "
           "the gaps between ticks of a 10 ms QTimer (ms) and the slowest frame the viewport "
           "drew (ms)")

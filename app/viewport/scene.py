@@ -11,13 +11,16 @@ Meshes are created once per layer and then updated in place (``mesh.points = ...
 ``copy_from`` when the topology changes), never re-added per frame. Rendering is explicit
 (``auto_update=False``) and coalesced: ``request_render()`` draws at most ~30 times a second.
 A big cloud is drawn in two steps (:mod:`app.cloud_detail`): a first frame of a small
-subset, then, once it is on screen and the event loop has run, the whole display subset.
+subset, then, once it is on screen and the event loop has run and its normals are ready
+(:mod:`app.cloud_normals`), the whole display subset lit by them; while a mouse button drags
+the view (:mod:`app.viewport.view_drag`) the first frame's subset again.
 Only the GUI thread calls into this module.
 """
 
 from __future__ import annotations
 
 import time
+from concurrent.futures import Future
 
 import numpy as np
 import pyvista as pv
@@ -26,6 +29,7 @@ from PySide6.QtWidgets import QWidget
 from pyvistaqt import QtInteractor
 
 from app.cloud_detail import DISPLAY_BUDGET, first_frame_positions, shown_indices, shown_text
+from app.cloud_normals import normals_job
 from app.display_types import FAR, FINE, FLIPPED, OVERLAP, DeviationMap, DisplayGeometry
 from app.viewport.deviation_colours import DeviationColours
 from app.viewport.face_pick import FacePicker
@@ -33,9 +37,14 @@ from app.viewport.legend_box import label_contrasts, swatch_legend
 from app.viewport.network_layers import NetworkLayers
 from app.viewport.selection import SelectionTool
 from app.viewport.solid_layers import SolidLayers
+from app.viewport.view_drag import ViewDrag
 from app.viewport.view_frame import first_view, standard_view
 
 RENDER_INTERVAL_MS = 33
+#: a frame that comes due while the GUI thread is busy (a load applied, a fit's outcome shown)
+#: and fires this much later (ms) waits one more turn of RENDER_YIELD_MS: the input and timers
+#: queued meanwhile are answered first, and the busy spell and the frame are two stalls, not one
+LATE_FRAME_MS, RENDER_YIELD_MS = 15, 5
 DEVIATION_TITLE = "Deviation"
 
 COLORS = {
@@ -49,8 +58,16 @@ COLORS = {
     "selection": "#ffc400",
 }
 
-#: a big cloud's colour under eye-dome lighting (the shading darkens the points)
-SHADED_CLOUD_COLOR = "#98a4b0"
+#: a big cloud's colour when its points are lit by their normals (the shading darkens them)
+SHADED_CLOUD_COLOR = "#b4bec8"
+#: a big cloud's second step waits this long between looks at its normals' job
+NORMALS_POLL_MS = 30
+#: the cloud's fragment shader lights a point's side facing the viewer: a point has no back
+#: face, so OpenGL's two-sided lighting (gl_FrontFacing) cannot flip the normals that point away
+#: (and a normal estimated from neighbours has either sign)
+FACING_NORMALS = ("//VTK::Normal::Impl",
+                  "//VTK::Normal::Impl\n"
+                  "  if (normalVCVSOutput.z < 0.0) { normalVCVSOutput = -normalVCVSOutput; }\n")
 
 UPPER_LEFT, UPPER_RIGHT, LOWER_RIGHT = 2, 3, 1  # vtkCornerAnnotation corner indices
 #: the view's principal axes come from at most about this many of the visible points
@@ -75,6 +92,10 @@ QUALITY_LEGEND_BOX = (0.01, 0.81, 0.36, 0.18)
 #: Layers the document tree and the View menu toggle.
 #: the points' size in pixels, and over a solid (Solid mode)
 POINT_SIZE, SOLID_POINT_SIZE = 3.0, 1.5
+#: the points' size of a cloud drawn reduced: its display budget's points cover about as many
+#: pixels as twice as many of POINT_SIZE (a frame costs mostly per point: under llvmpipe 50,000
+#: points of 4 px drew in 39 ms, 100,000 of 3 px in 61 ms, 50,000 of 3 px in 34 ms)
+REDUCED_POINT_SIZE = 4.0
 LAYERS = ("cloud", "surface", "curve", "control_net", "knot_lines", "patches", "offsets")
 #: Layers of the single-patch fit (hidden in Patches mode) and of the network (shown only then).
 SINGLE_FIT_LAYERS = ("surface", "curve", "control_net", "knot_lines")
@@ -166,16 +187,21 @@ class SceneView(QObject):
         #: written per cloud point (N,) (redrawn with the whole subset)
         self._cloud_display = np.zeros((0, 3))
         self._cloud_drawn: np.ndarray | None = None
+        #: the positions (F,) in the display subset of a big cloud's first frame, drawn again
+        #: while the mouse drags the view (None: the cloud is drawn whole at once)
+        self._cloud_first: np.ndarray | None = None
         self._cloud_values: np.ndarray | None = None
-        #: the whole display subset is drawn once the first frame is on screen (two steps)
+        #: the whole display subset is drawn once the first frame is on screen (two steps) and
+        #: the normals that light it are ready (their job: None when the cloud is drawn whole)
         self._detail_pending = False
+        self._normals: Future | None = None
         self._detail_timer = QTimer(self)
         self._detail_timer.setSingleShot(True)
         self._detail_timer.setInterval(0)
         self._detail_timer.timeout.connect(self._draw_full_detail)
         self.display_budget = DISPLAY_BUDGET
-        #: whether eye-dome lighting shades the view (on while a big cloud is drawn reduced)
-        self.eye_dome_lighting = False
+        #: whether the cloud's points are lit by their normals (a big cloud drawn reduced)
+        self.points_lit = False
         self._actors: dict[str, object] = {}
         self._visible = {layer: True for layer in LAYERS}
         self._visible["control_net"] = False
@@ -196,16 +222,30 @@ class SceneView(QObject):
         self._corners.SetText(UPPER_RIGHT, "")
         self._closed = False
         self.last_render_ms = 0.0
+        #: the slowest frame drawn (ms) since it was last set to 0, timed around every frame the
+        #: render window draws: the scene's own and the mouse's (a rotation draws on each move)
+        self.slowest_frame_ms = 0.0
+        self._frame_started = 0.0
+        render_window = self.plotter.renderer.GetRenderWindow()
+        render_window.AddObserver("StartEvent", self._on_frame_start)
+        render_window.AddObserver("EndEvent", self._on_frame_end)
         self._render_timer = QTimer(self)
         self._render_timer.setSingleShot(True)
         self._render_timer.setInterval(RENDER_INTERVAL_MS)
-        self._render_timer.timeout.connect(self._draw_frame)
+        self._render_timer.timeout.connect(self._render_timer_fired)
+        self._render_due = 0.0  # when the render timer should fire (perf_counter seconds)
+        self._frame_yielded = False
         self.network = NetworkLayers(self.plotter, self.request_render,
                                      self._apply_deviation_surface)
         #: the part route's solid (Solid mode)
         self.solid = SolidLayers(self.plotter, self.request_render)
         #: the colour scale (signed or tolerance bands) the cloud and the deviation surface share
         self.deviation_colours = DeviationColours(self.plotter)
+        #: a big cloud is drawn coarser while a mouse button drags the view (installed before
+        #: the tools below: their filters see the mouse first, a selection's drag never gets here)
+        self._view_drag = ViewDrag(self.plotter, self)
+        self._view_drag.began.connect(self._drag_began)
+        self._view_drag.ended.connect(self._drag_ended)
         #: box and lasso selection over the viewport (off until a mode is chosen)
         self.selection_tool = SelectionTool(self.plotter, self.plotter.renderer,
                                             self.request_render, self)
@@ -247,68 +287,115 @@ class SceneView(QObject):
         """The (stacked) target cloud (N, 3); resets its deviation colouring. Above the display
         budget only an even subset of the points is drawn (:meth:`shown_points`); above
         :data:`~app.cloud_detail.FIRST_FRAME_POINTS` drawn points the first frame
-        holds a smaller subset with the same bounds, unshaded, and the next the whole display
-        subset (:meth:`detail_pending` until then)."""
+        holds a smaller subset with the same bounds (lit when the normals are ready, as after a
+        load), and the next the whole display subset, lit (:meth:`detail_pending` until
+        then)."""
         points = np.zeros((0, 3)) if points is None else np.asarray(points, float)
         self._cloud_count = len(points)
         self._cloud_shown = shown_indices(len(points), self.display_budget)
         self._cloud_display = points if self._cloud_shown is None else points[self._cloud_shown]
         self._cloud_values = None
-        first = first_frame_positions(self._cloud_display)
-        self._detail_pending = first is not None
+        self._normals = None if self._cloud_shown is None else normals_job(self._cloud_display)
+        self._cloud_first = first_frame_positions(self._cloud_display)
+        self._detail_pending = self._cloud_first is not None
         self._detail_timer.stop()
-        if first is None:
-            self._cloud_drawn = self._cloud_shown
-        else:
-            self._cloud_drawn = first if self._cloud_shown is None else self._cloud_shown[first]
-        self._draw_cloud(self._cloud_display if first is None else self._cloud_display[first])
+        self._detail_timer.setInterval(0)
+        # lit at once when the normals are ready (the load job's): the first frame then also
+        # compiles the lit points' shader, which the whole subset's frame would otherwise do
+        ready = self._normals is not None and self._normals.done()
+        self._draw_cloud(self._cloud_first, lit=self._cloud_first is None or ready)
         self.set_deviation(None)
 
-    def _draw_cloud(self, drawn: np.ndarray) -> None:
-        """Put the points ``drawn`` (M, 3) in the cloud's mesh with the newest values, shaded
-        (eye-dome lighting) when they are the whole display subset of a reduced cloud."""
-        mesh = pv.PolyData(drawn)
+    def _draw_cloud(self, positions: np.ndarray | None, lit: bool) -> None:
+        """Put the display subset's points at ``positions`` (M,) (None: all of them) in the
+        cloud's mesh with the newest values; ``lit``: lit by their normals when the cloud is
+        reduced (:mod:`app.cloud_normals`; a subset drawn in one step, at most
+        FIRST_FRAME_POINTS points, waits for them)."""
+        if positions is None:
+            self._cloud_drawn = self._cloud_shown
+            mesh = pv.PolyData(self._cloud_display)
+        else:
+            self._cloud_drawn = (positions if self._cloud_shown is None
+                                 else self._cloud_shown[positions])
+            mesh = pv.PolyData(self._cloud_display[positions])
+        normals = self._lighting_normals() if lit and self._normals is not None else None
+        lit = normals is not None
+        if normals is not None:
+            mesh.point_data["Normals"] = normals if positions is None else normals[positions]
+            mesh.point_data.active_normals_name = "Normals"
         values = np.zeros(mesh.n_points)
         if self._cloud_values is not None:
             values[:] = (self._cloud_values if self._cloud_drawn is None
                          else self._cloud_values[self._cloud_drawn])
         mesh.point_data[DEVIATION_TITLE] = values
         if "cloud" not in self._meshes:
-            self._layer("cloud", mesh, color=COLORS["cloud"], point_size=(
-                SOLID_POINT_SIZE if self._mode == "solid" else POINT_SIZE),
+            self._layer("cloud", mesh, color=COLORS["cloud"], point_size=POINT_SIZE,
                         scalars=DEVIATION_TITLE, clim=(-1.0, 1.0), show_scalar_bar=False)
             self.deviation_colours.attach(self._actors["cloud"].mapper)
+            self._actors["cloud"].prop.interpolation = "gouraud"  # points with normals are lit
         else:
             self._layer("cloud", mesh)
-        self._set_eye_dome(self._cloud_shown is not None and not self._detail_pending)
+        actor = self._actors["cloud"]
+        actor.prop.point_size = self._cloud_point_size()
+        # lighter points: the lighting darkens them where they turn away
+        actor.prop.color = SHADED_CLOUD_COLOR if lit else COLORS["cloud"]
+        if lit != self.points_lit:  # the shader names the normals only when they are there
+            shader = actor.GetShaderProperty()
+            if lit:
+                shader.AddFragmentShaderReplacement(FACING_NORMALS[0], True, FACING_NORMALS[1],
+                                                    False)
+            else:
+                shader.ClearAllFragmentShaderReplacements()
+        self.points_lit = lit
+
+    def _cloud_point_size(self) -> float:
+        """Finer over a solid (its face colours show), larger when the cloud is drawn reduced."""
+        if self._mode == "solid":
+            return SOLID_POINT_SIZE
+        return POINT_SIZE if self._cloud_shown is None else REDUCED_POINT_SIZE
+
+    def _lighting_normals(self) -> np.ndarray | None:
+        """The normals (K, 3) of the display subset; None when their job failed (the points are
+        drawn unlit)."""
+        assert self._normals is not None
+        try:
+            return self._normals.result()
+        except Exception:
+            return None
 
     def _draw_full_detail(self) -> None:
         """The second step of a big cloud: its whole display subset, from the next frame on."""
         if not self._detail_pending or self._closed:
             return
+        if self._normals is not None and not self._normals.done():
+            self._detail_timer.setInterval(NORMALS_POLL_MS)  # look again, the first frame stays
+            self._detail_timer.start()
+            return
         self._detail_pending = False
-        self._cloud_drawn = self._cloud_shown
-        self._draw_cloud(self._cloud_display)
+        if self._view_drag.dragging:
+            self._drag_began()  # coarse until the drag ends
+        else:
+            self._draw_cloud(None, lit=True)
         self._apply_visibility("cloud")
+        self.request_render()
+
+    def _drag_began(self) -> None:
+        """A drag of the view began: a big cloud is drawn as its first-frame subset, lit (a
+        frame at every mouse move costs about linearly in points), until it ends."""
+        if self._cloud_first is None or self._detail_pending or self._closed:
+            return
+        self._draw_cloud(self._cloud_first, lit=True)
+
+    def _drag_ended(self) -> None:
+        """The drag ended: the whole display subset again, from the next frame on."""
+        if self._cloud_first is None or self._detail_pending or self._closed:
+            return
+        self._draw_cloud(None, lit=True)
         self.request_render()
 
     def detail_pending(self) -> bool:
         """Whether a big cloud's first frame still waits for its whole display subset."""
         return self._detail_pending
-
-    def _set_eye_dome(self, on: bool) -> None:
-        """Eye-dome lighting (VTK's screen-space shading of depth edges) while a big cloud is
-        drawn: a million points of one colour are a flat silhouette, the shading shows their
-        shape. It works under software OpenGL (Xvfb's llvmpipe) at little cost per frame."""
-        # lighter points: the shading darkens them where the depth changes
-        self._actors["cloud"].prop.color = SHADED_CLOUD_COLOR if on else COLORS["cloud"]
-        if on == self.eye_dome_lighting:
-            return
-        if on:
-            self.plotter.enable_eye_dome_lighting()
-        else:
-            self.plotter.disable_eye_dome_lighting()
-        self.eye_dome_lighting = on
 
     def shown_points(self) -> tuple[int, int]:
         """(points drawn once the cloud is drawn whole, points in the cloud)."""
@@ -496,8 +583,8 @@ class SceneView(QObject):
         self.network.set_enabled(mode == "patches")
         self.solid.set_enabled(mode == "solid")
         cloud = self._actors.get("cloud")
-        if cloud is not None:  # over a solid the points are finer: its face colours show
-            cloud.prop.point_size = SOLID_POINT_SIZE if mode == "solid" else POINT_SIZE
+        if cloud is not None:
+            cloud.prop.point_size = self._cloud_point_size()
         for name in SINGLE_FIT_LAYERS:
             self._apply_visibility(name)
         self._update_scalar_bar()
@@ -770,10 +857,24 @@ class SceneView(QObject):
     def request_render(self):
         if not self._closed and not self._render_timer.isActive():
             self._render_timer.start()
+            self._render_due = time.perf_counter() + self._render_timer.interval() / 1000.0
+
+    def _render_timer_fired(self) -> None:
+        """The coalesced frame; if it fires late (the GUI thread was busy), after one more turn
+        of the event loop."""
+        late_ms = (time.perf_counter() - self._render_due) * 1000.0
+        if late_ms > LATE_FRAME_MS and not self._frame_yielded and not self._closed:
+            self._frame_yielded = True
+            self._render_timer.start(RENDER_YIELD_MS)
+            return
+        self._frame_yielded = False
+        self._draw_frame()
 
     def render_now(self):
         """Draw now, a big cloud whole (its second step taken at once: a screenshot, a test)."""
         if self._detail_pending:
+            if self._normals is not None:
+                self._normals.result()  # a screenshot waits for them
             self._draw_full_detail()
         self._draw_frame()
 
@@ -803,6 +904,13 @@ class SceneView(QObject):
         self.render_now()
         with atomic_path(path) as temporary:
             self.plotter.screenshot(str(temporary))
+
+    def _on_frame_start(self, *_args) -> None:
+        self._frame_started = time.perf_counter()
+
+    def _on_frame_end(self, *_args) -> None:
+        spent_ms = (time.perf_counter() - self._frame_started) * 1000.0
+        self.slowest_frame_ms = max(self.slowest_frame_ms, spent_ms)
 
     def live_timers(self) -> int:
         return int(self._render_timer.isActive()) + int(self._detail_timer.isActive())

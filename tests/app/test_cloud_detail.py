@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from app_helpers import open_by_drop
-from test_selection import _drag, _grid_cloud, _vtk_display
+from test_selection import _drag, _grid_cloud, _mouse, _to_widget, _vtk_display
 
 from app.cloud_detail import (
     DISPLAY_BUDGET,
@@ -15,6 +15,8 @@ from app.cloud_detail import (
     shown_indices,
     shown_text,
 )
+from app.cloud_normals import ready_normals
+from app.viewport.scene import POINT_SIZE, REDUCED_POINT_SIZE
 
 
 def test_small_clouds_are_drawn_whole():
@@ -58,9 +60,10 @@ def test_a_million_points_draw_at_most_the_budget(qtbot, window):
     points = np.random.default_rng(1).uniform(-1.0, 1.0, (1_000_000, 3))
     scene.set_cloud(points)
     mesh = scene._meshes["cloud"]
-    # the first frame: a small subset, unshaded; the whole display subset follows it
+    # the first frame: a small subset, unlit (the normals of points no load job has read are
+    # estimated meanwhile); the whole display subset, lit, follows it
     assert scene.detail_pending() and mesh.n_points <= FIRST_FRAME_POINTS + 6
-    assert not scene.eye_dome_lighting
+    assert not scene.points_lit
     # the deviation of every point is accepted meanwhile; the drawn points show their own values
     deviation = np.linalg.norm(points, axis=1)
     scene.set_deviation(deviation)
@@ -70,23 +73,22 @@ def test_a_million_points_draw_at_most_the_budget(qtbot, window):
     assert FIRST_FRAME_POINTS < mesh.n_points <= DISPLAY_BUDGET
     assert scene.shown_points() == (mesh.n_points, 1_000_000)
     assert scene.shown_points_text() == f"showing {mesh.n_points:,} of 1,000,000 points"
-    assert scene.eye_dome_lighting  # the shading that shows a big cloud's shape
+    assert scene.points_lit  # lit by its normals: the shading that shows its shape
     drawn = np.asarray(mesh.point_data["Deviation"])
     np.testing.assert_allclose(drawn, np.linalg.norm(np.asarray(mesh.points), axis=1))
 
 
 def _frames(scene) -> list[tuple[int, bool]]:
-    """(the cloud's drawn points, eye-dome lighting on) at every frame the scene draws from
+    """(the cloud's drawn points, lit by their normals) at every frame the scene draws from
     now on."""
     frames: list[tuple[int, bool]] = []
-    render = scene.plotter.render
 
-    def counted(*args, **kwargs):
+    def counted(*_args):
         mesh = scene._meshes.get("cloud")
-        frames.append((0 if mesh is None else mesh.n_points, scene.eye_dome_lighting))
-        return render(*args, **kwargs)
+        frames.append((0 if mesh is None else mesh.n_points, scene.points_lit))
 
-    scene.plotter.render = counted
+    # every frame the render window draws: the scene's and those VTK's interactor draws itself
+    scene.plotter.renderer.GetRenderWindow().AddObserver("StartEvent", counted)
     return frames
 
 
@@ -97,14 +99,20 @@ def test_a_big_load_draws_a_small_first_frame_then_the_display_budget(qtbot, win
     np.save(tmp_path / "big.npy", points)
     frames = _frames(scene)
     open_by_drop(qtbot, window, [tmp_path / "big.npy"])
+    # the load job estimated the normals that light the display subset: the GUI thread waits
+    # for no other thread
+    assert ready_normals(points[shown_indices(len(points))]) is not None
     qtbot.waitUntil(lambda: not scene.detail_pending() and not scene.live_timers(),
                     timeout=20000)
     shown = scene.shown_points()[0]
     assert FIRST_FRAME_POINTS < shown <= DISPLAY_BUDGET
     drawn = [frame for frame in frames if frame[0]]
-    # the load's first frame holds at most FIRST_FRAME_POINTS (and the bounds' six), unshaded
-    assert drawn[0][0] <= FIRST_FRAME_POINTS + 6 and not drawn[0][1]
-    assert drawn[-1] == (shown, True)  # then the whole display subset, shaded
+    # the load's first frame holds at most FIRST_FRAME_POINTS (and the bounds' six), lit
+    # already: the load job estimated the normals
+    assert drawn[0][0] <= FIRST_FRAME_POINTS + 6 and drawn[0][1]
+    assert drawn[-1] == (shown, True)  # then the whole display subset, lit
+    mesh = scene._meshes["cloud"]
+    assert np.asarray(mesh.point_data["Normals"]).shape == (shown, 3)
     assert f"showing {shown:,} of 400,000 points" in window.statusBar().currentMessage()
     # the camera was framed (during the first frame) as on the whole display subset
     camera = scene.plotter.camera
@@ -142,7 +150,7 @@ def test_a_new_load_during_the_first_frame_leaves_no_stale_cloud(qtbot, window, 
     assert blocker.args == [False]
     qtbot.waitUntil(lambda: not scene.detail_pending() and not scene.live_timers(),
                     timeout=20000)
-    assert scene.shown_points()[1] == 300_000 and scene.eye_dome_lighting
+    assert scene.shown_points()[1] == 300_000 and scene.points_lit
     assert mesh.n_points == scene.shown_points()[0]
     assert np.asarray(mesh.points)[:, 0].max() < 2.0  # the first cloud's points only
 
@@ -154,7 +162,7 @@ def test_a_new_load_during_the_first_frame_leaves_no_stale_cloud(qtbot, window, 
     assert not scene.detail_pending()
     qtbot.waitUntil(lambda: not scene.live_timers(), timeout=20000)
     np.testing.assert_array_equal(np.asarray(mesh.points), small)
-    assert not scene.eye_dome_lighting and scene.shown_points() == (2_000, 2_000)
+    assert not scene.points_lit and scene.shown_points() == (2_000, 2_000)
 
 
 def test_a_cloud_over_the_budget_is_drawn_reduced_and_selected_whole(qtbot, window, tmp_path):
@@ -163,7 +171,9 @@ def test_a_cloud_over_the_budget_is_drawn_reduced_and_selected_whole(qtbot, wind
     open_by_drop(qtbot, window, [path])
     mesh = window.scene._meshes["cloud"]
     assert 400 < mesh.n_points <= 500
-    assert window.scene.eye_dome_lighting
+    assert window.scene.points_lit
+    cloud = window.scene._actors["cloud"]
+    assert cloud.prop.point_size == REDUCED_POINT_SIZE > POINT_SIZE  # fewer points, larger
     assert len(window.document.target_points()) == len(points)  # the document keeps them all
     assert f"showing {mesh.n_points:,} of 1,600 points" in window.statusBar().currentMessage()
     # every drawn point is one of the cloud's
@@ -194,4 +204,94 @@ def test_a_cloud_over_the_budget_is_drawn_reduced_and_selected_whole(qtbot, wind
     open_by_drop(qtbot, window, [path])
     assert window.scene.shown_points() == (1600, 1600)
     assert "showing" not in window.statusBar().currentMessage()
-    assert not window.scene.eye_dome_lighting
+    assert not window.scene.points_lit and cloud.prop.point_size == POINT_SIZE
+
+
+def test_a_cloud_whose_normals_fail_is_drawn_unlit(qtbot, window, monkeypatch):
+    import app.cloud_normals
+
+    def broken(points, neighbours=10):
+        raise MemoryError("no room for the neighbours")
+
+    monkeypatch.setattr(app.cloud_normals, "estimate_normals", broken)
+    scene = window.scene
+    scene.display_budget = 500
+    points = np.random.default_rng(8).uniform(-1.0, 1.0, (1_600, 3))
+    scene.set_cloud(points)
+    scene.render_now()
+    assert not scene.points_lit and scene._meshes["cloud"].n_points == scene.shown_points()[0]
+    assert "Normals" not in scene._meshes["cloud"].point_data
+
+
+def test_a_drag_of_the_view_draws_the_first_frame_subset_until_it_ends(qtbot, window):
+    from PySide6.QtCore import QEvent
+
+    scene = window.scene
+    points = np.random.default_rng(9).uniform(-1.0, 1.0, (400_000, 3))
+    scene.set_cloud(points)
+    scene.render_now()
+    mesh = scene._meshes["cloud"]
+    shown = scene.shown_points()[0]
+    assert mesh.n_points == shown and scene.points_lit
+    deviation = points[:, 0]
+    scene.set_deviation(deviation)
+    frames = _frames(scene)
+    camera = scene.plotter.camera
+    before = camera.position
+    widget = scene.plotter
+    width, height = widget.renderer.GetRenderWindow().GetSize()
+    path = [_to_widget(window, (width / 2 + 8 * step, height / 2 + 3 * step)) for step in range(8)]
+    _mouse(widget, QEvent.Type.MouseButtonPress, path[0])
+    for position in path[1:]:
+        _mouse(widget, QEvent.Type.MouseMove, position)  # VTK's interactor draws each move
+    moved = list(frames)
+    _mouse(widget, QEvent.Type.MouseButtonRelease, path[-1])
+    qtbot.waitUntil(lambda: not scene.live_timers(), timeout=20000)
+    assert camera.position != before  # the drag rotated the view
+    # every frame of the drag drew the first frame's subset, lit; the next the whole subset
+    assert len(moved) >= 5 and all(count <= FIRST_FRAME_POINTS + 6 and lit
+                                   for count, lit in moved)
+    assert frames[-1] == (shown, True) and mesh.n_points == shown
+    # the values drawn are those of the points drawn, during the drag and after it
+    np.testing.assert_allclose(np.asarray(mesh.point_data["Deviation"]),
+                               np.asarray(mesh.points)[:, 0])
+
+    # a drag of the box selection is no drag of the view: the cloud stays whole
+    window.box_select_action.trigger()
+    frames.clear()
+    _mouse(widget, QEvent.Type.MouseButtonPress, path[0])
+    _mouse(widget, QEvent.Type.MouseMove, path[-1])
+    assert mesh.n_points == shown
+    _mouse(widget, QEvent.Type.MouseButtonRelease, path[-1])
+    qtbot.waitUntil(lambda: not scene.live_timers(), timeout=20000)
+    assert mesh.n_points == shown and all(count == shown for count, _ in frames if count)
+
+
+def test_a_frame_due_during_a_busy_spell_lets_the_queued_events_go_first(qtbot, window):
+    import time
+
+    from PySide6.QtCore import Qt, QTimer
+
+    scene = window.scene
+    scene.set_cloud(np.random.default_rng(10).uniform(-1.0, 1.0, (2_000, 3)))
+    scene.render_now()
+    qtbot.waitUntil(lambda: not scene.live_timers(), timeout=20000)
+    order: list[str] = []
+    scene.plotter.renderer.GetRenderWindow().AddObserver(
+        "StartEvent", lambda *_: order.append("frame"))
+    scene.request_render()
+    time.sleep(0.1)  # the GUI thread busy (a load applied) past the frame's time
+    # a timer due just after the busy spell (a progress bar's, a probe's tick), due after the
+    # late frame: it still goes first
+    queued = QTimer()
+    queued.setSingleShot(True)
+    queued.setTimerType(Qt.TimerType.PreciseTimer)
+    queued.timeout.connect(lambda: order.append("queued"))
+    queued.start(1)
+    qtbot.waitUntil(lambda: "frame" in order and not scene.live_timers(), timeout=20000)
+    assert order == ["queued", "frame"]
+
+    order.clear()  # on time, the frame comes when due
+    scene.request_render()
+    qtbot.waitUntil(lambda: "frame" in order and not scene.live_timers(), timeout=20000)
+    assert order == ["frame"]
