@@ -43,6 +43,7 @@ from typing import Any, Literal
 import numpy as np
 
 from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
+from nurbs_core.patches.defaults import MIN_NETWORK_POINTS
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import quality_problems
 
@@ -203,7 +204,7 @@ def _decide(points: np.ndarray, file_mesh: ScanMesh | None, file_mesh_note: str,
     if file_mesh is not None:
         return Route("network", "the file's mesh is closed (watertight)", file_mesh)
     points = np.asarray(points, np.float64)
-    if len(points) < 100:
+    if len(points) < MIN_NETWORK_POINTS:
         return Route("single_patch", f"{len(points)} points are too few for a network")
     why = f"{file_mesh_note}; " if file_mesh_note else ""
     try:

@@ -108,6 +108,7 @@ def _single_patch_or_open_network(job: FitJob, options: PatchOptions,
     ``try_open_network`` is False: it was tried already); the single patch, with its warnings,
     when no open network can be built (forced over the cloud when it was refused: no input
     that holds a surface is refused)."""
+    from nurbs_core.patches.defaults import MIN_NETWORK_POINTS
     from nurbs_core.patches.layout import LayoutError
     from nurbs_core.route import open_network_instead, single_patch_problems
     from nurbs_core.surfacing.neighbours import stray_points
@@ -131,8 +132,9 @@ def _single_patch_or_open_network(job: FitJob, options: PatchOptions,
     problems = (single_patch_problems(result.status, result.statistics) if result is not None
                 else f"{refusal.topology.kind}: {str(refusal).split(':')[0]}" if refusal
                 else "")
+    # a cloud too small for a network (a few dozen points) goes to the last resort below
     network = (open_network_instead(points, problems, options.max_hole)
-               if problems and try_open_network else None)
+               if problems and try_open_network and len(points) >= MIN_NETWORK_POINTS else None)
     if network is not None:
         if not job.quiet:
             print(f"route: {network.reason} ({network.seconds:.1f} s)", file=sys.stderr)

@@ -18,3 +18,5 @@ WARN_SEAM = 2.0
 #: the 99th percentile's limit, a visible edge or a fold (a pleat turns its seam by 90 degrees
 #: and more) that a small percentile hides.
 WARN_SEAM_MAX = 30.0
+#: the fewest points a patch network is fitted to (fewer: one patch)
+MIN_NETWORK_POINTS = 100

@@ -24,6 +24,7 @@ from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
 from nurbs_core.patches.coarsen import coarsen, reach_ratios
 from nurbs_core.patches.crease_layout import coverage, layout_edges, snap_to_creases
 from nurbs_core.patches.creases import Creases, detect_creases, no_creases, sharpened
+from nurbs_core.patches.defaults import MIN_NETWORK_POINTS
 from nurbs_core.patches.fit import NetworkPass, fit_network
 from nurbs_core.patches.layout import LayoutError, QuadLayout, mesh_digest, quad_layout
 from nurbs_core.patches.measures import NetworkQuality, network_quality
@@ -398,8 +399,8 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     points = np.asarray(points, np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"a patch network needs points of shape (N, 3), got {points.shape}")
-    if len(points) < 100:
-        raise ValueError(f"a patch network needs at least 100 points, the cloud has "
+    if len(points) < MIN_NETWORK_POINTS:
+        raise ValueError(f"a patch network needs at least {MIN_NETWORK_POINTS} points, the cloud has "
                          f"{len(points)}: fit it as one patch")
     if not np.isfinite(points).all():
         raise ValueError("the cloud has NaN or infinite coordinates")

@@ -296,6 +296,18 @@ def test_a_tolerance_the_user_set_and_the_fit_misses_is_not_converged(tmp_path, 
     assert capsys.readouterr().out.startswith("status: converged")
 
 
+def test_a_few_dozen_scattered_points_get_one_patch_with_warnings_not_a_contradiction(
+        tmp_path, capsys):
+    """20 points whose mesh is closed: one patch was refused, the open network then said "a
+    patch network needs at least 100 points: fit it as one patch" and nurbs-fit exited 1."""
+    source, out = tmp_path / "few.xyz", tmp_path / "few.json"
+    np.savetxt(source, np.random.default_rng(0).random((20, 3)))
+    assert main([str(source), "-o", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert "too few for a network" in captured.err and "fitting one patch anyway" in captured.err
+    assert "status: fitted with warnings" in captured.out and out.is_file()
+
+
 def test_a_sheet_with_stray_points_is_one_clean_patch(tmp_path, capsys):
     # 1% of a height field's points thrown anywhere in its box: one patch folded towards them
     # (4.3% of its area), the route went on to an open network with warnings; the isolated ones
