@@ -101,6 +101,7 @@ def _inward(network: PatchNetwork) -> bool:
     from nurbs_core.io.network_mesh import network_mesh_arrays
 
     vertices, faces = network_mesh_arrays(network, 8)
+    vertices = vertices - vertices.mean(axis=0)  # no cancellation far from the origin
     a, b, c = (vertices[faces[:, k]] for k in range(3))
     return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) < 0
 

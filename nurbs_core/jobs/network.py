@@ -78,7 +78,10 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
     ``mesh_seconds``, which the report's mesh time includes). ``stoppable``: the first Ctrl-C
     ends the fit after the pass under way and writes the network as it stands (status
     "stopped"); a second one, or one before the first pass, quits without writing."""
+    import numpy as np
+
     from nurbs_core.io.dispatch import save_all
+    from nurbs_core.jobs.local_frame import shifted
     from nurbs_core.patches.pipeline import iter_patch_fit
 
     if points is None:
@@ -153,7 +156,9 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
         print(f"warning: {warning}")
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
-        save_all([(result.network, path, {"units": units}) for path in outputs])
+        # in the scan's own coordinates (a far scan was fitted about its centre)
+        network = shifted(result.network, job.origin)
+        save_all([(network, path, {"units": units}) for path in outputs])
     for record in said:  # what a writer had to do differently (an open network in shells)
         print(f"warning: {record.message}")
     print_units(units, outputs)
@@ -163,7 +168,7 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
         from nurbs_core.io.network_mesh import network_mesh_arrays
         from nurbs_core.jobs.deviation_report import write_fit_report
 
-        vertices, faces = network_mesh_arrays(result.network)
+        vertices, faces = network_mesh_arrays(network)
         summary = [("route", f"{'closed' if result.network.closed else 'open'} network of "
                              "patches"),
                    ("patches", f"{quality.patches} ({quality.size} x {quality.size} control "
@@ -176,7 +181,8 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
                    ("flipped area", f"{quality.flipped_fraction:.2%}"),
                    ("surface far from every point", f"{quality.far_fraction:.2%}"),
                    ("time", f"{sum(result.timings.values()):.1f} s")]
-        write_fit_report(job, points, vertices, faces, status=result.status, summary=summary,
+        write_fit_report(job, points + np.asarray(job.origin or (0.0, 0.0, 0.0)), vertices,
+                         faces, status=result.status, summary=summary,
                          warnings=list(result.warnings), closed=result.network.closed,
                          tolerance=options.tolerance)
     return plain({"kind": "network", "fit_status": result.status, "points": len(points),

@@ -19,6 +19,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from nurbs_core.patches.options import PatchOptions
+    from nurbs_core.patches.scan_mesh import ScanMesh
     from nurbs_core.route import Route
 
 
@@ -59,6 +60,7 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
         file_mesh, note = None, ""
         if points is None:
             points, file_mesh, note = surface_input(job.input, quiet=job.quiet)
+        points, file_mesh, job = _in_local_frame(job, points, file_mesh)
         options = patch_options(job, automatic=True)  # checked before the route is decided
         route = choose_route(points, file_mesh, note, max_hole=options.max_hole,
                              part=part_allowed(job, outputs))
@@ -97,6 +99,28 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
                                              try_open_network)
     prepared = prepare_fit(job, points)
     return finish_fit(prepared, run_fit(prepared, stoppable))
+
+
+def _in_local_frame(job: FitJob, points: np.ndarray, file_mesh: ScanMesh | None
+                    ) -> tuple[np.ndarray, ScanMesh | None, FitJob]:
+    """The cloud (N, 3) and the file's mesh moved to a local frame when they lie far from the
+    origin (:mod:`nurbs_core.jobs.local_frame`), and the job that writes the results back."""
+    import dataclasses
+
+    import numpy as np
+
+    from nurbs_core.jobs.local_frame import far_origin
+
+    origin = far_origin(points)
+    if origin is None:
+        return points, file_mesh, job
+    if not job.quiet:
+        print(f"the scan lies {float(np.linalg.norm(origin)):.6g} from the origin: it is fitted "
+              "about its own centre and written back in its coordinates", file=sys.stderr)
+    if file_mesh is not None:
+        file_mesh = dataclasses.replace(file_mesh, vertices=file_mesh.vertices - origin,
+                                        border=[loop - origin for loop in file_mesh.border])
+    return points - origin, file_mesh, job.replace(origin=tuple(float(v) for v in origin))
 
 
 def _single_patch_or_open_network(job: FitJob, options: PatchOptions,

@@ -42,6 +42,7 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
 
     from nurbs_core.brep.part import fit_part
     from nurbs_core.io.solid_io import save_solid
+    from nurbs_core.jobs.local_frame import shifted
 
     assert route.mesh is not None and route.segmentation is not None
     result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
@@ -85,7 +86,8 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
     for warning in result.problems.values():
         print(f"warning: {warning}")
     units = units_of(job)
-    save_solid(result.solid, outputs, result.segmentation.tolerance / 3, units)
+    solid = shifted(result.solid, job.origin)  # in the scan's own coordinates
+    save_solid(solid, outputs, result.segmentation.tolerance / 3, units)
     print_units(units, outputs)
     for path in outputs:
         print(f"wrote {path}")
@@ -93,7 +95,7 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
         from nurbs_core.io.cad import triangulate
         from nurbs_core.jobs.deviation_report import write_fit_report
 
-        vertices, faces, _ = triangulate(result.solid, result.segmentation.tolerance / 3)
+        vertices, faces, _ = triangulate(solid, result.segmentation.tolerance / 3)
         summary = [("route", f"{'an open shell' if result.open_shell else 'a solid'} "
                              "(machined part)"),
                    ("faces", f"{len(result.faces)} ({kinds})")]
@@ -106,7 +108,8 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
                         ("volume", f"{result.volume:.6g}")]
         summary += [("time", f"{sum(result.timings.values()):.1f} s")]
         summary += [(f"face {index}", face.description) for index, face in enumerate(result.faces)]
-        write_fit_report(job, points, vertices, faces, status=result.status, summary=summary,
+        write_fit_report(job, points + np.asarray(job.origin or (0.0, 0.0, 0.0)), vertices, faces,
+                         status=result.status, summary=summary,
                          warnings=list(result.problems.values()), closed=result.closed,
                          tolerance=result.segmentation.tolerance)
     return plain(statistics)

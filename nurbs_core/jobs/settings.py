@@ -70,6 +70,9 @@ class FitJob:
     quiet: bool = False
     max_decompressed: str | None = None
     debug: bool = False
+    #: set by the automatic route, not an option: the local frame's origin of a scan far from
+    #: the origin (:mod:`nurbs_core.jobs.local_frame`); results are moved back by it
+    origin: tuple[float, float, float] | None = None
 
     @classmethod
     def of(cls, values: Any, **changes: Any) -> FitJob:

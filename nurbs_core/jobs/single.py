@@ -185,6 +185,7 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
 
     from nurbs_core.failures import one_line
     from nurbs_core.io.dispatch import save_all
+    from nurbs_core.jobs.local_frame import shifted
 
     if result.status == "failed":
         raise FitFailed(f"the fit failed: {one_line(str(result.message))}")
@@ -212,6 +213,7 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
         print(quality_text(stats, diagonal, units))
     if prepared.flat_z:
         geometry = _lift(cast("CurveArrays", geometry), float(prepared.points[0, 2]))
+    geometry = shifted(geometry, job.origin)  # in the scan's own coordinates
     offset = None
     if job.offset is not None:
         from nurbs_core.geometry import NurbsSurface
@@ -239,7 +241,8 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
                    ("chamfer distance", f"{chamfer:.4g}")]
         if "flipped_fraction" in stats:
             summary.append(("flipped area", f"{stats['flipped_fraction']:.2%}"))
-        write_fit_report(job, prepared.points, mesh.vertices, mesh.faces, status=status,
+        write_fit_report(job, prepared.points + np.asarray(job.origin or (0.0, 0.0, 0.0)),
+                         mesh.vertices, mesh.faces, status=status,
                          summary=summary, warnings=quality_warnings(stats), closed=False,
                          tolerance=stats.get("tolerance"))
     return plain({**stats, "kind": config.kind, "points": len(prepared.points),

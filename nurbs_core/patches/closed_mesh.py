@@ -62,8 +62,9 @@ class NotClosedError(ValueError):
 
 
 def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """The volume a triangle mesh (V, 3), (F, 3) encloses: positive when its faces point out."""
-    tri = vertices[faces]
+    """The volume a triangle mesh (V, 3), (F, 3) encloses: positive when its faces point out
+    (summed about the vertices' centre: far from the origin the products cancel)."""
+    tri = vertices[faces] - vertices.mean(axis=0)
     return float(np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0)
 
 

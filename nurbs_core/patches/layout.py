@@ -107,6 +107,7 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
     if patches < 4:
         raise LayoutError(f"a quad layout needs at least 4 patches, got {patches}")
     chi = euler_characteristic(faces)
+    origin = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0)) if len(vertices) else np.zeros(3)
     normals = _face_normals(vertices, faces)
     tree = cKDTree(vertices[faces].mean(axis=1))
     attempts: list[str] = []
@@ -122,7 +123,9 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
             key = (digest, count, float(crease_angle))
             if key not in _REMESHED:
                 if not os.path.exists(source):     # written once, when a run needs it
-                    _write_obj(source, vertices, faces)
+                    # centred: Instant Meshes works in single precision, and a scan in a
+                    # site's coordinates (5e6 from the origin) ran it out of memory
+                    _write_obj(source, vertices - origin, faces)
                 try:
                     with _silenced_stdout():
                         pyinstantmeshes.remesh_file(source, target, target_face_count=count,
@@ -137,7 +140,7 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
                     _REMESHED.clear()
                 _REMESHED[key] = _read_obj(target)
             raw_vertices, raw_faces = _REMESHED[key]
-            raw_vertices, raw_faces = raw_vertices.copy(), [list(f) for f in raw_faces]
+            raw_vertices, raw_faces = raw_vertices + origin, [list(f) for f in raw_faces]
             try:
                 quads_v, quads = _without_small_corners(*_clean(raw_vertices, raw_faces))
                 check_manifold(quads)

@@ -230,7 +230,9 @@ def network_quality(network: PatchNetwork, points: np.ndarray,
         nearest = cKDTree(ref_points).query(s)[1]
         against = (normals * ref_normals[nearest]).sum(1) < 0
         flipped = float(area[against].sum() / total) if total > 0 else 0.0
-    volume = float((s * normals).sum(1) @ area / 3.0)
+    # about the samples' centre: the same volume for a closed surface, without the cancellation
+    # of coordinates far from the origin (a scan in a site's coordinates)
+    volume = float(((s - s.mean(axis=0)) * normals).sum(1) @ area / 3.0)
     _, _, c2s = foot_points(network, points, resolution=24, steps=10)
     tree = cKDTree(points)
     s2c = tree.query(s)[0]

@@ -1,0 +1,66 @@
+"""A scan in a site's coordinates (5,000 km from the origin) is fitted about its own centre and
+written back where it was: Instant Meshes ran out of memory on such a blob, its enclosed volume
+read 51.6 for 3.9, and a turned part lost its solid."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nurbs_core import samples
+from nurbs_core.cli import main
+from nurbs_core.jobs.local_frame import FAR_DIAGONALS, far_origin
+
+SITE = np.array([5e6, 4e6, 300.0])
+
+
+def test_only_a_cloud_far_from_the_origin_gets_a_local_frame():
+    cloud = samples.blob(500, seed=0).points
+    assert far_origin(cloud) is None
+    assert far_origin(cloud + 0.5 * FAR_DIAGONALS) is None  # a few diagonals away: untouched
+    origin = far_origin(cloud + SITE)
+    assert origin is not None
+    centre = 0.5 * (cloud.min(axis=0) + cloud.max(axis=0)) + SITE
+    assert np.allclose(origin, centre)
+
+
+def _same_fit_near_and_far(tmp_path, capsys, cloud: np.ndarray, suffix: str) -> tuple[str, str]:
+    reports = []
+    for name, offset in (("near", np.zeros(3)), ("far", SITE)):
+        source = tmp_path / f"{name}.xyz"
+        np.savetxt(source, cloud + offset, fmt="%.7f")
+        assert main([str(source), "-o", str(tmp_path / f"{name}{suffix}")]) == 0
+        captured = capsys.readouterr()
+        reports.append(captured.out)
+        if name == "far":
+            assert "fitted about its own centre" in captured.err
+    return reports[0], reports[1]
+
+
+def test_a_far_closed_scan_is_the_same_network_written_where_it_was(tmp_path, capsys):
+    from nurbs_core.io.network_io import read_network
+
+    cloud = samples.blob(1200, seed=0).points
+    near, far = _same_fit_near_and_far(tmp_path, capsys, cloud, ".json")
+    assert "status: converged" in far
+    volume = [float(text.split("enclosed volume ")[1].split()[0]) for text in (near, far)]
+    assert volume[1] == pytest.approx(volume[0], rel=1e-3)
+    network = read_network(tmp_path / "far.json")
+    assert network.closed
+    low, high = cloud.min(axis=0) + SITE, cloud.max(axis=0) + SITE
+    margin = 0.1 * np.linalg.norm(high - low)
+    points = network.control_points.reshape(-1, 3)
+    assert (points > low - margin).all() and (points < high + margin).all()
+
+
+def test_a_far_open_sheet_is_one_patch_written_where_it_was(tmp_path, capsys):
+    from nurbs_core.io import load
+
+    cloud = samples.curled_sheet(2000, seed=0).points
+    near, far = _same_fit_near_and_far(tmp_path, capsys, cloud, ".json")
+    assert far.startswith("status: converged")
+    rms = [float(text.split(", rms ")[1].split(",")[0]) for text in (near, far)]
+    assert rms[1] == pytest.approx(rms[0], rel=1e-3)
+    surface = load(tmp_path / "far.json")[0]
+    controls = surface.control_points.detach().numpy().reshape(-1, 3)
+    assert np.allclose(controls.mean(axis=0), cloud.mean(axis=0) + SITE, atol=1.0)
