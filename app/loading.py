@@ -256,11 +256,12 @@ def export_solid_report(path: str, points: np.ndarray, solid, *, title: str,
     its faces and status as ``nurbs-fit --report`` writes them, the tolerance the solid's own,
     ``up_axis`` up in its views.
     Returns the share of the points within the tolerance."""
+    from nurbs_core.brep.primitives import counted_kinds
     from nurbs_core.report.deviation import measure_deviation
     from nurbs_core.report.document import ReportContent, write_report
 
     report, display = solid.report, solid.display
-    kinds = ", ".join(f"{n} {k}{'s' if n > 1 else ''}" for k, n in report.face_types().items())
+    kinds = counted_kinds(report.face_types())
     if report.open_shell:
         summary = [("route", "an open shell (machined part)"),
                    ("faces", f"{len(report.faces)} ({kinds})"),

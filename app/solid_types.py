@@ -62,7 +62,9 @@ class SolidReport:
 
     def summary(self) -> str:
         """One line: "7 faces (1 cylinder, 6 planes), valid, closed"."""
-        kinds = ", ".join(f"{n} {k}{'s' if n > 1 else ''}" for k, n in self.face_types().items())
+        from nurbs_core.brep.primitives import counted_kinds
+
+        kinds = counted_kinds(self.face_types())
         shape = ("an open shell, open where the scan stops" if self.open_shell
                  else "closed" if self.closed else "NOT closed")
         return f"{len(self.faces)} faces ({kinds}), {'valid' if self.valid else 'INVALID'}, {shape}"

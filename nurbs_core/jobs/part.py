@@ -41,6 +41,7 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
     import numpy as np
 
     from nurbs_core.brep.part import fit_part
+    from nurbs_core.brep.primitives import counted_kinds
     from nurbs_core.io.solid_io import save_solid
     from nurbs_core.jobs.local_frame import shifted
 
@@ -59,8 +60,7 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
     statistics = result.statistics()
     noise = result.noise
     print(f"status: {result.status}")
-    kinds = ", ".join(f"{n} {k}{'s' if n > 1 else ''}"
-                      for k, n in statistics["face_types"].items())
+    kinds = counted_kinds(statistics["face_types"])
     shape = (f"{'valid' if result.valid else 'INVALID'}, open where the scan stops"
              if result.open_shell else
              f"{'valid' if result.valid else 'INVALID'}, "
