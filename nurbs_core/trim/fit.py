@@ -25,19 +25,24 @@ from nurbs_core.fitting.normalised import normalise
 from nurbs_core.fitting.sheet import MESH_POINTS, is_height_field
 from nurbs_core.foot_points import gauss_newton_steps
 from nurbs_core.geometry_arrays import CurveArrays, SurfaceArrays
+from nurbs_core.surfacing.disk import boundary_loops
 from nurbs_core.surfacing.fairing import energy, fairing_matrices
-from nurbs_core.surfacing.mesh import cloud_mesh, voxel_subsample
+from nurbs_core.surfacing.mesh import cloud_mesh, median_spacing, voxel_subsample
 from nurbs_core.trim.curve import fit_loop
-from nurbs_core.trim.extended import extended_fit
+from nurbs_core.trim.extended import MARGIN, MARGIN_SPACINGS, extended_fit
+from nurbs_core.trim.flattened import MapFrame, map_frame
 from nurbs_core.trim.measures import (
     areas,
     distances_to_polylines,
     extension_height,
     trim_curves_3d,
 )
-from nurbs_core.trim.outline import mesh_loops, outlines
+from nurbs_core.trim.outline import outlines
 from nurbs_core.trim.value import TrimLoop, TrimmedSurface
 
+#: Points farther than this many point spacings from the mapped piece of the cloud's mesh are
+#: left out of a mapped sheet's fit (they lie beyond a fold of the mesh: no (u, v) for them)
+OFF_MAP_SPACINGS = 3.0
 #: Holes of the scan wider than MIN_HOLE_SPACINGS point spacings become inner trim loops
 #: (smaller gaps are closed in the cloud's mesh, or left to the surface)
 MIN_HOLE_SPACINGS = 12.0
@@ -77,19 +82,24 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
     # judged on about MESH_POINTS voxel centroids (a dense cloud's noise rivals its spacing)
     judged = cloud.points if len(cloud.points) <= MESH_POINTS else \
         voxel_subsample(cloud.points, MESH_POINTS)[1]
-    if not is_height_field(judged):
-        raise ValueError("trimming fits a patch over the cloud's principal plane, and this sheet "
-                         "folds over it (it is not a height field over that plane): fit it "
-                         "without trimming")
     scale = cloud.scale
     normalised_config = config if config.tolerance is None else \
         config.replace(tolerance=config.tolerance / scale)
-    fit = extended_fit(cloud.points, normalised_config, stop)
+    mesh = cloud_mesh(cloud.points, seed=config.seed)
+    flat: MapFrame | None = None
+    fitted = cloud.points
+    if not is_height_field(judged):
+        # a sheet folding over its principal plane: (u, v) from a free-boundary map of its mesh
+        spacing = median_spacing(cloud.points)
+        flat = map_frame(mesh, spacing, MARGIN, MARGIN_SPACINGS)
+        # points off the mapped piece (beyond a fold of the cloud's mesh) have no (u, v)
+        fitted = cloud.points[flat.flat_coordinates(cloud.points)[1] <= OFF_MAP_SPACINGS * spacing]
+    fit = extended_fit(fitted, normalised_config, stop, flat, shaped=flat is not None)
     surface = fit.surface
     hole = MIN_HOLE_SPACINGS * fit.spacing if min_hole is None else min_hole / scale
-    mesh = cloud_mesh(cloud.points, seed=config.seed)
-    loops_found = outlines(mesh.vertices, mesh_loops(mesh), surface,
-                           fit.frame.parameters(mesh.vertices), hole)
+    vertices, faces = (mesh.vertices, mesh.faces) if flat is None else (flat.vertices, flat.faces)
+    loops_found = outlines(vertices, boundary_loops(faces), surface,
+                           fit.frame.parameters(vertices), hole)
     size = fit.frame.size
     loops = []
     for outline in loops_found:
@@ -101,11 +111,11 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
     trimmed.validate()
     in_input = TrimmedSurface(_to_input(surface, cloud.center, scale), trimmed.loops)
     # measures, in input units
-    start = fit.frame.parameters(cloud.points) if fit.subset is not None else fit.parameters
-    foot_u, foot_v = gauss_newton_steps(surface, cloud.points, start[:, 0], start[:, 1], steps=8)
+    start = fit.frame.parameters(fitted) if fit.subset is not None else fit.parameters
+    foot_u, foot_v = gauss_newton_steps(surface, fitted, start[:, 0], start[:, 1], steps=8)
     from nurbs_core.evaluate_arrays import surface_points
 
-    distances = np.linalg.norm(surface_points(surface, foot_u, foot_v) - cloud.points,
+    distances = np.linalg.norm(surface_points(surface, foot_u, foot_v) - fitted,
                                axis=1) * scale
     trimmed_area, untrimmed_area = areas(in_input)
     curves = trim_curves_3d(in_input)
@@ -118,6 +128,8 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
                                             surface.knots_v, surface.degree_v)
     stats = {"mean": float(distances.mean()), "rms": float(np.sqrt((distances ** 2).mean())),
              "max": float(distances.max()), "points": float(len(distances)),
+             "off_map_points": float(len(cloud.points) - len(fitted)),
+             "map_flipped": flat.flipped if flat is not None else 0.0,
              "trimmed_area": trimmed_area, "untrimmed_area": untrimmed_area,
              "area_ratio": trimmed_area / untrimmed_area,
              "trim_max_deviation": float(deviation.max()),
@@ -135,6 +147,11 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
     message = (f"{fit.grid[0]} x {fit.grid[1]} control grid, {within:.1%} of the points within "
                f"the tolerance; trimmed at the scan's outline: {len(loops[0].segments)} "
                f"segment(s) in the outer loop, {len(loops) - 1} hole(s)")
+    if flat is not None:
+        message += "; (u, v) from a free-boundary map of the cloud's mesh"
+    if len(fitted) < len(cloud.points):
+        message += (f"; {len(cloud.points) - len(fitted)} points lie beyond a fold of the "
+                    "cloud's mesh, off the map, and were left out")
     return TrimmedFit(in_input, stats, message, loops_found[0].points * scale + cloud.center)
 
 
