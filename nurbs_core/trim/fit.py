@@ -106,7 +106,13 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
         # fitted in isotropic coordinates: uv * size has the plane's lengths
         # holes are smooth loops: their corners cannot be told from dents (both turn right)
         segments = fit_loop(outline.uv * size, fit.spacing, corners=outline.outer)
-        loops.append(TrimLoop(tuple(_scaled(s, 1 / size) for s in segments), outline.outer))
+        segments = [_scaled(s, 1 / size) for s in segments]
+        if flat is not None:
+            # a corner point meets its sides' lines up to 3 outline edges beyond the outline,
+            # which can pass a map's narrower margin: held at the domain's edge (no data there)
+            segments = [s.replace(control_points=np.clip(s.control_points, 0.0, 1.0))
+                        for s in segments]
+        loops.append(TrimLoop(tuple(segments), outline.outer))
     trimmed = TrimmedSurface(surface, tuple(loops))
     trimmed.validate()
     in_input = TrimmedSurface(_to_input(surface, cloud.center, scale), trimmed.loops)

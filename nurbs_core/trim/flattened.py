@@ -181,16 +181,18 @@ def flatten(vertices: np.ndarray, faces: np.ndarray,
 def map_frame(mesh: CloudMesh, spacing: float, margin: float, margin_spacings: float
               ) -> MapFrame:
     """The flattened frame of a cloud's mesh (its largest piece): the map and its rectangle with
-    a margin of ``margin`` of the rectangle's size, at least ``margin_spacings`` x ``spacing``,
-    on every side. Raises ValueError when the map folds (more than MAX_FLIPPED of its area
-    turned over)."""
+    a margin of ``margin`` of the rectangle's SHORTER side, at least ``margin_spacings`` x
+    ``spacing``, on every side. (The plane's rule, ``margin`` of the longer side, gives a long
+    strip's map wide margins where only the fairing acts: on the curled sheet, 5.7 : 1, the
+    surface beyond the trim left its tangent planes by 10-15% of the diagonal.) Raises
+    ValueError when the map folds (more than MAX_FLIPPED of its area turned over)."""
     vertices, faces, _ = largest_piece(mesh)
     flat, flipped = flatten(vertices, faces)
     if flipped > MAX_FLIPPED:
         raise ValueError(f"the free-boundary map of the cloud's mesh folds ({flipped:.1%} of its "
                          "area turned over): the mesh is not a disk with holes")
     lo, hi = flat.min(0), flat.max(0)
-    pad = max(margin * float(np.max(hi - lo)), margin_spacings * spacing)
+    pad = max(margin * float(np.min(hi - lo)), margin_spacings * spacing)
     return MapFrame(vertices, faces, flat, lo - pad, hi - lo + 2 * pad, flipped)
 
 
