@@ -7,7 +7,8 @@ Run: ``python benchmarks/bench_trim_curved.py [--quick] [--json OUT]`` (one thre
 Cases: :func:`nurbs_core.samples.curled_sheet` (1.5 turns; sampled by area and uniformly in its
 parameters, ``by_parameter=True``, where the outer turn is 3.7 times sparser), 1,500 and 4,000
 points, seeds 0 and 1; :func:`~nurbs_core.samples.half_cylinder` and
-:func:`~nurbs_core.samples.bowl` (a hemisphere), 4,000 points; noise 0.2% of the diagonal.
+:func:`~nurbs_core.samples.bowl` (a hemisphere) and :func:`~nurbs_core.samples.leaflet_like`,
+4,000 points; noise 0.2% of the diagonal.
 Per case and route (``trim``: :func:`nurbs_core.trim.fit.fit_trimmed`; ``default``:
 ``fit(points, FitConfig(threads=1))``):
 
@@ -67,6 +68,7 @@ def cases(quick: bool) -> list[tuple[str, samples.SampledShape]]:
                     count, seed=seed, by_parameter=by == "by param")))
     found.append(("half cylinder 4000 s0", samples.half_cylinder(4000)))
     found.append(("bowl 4000 s0", samples.bowl(4000)))
+    found.append(("leaflet 4000 s0", samples.leaflet_like(4000)))
     return found
 
 

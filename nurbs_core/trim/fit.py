@@ -106,12 +106,11 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
         # fitted in isotropic coordinates: uv * size has the plane's lengths
         # holes are smooth loops: their corners cannot be told from dents (both turn right)
         segments = fit_loop(outline.uv * size, fit.spacing, corners=outline.outer)
+        # a corner point can land beyond the margin (a map's is narrower; the registered scan
+        # c5dataReg's plane rectangle too): held at the domain's edge (no data there)
         segments = [_scaled(s, 1 / size) for s in segments]
-        if flat is not None:
-            # a corner point meets its sides' lines up to 3 outline edges beyond the outline,
-            # which can pass a map's narrower margin: held at the domain's edge (no data there)
-            segments = [s.replace(control_points=np.clip(s.control_points, 0.0, 1.0))
-                        for s in segments]
+        segments = [s.replace(control_points=np.clip(s.control_points, 0.0, 1.0))
+                    for s in segments]
         loops.append(TrimLoop(tuple(segments), outline.outer))
     trimmed = TrimmedSurface(surface, tuple(loops))
     trimmed.validate()

@@ -109,14 +109,18 @@ def largest_piece(mesh: CloudMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     more than 90 degrees apart are a fold of the cloud's mesh. Cut there, a piece holding at
     least FOLDED_PIECE of the faces is a stretch of the sheet joined to the wrong side of its
     neighbour (the map would lay it out mirrored) and is dropped unless it is the largest;
-    smaller folded bits (a sliver, a hole's filling) stay. Of what remains the largest connected
-    piece is kept. (Its vertices (V, 3), its faces (F, 3) re-indexed, the kept vertices'
-    indices (V,) into ``mesh.vertices``.)"""
+    smaller folded bits (a sliver, a hole's filling) stay; triangles without area are dropped.
+    Of what remains the largest connected piece is kept. (Its vertices (V, 3), its faces (F, 3)
+    re-indexed, the kept vertices' indices (V,) into ``mesh.vertices``.)"""
     faces = np.asarray(mesh.faces)
     vertices = np.asarray(mesh.vertices)
-    first, second, _ = face_adjacency(faces)
     normals = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
                        vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    # triangles without area (on a scan's duplicated points) have no shape to map (LSCM: NaN)
+    doubled = np.linalg.norm(normals, axis=1)
+    solid = doubled > 1e-9 * doubled.mean()
+    faces, normals = faces[solid], normals[solid]
+    first, second, _ = face_adjacency(faces)
     joined = (normals[first] * normals[second]).sum(1) >= 0
     graph = scipy.sparse.coo_matrix((np.ones(int(joined.sum())), (first[joined],
                                                                   second[joined])),
