@@ -1,7 +1,9 @@
 """One trimmed patch of an open sheet: :func:`fit_trimmed` composes the steps
 
 1. the extended surface (:mod:`nurbs_core.trim.extended`): a patch over a rectangle around the
-   outline in the principal plane, filled smoothly by the fairing where there is no data;
+   outline in the principal plane (a sheet that is no height field over it: in a free-boundary
+   map of the cloud's mesh, :mod:`nurbs_core.trim.flattened`), filled smoothly by the fairing
+   where there is no data;
 2. the outline (:mod:`nurbs_core.trim.outline`): the cloud mesh's boundary loops, at their foot
    points on that surface;
 3. the trim loops (:mod:`nurbs_core.trim.curve`): fair B-spline loops through those (u, v),
@@ -9,7 +11,7 @@
 4. the measures (:mod:`nurbs_core.trim.measures`): trimmed vs untrimmed area, the trim's
    distance to the outline, the distances of the points.
 
-numpy + scipy only (the torch-free route).
+numpy + scipy (+ libigl for the map) only (the torch-free route).
 """
 
 from __future__ import annotations
@@ -74,7 +76,8 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
     docstring). ``config``: degrees, stiffness, grid bounds, tolerance (input units; automatic:
     3 noise sigmas) and seed; ``min_hole`` (input units): holes wider than this become inner
     loops (default MIN_HOLE_SPACINGS point spacings; ``float('inf')``: none). Raises ValueError
-    when the cloud cannot be meshed or folds over its principal plane."""
+    when the cloud cannot be meshed, has no boundary (a closed surface) or its free-boundary map
+    folds."""
     started = time.perf_counter()
     config = config or FitConfig()
     config.validate()

@@ -138,3 +138,21 @@ def test_the_registered_scan_is_trimmed_where_a_corner_left_the_domain(paper_dat
     result = fit_trimmed(np.loadtxt(paper_data / "step_fitting" / "c5dataReg.txt"))
     result.trimmed.validate()
     assert 0.5 < result.statistics["area_ratio"] < 1.0
+
+
+def test_the_trimmed_curled_sheet_reaches_rhino_and_json(curled, tmp_path):
+    rhino3dm = pytest.importorskip("rhino3dm")
+    from nurbs_core.io import save
+    from nurbs_core.io.trimmed_io import read_trimmed_json
+
+    _, result = curled
+    save(result.trimmed, tmp_path / "curled.3dm")
+    brep = rhino3dm.File3dm.Read(str(tmp_path / "curled.3dm")).Objects[0].Geometry
+    assert isinstance(brep, rhino3dm.Brep) and brep.IsValid
+    assert len(brep.Faces) == 1 and not brep.IsSurface
+    assert brep.Faces[0].OuterLoop.TrimCount == len(result.trimmed.loops[0].segments)
+    save(result.trimmed, tmp_path / "curled.json")
+    (back,) = read_trimmed_json(tmp_path / "curled.json")
+    assert np.array_equal(np.asarray(back.surface.control_points),
+                          np.asarray(result.trimmed.surface.control_points))
+    assert len(back.loops[0].segments) == len(result.trimmed.loops[0].segments)
