@@ -1,8 +1,10 @@
 """Trimmed patches of curved open sheets (``--trim`` over a free-boundary map of the cloud's
 mesh) against the default untrimmed patch, on clouds with a known true sheet.
 
-Run: ``python benchmarks/bench_trim_curved.py [--quick] [--json OUT]`` (one thread; about
-2 minutes, ``--quick``: the curled sheet at 1,500 points, seed 0, by area and by parameter).
+Run: ``python benchmarks/bench_trim_curved.py [--quick | --sweep] [--json OUT]`` (one thread;
+about 45 s; ``--quick``: the curled sheet at 1,500 points, seed 0, by area and by parameter;
+``--sweep``: ``bench_curled_sweep.py``'s 18 clouds, by parameter, 700 / 1,500 / 4,000 points,
+seeds 0-5).
 
 Cases: :func:`nurbs_core.samples.curled_sheet` (1.5 turns; sampled by area and uniformly in its
 parameters, ``by_parameter=True``, where the outer turn is 3.7 times sparser), 1,500 and 4,000
@@ -55,8 +57,12 @@ from nurbs_core.trim.value import TrimmedSurface
 GRID = 240
 
 
-def cases(quick: bool) -> list[tuple[str, samples.SampledShape]]:
+def cases(quick: bool, sweep: bool = False) -> list[tuple[str, samples.SampledShape]]:
     """The benchmark's clouds (module docstring)."""
+    if sweep:      # bench_curled_sweep.py's 18 clouds
+        return [(f"curled by param {count} s{seed}", samples.curled_sheet(
+            count, seed=seed, by_parameter=True)) for count in (700, 1500, 4000)
+            for seed in range(6)]
     if quick:
         return [(f"curled {by} 1500 s0", samples.curled_sheet(
             1500, seed=0, by_parameter=by == "by param")) for by in ("by area", "by param")]
@@ -152,6 +158,9 @@ def run_case(shape: samples.SampledShape) -> dict:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--sweep", action="store_true",
+                        help="bench_curled_sweep.py's 18 clouds (by parameter, 700 / 1,500 / "
+                             "4,000 points, seeds 0-5) instead")
     parser.add_argument("--json", metavar="OUT", help="also write the rows as JSON")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
@@ -159,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     print("| case | route | area/true | s2t max %diag | true outline to edge: mean, max %diag | "
           "flipped | extension height %diag | points off the map | time s |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for name, shape in cases(args.quick):
+    for name, shape in cases(args.quick, args.sweep):
         try:
             measured = run_case(shape)
         except ValueError as error:         # a refusal is a result too
@@ -173,6 +182,10 @@ def main(argv: list[str] | None = None) -> int:
                   f"{100 * m['outline_mean']:.2f}, {100 * m['outline_max']:.2f} | "
                   f"{m['flipped']:.2%} | {extension} | {off} | {m['time']:.1f} |", flush=True)
         rows.append({"case": name, **measured})
+    for route in ("trim", "default"):
+        far = [r["case"] for r in rows if r[route]["s2t_max"] > 0.015]
+        print(f"{route}: {len(far)} of {len(rows)} faces farther than 1.5% of the diagonal from "
+              f"the true sheet{': ' + ', '.join(far) if far else ''}")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
     return 0
