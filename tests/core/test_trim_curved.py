@@ -156,3 +156,16 @@ def test_the_trimmed_curled_sheet_reaches_rhino_and_json(curled, tmp_path):
     assert np.array_equal(np.asarray(back.surface.control_points),
                           np.asarray(result.trimmed.surface.control_points))
     assert len(back.loops[0].segments) == len(result.trimmed.loops[0].segments)
+
+
+def test_points_left_off_a_folded_mesh_are_reported_as_a_warning(tmp_path, capsys):
+    from nurbs_core.cli import main
+
+    # the 1,500-point curled sheet (by area, seed 1): its cloud mesh joins a stretch of the outer
+    # turn mirrored to its neighbour; the face leaves the points beyond that fold out
+    source = tmp_path / "curled.xyz"
+    np.savetxt(source, samples.curled_sheet(1500, seed=1).points)
+    assert main([str(source), "-o", str(tmp_path / "curled.json"), "--trim"]) == 0
+    out = capsys.readouterr().out
+    assert "status: fitted with warnings" in out
+    assert "of the cloud is not covered (beyond a fold" in out
