@@ -194,7 +194,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--offset", type=float, default=None, metavar="DIST",
                         help="also write the fitted surface offset by DIST along its normals")
     parser.add_argument("--trim", action="store_true",
-                        help="an open sheet as one patch over a rectangle around its outline, "
+                        help="an open sheet as one patch over a rectangle around its outline "
+                             "(in its principal plane, or in a free-boundary map of its mesh "
+                             "when it curls over that plane), "
                              "trimmed by a fair curve along the scan's outline (corners kept "
                              "sharp, holes as inner loops): one trimmed face in .step/.iges/.3dm, "
                              "the trim loops in .json, the trimmed face in mesh formats")

@@ -323,7 +323,16 @@ def fit_trimmed_job(job: FitJob, points: np.ndarray | None = None) -> dict[str, 
     started = time.perf_counter()
     result = fit_trimmed(points, config)
     stats = result.statistics
-    print(f"status: converged in {time.perf_counter() - started:.2f} s ({result.message})")
+    from nurbs_core.status import CONVERGED, WARN_UNCOVERED, reported_status
+
+    # a curved sheet's points beyond a fold of its mesh are off the map: the face leaves them out
+    left_out = stats.get("off_map_points", 0.0) / len(points)
+    warnings = [f"{left_out:.1%} of the cloud is not covered (beyond a fold of the cloud's "
+                "mesh, off the map)"] if left_out > WARN_UNCOVERED else []
+    status = reported_status(CONVERGED, warnings)
+    print(f"status: {status} in {time.perf_counter() - started:.2f} s ({result.message})")
+    for warning in warnings:
+        print(f"warning: {warning}")
     print(f"point-to-surface distance: mean {stats['mean']:.6g}, rms {stats['rms']:.6g}, "
           f"max {stats['max']:.6g}  (tolerance {stats['tolerance']:.4g})")
     print(f"trimmed area {stats['trimmed_area']:.6g} of the untrimmed patch's "
@@ -340,5 +349,5 @@ def fit_trimmed_job(job: FitJob, points: np.ndarray | None = None) -> dict[str, 
     for path in outputs:
         print(f"wrote {path}")
     counts = [int(n) for n in np.shape(result.trimmed.surface.control_points)[:-1]]
-    return plain({**stats, "kind": "surface", "points": len(points), "fit_status": "converged",
+    return plain({**stats, "kind": "surface", "points": len(points), "fit_status": status,
                   "fit_message": result.message, "control_points": counts, "trimmed": True})

@@ -22,6 +22,8 @@ from nurbs_core.knot_vectors import uniform
 #: turns by 23 degrees over that window; a rectangle's corner by 90).
 CORNER_ANGLE = 50.0
 CORNER_WINDOW = 4.0
+#: a corner point lies at most CORNER_REACH point spacings (the cloud's) from the corner vertex
+CORNER_REACH = 2.0
 #: outline points this many spacings from a corner are left to the corner point
 CORNER_GAP = 1.5
 #: ... and turns by at least CONCENTRATED of that over half the window
@@ -94,11 +96,13 @@ def _line(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre, direction
 
 
-def corner_point(points: np.ndarray, index: int, spacing: float) -> np.ndarray:
+def corner_point(points: np.ndarray, index: int, spacing: float,
+                 reach: float | None = None) -> np.ndarray:
     """The corner at vertex ``index`` of the closed polyline (L, 2): where the lines through the
     outline 1.5 to 6 spacings before and after it meet (a sampled corner is cut: the true corner
     lies beyond the nearest sample), or the vertex itself when they barely meet (near-parallel
-    sides, or a meeting point farther than 3 spacings away)."""
+    sides, or a meeting point farther than 3 spacings away); ``reach``: the corner moves at most
+    this far from the vertex (towards the meeting point)."""
     arc = arc_lengths(points)
     total = arc[-1]
     offset = (arc[:-1] - arc[index] + 0.5 * total) % total - 0.5 * total   # signed, wrapped
@@ -113,7 +117,14 @@ def corner_point(points: np.ndarray, index: int, spacing: float) -> np.ndarray:
         return vertex
     t = np.linalg.solve(matrix, b - a)
     meet = a + t[0] * da
-    return meet if np.linalg.norm(meet - vertex) <= 3 * spacing else vertex
+    distance = float(np.linalg.norm(meet - vertex))
+    if distance > 3 * spacing:
+        return vertex
+    if reach is not None and distance > reach:
+        # the sides' lines through a ragged outline meet far out: the true corner lies about a
+        # point spacing beyond the nearest sample, so the corner goes no farther than ``reach``
+        return vertex + (meet - vertex) * (reach / distance)
+    return meet
 
 
 def fit_segment(points: np.ndarray, count: int, *, start: np.ndarray | None = None,
@@ -190,16 +201,18 @@ def fit_loop(points: np.ndarray, spacing: float, *, corners: bool = True,
     points = np.asarray(points, np.float64)
     # a mesh's boundary edges are often longer than the cloud's spacing (they cut across dents)
     edges = np.linalg.norm(np.diff(np.concatenate([points, points[:1]]), axis=0), axis=1)
+    reach = CORNER_REACH * spacing
     spacing = max(spacing, float(np.median(edges)))
     found = find_corners(points, spacing) if corners else np.zeros(0, int)
-    segments = _fit_pieces(points, found, spacing, span_spacings, smoothing)
+    segments = _fit_pieces(points, found, spacing, span_spacings, smoothing, reach=reach)
     for _ in range(envelope):
         # asymmetric least squares (an expectile): the points outside the previous loop weigh
         # EXPECTILE, those inside 1 - EXPECTILE, so the loop moves out to the outermost points
         # while every point still holds it (dropping the inner points lets it wiggle)
         offset, _ = outward_offsets(points, segments)
         weights = np.where(offset > 0, EXPECTILE, 1 - EXPECTILE)
-        segments = _fit_pieces(points, found, spacing, span_spacings, smoothing, weights)
+        segments = _fit_pieces(points, found, spacing, span_spacings, smoothing, weights,
+                               reach=reach)
     return segments
 
 
@@ -226,7 +239,8 @@ def outward_offsets(points: np.ndarray, segments: list[CurveArrays],
 
 def _fit_pieces(points: np.ndarray, found: np.ndarray, spacing: float,
                 span_spacings: float, smoothing: float,
-                weights: np.ndarray | None = None) -> list[CurveArrays]:
+                weights: np.ndarray | None = None, reach: float | None = None
+                ) -> list[CurveArrays]:
     """One fit of the loop to the points (weighted by ``weights`` (L,) when given), split at the
     corners ``found``."""
     weights = np.ones(len(points)) if weights is None else weights
@@ -234,7 +248,7 @@ def _fit_pieces(points: np.ndarray, found: np.ndarray, spacing: float,
     if len(found) == 0:
         count = int(round(total / (span_spacings * spacing))) + DEGREE
         return [fit_segment(points, count, closed=True, smoothing=smoothing, weights=weights)]
-    tips = [corner_point(points, int(index), spacing) for index in found]
+    tips = [corner_point(points, int(index), spacing, reach) for index in found]
     segments = []
     for k, first in enumerate(found):
         last = found[(k + 1) % len(found)]

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -51,6 +52,22 @@ class PlaneFrame:
         return ((points - self.centre) @ self.axes.T - self.low) / self.size
 
 
+class DomainFrame(Protocol):
+    """Where the extended domain's (u, v) come from: the plane's projection
+    (:class:`PlaneFrame`) or a free-boundary map of the cloud's mesh
+    (:class:`~nurbs_core.trim.flattened.MapFrame`). ``size`` (2,): the rectangle's extent in
+    normalised lengths, so ``uv * size`` is (about) isotropic."""
+
+    @property
+    def size(self) -> np.ndarray:
+        """(2,) the rectangle's extent (normalised lengths)."""
+        ...
+
+    def parameters(self, points: np.ndarray) -> np.ndarray:
+        """(N, 2) the domain parameters of normalised points (N, 3)."""
+        ...
+
+
 @dataclass
 class ExtendedFit:
     """The core's surface over the extended domain (normalised units), every fitted point's foot
@@ -61,7 +78,7 @@ class ExtendedFit:
     surface: SurfaceArrays
     parameters: np.ndarray
     distances: np.ndarray
-    frame: PlaneFrame
+    frame: DomainFrame
     tolerance: float
     noise: float
     spacing: float
@@ -82,16 +99,19 @@ def plane_frame(points: np.ndarray, spacing: float) -> PlaneFrame:
     return PlaneFrame(centre, axes, lo - margin, hi - lo + 2 * margin)
 
 
-def extended_fit(points: np.ndarray, config: FitConfig, stop: StopToken | None = None
-                 ) -> ExtendedFit:
+def extended_fit(points: np.ndarray, config: FitConfig, stop: StopToken | None = None,
+                 frame: DomainFrame | None = None, shaped: bool = False) -> ExtendedFit:
     """The surface under the trim (module docstring) for normalised points (N, 3), with the
     degrees, stiffness, grid bounds and tolerance of ``config`` (its tolerance already in
-    normalised units when given: the caller divides by the cloud's scale)."""
+    normalised units when given: the caller divides by the cloud's scale). ``frame``: where the
+    points' starting (u, v) come from (default: the principal plane's :func:`plane_frame`);
+    ``shaped``: the starting control grid in the rectangle's proportions (else square)."""
     subset = None
     if len(points) > PASS_POINTS:    # the passes on a seeded random subset, as the sheet route
         subset = np.sort(np.random.default_rng(config.seed).choice(len(points), PASS_POINTS,
                                                                    replace=False))
-    frame = plane_frame(points, median_spacing(points))
+    if frame is None:
+        frame = plane_frame(points, median_spacing(points))
     points = points if subset is None else points[subset]
     spacing = median_spacing(points)
     parameters = frame.parameters(points)
@@ -102,6 +122,12 @@ def extended_fit(points: np.ndarray, config: FitConfig, stop: StopToken | None =
     limit = max(int(math.sqrt(len(points) / 8)), max(degrees) + 1)
     grid = (min(config.control_points_u, max(limit, degrees[0] + 1)),
             min(config.control_points_v, max(limit, degrees[1] + 1)))
+    if shaped:
+        # the same number of control points shared out in the rectangle's proportions (a map's
+        # rectangle can be long: 5.7 : 1 for a curled sheet)
+        aspect = float(frame.size[0] / frame.size[1])
+        grid = (max(round(grid[0] * math.sqrt(aspect)), degrees[0] + 1),
+                max(round(grid[1] / math.sqrt(aspect)), degrees[1] + 1))
     max_grid = (max(config.max_control_points, grid[0]), max(config.max_control_points, grid[1])) \
         if config.max_control_points else grid
     core = LeastSquaresCore(points, parameters, degrees, grid, config.stiffness, tolerance,

@@ -1,7 +1,9 @@
 """One trimmed patch of an open sheet: :func:`fit_trimmed` composes the steps
 
 1. the extended surface (:mod:`nurbs_core.trim.extended`): a patch over a rectangle around the
-   outline in the principal plane, filled smoothly by the fairing where there is no data;
+   outline in the principal plane (a sheet that is no height field over it: in a free-boundary
+   map of the cloud's mesh, :mod:`nurbs_core.trim.flattened`), filled smoothly by the fairing
+   where there is no data;
 2. the outline (:mod:`nurbs_core.trim.outline`): the cloud mesh's boundary loops, at their foot
    points on that surface;
 3. the trim loops (:mod:`nurbs_core.trim.curve`): fair B-spline loops through those (u, v),
@@ -9,7 +11,7 @@
 4. the measures (:mod:`nurbs_core.trim.measures`): trimmed vs untrimmed area, the trim's
    distance to the outline, the distances of the points.
 
-numpy + scipy only (the torch-free route).
+numpy + scipy (+ libigl for the map) only (the torch-free route).
 """
 
 from __future__ import annotations
@@ -25,19 +27,24 @@ from nurbs_core.fitting.normalised import normalise
 from nurbs_core.fitting.sheet import MESH_POINTS, is_height_field
 from nurbs_core.foot_points import gauss_newton_steps
 from nurbs_core.geometry_arrays import CurveArrays, SurfaceArrays
+from nurbs_core.surfacing.disk import boundary_loops
 from nurbs_core.surfacing.fairing import energy, fairing_matrices
-from nurbs_core.surfacing.mesh import cloud_mesh, voxel_subsample
+from nurbs_core.surfacing.mesh import cloud_mesh, median_spacing, voxel_subsample
 from nurbs_core.trim.curve import fit_loop
-from nurbs_core.trim.extended import extended_fit
+from nurbs_core.trim.extended import MARGIN, MARGIN_SPACINGS, extended_fit
+from nurbs_core.trim.flattened import MapFrame, map_frame
 from nurbs_core.trim.measures import (
     areas,
     distances_to_polylines,
     extension_height,
     trim_curves_3d,
 )
-from nurbs_core.trim.outline import mesh_loops, outlines
+from nurbs_core.trim.outline import outlines
 from nurbs_core.trim.value import TrimLoop, TrimmedSurface
 
+#: Points farther than this many point spacings from the mapped piece of the cloud's mesh are
+#: left out of a mapped sheet's fit (they lie beyond a fold of the mesh: no (u, v) for them)
+OFF_MAP_SPACINGS = 3.0
 #: Holes of the scan wider than MIN_HOLE_SPACINGS point spacings become inner trim loops
 #: (smaller gaps are closed in the cloud's mesh, or left to the surface)
 MIN_HOLE_SPACINGS = 12.0
@@ -69,7 +76,8 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
     docstring). ``config``: degrees, stiffness, grid bounds, tolerance (input units; automatic:
     3 noise sigmas) and seed; ``min_hole`` (input units): holes wider than this become inner
     loops (default MIN_HOLE_SPACINGS point spacings; ``float('inf')``: none). Raises ValueError
-    when the cloud cannot be meshed or folds over its principal plane."""
+    when the cloud cannot be meshed, has no boundary (a closed surface) or its free-boundary map
+    folds."""
     started = time.perf_counter()
     config = config or FitConfig()
     config.validate()
@@ -77,35 +85,45 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
     # judged on about MESH_POINTS voxel centroids (a dense cloud's noise rivals its spacing)
     judged = cloud.points if len(cloud.points) <= MESH_POINTS else \
         voxel_subsample(cloud.points, MESH_POINTS)[1]
-    if not is_height_field(judged):
-        raise ValueError("trimming fits a patch over the cloud's principal plane, and this sheet "
-                         "folds over it (it is not a height field over that plane): fit it "
-                         "without trimming")
     scale = cloud.scale
     normalised_config = config if config.tolerance is None else \
         config.replace(tolerance=config.tolerance / scale)
-    fit = extended_fit(cloud.points, normalised_config, stop)
+    mesh = cloud_mesh(cloud.points, seed=config.seed)
+    flat: MapFrame | None = None
+    fitted = cloud.points
+    if not is_height_field(judged):
+        # a sheet folding over its principal plane: (u, v) from a free-boundary map of its mesh
+        spacing = median_spacing(cloud.points)
+        flat = map_frame(mesh, spacing, MARGIN, MARGIN_SPACINGS)
+        # points off the mapped piece (beyond a fold of the cloud's mesh) have no (u, v)
+        fitted = cloud.points[flat.flat_coordinates(cloud.points)[1] <= OFF_MAP_SPACINGS * spacing]
+    fit = extended_fit(fitted, normalised_config, stop, flat, shaped=flat is not None)
     surface = fit.surface
     hole = MIN_HOLE_SPACINGS * fit.spacing if min_hole is None else min_hole / scale
-    mesh = cloud_mesh(cloud.points, seed=config.seed)
-    loops_found = outlines(mesh.vertices, mesh_loops(mesh), surface,
-                           fit.frame.parameters(mesh.vertices), hole)
+    vertices, faces = (mesh.vertices, mesh.faces) if flat is None else (flat.vertices, flat.faces)
+    loops_found = outlines(vertices, boundary_loops(faces), surface,
+                           fit.frame.parameters(vertices), hole)
     size = fit.frame.size
     loops = []
     for outline in loops_found:
         # fitted in isotropic coordinates: uv * size has the plane's lengths
         # holes are smooth loops: their corners cannot be told from dents (both turn right)
         segments = fit_loop(outline.uv * size, fit.spacing, corners=outline.outer)
-        loops.append(TrimLoop(tuple(_scaled(s, 1 / size) for s in segments), outline.outer))
+        # a corner point can land beyond the margin (a map's is narrower; the registered scan
+        # c5dataReg's plane rectangle too): held at the domain's edge (no data there)
+        segments = [_scaled(s, 1 / size) for s in segments]
+        segments = [s.replace(control_points=np.clip(s.control_points, 0.0, 1.0))
+                    for s in segments]
+        loops.append(TrimLoop(tuple(segments), outline.outer))
     trimmed = TrimmedSurface(surface, tuple(loops))
     trimmed.validate()
     in_input = TrimmedSurface(_to_input(surface, cloud.center, scale), trimmed.loops)
     # measures, in input units
-    start = fit.frame.parameters(cloud.points) if fit.subset is not None else fit.parameters
-    foot_u, foot_v = gauss_newton_steps(surface, cloud.points, start[:, 0], start[:, 1], steps=8)
+    start = fit.frame.parameters(fitted) if fit.subset is not None else fit.parameters
+    foot_u, foot_v = gauss_newton_steps(surface, fitted, start[:, 0], start[:, 1], steps=8)
     from nurbs_core.evaluate_arrays import surface_points
 
-    distances = np.linalg.norm(surface_points(surface, foot_u, foot_v) - cloud.points,
+    distances = np.linalg.norm(surface_points(surface, foot_u, foot_v) - fitted,
                                axis=1) * scale
     trimmed_area, untrimmed_area = areas(in_input)
     curves = trim_curves_3d(in_input)
@@ -118,6 +136,8 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
                                             surface.knots_v, surface.degree_v)
     stats = {"mean": float(distances.mean()), "rms": float(np.sqrt((distances ** 2).mean())),
              "max": float(distances.max()), "points": float(len(distances)),
+             "off_map_points": float(len(cloud.points) - len(fitted)),
+             "map_flipped": flat.flipped if flat is not None else 0.0,
              "trimmed_area": trimmed_area, "untrimmed_area": untrimmed_area,
              "area_ratio": trimmed_area / untrimmed_area,
              "trim_max_deviation": float(deviation.max()),
@@ -135,6 +155,11 @@ def fit_trimmed(points: ArrayLike, config: FitConfig | None = None, *,
     message = (f"{fit.grid[0]} x {fit.grid[1]} control grid, {within:.1%} of the points within "
                f"the tolerance; trimmed at the scan's outline: {len(loops[0].segments)} "
                f"segment(s) in the outer loop, {len(loops) - 1} hole(s)")
+    if flat is not None:
+        message += "; (u, v) from a free-boundary map of the cloud's mesh"
+    if len(fitted) < len(cloud.points):
+        message += (f"; {len(cloud.points) - len(fitted)} points lie beyond a fold of the "
+                    "cloud's mesh, off the map, and were left out")
     return TrimmedFit(in_input, stats, message, loops_found[0].points * scale + cloud.center)
 
 

@@ -12,8 +12,6 @@ import numpy as np
 
 from nurbs_core.foot_points import gauss_newton_steps
 from nurbs_core.geometry_arrays import SurfaceArrays
-from nurbs_core.surfacing.disk import boundary_loops
-from nurbs_core.surfacing.mesh import CloudMesh
 
 
 @dataclass(frozen=True)
@@ -30,11 +28,6 @@ def signed_area(polygon: np.ndarray) -> float:
     """The signed area of a closed polygon (L, 2): positive when counter-clockwise."""
     x, y = polygon[:, 0], polygon[:, 1]
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
-
-
-def mesh_loops(mesh: CloudMesh) -> list[np.ndarray]:
-    """The boundary loops of a cloud's mesh (index arrays into its vertices, longest first)."""
-    return boundary_loops(mesh.faces)
 
 
 def outlines(vertices: np.ndarray, loops: list[np.ndarray], surface: SurfaceArrays,

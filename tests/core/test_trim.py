@@ -299,13 +299,6 @@ def test_sharp_corners_stay_corners_and_a_round_outline_is_one_closed_fair_curve
     assert np.quantile(curvature[5:-5], 0.99) < 2.0
 
 
-def test_a_sheet_folding_over_its_plane_is_refused():
-    from nurbs_core.samples import curled_sheet
-
-    with pytest.raises(ValueError, match="not a height field"):
-        fit_trimmed(curled_sheet(1500).points)
-
-
 def test_nurbs_fit_trim_writes_cad_files_and_reports_areas_without_torch(tmp_path):
     points, _, _ = _sheet("disc")
     source = tmp_path / "disc.xyz"
@@ -322,3 +315,19 @@ def test_nurbs_fit_trim_writes_cad_files_and_reports_areas_without_torch(tmp_pat
 
     (trimmed,) = read_trimmed_json(outputs[0])
     assert len(trimmed.loops[0].segments) == 1          # a round outline: no corners
+
+
+def test_a_corner_point_goes_no_farther_than_its_reach():
+    from nurbs_core.trim.curve import corner_point
+
+    # a 20 x 20 square sampled every 1, its corner at the origin cut (a sampled corner lies
+    # inside the true one): the sides' lines meet at the origin, 3 from the cut's end (3, 0)
+    side = np.arange(0.0, 20.0)
+    square = np.concatenate([np.stack([side, np.zeros(20)], 1), np.stack([np.full(20, 20.0), side], 1),
+                             np.stack([20 - side, np.full(20, 20.0)], 1),
+                             np.stack([np.zeros(20), 20 - side], 1)])
+    outline = square[np.linalg.norm(square, axis=1) >= 3]
+    index = int(np.flatnonzero((outline[:, 1] == 0) & (outline[:, 0] == 3))[0])
+    assert corner_point(outline, index, 1.5) == pytest.approx([0.0, 0.0], abs=1e-9)
+    reached = corner_point(outline, index, 1.5, reach=2.0)
+    assert reached == pytest.approx([1.0, 0.0], abs=1e-9)
