@@ -256,9 +256,9 @@ def export_solid_report(path: str, points: np.ndarray, solid, *, title: str,
     its faces and status as ``nurbs-fit --report`` writes them, the tolerance the solid's own,
     ``up_axis`` up in its views.
     Returns the share of the points within the tolerance."""
-    from nurbs_core.brep.primitives import counted_kinds
     from nurbs_core.report.deviation import measure_deviation
     from nurbs_core.report.document import ReportContent, write_report
+    from nurbs_core.status import counted_kinds
 
     report, display = solid.report, solid.display
     kinds = counted_kinds(report.face_types())

@@ -62,7 +62,7 @@ class SolidReport:
 
     def summary(self) -> str:
         """One line: "7 faces (1 cylinder, 6 planes), valid, closed"."""
-        from nurbs_core.brep.primitives import counted_kinds
+        from nurbs_core.status import counted_kinds
 
         kinds = counted_kinds(self.face_types())
         shape = ("an open shell, open where the scan stops" if self.open_shell

@@ -52,3 +52,10 @@ def quality_warnings(stats: Mapping[str, float]) -> list[str]:
                         "met (more than the allowed share of the points or of the surface lies "
                         "farther from the other)")
     return warnings
+
+
+def counted_kinds(counts: Mapping[str, int]) -> str:
+    """Face kinds with their counts in words: {"cone": 1, "torus": 2} -> "1 cone, 2 tori"."""
+    plural = {"torus": "tori", "sphere": "spheres"}
+    return ", ".join(f"{n} {plural.get(kind, kind + 's') if n > 1 else kind}"
+                     for kind, n in counts.items())

@@ -307,9 +307,3 @@ def fit_kind(kind: str, points: np.ndarray, normals: np.ndarray) -> Primitive | 
     except (ValueError, np.linalg.LinAlgError):
         return best
 
-
-def counted_kinds(counts: dict[str, int]) -> str:
-    """Face kinds with their counts in words: {"cone": 1, "torus": 2} -> "1 cone, 2 tori"."""
-    plural = {"torus": "tori", "sphere": "spheres"}
-    return ", ".join(f"{n} {plural.get(kind, kind + 's') if n > 1 else kind}"
-                     for kind, n in counts.items())

@@ -41,9 +41,9 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
     import numpy as np
 
     from nurbs_core.brep.part import fit_part
-    from nurbs_core.brep.primitives import counted_kinds
     from nurbs_core.io.solid_io import save_solid
     from nurbs_core.jobs.local_frame import shifted
+    from nurbs_core.status import counted_kinds
 
     assert route.mesh is not None and route.segmentation is not None
     result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
