@@ -22,7 +22,8 @@ if TYPE_CHECKING:
 @dataclass
 class FitJob:
     """One input, its outputs and how to fit it; the fields are ``nurbs-fit``'s options (see
-    ``nurbs-fit --help``) under their argparse names. ``None`` means the engine's default."""
+    ``nurbs-fit --help``) under their argparse names, but ``origin``, which the automatic route
+    sets. ``None`` means the engine's default."""
 
     input: str
     output: list[str] = field(default_factory=list)
