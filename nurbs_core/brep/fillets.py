@@ -11,7 +11,10 @@ model such a part the other way round, and so does this module:
    whose region lies beside two other regions it is tangent to (within the tolerance), with
    its points on less than half a turn around its axis (a hole goes all the way round); a
    curved surface smaller than the blends it lies beside (two or more) is a corner (the rolling
-   ball of the fillets that meet there, or what the segmentation took for it). Radii within
+   ball of the fillets that meet there, or what the segmentation took for it), and so is one
+   beside blends of two or more edge directions, none along its own axis, with fewer points
+   than those blends together (a cone the segmentation took across a corner and half of the
+   fillets meeting there, larger than each fillet left). Radii within
    the tolerance of each other are one radius (design intent: the mean of the fits, weighted
    by their points).
 2. :func:`filleted_solid` builds the solid of the other surfaces (sharp edges: a handful of
@@ -46,6 +49,9 @@ MAX_BLEND_TURN = np.pi
 MAX_FIT_RMS = 0.7
 #: two regions are neighbours when some of their points lie within this many point spacings
 NEIGHBOUR_SPACINGS = 3.0
+#: two axes within this angle (degrees) run one way: fillets along parallel edges, a turned
+#: part's rims around its axis
+PARALLEL_AXES = 10.0
 
 
 @dataclass(frozen=True)
@@ -112,6 +118,33 @@ def _common_radii(blends: list[Blend], sizes: np.ndarray, tolerance: float) -> l
     return result
 
 
+def _at_vertex(surface: Primitive, blends: list[Primitive], size: int, blend_points: int
+               ) -> bool:
+    """Whether a curved surface that is not a blend sits where fillets of edges of two or more
+    directions meet (a vertex of the part), taking less of the scan (``size`` points) than the
+    ``blends`` beside it together (``blend_points``) and with its own axis along none of
+    theirs. Where fillets of different radii meet at a corner the segmentation can take a cone
+    around the corner's diagonal for the corner and half of the fillets beside it (filleted
+    box #2 of ``bench_parts.py --random 5``: two cones of 929 and 924 points, over half of two
+    or three fillets each); such a cone is larger than every blend left beside it, so the size
+    test misses it. A turned part's cylinder or cone between two rounded rims is not a vertex:
+    its rims run around its own axis."""
+    if surface.kind == "plane" or size > blend_points:
+        return False
+    cos_parallel = np.cos(np.radians(PARALLEL_AXES))
+    axes = [b.axis / np.linalg.norm(b.axis) for b in blends]
+    directions: list[np.ndarray] = []
+    for axis in axes:
+        if all(abs(float(axis @ d)) < cos_parallel for d in directions):
+            directions.append(axis)
+    if len(directions) < 2:
+        return False
+    if surface.kind == "sphere":
+        return True
+    own = surface.axis / np.linalg.norm(surface.axis)
+    return all(abs(float(own @ axis)) < cos_parallel for axis in axes)
+
+
 def find_blends(surfaces: list[Primitive], labels: np.ndarray, points: np.ndarray,
                 tolerance: float, spacing: float) -> tuple[list[Blend], list[int]]:
     """The blends among ``surfaces`` (see the module) and the corners (their indices).
@@ -140,9 +173,11 @@ def find_blends(surfaces: list[Primitive], labels: np.ndarray, points: np.ndarra
         if surface.kind == "plane" or index in rounded:
             continue
         # a corner is smaller than the fillets that meet at it (a turned part's cylinder
-        # between two rounded rims is not)
+        # between two rounded rims is not), or lies where fillets of two directions meet
         largest = max((sizes[k] for k in beside[index] & rounded), default=0)
-        if (len(beside[index] & rounded) >= 2 and sizes[index] <= largest) or (
+        if (len(beside[index] & rounded) >= 2 and sizes[index] <= largest) or _at_vertex(
+                surface, [surfaces[k] for k in beside[index] & rounded],
+                sizes[index], sum(sizes[k] for k in beside[index] & rounded)) or (
                 surface.kind == "sphere" and sum(
                 surfaces[other].kind == "plane" and any(
                     abs(t - surface.radius) < tolerance
