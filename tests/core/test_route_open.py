@@ -128,6 +128,29 @@ def test_a_clean_open_sheet_stays_one_patch_well_within_the_limit(make):
     assert route.reason.endswith("): one patch") and "; not a machined part (" in route.reason
 
 
+def test_a_height_field_is_routed_without_wrapping_it(monkeypatch):
+    """A height field over its principal plane (one layer) encloses no volume: the route asks
+    that first and does not wrap the cloud; a closed object is no height field and is wrapped
+    (and found closed) as before."""
+    import nurbs_core.route as route_module
+
+    wrapped = []
+    real_closed_mesh = route_module.closed_mesh
+
+    def counting_closed_mesh(points, **kwargs):
+        wrapped.append(len(points))
+        return real_closed_mesh(points, **kwargs)
+
+    monkeypatch.setattr(route_module, "closed_mesh", counting_closed_mesh)
+    route = choose_route(samples.height_field(4000).points)
+    assert route.kind == "single_patch" and "a height field over its principal plane" in \
+        route.reason
+    assert wrapped == []
+    route = choose_route(samples.sphere(4000).points, part=False)
+    assert route.kind == "network" and "encloses a volume" in route.reason
+    assert wrapped == [4000]
+
+
 @pytest.mark.parametrize(("patch", "by_parameter"), [("stabilizer/smesh.4.dat", False),
                                                      ("stabilizer/smesh.4.dat", True),
                                                      ("offset_surfaces/turbine_blade_patch0.json",
