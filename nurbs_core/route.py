@@ -42,7 +42,6 @@ from typing import Any, Literal
 
 import numpy as np
 
-from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import quality_problems
 
@@ -217,6 +216,9 @@ def _decide(points: np.ndarray, file_mesh: ScanMesh | None, file_mesh_note: str,
     height_field = is_height_field(surface)
     if height_field:
         return _open_surface(points, why, max_hole, part, surface, height_field)
+    # the wrap's module (and scipy.ndimage, 0.1 s) is loaded only for a cloud it must judge
+    from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
+
     try:
         mesh = closed_mesh(points, max_hole=max_hole)
     except NotClosedError:

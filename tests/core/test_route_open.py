@@ -132,16 +132,16 @@ def test_a_height_field_is_routed_without_wrapping_it(monkeypatch):
     """A height field over its principal plane (one layer) encloses no volume: the route asks
     that first and does not wrap the cloud; a closed object is no height field and is wrapped
     (and found closed) as before."""
-    import nurbs_core.route as route_module
+    import nurbs_core.patches.closed_mesh as wrap_module
 
     wrapped = []
-    real_closed_mesh = route_module.closed_mesh
+    real_closed_mesh = wrap_module.closed_mesh
 
     def counting_closed_mesh(points, **kwargs):
         wrapped.append(len(points))
         return real_closed_mesh(points, **kwargs)
 
-    monkeypatch.setattr(route_module, "closed_mesh", counting_closed_mesh)
+    monkeypatch.setattr(wrap_module, "closed_mesh", counting_closed_mesh)
     route = choose_route(samples.height_field(4000).points)
     assert route.kind == "single_patch" and "a height field over its principal plane" in \
         route.reason
