@@ -2,7 +2,8 @@
 
 * ``network``: the object is closed: the input file's own watertight mesh, or the wrap of its
   points encloses a volume (:func:`nurbs_core.patches.closed_mesh.closed_mesh`, robust to uneven
-  sampling). One open patch cannot hold a closed object without folding, so it becomes a
+  sampling; a height field over its principal plane, one layer, encloses nothing and is asked
+  first, never wrapped). One open patch cannot hold a closed object without folding, so it becomes a
   watertight network of tangent-continuous patches.
 * ``part``: a closed object most of whose scan lies on a few large analytic surfaces (planes,
   cylinders, cones, spheres: :func:`nurbs_core.brep.part.part_like`) becomes a valid solid with
