@@ -2,7 +2,8 @@
 
 * ``network``: the object is closed: the input file's own watertight mesh, or the wrap of its
   points encloses a volume (:func:`nurbs_core.patches.closed_mesh.closed_mesh`, robust to uneven
-  sampling). One open patch cannot hold a closed object without folding, so it becomes a
+  sampling; a height field over its principal plane, one layer, encloses nothing and is asked
+  first, never wrapped). One open patch cannot hold a closed object without folding, so it becomes a
   watertight network of tangent-continuous patches.
 * ``part``: a closed object most of whose scan lies on a few large analytic surfaces (planes,
   cylinders, cones, spheres: :func:`nurbs_core.brep.part.part_like`) becomes a valid solid with
@@ -42,7 +43,6 @@ from typing import Any, Literal
 
 import numpy as np
 
-from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
 from nurbs_core.patches.defaults import MIN_NETWORK_POINTS
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import quality_problems
@@ -207,31 +207,41 @@ def _decide(points: np.ndarray, file_mesh: ScanMesh | None, file_mesh_note: str,
     if len(points) < MIN_NETWORK_POINTS:
         return Route("single_patch", f"{len(points)} points are too few for a network")
     why = f"{file_mesh_note}; " if file_mesh_note else ""
+    from nurbs_core.fitting.sheet import is_height_field
+    from nurbs_core.surfacing.neighbours import stray_points
+
+    # measured on the points the single patch would fit (strays left out). A height field over
+    # its principal plane (a single layer) encloses no volume: it is asked before the wrap,
+    # which costs 0.6 of a 20,000-point height field's 2.7 CPU s (a slab thinner than five
+    # spacings, the thickest that still passes as one layer, does not close under the wrap)
+    surface = points[~stray_points(points)]
+    height_field = is_height_field(surface)
+    if height_field:
+        return _open_surface(points, why, max_hole, part, surface, height_field)
+    # the wrap's module (and scipy.ndimage, 0.1 s) is loaded only for a cloud it must judge
+    from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
+
     try:
         mesh = closed_mesh(points, max_hole=max_hole)
     except NotClosedError:
-        return _open_surface(points, why, max_hole, part)
+        return _open_surface(points, why, max_hole, part, surface, height_field)
     holes = (f" once its openings up to {mesh.max_hole:.4g} wide are sealed"
              if mesh.filled_fraction > 0 else "")
     return Route("network", f"{why}the cloud encloses a volume{holes} (a closed object)", mesh)
 
 
 def _open_surface(points: np.ndarray, why: str, max_hole: float | None,
-                  part: bool | None = None) -> Route:
+                  part: bool | None, surface: np.ndarray, height_field: bool) -> Route:
     """The route of a cloud (N, 3) that encloses no volume: an open shell when it is a part
     (:func:`_open_part`; ``part`` as :func:`choose_route`'s), else one patch, unless its map to
     one patch crowds part of it over ``MAX_MAP_CROWDING`` times; then the open network over the
     scan's bounded mesh, built here (one patch when no such mesh can be built). ``why``: the
-    finding's opening words."""
-    from nurbs_core.fitting.sheet import is_height_field
-    from nurbs_core.surfacing.neighbours import stray_points
-
+    finding's opening words; ``surface`` (M, 3): the cloud without its strays; ``height_field``:
+    whether that is a height field over its principal plane."""
     finding = f"{why}the cloud encloses no volume (an open surface"
-    # measured on the points the single patch would fit (strays left out) and on the same map;
-    # the fit builds that map again: handing it down through the fit's layers (normalised
-    # coordinates, the prepared job) is not worth ~0.4 s, the mesh's cost on a sheet
-    surface = points[~stray_points(points)]
-    height_field = is_height_field(surface)
+    # the crowding is measured on the same points and map; the fit builds that map again:
+    # handing it down through the fit's layers (normalised coordinates, the prepared job) is not
+    # worth ~0.4 s, the mesh's cost on a sheet
     if part or (part is None and not height_field):
         shell = _open_part(points, finding, max_hole, forced=bool(part))
         if isinstance(shell, Route):

@@ -43,8 +43,9 @@ PASS_POINTS = 30_000
 #: (``benchmarks/bench_dense.py``; 0: no final solve)
 FINAL_POINTS = 1_000_000
 MESH_POINTS = 6_000
-#: is_height_field judges a larger cloud on an even subset of about this many points
-HEIGHT_FIELD_POINTS = 50_000
+#: is_height_field judges a larger cloud on an even subset of about this many points (the
+#: wrap's resolution: closed_mesh.WRAP_POINTS, so a plate the wrap would close stays two layers)
+HEIGHT_FIELD_POINTS = 100_000
 #: The automatic tolerance, in estimated noise standard deviations (99% of Gaussian noise lies
 #: within 2.6 of them), and its floor relative to the bounding-box diagonal.
 NOISE_TOLERANCE = 3.0
