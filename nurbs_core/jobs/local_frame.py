@@ -4,9 +4,10 @@ Registered scans and survey data come in a site's coordinates: a part a few cent
 5,000 km from the origin. The route's numbers then cancel (an algebraic sphere fit squares
 coordinates of 5e6; a triangle's signed volume multiplies three), and Instant Meshes, which
 works in single precision, ran out of memory on such a mesh. The automatic route therefore
-moves a cloud whose box centre lies more than ``FAR_DIAGONALS`` diagonals from the origin to
-that centre (:func:`far_origin`), fits it there, and :func:`shifted` moves each result back
-before it is written (the files hold the scan's own coordinates). Nearer clouds are untouched.
+moves a cloud whose box centre lies more than 20 diagonals from the origin to that centre
+(:func:`nurbs_core.local_origin.far_origin`), fits it there, and :func:`shifted` moves each
+result back before it is written (the files hold the scan's own coordinates). Nearer clouds
+are untouched.
 """
 
 from __future__ import annotations
@@ -15,24 +16,6 @@ import dataclasses
 from typing import Any
 
 import numpy as np
-
-#: a cloud whose bounding-box centre is farther from the origin than this many of its
-#: diagonals is fitted about that centre
-FAR_DIAGONALS = 20.0
-
-
-def far_origin(points: np.ndarray) -> np.ndarray | None:
-    """The local frame's origin (3,) for the cloud ``points`` (N, 3): its bounding-box centre
-    when that lies more than ``FAR_DIAGONALS`` diagonals from the origin, else None."""
-    points = np.asarray(points, np.float64)
-    if len(points) == 0:
-        return None
-    low, high = points.min(axis=0), points.max(axis=0)
-    centre = 0.5 * (low + high)
-    diagonal = float(np.linalg.norm(high - low))
-    if not np.isfinite(centre).all() or float(np.linalg.norm(centre)) <= FAR_DIAGONALS * diagonal:
-        return None
-    return centre
 
 
 def shifted(geometry: Any, offset: np.ndarray | tuple[float, float, float] | None) -> Any:

@@ -109,7 +109,7 @@ def _in_local_frame(job: FitJob, points: np.ndarray, file_mesh: ScanMesh | None
 
     import numpy as np
 
-    from nurbs_core.jobs.local_frame import far_origin
+    from nurbs_core.local_origin import far_origin
 
     origin = far_origin(points)
     if origin is None:

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from nurbs_core.local_origin import far_origin
+
 #: Instant Meshes' pure-quad output has about this many quads per face of its target count.
 QUADS_PER_TARGET_FACE = 4.3
 #: Relative changes of the target count tried in turn when a layout fails its checks (Instant
@@ -107,7 +109,11 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
     if patches < 4:
         raise LayoutError(f"a quad layout needs at least 4 patches, got {patches}")
     chi = euler_characteristic(faces)
-    origin = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0)) if len(vertices) else np.zeros(3)
+    # a mesh far from the origin is centred (Instant Meshes works in single precision: a scan
+    # at 5e6 ran it out of memory); a nearer one is written as it is, since its layouts
+    # depend on the coordinates to the last bit
+    far = far_origin(vertices)
+    origin = np.zeros(3) if far is None else far
     normals = _face_normals(vertices, faces)
     tree = cKDTree(vertices[faces].mean(axis=1))
     attempts: list[str] = []

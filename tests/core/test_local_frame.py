@@ -9,7 +9,7 @@ import pytest
 
 from nurbs_core import samples
 from nurbs_core.cli import main
-from nurbs_core.jobs.local_frame import FAR_DIAGONALS, far_origin
+from nurbs_core.local_origin import FAR_DIAGONALS, far_origin
 
 SITE = np.array([5e6, 4e6, 300.0])
 
