@@ -64,3 +64,33 @@ def test_a_far_open_sheet_is_one_patch_written_where_it_was(tmp_path, capsys):
     surface = load(tmp_path / "far.json")[0]
     controls = surface.control_points.detach().numpy().reshape(-1, 3)
     assert np.allclose(controls.mean(axis=0), cloud.mean(axis=0) + SITE, atol=1.0)
+
+
+@pytest.mark.slow
+def test_a_far_machined_part_is_its_solid_written_where_it_was(tmp_path, capsys):
+    """A turned part 5,000 km out gave no valid solid (the points 27 noise sigmas from it);
+    about its centre it is the same solid, its STEP in the scan's coordinates and its faces'
+    positions said to be about that centre."""
+    pytest.importorskip("OCP")
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepBndLib import BRepBndLib
+    from OCP.STEPControl import STEPControl_Reader
+
+    from nurbs_core.brep.sample_parts import PARTS, scan_part
+
+    points = scan_part(PARTS["turned"](), 20_000, seed=0)[0] + SITE
+    source, out = tmp_path / "turned.xyz", tmp_path / "turned.step"
+    np.savetxt(source, points, fmt="%.7f")
+    assert main([str(source), "-o", str(out)]) == 0
+    report = capsys.readouterr().out
+    assert "status: converged" in report and "valid, closed" in report
+    assert "the face positions below are about the scan's centre" in report
+    reader = STEPControl_Reader()
+    reader.ReadFile(str(out))
+    reader.TransferRoots()
+    box = Bnd_Box()
+    BRepBndLib.Add_s(reader.OneShape(), box)
+    low, high = box.CornerMin(), box.CornerMax()
+    found = np.array([[low.X(), low.Y(), low.Z()], [high.X(), high.Y(), high.Z()]])
+    expected = np.array([points.min(axis=0), points.max(axis=0)])
+    assert np.abs(found - expected).max() < 0.05
