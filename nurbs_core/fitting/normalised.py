@@ -41,6 +41,31 @@ def normalise(target: ArrayLike, config: FitConfig) -> NormalisedCloud:
     return NormalisedCloud(points, normalised, center, scale)
 
 
+def check_spread(points: np.ndarray, kind: str = "surface") -> None:
+    """ValueError naming what keeps the points (N, d) from holding a ``kind`` ("surface" or
+    "curve"): none, one, NaN or inf, all at one place, or (a surface) all on one line. The
+    automatic route asks it before deciding anything, the fits again."""
+    n = points.shape[0]
+    if n == 0:
+        raise ValueError("the point cloud is empty")
+    if n == 1:
+        raise ValueError(f"a single point cannot define a {kind}")
+    bad = ~np.isfinite(points).all(axis=1)
+    if bad.any():
+        rows = np.flatnonzero(bad)
+        raise ValueError(f"the point cloud contains NaN or inf in {rows.size} row(s), first at "
+                         f"row {rows[0]} (0-based)")
+    extent = points.max(axis=0) - points.min(axis=0)
+    if not np.linalg.norm(extent) > 0:
+        raise ValueError(f"all {n} points coincide; a {kind} needs points that spread out")
+    if kind == "surface":
+        _, _, spread = principal_axes(points)
+        # eigenvalues carry rounding of about eps * largest: compare spreads at sqrt(eps) scale
+        if spread[1] <= 1e-6 * spread[0]:
+            raise ValueError("the points are collinear; a surface needs points spread over an "
+                             "area (fit a curve instead)")
+
+
 def check_points(target: ArrayLike, config: FitConfig) -> np.ndarray:
     """The target points as (N, d) float64, or ValueError naming what is wrong with them."""
     try:
@@ -51,25 +76,8 @@ def check_points(target: ArrayLike, config: FitConfig) -> np.ndarray:
     if points.ndim != 2 or points.shape[-1] not in ((3,) if config.kind == "surface" else (2, 3)):
         raise ValueError(f"a {config.kind} fit needs target points of shape {expected}, got "
                          f"{points.shape}")
+    check_spread(points, config.kind)
     n = points.shape[0]
-    if n == 0:
-        raise ValueError("the point cloud is empty")
-    if n == 1:
-        raise ValueError(f"a single point cannot define a {config.kind}")
-    bad = ~np.isfinite(points).all(axis=1)
-    if bad.any():
-        rows = np.flatnonzero(bad)
-        raise ValueError(f"the point cloud contains NaN or inf in {rows.size} row(s), first at "
-                         f"row {rows[0]} (0-based)")
-    extent = points.max(axis=0) - points.min(axis=0)
-    if not np.linalg.norm(extent) > 0:
-        raise ValueError(f"all {n} points coincide; a {config.kind} needs points that spread out")
-    if config.kind == "surface":
-        _, _, spread = principal_axes(points)
-        # eigenvalues carry rounding of about eps * largest: compare spreads at sqrt(eps) scale
-        if spread[1] <= 1e-6 * spread[0]:
-            raise ValueError("the points are collinear; a surface needs points spread over an "
-                             "area (fit a curve instead)")
     surface = config.kind == "surface"
     controls = config.control_points_u * (config.control_points_v if surface else 1)
     if n < controls:

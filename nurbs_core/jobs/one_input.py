@@ -60,6 +60,11 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
         file_mesh, note = None, ""
         if points is None:
             points, file_mesh, note = surface_input(job.input, quiet=job.quiet)
+        import numpy as np
+
+        from nurbs_core.fitting.normalised import check_spread
+
+        check_spread(np.asarray(points, np.float64))  # before any route is decided or printed
         points, file_mesh, job = _in_local_frame(job, points, file_mesh)
         options = patch_options(job, automatic=True)  # checked before the route is decided
         route = choose_route(points, file_mesh, note, max_hole=options.max_hole,

@@ -308,6 +308,19 @@ def test_a_few_dozen_scattered_points_get_one_patch_with_warnings_not_a_contradi
     assert "status: fitted with warnings" in captured.out and out.is_file()
 
 
+@pytest.mark.parametrize("cloud, says", [
+    (np.zeros((300, 3)), "all 300 points coincide"),
+    (np.outer(np.linspace(0, 1, 300), [1.0, 2.0, 3.0]), "the points are collinear"),
+])
+def test_a_cloud_that_holds_no_surface_is_refused_in_one_line_before_any_route(
+        tmp_path, capsys, cloud, says):
+    source = tmp_path / "degenerate.xyz"
+    np.savetxt(source, cloud)
+    assert main([str(source), "-o", str(tmp_path / "fit.json")]) != 0
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(lines) == 1 and says in lines[0], lines
+
+
 def test_a_sheet_with_stray_points_is_one_clean_patch(tmp_path, capsys):
     # 1% of a height field's points thrown anywhere in its box: one patch folded towards them
     # (4.3% of its area), the route went on to an open network with warnings; the isolated ones
