@@ -12,6 +12,7 @@ route chose another way, or no valid solid results): the window then fits the ne
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 from dataclasses import dataclass
@@ -43,6 +44,9 @@ class EditSource:
     mesh_vertices: np.ndarray
     mesh_triangles: np.ndarray
     regions: Any
+    #: the local frame's origin (3,) of a scan far from the origin: the points and mesh above
+    #: are about it, and each solid built from them is moved back by it (None: near the origin)
+    origin: np.ndarray | None = None
 
 
 def solid_report(result: Any, reason: str = "") -> SolidReport:
@@ -87,9 +91,19 @@ def run_part_route(points: np.ndarray, part: bool | None, max_hole: float | None
     no OpenCASCADE); PartCancelled when ``cancel`` was set."""
     from nurbs_core.brep.part import fit_part
     from nurbs_core.brep.solid import SolidError
+    from nurbs_core.jobs.local_frame import shifted
+    from nurbs_core.local_origin import far_origin
     from nurbs_core.route import choose_route, without_solid
 
     points = np.asarray(points, np.float64)
+    # a scan far from the origin is segmented and built about its centre, as nurbs-fit does
+    # (nurbs_core.jobs.local_frame); the solid is moved back for the window
+    origin = far_origin(points)
+    if origin is not None:
+        points = points - origin
+        if file_mesh is not None:
+            file_mesh = dataclasses.replace(file_mesh, vertices=file_mesh.vertices - origin,
+                                            border=[loop - origin for loop in file_mesh.border])
     route = choose_route(points, file_mesh, file_mesh_note, max_hole=max_hole, part=part)
     _check(cancel)
     timings = {"route": route.seconds}
@@ -111,13 +125,17 @@ def run_part_route(points: np.ndarray, part: bool | None, max_hole: float | None
     timings["solid"] = time.perf_counter() - started
     _check(cancel)
     started = time.perf_counter()
-    report = solid_report(result, route.reason)
-    display = solid_display(result.solid, report.tolerance)
+    reason = route.reason
+    if origin is not None:
+        reason += ("; its faces' positions are about the scan's centre ("
+                   + ", ".join(f"{value:.12g}" for value in origin) + ")")
+    report = solid_report(result, reason)
+    solid = shifted(result.solid, origin)
+    display = solid_display(solid, report.tolerance)
     timings["triangles"] = time.perf_counter() - started
     _check(cancel)
-    source = EditSource(points, route.mesh.vertices, route.mesh.faces, result.regions)
-    return PartOutcome(route.reason, result.solid, report, display, timings=timings,
-                       source=source)
+    source = EditSource(points, route.mesh.vertices, route.mesh.faces, result.regions, origin)
+    return PartOutcome(route.reason, solid, report, display, timings=timings, source=source)
 
 
 def run_face_edit(outcome: PartOutcome, points: np.ndarray, edit: dict[str, Any],
@@ -130,6 +148,7 @@ def run_face_edit(outcome: PartOutcome, points: np.ndarray, edit: dict[str, Any]
     why the edit cannot be made; the solid it started from stays the caller's."""
     from nurbs_core.brep.face_edits import FaceEdit, apply_edit
     from nurbs_core.brep.part import rebuild_part
+    from nurbs_core.jobs.local_frame import shifted
 
     started = time.perf_counter()
     source = outcome.source
@@ -142,11 +161,12 @@ def run_face_edit(outcome: PartOutcome, points: np.ndarray, edit: dict[str, Any]
     timings = {"solid": time.perf_counter() - started}
     _check(cancel)
     report = solid_report(result, outcome.route_reason)
-    display = solid_display(result.solid, report.tolerance)
+    solid = shifted(result.solid, source.origin)
+    display = solid_display(solid, report.tolerance)
     _check(cancel)
-    return PartOutcome(outcome.route_reason, result.solid, report, display, timings=timings,
+    return PartOutcome(outcome.route_reason, solid, report, display, timings=timings,
                        source=EditSource(source.points, source.mesh_vertices,
-                                         source.mesh_triangles, regions))
+                                         source.mesh_triangles, regions, source.origin))
 
 
 def _source_again(points: np.ndarray, outcome: PartOutcome,
@@ -156,9 +176,13 @@ def _source_again(points: np.ndarray, outcome: PartOutcome,
     edits applied again."""
     from nurbs_core.brep.face_edits import FaceEdit, apply_edit
     from nurbs_core.brep.part import fit_part
+    from nurbs_core.local_origin import far_origin
     from nurbs_core.route import choose_route
 
     assert outcome.report is not None
+    origin = far_origin(points)  # the frame the solid was made in (run_part_route's)
+    if origin is not None:
+        points = points - origin
     if len(points) != len(outcome.report.distances):
         raise ValueError(f"the solid was made from {len(outcome.report.distances)} points, "
                          f"not the {len(points)} Start fits now: Start makes a new solid")
@@ -172,4 +196,4 @@ def _source_again(points: np.ndarray, outcome: PartOutcome,
     for edit in outcome.report.edits:
         _check(cancel)
         regions = apply_edit(regions, points, FaceEdit.from_dict(edit))
-    return EditSource(points, route.mesh.vertices, route.mesh.faces, regions)
+    return EditSource(points, route.mesh.vertices, route.mesh.faces, regions, origin)
