@@ -6,8 +6,8 @@ eye-dome lighting (the shading used before) added two full-window passes: 180-23
 under software OpenGL (llvmpipe) at any point count.
 
 A point's normal is the direction of least spread of its :data:`NEIGHBOURS` nearest drawn
-points (principal component analysis over a SciPy k-d tree). Its sign is arbitrary: the
-viewport lights both sides. Estimating them for 50,000 points takes 0.2-0.5 s, so the
+points (the engine's PCA frames: :func:`nurbs_core.surfacing.neighbours.local_frames`). Its
+sign is arbitrary: the viewport lights both sides. Estimating them for 50,000 points takes 0.2-0.5 s, so the
 load job computes them (:func:`display_normals` keeps its newest answers, keyed by the points'
 bytes) and the GUI thread finds them ready (:func:`ready_normals`); elsewhere (a crop, a
 hidden cloud) :func:`normals_job` computes them on a worker thread while the view waits.
@@ -21,7 +21,6 @@ from collections import OrderedDict
 from concurrent.futures import Future
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 #: the neighbours (the point included) whose spread gives a point's normal
 NEIGHBOURS = 10
@@ -33,18 +32,15 @@ _lock = threading.Lock()
 def estimate_normals(points: np.ndarray, neighbours: int = NEIGHBOURS) -> np.ndarray:
     """Unit normals (K, 3) float32 of ``points`` (K, 3): each the direction of least spread of
     its ``neighbours`` nearest points (its sign arbitrary); +z where fewer than 3 points."""
+    from nurbs_core.surfacing.neighbours import local_frames
+
     points = np.asarray(points, dtype=np.float64)
     normals = np.zeros((len(points), 3), np.float32)
     normals[:, 2] = 1.0
-    if len(points) < 3:
+    if len(points) < 4:
         return normals
-    k = min(neighbours, len(points))
-    _, nearest = cKDTree(points).query(points, k=k)
-    around = points[nearest]  # (K, k, 3)
-    around -= around.mean(axis=1, keepdims=True)
-    covariance = np.einsum("nki,nkj->nij", around, around)
-    _, vectors = np.linalg.eigh(covariance)  # eigenvalues ascending
-    found = vectors[:, :, 0]
+    # the engine's PCA frames (each point and its neighbours - 1 nearest)
+    found = local_frames(points, k=neighbours - 1).normals
     good = np.isfinite(found).all(axis=1) & (np.linalg.norm(found, axis=1) > 0.5)
     normals[good] = found[good]
     return normals

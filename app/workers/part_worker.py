@@ -12,7 +12,6 @@ route chose another way, or no valid solid results): the window then fits the ne
 
 from __future__ import annotations
 
-import dataclasses
 import threading
 import time
 from dataclasses import dataclass
@@ -91,19 +90,13 @@ def run_part_route(points: np.ndarray, part: bool | None, max_hole: float | None
     no OpenCASCADE); PartCancelled when ``cancel`` was set."""
     from nurbs_core.brep.part import fit_part
     from nurbs_core.brep.solid import SolidError
-    from nurbs_core.jobs.local_frame import shifted
-    from nurbs_core.local_origin import far_origin
+    from nurbs_core.jobs.local_frame import shifted, to_local
     from nurbs_core.route import choose_route, without_solid
 
     points = np.asarray(points, np.float64)
     # a scan far from the origin is segmented and built about its centre, as nurbs-fit does
     # (nurbs_core.jobs.local_frame); the solid is moved back for the window
-    origin = far_origin(points)
-    if origin is not None:
-        points = points - origin
-        if file_mesh is not None:
-            file_mesh = dataclasses.replace(file_mesh, vertices=file_mesh.vertices - origin,
-                                            border=[loop - origin for loop in file_mesh.border])
+    points, file_mesh, origin = to_local(points, file_mesh)
     route = choose_route(points, file_mesh, file_mesh_note, max_hole=max_hole, part=part)
     _check(cancel)
     timings = {"route": route.seconds}
@@ -176,13 +169,11 @@ def _source_again(points: np.ndarray, outcome: PartOutcome,
     edits applied again."""
     from nurbs_core.brep.face_edits import FaceEdit, apply_edit
     from nurbs_core.brep.part import fit_part
-    from nurbs_core.local_origin import far_origin
+    from nurbs_core.jobs.local_frame import to_local
     from nurbs_core.route import choose_route
 
     assert outcome.report is not None
-    origin = far_origin(points)  # the frame the solid was made in (run_part_route's)
-    if origin is not None:
-        points = points - origin
+    points, _, origin = to_local(points)  # the frame the solid was made in (run_part_route's)
     if len(points) != len(outcome.report.distances):
         raise ValueError(f"the solid was made from {len(outcome.report.distances)} points, "
                          f"not the {len(points)} Start fits now: Start makes a new solid")

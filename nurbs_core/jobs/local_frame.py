@@ -13,17 +13,39 @@ are untouched.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from nurbs_core.local_origin import far_origin
+
+if TYPE_CHECKING:
+    from nurbs_core.patches.scan_mesh import ScanMesh
+
+
+def to_local(points: np.ndarray, file_mesh: ScanMesh | None = None
+             ) -> tuple[np.ndarray, ScanMesh | None, np.ndarray | None]:
+    """The cloud (N, 3) and the input file's mesh about the cloud's local origin
+    (:func:`nurbs_core.local_origin.far_origin`), and that origin (3,); all as given, and None,
+    for a cloud near the origin."""
+    origin = far_origin(points)
+    if origin is None:
+        return points, file_mesh, None
+    if file_mesh is not None:
+        file_mesh = dataclasses.replace(file_mesh, vertices=file_mesh.vertices - origin,
+                                        border=[loop - origin for loop in file_mesh.border])
+    return np.asarray(points, np.float64) - origin, file_mesh, origin
+
 
 def shifted(geometry: Any, offset: np.ndarray | tuple[float, float, float] | None) -> Any:
-    """``geometry`` moved by ``offset`` (3,): a surface or curve (numpy twin), a patch network
-    or an OpenCASCADE shape (a solid, an open shell); the same object when ``offset`` is None."""
+    """``geometry`` moved by ``offset`` (3,): points (N, 3), a surface or curve (numpy twin), a
+    patch network or an OpenCASCADE shape (a solid, an open shell); the same object when
+    ``offset`` is None."""
     if offset is None:
         return geometry
     offset = np.asarray(offset, np.float64)
+    if isinstance(geometry, np.ndarray):
+        return geometry + offset
     from nurbs_core.geometry_arrays import CurveArrays, SurfaceArrays
     from nurbs_core.patches.network import PatchNetwork
 

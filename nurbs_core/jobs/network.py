@@ -78,7 +78,6 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
     ``mesh_seconds``, which the report's mesh time includes). ``stoppable``: the first Ctrl-C
     ends the fit after the pass under way and writes the network as it stands (status
     "stopped"); a second one, or one before the first pass, quits without writing."""
-    import numpy as np
 
     from nurbs_core.io.dispatch import save_all
     from nurbs_core.jobs.local_frame import shifted
@@ -181,9 +180,9 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
                    ("flipped area", f"{quality.flipped_fraction:.2%}"),
                    ("surface far from every point", f"{quality.far_fraction:.2%}"),
                    ("time", f"{sum(result.timings.values()):.1f} s")]
-        write_fit_report(job, points + np.asarray(job.origin or (0.0, 0.0, 0.0)), vertices,
-                         faces, status=result.status, summary=summary,
-                         warnings=list(result.warnings), closed=result.network.closed,
+        write_fit_report(job, shifted(points, job.origin), vertices, faces,
+                         status=result.status, summary=summary, warnings=list(result.warnings),
+                         closed=result.network.closed,
                          tolerance=options.tolerance)
     return plain({"kind": "network", "fit_status": result.status, "points": len(points),
                    "patches": quality.patches, "s2c_max": quality.s2c_max,

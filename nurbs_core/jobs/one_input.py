@@ -110,22 +110,15 @@ def _in_local_frame(job: FitJob, points: np.ndarray, file_mesh: ScanMesh | None
                     ) -> tuple[np.ndarray, ScanMesh | None, FitJob]:
     """The cloud (N, 3) and the file's mesh moved to a local frame when they lie far from the
     origin (:mod:`nurbs_core.jobs.local_frame`), and the job that writes the results back."""
-    import dataclasses
+    from nurbs_core.jobs.local_frame import to_local
 
-    import numpy as np
-
-    from nurbs_core.local_origin import far_origin
-
-    origin = far_origin(points)
+    points, file_mesh, origin = to_local(points, file_mesh)
     if origin is None:
         return points, file_mesh, job
     if not job.quiet:
-        print(f"the scan lies {float(np.linalg.norm(origin)):.6g} from the origin: it is fitted "
-              "about its own centre and written back in its coordinates", file=sys.stderr)
-    if file_mesh is not None:
-        file_mesh = dataclasses.replace(file_mesh, vertices=file_mesh.vertices - origin,
-                                        border=[loop - origin for loop in file_mesh.border])
-    return points - origin, file_mesh, job.replace(origin=tuple(float(v) for v in origin))
+        print(f"the scan lies {float((origin ** 2).sum()) ** 0.5:.6g} from the origin: it is "
+              "fitted about its own centre and written back in its coordinates", file=sys.stderr)
+    return points, file_mesh, job.replace(origin=tuple(float(v) for v in origin))
 
 
 def _single_patch_or_open_network(job: FitJob, options: PatchOptions,

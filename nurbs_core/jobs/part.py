@@ -116,7 +116,7 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
         if about:
             summary += [("face positions", f"about the scan's centre {about}")]
         summary += [(f"face {index}", face.description) for index, face in enumerate(result.faces)]
-        write_fit_report(job, points + np.asarray(job.origin or (0.0, 0.0, 0.0)), vertices, faces,
+        write_fit_report(job, shifted(points, job.origin), vertices, faces,
                          status=result.status, summary=summary,
                          warnings=list(result.problems.values()), closed=result.closed,
                          tolerance=result.segmentation.tolerance)

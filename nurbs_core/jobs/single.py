@@ -241,9 +241,9 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
                    ("chamfer distance", f"{chamfer:.4g}")]
         if "flipped_fraction" in stats:
             summary.append(("flipped area", f"{stats['flipped_fraction']:.2%}"))
-        write_fit_report(job, prepared.points + np.asarray(job.origin or (0.0, 0.0, 0.0)),
-                         mesh.vertices, mesh.faces, status=status,
-                         summary=summary, warnings=quality_warnings(stats), closed=False,
+        write_fit_report(job, shifted(prepared.points, job.origin), mesh.vertices,
+                         mesh.faces, status=status, summary=summary,
+                         warnings=quality_warnings(stats), closed=False,
                          tolerance=stats.get("tolerance"))
     return plain({**stats, "kind": config.kind, "points": len(prepared.points),
                    "fit_status": status, "iterations": result.iterations,
