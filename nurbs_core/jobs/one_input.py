@@ -106,6 +106,10 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
     return finish_fit(prepared, run_fit(prepared, stoppable))
 
 
+#: mesh formats whose coordinates are single precision by their specifications
+SINGLE_PRECISION = {".stl", ".glb"}
+
+
 def _in_local_frame(job: FitJob, points: np.ndarray, file_mesh: ScanMesh | None
                     ) -> tuple[np.ndarray, ScanMesh | None, FitJob]:
     """The cloud (N, 3) and the file's mesh moved to a local frame when they lie far from the
@@ -115,9 +119,20 @@ def _in_local_frame(job: FitJob, points: np.ndarray, file_mesh: ScanMesh | None
     points, file_mesh, origin = to_local(points, file_mesh)
     if origin is None:
         return points, file_mesh, job
+    distance = float((origin ** 2).sum()) ** 0.5
     if not job.quiet:
-        print(f"the scan lies {float((origin ** 2).sum()) ** 0.5:.6g} from the origin: it is "
-              "fitted about its own centre and written back in its coordinates", file=sys.stderr)
+        print(f"the scan lies {distance:.6g} from the origin: it is fitted about its own centre "
+              "and written back in its coordinates", file=sys.stderr)
+    single = sorted({Path(path).suffix.lower() for path in job.output} & SINGLE_PRECISION)
+    if single:
+        import numpy as np
+
+        # STL and glTF store single precision by their specifications: so far out, every
+        # vertex of the written mesh is rounded (the fit itself is not)
+        rounding = float(np.spacing(np.float32(distance)))
+        print(f"warning: {' and '.join(single)} hold single precision: {distance:.3g} from the "
+              f"origin their vertices are rounded to {rounding:.3g}; .step, .3dm, .obj, .ply and "
+              ".json keep the coordinates", file=sys.stderr)
     return points, file_mesh, job.replace(origin=tuple(float(v) for v in origin))
 
 

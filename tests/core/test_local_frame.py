@@ -59,6 +59,10 @@ def test_a_far_open_sheet_is_one_patch_written_where_it_was(tmp_path, capsys):
     cloud = samples.curled_sheet(2000, seed=0).points
     near, far = _same_fit_near_and_far(tmp_path, capsys, cloud, ".json")
     assert far.startswith("status: converged")
+    # STL is single precision: at 6.4e6 its vertices are rounded to 0.5, and nurbs-fit says so
+    source = tmp_path / "far.xyz"
+    assert main([str(source), "-o", str(tmp_path / "far.stl"), "-q"]) == 0
+    assert ".stl hold single precision" in capsys.readouterr().err
     rms = [float(text.split(", rms ")[1].split(",")[0]) for text in (near, far)]
     assert rms[1] == pytest.approx(rms[0], rel=1e-3)
     surface = load(tmp_path / "far.json")[0]
