@@ -167,7 +167,8 @@ def build_parser() -> argparse.ArgumentParser:
                              "(with --grid: the exact least-squares solve at the grid's "
                              "parameters, no iterations); 'gradient': the torch optimisation "
                              "from that start; 'auto' adds the gradient fit only for a "
-                             "non-default loss or free knots/weights")
+                             "loss other than p2s (plus at most 1%% of its weight in chamfer) "
+                             "or free knots/weights")
     parser.add_argument("--max-control-points", type=int, default=None, metavar="N",
                         help="largest control grid per direction the least-squares core may "
                              "grow to while the tolerance is not met (default 40; 0 keeps the "

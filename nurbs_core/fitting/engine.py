@@ -23,13 +23,13 @@ import torch
 from numpy.typing import ArrayLike
 
 from nurbs_core import losses as _losses
-from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, FitSnapshot, Loss, StopToken
+from nurbs_core.fitting.config import FitConfig, FitSnapshot, StopToken
 from nurbs_core.fitting.evaluation import Evaluation, cloud_tree, draw_batch, uses_parameters
 from nurbs_core.fitting.exact import exact_geometry, exact_problem, exact_snapshot, uses_exact
 from nurbs_core.fitting.guard import DivergenceGuard
 from nurbs_core.fitting.learned_start import CoreRace, LearnedStart, core_race, learned_start
 from nurbs_core.fitting.model import TrainableGeometry
-from nurbs_core.fitting.plan import resolved_solver, uses_core
+from nurbs_core.fitting.plan import core_answers, resolved_solver, uses_core
 from nurbs_core.fitting.problem import Problem, initial_geometry, prepare, start_parameters
 from nurbs_core.fitting.projection import project
 from nurbs_core.fitting.refinement import refine
@@ -69,9 +69,10 @@ def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopTo
     with ``done=True``. The run is deterministic for a given ``config.seed``. A step that makes the
     loss or parameters non-finite (or explode) is rolled back, the learning rate halved and the
     snapshot message says so; the fit continues. A gradient fit ends in the lowest-loss state of
-    its last stage (never above its start's loss, :meth:`_Run.keep_best`); with the default loss
-    a gradient fit that went on from the least-squares core ends with the core's fit when its own
-    is farther from the points or gained a fold, overlap or uncovered cloud (:func:`_closer_of`).
+    its last stage (never above its start's loss, :meth:`_Run.keep_best`); with a loss the core
+    minimises too (:func:`~nurbs_core.fitting.plan.core_answers`, the default's) a gradient fit
+    that went on from the least-squares core ends with the core's fit when its own is farther
+    from the points or gained a fold, overlap or uncovered cloud (:func:`_closer_of`).
     The final message says which was kept.
     """
     config = FitConfig() if config is None else config
@@ -204,7 +205,7 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _lo
                                        mesh=start.mesh, scale=problem.scale)
             final = dataclasses.replace(final, statistics=stats,
                                         elapsed=time.perf_counter() - started)
-            if config.loss == Loss.parse(DEFAULT_LOSS):
+            if core_answers(config.loss):  # the same objective as the core's: keep the closer
                 final = _closer_of(final, core_final(cloud, start, result, started),
                                    run.kept_note)
             assert final.statistics is not None  # set above
@@ -219,10 +220,11 @@ _GAINED = {"folds": "folds", "overlaps": "overlaps itself over the cloud",
 
 
 def _closer_of(final: FitSnapshot, core: FitSnapshot, kept_note: str | None) -> FitSnapshot:
-    """The gradient fit's done snapshot ``final`` of the default loss, or the least-squares core's
+    """The gradient fit's done snapshot ``final`` of a loss the core minimises too (the default's,
+    :func:`~nurbs_core.fitting.plan.core_answers`), or the least-squares core's
     fit it went on from (``core``) when that one is closer to the points (RMS over all of them)
     or the gradient fit gained a quality warning (a fold, an overlap, uncovered cloud) that the
-    core's fit does not have: the default loss's objective is the distance to the points, and a
+    core's fit does not have: that loss's objective is the distance to the points, and a
     refinement that ends farther from them, or less clean, than its start is not one. The
     gradient fit's losses, iterations and status stay (its message says what was kept, in place
     of ``kept_note``: the gradient fit's own note on the state it kept)."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from nurbs_core.fitting.config import DEFAULT_LOSS, FitConfig, Loss
+from nurbs_core.fitting.config import FitConfig, Loss
 
 #: What sends a fit to the gradient fit (:attr:`FitPlan.why`): the settings that ask for it
 #: (:func:`gradient_reason`), a curve, known parameters, or a starting shape to go on from.
@@ -22,11 +22,32 @@ REASONS = ("solver", "learned", "loss", "free_knots", "free_weights", "pin_bound
            "custom_knots", "curve", "known", "initial")
 
 
+#: The largest Chamfer weight, as a share of the foot-point term's, of a loss the least-squares core
+#: answers (:func:`core_answers`); the default loss's is 0.001.
+CORE_CHAMFER_SHARE = 0.01
+
+
+def core_answers(loss: Loss) -> bool:
+    """Whether the least-squares core minimises ``loss``: the foot-point distance ``p2s`` alone or
+    with a Chamfer term of at most :data:`CORE_CHAMFER_SHARE` of its weight (the core minimises the
+    first; what a small Chamfer weight does, keeping the surface over the cloud, the core's
+    coverage check guards). Any other term (Hausdorff, Laplacian, l1, ...) or a heavier Chamfer
+    term needs the gradient fit. A rule on the loss's terms, not its text: the default
+    ``p2s+0.001*chamfer``, ``p2s``, ``0.5*p2s+0.0001*chamfer`` and ``p2s+0.0011*chamfer`` are all
+    the core's."""
+    terms = dict(loss.terms)
+    point_weight = terms.pop("p2s", 0.0)
+    chamfer_weight = terms.pop("chamfer", 0.0)
+    return (not terms and point_weight > 0
+            and chamfer_weight <= CORE_CHAMFER_SHARE * point_weight)
+
+
 def gradient_reason(config: FitConfig) -> str | None:
     """Why an unordered surface cloud's fit goes on to the gradient fit after the least-squares
     core, one of :data:`REASONS` (None: the core alone answers the config). "solver": chosen;
     "learned": the core's fit from a learned start is refined by it unless only the core is asked
-    for (:mod:`nurbs_core.fitting.learned_start`); "loss": not the default loss; free knots,
+    for (:mod:`nurbs_core.fitting.learned_start`); "loss": a loss the core does not minimise
+    (:func:`core_answers`); free knots,
     free weights, a pinned boundary, custom knots (the core places its own knots)."""
     if config.solver == "least_squares":
         return None
@@ -34,7 +55,7 @@ def gradient_reason(config: FitConfig) -> str | None:
         return "solver"
     if config.init == "learned":
         return "learned"
-    if config.loss != Loss.parse(DEFAULT_LOSS):
+    if not core_answers(config.loss):
         return "loss"
     for name in ("free_knots", "free_weights", "pin_boundary", "custom_knots"):
         if getattr(config, name):

@@ -7,8 +7,8 @@ import pytest
 
 from nurbs_core import samples
 from nurbs_core.fitting import iter_fit
-from nurbs_core.fitting.config import FitConfig
-from nurbs_core.fitting.plan import REASONS, fit_plan, gradient_reason, resolved_solver
+from nurbs_core.fitting.config import FitConfig, Loss
+from nurbs_core.fitting.plan import REASONS, core_answers, fit_plan, gradient_reason, resolved_solver
 
 #: small, quick fits: the stages matter here, not the accuracy
 QUICK = {"control_points_u": 6, "control_points_v": 6, "iterations": 4, "max_control_points": 0}
@@ -48,6 +48,18 @@ def test_each_setting_that_brings_in_the_gradient_fit_is_its_reason():
             assert resolved_solver(config.replace(solver="least_squares")) == "least_squares"
 
 
+def test_the_core_answers_a_loss_by_its_terms_not_its_text():
+    """Issue 29: a Chamfer weight of 0.0011 instead of 0.001 used to switch algorithms."""
+    for loss in ("p2s+0.001*chamfer", "0.001*chamfer+p2s", "p2s", "p2s+0.0011*chamfer",
+                 "2*p2s+0.02*chamfer", "point_to_surface+0.001*cd"):
+        assert core_answers(Loss.parse(loss)), loss
+        assert gradient_reason(FitConfig(loss=loss)) is None, loss
+    for loss in ("chamfer", "p2s+chamfer", "p2s+0.011*chamfer", "p2s+0.001*hausdorff",
+                 "p2s+0.1*laplacian", "l1", "p2s+fairing", "mse"):
+        assert not core_answers(Loss.parse(loss)), loss
+        assert gradient_reason(FitConfig(loss=loss)) == "loss", loss
+
+
 def test_the_plan_of_curves_known_parameters_and_a_starting_shape():
     assert fit_plan(FitConfig(kind="curve")).stages == ("gradient",)
     assert fit_plan(FitConfig(kind="curve")).why == "curve"
@@ -63,6 +75,7 @@ def test_the_plan_of_curves_known_parameters_and_a_starting_shape():
 @pytest.mark.parametrize("changes, stages, why", [
     ({}, ("least_squares",), None),
     ({"loss": "p2s+0.001*chamfer+hausdorff"}, ("least_squares", "gradient"), "loss"),
+    ({"loss": "p2s+0.002*chamfer"}, ("least_squares",), None),
     ({"free_weights": True}, ("least_squares", "gradient"), "free_weights"),
     ({"solver": "gradient", "parameterization": "plane"}, ("gradient",), "solver"),
 ])
