@@ -48,11 +48,16 @@ class EditSource:
     origin: np.ndarray | None = None
 
 
-def solid_report(result: Any, reason: str = "") -> SolidReport:
-    """The report of a :class:`nurbs_core.brep.part.PartResult`."""
+def solid_report(result: Any, reason: str = "", origin: np.ndarray | None = None,
+                 size: float = 1.0) -> SolidReport:
+    """The report of a :class:`nurbs_core.brep.part.PartResult`; a part fitted about its scan's
+    centre ``origin`` (3,) has its faces' positions moved back to the scan's coordinates
+    (``size``: the part's, for the digits of its descriptions)."""
+    from nurbs_core.brep.part import moved_faces
+
     faces = tuple(FaceRow(face.kind, face.description, dict(face.parameters), int(face.points),
                           float(face.mean), float(face.p99), int(face.region))
-                  for face in result.faces)
+                  for face in moved_faces(result.faces, origin, size))
     edits = () if result.regions is None else tuple(e.as_dict() for e in result.regions.edits)
     return SolidReport(faces, bool(result.valid), bool(result.closed),
                        0.0 if result.open_shell else float(result.volume),
@@ -71,6 +76,11 @@ def solid_display(solid: Any, tolerance: float) -> SolidDisplay:
     vertices, triangles, owners = triangulate(solid, tolerance * TRIANGLE_SHARE)
     return SolidDisplay(np.asarray(vertices, np.float64), np.asarray(triangles, np.int64),
                         np.asarray(owners, np.int64))
+
+
+def _size(points: np.ndarray) -> float:
+    """The diagonal of the points' (N, 3) bounding box."""
+    return float(np.linalg.norm(np.ptp(points, axis=0)))
 
 
 def _check(cancel: threading.Event | None) -> None:
@@ -118,11 +128,7 @@ def run_part_route(points: np.ndarray, part: bool | None, max_hole: float | None
     timings["solid"] = time.perf_counter() - started
     _check(cancel)
     started = time.perf_counter()
-    reason = route.reason
-    if origin is not None:
-        reason += ("; its faces' positions are about the scan's centre ("
-                   + ", ".join(f"{value:.12g}" for value in origin) + ")")
-    report = solid_report(result, reason)
+    report = solid_report(result, route.reason, origin, _size(points))
     solid = shifted(result.solid, origin)
     display = solid_display(solid, report.tolerance)
     timings["triangles"] = time.perf_counter() - started
@@ -153,7 +159,7 @@ def run_face_edit(outcome: PartOutcome, points: np.ndarray, edit: dict[str, Any]
     result = rebuild_part(source.points, source.mesh_vertices, source.mesh_triangles, regions)
     timings = {"solid": time.perf_counter() - started}
     _check(cancel)
-    report = solid_report(result, outcome.route_reason)
+    report = solid_report(result, outcome.route_reason, source.origin, _size(source.points))
     solid = shifted(result.solid, source.origin)
     display = solid_display(solid, report.tolerance)
     _check(cancel)

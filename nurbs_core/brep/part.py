@@ -13,6 +13,7 @@ on average, and each face's own points within :data:`FACE_P99_LIMIT` noise sigma
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -32,7 +33,7 @@ from nurbs_core.brep.occ import (
     triangulate,
     volume,
 )
-from nurbs_core.brep.primitives import Primitive
+from nurbs_core.brep.primitives import Primitive, position_digits
 from nurbs_core.brep.segment import Segmentation, segment
 
 if TYPE_CHECKING:
@@ -156,6 +157,27 @@ class PartResult:
                 "p99": float(np.percentile(d, 99)), "max": float(d.max()),
                 "fit_seconds": sum(self.timings.values()), "fillets": self.fillets,
                 "warnings": list(self.problems.values()), **border}
+
+
+def moved_faces(faces: list[PartFace], offset: np.ndarray | None,
+                size: float) -> list[PartFace]:
+    """The faces with their positions (a plane's point, an axis's point, a centre, an apex)
+    moved by ``offset`` (3,): a part fitted about its scan's centre (a scan far from the
+    origin, :mod:`nurbs_core.jobs.local_frame`) reported in the scan's own coordinates, its
+    descriptions with the digits that keep the part's detail (:func:`position_digits`; ``size``:
+    the part's, e.g. its diagonal). ``offset`` None: the faces as they are."""
+    if offset is None:
+        return list(faces)
+    digits = position_digits(size, offset)
+    moved = []
+    for face in faces:
+        if "origin" not in face.parameters:  # a freeform face: no position
+            moved.append(face)
+            continue
+        surface = Primitive.from_parameters(face.parameters).moved(offset)
+        moved.append(dataclasses.replace(face, parameters=surface.parameters(),
+                                         description=surface.describe(digits)))
+    return moved
 
 
 def part_problems(result: PartResult) -> dict[str, str]:

@@ -11,7 +11,9 @@ fits it within the tolerance. numpy + scipy only.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.optimize
@@ -29,6 +31,13 @@ CONE_LIMIT = 2.0
 def _unit(vectors: np.ndarray) -> np.ndarray:
     norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
     return vectors / np.maximum(norm, 1e-300)
+
+
+def position_digits(size: float, offset: np.ndarray, digits: int = 5) -> int:
+    """The significant digits that keep ``digits`` of positions within a part of ``size`` once
+    moved by ``offset`` (3,) (a 1-m part 5,000 km out: 5 + 7), at most 15."""
+    ratio = float(np.abs(np.asarray(offset, np.float64)).max()) / max(float(size), 1e-300)
+    return int(min(15, digits + max(0.0, np.ceil(np.log10(max(ratio, 1.0))))))
 
 
 def axis_frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -91,9 +100,10 @@ class Primitive:
             return _unit(v - self.radius * outward)
         return np.cos(self.angle) * outward - np.sin(self.angle) * self.axis
 
-    def describe(self) -> str:
-        """Its parameters, one clause (for the report)."""
-        o = ", ".join(f"{c:.5g}" for c in self.origin)
+    def describe(self, digits: int = 5) -> str:
+        """Its parameters, one clause (for the report); positions to ``digits`` significant
+        digits (:func:`position_digits` keeps a far part's)."""
+        o = ", ".join(f"{c:.{digits}g}" for c in self.origin)
         a = ", ".join(f"{c:.4f}" for c in self.axis)
         if self.kind == "plane":
             return f"plane through ({o}), normal ({a})"
@@ -105,6 +115,22 @@ class Primitive:
             return (f"torus radii {self.radius:.5g} and {self.minor:.5g}, centre ({o}), "
                     f"axis ({a})")
         return f"cone half-angle {np.degrees(self.angle):.3f} deg, apex ({o}), axis ({a})"
+
+    def moved(self, offset: np.ndarray) -> Primitive:
+        """The same surface moved by ``offset`` (3,)."""
+        return dataclasses.replace(self, origin=self.origin + np.asarray(offset, np.float64))
+
+    @classmethod
+    def from_parameters(cls, values: dict[str, Any]) -> Primitive:
+        """The surface of :meth:`parameters`' plain values (their inverse)."""
+        kind = str(values["type"])
+        if kind not in SIMPLICITY:
+            raise ValueError(f"not an analytic surface type: {kind!r}")
+        axis = np.asarray(values.get("axis", (0.0, 0.0, 1.0)), np.float64)
+        radius = float(values.get("radius", values.get("major_radius", 0.0)))
+        return cls(kind, np.asarray(values["origin"], np.float64), axis, radius,
+                   float(np.radians(values.get("half_angle_degrees", 0.0))),
+                   float(values.get("minor_radius", 0.0)))
 
     def parameters(self) -> dict[str, object]:
         """Plain JSON values: type, origin, axis, radius, half-angle in degrees."""

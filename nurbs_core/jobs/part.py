@@ -40,7 +40,7 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
     check (the automatic route then fits the network)."""
     import numpy as np
 
-    from nurbs_core.brep.part import fit_part
+    from nurbs_core.brep.part import fit_part, moved_faces
     from nurbs_core.io.solid_io import save_solid
     from nurbs_core.jobs.local_frame import shifted
     from nurbs_core.status import counted_kinds
@@ -80,13 +80,11 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
         print(f"border (the scan's border loops to the shell's free edges): mean "
               f"{border.mean():.6g} ({border.mean() / noise:.2f} sigma), 99th percentile "
               f"{np.percentile(border, 99):.6g} ({np.percentile(border, 99) / noise:.2f} sigma)")
-    about = ""
-    if job.origin is not None:
-        # the faces' positions are the fit's, about the scan's centre: said once, in full
-        about = "(" + ", ".join(f"{value:.12g}" for value in job.origin) + ")"
-        print(f"the face positions below are about the scan's centre {about} (the files hold "
-              "the scan's own coordinates)")
-    for index, face in enumerate(result.faces):
+    # fitted about the scan's centre when it lies far out: the faces in the scan's coordinates
+    size = float(np.linalg.norm(np.ptp(points, axis=0)))
+    origin = None if job.origin is None else np.asarray(job.origin, np.float64)
+    part_faces = moved_faces(result.faces, origin, size)
+    for index, face in enumerate(part_faces):
         print(f"face {index}: {face.description}; {face.points} points, mean "
               f"{face.mean:.4g}, 99th percentile {face.p99:.4g}")
     for warning in result.problems.values():
@@ -113,13 +111,10 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
                                   f"{'closed' if result.closed else 'NOT closed'}"),
                         ("volume", f"{result.volume:.6g}")]
         summary += [("time", f"{sum(result.timings.values()):.1f} s")]
-        if about:
-            summary += [("face positions", f"about the scan's centre {about}")]
-        summary += [(f"face {index}", face.description) for index, face in enumerate(result.faces)]
+        summary += [(f"face {index}", face.description)
+                    for index, face in enumerate(part_faces)]
         write_fit_report(job, shifted(points, job.origin), vertices, faces,
                          status=result.status, summary=summary,
                          warnings=list(result.problems.values()), closed=result.closed,
                          tolerance=result.segmentation.tolerance)
-    if job.origin is not None:
-        statistics["faces_about"] = list(job.origin)  # the faces' parameters are about it
     return plain(statistics)

@@ -20,14 +20,16 @@ def test_a_far_turned_part_is_its_solid_where_the_scan_is_and_stays_there_when_e
     outcome = run_part_route(points, None)
     assert outcome.solid is not None, outcome.fallback
     assert outcome.report is not None and outcome.report.valid and outcome.report.closed
-    assert "about the scan's centre" in outcome.report.reason
+    # the faces' positions are in the scan's coordinates: the cylinder's axis runs through it
+    cylinder = [face.kind for face in outcome.report.faces].index("cylinder")
+    axis_point = np.asarray(outcome.report.faces[cylinder].parameters["origin"])
+    assert np.linalg.norm(axis_point - points.mean(axis=0)) < np.linalg.norm(np.ptp(points, 0))
     assert outcome.display is not None
     low, high = points.min(axis=0), points.max(axis=0)
     margin = 0.05 * np.linalg.norm(high - low)
     vertices = outcome.display.vertices
     assert (vertices > low - margin).all() and (vertices < high + margin).all()
     # an edit (a cylinder as NURBS) is built in the same frame and moved back too
-    cylinder = [face.kind for face in outcome.report.faces].index("cylinder")
     edited = run_face_edit(outcome, points, {"action": "type", "kind": "freeform", "regions": [
         outcome.report.faces[cylinder].region]})
     assert edited.display is not None  # where the scan is (the edited face's shape aside)

@@ -17,8 +17,10 @@ from nurbs_core.brep.part import (  # noqa: E402
     FACE_P99_LIMIT,
     MEAN_LIMIT,
     MIN_SHARP_SHARE,
+    PartFace,
     face_sigmas,
     fit_part,
+    moved_faces,
     part_like,
     sharp_share,
 )
@@ -85,6 +87,27 @@ def test_least_squares_recovers_exact_parameters_from_noisy_points(kind):
         assert abs(fitted.axis @ axis) > 1 - 1e-5
     # refining an exact surface on exact points keeps it
     assert refine(truth, points).distance(points).max() < 1e-9
+
+
+@pytest.mark.parametrize("kind", ["plane", "sphere", "cylinder", "cone", "torus"])
+def test_a_face_moved_back_from_its_local_frame_keeps_its_shape_and_its_digits(kind):
+    """A far scan's part is fitted about its centre; its faces are reported in the scan's
+    coordinates: the same surface (distances of moved points unchanged), positions moved."""
+    surface = Primitive(kind, np.array([0.123456, -0.2, 0.05]), _unit(np.array([0.2, -0.1, 1.0])),
+                        0.4, np.radians(20.0), 0.1)
+    assert Primitive.from_parameters(surface.parameters()).parameters() == surface.parameters()
+    offset = np.array([5e6, 4e6, 300.0])
+    face = PartFace(kind, surface.parameters(), surface.describe(), 10, 0.0, 0.0, 0.0)
+    moved = moved_faces([face], offset, size=1.0)[0]
+    again = Primitive.from_parameters(moved.parameters)
+    assert np.allclose(again.origin, surface.origin + offset, rtol=0, atol=1e-9)
+    points = np.random.default_rng(0).normal(size=(50, 3))
+    assert np.allclose(again.distance(points + offset), surface.distance(points), atol=1e-7)
+    # 5 + 7 significant digits: 5000000.12346, the local 0.12346 kept
+    assert "5000000.12346" in moved.description, moved.description
+    assert moved_faces([face], None, 1.0)[0] is face
+    freeform = PartFace("freeform", {"type": "freeform"}, "freeform", 10, 0.0, 0.0, 0.0)
+    assert moved_faces([freeform], offset, 1.0)[0] is freeform
 
 
 def test_a_fillet_that_misses_the_faces_it_rounds_is_made_to_cross_them():

@@ -74,7 +74,8 @@ def test_a_far_open_sheet_is_one_patch_written_where_it_was(tmp_path, capsys):
 def test_a_far_machined_part_is_its_solid_written_where_it_was(tmp_path, capsys):
     """A turned part 5,000 km out gave no valid solid (the points 27 noise sigmas from it);
     about its centre it is the same solid, its STEP in the scan's coordinates and its faces'
-    positions said to be about that centre."""
+    positions given in the scan's coordinates too (printed and in the HTML report), with the
+    digits that keep them."""
     pytest.importorskip("OCP")
     from OCP.Bnd import Bnd_Box
     from OCP.BRepBndLib import BRepBndLib
@@ -85,10 +86,16 @@ def test_a_far_machined_part_is_its_solid_written_where_it_was(tmp_path, capsys)
     points = scan_part(PARTS["turned"](), 20_000, seed=0)[0] + SITE
     source, out = tmp_path / "turned.xyz", tmp_path / "turned.step"
     np.savetxt(source, points, fmt="%.7f")
-    assert main([str(source), "-o", str(out)]) == 0
+    html = tmp_path / "turned.html"
+    assert main([str(source), "-o", str(out), "--report", str(html)]) == 0
     report = capsys.readouterr().out
     assert "status: converged" in report and "valid, closed" in report
-    assert "the face positions below are about the scan's centre" in report
+    planes = [line for line in report.splitlines() if ": plane through (" in line]
+    assert planes, report
+    for line in planes:  # 5 digits of the part's detail kept 5,000 km out: 5 + 7
+        point = np.array([float(c) for c in line.split("through (")[1].split(")")[0].split(",")])
+        assert np.linalg.norm(point - points.mean(axis=0)) < np.linalg.norm(np.ptp(points, 0))
+        assert line.split(": ", 1)[1].split(";")[0] in html.read_text()
     reader = STEPControl_Reader()
     reader.ReadFile(str(out))
     reader.TransferRoots()
