@@ -227,7 +227,9 @@ def _decide(points: np.ndarray, file_mesh: ScanMesh | None, file_mesh_note: str,
         return _open_surface(points, why, max_hole, part, surface, height_field)
     holes = (f" once its openings up to {mesh.max_hole:.4g} wide are sealed"
              if mesh.filled_fraction > 0 else "")
-    return Route("network", f"{why}the cloud encloses a volume{holes} (a closed object)", mesh)
+    what = ("a volume{holes} (a closed object)" if mesh.pieces <= 1
+            else f"{mesh.pieces} separate volumes{{holes}} ({mesh.pieces} closed objects)")
+    return Route("network", f"{why}the cloud encloses {what.format(holes=holes)}", mesh)
 
 
 def _open_surface(points: np.ndarray, why: str, max_hole: float | None,

@@ -52,8 +52,10 @@ def _count(shape: OccShape, kind: str) -> int:
 
 def _sew(network: PatchNetwork) -> OccShape:
     """The sewn shell; ValueError unless it is one shell of every patch, closed iff the network
-    is closed. An open network whose patches do not all sew gives a compound of its shells (an
-    OpenShellsWarning says so): every patch is written, never none."""
+    is closed, or (a closed network of separate objects scanned together) a compound of closed
+    shells without free or multiple edges. An open network whose patches do not all sew gives
+    a compound of its shells (an OpenShellsWarning says so): every patch is written, never
+    none."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_Sewing
     from OCP.TopAbs import TopAbs_ShapeEnum
     from OCP.TopExp import TopExp_Explorer
@@ -66,8 +68,11 @@ def _sew(network: PatchNetwork) -> OccShape:
     sewing.Perform()
     sewn = sewing.SewedShape()
     shells = _count(sewn, "SHELL")
-    if not network.closed and shells != 1 and _count(sewn, "FACE") == network.patch_count:
+    if shells != 1 and _count(sewn, "FACE") == network.patch_count:
         sewn, shells = _shells_of(sewn)
+    if (shells > 1 and network.closed and not sewing.NbFreeEdges()
+            and not sewing.NbMultipleEdges()):
+        return sewn  # separate closed objects scanned together: one closed shell each
     if _count(sewn, "FACE") != network.patch_count or shells < 1 or (
             shells > 1 and network.closed):
         raise ValueError(f"sewing the {network.patch_count} patches gave {shells} shells and "
@@ -123,6 +128,25 @@ def _volume(shape: OccShape) -> float:
     return properties.Mass()
 
 
+def _solids(shells: OccShape) -> OccShape:
+    """The solid of a closed shell, or a compound of one solid per closed shell of a compound
+    (separate objects)."""
+    from OCP.BRep import BRep_Builder
+    from OCP.TopAbs import TopAbs_ShapeEnum
+    from OCP.TopoDS import TopoDS, TopoDS_Compound
+
+    from nurbs_core.occ_topology import subshapes
+
+    if shells.ShapeType() == TopAbs_ShapeEnum.TopAbs_SHELL:
+        return _solid(shells)
+    builder = BRep_Builder()
+    compound = TopoDS_Compound()
+    builder.MakeCompound(compound)
+    for shell in subshapes(shells, "SHELL"):
+        builder.Add(compound, _solid(TopoDS.Shell(shell)))
+    return compound
+
+
 def _solid(shell: OccShape) -> OccShape:
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeSolid
     from OCP.ShapeFix import ShapeFix_Solid
@@ -137,14 +161,15 @@ def _solid(shell: OccShape) -> OccShape:
 
 
 def network_shape(network: PatchNetwork) -> OccShape:
-    """One ``TopoDS_Solid`` (closed network) or ``TopoDS_Shell`` (open) of all patches;
-    ValueError when it cannot be built or BRepCheck_Analyzer finds it invalid."""
+    """One ``TopoDS_Solid`` (closed network; a compound of solids when it holds separate closed
+    objects) or ``TopoDS_Shell`` (open) of all patches; ValueError when it cannot be built or
+    BRepCheck_Analyzer finds it invalid."""
     require_ocp("Building a patch-network shape")
     quiet_occ()
     from OCP.BRepCheck import BRepCheck_Analyzer
 
     shell = _sew(network)
-    shape = _solid(shell) if network.closed else shell
+    shape = _solids(shell) if network.closed else shell
     if not BRepCheck_Analyzer(shape).IsValid():
         raise ValueError(f"OpenCASCADE finds the sewn {'solid' if network.closed else 'shell'} "
                          "of the network invalid (BRepCheck_Analyzer)")

@@ -12,10 +12,11 @@ neighbourhood; the free voxels reached from the border are outside; normals poin
 * in the free ones, only the sign: outside where the border reaches, inside elsewhere (a closed
   object encloses it), whatever the normals say;
 
-then marching cubes (scikit-image) at level 0, the largest piece kept, faces oriented so the
-enclosed volume is positive (normals outward). A thin part (a sheet whose two sides lie closer
-than the balls of the default grid, which then fill its inside) is wrapped again on a finer grid
-when most of its points see another side across them.
+then marching cubes (scikit-image) at level 0, the pieces of at least :data:`SUBSTANTIAL_PIECE`
+of the largest's faces kept (several objects scanned together are each closed; bubbles of noise
+are dropped), faces oriented so the enclosed volume is positive (normals outward). A thin part
+(a sheet whose two sides lie closer than the balls of the default grid, which then fill its
+inside) is wrapped again on a finer grid when most of its points see another side across them.
 """
 
 from __future__ import annotations
@@ -36,6 +37,13 @@ CELLS_PER_DIAGONAL = 64
 MAX_CELLS = 900_000
 #: A cell is at least this many cloud spacings wide (finer cells see the noise as holes).
 MIN_CELL_SPACINGS = 1.4
+#: A piece of the zero set is an object of its own (several objects scanned together) when it
+#: holds at least this share of the largest piece's faces and lies over points of its own (no
+#: other kept piece's: :func:`_object_pieces`); smaller ones (a clump of stray points) are
+#: dropped.
+SUBSTANTIAL_PIECE = 0.05
+#: Points farther apart than this many cells belong to separate objects (see SUBSTANTIAL_PIECE).
+OBJECT_GAP = 3.0
 #: Cells of margin around the cloud (room for the largest blocking balls and the blur).
 PAD = 6
 #: Gaussian blur of the sampled distance (cells).
@@ -320,7 +328,7 @@ def _zero_set(points: np.ndarray, normals: np.ndarray | None, wrapped: Wrap, tre
         raise NotClosedError("the cloud encloses no volume: it is not a closed surface")
     verts, faces, _, _ = marching_cubes(volume, level=0.0, spacing=(cell, cell, cell))
     verts = verts + grid.origin
-    faces, pieces = _largest_piece(faces.astype(np.int64), len(verts))
+    faces, pieces = _object_pieces(faces.astype(np.int64), verts, points, tree, cell)
     verts, faces = compacted(verts, faces)
     gap, owner = tree.query(verts)
     away_vertices = gap > np.maximum(AWAY * cell, wrapped.radii[owner])
@@ -384,7 +392,45 @@ def _widest_cap(vertices: np.ndarray, faces: np.ndarray, filled: np.ndarray) -> 
     return widest
 
 
-def _largest_piece(faces: np.ndarray, count: int) -> tuple[np.ndarray, int]:
+def _object_pieces(faces: np.ndarray, verts: np.ndarray, points: np.ndarray, tree: cKDTree,
+                   cell: float) -> tuple[np.ndarray, int]:
+    """The faces (F, 3) of the zero set's pieces that close separate objects, and how many: the
+    largest piece over each separate cluster of the points (points within
+    :data:`OBJECT_GAP` cells of each other are one object) that holds at least
+    :data:`SUBSTANTIAL_PIECE` of the largest piece's faces, over a cluster of at least that
+    share of the largest cluster's points. A second piece over the same points (the sealed ears
+    of an open scan) or over a few stray points is dropped."""
+    import scipy.sparse
+    import scipy.sparse.csgraph
+
+    label, sizes = _face_pieces(faces, len(verts))
+    order = np.argsort(sizes)[::-1]
+    if len(order) < 2 or sizes[order[1]] < SUBSTANTIAL_PIECE * sizes[order[0]]:
+        return faces[label == order[0]], 1
+    pairs = tree.query_pairs(OBJECT_GAP * cell, output_type="ndarray")
+    graph = scipy.sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                                    shape=(len(points), len(points)))
+    _, cluster = scipy.sparse.csgraph.connected_components(graph, directed=False)
+    members = np.bincount(cluster)
+    nearest = tree.query(verts)[1]
+    kept: list[int] = []
+    taken: set[int] = set()
+    for piece in order:
+        if sizes[piece] < SUBSTANTIAL_PIECE * sizes[order[0]]:
+            break
+        owners = cluster[nearest[faces[label == piece, 0]]]
+        own = int(np.bincount(owners).argmax())
+        if kept and members[own] < SUBSTANTIAL_PIECE * max(members[list(taken)]):
+            continue  # over a few stray points, not an object
+        if own not in taken:
+            taken.add(own)
+            kept.append(int(piece))
+    return faces[np.isin(label, kept)], len(kept)
+
+
+def _face_pieces(faces: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each face's (F,) connected piece of the mesh over ``count`` vertices, and the pieces'
+    face counts."""
     import scipy.sparse
     import scipy.sparse.csgraph
 
@@ -393,9 +439,13 @@ def _largest_piece(faces: np.ndarray, count: int) -> tuple[np.ndarray, int]:
     graph = scipy.sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(count, count))
     pieces, label = scipy.sparse.csgraph.connected_components(graph, directed=False)
     face_label = label[faces[:, 0]]
-    sizes = np.bincount(face_label, minlength=pieces)
-    real = int((sizes > 0).sum())
-    return faces[face_label == int(np.argmax(sizes))], real
+    return face_label, np.bincount(face_label, minlength=pieces)
+
+
+def _largest_piece(faces: np.ndarray, count: int) -> tuple[np.ndarray, int]:
+    """The faces (F, 3) of the largest piece, and how many pieces there were."""
+    label, sizes = _face_pieces(faces, count)
+    return faces[label == int(np.argmax(sizes))], int((sizes > 0).sum())
 
 
 #: A file's own mesh is used for the layout up to this many vertices (Instant Meshes breaks on

@@ -19,7 +19,8 @@ class ScanMesh:
     """vertices (V, 3), faces (F, 3) consistently oriented (outward on a closed object, like the
     scan's oriented normals on an open one); normals (N, 3): the oriented normals of the points
     it was built from (the cloud, or its voxel centroids when the cloud is large); cell: the
-    voxel size; pieces: how many separate pieces marching cubes found."""
+    voxel size; pieces: how many separate pieces marching cubes found (a closed mesh: how many
+    separate closed objects it holds, several scanned together)."""
 
     vertices: np.ndarray
     faces: np.ndarray
