@@ -391,5 +391,7 @@ def _open_network(points: np.ndarray, finding: str, max_hole: float | None) -> R
     except NotASurfaceError:
         return None
     loops = len(mesh.border)
+    pieces = (f"; the scan holds {mesh.pieces} separate objects, each in the network"
+              if mesh.pieces > 1 else "")
     return Route("network", f"{finding}; its mesh ends at {loops} border "
-                            f"loop{'s' if loops > 1 else ''}", mesh)
+                            f"loop{'s' if loops > 1 else ''}{pieces}", mesh)

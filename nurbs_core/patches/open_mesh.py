@@ -16,12 +16,13 @@ An open shell's wrap encloses nothing (:mod:`nurbs_core.reconstruct.wrap`), so n
 * marching cubes (scikit-image) of its zero set, masked by the band: the surface ends where the
   band ends, about one point spacing beyond the scan's border.
 
-Then the mesh is made a clean 2-manifold for a layout: the largest piece, the faces at a vertex
-where two fans touch removed, holes narrower than ``max_hole`` (and pin-holes) capped
-(``filled``; the widest opening always stays). The mesh runs on past the last points by about a
-point spacing (the band's reach); the network's border term draws the fit back to the border. The openings
-that stay are the scan's **border**: each loop pulled onto the cloud's outermost points and
-smoothed along itself, which the network's free sides then follow.
+Then the mesh is made a clean 2-manifold for a layout: the largest piece over each separate
+object of the scan (several sheets, or a sheet beside a closed object, scanned together), the
+faces at a vertex where two fans touch removed, holes narrower than ``max_hole`` (and pin-holes)
+capped (``filled``; each object's widest opening always stays). The mesh runs on past the last
+points by about a point spacing (the band's reach); the network's border term draws the fit back
+to the border. The openings that stay are the scan's **border**: each loop pulled onto the
+cloud's outermost points and smoothed along itself, which the network's free sides then follow.
 
 numpy + scipy + scikit-image only.
 """
@@ -38,8 +39,9 @@ from nurbs_core.patches.closed_mesh import (
     MAX_HOLE,
     SMOOTHING,
     WRAP_POINTS,
+    _face_pieces,
     _grid,
-    _largest_piece,
+    _object_pieces,
     bimodality,
     compacted,
     tangent_plane_distance,
@@ -101,7 +103,8 @@ def open_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
     # scan does not have, which no quad layout reproduces; a wider blur closes them
     best = None
     for blur in HANDLE_BLURS:
-        vertices, faces, pieces = _zero_set(distance, band, mask, grid, SMOOTHING * blur)
+        vertices, faces, pieces = _zero_set(distance, band, mask, grid, SMOOTHING * blur,
+                                            points, tree)
         handles = genus(faces)
         if best is not None:
             # a blur that closes the tunnels but shrinks the surface off the points (the ears'
@@ -119,17 +122,28 @@ def open_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
     face_normal = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
                            vertices[faces[:, 2]] - vertices[faces[:, 0]])
     agree = np.einsum("ij,ij->i", face_normal, normals[tree.query(centroid)[1]])
-    if (agree < 0).sum() > (agree > 0).sum():
-        faces = faces[:, ::-1].copy()
+    piece, _ = _face_pieces(faces, len(vertices))
+    for number in np.unique(piece):  # each object's faces turned like its points' normals
+        mine = piece == number
+        if (agree[mine] < 0).sum() > (agree[mine] > 0).sum():
+            faces[mine] = faces[mine][:, ::-1]
     loops = boundary_loops(faces)
     widths = [float(np.linalg.norm(np.ptp(vertices[loop], axis=0))) for loop in loops]
+    # the widest opening of each object stays (an object's border)
+    vertex_piece = np.zeros(len(vertices), np.int64)
+    vertex_piece[faces.ravel()] = np.repeat(piece, 3)
+    widest: dict[int, int] = {}
+    for number, (loop, width) in enumerate(zip(loops, widths)):
+        owner = int(vertex_piece[loop[0]])
+        if owner not in widest or width > widths[widest[owner]]:
+            widest[owner] = number
     filled = np.zeros(len(vertices), bool)
     border: list[np.ndarray] = []
     new_vertices, new_faces = [vertices], [faces]
     count = len(vertices)
     for number, (loop, width) in enumerate(zip(loops, widths)):
         ring = vertices[loop]
-        if width <= max(max_hole, PIN_HOLE * grid.cell) and number != int(np.argmax(widths)):
+        if width <= max(max_hole, PIN_HOLE * grid.cell) and number not in widest.values():
             # a hole: a fan from its centroid (the fit fairs it)
             new_vertices.append(ring.mean(axis=0)[None])
             new_faces.append(np.column_stack([np.roll(loop, -1), loop, np.full(len(loop), count)]))
@@ -175,10 +189,12 @@ def sheet_between(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray,
 
 
 def _zero_set(distance: np.ndarray, band: np.ndarray, mask: np.ndarray, grid: VoxelGrid,
-              blur: float) -> tuple[np.ndarray, np.ndarray, int]:
+              blur: float, points: np.ndarray, tree: cKDTree) -> tuple[np.ndarray, np.ndarray, int]:
     """The zero set of the tangent-plane ``distance`` on the grid, blurred by ``blur`` cells
     inside the ``band`` and cut by ``mask``: vertices (V, 3), faces (F, 3) of its largest
-    piece without pinched vertices, and how many pieces marching cubes found."""
+    piece over each separate object of the ``points`` (N, 3)
+    (:func:`~nurbs_core.patches.closed_mesh._object_pieces`) without pinched vertices, and how
+    many objects."""
     from skimage.measure import marching_cubes
 
     # blurred inside the band only (a normalised convolution: the zeros outside do not leak in)
@@ -189,19 +205,22 @@ def _zero_set(distance: np.ndarray, band: np.ndarray, mask: np.ndarray, grid: Vo
         raise NotASurfaceError("the cloud's distance field has no zero set")
     vertices, faces, _, _ = marching_cubes(field, 0.0, spacing=(grid.cell,) * 3, mask=mask)
     vertices = vertices + grid.origin
-    faces, pieces = _largest_piece(faces.astype(np.int64), len(vertices))
+    faces, _ = _object_pieces(faces.astype(np.int64), vertices, points, tree, grid.cell)
     faces = _without_pinches(faces)
-    faces, _ = _largest_piece(faces, len(vertices))
+    faces, pieces = _object_pieces(faces, vertices, points, tree, grid.cell)
     vertices, faces = compacted(vertices, faces)
     return vertices, faces, pieces
 
 
 def genus(faces: np.ndarray) -> int:
-    """The genus of a connected triangle mesh (F, 3) with or without border: (2 - chi - b) / 2
-    for Euler characteristic chi and b border loops."""
+    """The genus (handles) of a triangle mesh (F, 3) with or without border, summed over its
+    P connected pieces: (2 P - chi - b) / 2 for Euler characteristic chi and b border loops."""
     from nurbs_core.patches.layout import euler_characteristic
 
-    return max(0, (2 - euler_characteristic(faces.tolist()) - len(boundary_loops(faces))) // 2)
+    count = int(faces.max()) + 1 if len(faces) else 0
+    pieces = len(np.unique(_face_pieces(faces, count)[0])) if len(faces) else 0
+    return max(0, (2 * pieces - euler_characteristic(faces.tolist())
+                   - len(boundary_loops(faces))) // 2)
 
 
 def propagated_normals(points: np.ndarray, normals: np.ndarray,

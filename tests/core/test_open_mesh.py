@@ -71,6 +71,36 @@ def test_too_few_points_hold_no_surface():
         open_mesh(np.random.default_rng(0).normal(size=(10, 3)))
 
 
+def test_two_sheets_scanned_together_are_both_in_the_open_network(tmp_path, capsys):
+    """Two saddles one above the other in one scan: the open mesh kept the larger piece only,
+    so the network covered one sheet (30.6% of its area far from every point, the other
+    sheet's points 0.41 from it on average). Each sheet is now its own piece of the open mesh,
+    with its own border, and the network follows both. A sphere beside a sheet is fitted the
+    same way instead of one patch forced over both (36% of it flipped)."""
+    from nurbs_core.cli import main
+
+    sheet = samples.saddle(1500, seed=1).points
+    lift = np.array([0.0, 0.0, 1.5 * np.ptp(sheet, axis=0).max()])
+    mesh = open_mesh(np.vstack([sheet, sheet + lift]))
+    assert mesh.pieces == 2 and len(mesh.border) == 2
+    sphere = samples.sphere(2000, seed=2).points
+    mesh = open_mesh(np.vstack([sphere, sheet + [3.5, 0.0, 0.0]]))
+    assert mesh.pieces == 2 and len(mesh.border) == 1  # the sphere is closed
+    source = tmp_path / "two_sheets.xyz"
+    points = np.vstack([sheet, sheet + lift])
+    np.savetxt(source, points)
+    assert main([str(source), "-o", str(tmp_path / "fit.json")]) == 0
+    captured = capsys.readouterr()
+    assert "the scan holds 2 separate objects" in captured.err
+    report = captured.out
+    distance = float(report.split("point-to-surface distance: mean ")[1].split(",")[0])
+    assert distance < 0.02, report  # both sheets followed (one sheet: 0.41)
+    line = next(text for text in report.splitlines()
+                if text.startswith("surface-to-cloud distance"))
+    far = float(line.split("; ")[1].split("% of the area farther")[0])
+    assert far < 1.0, report  # one sheet's network: 30.6% (the other sheet's place uncovered)
+
+
 def test_a_clean_single_patch_stays_and_a_poor_one_turns_to_the_open_network(open_head):
     assert single_patch_problems("converged", {"flipped_fraction": 0.0, "coverage": 1.0}) == ""
     assert single_patch_problems("stopped", {"coverage": 0.5}) == ""   # the user stopped it
