@@ -39,7 +39,7 @@ MAX_CELLS = 900_000
 MIN_CELL_SPACINGS = 1.4
 #: A piece of the zero set is an object of its own (several objects scanned together) when it
 #: holds at least this share of the largest piece's faces and lies over points of its own (no
-#: other kept piece's: :func:`_object_pieces`); smaller ones (a clump of stray points) are
+#: other kept piece's: :func:`object_pieces`); smaller ones (a clump of stray points) are
 #: dropped.
 SUBSTANTIAL_PIECE = 0.05
 #: Points farther apart than this many cells belong to separate objects (see SUBSTANTIAL_PIECE).
@@ -328,7 +328,7 @@ def _zero_set(points: np.ndarray, normals: np.ndarray | None, wrapped: Wrap, tre
         raise NotClosedError("the cloud encloses no volume: it is not a closed surface")
     verts, faces, _, _ = marching_cubes(volume, level=0.0, spacing=(cell, cell, cell))
     verts = verts + grid.origin
-    faces, pieces = _object_pieces(faces.astype(np.int64), verts, points, tree, cell)
+    faces, pieces = object_pieces(faces.astype(np.int64), verts, points, tree, cell)
     verts, faces = compacted(verts, faces)
     gap, owner = tree.query(verts)
     away_vertices = gap > np.maximum(AWAY * cell, wrapped.radii[owner])
@@ -392,7 +392,7 @@ def _widest_cap(vertices: np.ndarray, faces: np.ndarray, filled: np.ndarray) -> 
     return widest
 
 
-def _object_pieces(faces: np.ndarray, verts: np.ndarray, points: np.ndarray, tree: cKDTree,
+def object_pieces(faces: np.ndarray, verts: np.ndarray, points: np.ndarray, tree: cKDTree,
                    cell: float) -> tuple[np.ndarray, int]:
     """The faces (F, 3) of the zero set's pieces that close separate objects, and how many: the
     largest piece over each separate cluster of the points (points within
@@ -403,7 +403,7 @@ def _object_pieces(faces: np.ndarray, verts: np.ndarray, points: np.ndarray, tre
     import scipy.sparse
     import scipy.sparse.csgraph
 
-    label, sizes = _face_pieces(faces, len(verts))
+    label, sizes = face_pieces(faces, len(verts))
     order = np.argsort(sizes)[::-1]
     if len(order) < 2 or sizes[order[1]] < SUBSTANTIAL_PIECE * sizes[order[0]]:
         return faces[label == order[0]], 1
@@ -428,7 +428,7 @@ def _object_pieces(faces: np.ndarray, verts: np.ndarray, points: np.ndarray, tre
     return faces[np.isin(label, kept)], len(kept)
 
 
-def _face_pieces(faces: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+def face_pieces(faces: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
     """Each face's (F,) connected piece of the mesh over ``count`` vertices, and the pieces'
     face counts."""
     import scipy.sparse
@@ -444,7 +444,7 @@ def _face_pieces(faces: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]
 
 def _largest_piece(faces: np.ndarray, count: int) -> tuple[np.ndarray, int]:
     """The faces (F, 3) of the largest piece, and how many pieces there were."""
-    label, sizes = _face_pieces(faces, count)
+    label, sizes = face_pieces(faces, count)
     return faces[label == int(np.argmax(sizes))], int((sizes > 0).sum())
 
 

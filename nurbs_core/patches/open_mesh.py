@@ -39,11 +39,11 @@ from nurbs_core.patches.closed_mesh import (
     MAX_HOLE,
     SMOOTHING,
     WRAP_POINTS,
-    _face_pieces,
     _grid,
-    _object_pieces,
     bimodality,
     compacted,
+    face_pieces,
+    object_pieces,
     tangent_plane_distance,
 )
 from nurbs_core.patches.scan_mesh import ScanMesh
@@ -122,7 +122,7 @@ def open_mesh(points: np.ndarray, max_hole: float | None = None) -> ScanMesh:
     face_normal = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
                            vertices[faces[:, 2]] - vertices[faces[:, 0]])
     agree = np.einsum("ij,ij->i", face_normal, normals[tree.query(centroid)[1]])
-    piece, _ = _face_pieces(faces, len(vertices))
+    piece, _ = face_pieces(faces, len(vertices))
     for number in np.unique(piece):  # each object's faces turned like its points' normals
         mine = piece == number
         if (agree[mine] < 0).sum() > (agree[mine] > 0).sum():
@@ -193,7 +193,7 @@ def _zero_set(distance: np.ndarray, band: np.ndarray, mask: np.ndarray, grid: Vo
     """The zero set of the tangent-plane ``distance`` on the grid, blurred by ``blur`` cells
     inside the ``band`` and cut by ``mask``: vertices (V, 3), faces (F, 3) of its largest
     piece over each separate object of the ``points`` (N, 3)
-    (:func:`~nurbs_core.patches.closed_mesh._object_pieces`) without pinched vertices, and how
+    (:func:`~nurbs_core.patches.closed_mesh.object_pieces`) without pinched vertices, and how
     many objects."""
     from skimage.measure import marching_cubes
 
@@ -205,9 +205,9 @@ def _zero_set(distance: np.ndarray, band: np.ndarray, mask: np.ndarray, grid: Vo
         raise NotASurfaceError("the cloud's distance field has no zero set")
     vertices, faces, _, _ = marching_cubes(field, 0.0, spacing=(grid.cell,) * 3, mask=mask)
     vertices = vertices + grid.origin
-    faces, _ = _object_pieces(faces.astype(np.int64), vertices, points, tree, grid.cell)
+    faces, _ = object_pieces(faces.astype(np.int64), vertices, points, tree, grid.cell)
     faces = _without_pinches(faces)
-    faces, pieces = _object_pieces(faces, vertices, points, tree, grid.cell)
+    faces, pieces = object_pieces(faces, vertices, points, tree, grid.cell)
     vertices, faces = compacted(vertices, faces)
     return vertices, faces, pieces
 
@@ -218,7 +218,7 @@ def genus(faces: np.ndarray) -> int:
     from nurbs_core.patches.layout import euler_characteristic
 
     count = int(faces.max()) + 1 if len(faces) else 0
-    pieces = len(np.unique(_face_pieces(faces, count)[0])) if len(faces) else 0
+    pieces = len(np.unique(face_pieces(faces, count)[0])) if len(faces) else 0
     return max(0, (2 * pieces - euler_characteristic(faces.tolist())
                    - len(boundary_loops(faces))) // 2)
 
