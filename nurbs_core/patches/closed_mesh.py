@@ -393,7 +393,7 @@ def _widest_cap(vertices: np.ndarray, faces: np.ndarray, filled: np.ndarray) -> 
 
 
 def object_pieces(faces: np.ndarray, verts: np.ndarray, points: np.ndarray, tree: cKDTree,
-                   cell: float) -> tuple[np.ndarray, int]:
+                  cell: float) -> tuple[np.ndarray, int]:
     """The faces (F, 3) of the zero set's pieces that close separate objects, and how many: the
     largest piece over each separate cluster of the points (points within
     :data:`OBJECT_GAP` cells of each other are one object) that holds at least
