@@ -48,6 +48,8 @@ class LoadedFiles:
     patch_names: list[str] = field(default_factory=list)
     #: file name -> the length unit the file states (None: it states none), in reading order
     stated_units: dict[str, str | None] = field(default_factory=dict)
+    #: what the window reports about the files read (duplicate points merged, ...)
+    notes: list[str] = field(default_factory=list)
 
 
 def open_suffixes() -> tuple[str, ...]:
@@ -126,7 +128,13 @@ def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
             suffix = f" #{index + 1}" if len(result) > 1 else ""
             loaded.patch_names.append(f"{path.name}{suffix}")
     else:
+        from nurbs_core.io.cloud import distinct_points, duplicates_note
+
         points = result.points  # the engine's PointCloud checked it: (N, 3) float64
+        kept = distinct_points(points)
+        if len(kept) < len(points):
+            loaded.notes.append(f"{path.name}: {duplicates_note(len(points) - len(kept), len(points))}.")
+            points = points[kept]
         if len(points) < 4:
             raise ValueError(f"{path}: needs at least 4 points, has {len(points)}")
         loaded.targets.append(Target(path.name, points, str(path)))

@@ -244,7 +244,7 @@ class LoadPolicy(QObject):
             counts.append(f"{len(loaded.patch_names)} NURBS shape(s) from {names(sources)}")
         shown = window.scene.shown_points_text()  # a big cloud is drawn reduced
         self.message = f"Opened {'; '.join(counts)}" + (f" ({shown})" if shown else "")
-        window.report(f"{self.message}. {units_note}")
+        window.report(" ".join(part for part in [f"{self.message}.", *loaded.notes, units_note] if part))
         window.setWindowTitle(f"NURBS Studio - {names([Path(p).name for p in paths])}")
         window.files_loaded.emit(True)
 

@@ -55,7 +55,7 @@ def surface_input(path: str, quiet: bool) -> tuple[np.ndarray, ScanMesh | None, 
 
     arrays = read_mesh_faces(path, suffix_of(path)) if is_mesh_file(path) else None
     if arrays is None:      # a cloud, or a mesh format holding no faces (an OBJ of points)
-        return load_points(path).points, None, ""
+        return distinct_cloud(path, load_points(path).points, quiet), None, ""
     from nurbs_core.patches.closed_mesh import mesh_from_faces
 
     vertices, faces = arrays
@@ -67,6 +67,18 @@ def surface_input(path: str, quiet: bool) -> tuple[np.ndarray, ScanMesh | None, 
     if len(vertices) < FILE_MESH_SAMPLES:
         return sample_mesh_points(path, vertices, faces, FILE_MESH_SAMPLES).points, mesh, why
     return check_points(path, vertices), mesh, why
+
+
+def distinct_cloud(path: str, points: np.ndarray, quiet: bool) -> np.ndarray:
+    """The cloud (N, 3) without its duplicate points
+    (:func:`nurbs_core.io.cloud.distinct_points`), saying how many were merged."""
+    from nurbs_core.io.cloud import distinct_points, duplicates_note
+
+    kept = distinct_points(points)
+    if len(kept) < len(points) and not quiet:
+        print(f"{path}: {duplicates_note(len(points) - len(kept), len(points))}",
+              file=sys.stderr)
+    return points[kept]
 
 
 def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],

@@ -62,6 +62,10 @@ def prepare_fit(job: FitJob, points: np.ndarray | None = None) -> PreparedFit:
     outputs = check_before_work(job)
     if points is None:
         points = load_points(job.input).points
+        if not job.curve and job.grid is None:  # an unordered surface cloud
+            from nurbs_core.jobs.network import distinct_cloud
+
+            points = distinct_cloud(job.input, points, job.quiet)
     flat_z = bool(job.curve and len(points) and np.ptp(points[:, 2]) == 0)
     target = points[:, :2] if flat_z else points
     config = _default_grid_for(job, fit_config(job, target.shape[1]), len(target))

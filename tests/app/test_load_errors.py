@@ -1,8 +1,9 @@
 """The app's loads report the engine's own reasons for a file it cannot open (no second check
-in the app that would say less: a link loop is not "no such file")."""
+in the app that would say less: a link loop is not "no such file"), and what they merged."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from app.loading import load_files
@@ -40,3 +41,15 @@ def test_a_new_error_replaces_the_dialog_offering_patches(window):
     boxes = [w for w in window.findChildren(QMessageBox) if w.isVisible()]
     assert boxes == [window._message_box] and "another problem" in boxes[0].text()
     window._message_box.reject()
+
+
+def test_a_cloud_written_twice_opens_once_and_the_log_says_so(tmp_path):
+    from nurbs_core import samples
+
+    points = samples.saddle(600, seed=2).points
+    source = tmp_path / "twice.xyz"
+    np.savetxt(source, np.vstack([points, points]))
+    loaded = load_files([str(source)])
+    assert len(loaded.targets[0].points) == 600
+    assert np.allclose(loaded.targets[0].points, points)
+    assert loaded.notes and "600 of 1,200 points repeat an earlier one" in loaded.notes[0]

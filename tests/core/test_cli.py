@@ -280,6 +280,30 @@ def test_closed_cloud_becomes_a_network_by_default_and_a_forced_patch_is_not_con
     assert report.startswith("status: fitted with warnings")
 
 
+def test_a_cloud_written_twice_is_fitted_once_and_says_so(tmp_path, capsys):
+    """Every point twice (a file written twice, passes merged point for point): a saddle was
+    one patch 40% flipped and a closed blob no closed mesh (one patch forced, 39% flipped)."""
+    from nurbs_core import samples
+    from nurbs_core.jobs.network import surface_input
+    from nurbs_core.route import choose_route
+
+    sheet = samples.saddle(2000, seed=1).points
+    source, out = tmp_path / "twice.xyz", tmp_path / "twice.json"
+    np.savetxt(source, np.vstack([sheet, sheet]))
+    for extra in ([], ["--single-patch"]):
+        assert main([str(source), "-o", str(out), *extra]) == 0
+        captured = capsys.readouterr()
+        assert "2,000 of 4,000 points repeat an earlier one" in captured.err
+        assert captured.out.startswith("status: converged"), captured.out
+        flipped = float(captured.out.split("flipped area: ")[1].split("%")[0])
+        assert flipped < 1.0
+    blob = samples.blob(1500, seed=3).points
+    np.savetxt(source, np.vstack([blob, blob, blob[:500]]))
+    points, _, _ = surface_input(str(source), quiet=True)
+    assert len(points) == 1500
+    assert choose_route(points).kind == "network"
+
+
 def test_a_tolerance_the_user_set_and_the_fit_misses_is_not_converged(tmp_path, capsys):
     """An automatic tolerance is the fit's own stopping rule; a tolerance the user set is a
     promise: missing it was reported as "converged (tolerance not met)"."""
