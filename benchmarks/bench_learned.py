@@ -2,7 +2,7 @@
 
 Run: ``python benchmarks/bench_learned.py [--patches 24] [--cad 12] [--table 200] [--cad-table 100]
 [--model "supervised 20x20=/tmp/sup/best.pt" ...] [--today default] [--data SPLINES.h5]
-[--starts] [--learned-model PATH]``
+[--starts] [--cost [ITERATIONS]] [--learned-model PATH]``
 
 Held-out data beside the patch generator's test split: ``nurbs_core.samples`` shapes (made by
 other means), and faces of random CAD solids (:mod:`nurbs_core.learn.cad_faces`, its ``test``
@@ -68,10 +68,10 @@ import numpy as np
 import torch
 
 from nurbs_core import samples
-from nurbs_core.fitting import FitConfig, fit, iter_fit, learned_start
+from nurbs_core.fitting import FitConfig, StopToken, fit, iter_fit, learned_start
 from nurbs_core.fitting import statistics as fit_statistics
 from nurbs_core.fitting.problem import least_squares_start, prepare
-from nurbs_core.fitting.sheet import sheet_start
+from nurbs_core.fitting.sheet import core_snapshots, sheet_start
 from nurbs_core.learn.data import PatchGenerator, load_spline_dataset
 from nurbs_core.learn.losses import folded_fraction, laplacian, nearest_squared
 from nurbs_core.learn.normalize import Normalization
@@ -382,6 +382,88 @@ def starts(clouds: list[tuple[str, np.ndarray]], path: str | None) -> None:
               f"{max(areas):.3f} x the cloud's")
 
 
+def cost(clouds: list[tuple[str, np.ndarray]], budget: int, path: str | None) -> None:
+    """Part 6 (``--cost ITERATIONS``): what the learned start buys. Every cloud is fitted with
+    ``init="pca"`` and ``init="learned"``, with the least-squares core alone
+    (``solver="least_squares"``) and with ``budget`` gradient iterations after it
+    (``solver="gradient"``): wall-clock time to the result (one thread, the model loaded
+    beforehand, the two inits one after the other per cloud) and the final RMS (foot points, all
+    points). Then, on the clouds where the learned start is used, the core is run from both
+    parameterisations (the two-core race the engine ran before
+    :func:`~nurbs_core.fitting.learned_start.core_choice`) and its converged RMS says which start
+    the race would have gone on from; printed: how often ``core_choice`` (one solve at the mesh
+    map's parameters against the learned start's) picks that one, how far its pick's core fit is
+    from the race's winner's, and the time of the choice against the second core."""
+    print(f"\n## 6. what the learned start buys on {len(clouds)} held-out clouds (wall clock to "
+          f"the result on one thread; final RMS; learned against pca)")
+    fit(clouds[0][1], FitConfig(init="learned", threads=1, learned_model=path))  # load it
+    for solver in ("least_squares", "gradient"):
+        config = FitConfig(solver=solver, iterations=budget, threads=1, learned_model=path)
+        seconds: dict[str, list[float]] = {"pca": [], "learned": []}
+        rms: dict[str, list[float]] = {"pca": [], "learned": []}
+        used = 0
+        for _, points in clouds:
+            for init in ("pca", "learned"):
+                started = time.perf_counter()
+                result = fit(points, config.replace(init=init))
+                seconds[init].append(time.perf_counter() - started)
+                rms[init].append(result.statistics["rms"])
+                if init == "learned":
+                    used += (result.message or "").startswith("learned start")
+        extra = [1e3 * (a - b) for a, b in zip(seconds["learned"], seconds["pca"], strict=True)]
+        ratio = [(a / b - 1, name) for a, b, (name, _) in
+                 zip(rms["learned"], rms["pca"], clouds, strict=True)]
+        what = ("the least-squares core alone" if solver == "least_squares"
+                else f"the core, then {budget} gradient iterations")
+        print(f"{what}: learned start used on {used}/{len(clouds)}; time to the result: pca "
+              f"median {1e3 * stats_lib.median(seconds['pca']):.0f} ms, learned median "
+              f"{1e3 * stats_lib.median(seconds['learned']):.0f} ms (per cloud: learned - pca "
+              f"median {stats_lib.median(extra):+.0f} ms, least {min(extra):+.0f} ms, most "
+              f"{max(extra):+.0f} ms); final RMS learned / pca - 1: median "
+              f"{100 * stats_lib.median(r for r, _ in ratio):+.2f} %, best "
+              f"{100 * min(ratio)[0]:+.1f} % ({min(ratio)[1]}), worst {100 * max(ratio)[0]:+.1f} "
+              f"% ({max(ratio)[1]}); farther than pca on {sum(r > 0 for r, _ in ratio)}, by "
+              f"more than 1 % on {sum(r > 0.01 for r, _ in ratio)}, closer by more than 1 % on "
+              f"{sum(r < -0.01 for r, _ in ratio)}")
+    race_config = FitConfig(solver="gradient", init="learned", threads=1, learned_model=path)
+    agree, picks, wins, count = 0, 0, 0, 0
+    over, choice_ms, core_ms = [], [], []
+    for name, points in clouds:
+        problem = prepare(points, race_config)
+        start = learned_start.learned_start(problem, race_config)
+        if start.geometry is None:
+            continue
+        started = time.perf_counter()
+        choice = learned_start.core_choice(problem, race_config, start)
+        choice_ms.append(1e3 * (time.perf_counter() - started))
+        core_rms = {}
+        for key, sheet in (("learned", start.core_start()), ("mesh", start.sheet)):
+            result: dict = {}
+            started = time.perf_counter()
+            for _ in core_snapshots(problem.cloud, race_config, sheet, StopToken(), started,
+                                    result):
+                pass
+            if key == "mesh":
+                core_ms.append(1e3 * (time.perf_counter() - started))
+            core_rms[key] = float(np.sqrt(np.mean(result["distances"] ** 2)))
+        race = core_rms["learned"] < core_rms["mesh"]
+        count += 1
+        wins += race
+        picks += choice.learned
+        agree += choice.learned == race
+        picked = core_rms["learned" if choice.learned else "mesh"]
+        over.append((picked / min(core_rms.values()) - 1, name))
+    if count:
+        worst = max(over)
+        print(f"the cheap choice (core_choice) on the {count} clouds with a learned start: the "
+              f"race's winner is the learned core fit on {wins}, the choice picks the learned "
+              f"parameters on {picks} and the race's winner on {agree}/{count}; its pick's core "
+              f"fit is above the race's winner's on {sum(r > 0 for r, _ in over)} (median "
+              f"{100 * stats_lib.median(r for r, _ in over):+.2f} %, worst {100 * worst[0]:+.1f} "
+              f"% ({worst[1]})); the choice takes a median {stats_lib.median(choice_ms):.0f} ms, "
+              f"the second core it saves {stats_lib.median(core_ms):.0f} ms")
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--patches", type=int, default=24)
@@ -395,6 +477,11 @@ def main(argv: list[str] | None = None) -> None:
                         "solve at the plane's and at the learned surface's parameters")
     parser.add_argument("--starts", action="store_true", help="part 5: the start unpinned, "
                         "pinned and from the core's map, and the core from the pinned parameters")
+    parser.add_argument("--cost", type=int, nargs="?", const=200, metavar="ITERATIONS",
+                        help="part 6 with this gradient budget (default 200): time to the result "
+                        "and final RMS of init learned against init pca, and how often the "
+                        "engine's cheap choice of the core's start picks the two-core race's "
+                        "winner")
     parser.add_argument("--data", help="a SplineDataset-format HDF5 file for the table")
     parser.add_argument("--cad", type=int, default=12, help="faces of random CAD solids added to "
                         "parts 2-4's clouds (OpenCASCADE, the cad extra; 0 without it)")
@@ -429,6 +516,8 @@ def main(argv: list[str] | None = None) -> None:
             least_squares_starts(clouds, reference, args.learned_model)
     if args.starts:
         starts(clouds, args.learned_model)
+    if args.cost is not None:
+        cost(clouds, args.cost, args.learned_model)
 
 
 if __name__ == "__main__":

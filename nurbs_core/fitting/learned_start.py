@@ -80,6 +80,9 @@ class LearnedStart:
     #: (N, 2) every point's parameters in [0, 1]^2 from the prediction, pinned to the square
     #: along the cloud's outline (None when the start fell back)
     parameters: np.ndarray | None = None
+    #: the RMS of the start's solve at its foot points (normalised units; None when it fell
+    #: back): what :func:`core_choice` weighs against the mesh map's solve
+    rms: float | None = None
 
     def core_start(self) -> SheetStart:
         """The least-squares core's start with the learned parameters in place of the mesh
@@ -136,12 +139,64 @@ def learned_start(problem: Problem, config: FitConfig) -> LearnedStart:
     assert isinstance(geometry, NurbsSurface), "a surface fit starts from a surface"
     # a start that folds, overlaps itself or leaves the cloud uncovered keeps those flaws through
     # the fit: judge it as every fit is judged, and use only a clean one
-    problems = quality_warnings(surface_quality(geometry.to(dtype=torch.float64),
-                                                problem.points.double().numpy()))
+    quality = surface_quality(geometry.to(dtype=torch.float64), problem.points.double().numpy())
+    problems = quality_warnings(quality)
     if problems:
         return LearnedStart(None, f"the learned start {which} is not a clean sheet: "
                             f"{'; '.join(problems)}" + fallback, sheet)
-    return LearnedStart(geometry, f"learned start {which}", sheet, unit)
+    return LearnedStart(geometry, f"learned start {which}", sheet, unit, quality["rms"])
+
+
+@dataclass(frozen=True)
+class CoreChoice:
+    """Which parameters the least-squares core runs from, decided before it runs
+    (:func:`core_choice`): the learned ones (``learned``) or the cloud's mesh map's, by the RMS
+    (input units, foot points, every point) of one least-squares solve at each (the config's
+    grid and knots, :data:`LEARNED_START_SMOOTHING`)."""
+
+    learned: bool
+    learned_rms: float
+    mesh_rms: float
+    #: the mesh map's solve (normalised coordinates): iteration 0 when the core runs from its map
+    mesh_geometry: NurbsSurface
+
+    @property
+    def message(self) -> str:
+        """The line the run reports: both solves' RMS and where the core runs from."""
+        return (f"its start solve has RMS {self.learned_rms:.4g} against {self.mesh_rms:.4g} at "
+                "the cloud's mesh map's parameters: the least-squares core runs from "
+                + ("the learned parameters" if self.learned
+                   else "the mesh map's, as init 'pca' does"))
+
+
+def core_choice(problem: Problem, config: FitConfig, start: LearnedStart) -> CoreChoice:
+    """Where the least-squares core of a learned start runs from, decided before it runs: one
+    least-squares solve at the mesh map's parameters (every point; the same grid, knots and
+    :data:`LEARNED_START_SMOOTHING` as the learned start's solve), its foot-point RMS against the
+    learned start's (:attr:`LearnedStart.rms`, measured by its quality check). The core runs from
+    the learned parameters when their solve is the closer, else from the mesh map's, and the run
+    is then ``init="pca"``'s, control point for control point. The learned start is clean by
+    construction (a start with quality warnings falls back); the mesh map's solve is not judged
+    for warnings, which would cost more than the core itself (the cloud's mesh and normals: about
+    0.1-0.2 s on 700 points, the core about 0.05-0.2 s).
+
+    This replaced running the core from both and going on from the closer (the two-core race):
+    how often it picks the race's winner, what that costs and what the learned start buys are
+    measured by ``benchmarks/bench_learned.py --cost``."""
+    assert start.sheet is not None and start.rms is not None, "a learned start that did not fall back"
+    sheet = start.sheet
+    points = problem.points.double().numpy()
+    parameters = sheet.parameters
+    if sheet.subset is not None:  # a large cloud: its every point's parameters from the map
+        assert sheet.mesh is not None and sheet.mesh_uv is not None, "a learned start's mesh map"
+        parameters = interpolate_parameters(points, sheet.mesh, sheet.mesh_uv)
+    geometry = least_squares_start(problem, config, _in_domains(parameters, problem.domains),
+                                   LEARNED_START_SMOOTHING)
+    assert isinstance(geometry, NurbsSurface), "a surface fit starts from a surface"
+    _, distances = project(geometry, points)
+    mesh_rms = float(np.sqrt(np.mean(distances ** 2)))
+    return CoreChoice(start.rms < mesh_rms, start.rms * problem.scale, mesh_rms * problem.scale,
+                      geometry)
 
 
 @dataclass
