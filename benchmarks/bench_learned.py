@@ -62,7 +62,7 @@ planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-ta
 
    **Measured** (that command, 36 held-out clouds, the learned start used on 32; one thread on
    the 2-core machine shared with other jobs, so wall clock moves by up to 1.5 x between runs;
-   before = the two-core race at commit 835e388, after = one core at 6a48d83, one session):
+   before = the two-core race at commit 0685961, after = one core at 8d24bf5, one session):
 
    ============================================  =====================  =====================
    learned against pca                           two cores (race)       one core (choice)
