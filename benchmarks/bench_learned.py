@@ -62,20 +62,21 @@ planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-ta
 
    **Measured** (that command, 36 held-out clouds, the learned start used on 32; one thread on
    the 2-core machine shared with other jobs, so wall clock moves by up to 1.5 x between runs;
-   before = the two-core race at commit 0685961, after = one core at 8d24bf5, one session):
+   before = the two-core race at commit 0685961, after = one core at 8d24bf5, one session;
+   the one-core times of two runs, the second after rebasing onto main, the RMS identical):
 
    ============================================  =====================  =====================
    learned against pca                           two cores (race)       one core (choice)
    ============================================  =====================  =====================
-   core alone: time, median per cloud            +417 ms                +200 ms
+   core alone: time, median per cloud            +417 ms                +200 ms, +289 ms
    core alone: final RMS median / best / worst   +0.00 / -6.9 / +0.0 %  +0.00 / -6.9 / +7.1 %
    core alone: closer / farther by > 1 %         11 / 0                 3 / 1
-   200 gradient iterations: time, median         +274 ms                +248 ms
+   200 gradient iterations: time, median         +274 ms                +248 ms, +166 ms
    gradient: final RMS median / best / worst     +0.00 / -5.0 / +1.3 %  +0.00 / -5.0 / +1.7 %
    gradient: closer / farther by > 1 %           7 / 2                  1 / 1
    ============================================  =====================  =====================
 
-   The choice (one solve at the mesh map's parameters, median 22-42 ms, against the second
+   The choice (one solve at the mesh map's parameters, median 21-42 ms, against the second
    core's 91-179 ms) picks the race's winner on 20 of 32 clouds (the race went on from the
    learned core fit on 15, the choice picks the learned parameters on 5); where it misses, its
    core fit is at most 7.1 % above the winner's (a CAD cone face, also the one cloud where the
@@ -83,7 +84,7 @@ planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-ta
    the start solves at smoothing 1e-4 20/32, the core's first pass from each 18/32, its third,
    at three passes each, 21/32). **So the learned start buys nothing**: the same final RMS as
    init "pca" in the median, closer by more than 1 % on a few clouds and farther on one, for
-   about 0.2 s more per 700-point cloud (the prediction, the pinned map, the start's solve and
+   about 0.2-0.3 s more per 700-point cloud (the prediction, the pinned map, the start's solve and
    its quality check). ``init="pca"`` stays the default and the recommendation; the learned
    start stays as an experiment.
 """
