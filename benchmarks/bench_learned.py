@@ -2,7 +2,7 @@
 
 Run: ``python benchmarks/bench_learned.py [--patches 24] [--cad 12] [--table 200] [--cad-table 100]
 [--model "supervised 20x20=/tmp/sup/best.pt" ...] [--today default] [--data SPLINES.h5]
-[--starts] [--learned-model PATH]``
+[--starts] [--cost [ITERATIONS]] [--learned-model PATH]``
 
 Held-out data beside the patch generator's test split: ``nurbs_core.samples`` shapes (made by
 other means), and faces of random CAD solids (:mod:`nurbs_core.learn.cad_faces`, its ``test``
@@ -29,9 +29,9 @@ planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-ta
    made by other means: ``nurbs_core.samples`` saddles, bowls, terrains, leaflets, curled
    sheets), each fitted by the gradient fit (default loss, 12 x 12 control points) from today's
    start (``init="pca"``: the principal plane, ``parameterization="plane"``) and from the
-   learned one (``init="learned"``: the least-squares core from the parameters the prediction
-   gives the points and from the mesh map's, the closer core fit refined by the gradient fit,
-   :mod:`nurbs_core.fitting.learned_start`). The accuracy today's start
+   learned one (``init="learned"``: one least-squares core, from the parameters the prediction
+   gives the points or from the mesh map's, whichever start solve is the closer, refined by the
+   gradient fit, :mod:`nurbs_core.fitting.learned_start`). The accuracy today's start
    reaches after 100 iterations (RMS point-to-surface distance at foot points) is the target;
    printed: the iteration at which the learned start first reaches it (median and worst, and as
    a fraction of 100), and the final RMS of both after ``--iterations``. A learned start that
@@ -53,6 +53,40 @@ planes, cylinders, spheres, tori, lofts, revolutions...), in parts 1 (``--cad-ta
    from, unpinned, pinned (:func:`nurbs_core.fitting.learned_start.pinned_parameters`) with two
    smoothings, and from the least-squares core's mesh map; then the core from the pinned
    parameters against ``nurbs-fit``'s default fit (see :func:`starts`).
+6. **What the learned start buys** (``--cost [ITERATIONS]``; ``--table 0 --cad-table 0
+   --iterations 0 --cost`` runs it alone, about 6 minutes): time to the result and final RMS
+   of ``init="learned"`` against ``init="pca"``, the core alone and with 200 gradient
+   iterations, and how often the engine's choice of the core's start
+   (:func:`nurbs_core.fitting.learned_start.core_choice`) picks the start the two-core race it
+   replaced would have gone on from (see :func:`cost`).
+
+   **Measured** (that command, 36 held-out clouds, the learned start used on 32; one thread on
+   the 2-core machine shared with other jobs, so wall clock moves by up to 1.5 x between runs;
+   before = the two-core race at commit 0685961, after = one core at 8d24bf5, one session;
+   the one-core times of two runs, the second after rebasing onto main, the RMS identical):
+
+   ============================================  =====================  =====================
+   learned against pca                           two cores (race)       one core (choice)
+   ============================================  =====================  =====================
+   core alone: time, median per cloud            +417 ms                +200 ms, +289 ms
+   core alone: final RMS median / best / worst   +0.00 / -6.9 / +0.0 %  +0.00 / -6.9 / +7.1 %
+   core alone: closer / farther by > 1 %         11 / 0                 3 / 1
+   200 gradient iterations: time, median         +274 ms                +248 ms, +166 ms
+   gradient: final RMS median / best / worst     +0.00 / -5.0 / +1.3 %  +0.00 / -5.0 / +1.7 %
+   gradient: closer / farther by > 1 %           7 / 2                  1 / 1
+   ============================================  =====================  =====================
+
+   The choice (one solve at the mesh map's parameters, median 21-42 ms, against the second
+   core's 91-179 ms) picks the race's winner on 20 of 32 clouds (the race went on from the
+   learned core fit on 15, the choice picks the learned parameters on 5); where it misses, its
+   core fit is at most 7.1 % above the winner's (a CAD cone face, also the one cloud where the
+   learned fit now ends above init "pca"'s). No cheap measure did better (a throwaway probe:
+   the start solves at smoothing 1e-4 20/32, the core's first pass from each 18/32, its third,
+   at three passes each, 21/32). **So the learned start buys nothing**: the same final RMS as
+   init "pca" in the median, closer by more than 1 % on a few clouds and farther on one, for
+   about 0.2-0.3 s more per 700-point cloud (the prediction, the pinned map, the start's solve and
+   its quality check). ``init="pca"`` stays the default and the recommendation; the learned
+   start stays as an experiment.
 """
 
 from __future__ import annotations
@@ -68,10 +102,10 @@ import numpy as np
 import torch
 
 from nurbs_core import samples
-from nurbs_core.fitting import FitConfig, fit, iter_fit, learned_start
+from nurbs_core.fitting import FitConfig, StopToken, fit, iter_fit, learned_start
 from nurbs_core.fitting import statistics as fit_statistics
 from nurbs_core.fitting.problem import least_squares_start, prepare
-from nurbs_core.fitting.sheet import sheet_start
+from nurbs_core.fitting.sheet import core_snapshots, sheet_start
 from nurbs_core.learn.data import PatchGenerator, load_spline_dataset
 from nurbs_core.learn.losses import folded_fraction, laplacian, nearest_squared
 from nurbs_core.learn.normalize import Normalization
@@ -255,10 +289,10 @@ def iterations(clouds: list[tuple[str, np.ndarray]], budget: int, path: str | No
                          + (", ours folds" if _folds(finals[-1]) else "") + ")")
     used = [m.startswith("learned start") for m in messages]
     fallbacks = sorted({_reason(m) for m in messages if not m.startswith("learned start")})
-    won = sum("core fit has RMS" in q["message"] and "going on from the mesh map's"
-              not in q["message"] for q in finals)
-    print(f"learned start used on {sum(used)}/{len(used)} clouds (its core fit the closer "
-          f"on {won}, refined from it); fell back on the others "
+    won = sum("the least-squares core runs from the learned parameters" in q["message"]
+              for q in finals)
+    print(f"learned start used on {sum(used)}/{len(used)} clouds (its core run from the learned "
+          f"parameters on {won}, from the mesh map's on the rest); fell back on the others "
           f"({'; '.join(fallbacks) or '-'})")
     median = stats_lib.median(reached)
     print(f"learned start: iterations to reach the target: median {median:g} "
@@ -382,6 +416,88 @@ def starts(clouds: list[tuple[str, np.ndarray]], path: str | None) -> None:
               f"{max(areas):.3f} x the cloud's")
 
 
+def cost(clouds: list[tuple[str, np.ndarray]], budget: int, path: str | None) -> None:
+    """Part 6 (``--cost ITERATIONS``): what the learned start buys. Every cloud is fitted with
+    ``init="pca"`` and ``init="learned"``, with the least-squares core alone
+    (``solver="least_squares"``) and with ``budget`` gradient iterations after it
+    (``solver="gradient"``): wall-clock time to the result (one thread, the model loaded
+    beforehand, the two inits one after the other per cloud) and the final RMS (foot points, all
+    points). Then, on the clouds where the learned start is used, the core is run from both
+    parameterisations (the two-core race the engine ran before
+    :func:`~nurbs_core.fitting.learned_start.core_choice`) and its converged RMS says which start
+    the race would have gone on from; printed: how often ``core_choice`` (one solve at the mesh
+    map's parameters against the learned start's) picks that one, how far its pick's core fit is
+    from the race's winner's, and the time of the choice against the second core."""
+    print(f"\n## 6. what the learned start buys on {len(clouds)} held-out clouds (wall clock to "
+          f"the result on one thread; final RMS; learned against pca)")
+    fit(clouds[0][1], FitConfig(init="learned", threads=1, learned_model=path))  # load it
+    for solver in ("least_squares", "gradient"):
+        config = FitConfig(solver=solver, iterations=budget, threads=1, learned_model=path)
+        seconds: dict[str, list[float]] = {"pca": [], "learned": []}
+        rms: dict[str, list[float]] = {"pca": [], "learned": []}
+        used = 0
+        for _, points in clouds:
+            for init in ("pca", "learned"):
+                started = time.perf_counter()
+                result = fit(points, config.replace(init=init))
+                seconds[init].append(time.perf_counter() - started)
+                rms[init].append(result.statistics["rms"])
+                if init == "learned":
+                    used += (result.message or "").startswith("learned start")
+        extra = [1e3 * (a - b) for a, b in zip(seconds["learned"], seconds["pca"], strict=True)]
+        ratio = [(a / b - 1, name) for a, b, (name, _) in
+                 zip(rms["learned"], rms["pca"], clouds, strict=True)]
+        what = ("the least-squares core alone" if solver == "least_squares"
+                else f"the core, then {budget} gradient iterations")
+        print(f"{what}: learned start used on {used}/{len(clouds)}; time to the result: pca "
+              f"median {1e3 * stats_lib.median(seconds['pca']):.0f} ms, learned median "
+              f"{1e3 * stats_lib.median(seconds['learned']):.0f} ms (per cloud: learned - pca "
+              f"median {stats_lib.median(extra):+.0f} ms, least {min(extra):+.0f} ms, most "
+              f"{max(extra):+.0f} ms); final RMS learned / pca - 1: median "
+              f"{100 * stats_lib.median(r for r, _ in ratio):+.2f} %, best "
+              f"{100 * min(ratio)[0]:+.1f} % ({min(ratio)[1]}), worst {100 * max(ratio)[0]:+.1f} "
+              f"% ({max(ratio)[1]}); farther than pca on {sum(r > 0 for r, _ in ratio)}, by "
+              f"more than 1 % on {sum(r > 0.01 for r, _ in ratio)}, closer by more than 1 % on "
+              f"{sum(r < -0.01 for r, _ in ratio)}")
+    race_config = FitConfig(solver="gradient", init="learned", threads=1, learned_model=path)
+    agree, picks, wins, count = 0, 0, 0, 0
+    over, choice_ms, core_ms = [], [], []
+    for name, points in clouds:
+        problem = prepare(points, race_config)
+        start = learned_start.learned_start(problem, race_config)
+        if start.geometry is None:
+            continue
+        started = time.perf_counter()
+        choice = learned_start.core_choice(problem, race_config, start)
+        choice_ms.append(1e3 * (time.perf_counter() - started))
+        core_rms = {}
+        for key, sheet in (("learned", start.core_start()), ("mesh", start.sheet)):
+            result: dict = {}
+            started = time.perf_counter()
+            for _ in core_snapshots(problem.cloud, race_config, sheet, StopToken(), started,
+                                    result):
+                pass
+            if key == "mesh":
+                core_ms.append(1e3 * (time.perf_counter() - started))
+            core_rms[key] = float(np.sqrt(np.mean(result["distances"] ** 2)))
+        race = core_rms["learned"] < core_rms["mesh"]
+        count += 1
+        wins += race
+        picks += choice.learned
+        agree += choice.learned == race
+        picked = core_rms["learned" if choice.learned else "mesh"]
+        over.append((picked / min(core_rms.values()) - 1, name))
+    if count:
+        worst = max(over)
+        print(f"the cheap choice (core_choice) on the {count} clouds with a learned start: the "
+              f"race's winner is the learned core fit on {wins}, the choice picks the learned "
+              f"parameters on {picks} and the race's winner on {agree}/{count}; its pick's core "
+              f"fit is above the race's winner's on {sum(r > 0 for r, _ in over)} (median "
+              f"{100 * stats_lib.median(r for r, _ in over):+.2f} %, worst {100 * worst[0]:+.1f} "
+              f"% ({worst[1]})); the choice takes a median {stats_lib.median(choice_ms):.0f} ms, "
+              f"the second core it saves {stats_lib.median(core_ms):.0f} ms")
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--patches", type=int, default=24)
@@ -395,6 +511,11 @@ def main(argv: list[str] | None = None) -> None:
                         "solve at the plane's and at the learned surface's parameters")
     parser.add_argument("--starts", action="store_true", help="part 5: the start unpinned, "
                         "pinned and from the core's map, and the core from the pinned parameters")
+    parser.add_argument("--cost", type=int, nargs="?", const=200, metavar="ITERATIONS",
+                        help="part 6 with this gradient budget (default 200): time to the result "
+                        "and final RMS of init learned against init pca, and how often the "
+                        "engine's cheap choice of the core's start picks the two-core race's "
+                        "winner")
     parser.add_argument("--data", help="a SplineDataset-format HDF5 file for the table")
     parser.add_argument("--cad", type=int, default=12, help="faces of random CAD solids added to "
                         "parts 2-4's clouds (OpenCASCADE, the cad extra; 0 without it)")
@@ -429,6 +550,8 @@ def main(argv: list[str] | None = None) -> None:
             least_squares_starts(clouds, reference, args.learned_model)
     if args.starts:
         starts(clouds, args.learned_model)
+    if args.cost is not None:
+        cost(clouds, args.cost, args.learned_model)
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ from nurbs_core.fitting.config import FitConfig, FitSnapshot, StopToken
 from nurbs_core.fitting.evaluation import Evaluation, cloud_tree, draw_batch, uses_parameters
 from nurbs_core.fitting.exact import exact_geometry, exact_problem, exact_snapshot, uses_exact
 from nurbs_core.fitting.guard import DivergenceGuard
-from nurbs_core.fitting.learned_start import CoreRace, LearnedStart, core_race, learned_start
+from nurbs_core.fitting.learned_start import LearnedStart, core_choice, learned_start
 from nurbs_core.fitting.model import TrainableGeometry
 from nurbs_core.fitting.plan import core_answers, resolved_solver, uses_core
 from nurbs_core.fitting.problem import Problem, initial_geometry, prepare, start_parameters
@@ -103,9 +103,10 @@ def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopTo
     return _noted(_gradient_run(problem, config, geometry, loss, stop, initial is not None), note)
 
 
-def _noted(snapshots: Iterator[FitSnapshot], note: str | None) -> Iterator[FitSnapshot]:
-    """``snapshots`` with ``note`` put before the message of the first one and the final one."""
-    first = True
+def _noted(snapshots: Iterator[FitSnapshot], note: str | None,
+           first: bool = True) -> Iterator[FitSnapshot]:
+    """``snapshots`` with ``note`` put before the message of the first one (unless ``first`` is
+    False: a snapshot before them said it) and the final one."""
     for snapshot in snapshots:
         if note is not None and (first or snapshot.done):
             snapshot = dataclasses.replace(
@@ -139,48 +140,40 @@ def _gradient_run(problem: Problem, config: FitConfig, geometry: Geometry,
 def _learned_sheet_run(problem: Problem, config: FitConfig, learned: LearnedStart,
                        loss: _losses.CompositeLoss, stop: StopToken,
                        started: float) -> Iterator[FitSnapshot]:
-    """A learned start's fit of an unordered cloud: the start as iteration 0, the least-squares
-    core from its parameters and from the mesh map's (:func:`core_race`), then the run of
-    :func:`_sheet_run` from the closer core fit (the gradient fit goes on from either as it does
-    from the mesh map's: when the mesh map's wins, the run is ``init="pca"``'s)."""
+    """A learned start's fit of an unordered cloud: where the least-squares core runs from is
+    decided first (:func:`~nurbs_core.fitting.learned_start.core_choice`: the learned
+    parameters or the mesh map's, by one solve at each), the chosen start's solve is iteration
+    0, then the run of :func:`_sheet_run` from those parameters: one core, then the gradient fit
+    as after any core fit (from the mesh map's, the run is ``init="pca"``'s)."""
     assert learned.geometry is not None and learned.sheet is not None, "a learned start"
-    yield FitSnapshot(iteration=0, geometry=core_geometry_numpy(learned.geometry.numpy(), problem.cloud),
+    try:
+        with torch_threads(config.threads):
+            choice = core_choice(problem, config, learned)
+    except Exception as exc:  # report to the app as a failed run instead of killing its thread
+        yield failed_snapshot(exc, started)
+        return
+    note = f"{learned.message}; {choice.message}"
+    shown = learned.geometry if choice.learned else choice.mesh_geometry
+    yield FitSnapshot(iteration=0, geometry=core_geometry_numpy(shown.numpy(), problem.cloud),
                       losses=[], elapsed=time.perf_counter() - started, done=False,
-                      status="running", message=learned.message)
-    race = CoreRace()
-    with torch_threads(config.threads):
-        try:
-            yield from core_race(problem, config, learned, stop, started, race)
-        except Exception as exc:  # report to the app as a failed run instead of killing its thread
-            yield failed_snapshot(exc, started)
-            return
-    winner = race.result
-    if winner["status"] != "stopped":  # the race's outcome: the core fit the run goes on from
-        yield FitSnapshot(iteration=winner["iteration"],
-                          geometry=core_geometry_numpy(winner["geometry"], problem.cloud),
-                          losses=[], elapsed=time.perf_counter() - started, done=False,
-                          status="running", message=race.message, stage="least_squares")
-    # both cores fitted the same points over the same mesh: its quality measures serve either
-    yield from _noted(_sheet_run(problem, config, learned.sheet, loss, stop, started,
-                                 core=winner), f"{learned.message}; {race.message}")
+                      status="running", message=note)
+    start = learned.core_start() if choice.learned else learned.sheet
+    yield from _noted(_sheet_run(problem, config, start, loss, stop, started), note, first=False)
 
 
 def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _losses.CompositeLoss,
-               stop: StopToken, started: float, core: dict | None = None) -> Iterator[FitSnapshot]:
+               stop: StopToken, started: float) -> Iterator[FitSnapshot]:
     """The least-squares core's passes, then (when the config asks for more than least squares)
-    the gradient fit from its result; the final snapshot carries the statistics. ``core``: the
-    result of core passes already run over ``start``'s mesh (see
-    :func:`~nurbs_core.fitting.sheet.core_snapshots`): the run goes on from it. The core alone is
-    :func:`~nurbs_core.fitting.sheet_run.sheet_run` (numpy)."""
+    the gradient fit from its result; the final snapshot carries the statistics. The core alone
+    is :func:`~nurbs_core.fitting.sheet_run.sheet_run` (numpy)."""
     cloud = problem.cloud
     if resolved_solver(config) != "gradient":
-        yield from sheet_run(cloud, config, start, stop, started, core)
+        yield from sheet_run(cloud, config, start, stop, started)
         return
     with torch_threads(config.threads):
-        result: dict = {} if core is None else core
+        result: dict = {}
         try:
-            if core is None:
-                yield from core_snapshots(cloud, config, start, stop, started, result)
+            yield from core_snapshots(cloud, config, start, stop, started, result)
         except Exception as exc:  # report to the app as a failed run instead of killing its thread
             yield failed_snapshot(exc, started)
             return

@@ -6,20 +6,25 @@ and a plane does not is the patch's parameterisation: where each point lies on t
 a patch that bends far out of any plane. The start takes that from it: the foot points of the
 cloud's mesh vertices on the predicted surface, pinned to the square along the cloud's outline
 (:func:`pinned_parameters`), give each point its parameters, and one least-squares solve at
-those parameters (the config's degrees and counts) is the picture of iteration 0. The fit then
-goes the way of every unordered cloud, with the learned parameters in place of the mesh map's:
-the least-squares core's passes, then (solver "gradient") the gradient fit from the core's
-result. :func:`core_race` runs the core from both parameterisations and goes on from the closer
-core fit, so that a learned start never leaves the user with a farther core fit than
-``init="pca"``'s; the gradient fit goes on from the winner as from any core fit (when the mesh
-map's wins, the run is ``init="pca"``'s, control point for control point).
+those parameters (the config's degrees and counts) is the start's picture. The fit then goes
+the way of every unordered cloud, with one least-squares core: :func:`core_choice` decides
+before it runs whether it runs from the learned parameters or from the mesh map's (one solve at
+the mesh map's parameters against the learned start's, by RMS; the chosen solve is iteration 0),
+then the core's passes and (solver "gradient") the gradient fit from the core's result; from
+the mesh map's parameters the run is ``init="pca"``'s, control point for control point.
+
+What the choice gives up, measured (``bench_learned.py --table 0 --cad-table 0 --iterations 0
+--cost``, 36 held-out clouds, the learned start used on 32): the two-core race it replaced
+went on from the learned core fit on 15 of 32, the choice picks the learned parameters on 5 and
+the race's winner on 20; a learned core fit can now end farther than ``init="pca"``'s (the
+race's guarantee is gone), see docs/fitting.md for the figures before and after.
 
 Measured and dropped: refining a learned core fit at a tenth of the learning rate after a
 5-iteration warm-up (what the gradient fit from the learned least-squares solve needed before
 the core ran from its parameters). ``bench_learned.py --table 0 --cad-table 0 --today default``
 at commit 08c7896 (that schedule) left one of 36 held-out clouds 1.4 % above today's final RMS;
-now (today's schedule) none ends above it by more than 1 %, with the same median of 6
-iterations to today's RMS after 100.
+today's schedule (then still with the two-core race) none above it by more than 1 %, with the
+same median of 6 iterations to today's RMS after 100.
 
 The model is trained on open patches only. The start falls back to the configuration's usual
 path (the cloud's principal plane, or the least-squares core of an unordered cloud), with the
@@ -36,18 +41,17 @@ from __future__ import annotations
 import dataclasses
 import functools
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import torch
 
 from nurbs_core.evaluate import surface_derivatives
-from nurbs_core.fitting.config import FitConfig, FitSnapshot, StopToken
+from nurbs_core.fitting.config import FitConfig
 from nurbs_core.fitting.problem import Problem, least_squares_start
 from nurbs_core.fitting.projection import project
-from nurbs_core.fitting.sheet import SheetStart, core_snapshots, sheet_start
+from nurbs_core.fitting.sheet import SheetStart, sheet_start
 from nurbs_core.geometry import NurbsSurface
 from nurbs_core.quality import quality_warnings, surface_quality
 from nurbs_core.surfacing.parameterize import interpolate_parameters
@@ -80,6 +84,9 @@ class LearnedStart:
     #: (N, 2) every point's parameters in [0, 1]^2 from the prediction, pinned to the square
     #: along the cloud's outline (None when the start fell back)
     parameters: np.ndarray | None = None
+    #: the RMS of the start's solve at its foot points (normalised units; None when it fell
+    #: back): what :func:`core_choice` weighs against the mesh map's solve
+    rms: float | None = None
 
     def core_start(self) -> SheetStart:
         """The least-squares core's start with the learned parameters in place of the mesh
@@ -136,59 +143,64 @@ def learned_start(problem: Problem, config: FitConfig) -> LearnedStart:
     assert isinstance(geometry, NurbsSurface), "a surface fit starts from a surface"
     # a start that folds, overlaps itself or leaves the cloud uncovered keeps those flaws through
     # the fit: judge it as every fit is judged, and use only a clean one
-    problems = quality_warnings(surface_quality(geometry.to(dtype=torch.float64),
-                                                problem.points.double().numpy()))
+    quality = surface_quality(geometry.to(dtype=torch.float64), problem.points.double().numpy())
+    problems = quality_warnings(quality)
     if problems:
         return LearnedStart(None, f"the learned start {which} is not a clean sheet: "
                             f"{'; '.join(problems)}" + fallback, sheet)
-    return LearnedStart(geometry, f"learned start {which}", sheet, unit)
+    return LearnedStart(geometry, f"learned start {which}", sheet, unit, quality["rms"])
 
 
-@dataclass
-class CoreRace:
-    """What :func:`core_race` found: whether the learned core fit won, the winner's core result
-    (:func:`~nurbs_core.fitting.sheet.core_snapshots`'s, its "iteration" the passes of both
-    cores) and the line the run reports."""
+@dataclass(frozen=True)
+class CoreChoice:
+    """Which parameters the least-squares core runs from, decided before it runs
+    (:func:`core_choice`): the learned ones (``learned``) or the cloud's mesh map's, by the RMS
+    (input units, foot points, every point) of one least-squares solve at each (the config's
+    grid and knots, :data:`LEARNED_START_SMOOTHING`)."""
 
-    learned_won: bool = False
-    result: dict[str, Any] = dataclasses.field(default_factory=dict)
-    message: str = ""
+    learned: bool
+    learned_rms: float
+    mesh_rms: float
+    #: the mesh map's solve (normalised coordinates): iteration 0 when the core runs from its map
+    mesh_geometry: NurbsSurface
+
+    @property
+    def message(self) -> str:
+        """The line the run reports: both solves' RMS and where the core runs from."""
+        return (f"its start solve has RMS {self.learned_rms:.4g} against {self.mesh_rms:.4g} at "
+                "the cloud's mesh map's parameters: the least-squares core runs from "
+                + ("the learned parameters" if self.learned
+                   else "the mesh map's, as init 'pca' does"))
 
 
-def core_race(problem: Problem, config: FitConfig, start: LearnedStart, stop: StopToken,
-              started: float, race: CoreRace) -> Iterator[FitSnapshot]:
-    """The least-squares core (:func:`~nurbs_core.fitting.sheet.core_snapshots`) from the learned
-    parameters (its passes yielded live, numbered from 1), then from the mesh map's (today's
-    start: only its pauses are yielded; its passes count on). Fills ``race``: the learned core
-    fit wins when its RMS over all points is below the mesh map's; the message gives both in
-    the points' units. A stop during either core keeps the learned fit (the one complete, or the
-    one shown).
+def core_choice(problem: Problem, config: FitConfig, start: LearnedStart) -> CoreChoice:
+    """Where the least-squares core of a learned start runs from, decided before it runs: one
+    least-squares solve at the mesh map's parameters (every point; the same grid, knots and
+    :data:`LEARNED_START_SMOOTHING` as the learned start's solve), its foot-point RMS against the
+    learned start's (:attr:`LearnedStart.rms`, measured by its quality check). The core runs from
+    the learned parameters when their solve is the closer, else from the mesh map's, and the run
+    is then ``init="pca"``'s, control point for control point. The learned start is clean by
+    construction (a start with quality warnings falls back); the mesh map's solve is not judged
+    for warnings, which would cost more than the core itself (the cloud's mesh and normals: about
+    0.1-0.2 s on 700 points, the core about 0.05-0.2 s).
 
-    Why both: the prediction's parameters are better on most held-out clouds (the core then fits
-    closer, and the gradient fit gets there in few iterations), but not on all of them, and
-    a learned start must never leave the user worse off than today's: where the mesh map's core
-    fit is at least as close, the fit goes on from it exactly as ``init="pca"`` would."""
-    assert start.sheet is not None, "a learned start that did not fall back"
-    learned: dict[str, Any] = {}
-    yield from core_snapshots(problem.cloud, config, start.core_start(), stop, started, learned)
-    today: dict[str, Any] = {}
-    if learned["status"] != "stopped":
-        for snapshot in core_snapshots(problem.cloud, config, start.sheet, stop, started, today):
-            if snapshot.status == "paused":
-                yield dataclasses.replace(snapshot, iteration=learned["iteration"])
-    if not today or today["status"] == "stopped":
-        race.learned_won, race.result = True, learned
-        learned["iteration"] += today.get("iteration", 0)
-        race.message = "stopped before its core fit was compared with the mesh map's"
-        return
-    mine, theirs = (float(np.sqrt(np.mean(r["distances"] ** 2))) * problem.scale
-                    for r in (learned, today))
-    race.learned_won = mine < theirs
-    race.result = learned if race.learned_won else today
-    race.result["iteration"] = learned["iteration"] + today["iteration"]
-    race.message = f"its core fit has RMS {mine:.4g} against {theirs:.4g} from the cloud's mesh map"
-    if not race.learned_won:
-        race.message += ": going on from the mesh map's, as init 'pca' does"
+    This replaced running the core from both and going on from the closer (the two-core race):
+    how often it picks the race's winner, what that costs and what the learned start buys are
+    measured by ``benchmarks/bench_learned.py --cost``."""
+    assert start.sheet is not None and start.rms is not None, "a learned start that did not fall back"
+    sheet = start.sheet
+    points = problem.points.double().numpy()
+    parameters = sheet.parameters
+    if sheet.subset is not None:  # a large cloud: its every point's parameters from the map
+        assert sheet.mesh is not None and sheet.mesh_uv is not None, "a learned start's mesh map"
+        parameters = interpolate_parameters(points, sheet.mesh, sheet.mesh_uv)
+    geometry = least_squares_start(problem, config, _in_domains(parameters, problem.domains),
+                                   LEARNED_START_SMOOTHING)
+    assert isinstance(geometry, NurbsSurface), "a surface fit starts from a surface"
+    _, distances = project(geometry, points)
+    mesh_rms = float(np.sqrt(np.mean(distances ** 2)))
+    return CoreChoice(start.rms < mesh_rms, start.rms * problem.scale, mesh_rms * problem.scale,
+                      geometry)
 
 
 def pinned_parameters(problem: Problem, sheet: SheetStart, prediction: NurbsSurface) -> np.ndarray:

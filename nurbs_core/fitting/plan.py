@@ -90,8 +90,10 @@ class FitPlan:
 
     stages: ("least_squares",) the core alone; ("least_squares", "gradient") the core, then the
     gradient fit from its result; ("gradient",) the gradient fit alone; ("exact",) the exact
-    least-squares solve at known parameters. why: the :data:`REASONS` entry that brings in the
-    gradient fit (None when it does not run)."""
+    least-squares solve at known parameters. "least_squares" is one run of the core, with
+    ``init="learned"`` too (from the learned parameters or the mesh map's, chosen before it
+    runs: :func:`~nurbs_core.fitting.learned_start.core_choice`). why: the :data:`REASONS` entry
+    that brings in the gradient fit (None when it does not run)."""
 
     stages: tuple[str, ...]
     why: str | None = None

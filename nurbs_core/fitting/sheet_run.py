@@ -41,18 +41,16 @@ def iter_sheet_fit(target: ArrayLike, config: FitConfig,
 
 
 def sheet_run(cloud: NormalisedCloud, config: FitConfig, start: SheetStart, stop: StopToken,
-              started: float, core: dict | None = None) -> Iterator[FitSnapshot]:
-    """The core's passes over ``start`` (unless ``core``, the result of passes already run over
-    its mesh, is given: the run goes on from it), then (unless stopped) stiffer refits while the
-    fit folds; the done snapshot carries the statistics. A pass that raises ends the run with a
+              started: float) -> Iterator[FitSnapshot]:
+    """The core's passes over ``start``, then (unless stopped) stiffer refits while the fit
+    folds; the done snapshot carries the statistics. A pass that raises ends the run with a
     "failed" done snapshot (the app shows it instead of losing its worker thread)."""
-    result: dict = {} if core is None else core
-    if core is None:
-        try:
-            yield from core_snapshots(cloud, config, start, stop, started, result)
-        except Exception as exc:  # report to the app as a failed run instead of killing its thread
-            yield failed_snapshot(exc, started)
-            return
+    result: dict = {}
+    try:
+        yield from core_snapshots(cloud, config, start, stop, started, result)
+    except Exception as exc:  # report to the app as a failed run instead of killing its thread
+        yield failed_snapshot(exc, started)
+        return
     final = core_final(cloud, start, result, started)
     if result["status"] != "stopped":
         final = yield from unfolded(cloud, config, start, stop, started, final)
