@@ -37,11 +37,16 @@ from nurbs_core.fitting.schedule import LearningRateSchedule
 from nurbs_core.fitting.sheet import (
     SheetStart,
     core_geometry_numpy,
-    core_snapshots,
     sheet_start,
     surface_statistics,
 )
-from nurbs_core.fitting.sheet_run import core_final, failed_snapshot, sheet_run, with_warnings
+from nurbs_core.fitting.sheet_run import (
+    core_final,
+    core_passes,
+    failed_snapshot,
+    sheet_run,
+    with_warnings,
+)
 from nurbs_core.geometry import NurbsCurve, NurbsSurface, geometry_from_numpy
 from nurbs_core.geometry_arrays import CurveArrays, GeometryArrays, SurfaceArrays
 from nurbs_core.quality import quality_problems
@@ -171,11 +176,8 @@ def _sheet_run(problem: Problem, config: FitConfig, start: SheetStart, loss: _lo
         yield from sheet_run(cloud, config, start, stop, started)
         return
     with torch_threads(config.threads):
-        result: dict = {}
-        try:
-            yield from core_snapshots(cloud, config, start, stop, started, result)
-        except Exception as exc:  # report to the app as a failed run instead of killing its thread
-            yield failed_snapshot(exc, started)
+        result = yield from core_passes(cloud, config, start, stop, started)
+        if result is None:
             return
         if result["status"] == "stopped":
             yield core_final(cloud, start, result, started)

@@ -45,16 +45,27 @@ def sheet_run(cloud: NormalisedCloud, config: FitConfig, start: SheetStart, stop
     """The core's passes over ``start``, then (unless stopped) stiffer refits while the fit
     folds; the done snapshot carries the statistics. A pass that raises ends the run with a
     "failed" done snapshot (the app shows it instead of losing its worker thread)."""
-    result: dict = {}
-    try:
-        yield from core_snapshots(cloud, config, start, stop, started, result)
-    except Exception as exc:  # report to the app as a failed run instead of killing its thread
-        yield failed_snapshot(exc, started)
+    result = yield from core_passes(cloud, config, start, stop, started)
+    if result is None:
         return
     final = core_final(cloud, start, result, started)
     if result["status"] != "stopped":
         final = yield from unfolded(cloud, config, start, stop, started, final)
     yield final
+
+
+def core_passes(cloud: NormalisedCloud, config: FitConfig, start: SheetStart, stop: StopToken,
+                started: float) -> Generator[FitSnapshot, None, dict | None]:
+    """The core's passes over ``start`` (their snapshots yielded); returns their result (see
+    :func:`~nurbs_core.fitting.sheet.core_snapshots`), or None after yielding a "failed" done
+    snapshot when a pass raised (the app shows it instead of losing its worker thread)."""
+    result: dict = {}
+    try:
+        yield from core_snapshots(cloud, config, start, stop, started, result)
+    except Exception as exc:  # report to the app as a failed run instead of killing its thread
+        yield failed_snapshot(exc, started)
+        return None
+    return result
 
 
 def failed_snapshot(exc: Exception, started: float) -> FitSnapshot:
