@@ -1,6 +1,6 @@
 """The part route off the GUI thread: the route decided by :func:`nurbs_core.route.choose_route`
 (the CLI's one place that decides it), then the solid with analytic faces
-(:func:`nurbs_core.brep.part.fit_part`), its report and its triangles for the viewport.
+(:func:`nurbs_core.brep.objects.fit_parts`), its report and its triangles for the viewport.
 
 :func:`run_part_route` is a plain function (no Qt, no VTK): the window runs it in an abandonable
 job (:meth:`app.workers.jobs.JobRunner.submit_detached`). The engine's solid builder has no stop
@@ -98,7 +98,7 @@ def run_part_route(points: np.ndarray, part: bool | None, max_hole: float | None
     forced) the solid fails its quality checks (``nurbs-fit``'s rule: the automatic route
     promises a clean result). ValueError when a forced part route cannot run (an open cloud,
     no OpenCASCADE); PartCancelled when ``cancel`` was set."""
-    from nurbs_core.brep.part import fit_part
+    from nurbs_core.brep.objects import fit_parts
     from nurbs_core.brep.solid import SolidError
     from nurbs_core.jobs.local_frame import shifted, to_local
     from nurbs_core.route import choose_route, without_solid
@@ -115,8 +115,8 @@ def run_part_route(points: np.ndarray, part: bool | None, max_hole: float | None
     assert route.mesh is not None
     started = time.perf_counter()
     try:
-        result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
-                          route.freeform, border=route.mesh.border or None)
+        result = fit_parts(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
+                           route.freeform, border=route.mesh.border or None)
         if result.problems and not part:
             raise SolidError("the solid fails its checks: "
                              + "; ".join(result.problems.values()))
@@ -153,6 +153,9 @@ def run_face_edit(outcome: PartOutcome, points: np.ndarray, edit: dict[str, Any]
     source = outcome.source
     if source is None:
         source = _source_again(np.asarray(points, np.float64), outcome, cancel)
+    if source.regions is None:
+        raise ValueError("face edits work on the solid of one object; this scan holds several "
+                         "(one solid each)")
     _check(cancel)
     regions = apply_edit(source.regions, source.points, FaceEdit.from_dict(edit))
     _check(cancel)
@@ -188,6 +191,9 @@ def _source_again(points: np.ndarray, outcome: PartOutcome,
     if route.kind != "part" or route.mesh is None or route.segmentation is None:
         raise ValueError(f"the scan is no part any more ({route.reason}): Start makes a new "
                          "solid")
+    if route.mesh.pieces > 1:
+        raise ValueError("face edits work on the solid of one object; this scan holds several "
+                         "(one solid each)")
     regions = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
                        route.freeform).regions
     for edit in outcome.report.edits:

@@ -34,20 +34,22 @@ def part_allowed(job: FitJob, outputs: list[Path]) -> bool | None:
 
 def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
              route: Route) -> dict[str, Any]:
-    """The part route: the solid with analytic faces (:func:`nurbs_core.brep.part.fit_part`),
+    """The part route: the solid with analytic faces (:func:`nurbs_core.brep.objects.fit_parts`:
+    one solid per object of a scan of several),
     its report (per face its type, parameters, points and deviation) and files. SolidError when
     no valid solid results or, unless --part forced the route, when the solid fails a quality
     check (the automatic route then fits the network)."""
     import numpy as np
 
-    from nurbs_core.brep.part import fit_part, moved_faces
+    from nurbs_core.brep.objects import fit_parts
+    from nurbs_core.brep.part import moved_faces
     from nurbs_core.io.solid_io import save_solid
     from nurbs_core.jobs.local_frame import shifted
     from nurbs_core.status import counted_kinds
 
     assert route.mesh is not None and route.segmentation is not None
-    result = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
-                      route.freeform, border=route.mesh.border or None)
+    result = fit_parts(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
+                       route.freeform, border=route.mesh.border or None)
     what = "open shell" if result.open_shell else "solid"
     if result.problems and not job.part:
         from nurbs_core.brep.solid import SolidError
@@ -65,6 +67,11 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
              if result.open_shell else
              f"{'valid' if result.valid else 'INVALID'}, "
              f"{'closed' if result.closed else 'NOT closed'}; volume {result.volume:.6g}")
+    from nurbs_core.occ_topology import subshapes
+
+    solids = 0 if result.open_shell else len(subshapes(result.solid, "SOLID"))
+    if solids > 1:  # several objects scanned together: one solid each
+        what = f"{solids} solids"
     print(f"{what}: {len(result.faces)} faces ({kinds}); {shape}; "
           f"{sum(result.timings.values()):.2f} s "
           f"({', '.join(f'{k} {v:.1f} s' for k, v in result.timings.items())})")
