@@ -33,7 +33,7 @@ def solid_document(outcome: PartOutcome) -> tuple[dict[str, Any], dict[str, np.n
     document = {
         "brep": brep, "reason": report.reason, "seconds": report.seconds,
         "valid": report.valid, "closed": report.closed, "volume": report.volume,
-        "open_shell": report.open_shell,
+        "open_shell": report.open_shell, "solids": report.solids,
         "status": report.status, "problems": list(report.problems), "noise": report.noise,
         "tolerance": report.tolerance,
         "faces": [{"kind": f.kind, "description": f.description, "parameters": f.parameters,
@@ -82,6 +82,14 @@ def _number(data: dict[str, Any], key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ValueError(f"the solid's {key} must be a finite number")
     return float(value)
+
+
+def _count(data: dict[str, Any], key: str) -> int:
+    """A positive whole number (1 when absent: sessions saved before it was kept)."""
+    value = data.get(key, 1)
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"the solid's {key} must be a positive whole number")
+    return value
 
 
 def _positive(data: dict[str, Any], key: str) -> float:
@@ -197,7 +205,7 @@ def solid_from_document(document: Any, arrays: dict[str, np.ndarray]) -> PartOut
                          _positive(document, "noise"), _positive(document, "tolerance"),
                          distances, point_faces, reason if isinstance(reason, str) else "",
                          _number(document, "seconds"), _edits(document, len(distances)),
-                         bool(document.get("open_shell")))
+                         bool(document.get("open_shell")), _count(document, "solids"))
     shape = shape_from_brep(document["brep"])
     _check_tolerance(report.tolerance, shape)
     display = solid_display(shape, report.tolerance)

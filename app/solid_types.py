@@ -54,6 +54,8 @@ class SolidReport:
     #: ``{"action", "regions", "kind"}``, :class:`nurbs_core.brep.face_edits.FaceEdit`'s)
     edits: tuple[dict[str, Any], ...] = ()
     open_shell: bool = False
+    #: how many solids: one per object of a scan of several parts scanned together
+    solids: int = 1
 
     def face_types(self) -> dict[str, int]:
         """How many faces of each type, types in alphabetical order."""
@@ -61,13 +63,16 @@ class SolidReport:
         return {kind: kinds.count(kind) for kind in sorted(set(kinds))}
 
     def summary(self) -> str:
-        """One line: "7 faces (1 cylinder, 6 planes), valid, closed"."""
+        """One line: "7 faces (1 cylinder, 6 planes), valid, closed" ("2 solids, 13 faces ..."
+        for a scan of several objects)."""
         from nurbs_core.status import counted_kinds
 
         kinds = counted_kinds(self.face_types())
         shape = ("an open shell, open where the scan stops" if self.open_shell
                  else "closed" if self.closed else "NOT closed")
-        return f"{len(self.faces)} faces ({kinds}), {'valid' if self.valid else 'INVALID'}, {shape}"
+        solids = f"{self.solids} solids, " if self.solids > 1 else ""
+        return (f"{solids}{len(self.faces)} faces ({kinds}), "
+                f"{'valid' if self.valid else 'INVALID'}, {shape}")
 
     @property
     def sound(self) -> bool:

@@ -54,6 +54,7 @@ def solid_report(result: Any, reason: str = "", origin: np.ndarray | None = None
     centre ``origin`` (3,) has its faces' positions moved back to the scan's coordinates
     (``size``: the part's, for the digits of its descriptions)."""
     from nurbs_core.brep.part import moved_faces
+    from nurbs_core.occ_topology import subshapes
 
     faces = tuple(FaceRow(face.kind, face.description, dict(face.parameters), int(face.points),
                           float(face.mean), float(face.p99), int(face.region))
@@ -65,7 +66,8 @@ def solid_report(result: Any, reason: str = "", origin: np.ndarray | None = None
                        float(result.segmentation.tolerance),
                        np.asarray(result.distances, np.float64),
                        np.asarray(result.point_faces, np.int64), reason,
-                       float(sum(result.timings.values())), edits, bool(result.open_shell))
+                       float(sum(result.timings.values())), edits, bool(result.open_shell),
+                       max(1, len(subshapes(result.solid, "SOLID"))))
 
 
 def solid_display(solid: Any, tolerance: float) -> SolidDisplay:

@@ -151,3 +151,20 @@ def test_more_face_edits_than_a_session_replays_are_refused(box_solid):
                                                                f"than the {MAX_EDITS}")
     kept = solid_from_document({**document, "edits": [edit] * MAX_EDITS}, arrays)
     assert len(kept.report.edits) == MAX_EDITS
+
+
+def test_the_count_of_solids_is_kept_and_older_sessions_read_as_one(box_solid):
+    """A scan of several parts has one solid each: the Solid dock's summary says how many, the
+    session keeps it, a session saved before it was kept reads as one solid."""
+    import dataclasses
+
+    from app.solid_session import solid_from_document
+
+    document, arrays = box_solid
+    report = solid_from_document(document, arrays).report
+    assert report.solids == 1 and not report.summary().startswith("1 solids")
+    assert dataclasses.replace(report, solids=2).summary().startswith("2 solids, 6 faces")
+    assert solid_from_document({**document, "solids": 2}, arrays).report.solids == 2
+    older = {key: value for key, value in document.items() if key != "solids"}
+    assert solid_from_document(older, arrays).report.solids == 1
+    _refused({**document, "solids": 0}, arrays, "solids must be a positive whole number")
