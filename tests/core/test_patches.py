@@ -356,3 +356,20 @@ def test_an_instant_meshes_failure_is_a_failed_attempt_not_a_crash(monkeypatch):
     mesh = closed_mesh(shape.points)
     with pytest.raises(LayoutError, match="Instant Meshes failed .Internal error in extraction"):
         quad_layout(mesh.vertices, mesh.faces, 24)
+
+
+def test_a_very_noisy_scan_gets_patches_many_noise_sigmas_across():
+    """A blob at 2% noise: its bumpy mesh turned like a finer shape, so ``auto`` laid out 177
+    patches of 5x5 control points over 5,000 points, which followed the noise (area 2.1x the
+    truth's, 3.9% folded). The noise bounds the count; a clean scan's bound is far above it."""
+    from nurbs_core.patches.pipeline import NOISE_PATCH_SIDE, estimate_noise, plain_layout
+
+    points = samples.blob(5000, seed=5, noise=0.02).points
+    mesh = closed_mesh(points)
+    noise = estimate_noise(points)
+    bounded = plain_layout(mesh, "auto", len(points), noise)
+    assert len(bounded.quads) <= 1.2 * mesh.area / (NOISE_PATCH_SIDE * noise) ** 2
+    assert len(plain_layout(mesh, "auto", len(points)).quads) > 2 * len(bounded.quads)
+    clean = samples.blob(5000, seed=5, noise=0.002).points
+    bound = closed_mesh(clean).area / (NOISE_PATCH_SIDE * estimate_noise(clean)) ** 2
+    assert bound > 1000  # far above AUTO_MAX: the clean scan's layout is left as it was
