@@ -29,6 +29,7 @@ from nurbs_core.patches.fit import NetworkPass, fit_network
 from nurbs_core.patches.layout import LayoutError, QuadLayout, mesh_digest, quad_layout
 from nurbs_core.patches.measures import NetworkQuality, network_quality
 from nurbs_core.patches.network import PatchNetwork
+from nurbs_core.patches.object_layouts import layout_per_object
 from nurbs_core.patches.options import PatchOptions, check_patch_count
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.patches.verdict import network_warnings, thin_scan_note
@@ -440,11 +441,18 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     # once: the layout's noise bound, the fit's Cp and the report's warning share it
     noise = estimate_noise(fitted)
     creases = detect_creases(mesh, points) if options.creases else no_creases()
-    layout = choose_layout(mesh, options.patches, len(points), creases, noise)
     border = border_points(mesh)
-    if border is not None:
-        # no border row on the skirt the open mesh runs on past the scan's last points
-        layout = trim_to_border(layout, border, points)
+    # several objects scanned together (no creases): a layout per object, each trimmed to its
+    # own border (None: one object)
+    layout = None if len(creases) else layout_per_object(
+        mesh, options.patches, points,
+        lambda part, count, size: choose_layout(part, count, size, None, noise),
+        trim_to_border, border_points)
+    if layout is None:
+        layout = choose_layout(mesh, options.patches, len(points), creases, noise)
+        if border is not None:
+            # no border row on the skirt the open mesh runs on past the scan's last points
+            layout = trim_to_border(layout, border, points)
     timings["layout"] = time.perf_counter() - start
     yield PatchEvent("layout", mesh=mesh, layout=layout)
     if should_stop(stop):

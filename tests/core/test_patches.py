@@ -373,3 +373,22 @@ def test_a_very_noisy_scan_gets_patches_many_noise_sigmas_across():
     clean = samples.blob(5000, seed=5, noise=0.002).points
     bound = closed_mesh(clean).area / (NOISE_PATCH_SIDE * estimate_noise(clean)) ** 2
     assert bound > 1000  # far above AUTO_MAX: the clean scan's layout is left as it was
+
+
+def test_the_layouts_of_separate_objects_join_without_sharing_a_vertex():
+    from nurbs_core.patches.object_layouts import joined_layouts, object_meshes
+
+    one = closed_mesh(samples.sphere(1500, seed=1).points)
+    two = closed_mesh(np.vstack([samples.sphere(1500, seed=1).points,
+                                 samples.sphere(1500, seed=2).points + [4.0, 0.0, 0.0]]))
+    assert len(object_meshes(one)) == 1
+    parts = object_meshes(two)
+    assert len(parts) == 2 and all(part.closed and part.pieces == 1 for part, _ in parts)
+    assert sum(len(part.faces) for part, _ in parts) == len(two.faces)
+    layouts = [quad_layout(part.vertices, part.faces, 24) for part, _ in parts]
+    joined = joined_layouts(layouts)
+    assert len(joined.quads) == sum(len(layout.quads) for layout in layouts)
+    first = set(joined.quads[:len(layouts[0].quads)].ravel().tolist())
+    second = set(joined.quads[len(layouts[0].quads):].ravel().tolist())
+    assert not first & second
+    assert np.allclose(joined.vertices[sorted(second)].mean(axis=0)[0], 4.0, atol=0.2)
