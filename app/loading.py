@@ -128,13 +128,12 @@ def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
             suffix = f" #{index + 1}" if len(result) > 1 else ""
             loaded.patch_names.append(f"{path.name}{suffix}")
     else:
-        from nurbs_core.io.cloud import distinct_points, duplicates_note
+        from nurbs_core.io.cloud import without_repeats
 
-        points = result.points  # the engine's PointCloud checked it: (N, 3) float64
-        kept = distinct_points(points)
-        if len(kept) < len(points):
-            loaded.notes.append(f"{path.name}: {duplicates_note(len(points) - len(kept), len(points))}.")
-            points = points[kept]
+        # the engine's PointCloud checked it: (N, 3) float64; repeated points merged
+        points, note = without_repeats(result.points)
+        if note:
+            loaded.notes.append(f"{path.name}: {note}.")
         if len(points) < 4:
             raise ValueError(f"{path}: needs at least 4 points, has {len(points)}")
         loaded.targets.append(Target(path.name, points, str(path)))

@@ -42,7 +42,7 @@ import torch
 from scipy.spatial import cKDTree
 
 from nurbs_core import samples
-from nurbs_core.evaluate_arrays import surface_derivatives
+from nurbs_core.evaluate_arrays import surface_derivatives, surface_domain
 from nurbs_core.fitting import FitConfig, fit
 from nurbs_core.geometry_arrays import SurfaceArrays
 from nurbs_core.trim.fit import fit_trimmed
@@ -104,8 +104,7 @@ def face_measures(surface: SurfaceArrays, boundary: list[np.ndarray],
                   outline: np.ndarray) -> dict:
     """The measures of one face (module docstring): ``polygons`` the trim loops in (u, v)
     (None: the whole domain), ``boundary`` the face's boundary as closed 3-D polylines."""
-    u0, u1 = float(surface.knots_u[surface.degree_u]), float(surface.knots_u[-surface.degree_u - 1])
-    v0, v1 = float(surface.knots_v[surface.degree_v]), float(surface.knots_v[-surface.degree_v - 1])
+    (u0, u1), (v0, v1) = surface_domain(surface)
     du, dv = (u1 - u0) / GRID, (v1 - v0) / GRID
     u = u0 + du * (np.arange(GRID) + 0.5)
     v = v0 + dv * (np.arange(GRID) + 0.5)
@@ -143,8 +142,7 @@ def run_case(shape: samples.SampledShape) -> dict:
     default_time = time.perf_counter() - start
     surface = result.geometry.detach().numpy()
     t = np.linspace(0.0, 1.0, 400)
-    u0, u1 = float(surface.knots_u[surface.degree_u]), float(surface.knots_u[-surface.degree_u - 1])
-    v0, v1 = float(surface.knots_v[surface.degree_v]), float(surface.knots_v[-surface.degree_v - 1])
+    (u0, u1), (v0, v1) = surface_domain(surface)
     border = np.concatenate([np.stack([u0 + (u1 - u0) * t, np.full_like(t, v0)], 1),
                              np.stack([np.full_like(t, u1), v0 + (v1 - v0) * t], 1),
                              np.stack([u1 - (u1 - u0) * t, np.full_like(t, v1)], 1),

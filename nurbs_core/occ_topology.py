@@ -7,6 +7,7 @@ OCP is optional (the ``cad`` extra): it is imported inside the function.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any
 
 #: OpenCASCADE objects (OCP ships no type information): shapes, geometry, arrays; the one
@@ -26,3 +27,16 @@ def subshapes(shape: OccObject, kind: str) -> list[OccObject]:
     TopExp.MapShapes_s(shape, getattr(TopAbs_ShapeEnum, "TopAbs_" + kind), found)
     cast = getattr(TopoDS, kind.capitalize())
     return [cast(found.FindKey(k)) for k in range(1, found.Size() + 1)]
+
+
+def compound(shapes: Iterable[OccObject]) -> OccObject:
+    """One ``TopoDS_Compound`` holding the shapes."""
+    from OCP.BRep import BRep_Builder
+    from OCP.TopoDS import TopoDS_Compound
+
+    builder = BRep_Builder()
+    result = TopoDS_Compound()
+    builder.MakeCompound(result)
+    for shape in shapes:
+        builder.Add(result, shape)
+    return result

@@ -221,7 +221,6 @@ class SceneView(QObject):
                                               color="#222222", name="corner_texts")
         self._corners.SetText(UPPER_RIGHT, "")
         self._closed = False
-        self.last_render_ms = 0.0
         #: the slowest frame drawn (ms) since it was last set to 0, timed around every frame the
         #: render window draws: the scene's own and the mouse's (a rotation draws on each move)
         self.slowest_frame_ms = 0.0
@@ -892,7 +891,6 @@ class SceneView(QObject):
         # slow (software) OpenGL: keep the event loop free at least 60% of the time, so input,
         # timers and the other widgets are answered between frames
         self._render_timer.setInterval(int(max(RENDER_INTERVAL_MS, 2.5 * spent_ms)))
-        self.last_render_ms = spent_ms
         if self._detail_pending:
             self._detail_timer.start()
 

@@ -48,6 +48,10 @@ class EditSource:
     origin: np.ndarray | None = None
 
 
+#: why a solid of several objects (a scan of parts scanned together) takes no face edits
+ONE_OBJECT_EDITS = "face edits work on the solid of one object; this scan holds several (one solid each)"
+
+
 def solid_report(result: Any, reason: str = "", origin: np.ndarray | None = None,
                  size: float = 1.0) -> SolidReport:
     """The report of a :class:`nurbs_core.brep.part.PartResult`; a part fitted about its scan's
@@ -117,8 +121,7 @@ def run_part_route(points: np.ndarray, part: bool | None, max_hole: float | None
     assert route.mesh is not None
     started = time.perf_counter()
     try:
-        result = fit_parts(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
-                           route.freeform, border=route.mesh.border or None)
+        result = fit_parts(points, route.mesh, route.segmentation, route.freeform)
         if result.problems and not part:
             raise SolidError("the solid fails its checks: "
                              + "; ".join(result.problems.values()))
@@ -156,8 +159,7 @@ def run_face_edit(outcome: PartOutcome, points: np.ndarray, edit: dict[str, Any]
     if source is None:
         source = _source_again(np.asarray(points, np.float64), outcome, cancel)
     if source.regions is None:
-        raise ValueError("face edits work on the solid of one object; this scan holds several "
-                         "(one solid each)")
+        raise ValueError(ONE_OBJECT_EDITS)
     _check(cancel)
     regions = apply_edit(source.regions, source.points, FaceEdit.from_dict(edit))
     _check(cancel)
@@ -194,8 +196,7 @@ def _source_again(points: np.ndarray, outcome: PartOutcome,
         raise ValueError(f"the scan is no part any more ({route.reason}): Start makes a new "
                          "solid")
     if route.mesh.pieces > 1:
-        raise ValueError("face edits work on the solid of one object; this scan holds several "
-                         "(one solid each)")
+        raise ValueError(ONE_OBJECT_EDITS)
     regions = fit_part(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
                        route.freeform).regions
     for edit in outcome.report.edits:

@@ -14,43 +14,35 @@ import time
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from nurbs_core.brep.part import PartFace, PartResult, fit_part
 from nurbs_core.brep.segment import Segmentation
 
 if TYPE_CHECKING:
     from nurbs_core.brep.freeform import FreeformRegion
+    from nurbs_core.patches.scan_mesh import ScanMesh
 
 
-def fit_parts(points: np.ndarray, mesh_vertices: np.ndarray | None = None,
-              mesh_triangles: np.ndarray | None = None,
-              segmentation: Segmentation | None = None,
-              freeform: FreeformRegion | None = None,
-              border: list[np.ndarray] | None = None) -> PartResult:
-    """:func:`~nurbs_core.brep.part.fit_part` (same arguments) for a scan (N, 3) of one object
-    or more: when the closed mesh (V, 3), (T, 3) holds several separate pieces, each object's
-    points (those nearest its piece) are fitted alone and the results joined
+def fit_parts(points: np.ndarray, mesh: ScanMesh, segmentation: Segmentation | None = None,
+              freeform: FreeformRegion | None = None) -> PartResult:
+    """:func:`~nurbs_core.brep.part.fit_part` of a scan (N, 3) over its mesh (the route's
+    closed mesh, or an open scan's bounded mesh with its border), of one object or more: when
+    the closed mesh holds several separate objects
+    (:func:`~nurbs_core.patches.closed_mesh.object_meshes`), each object's points (those
+    nearest its piece) are fitted alone over its piece and the results joined
     (:func:`joined_parts`); their face edits are not recorded (``regions`` None). SolidError
     when any object gives no valid solid."""
-    if border or mesh_vertices is None or mesh_triangles is None:
-        return fit_part(points, mesh_vertices, mesh_triangles, segmentation, freeform, border)
-    from nurbs_core.patches.closed_mesh import compacted, face_pieces
+    from nurbs_core.patches.closed_mesh import nearest_objects, object_meshes
 
+    objects = [] if mesh.border else object_meshes(mesh)
+    if len(objects) < 2:
+        return fit_part(points, mesh.vertices, mesh.faces, segmentation, freeform,
+                        border=mesh.border or None)
     points = np.asarray(points, np.float64)
-    label, sizes = face_pieces(mesh_triangles, len(mesh_vertices))
-    pieces = np.flatnonzero(sizes)
-    if len(pieces) < 2:
-        return fit_part(points, mesh_vertices, mesh_triangles, segmentation, freeform)
-    vertex_piece = np.full(len(mesh_vertices), -1)
-    vertex_piece[mesh_triangles.ravel()] = np.repeat(label, 3)
-    owner = vertex_piece[cKDTree(mesh_vertices).query(points)[1]]
-    members, results = [], []
-    for piece in pieces:
-        mine = np.flatnonzero(owner == piece)
-        vertices, triangles = compacted(mesh_vertices, mesh_triangles[label == piece])
-        results.append(fit_part(points[mine], vertices, triangles))
-        members.append(mine)
+    nearest = nearest_objects(mesh, objects, points)
+    members = [np.flatnonzero(nearest == index) for index in range(len(objects))]
+    results = [fit_part(points[mine], part.vertices, part.faces)
+               for (part, _), mine in zip(objects, members)]
     return joined_parts(results, members, len(points))
 
 
@@ -61,13 +53,9 @@ def joined_parts(results: list[PartResult], members: list[np.ndarray],
     point's distance and face (indices into the joined faces), the segmentations joined
     (labels into the joined surfaces; the largest noise and tolerance), valid and closed when
     every object is, the volumes summed."""
-    from OCP.BRep import BRep_Builder
-    from OCP.TopoDS import TopoDS_Compound
+    from nurbs_core.occ_topology import compound
 
     started = time.perf_counter()
-    builder = BRep_Builder()
-    compound = TopoDS_Compound()
-    builder.MakeCompound(compound)
     faces: list[PartFace] = []
     distances = np.zeros(count)
     point_faces = np.full(count, -1, np.int64)
@@ -75,7 +63,6 @@ def joined_parts(results: list[PartResult], members: list[np.ndarray],
     surfaces: list[Any] = []
     timings: dict[str, float] = {}
     for result, mine in zip(results, members):
-        builder.Add(compound, result.solid)
         distances[mine] = result.distances
         point_faces[mine] = np.where(result.point_faces >= 0,
                                      result.point_faces + len(faces), -1)
@@ -93,7 +80,8 @@ def joined_parts(results: list[PartResult], members: list[np.ndarray],
         sum(s.seconds for s in segmentations), sum(s.rounds for s in segmentations),
         [size for s in segmentations for size in s.region_sizes])
     timings["join"] = time.perf_counter() - started
-    return PartResult(compound, faces, segmentation, distances, point_faces,
+    return PartResult(compound(result.solid for result in results), faces, segmentation,
+                      distances, point_faces,
                       all(result.valid for result in results),
                       all(result.closed for result in results),
                       float(sum(result.volume for result in results)), timings,

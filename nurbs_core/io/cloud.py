@@ -80,22 +80,15 @@ def distinct_points(points: np.ndarray) -> np.ndarray:
     return np.arange(len(points)) if len(first) == len(points) else np.sort(first)
 
 
-def without_duplicates(cloud: PointCloud) -> tuple[PointCloud, int]:
-    """The cloud without its duplicate points (:func:`distinct_points`; attributes kept for
-    the points kept), and how many were dropped."""
-    kept = distinct_points(cloud.points)
-    dropped = len(cloud.points) - len(kept)
+def without_repeats(points: np.ndarray) -> tuple[np.ndarray, str]:
+    """The points (M, 3) of ``points`` (N, 3) that do not repeat an earlier one
+    (:func:`distinct_points`), and a sentence saying how many were merged ("" when none)."""
+    kept = distinct_points(points)
+    dropped = len(points) - len(kept)
     if not dropped:
-        return cloud, 0
-    return PointCloud(cloud.points[kept], {name: values[kept]
-                                           for name, values in cloud.attributes.items()},
-                      cloud.path), dropped
-
-
-def duplicates_note(dropped: int, total: int) -> str:
-    """One sentence for a report: how many duplicate points were merged."""
-    return (f"{dropped:,} of {total:,} points repeat an earlier one (closer than "
-            f"{DUPLICATE_SHARE:g} of the diagonal): each is fitted once")
+        return points, ""
+    return points[kept], (f"{dropped:,} of {len(points):,} points repeat an earlier one (closer "
+                          f"than {DUPLICATE_SHARE:g} of the diagonal): each is fitted once")
 
 
 def check_points(path: StrPath | None, points: np.ndarray,

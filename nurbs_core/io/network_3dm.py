@@ -99,11 +99,9 @@ def _inward(network: PatchNetwork) -> bool:
     """Whether a closed network's patch normals point inwards (negative enclosed volume of a
     coarse welded mesh)."""
     from nurbs_core.io.network_mesh import network_mesh_arrays
+    from nurbs_core.patches.closed_mesh import signed_volume
 
-    vertices, faces = network_mesh_arrays(network, 8)
-    vertices = vertices - vertices.mean(axis=0)  # no cancellation far from the origin
-    a, b, c = (vertices[faces[:, k]] for k in range(3))
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) < 0
+    return signed_volume(*network_mesh_arrays(network, 8)) < 0
 
 
 def network_brep(network: PatchNetwork) -> rhino3dm.Brep:

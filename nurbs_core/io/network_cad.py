@@ -131,20 +131,14 @@ def _volume(shape: OccShape) -> float:
 def _solids(shells: OccShape) -> OccShape:
     """The solid of a closed shell, or a compound of one solid per closed shell of a compound
     (separate objects)."""
-    from OCP.BRep import BRep_Builder
     from OCP.TopAbs import TopAbs_ShapeEnum
-    from OCP.TopoDS import TopoDS, TopoDS_Compound
+    from OCP.TopoDS import TopoDS
 
-    from nurbs_core.occ_topology import subshapes
+    from nurbs_core.occ_topology import compound, subshapes
 
     if shells.ShapeType() == TopAbs_ShapeEnum.TopAbs_SHELL:
         return _solid(shells)
-    builder = BRep_Builder()
-    compound = TopoDS_Compound()
-    builder.MakeCompound(compound)
-    for shell in subshapes(shells, "SHELL"):
-        builder.Add(compound, _solid(TopoDS.Shell(shell)))
-    return compound
+    return compound(_solid(TopoDS.Shell(shell)) for shell in subshapes(shells, "SHELL"))
 
 
 def _solid(shell: OccShape) -> OccShape:

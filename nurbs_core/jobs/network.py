@@ -70,15 +70,14 @@ def surface_input(path: str, quiet: bool) -> tuple[np.ndarray, ScanMesh | None, 
 
 
 def distinct_cloud(path: str, points: np.ndarray, quiet: bool) -> np.ndarray:
-    """The cloud (N, 3) without its duplicate points
-    (:func:`nurbs_core.io.cloud.distinct_points`), saying how many were merged."""
-    from nurbs_core.io.cloud import distinct_points, duplicates_note
+    """The cloud (N, 3) without its repeated points
+    (:func:`nurbs_core.io.cloud.without_repeats`), saying how many were merged."""
+    from nurbs_core.io.cloud import without_repeats
 
-    kept = distinct_points(points)
-    if len(kept) < len(points) and not quiet:
-        print(f"{path}: {duplicates_note(len(points) - len(kept), len(points))}",
-              file=sys.stderr)
-    return points[kept]
+    points, note = without_repeats(points)
+    if note and not quiet:
+        print(f"{path}: {note}", file=sys.stderr)
+    return points
 
 
 def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],

@@ -48,8 +48,7 @@ def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
     from nurbs_core.status import counted_kinds
 
     assert route.mesh is not None and route.segmentation is not None
-    result = fit_parts(points, route.mesh.vertices, route.mesh.faces, route.segmentation,
-                       route.freeform, border=route.mesh.border or None)
+    result = fit_parts(points, route.mesh, route.segmentation, route.freeform)
     what = "open shell" if result.open_shell else "solid"
     if result.problems and not job.part:
         from nurbs_core.brep.solid import SolidError

@@ -129,8 +129,6 @@ def quad_layout(vertices: np.ndarray, faces: np.ndarray, patches: int = 24, *,
             key = (digest, count, float(crease_angle))
             if key not in _REMESHED:
                 if not os.path.exists(source):     # written once, when a run needs it
-                    # centred: Instant Meshes works in single precision, and a scan in a
-                    # site's coordinates (5e6 from the origin) ran it out of memory
                     _write_obj(source, vertices - origin, faces)
                 try:
                     with _silenced_stdout():

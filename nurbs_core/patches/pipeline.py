@@ -235,6 +235,15 @@ def _turn_off_creases(layout: QuadLayout, creases: Creases) -> float:
     return layout_turn(replace(layout, creases=layout.creases | skip))
 
 
+def trimmed_layout(mesh: ScanMesh, patches: int | str, points: np.ndarray, noise: float,
+                   creases: Creases | None = None) -> QuadLayout:
+    """:func:`choose_layout` for the cloud (N, 3), trimmed to the border of an open mesh: no
+    border row on the skirt the open mesh runs on past the scan's last points."""
+    layout = choose_layout(mesh, patches, len(points), creases, noise)
+    border = border_points(mesh)
+    return layout if border is None else trim_to_border(layout, border, points)
+
+
 def plain_layout(mesh: ScanMesh, patches: int | str, points: int | None = None,
                  noise: float = 0.0) -> QuadLayout:
     """The layout for a target count; for "auto" the coarsest that turns by at most
@@ -442,17 +451,12 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     noise = estimate_noise(fitted)
     creases = detect_creases(mesh, points) if options.creases else no_creases()
     border = border_points(mesh)
-    # several objects scanned together (no creases): a layout per object, each trimmed to its
-    # own border (None: one object)
+    # several objects scanned together (no creases): a layout per object (None: one object)
     layout = None if len(creases) else layout_per_object(
         mesh, options.patches, points,
-        lambda part, count, size: choose_layout(part, count, size, None, noise),
-        trim_to_border, border_points)
+        lambda part, count, mine: trimmed_layout(part, count, mine, noise))
     if layout is None:
-        layout = choose_layout(mesh, options.patches, len(points), creases, noise)
-        if border is not None:
-            # no border row on the skirt the open mesh runs on past the scan's last points
-            layout = trim_to_border(layout, border, points)
+        layout = trimmed_layout(mesh, options.patches, points, noise, creases)
     timings["layout"] = time.perf_counter() - start
     yield PatchEvent("layout", mesh=mesh, layout=layout)
     if should_stop(stop):

@@ -406,3 +406,14 @@ def _path_parity(predecessor: np.ndarray, flag: np.ndarray, order: np.ndarray) -
         parity = parity ^ parity[parent]   # roots carry no flag, so XOR with them is a no-op
         parent = grand
     return parity & reached
+
+
+def face_pieces(faces: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each face's (F,) connected piece of the mesh over ``count`` vertices, and the pieces'
+    face counts."""
+    rows = np.concatenate([faces[:, 0], faces[:, 1]])
+    cols = np.concatenate([faces[:, 1], faces[:, 2]])
+    graph = scipy.sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(count, count))
+    pieces, label = connected_components(graph, directed=False)
+    face_label = label[faces[:, 0]]
+    return face_label, np.bincount(face_label, minlength=pieces)

@@ -17,6 +17,7 @@ numpy + scipy + libigl.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,7 +26,8 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from nurbs_core.surfacing.disk import boundary_loops
-from nurbs_core.surfacing.mesh import CloudMesh, face_adjacency
+from nurbs_core.surfacing.mesh import CloudMesh, face_adjacency, face_pieces
+from nurbs_core.surfacing.parameterize import signed_areas
 
 #: ARAP iterations after the LSCM start (0: the conformal map as it is)
 ARAP_ITERATIONS = 20
@@ -53,6 +55,25 @@ class MapFrame:
     size: np.ndarray
     flipped: float
 
+    @functools.cached_property
+    def _tree(self) -> cKDTree:
+        return cKDTree(self.vertices)
+
+    @functools.cached_property
+    def _faces_around(self) -> np.ndarray:
+        """(V, K) the faces around every vertex, as a padded table, -1 where none (built once:
+        a trimmed fit maps its points three or four times)."""
+        incidence = scipy.sparse.csr_matrix(
+            (np.ones(self.faces.size), (self.faces.ravel(), np.repeat(np.arange(len(self.faces)),
+                                                                      3))),
+            shape=(len(self.vertices), len(self.faces)))
+        counts = np.diff(incidence.indptr)
+        table = np.full((len(self.vertices), max(int(counts.max()), 1)), -1)
+        rows = np.repeat(np.arange(len(self.vertices)), counts)
+        columns = np.arange(incidence.nnz) - np.repeat(incidence.indptr[:-1], counts)
+        table[rows, columns] = incidence.indices
+        return table
+
     def parameters(self, points: np.ndarray) -> np.ndarray:
         """(N, 2) the map parameters of points (N, 3): through the nearest mesh triangle."""
         return (self.flat_coordinates(points)[0] - self.low) / self.size
@@ -63,19 +84,8 @@ class MapFrame:
         triangles around its nearest vertex (clamped to that triangle) applied to the
         triangle's map corners."""
         points = np.asarray(points, np.float64)
-        _, nearest = cKDTree(self.vertices).query(points)
-        # the faces around every vertex, as a padded table (V, K), -1 where none
-        incidence = scipy.sparse.csr_matrix(
-            (np.ones(self.faces.size), (self.faces.ravel(), np.repeat(np.arange(len(self.faces)),
-                                                                      3))),
-            shape=(len(self.vertices), len(self.faces)))
-        counts = np.diff(incidence.indptr)
-        width = max(int(counts.max()), 1)
-        table = np.full((len(self.vertices), width), -1)
-        rows = np.repeat(np.arange(len(self.vertices)), counts)
-        columns = np.arange(incidence.nnz) - np.repeat(incidence.indptr[:-1], counts)
-        table[rows, columns] = incidence.indices
-        candidates = table[nearest]                                    # (N, K)
+        _, nearest = self._tree.query(points)
+        candidates = self._faces_around[nearest]                       # (N, K)
         valid = candidates >= 0
         faces = self.faces[np.where(valid, candidates, 0)]             # (N, K, 3)
         a, b, c = (self.vertices[faces[..., k]] for k in range(3))
@@ -129,11 +139,8 @@ def largest_piece(mesh: CloudMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     sizes = np.bincount(label)
     faces = faces[(label == int(np.argmax(sizes))) | (sizes[label] < FOLDED_PIECE * len(faces))]
     # the largest vertex-connected piece of the rest
-    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    graph = scipy.sparse.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])),
-                                    shape=(len(vertices), len(vertices)))
-    _, label = connected_components(graph, directed=False)
-    kept_faces = faces[label[faces[:, 0]] == int(np.argmax(np.bincount(label[faces[:, 0]])))]
+    label, sizes = face_pieces(faces, len(vertices))
+    kept_faces = faces[label == int(np.argmax(sizes))]
     kept, inverse = np.unique(kept_faces, return_inverse=True)
     return vertices[kept], inverse.reshape(-1, 3).astype(np.int64), kept
 
@@ -157,7 +164,7 @@ def flatten(vertices: np.ndarray, faces: np.ndarray,
     pinned = np.array([first, second], np.int64)
     separation = float(np.linalg.norm(vertices[second] - vertices[first]))
     flat, _ = igl.lscm(vertices, faces, pinned, np.array([[0.0, 0.0], [separation, 0.0]]))
-    if _signed_areas(flat, faces).sum() < 0:        # keep the mesh's orientation
+    if signed_areas(flat, faces).sum() < 0:        # keep the mesh's orientation
         flat = flat * np.array([1.0, -1.0])
     if arap_iterations > 0:
         data = igl.ARAPData()
@@ -167,7 +174,7 @@ def flatten(vertices: np.ndarray, faces: np.ndarray,
         relaxed = igl.arap_solve(flat[pinned[:1]], data, flat)
         if np.all(np.isfinite(relaxed)):
             flat = relaxed
-    areas = _signed_areas(flat, faces)
+    areas = signed_areas(flat, faces)
     if areas.sum() < 0:
         flat, areas = flat * np.array([1.0, -1.0]), -areas
     total = np.abs(areas).sum()
@@ -216,10 +223,3 @@ def tightest_axes(flat: np.ndarray) -> np.ndarray:
             best_area = extent[0] * extent[1]
             best = axes if extent[0] >= extent[1] else np.array([axes[1], -axes[0]])
     return best
-
-
-def _signed_areas(flat: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(F,) signed areas of the map's triangles (positive: counter-clockwise)."""
-    a, b, c = flat[faces[:, 0]], flat[faces[:, 1]], flat[faces[:, 2]]
-    return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
-                  - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))

@@ -480,7 +480,7 @@ def test_clouds_beyond_the_fits_range_are_refused_clearly(tmp_path, scale, messa
 def test_duplicate_points_are_found_exact_and_near_and_nothing_else():
     """A file written twice or passes merged point for point: the routes' neighbour searches see
     a spacing of zero (a saddle given twice was one patch 40% flipped)."""
-    from nurbs_core.io.cloud import DUPLICATE_SHARE, distinct_points, without_duplicates
+    from nurbs_core.io.cloud import DUPLICATE_SHARE, distinct_points, without_repeats
 
     rng = np.random.default_rng(0)
     points = rng.normal(size=(500, 3))
@@ -491,11 +491,11 @@ def test_duplicate_points_are_found_exact_and_near_and_nothing_else():
     kept = distinct_points(doubled)
     assert np.array_equal(kept[:500], np.arange(500))  # the first of each, in order
     assert len(kept) <= 503  # a near pair straddling a cell wall may stay (rarely)
-    colors = np.arange(len(doubled))[:, None].repeat(3, axis=1).astype(np.uint8)
-    cloud, dropped = without_duplicates(PointCloud(doubled, {"colors": colors}))
-    assert dropped == len(doubled) - len(kept)
-    assert np.array_equal(cloud.points, doubled[kept])
-    assert np.array_equal(cloud.attributes["colors"], colors[kept])
+    merged, note = without_repeats(doubled)
+    assert np.array_equal(merged, doubled[kept])
+    assert note.startswith(f"{len(doubled) - len(kept):,} of {len(doubled):,} points repeat")
+    same, none = without_repeats(points)
+    assert same is points and none == ""
     # a point as close as a dense scan's spacing is its own
     close = np.vstack([points, points[:50] + 1e-4 * diagonal])
     assert len(distinct_points(close)) == 550
