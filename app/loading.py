@@ -142,10 +142,10 @@ def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
 
 def _mesh_file(path: Path) -> tuple[np.ndarray, Any, str] | None:
     """A mesh file (STL, OBJ, OFF, PLY with faces, ...) read as ``nurbs-fit`` reads it
-    (:func:`nurbs_core.jobs.network.surface_input`): the points to fit (N, 3) (sampled over
+    (:func:`nurbs_core.jobs.input_cloud.surface_input`): the points to fit (N, 3) (sampled over
     its area when it has few vertices, never reduced to its vertices), its own closed mesh or
     None, and why that mesh cannot serve; None for any other file."""
-    from nurbs_core.jobs.network import is_mesh_file, surface_input
+    from nurbs_core.jobs.input_cloud import is_mesh_file, surface_input
 
     if not is_mesh_file(str(path)):
         return None

@@ -39,7 +39,7 @@ def to_local(points: np.ndarray, file_mesh: ScanMesh | None = None
 
 def shifted(geometry: Any, offset: np.ndarray | tuple[float, float, float] | None) -> Any:
     """``geometry`` moved by ``offset`` (3,): points (N, 3), a surface or curve (numpy twin), a
-    patch network or an OpenCASCADE shape (a solid, an open shell); the same object when
+    trimmed surface, a patch network or an OpenCASCADE shape (a solid, an open shell); the same object when
     ``offset`` is None."""
     if offset is None:
         return geometry
@@ -51,6 +51,10 @@ def shifted(geometry: Any, offset: np.ndarray | tuple[float, float, float] | Non
 
     if isinstance(geometry, (SurfaceArrays, CurveArrays)):
         return dataclasses.replace(geometry, control_points=geometry.control_points + offset)
+    from nurbs_core.trim.value import TrimmedSurface
+
+    if isinstance(geometry, TrimmedSurface):  # its trim loops lie in (u, v): they stay
+        return dataclasses.replace(geometry, surface=shifted(geometry.surface, offset))
     if isinstance(geometry, PatchNetwork):
         return dataclasses.replace(geometry, vertices=geometry.vertices + offset,
                                    control_points=geometry.control_points + offset)

@@ -22,64 +22,6 @@ if TYPE_CHECKING:
     from nurbs_core.patches.scan_mesh import ScanMesh
 
 
-#: A mesh file with fewer vertices than this is fitted to this many points sampled uniformly
-#: over its area (its vertices alone are too few, or unevenly spread: CAD meshes).
-FILE_MESH_SAMPLES = 10_000
-
-
-def is_mesh_file(path: str) -> bool:
-    """Whether ``path`` names a mesh file (STL, OBJ, OFF, glTF, or a PLY that declares faces):
-    read with its triangles by :func:`surface_input` (a PLY cloud goes to the fast PLY reader).
-    A PLY that is not there is no mesh file (its reader says what is wrong)."""
-    from nurbs_core.io.points import MESH_SUFFIXES, suffix_of
-
-    suffix = suffix_of(path)
-    if suffix in MESH_SUFFIXES:
-        return True
-    if suffix != ".ply" or not Path(path).is_file():
-        return False
-    from nurbs_core.io.ply import has_faces
-
-    return has_faces(path)
-
-
-def surface_input(path: str, quiet: bool) -> tuple[np.ndarray, ScanMesh | None, str]:
-    """The points to fit a surface or network to (N, 3), the input file's own closed mesh for a
-    network's layout or None, and why a mesh file's mesh cannot serve ("" for a cloud). A mesh
-    file (STL, OBJ, PLY with faces, ...) is read once with its triangles: a file with few
-    vertices is sampled uniformly over its area, never reduced to its vertices."""
-    from nurbs_core.io import load_points
-    from nurbs_core.io.cloud import check_points
-    from nurbs_core.io.meshes import read_mesh_faces, sample_mesh_points
-    from nurbs_core.io.points import suffix_of
-
-    arrays = read_mesh_faces(path, suffix_of(path)) if is_mesh_file(path) else None
-    if arrays is None:      # a cloud, or a mesh format holding no faces (an OBJ of points)
-        return distinct_cloud(path, load_points(path).points, quiet), None, ""
-    from nurbs_core.patches.closed_mesh import mesh_from_faces
-
-    vertices, faces = arrays
-    mesh, why = mesh_from_faces(vertices, faces)
-    if not quiet:
-        print(f"{path}: a mesh of {len(faces)} triangles"
-              + (", closed: its own mesh lays out the patches" if mesh is not None
-                 else f" ({why})"), file=sys.stderr)
-    if len(vertices) < FILE_MESH_SAMPLES:
-        return sample_mesh_points(path, vertices, faces, FILE_MESH_SAMPLES).points, mesh, why
-    return check_points(path, vertices), mesh, why
-
-
-def distinct_cloud(path: str, points: np.ndarray, quiet: bool) -> np.ndarray:
-    """The cloud (N, 3) without its repeated points
-    (:func:`nurbs_core.io.cloud.without_repeats`), saying how many were merged."""
-    from nurbs_core.io.cloud import without_repeats
-
-    points, note = without_repeats(points)
-    if note and not quiet:
-        print(f"{path}: {note}", file=sys.stderr)
-    return points
-
-
 def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
                 points: np.ndarray | None = None, mesh: ScanMesh | None = None,
                 mesh_seconds: float = 0.0, stoppable: bool = True) -> dict[str, Any]:
@@ -95,6 +37,8 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
     from nurbs_core.patches.pipeline import iter_patch_fit
 
     if points is None:
+        from nurbs_core.jobs.input_cloud import surface_input
+
         points, mesh, _ = surface_input(job.input, quiet=job.quiet)
     if "torch" in sys.modules:   # the network route itself runs on numpy and scipy
         sys.modules["torch"].set_num_threads(max(1, job.threads))

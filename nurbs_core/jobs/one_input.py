@@ -10,7 +10,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from nurbs_core.jobs.checks import check_before_work, check_network_outputs, check_no_solid_outputs
-from nurbs_core.jobs.network import run_patches, surface_input
+from nurbs_core.jobs.input_cloud import input_cloud
+from nurbs_core.jobs.network import run_patches
 from nurbs_core.jobs.part import part_allowed, run_part
 from nurbs_core.jobs.settings import FitJob, is_automatic, patch_options
 from nurbs_core.jobs.single import finish_fit, prepare_fit, run_fit
@@ -19,7 +20,6 @@ if TYPE_CHECKING:
     import numpy as np
 
     from nurbs_core.patches.options import PatchOptions
-    from nurbs_core.patches.scan_mesh import ScanMesh
     from nurbs_core.route import Route
 
 
@@ -42,30 +42,27 @@ def fit_one(job: FitJob, points: np.ndarray | None = None,
 
 
 def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[str, Any]:
+    if job.part and not is_automatic(job):
+        raise ValueError("--part fits a solid: it cannot be combined with --patches, "
+                         "--single-patch, --curve, --grid, --initial or --offset")
+    if job.trim:
+        from nurbs_core.jobs.single import check_trim_options
+
+        check_trim_options(job)
+    outputs = check_before_work(job)
+    # every route fits the same cloud: read once, repeats merged, its spread checked and moved
+    # to a local frame when it lies far from the origin, before any route is decided or printed
+    points, file_mesh, note, job = input_cloud(job, points)
     if job.trim:
         from nurbs_core.jobs.single import fit_trimmed_job
 
         return fit_trimmed_job(job, points)
-    if job.part and not is_automatic(job):
-        raise ValueError("--part fits a solid: it cannot be combined with --patches, "
-                         "--single-patch, --curve, --grid, --initial or --offset")
     if job.patches is not None:
-        outputs = check_before_work(job)
-        return run_patches(job, patch_options(job), outputs, points=points,
+        return run_patches(job, patch_options(job), outputs, points=points, mesh=file_mesh,
                            stoppable=stoppable)
     if is_automatic(job):
         from nurbs_core.route import choose_route, without_solid
 
-        outputs = check_before_work(job)
-        file_mesh, note = None, ""
-        if points is None:
-            points, file_mesh, note = surface_input(job.input, quiet=job.quiet)
-        import numpy as np
-
-        from nurbs_core.fitting.normalised import check_spread
-
-        check_spread(np.asarray(points, np.float64))  # before any route is decided or printed
-        points, file_mesh, job = _in_local_frame(job, points, file_mesh)
         options = patch_options(job, automatic=True)  # checked before the route is decided
         route = choose_route(points, file_mesh, note, max_hole=options.max_hole,
                              part=part_allowed(job, outputs))
@@ -104,36 +101,6 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
                                              try_open_network)
     prepared = prepare_fit(job, points)
     return finish_fit(prepared, run_fit(prepared, stoppable))
-
-
-#: mesh formats whose coordinates are single precision by their specifications
-SINGLE_PRECISION = {".stl", ".glb"}
-
-
-def _in_local_frame(job: FitJob, points: np.ndarray, file_mesh: ScanMesh | None
-                    ) -> tuple[np.ndarray, ScanMesh | None, FitJob]:
-    """The cloud (N, 3) and the file's mesh moved to a local frame when they lie far from the
-    origin (:mod:`nurbs_core.jobs.local_frame`), and the job that writes the results back."""
-    from nurbs_core.jobs.local_frame import to_local
-
-    points, file_mesh, origin = to_local(points, file_mesh)
-    if origin is None:
-        return points, file_mesh, job
-    distance = float((origin ** 2).sum()) ** 0.5
-    if not job.quiet:
-        print(f"the scan lies {distance:.6g} from the origin: it is fitted about its own centre "
-              "and written back in its coordinates", file=sys.stderr)
-    single = sorted({Path(path).suffix.lower() for path in job.output} & SINGLE_PRECISION)
-    if single:
-        import numpy as np
-
-        # STL and glTF store single precision by their specifications: so far out, every
-        # vertex of the written mesh is rounded (the fit itself is not)
-        rounding = float(np.spacing(np.float32(distance)))
-        print(f"warning: {' and '.join(single)} hold single precision: {distance:.3g} from the "
-              f"origin their vertices are rounded to {rounding:.3g}; .step, .3dm, .obj, .ply and "
-              ".json keep the coordinates", file=sys.stderr)
-    return points, file_mesh, job.replace(origin=tuple(float(v) for v in origin))
 
 
 def _single_patch_or_open_network(job: FitJob, options: PatchOptions,

@@ -57,15 +57,12 @@ def prepare_fit(job: FitJob, points: np.ndarray | None = None) -> PreparedFit:
     print the report's first line (stderr). Raises on a bad input or option."""
     import numpy as np
 
-    from nurbs_core.io import load_points
+    from nurbs_core.jobs.input_cloud import input_cloud
 
     outputs = check_before_work(job)
-    if points is None:
-        points = load_points(job.input).points
-        if not job.curve and job.grid is None:  # an unordered surface cloud
-            from nurbs_core.jobs.network import distinct_cloud
-
-            points = distinct_cloud(job.input, points, job.quiet)
+    # read, repeats merged, spread checked, far scans in a local frame (nothing more to do for
+    # a cloud fit_one prepared so already)
+    points, _, _, job = input_cloud(job, points)
     flat_z = bool(job.curve and len(points) and np.ptp(points[:, 2]) == 0)
     target = points[:, :2] if flat_z else points
     config = _default_grid_for(job, fit_config(job, target.shape[1]), len(target))
@@ -291,6 +288,15 @@ def _lift(curve: CurveArrays, z: float) -> CurveArrays:
     return curve.replace(control_points=lifted)
 
 
+def check_trim_options(job: FitJob) -> None:
+    """ValueError for the options ``--trim`` does not combine with (before any input is read)."""
+    if job.curve or job.patches is not None or job.part or job.grid is not None \
+            or job.initial is not None or job.offset is not None or job.report is not None:
+        raise ValueError("--trim fits one trimmed patch of an open sheet: it cannot be combined "
+                         "with --curve, --patches, --part, --grid, --initial, --offset or "
+                         "--report")
+
+
 def fit_trimmed_job(job: FitJob, points: np.ndarray | None = None) -> dict[str, Any]:
     """``nurbs-fit --trim``: one patch of an open sheet trimmed at the scan's outline
     (:func:`nurbs_core.trim.fit.fit_trimmed`), the report (distances, trimmed vs untrimmed area,
@@ -306,13 +312,10 @@ def fit_trimmed_job(job: FitJob, points: np.ndarray | None = None) -> dict[str, 
     from nurbs_core.io.errors import FileFormatError
     from nurbs_core.io.points import suffix_of
     from nurbs_core.io.trimmed_io import TRIMMED_SUFFIXES
+    from nurbs_core.jobs.local_frame import shifted
     from nurbs_core.trim.fit import fit_trimmed
 
-    if job.curve or job.patches is not None or job.part or job.grid is not None \
-            or job.initial is not None or job.offset is not None or job.report is not None:
-        raise ValueError("--trim fits one trimmed patch of an open sheet: it cannot be combined "
-                         "with --curve, --patches, --part, --grid, --initial, --offset or "
-                         "--report")
+    check_trim_options(job)
     outputs = check_before_work(job)
     for path in outputs:
         if suffix_of(path) not in TRIMMED_SUFFIXES:
@@ -348,7 +351,9 @@ def fit_trimmed_job(job: FitJob, points: np.ndarray | None = None) -> dict[str, 
           f"{stats['trim_p95_deviation']:.4g}; outline points to the trim: max "
           f"{stats['outline_max_deviation']:.4g} (point spacing {stats['spacing']:.4g})")
     units = units_of(job)
-    save_all([(result.trimmed, path, {"units": units}) for path in outputs])
+    # in the scan's own coordinates (a far scan was fitted about its centre)
+    trimmed = shifted(result.trimmed, job.origin)
+    save_all([(trimmed, path, {"units": units}) for path in outputs])
     print_units(units, outputs)
     for path in outputs:
         print(f"wrote {path}")

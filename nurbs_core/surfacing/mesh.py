@@ -25,6 +25,7 @@ from scipy.spatial import cKDTree
 
 from nurbs_core.surfacing.disk import fill_small_holes
 from nurbs_core.surfacing.neighbours import LocalFrames, estimate_noise, local_frames, smooth_points
+from nurbs_core.surfacing.repeats import DUPLICATE_SHARE, distinct_points
 
 #: Neighbours considered for each point's Delaunay 1-ring.
 RING_CANDIDATES = 24
@@ -93,8 +94,12 @@ def cloud_mesh(points: np.ndarray, *, max_vertices: int = MAX_MESH_VERTICES,
     points = np.asarray(points, np.float64)
     if points.ndim != 2 or points.shape[1] != 3 or len(points) < 8:
         raise ValueError(f"a mesh needs at least 8 points of shape (N, 3), got {points.shape}")
+    # one vertex per point: repeated points (a cloud written twice) would be vertices of
+    # zero-length edges, every umbrella around them degenerate
     source = voxel_subsample(points, max_vertices)[0] if len(points) > max_vertices else \
-        np.arange(len(points))
+        distinct_points(points)
+    if len(source) < 8:
+        raise ValueError(f"a mesh needs at least 8 distinct points, got {len(source)}")
     vertices = points[source]
     # a tiny deterministic jitter breaks the co-circular ties of gridded scans the same way in
     # every umbrella (ties would make neighbouring umbrellas pick different diagonals)
@@ -147,10 +152,26 @@ def without_faces(mesh: CloudMesh, drop: np.ndarray) -> CloudMesh:
 # --------------------------------------------------------------------------------------------
 
 
+#: how many copies of one point :func:`median_spacing` looks past (a cloud written twice, scan
+#: passes merged point for point)
+REPEATS_SKIPPED = 15
+
+
 def median_spacing(points: np.ndarray) -> float:
-    """Median nearest-neighbour distance of (up to 5,000 of) ``points`` (N, 3); 1 if zero."""
-    distances, _ = cKDTree(points).query(points[: min(len(points), 5000)], k=2)
-    return float(np.median(distances[:, 1])) or 1.0
+    """Median distance from (up to 5,000 of) ``points`` (N, 3) to their nearest distinct
+    neighbour; 1 if zero. Copies of a point (closer than DUPLICATE_SHARE of the diagonal, up to
+    REPEATS_SKIPPED of them) are looked past: a cloud whose every point is repeated has the
+    spacing of its distinct points, not zero."""
+    points = np.asarray(points, np.float64)
+    if len(points) < 2:
+        return 1.0
+    diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
+    distances, _ = cKDTree(points).query(points[: min(len(points), 5000)],
+                                         k=min(len(points), REPEATS_SKIPPED + 2))
+    distinct = np.where(distances[:, 1:] > DUPLICATE_SHARE * diagonal, distances[:, 1:],
+                        np.inf).min(axis=1)
+    distinct = distinct[np.isfinite(distinct)]
+    return float(np.median(distinct)) if distinct.size else 1.0
 
 
 def voxel_subsample(points: np.ndarray,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from app_helpers import open_by_drop
 
-from nurbs_core.jobs.network import FILE_MESH_SAMPLES
+from nurbs_core.jobs.input_cloud import FILE_MESH_SAMPLES
 
 FIT_TIMEOUT_MS = 240_000
 

@@ -285,7 +285,7 @@ def test_a_cloud_written_twice_is_fitted_once_and_says_so(tmp_path, capsys):
     """Every point twice (a file written twice, passes merged point for point): a saddle was
     one patch 40% flipped and a closed blob no closed mesh (one patch forced, 39% flipped)."""
     from nurbs_core import samples
-    from nurbs_core.jobs.network import surface_input
+    from nurbs_core.jobs.input_cloud import surface_input
     from nurbs_core.route import choose_route
 
     sheet = samples.saddle(2000, seed=1).points
@@ -303,6 +303,32 @@ def test_a_cloud_written_twice_is_fitted_once_and_says_so(tmp_path, capsys):
     points, _, _ = surface_input(str(source), quiet=True)
     assert len(points) == 1500
     assert choose_route(points).kind == "network"
+
+
+def test_a_trimmed_sheet_of_a_cloud_written_twice_is_the_sheet_fitted_once(tmp_path, capsys):
+    """--trim read the cloud itself, repeats and all: the point spacing read zero (so one
+    diagonal), and a 'converged' face kept 0.0% of its patch; every route now fits the cloud
+    prepared in one place (nurbs_core.jobs.input_cloud)."""
+    from nurbs_core import samples
+
+    sheet = samples.saddle(1500, seed=2).points
+    reports = []
+    for name, cloud in (("once", sheet), ("twice", np.vstack([sheet, sheet]))):
+        source = tmp_path / f"{name}.xyz"
+        np.savetxt(source, cloud)
+        assert main([str(source), "--trim", "-o", str(tmp_path / f"{name}.json")]) == 0
+        captured = capsys.readouterr()
+        assert ("repeat an earlier one" in captured.err) == (name == "twice")
+        reports.append(captured.out)
+    ratios = [float(text.split("untrimmed patch's ")[1].split("(")[1].split("%")[0])
+              for text in reports]
+    assert ratios[1] == pytest.approx(ratios[0], abs=0.1)
+    assert ratios[1] > 30.0
+    # the same control grid and share of points within the tolerance (21 x 23 and 40.6% of
+    # the points when the repeats were fitted)
+    grids = [text.split(" control grid")[0].split("(")[-1] for text in reports]
+    within = [text.split(" of the points within")[0].split(", ")[-1] for text in reports]
+    assert grids[1] == grids[0] and within[1] == within[0]
 
 
 def test_a_tolerance_the_user_set_and_the_fit_misses_is_not_converged(tmp_path, capsys):

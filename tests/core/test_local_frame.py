@@ -70,6 +70,36 @@ def test_a_far_open_sheet_is_one_patch_written_where_it_was(tmp_path, capsys):
     assert np.allclose(controls.mean(axis=0), cloud.mean(axis=0) + SITE, atol=1.0)
 
 
+@pytest.mark.parametrize("route", [["--trim"], ["--single-patch"], ["--patches", "6"],
+                                   ["--curve", "--iterations", "50"]])
+def test_every_route_fits_a_far_scan_in_a_local_frame(tmp_path, capsys, route):
+    """The local frame (and the spread check, the merged repeats) were the automatic route's
+    alone: --trim, --patches N, --single-patch and --curve fitted a scan 5,000 km out in its
+    site coordinates. Each now says so and writes its result back where the scan was."""
+    from nurbs_core.io import load
+
+    curve = route[0] == "--curve"
+    cloud = (np.c_[np.linspace(0, 1, 200), np.sin(np.linspace(0, 3, 200)), np.zeros(200)]
+             if curve else samples.blob(1500, seed=0).points if route[0] == "--patches"
+             else samples.saddle(1500, seed=0).points)
+    source, out = tmp_path / "far.xyz", tmp_path / "far.json"
+    np.savetxt(source, cloud + SITE, fmt="%.7f")
+    assert main([str(source), *route, "-o", str(out)]) == 0
+    assert "fitted about its own centre" in capsys.readouterr().err
+    if route[0] == "--patches":
+        from nurbs_core.io.network_io import read_network
+
+        controls = read_network(out).control_points.reshape(-1, 3)
+    else:
+        geometry = load(out)[0]
+        geometry = geometry.surface if hasattr(geometry, "surface") else geometry
+        controls = geometry.control_points
+        controls = np.asarray(getattr(controls, "detach", lambda: controls)()).reshape(-1, 3)
+    low, high = cloud.min(axis=0) + SITE, cloud.max(axis=0) + SITE
+    margin = 0.5 * np.linalg.norm(high - low)
+    assert (controls > low - margin).all() and (controls < high + margin).all()
+
+
 @pytest.mark.slow
 def test_a_far_machined_part_is_its_solid_written_where_it_was(tmp_path, capsys):
     """A turned part 5,000 km out gave no valid solid (the points 27 noise sigmas from it);

@@ -1,5 +1,5 @@
 """Mesh files (STL, OBJ, PLY with faces) read with their triangles for the network and part
-routes (:func:`nurbs_core.jobs.network.surface_input`) hold their vertices to the rules of a
+routes (:func:`nurbs_core.jobs.input_cloud.surface_input`) hold their vertices to the rules of a
 cloud's points: a NaN or infinite vertex is refused with one line naming the file, never dropped
 with its triangles (which turned a closed mesh into an open one and changed the route)."""
 
@@ -55,7 +55,7 @@ def test_a_clean_closed_mesh_file_keeps_its_triangles(tmp_path, suffix):
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
 def test_a_non_finite_vertex_is_refused_not_dropped(tmp_path, suffix, bad):
     from nurbs_core.io.errors import FileFormatError
-    from nurbs_core.jobs.network import surface_input
+    from nurbs_core.jobs.input_cloud import surface_input
 
     vertices, faces = _octahedron()
     vertices[4, 0] = bad
@@ -113,7 +113,7 @@ def test_a_face_of_many_corners_off_one_plane_is_refused_at_once(tmp_path, suffi
     import time
 
     from nurbs_core.io.errors import FileFormatError
-    from nurbs_core.jobs.network import surface_input
+    from nurbs_core.jobs.input_cloud import surface_input
 
     sphere = np.random.default_rng(0).normal(size=(162, 3))
     sphere /= np.linalg.norm(sphere, axis=1, keepdims=True)

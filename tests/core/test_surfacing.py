@@ -271,3 +271,17 @@ def test_a_cloud_fitted_on_a_subset_is_solved_once_more_on_every_point(monkeypat
         surface = result.geometry.detach().to(dtype=torch.float64)
         errors[final] = float(np.sqrt(np.mean(sampled_distances(surface, shape.clean) ** 2)))
     assert errors[100_000] < errors[0] / 1.2, errors     # 0.25 against 0.33 sigmas
+
+
+def test_repeated_points_mesh_and_space_like_the_points_once():
+    """A cloud written twice gave a median spacing of zero (so one diagonal: a trimmed face kept
+    0.0% of its patch) and umbrellas of zero-length edges."""
+    from nurbs_core.surfacing.mesh import median_spacing
+
+    points = samples.saddle(1500, seed=4).points
+    twice = np.vstack([points, points, points[:300]])
+    assert median_spacing(twice) == pytest.approx(median_spacing(points), rel=0.02)
+    once, repeated = cloud_mesh(points), cloud_mesh(twice)
+    assert len(repeated.vertices) == len(points)
+    assert np.array_equal(np.sort(repeated.source), np.arange(len(points)))
+    assert len(repeated.faces) == len(once.faces)
