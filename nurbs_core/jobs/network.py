@@ -51,6 +51,9 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
 
     def on_interrupt(*_: object) -> None:
         if stop.stopped or not passes:
+            if not passes:  # the mesh and the layout come before any network to write
+                print("nurbs-fit: interrupted before the network's first pass: nothing written",
+                      file=sys.stderr, flush=True)
             raise KeyboardInterrupt
         stop.stop()
         print("nurbs-fit: stopping after this pass (Ctrl-C again to quit without writing)",

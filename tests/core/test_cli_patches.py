@@ -153,3 +153,23 @@ def test_ctrl_c_during_a_network_fit_writes_the_network_as_it_stands(sphere_file
     assert "status: stopped" in captured.out and "stopped after 5 passes" in captured.out
     network = read_network(out)
     assert network.closed and network.patch_count >= 6
+
+
+def test_ctrl_c_before_a_network_has_its_first_pass_says_nothing_was_written(
+        sphere_file, tmp_path, capsys, monkeypatch):
+    """Ctrl-C during the mesh and the layout: no network exists yet; the exit says so in one line
+    (it read a bare "interrupted") and no file is written."""
+    import os
+    import signal
+
+    import nurbs_core.patches.pipeline as pipeline
+
+    def interrupted_before_the_first_pass(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)
+        yield from ()
+
+    monkeypatch.setattr(pipeline, "fit_network", interrupted_before_the_first_pass)
+    out = tmp_path / "net.json"
+    assert main([str(sphere_file), "-o", str(out), "--patches", "auto"]) == 130
+    assert "before the network's first pass: nothing written" in capsys.readouterr().err
+    assert not out.exists()
