@@ -9,11 +9,11 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from nurbs_core.jobs.settings import FitJob
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from nurbs_core.patches.scan_mesh import ScanMesh
 
 
@@ -83,6 +83,8 @@ def input_cloud(job: FitJob, points: np.ndarray | None
     (not with ``--grid``, whose rows are ordered); its spread checked; moved to a local frame
     when it lies far from the origin (not with ``--initial``, whose start is in the file's
     coordinates)."""
+    import numpy as np
+
     from nurbs_core.fitting.normalised import check_spread
 
     file_mesh, note = None, ""
@@ -121,6 +123,8 @@ def in_local_frame(job: FitJob, points: np.ndarray, file_mesh: ScanMesh | None
               "and written back in its coordinates", file=sys.stderr)
     single = sorted({Path(path).suffix.lower() for path in job.output} & SINGLE_PRECISION)
     if single:
+        import numpy as np
+
         # STL and glTF store single precision by their specifications: so far out, every
         # vertex of the written mesh is rounded (the fit itself is not)
         rounding = float(np.spacing(np.float32(distance)))
