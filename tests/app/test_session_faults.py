@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import io
 import json
+import re
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
@@ -209,3 +210,31 @@ def test_a_damaged_session_is_one_clear_line_and_the_document_is_untouched(
     assert text.startswith(str(path)) and "\n" not in text
     assert "KeyError" not in text and "TypeError" not in text
     assert (document.targets, document.settings, document.fitted, document.network) == before
+
+
+WINDOW_CASES = ["NaN point", "2-column points", "network huge declared size", "truncated archive",
+                "fitted several surfaces", "a PLY renamed"]
+
+
+def test_the_window_refuses_damaged_sessions_and_keeps_its_document(
+        qtbot, window, ply_cloud, tmp_path, good_members, caplog):
+    """Through File > Open Session (the load job): each damaged session ends the open with
+    ``files_loaded(False)``, one message naming the part and saying the document is unchanged,
+    no traceback logged, the cloud still open."""
+    from app_helpers import open_by_drop
+
+    open_by_drop(qtbot, window, [ply_cloud[0]])
+    targets = window.document.targets
+    damages = {label: (damage, message) for label, damage, message in CASES}
+    for label in WINDOW_CASES:
+        damage, message = damages[label]
+        path = tmp_path / f"{label.replace(' ', '_')}.nstudio"
+        path.write_bytes(damage(copy.deepcopy(good_members)))
+        with qtbot.waitSignal(window.files_loaded, timeout=30000) as opened:
+            window.open_session(str(path))
+        assert opened.args == [False], label
+        first, second = window.last_error.split("\n")
+        assert second == "The document was left unchanged."
+        assert first.startswith(str(path)) and re.search(message, first), first
+        assert window.document.targets is targets and window.document.network is None
+    assert not [record for record in caplog.records if record.exc_info], "a traceback was logged"
