@@ -166,6 +166,10 @@ CASES: list[tuple[str, Callable[[Members], bytes], str]] = [
      "settings.fit must be an object, got text"),
     ("offset distance as text", _manifest(lambda m: m["settings"].update(offset_distance="0.1")),
      "offset_distance must be a finite number"),
+    # the dock showed 1,000,000 (its maximum) while the offsets were computed at 1e300
+    ("offset distance beyond the dock", _manifest(
+        lambda m: m["settings"].update(offset_distance=1e300, show_offsets=True)),
+     "offset_distance 1e[+]300 is beyond the Offsets dock's range"),
     ("targets an object", _manifest(lambda m: m.update(targets={"a": 1})),
      "targets must be a list"),
     ("visible as text", _manifest(lambda m: m["targets"][0].update(visible="no")),
@@ -238,3 +242,8 @@ def test_the_window_refuses_damaged_sessions_and_keeps_its_document(
         assert first.startswith(str(path)) and re.search(message, first), first
         assert window.document.targets is targets and window.document.network is None
     assert not [record for record in caplog.records if record.exc_info], "a traceback was logged"
+    # the offset distance a session may hold is the one the Offsets dock can show
+    from app.session_file import MAX_OFFSET_DISTANCE
+
+    box = window.offset_panel.distance
+    assert (box.minimum(), box.maximum()) == (-MAX_OFFSET_DISTANCE, MAX_OFFSET_DISTANCE)
