@@ -170,6 +170,10 @@ CASES: list[tuple[str, Callable[[Members], bytes], str]] = [
     ("offset distance beyond the dock", _manifest(
         lambda m: m["settings"].update(offset_distance=1e300, show_offsets=True)),
      "offset_distance 1e[+]300 is beyond the Offsets dock's range"),
+    # every cloud named the one member: each read copied it (a 24 MB file, 240 GB of clouds)
+    ("one member for many clouds", _manifest(
+        lambda m: m.update(targets=[m["targets"][0]] * 10_000)),
+     "targets/0.npy is named twice"),
     ("targets an object", _manifest(lambda m: m.update(targets={"a": 1})),
      "targets must be a list"),
     ("visible as text", _manifest(lambda m: m["targets"][0].update(visible="no")),
