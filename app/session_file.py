@@ -475,7 +475,7 @@ def _session_network(path: Path, data: dict[str, Any], archive: Any) -> tuple[An
     try:
         network = network_from_document(name, archive.document(name))
     except FileFormatError as exc:
-        raise ValueError(str(exc)) from None
+        raise ValueError(f"the patch network ({name}): {exc.problem}") from None
     report = data.get("network_report") or {}
     if not isinstance(report, dict):
         raise ValueError("network_report must be an object")

@@ -202,7 +202,11 @@ def _network_from(path: StrPath, document: object) -> PatchNetwork:
     # the index map (P x n x n) holds what the network will: read from the file first, it
     # bounds the declared size by what the file holds (a size of 20000 on 6 quads had the
     # layout allocate 18 GB before any check)
-    index = _array(path, document, "index", (len(quads), size, size), np.int64)
+    index = _array(path, document, "index", (None, None, None), np.int64)
+    if index.shape != (len(quads), size, size):
+        raise FileFormatError(path, f"size {size} and the {len(quads)} layout quads need an "
+                                    f"index map of {len(quads)} x {size} x {size}, the file holds "
+                                    f"{' x '.join(map(str, index.shape))}")
     creases = _creases(path, document.get("adjacency"))
     try:
         network = build_network(vertices, quads, size=size, degree=degree, creases=creases)

@@ -149,7 +149,8 @@ CASES: list[tuple[str, Callable[[Members], bytes], str]] = [
      "control_points has shape"),
     # 6 quads declared 20000 x 20000 control points each: the layout allocated 18 GB (killed)
     ("network huge declared size", _network_member(lambda n: n.update(size=20000)),
-     "index has shape"),
+     r"the patch network \(network.json\): size 20000 and the 6 layout quads need an index map "
+     r"of 6 x 20000 x 20000, the file holds 6 x 5 x 5"),
     ("network missing layout", _network_member(lambda n: n.pop("layout")),
      "the network lacks the \"layout\" object"),
     ("target missing points", _manifest(lambda m: m["targets"][0].pop("points")),

@@ -147,7 +147,7 @@ def _edit(document: dict, change: str) -> None:
     ("numbers as text", "control_points is not a"),
     ("degree is text", "degree must be an integer"),
     ("not manifold", "invalid layout"),
-    ("huge declared size", "index has shape .* expected 6 x 20000 x 20000"),
+    ("huge declared size", "need an index map of 6 x 20000 x 20000, the file holds 6 x 6 x 6"),
     ("zero size", "size must be a positive whole number"),
 ])
 def test_malformed_json_is_a_clear_error(tmp_path, ball, change, message):
