@@ -34,6 +34,10 @@ SESSION_SUFFIX = ".nstudio"
 MANIFEST = "session.json"
 #: At most this many members (a session holds a few clouds and one network).
 MAX_MEMBERS = 10_000
+#: The largest offset distance a session may hold: the Offsets dock's range
+#: (app/panels/offset_panel.py). 1e300 opened, the dock showed 1,000,000 and the offsets were
+#: computed at 1e300 (overflowing).
+MAX_OFFSET_DISTANCE = 1e6
 
 
 def is_archive(path: str | Path) -> bool:
@@ -121,6 +125,7 @@ class SessionArchive:
                 raise ValueError(f"{self.path}: member {member.filename} is compressed or larger "
                                  "than the file (sessions store their members as they are)")
         self.names = {member.filename for member in members}
+        self._arrays_read: set[str] = set()
 
     def __enter__(self) -> SessionArchive:
         return self
@@ -140,12 +145,20 @@ class SessionArchive:
         """The JSON member ``name``, parsed."""
         try:
             return json.loads(self._bytes(name))
-        except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        except RecursionError:
+            raise ValueError(f"{name} is nested too deeply to be a session's JSON") from None
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise ValueError(f"{name} is not valid JSON ({exc})") from None
 
     def array(self, name: str) -> np.ndarray:
         """The array ``<name>.npy``: numeric (bool, integer or floating point), its header
-        checked against the member's size before any data is read."""
+        checked against the member's size before any data is read. Each array is read once:
+        a manifest naming one member for every cloud would have it copied as often (10,000
+        clouds of one 24 MB member: 240 GB from a 24 MB file)."""
+        if name in self._arrays_read:
+            raise ValueError(f"{name}.npy is named twice in the session (each cloud and map has "
+                             "its own)")
+        self._arrays_read.add(name)
         data = self._bytes(f"{name}.npy")
         stream = io.BytesIO(data)
         try:
@@ -250,6 +263,9 @@ def read_session(path: str | Path) -> dict[str, Any]:
     if is_archive(path):
         try:
             with SessionArchive(path) as archive:
+                if MANIFEST not in archive.names:
+                    raise ValueError(f"{path}: not a NURBS Studio session (a zip archive "
+                                     f"without {MANIFEST})")
                 data = archive.document(MANIFEST)
                 if not isinstance(data, dict) or data.get("format") != ARCHIVE_FORMAT:
                     raise ValueError(f"not a NURBS Studio session (expected format "
@@ -259,10 +275,7 @@ def read_session(path: str | Path) -> dict[str, Any]:
             message = str(exc)
             raise ValueError(message if message.startswith(str(path))
                              else f"{path}: damaged session ({message})") from None
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: not a readable session file ({exc})") from None
+    data = _json_session(path)
     if not isinstance(data, dict) or data.get("format") not in (JSON_SESSION_FORMAT,
                                                                  *OLD_SESSION_FORMATS):
         raise ValueError(f"{path}: not a NURBS Studio session (expected format "
@@ -271,6 +284,28 @@ def read_session(path: str | Path) -> dict[str, Any]:
         return _parsed_session(path, data, None)
     except ValueError as exc:
         raise ValueError(f"{path}: damaged session ({exc})") from None
+
+
+def _json_session(path: Path) -> Any:
+    """The parsed document of a file that is no zip archive: a JSON session of the formats
+    before the archive, read as a JSON file is (bounded: :func:`read_json_file`); ValueError
+    saying what the file is instead (a truncated archive, binary data, invalid JSON)."""
+    from nurbs_core.io.errors import FileFormatError
+    from nurbs_core.io.json_format import read_json_file
+
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(4)
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read the session file ({exc.strerror or exc})") from None
+    if head.startswith(b"PK"):  # a zip's local header: an archive cut short or corrupted
+        raise ValueError(f"{path}: damaged session (the archive is truncated or corrupt: its "
+                         "zip directory does not read)")
+    try:
+        return read_json_file(path)
+    except FileFormatError as exc:
+        raise ValueError(f"{path}: not a NURBS Studio session (neither a session archive nor "
+                         f"a JSON session: {exc.problem})") from None
 
 
 def load_session(document: Document, path: str | Path) -> dict[str, Any]:
@@ -295,6 +330,8 @@ def _session_target(number: int, item: Any) -> Target:
         raise ValueError(f"targets[{number}].path must be text, got {path!r}")
     if not isinstance(visible, bool):  # "no" is text: never read as true
         raise ValueError(f"targets[{number}].visible must be true or false, got {visible!r}")
+    if "points" not in item:
+        raise ValueError(f"targets[{number}] ({item['name']}) needs its points")
     points = number_array(f"targets[{number}].points", item["points"])
     if points.size == 0:
         points = points.reshape(0, 3)
@@ -319,11 +356,7 @@ def _parsed_session(path: Path, data: dict[str, Any], archive: Any) -> dict[str,
     members hold the points and the network; None for a JSON session, which holds its points
     as lists). ValueError for anything malformed."""
     try:
-        if data["format"] == OLD_SESSION_FORMATS[0]:
-            settings = Settings.from_flat_json(data.get("settings", {}))
-        else:
-            settings = Settings.from_json(data.get("settings", {}))
-        settings.validate()
+        settings = _session_settings(data)
         targets = []
         for number, item in enumerate(_list(data, "targets")):
             if archive is not None and isinstance(item, dict):
@@ -331,11 +364,14 @@ def _parsed_session(path: Path, data: dict[str, Any], archive: Any) -> dict[str,
                     raise ValueError(f"targets[{number}] needs the name of its points")
                 item = {**item, "points": archive.array(item["points"])}
             targets.append(_session_target(number, item))
-        patches = [_geometry(f"patches[{k}].geometry", p["geometry"])
-                   for k, p in enumerate(_list(data, "patches"))]
-        names = [p["name"] for p in _list(data, "patches")]
-        if not all(isinstance(name, str) for name in names):
-            raise ValueError("patch names must be text")
+        patches, names = [], []
+        for number, item in enumerate(_list(data, "patches")):
+            if not isinstance(item, dict) or not isinstance(item.get("name"), str):
+                raise ValueError(f"patches[{number}] needs a name (text) and a geometry")
+            if "geometry" not in item:
+                raise ValueError(f"patches[{number}] ({item['name']}) needs its geometry")
+            patches.append(_geometry(f"patches[{number}] ({item['name']})", item["geometry"]))
+            names.append(item["name"])
         fitted = data.get("fitted")
         fitted = None if fitted is None else _geometry("fitted", fitted)
         units = _session_units(data, targets)
@@ -345,11 +381,42 @@ def _parsed_session(path: Path, data: dict[str, Any], archive: Any) -> dict[str,
         solid = None
         if archive is not None and data.get("solid") is not None:
             solid = _session_solid(data, archive)
-    except (KeyError, TypeError) as exc:
-        raise ValueError(f"{type(exc).__name__}: {exc}") from None
+    except KeyError as exc:  # a checked entry lacks a field the checks above did not name
+        raise ValueError(f"an entry lacks its {exc.args[0]!r}") from None
+    except TypeError as exc:
+        raise ValueError(f"a value of the wrong type ({exc})") from None
     return {"settings": settings, "targets": targets, "patches": patches, "names": names,
             "fitted": fitted, "network": network, "network_report": report, "units": units,
             "solid": solid}
+
+
+def _session_settings(data: dict[str, Any]) -> Settings:
+    """The session's settings, checked (:meth:`Settings.validate`: the bounds nurbs-fit
+    keeps); ValueError naming what is wrong. Each part must be an object first: ``"fit":
+    "fast"`` was read letter by letter ("unknown fit settings: a, f, s, t")."""
+    value = data.get("settings", {})
+    if not isinstance(value, dict):
+        raise ValueError(f"settings must be an object, got {_kind(value)}")
+    if data["format"] == OLD_SESSION_FORMATS[0]:
+        settings = Settings.from_flat_json(value)
+    else:
+        for part in ("fit", "patches"):
+            if part in value and not isinstance(value[part], dict):
+                raise ValueError(f"settings.{part} must be an object, got {_kind(value[part])}")
+        settings = Settings.from_json(value)
+    settings.validate()
+    if abs(settings.offset_distance) > MAX_OFFSET_DISTANCE:
+        raise ValueError(f"settings.offset_distance {settings.offset_distance:g} is beyond the "
+                         f"Offsets dock's range (-{MAX_OFFSET_DISTANCE:g} to "
+                         f"{MAX_OFFSET_DISTANCE:g})")
+    return settings
+
+
+def _kind(value: Any) -> str:
+    """What a JSON value is, in words (for messages)."""
+    names = {bool: "true/false", int: "a number", float: "a number", str: "text",
+             list: "a list", dict: "an object", type(None): "null"}
+    return names.get(type(value), type(value).__name__)
 
 
 def _session_solid(data: dict[str, Any], archive: Any) -> Any:
@@ -370,9 +437,16 @@ def _geometry(name: str, data: Any) -> Any:
     if not isinstance(data, dict):
         raise ValueError(f"{name} must be an object")
     try:
-        return from_mapping(data)
+        geometry = from_mapping(data)
     except ValueError as exc:
         raise ValueError(f"{name}: {exc}") from None
+    # one shape: a batch of them (control points (B, n, m, 3)) is what a fit's snapshot may
+    # carry, never what the window shows
+    net_dims = 3 if geometry.kind == "surface" else 2
+    if np.ndim(geometry.control_points) != net_dims:
+        raise ValueError(f"{name}: control points of shape "
+                         f"{np.shape(geometry.control_points)} are several shapes, not one")
+    return geometry
 
 
 def _session_units(data: dict[str, Any], targets: list[Target]) -> str | None:
@@ -401,7 +475,7 @@ def _session_network(path: Path, data: dict[str, Any], archive: Any) -> tuple[An
     try:
         network = network_from_document(name, archive.document(name))
     except FileFormatError as exc:
-        raise ValueError(str(exc)) from None
+        raise ValueError(f"the patch network ({name}): {exc.problem}") from None
     report = data.get("network_report") or {}
     if not isinstance(report, dict):
         raise ValueError("network_report must be an object")

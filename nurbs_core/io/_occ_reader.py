@@ -96,17 +96,82 @@ def _step_length_unit(path: str) -> str | None:
     return next((unit for pattern, unit in _STEP_UNITS if pattern.search(text)), None)
 
 
+#: IGES's unit flags (Global section, parameter 14) -> OpenCASCADE's unit names (the units we
+#: offer; miles, kilometres, mils, microns and microinches are not among them)
+_IGES_UNITS = {1: "INCH", 2: "MM", 4: "FT", 6: "M", 10: "CM"}
+_HOLLERITH = re.compile(r"\s*(\d+)H")
+#: the Global section's lines read at most (it has about 5; the unit is in the first few)
+MAX_GLOBAL_LINES = 100
+#: bytes read of one line at most (IGES lines have 80 columns)
+MAX_LINE = 4096
+
+
+def _iges_global_parameters(path: str, count: int) -> list[str]:
+    """The first ``count`` parameters of an IGES file's Global section (its 'G' lines, columns
+    1-72; Hollerith strings ``4HINCH`` read as their text); fewer when the section is shorter."""
+    lines = []
+    with open(path, "rb") as handle:
+        for raw in iter(lambda: handle.readline(MAX_LINE), b""):  # 80-column lines
+            line = raw.decode("latin-1").rstrip("\r\n")
+            if len(line) >= 73 and line[72] == "G":
+                lines.append(line[:72])
+            elif lines:  # the section ended
+                break
+            if len(lines) > MAX_GLOBAL_LINES:
+                break
+    text, at = "".join(lines), 0
+    parameters: list[str] = []
+    delimiter, end = ",", ";"
+    while at < len(text) and len(parameters) < count:
+        hollerith = _HOLLERITH.match(text, at)
+        if hollerith:
+            start = hollerith.end()
+            value, at = text[start:start + int(hollerith.group(1))], start + int(hollerith.group(1))
+        else:
+            stop = min((i for i in (text.find(delimiter, at), text.find(end, at)) if i >= 0),
+                       default=len(text))
+            value, at = text[at:stop].strip(), stop
+        parameters.append(value)
+        if len(parameters) == 1 and value:
+            delimiter = value
+        elif len(parameters) == 2 and value:
+            end = value
+        if at < len(text) and text[at] == end:
+            break
+        at += 1  # past the delimiter
+    return parameters
+
+
+def _iges_length_unit(path: str) -> str | None:
+    """The length unit an IGES file states (its unit flag, OpenCASCADE's name of it; None when
+    the Global section does not read or names a unit we do not offer)."""
+    try:
+        flag = _iges_global_parameters(path, 14)[13]
+        return _IGES_UNITS.get(int(float(flag)))
+    except (IndexError, ValueError, OSError):
+        return None
+
+
+def _length_unit(path: str, kind: str) -> str | None:
+    """The length unit a STEP or IGES file states (OpenCASCADE's name; None: none known)."""
+    return _step_length_unit(path) if kind == "step" else _iges_length_unit(path)
+
+
 def _read_shape(path: str, kind: str) -> OccObject:
     from OCP.IFSelect import IFSelect_ReturnStatus
     from OCP.IGESControl import IGESControl_Reader
     from OCP.Interface import Interface_Static
     from OCP.STEPControl import STEPControl_Reader
 
-    if kind == "step":
-        # the coordinates as the file has them, in its own unit (OpenCASCADE would convert them
-        # to millimetres: a model written in metres came back 1000 x larger)
-        # (the reader serves many files: every read sets it, millimetres when none is stated)
-        Interface_Static.SetCVal_s("xstep.cascade.unit", _step_length_unit(path) or "MM")
+    # the coordinates as the file has them, in its own unit: a STEP file's unit is the session
+    # unit (OpenCASCADE would convert them to millimetres: a model written in metres came back
+    # 1000 x larger); the IGES reader keeps the file's coordinates when the session unit is
+    # millimetres and divides them by the session unit's millimetres otherwise (measured: a
+    # file in metres read under "M" came back 1000 x smaller), so IGES reads under "MM"
+    # (the reader serves many files: every read sets it; an IGES file took the unit of the STEP
+    # file read before it, and came back 25.4 x smaller after one in inches)
+    unit = _step_length_unit(path) if kind == "step" else None
+    Interface_Static.SetCVal_s("xstep.cascade.unit", unit or "MM")
     reader = STEPControl_Reader() if kind == "step" else IGESControl_Reader()
     status = reader.ReadFile(path)
     if status != IFSelect_ReturnStatus.IFSelect_RetDone:
@@ -357,7 +422,7 @@ def _handle(request: dict[str, Any], replies: TextIO) -> dict[str, Any]:
         else:
             items = read_items(request["path"], kind)
             objects = len(items)
-            units = _step_length_unit(request["path"]) if kind == "step" else None
+            units = _length_unit(request["path"], kind)
         # Any values: numpy's stubs match **kwds against allow_pickle otherwise
         arrays: dict[str, Any] = {f"{key}_{k}": value for k, item in enumerate(items)
                                   for key, value in item.items()}

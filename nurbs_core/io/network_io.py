@@ -197,13 +197,22 @@ def _network_from(path: StrPath, document: object) -> PatchNetwork:
     if len(quads) == 0 or quads.min() < 0 or quads.max() >= len(vertices):
         raise FileFormatError(path, f"layout.quads must index the {len(vertices)} layout "
                                     "vertices (and not be empty)")
+    if size < 1:
+        raise FileFormatError(path, f"size must be a positive whole number, got {size}")
+    # the index map (P x n x n) holds what the network will: read from the file first, it
+    # bounds the declared size by what the file holds (a size of 20000 on 6 quads had the
+    # layout allocate 18 GB before any check)
+    index = _array(path, document, "index", (None, None, None), np.int64)
+    if index.shape != (len(quads), size, size):
+        raise FileFormatError(path, f"size {size} and the {len(quads)} layout quads need an "
+                                    f"index map of {len(quads)} x {size} x {size}, the file holds "
+                                    f"{' x '.join(map(str, index.shape))}")
+    creases = _creases(path, document.get("adjacency"))
     try:
-        network = build_network(vertices, quads, size=size, degree=degree,
-                                creases=_creases(path, document.get("adjacency")))
+        network = build_network(vertices, quads, size=size, degree=degree, creases=creases)
     except ValueError as exc:
         raise FileFormatError(path, f"invalid layout: {exc}") from None
     control = _array(path, document, "control_points", network.control_points.shape, np.float64)
-    index = _array(path, document, "index", network.index.shape, np.int64)
     if index.min() < 0 or index.max() >= len(control):
         raise FileFormatError(path, f"index must lie in [0, {len(control)})")
     if not np.array_equal(index, network.index):

@@ -173,7 +173,7 @@ def _patch_settings(**patches):
     ({"fitted": _fitted_surface(knots_u=["0"] * 4 + ["1"] * 4)},
      "fitted: knots_u must hold numbers"),
     ({"patches": [{"name": "p", "geometry": _fitted_surface(degree_u=True)}]},
-     r"patches\[0\]\.geometry: degree_u must be an integer, got True"),
+     r"patches\[0\] \(p\): degree_u must be an integer, got True"),
     ({"settings": _settings(degree_u="3")}, "degree_u must be an integer, got '3'"),
     ({"settings": _settings(free_knots="no")}, "free_knots must be true or false, got 'no'"),
     ({"settings": _settings(parameter_correction=0)},

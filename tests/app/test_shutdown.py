@@ -90,3 +90,96 @@ def test_sigterm_during_a_fit_on_ten_million_points_exits_within_seconds(tmp_pat
     assert status == 128 + signal.SIGTERM, "".join(seen)
     assert "Traceback" not in "".join(seen)
     assert seconds < 10, f"exit took {seconds:.1f} s after SIGTERM"
+
+
+#: A ``python -m app CLOUD --fit`` that also saves the session to SESSION once the fit runs
+#: (as a user would from File > Save Session; written slowly, as to a slow disk) and says so
+#: on stderr.
+SAVING_APP = """
+import sys
+import time
+
+from PySide6.QtCore import QTimer
+
+import app.window.session_policy as policy
+from app import __main__ as entry
+from app.main_window import MainWindow
+
+cloud, session = sys.argv[1], sys.argv[2]
+made, write = MainWindow.__init__, policy.write_session
+
+
+def slow_write(content, path, report=None, check=None):
+    # the save, slowed to about 20 MB/s (a slow disk), so that SIGTERM finds it writing
+    def slow_check():
+        time.sleep(0.05)
+        if check is not None:
+            check()
+    write(content, path, report, slow_check)
+
+
+def with_a_save(window, *args, **kwargs):
+    made(window, *args, **kwargs)
+
+    def save():
+        if window.save_session(session):
+            print("SAVING the session", file=sys.stderr, flush=True)
+
+    window.controller.snapshot_shown.connect(
+        lambda _snapshot: None if getattr(window, "_saving", False)
+        else (setattr(window, "_saving", True), QTimer.singleShot(0, save)))
+
+
+MainWindow.__init__ = with_a_save
+policy.write_session = slow_write
+sys.exit(entry.main([cloud, "--fit"]))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_sigterm_while_a_big_session_saves_during_a_fit_loses_nothing(tmp_path):
+    """SIGTERM with a fit running on 3,000,000 points and their session being saved: the app
+    exits (143, no traceback) and the session it was writing is complete and opens, with every
+    point; no temporary file is left beside it. (An old file stands at the path first: a save
+    abandoned by the exit would leave it, and the session would not read; the save is slowed
+    to take about 4 s, so the signal comes while it writes.)"""
+    from app.session_file import read_session
+
+    cloud = tmp_path / "big.npy"
+    points = sin_cos_cloud(3_000_000, seed=7)
+    np.save(cloud, points)
+    folder = tmp_path / "out"
+    folder.mkdir()
+    session = folder / "work.nstudio"
+    session.write_bytes(b"an older file in the way")
+    driver = tmp_path / "saving_app.py"
+    driver.write_text(SAVING_APP)
+    with app_process_env() as env:
+        process = subprocess.Popen([sys.executable, str(driver), str(cloud), str(session)],
+                                   cwd=ROOT, env={**env, "OMP_NUM_THREADS": "1"},
+                                   stderr=subprocess.PIPE, text=True)
+        saving, seen = threading.Event(), []
+
+        def read() -> None:
+            assert process.stderr is not None
+            for line in process.stderr:
+                seen.append(line)
+                if "SAVING the session" in line:
+                    saving.set()
+
+        threading.Thread(target=read, daemon=True).start()
+        try:
+            assert saving.wait(300), "".join(seen)
+            assert process.poll() is None, "".join(seen)
+            process.send_signal(signal.SIGTERM)
+            status = process.wait(300)              # a hang guard, not a bound
+        finally:
+            if process.poll() is None:
+                process.kill()
+                process.wait()
+    assert status == 128 + signal.SIGTERM, "".join(seen)
+    assert "Traceback" not in "".join(seen)
+    saved = read_session(session)
+    np.testing.assert_array_equal(saved["targets"][0].points, points)
+    assert sorted(p.name for p in folder.iterdir()) == ["work.nstudio"]

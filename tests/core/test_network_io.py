@@ -127,6 +127,10 @@ def _edit(document: dict, change: str) -> None:
         document["degree"] = "3"
     elif change == "not manifold":
         document["layout"]["quads"][1] = document["layout"]["quads"][0]
+    elif change == "huge declared size":  # the layout allocated 6 x 20000^2 indices: 18 GB
+        document["size"] = 20_000
+    elif change == "zero size":
+        document["size"] = 0
 
 
 @pytest.mark.parametrize("change, message", [
@@ -143,6 +147,8 @@ def _edit(document: dict, change: str) -> None:
     ("numbers as text", "control_points is not a"),
     ("degree is text", "degree must be an integer"),
     ("not manifold", "invalid layout"),
+    ("huge declared size", "need an index map of 6 x 20000 x 20000, the file holds 6 x 6 x 6"),
+    ("zero size", "size must be a positive whole number"),
 ])
 def test_malformed_json_is_a_clear_error(tmp_path, ball, change, message):
     document = network_document(ball)
