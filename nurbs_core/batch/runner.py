@@ -81,17 +81,24 @@ def _written_since(path: str, since: float) -> bool:
 
 
 def _record_written(records: list[dict | None], items: list[Item], since: float) -> None:
-    """Rows for the inputs without a record whose outputs this run wrote (after ``since``, a
-    time.time()): the run was interrupted after writing them and before recording them; their
-    statistics are not known."""
+    """Rows "ok" for the inputs whose outputs this run wrote (after ``since``, a time.time()) but
+    which have no record (the run was interrupted between the files and the record) or a failed
+    one (a worker or the scheduler was lost after the files were written; a fit that fails
+    writes nothing: its outputs are all-or-nothing). Their statistics are not known."""
     for position, item in enumerate(items):
-        if records[position] is not None or item.error is not None or not item.outputs:
+        record = records[position]
+        if record is not None and record["status"] != "failed":
+            continue
+        if item.error is not None or not item.outputs:
             continue
         if all(_written_since(p, since) for p in item.outputs):
             records[position] = _with_size({
                 "input": item.label, "output": item.outputs[0], "status": "ok",
                 "seconds": None, "error": "",
-                "note": "written just before the interruption: its statistics were not recorded"})
+                "note": ("written just before the interruption" if record is None else
+                         "written, then its record was lost ("
+                         + record["error"].removeprefix("nurbs-fit: error: ") + ")")
+                        + ": its statistics were not recorded"})
 
 
 def _with_size(record: dict) -> dict:
@@ -230,7 +237,7 @@ def run_batch(batch: BatchSettings) -> int:
     with SummaryJournal(summary, [r for r in records if r is not None]) as journal:
         try:
             if todo and (jobs > 1 or batch.scheduler is not None):
-                with DaskExecutor(jobs, batch.scheduler, job.threads) as executor:
+                with DaskExecutor(jobs, batch.scheduler, job.threads, job.debug) as executor:
                     progress.start = time.perf_counter()  # the rate counts fitting, not start-up
                     for position, record in executor.run(job, todo, batch.batch_fits):
                         _arrived(records, position,
@@ -245,6 +252,8 @@ def run_batch(batch: BatchSettings) -> int:
                 return _interrupted(records, items, todo, started, journal,
                                     writers_stopped=batch.scheduler is None, progress=progress)
         progress.show(final=True)
+        # results written by a worker that was lost before its record came back are whole
+        _record_written(records, items, started)
         done = [r for r in records if r is not None]
         journal.finish(done)
     failed = [r for r in done if r["status"] == "failed"]
