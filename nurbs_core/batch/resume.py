@@ -39,6 +39,8 @@ def _readable_as(path: str, kind: str) -> bool:
         from nurbs_core.io.network_io import read_network
 
         return kind != CURVE and read_network(path).patch_count > 0
+    if suffix_of(path) == ".json" and kind == NETWORK:
+        return False  # a network's .json is our network format
     content = load_any(path)
     if not isinstance(content, list):
         return len(content.points) > 0

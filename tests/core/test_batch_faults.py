@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from nurbs_core import samples
-from nurbs_core.batch.resume import CURVE, SURFACE, is_complete
+from nurbs_core.batch.resume import CURVE, NETWORK, SURFACE, is_complete
 from nurbs_core.batch.summary import SummaryJournal, earlier_rows
 from nurbs_core.cli import SOME_FAILED_STATUS, main
 from nurbs_core.io import save_points
@@ -73,6 +73,28 @@ def test_a_rerun_into_the_input_folder_never_fits_its_own_results(tmp_path):
         "a.ply.ply", "a.xyz_2.ply", "a.xyz_3.ply"}
     assert sorted(_files(folder)) == sorted(first)
     assert {p: p.read_bytes() for p in inputs} == before
+
+
+def test_a_summary_linked_to_an_input_or_a_folder_in_a_results_way_is_refused(tmp_path, capsys):
+    """By identity, not spelling: a --summary that is a symbolic link to a cloud is refused in
+    one line naming the cloud; a folder standing where a result is due (out/c01.json/) failed
+    that input after the others were fitted, and is now refused before any work."""
+    clouds = [_cloud_file(tmp_path / "scans" / f"c0{k}.xyz", k) for k in (1, 2)]
+    before = {p: p.read_bytes() for p in clouds}
+    (tmp_path / "link.csv").symlink_to(clouds[1])
+    out = tmp_path / "out"
+    code = main([str(tmp_path / "scans"), "--output-dir", str(out), "--summary",
+                 str(tmp_path / "link.csv"), "-q", *FIT])
+    assert code == 1
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and f"would overwrite the input {clouds[1]}" in error[0], error
+    (out / "c01.json").mkdir(parents=True)
+    code = main([str(tmp_path / "scans"), "--output-dir", str(out), "-q", *FIT])
+    assert code == 1
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "a folder is in the way of the result of" in error[0], error
+    assert sorted(p.name for p in out.iterdir()) == ["c01.json"]         # nothing fitted
+    assert {p: p.read_bytes() for p in clouds} == before
 
 
 @pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs /proc")
@@ -143,6 +165,7 @@ def test_skip_existing_skips_only_whole_results_of_the_right_kind_and_size(tmp_p
     os.replace(tmp_path / "curve.json", out / "c1.json")
     assert not is_complete(str(out / "c1.json"), SURFACE)
     assert is_complete(str(out / "c1.json"), CURVE)
+    assert not is_complete(str(out / "c0.json"), NETWORK)          # --patches: a network is due
     with open(out / "c2.json", "a") as handle:
         handle.write(" ")
     (out / "c3.json").write_bytes((out / "c3.json").read_bytes()[:300])
