@@ -251,6 +251,12 @@ def run_batch(batch: BatchSettings) -> int:
             with held_signals(replay=False):
                 return _interrupted(records, items, todo, started, journal,
                                     writers_stopped=batch.scheduler is None, progress=progress)
+        except Exception:
+            # the run itself failed (not one input): the summary still lists, in input order,
+            # every result written so far
+            _record_written(records, items, started)
+            journal.finish([r for r in records if r is not None])
+            raise
         progress.show(final=True)
         # results written by a worker that was lost before its record came back are whole
         _record_written(records, items, started)

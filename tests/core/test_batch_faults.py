@@ -284,3 +284,32 @@ def test_a_worker_killed_on_a_local_cluster_never_hangs_the_batch(tmp_path):
         if row["status"] == "ok":
             assert is_complete(row["output"], SURFACE, row["output_bytes"])
     assert "Traceback" not in batch.stderr, batch.stderr
+
+
+def test_a_run_that_fails_midway_still_lists_every_result_it_wrote(tmp_path, monkeypatch,
+                                                                   capsys):
+    """The run itself fails (not one input: here the executor raises after its second result is
+    written, before its record is taken): one error line, status 1, and the summary lists both
+    results, in input order."""
+    import nurbs_core.batch.executors as executors
+
+    real = executors.serial
+
+    def failing_after_the_second_write(*args, **kwargs):
+        for count, settled in enumerate(real(*args, **kwargs)):
+            if count == 1:
+                raise RuntimeError("the executor broke")
+            yield settled
+
+    monkeypatch.setattr(executors, "serial", failing_after_the_second_write)
+    folder = tmp_path / "scans"
+    for k in range(4):
+        _cloud_file(folder / f"c{k}.xyz", k)
+    out = tmp_path / "fits"
+    assert main([str(folder), "--output-dir", str(out), "-q", *FIT]) == 1
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "the executor broke" in error[0]
+    rows = [json.loads(line) for line in (out / "summary.jsonl").read_text().splitlines()]
+    assert [Path(row["input"]).name for row in rows] == ["c0.xyz", "c1.xyz"]
+    assert rows[0]["rms"] > 0 and rows[1]["note"]             # the second: written, not recorded
+    assert {p.name for p in out.glob("*.json")} == {"c0.json", "c1.json"}
