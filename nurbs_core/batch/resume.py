@@ -70,11 +70,18 @@ def is_complete(path: str, kind: str, recorded_bytes: object = None) -> bool:
 def earlier_outputs(rows: dict[str, dict]) -> tuple[Path, ...]:
     """The files an earlier run wrote (its summary's finished rows: each result and its
     ``--offset`` companion): a folder's expansion leaves them out, so that a rerun into an input
-    folder does not fit its own results."""
+    folder does not fit its own results. A result no longer of the size its row recorded was
+    replaced since (a cloud of the user's): it stays an input."""
     from nurbs_core.jobs.checks import offset_path
 
     paths: list[Path] = []
     for row in rows.values():
         output = Path(str(row["output"]))
+        recorded = row.get(OUTPUT_BYTES)
+        try:
+            if recorded not in (None, "") and int(str(recorded)) != output.stat().st_size:
+                continue
+        except (OSError, ValueError):
+            continue
         paths += [output, offset_path(output)]
     return tuple(paths)

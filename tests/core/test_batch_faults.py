@@ -73,6 +73,15 @@ def test_a_rerun_into_the_input_folder_never_fits_its_own_results(tmp_path):
         "a.ply.ply", "a.xyz_2.ply", "a.xyz_3.ply"}
     assert sorted(_files(folder)) == sorted(first)
     assert {p: p.read_bytes() for p in inputs} == before
+    # a result replaced by a cloud of the user's (another size than its row says) is an input
+    # again: fitted, never written over
+    mine = _cloud_file(folder / "a.ply.ply", 7, points=150)
+    kept = mine.read_bytes()
+    assert main(arguments) == 0
+    rows = _rows(folder / "summary.jsonl")
+    assert sorted(rows) == ["a.ply", "a.ply.ply", "a.xyz", "a.xyz.ply"]
+    assert mine.read_bytes() == kept
+    assert {p: p.read_bytes() for p in inputs} == before
 
 
 def test_a_summary_linked_to_an_input_or_a_folder_in_a_results_way_is_refused(tmp_path, capsys):
