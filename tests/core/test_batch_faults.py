@@ -22,7 +22,8 @@ from nurbs_core import samples
 from nurbs_core.batch.resume import CURVE, NETWORK, SURFACE, is_complete
 from nurbs_core.batch.summary import SummaryJournal, earlier_rows
 from nurbs_core.cli import SOME_FAILED_STATUS, main
-from nurbs_core.io import save_points
+from nurbs_core.geometry import NurbsCurve
+from nurbs_core.io import save, save_points
 
 FIT = ["--iterations", "3", "--control-points", "5", "5", "--samples", "16"]
 
@@ -77,7 +78,7 @@ def test_a_rerun_into_the_input_folder_never_fits_its_own_results(tmp_path):
     # again: fitted, never written over
     mine = _cloud_file(folder / "a.ply.ply", 7, points=150)
     kept = mine.read_bytes()
-    assert main(arguments) == 0
+    assert main([*arguments, "--skip-existing"]) == 0
     rows = _rows(folder / "summary.jsonl")
     assert sorted(rows) == ["a.ply", "a.ply.ply", "a.xyz", "a.xyz.ply"]
     assert mine.read_bytes() == kept
@@ -161,31 +162,28 @@ def test_the_summary_journal_holds_every_row_added_before_a_kill(tmp_path, suffi
 
 def test_skip_existing_skips_only_whole_results_of_the_right_kind_and_size(tmp_path):
     """A result replaced by a curve (a surface is due), one grown by a byte (still readable, not
-    the size the summary recorded), one cut short, one empty: all four fitted again; the intact
-    one skipped with its earlier statistics, though the resume spells the folder differently."""
+    the size the summary recorded), one cut short: all three fitted again; the intact one
+    skipped with its earlier statistics, though the resume spells the folder differently."""
     folder = tmp_path / "scans"
-    for k in range(5):
-        _cloud_file(folder / f"c{k}.xyz", k)
+    for k in range(4):
+        _cloud_file(folder / f"c{k}.xyz", k, points=100)
     out = tmp_path / "fits"
     assert main([str(folder), "--output-dir", str(out), "-q", *FIT]) == 0
     first = _rows(out / "summary.jsonl")
-    assert main([str(folder / "c0.xyz"), "-o", str(tmp_path / "curve.json"), "--curve",
-                 "--iterations", "3", "-q"]) == 0
-    os.replace(tmp_path / "curve.json", out / "c1.json")
+    save(NurbsCurve(np.random.default_rng(0).normal(size=(6, 3)), 3), out / "c1.json")
     assert not is_complete(str(out / "c1.json"), SURFACE)
     assert is_complete(str(out / "c1.json"), CURVE)
     assert not is_complete(str(out / "c0.json"), NETWORK)          # --patches: a network is due
     with open(out / "c2.json", "a") as handle:
         handle.write(" ")
     (out / "c3.json").write_bytes((out / "c3.json").read_bytes()[:300])
-    (out / "c4.json").write_bytes(b"")
     spelled = tmp_path / "other" / ".." / "fits"                # the same folder, spelled anew
     assert main([str(folder), "--output-dir", str(spelled), "--skip-existing", "-q", *FIT]) == 0
     rows = _rows(spelled / "summary.jsonl")
     assert rows["c0.xyz"]["status"] == "skipped"
     assert rows["c0.xyz"]["rms"] == first["c0.xyz"]["rms"]
-    assert [rows[f"c{k}.xyz"]["status"] for k in range(1, 5)] == ["ok"] * 4
-    for k in range(5):
+    assert [rows[f"c{k}.xyz"]["status"] for k in range(1, 4)] == ["ok"] * 3
+    for k in range(4):
         assert is_complete(str(out / f"c{k}.json"), SURFACE, rows[f"c{k}.xyz"]["output_bytes"])
 
 
