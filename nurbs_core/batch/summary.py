@@ -101,8 +101,11 @@ class SummaryJournal:
         assert self.handle is not None
         line = (_csv_rows(self.columns, [record], header=False) if _is_csv(self.path)
                 else _jsonl_line(record))
-        self.handle.write(line)
-        self.handle.flush()
+        try:
+            self.handle.write(line)
+            self.handle.flush()
+        except OSError as exc:  # a full disk: name the summary (the rows before stay whole)
+            raise type(exc)(f"cannot write {self.path}: {exc.strerror or exc}") from exc
 
     def finish(self, records: list[dict]) -> None:
         """The final table: ``records`` (every input's row, in input order), written atomically."""
@@ -111,9 +114,14 @@ class SummaryJournal:
         write_summary(self.path, self.records)
 
     def close(self) -> None:
-        if self.handle is not None:
-            self.handle.close()
-            self.handle = None
+        """Close the append handle (a row it could not flush, on a full disk, is dropped: the
+        error was raised by :meth:`add`)."""
+        handle, self.handle = self.handle, None
+        if handle is not None:
+            try:
+                handle.close()
+            except OSError:
+                pass
 
     def __enter__(self) -> SummaryJournal:
         return self

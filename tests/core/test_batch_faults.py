@@ -160,6 +160,30 @@ def test_the_summary_journal_holds_every_row_added_before_a_kill(tmp_path, suffi
     assert sorted(rows) == sorted(os.path.realpath(f"out/c{k}.json") for k in range(2))
 
 
+def test_a_summary_row_that_cannot_be_written_names_the_summary(tmp_path):
+    """A full disk while a row is appended: the error names the summary (before: "[Errno 28] No
+    space left on device"), the rows before it stay readable, closing does not raise again."""
+    import errno
+
+    path = tmp_path / "summary.jsonl"
+    journal = SummaryJournal(path, [])
+    journal.add({"input": "c0.xyz", "output": "out/c0.json", "status": "ok", "rms": 0.1})
+
+    class FullDisk:
+        def write(self, _text):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        def close(self):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    journal.handle.close()
+    journal.handle = FullDisk()
+    with pytest.raises(OSError, match=f"cannot write {path}: No space left on device"):
+        journal.add({"input": "c1.xyz", "output": "out/c1.json", "status": "ok", "rms": 0.2})
+    journal.close()
+    assert list(earlier_rows(path)) == [os.path.realpath("out/c0.json")]
+
+
 def test_skip_existing_skips_only_whole_results_of_the_right_kind_and_size(tmp_path):
     """A result replaced by a curve (a surface is due), one grown by a byte (still readable, not
     the size the summary recorded), one cut short: all three fitted again; the intact one
