@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from nurbs_core.jobs import FitJob
 
 WORKER_WAIT_S = 60  # --scheduler: how long to wait for the first worker
+CONNECT_S = 30  # --scheduler: how long to wait for the scheduler to answer
 #: with no worker left for this long, the inputs still waiting fail (checked every POLL_S)
 WORKERLESS_S = 60.0
 POLL_S = 1.0
@@ -107,7 +108,11 @@ class DaskExecutor:
             self.client.wait_for_workers(self.jobs, timeout=WORKER_WAIT_S)
             self._pin()
         else:
-            self.client = distributed.Client(self.scheduler, timeout="30s")
+            try:
+                self.client = distributed.Client(self.scheduler, timeout=f"{CONNECT_S}s")
+            except OSError as exc:  # nothing answers there (Dask says: "Timed out trying ...")
+                raise OSError(f"no Dask scheduler answered at {self.scheduler} within "
+                              f"{CONNECT_S} s ({exc}); start one with: dask scheduler") from None
             try:
                 self.client.wait_for_workers(1, timeout=WORKER_WAIT_S)
             except TimeoutError:

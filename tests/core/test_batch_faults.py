@@ -344,3 +344,29 @@ def test_a_run_that_fails_midway_still_lists_every_result_it_wrote(tmp_path, mon
     assert [Path(row["input"]).name for row in rows] == ["c0.xyz", "c1.xyz"]
     assert rows[0]["rms"] > 0 and rows[1]["note"]             # the second: written, not recorded
     assert {p.name for p in out.glob("*.json")} == {"c0.json", "c1.json"}
+
+
+def test_a_scheduler_that_does_not_answer_is_one_clear_line(tmp_path):
+    """--scheduler at an address where nothing listens: one line saying no scheduler answered
+    and how to start one (before: Dask's "Timed out trying to connect ..."), status 1."""
+    pytest.importorskip("distributed", reason="the batch extra (dask[distributed]) is not installed")
+    import socket
+
+    with socket.socket() as sock:                               # a port nothing listens on
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    cloud = _cloud_file(tmp_path / "c0.xyz", 0)
+    code = ("import sys\n"
+            "import nurbs_core.batch.executors as executors\n"
+            "executors.CONNECT_S = 1\n"
+            "from nurbs_core.cli import main\n"
+            "sys.exit(main(sys.argv[1:]))\n")
+    batch = subprocess.run([sys.executable, "-c", code, str(cloud), "--output-dir",
+                            str(tmp_path / "out"), "--scheduler", f"tcp://127.0.0.1:{port}",
+                            "-q"], capture_output=True, text=True, timeout=120)
+    assert batch.returncode == 1
+    lines = batch.stderr.strip().splitlines()
+    assert len(lines) == 1, batch.stderr
+    assert lines[0].startswith(f"nurbs-fit: error: no Dask scheduler answered at "
+                               f"tcp://127.0.0.1:{port} within 1 s")
+    assert "dask scheduler" in lines[0]
