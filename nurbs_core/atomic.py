@@ -82,7 +82,8 @@ def atomic_paths(paths: Iterable[StrPath]) -> Iterator[list[Path]]:
     """Temporary paths (one per target, each with its target's suffix) for writing several files
     all-or-nothing: the targets are replaced only after every file was written and flushed; if
     any write fails, no target changes and no temporary file is left behind."""
-    targets = [Path(os.path.realpath(os.fspath(path))) for path in paths]
+    given = [Path(os.fspath(path)) for path in paths]
+    targets = [Path(os.path.realpath(path)) for path in given]
     if len(set(targets)) != len(targets):
         raise ValueError("the same file is named twice among the outputs")
     temporaries: list[Path] = []
@@ -98,8 +99,35 @@ def atomic_paths(paths: Iterable[StrPath]) -> Iterator[list[Path]]:
             os.replace(temporary, target)
         for directory in {target.parent for target in targets}:
             _fsync_path(directory, directory=True)
-    except BaseException:
+    except BaseException as exc:
         for temporary in temporaries:
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(temporary)
+        if isinstance(exc, OSError):
+            named = _naming_targets(exc, temporaries, targets, given)
+            if named is not exc:
+                raise named from exc
         raise
+
+
+def _naming_targets(error: OSError, temporaries: list[Path], targets: list[Path],
+                    given: list[Path]) -> OSError:
+    """``error`` (same type and errno) saying which of the user's files could not be written,
+    never the hidden temporary file (``No space left on device``, a write error without a name,
+    becomes ``cannot write fit.ply: No space left on device``). An error about another file (a
+    writer reading something) is returned as it is."""
+    names = [os.fspath(path) for path in given]
+    if error.filename is not None:
+        named = os.fspath(error.filename)
+        ours = [path for temporary, target, path in zip(temporaries, targets, given, strict=False)
+                if named in (os.fspath(temporary), os.fspath(target), os.fspath(path))]
+        if not ours:
+            return error
+        names = [os.fspath(ours[0])]
+    reason = error.strerror or str(error)
+    try:
+        named = type(error)(f"cannot write {', '.join(names)}: {reason}")
+    except TypeError:  # an OSError subclass with a constructor of its own
+        named = OSError(f"cannot write {', '.join(names)}: {reason}")
+    named.errno = error.errno
+    return named

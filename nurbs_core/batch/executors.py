@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from nurbs_core.jobs import FitJob
 
 WORKER_WAIT_S = 60  # --scheduler: how long to wait for the first worker
+CONNECT_S = 30  # --scheduler: how long to wait for the scheduler to answer
 #: with no worker left for this long, the inputs still waiting fail (checked every POLL_S)
 WORKERLESS_S = 60.0
 POLL_S = 1.0
@@ -61,10 +62,13 @@ def check_available() -> None:
 
 class DaskExecutor:
     """A Dask client: on an embedded ``LocalCluster(n_workers=jobs, threads_per_worker=1,
-    processes=True)``, or connected to ``scheduler``. Use as a context manager."""
+    processes=True)``, or connected to ``scheduler``. Use as a context manager. Dask's own log
+    (a lost worker or scheduler logs its tracebacks) is silenced unless ``debug``: what it
+    means for each input is in the input's record."""
 
-    def __init__(self, jobs: int = 1, scheduler: str | None = None, threads: int = 1):
-        self.jobs, self.scheduler, self.threads = jobs, scheduler, threads
+    def __init__(self, jobs: int = 1, scheduler: str | None = None, threads: int = 1,
+                 debug: bool = False):
+        self.jobs, self.scheduler, self.threads, self.debug = jobs, scheduler, threads, debug
         # distributed's LocalCluster / Client (Dask is an optional extra: imported on entry)
         self.cluster: Any = None
         self.client: Any = None
@@ -73,6 +77,8 @@ class DaskExecutor:
         self._silenced = False
 
     def __enter__(self) -> DaskExecutor:
+        if not self.debug:
+            self._silence()
         try:
             self._start()
         except BaseException:  # Ctrl-C during start-up too: nothing started is left running
@@ -102,7 +108,11 @@ class DaskExecutor:
             self.client.wait_for_workers(self.jobs, timeout=WORKER_WAIT_S)
             self._pin()
         else:
-            self.client = distributed.Client(self.scheduler, timeout="30s")
+            try:
+                self.client = distributed.Client(self.scheduler, timeout=f"{CONNECT_S}s")
+            except OSError as exc:  # nothing answers there (Dask says: "Timed out trying ...")
+                raise OSError(f"no Dask scheduler answered at {self.scheduler} within "
+                              f"{CONNECT_S} s ({exc}); start one with: dask scheduler") from None
             try:
                 self.client.wait_for_workers(1, timeout=WORKER_WAIT_S)
             except TimeoutError:
@@ -142,8 +152,9 @@ class DaskExecutor:
         self._silenced = False
 
     def _silence(self) -> None:
-        """No log records until the cluster is closed (Dask logs the cancelled tasks and the
-        killed workers as errors: a stopped batch prints its one line only)."""
+        """No log records until the cluster is closed (Dask logs the cancelled tasks, the
+        killed workers and a lost scheduler as errors, with tracebacks: a batch prints its own
+        lines only)."""
         if not self._silenced:
             self._silenced = True
             self._quiet.enter_context(_logging_disabled())
@@ -192,6 +203,16 @@ class DaskExecutor:
                                                      return_when="FIRST_COMPLETED")
                 except TimeoutError:
                     done = set()
+                except Exception as exc:  # noqa: BLE001 - the scheduler is gone (its futures
+                    # cancelled): every input still waiting fails, the finished ones stay
+                    where = self.scheduler or "the local cluster"
+                    why = ", ".join(sorted({str(group.reason) for group in
+                                            getattr(exc, "error_groups", ())})) or type(exc).__name__
+                    for future in pending:
+                        yield from _failed(futures[future], f"lost the Dask scheduler of {where} "
+                                           f"({why}); start it again, then resume with "
+                                           "--skip-existing")
+                    return
                 settled = False
                 for future in done:
                     chunk = futures[future]
@@ -245,7 +266,7 @@ def _failed(chunk: PositionedItems, why: str) -> Iterator[tuple[int, dict]]:
     """A failed record for each item of ``chunk``, saying ``why``."""
     from nurbs_core.jobs import error_line
 
-    error = error_line(RuntimeError(why))
+    error = error_line(OSError(why))  # the environment failed, not the input
     for position, item in chunk:
         yield position, {"input": item["input"], "output": item["outputs"][0],
                          "status": "failed", "seconds": None, "error": error}

@@ -189,7 +189,8 @@ def check_planned_writes(items: list[Item], summary: Path, read: tuple[str | Non
     """Every file the batch will write (each item's results, the summary) against every input
     (the items, and ``read``: the other files every fit reads, ``--initial``) and against each
     other, by file identity (symbolic and hard links, ``..``, letter case on a case-insensitive
-    file system), before any work: OutputPathError naming both."""
+    file system), before any work: OutputPathError naming both (or naming the folder that stands
+    where a file is due)."""
     from nurbs_core.io.errors import OutputPathError
     from nurbs_core.io.outputs import same_file
 
@@ -203,6 +204,9 @@ def check_planned_writes(items: list[Item], summary: Path, read: tuple[str | Non
     writes = [(Path(p), f"the result of {item.label}") for item in items for p in item.outputs]
     writes.append((summary, "the summary"))
     for path, what in writes:
+        if path.is_dir():
+            raise OutputPathError(path, f"a folder is in the way of {what}; move it or choose "
+                                        "another --output-dir")
         for source in sources.values():
             if same_file(path, Path(source)):
                 raise OutputPathError(path, f"{what} would overwrite the input {source}; choose "

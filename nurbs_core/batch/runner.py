@@ -5,9 +5,6 @@ input succeeded (or was skipped), 3 (:data:`nurbs_core.jobs.SOME_FAILED_STATUS`)
 
 from __future__ import annotations
 
-import csv
-import io
-import json
 import math
 import os
 import sys
@@ -16,10 +13,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 if TYPE_CHECKING:
+    from nurbs_core.batch.inputs import Item
     from nurbs_core.batch.settings import BatchSettings
+    from nurbs_core.batch.summary import SummaryJournal
 
-#: The first columns of the summary, in this order; the statistics follow.
-SUMMARY_COLUMNS = ("input", "output", "status", "seconds", "error")
 PROGRESS_INTERVAL = 0.5  # seconds between progress lines
 
 
@@ -73,54 +70,6 @@ class Progress:
         print(("\r" if self.tty else "") + line, end=end, file=self.stream, flush=True)
 
 
-def _cell(value: object) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, (list, dict)):
-        return json.dumps(value)
-    return str(value)
-
-
-def write_summary(path: Path, records: list[dict]) -> None:
-    """The summary, one row per input in input order: JSON Lines (``.jsonl``) or CSV (``.csv``,
-    the union of the statistics as columns), written atomically."""
-    from nurbs_core.atomic import atomic_write
-
-    if path.suffix.lower() == ".csv":
-        columns = list(SUMMARY_COLUMNS)
-        for record in records:
-            columns += [key for key in record if key not in columns and key != "traceback"]
-        text = io.StringIO()
-        writer = csv.writer(text)
-        writer.writerow(columns)
-        for record in records:
-            writer.writerow([_cell(record.get(column)) for column in columns])
-        content = text.getvalue()
-    else:
-        content = "".join(json.dumps({**{c: record.get(c) for c in SUMMARY_COLUMNS}, **record})
-                          + "\n" for record in records)
-    with atomic_write(path, "w") as handle:
-        handle.write(content)
-
-
-def _complete(path: str) -> bool:
-    """Whether an earlier result can be read back whole (``--skip-existing`` skips only those:
-    an empty file, or one a killed run cut short, is fitted again)."""
-    try:
-        if os.path.getsize(path) == 0:
-            return False
-        from nurbs_core.io.dispatch import load_any
-
-        if path.lower().endswith(".json") and "nurbs-studio-network" in _head(path, 200):
-            from nurbs_core.io.network_io import read_network
-
-            return read_network(path).patch_count > 0
-        content = load_any(path)
-        return len(getattr(content, "points", content)) > 0
-    except Exception:  # noqa: BLE001 - unreadable for any reason: not a finished result
-        return False
-
-
 def _written_since(path: str, since: float) -> bool:
     """Whether this run wrote ``path`` (after ``since``, a time.time()). Its writes are atomic:
     a file in place is whole (reading it back loaded the engine: ~2.5 s after a Ctrl-C)."""
@@ -131,55 +80,53 @@ def _written_since(path: str, since: float) -> bool:
     return status.st_size > 0 and status.st_mtime >= since
 
 
-def _record_written(records: list[dict | None], items: list, since: float) -> None:
-    """Rows for the inputs without a record whose outputs this run wrote (after ``since``, a
-    time.time()): the run was interrupted after writing them and before recording them; their
-    statistics are not known."""
+def _record_written(records: list[dict | None], items: list[Item], since: float) -> None:
+    """Rows "ok" for the inputs whose outputs this run wrote (after ``since``, a time.time()) but
+    which have no record (the run was interrupted between the files and the record) or a failed
+    one (a worker or the scheduler was lost after the files were written; a fit that fails
+    writes nothing: its outputs are all-or-nothing). Their statistics are not known."""
     for position, item in enumerate(items):
-        if records[position] is not None or item.error is not None or not item.outputs:
+        record = records[position]
+        if record is not None and record["status"] != "failed":
+            continue
+        if item.error is not None or not item.outputs:
             continue
         if all(_written_since(p, since) for p in item.outputs):
-            records[position] = {"input": item.label, "output": item.outputs[0],
-                                 "status": "ok", "seconds": None, "error": "",
-                                 "note": "written just before the interruption: its statistics "
-                                         "were not recorded"}
+            records[position] = _with_size({
+                "input": item.label, "output": item.outputs[0], "status": "ok",
+                "seconds": None, "error": "",
+                "note": ("written just before the interruption" if record is None else
+                         "written, then its record was lost ("
+                         + record["error"].removeprefix("nurbs-fit: error: ") + ")")
+                        + ": its statistics were not recorded"})
 
 
-def _head(path: str, size: int = 4096) -> str:
-    with open(path, encoding="utf-8", errors="replace") as handle:
-        return handle.read(size)
+def _with_size(record: dict) -> dict:
+    """``record`` with its result's size (a resume compares it), when it is ok."""
+    from nurbs_core.batch.resume import OUTPUT_BYTES
+
+    if record.get("status") == "ok" and record.get("output"):
+        try:
+            record[OUTPUT_BYTES] = os.path.getsize(record["output"])
+        except OSError:
+            pass
+    return record
 
 
-def _earlier_rows(summary: Path) -> dict[str, dict]:
-    """The rows of an earlier run's summary by their output path (empty when there is none or
-    it cannot be read)."""
-    if not _is_summary(summary):
-        return {}
+def _prepare_folder(directory: Path) -> None:
+    """The results' folder, created if missing, and known to take new files (a read-only
+    folder, /proc: refused naming it, before any work)."""
+    from nurbs_core.io.errors import OutputPathError
+    from nurbs_core.io.outputs import check_folder_writable
+
+    if directory.exists() and not directory.is_dir():
+        raise OutputPathError(directory, "it is a file, not a folder")
     try:
-        if summary.suffix.lower() == ".csv":
-            with open(summary, newline="", encoding="utf-8") as handle:
-                rows = list(csv.DictReader(handle))
-        else:
-            rows = [json.loads(line) for line in summary.read_text(encoding="utf-8").splitlines()
-                    if line.strip()]
-    except (OSError, ValueError):
-        return {}
-    return {row["output"]: {k: v for k, v in row.items() if v not in ("", None)}
-            for row in rows if isinstance(row, dict) and row.get("output")
-            and row.get("status") in ("ok", "skipped")}
-
-
-def _is_summary(path: Path) -> bool:
-    """Whether ``path`` holds a summary this tool wrote (its first line names the summary's
-    columns), so that a folder's expansion may leave it out."""
-    try:
-        with open(path, encoding="utf-8", errors="replace") as handle:
-            first = handle.readline(4096)
-    except OSError:
-        return False
-    if path.suffix.lower() == ".csv":
-        return first.startswith(",".join(SUMMARY_COLUMNS))
-    return first.startswith('{"input": ') and '"status": ' in first
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputPathError(directory, f"the folder cannot be created "
+                                         f"({exc.strerror or exc})") from None
+    check_folder_writable(directory, directory)
 
 
 def _check(batch: BatchSettings, summary: Path) -> None:
@@ -202,11 +149,39 @@ def _check(batch: BatchSettings, summary: Path) -> None:
         from nurbs_core.io.limits import set_decompression_limit
 
         set_decompression_limit(job.max_decompressed)
-    check_output_paths([summary], suffixes=(".jsonl", ".csv"))
     if batch.scheduler is not None:
         from nurbs_core.batch.executors import check_available
 
         check_available()
+    _prepare_folder(Path(batch.output_dir))
+    check_output_paths([summary], suffixes=(".jsonl", ".csv"))
+
+
+def _settle_before_work(batch: BatchSettings, items: list[Item],
+                        earlier: dict[str, dict]) -> tuple[list[dict | None], list[tuple[int, dict]]]:
+    """The records known before any fit (inputs that cannot be fitted; with ``--skip-existing``
+    the results already whole, which keep the ``earlier`` run's statistics) and the items left
+    to fit, with their positions."""
+    from nurbs_core.batch.resume import OUTPUT_BYTES, is_complete, result_kind
+    from nurbs_core.batch.summary import output_key
+
+    kind = result_kind(batch.job)
+    records: list[dict | None] = [None] * len(items)
+    todo = []
+    for position, item in enumerate(items):
+        row = earlier.get(output_key(item.outputs[0])) if item.outputs else None
+        if item.error is not None:
+            records[position] = {"input": item.label, "output": None, "status": "failed",
+                                 "seconds": 0.0, "error": item.error}
+        elif batch.skip_existing and all(
+                is_complete(p, kind, (row or {}).get(OUTPUT_BYTES) if k == 0 else None)
+                for k, p in enumerate(item.outputs)):
+            records[position] = _with_size({**(row or {}), "input": item.label,
+                                            "output": item.outputs[0], "status": "skipped",
+                                            "error": ""})
+        else:
+            todo.append((position, item.plain()))
+    return records, todo
 
 
 def run_batch(batch: BatchSettings) -> int:
@@ -217,33 +192,25 @@ def run_batch(batch: BatchSettings) -> int:
     from nurbs_core.batch.executors import DaskExecutor, serial
     from nurbs_core.batch.inputs import check_planned_writes, expand, name_outputs
     from nurbs_core.batch.interrupts import held_signals
+    from nurbs_core.batch.resume import earlier_outputs
+    from nurbs_core.batch.summary import SummaryJournal, earlier_rows, is_summary
     from nurbs_core.jobs import SOME_FAILED_STATUS
 
     if not batch.format.startswith("."):
         batch = dataclasses.replace(batch, format="." + batch.format)
     job = batch.job
     directory = Path(batch.output_dir)
-    directory.mkdir(parents=True, exist_ok=True)
     summary = Path(batch.summary) if batch.summary else directory / "summary.jsonl"
     _check(batch, summary)
-    # an earlier run's summary in an input folder is not a cloud; any other file named as the
+    # an earlier run's summary in an input folder is not a cloud, nor are the results it lists
+    # (a rerun into the input folder fitted its own results); any other file named as the
     # summary is an input, and the check below refuses to overwrite it
-    items = expand(batch.inputs, exclude=(summary,) if _is_summary(summary) else ())
+    earlier = earlier_rows(summary)
+    items = expand(batch.inputs, exclude=((summary, *earlier_outputs(earlier))
+                                          if is_summary(summary) else ()))
     name_outputs(items, directory, batch.format.lower(), offset=job.offset is not None)
     check_planned_writes(items, summary, read=(job.initial,))
-    records: list[dict | None] = [None] * len(items)
-    earlier = _earlier_rows(summary) if batch.skip_existing else {}
-    todo = []
-    for position, item in enumerate(items):
-        if item.error is not None:
-            records[position] = {"input": item.label, "output": None, "status": "failed",
-                                 "seconds": 0.0, "error": item.error}
-        elif batch.skip_existing and all(_complete(p) for p in item.outputs):
-            # a resume keeps what the earlier run measured of it
-            records[position] = {**earlier.get(item.outputs[0], {}), "input": item.label,
-                                 "output": item.outputs[0], "status": "skipped", "error": ""}
-        else:
-            todo.append((position, item.plain()))
+    records, todo = _settle_before_work(batch, items, earlier)
     skipped = sum(r is not None and r["status"] == "skipped" for r in records)
     progress = Progress(len(items), skipped, job.quiet,
                         failed=sum(r is not None and r["status"] == "failed" for r in records))
@@ -265,30 +232,36 @@ def run_batch(batch: BatchSettings) -> int:
         print(f"nurbs-fit: {len(items)} inputs ({len(todo)} to fit, {skipped} skipped) on {where}; "
               f"results in {directory}", file=sys.stderr, flush=True)
     started = time.time()
-    # the summary is rewritten (atomically) as each result arrives: a run killed at any moment
-    # leaves an accurate one
-    write_summary(summary, [r for r in records if r is not None])
-    try:
-        if todo and (jobs > 1 or batch.scheduler is not None):
-            with DaskExecutor(jobs, batch.scheduler, job.threads) as executor:
-                progress.start = time.perf_counter()  # the rate counts fitting, not start-up
-                for position, record in executor.run(job, todo, batch.batch_fits):
-                    records[position] = {**record, "output": items[position].outputs[0]}
-                    progress.update(record)
-                    write_summary(summary, [r for r in records if r is not None])
-        else:
-            for position, record in serial(job, todo, batch.batch_fits):
-                records[position] = record
-                progress.update(record)
-                write_summary(summary, [r for r in records if r is not None])
-    except KeyboardInterrupt:
-        # a second Ctrl-C must not cut the summary short: held, then dropped
-        with held_signals(replay=False):
-            return _interrupted(records, items, todo, started, summary,
-                                writers_stopped=batch.scheduler is None, progress=progress)
-    progress.show(final=True)
-    done = [r for r in records if r is not None]
-    write_summary(summary, done)
+    # each row is appended (and flushed) as its result arrives: a run killed at any moment
+    # leaves an accurate summary; the table is rewritten in input order at the end
+    with SummaryJournal(summary, [r for r in records if r is not None]) as journal:
+        try:
+            if todo and (jobs > 1 or batch.scheduler is not None):
+                with DaskExecutor(jobs, batch.scheduler, job.threads, job.debug) as executor:
+                    progress.start = time.perf_counter()  # the rate counts fitting, not start-up
+                    for position, record in executor.run(job, todo, batch.batch_fits):
+                        _arrived(records, position,
+                                 {**record, "output": items[position].outputs[0]},
+                                 journal, progress)
+            else:
+                for position, record in serial(job, todo, batch.batch_fits):
+                    _arrived(records, position, record, journal, progress)
+        except KeyboardInterrupt:
+            # a second Ctrl-C must not cut the summary short: held, then dropped
+            with held_signals(replay=False):
+                return _interrupted(records, items, todo, started, journal,
+                                    writers_stopped=batch.scheduler is None, progress=progress)
+        except Exception:
+            # the run itself failed (not one input): the summary still lists, in input order,
+            # every result written so far
+            _record_written(records, items, started)
+            journal.finish([r for r in records if r is not None])
+            raise
+        progress.show(final=True)
+        # results written by a worker that was lost before its record came back are whole
+        _record_written(records, items, started)
+        done = [r for r in records if r is not None]
+        journal.finish(done)
     failed = [r for r in done if r["status"] == "failed"]
     ok = sum(r["status"] == "ok" for r in done)
     print(f"{ok} fitted, {len(failed)} failed, {skipped} skipped; summary: {summary}")
@@ -297,8 +270,16 @@ def run_batch(batch: BatchSettings) -> int:
     return SOME_FAILED_STATUS if failed else 0
 
 
-def _interrupted(records: list[dict | None], items: list, todo: list[tuple[int, dict]],
-                 started: float, summary: Path, writers_stopped: bool,
+def _arrived(records: list[dict | None], position: int, record: dict, journal: SummaryJournal,
+             progress: Progress) -> None:
+    """A settled input: its record kept (with its result's size) and appended to the summary."""
+    records[position] = _with_size(record)
+    journal.add(record)
+    progress.update(record)
+
+
+def _interrupted(records: list[dict | None], items: list[Item], todo: list[tuple[int, dict]],
+                 started: float, journal: SummaryJournal, writers_stopped: bool,
                  progress: Progress) -> int:
     """After Ctrl-C or SIGTERM: the summary of what was kept, one line saying so, status 130.
     ``writers_stopped``: no fit of this run is still writing (this process, or the embedded
@@ -312,7 +293,7 @@ def _interrupted(records: list[dict | None], items: list, todo: list[tuple[int, 
         remove_partial_writes(p for position, _ in todo if records[position] is None
                               for p in items[position].outputs)
     done = [r for r in records if r is not None]
-    write_summary(summary, done)
+    journal.finish(done)
     progress.end_line()
     written = sum(r["status"] == "ok" for r in done)
     counts = [f"{n} {what}" for n, what in (
@@ -320,5 +301,6 @@ def _interrupted(records: list[dict | None], items: list, todo: list[tuple[int, 
         (sum(r["status"] == "failed" for r in done), "failed")) if n]
     print(f"nurbs-fit: interrupted: {written} of {len(items)} results written"
           + (f" ({', '.join(counts)})" if counts else "")
-          + f", summary in {summary}; resume with --skip-existing", file=sys.stderr, flush=True)
+          + f", summary in {journal.path}; resume with --skip-existing", file=sys.stderr,
+          flush=True)
     return INTERRUPTED_STATUS

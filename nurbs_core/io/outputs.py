@@ -23,16 +23,19 @@ def same_file(first: Path, second: Path) -> bool:
         return False
 
 
-def _probe(path: Path, folder: Path) -> None:
-    """Create and remove a file in ``folder`` (permission bits do not tell: /proc, a read-only
+def check_folder_writable(folder: Path, shown: StrPath, shown_folder: StrPath | None = None) -> None:
+    """OutputPathError naming ``shown`` (the user's path; ``shown_folder``: its folder as the
+    user spelled it, default ``folder``) unless a file can be created in
+    ``folder``: one is created and removed (permission bits do not tell: /proc, a read-only
     mount, a full quota), so an output that cannot be written fails before the work, naming the
     output, not the hidden temporary file a save would have used."""
     probe = folder / f".nurbs-fit-probe-{os.getpid()}-{secrets.token_hex(4)}"
     try:
         os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
     except OSError as exc:
-        raise OutputPathError(path, f"files cannot be created in {path.parent} "
-                                    f"({exc.strerror or exc})") from None
+        where = folder if shown_folder is None else shown_folder
+        raise OutputPathError(shown, f"files cannot be created in {where} "
+                                     f"({exc.strerror or exc})") from None
     try:
         os.unlink(probe)
     except OSError:
@@ -67,7 +70,7 @@ def check_output_paths(outputs: Iterable[StrPath], inputs: Iterable[StrPath | No
             raise OutputPathError(path, f"the folder {path.parent} does not exist")
         if not os.access(folder, os.W_OK | os.X_OK):
             raise OutputPathError(path, f"the folder {path.parent} is not writable")
-        _probe(path, folder)
+        check_folder_writable(folder, path, path.parent)
         for earlier in paths:
             if same_file(path, earlier):
                 raise OutputPathError(path, f"it is named twice among the outputs "

@@ -267,9 +267,11 @@ def _free_port() -> int:
 
 
 @contextlib.contextmanager
-def _dask_cluster(tmp_path: Path, workers: int, nanny: bool = True):
+def _dask_cluster(tmp_path: Path, workers: int, nanny: bool = True,
+                  scheduler: list | None = None):
     """A scheduler and ``workers`` single-thread workers started with Dask's own commands:
-    yields (address, the worker processes); all of them are stopped on exit."""
+    yields (address, the worker processes), the scheduler's process appended to ``scheduler``
+    (when given); all of them are stopped on exit."""
     pytest.importorskip("distributed", reason="the batch extra (dask[distributed]) is not installed")
     if not DASK_BIN.exists():
         pytest.skip(f"no {DASK_BIN} (the batch extra is not installed in this environment)")
@@ -290,6 +292,8 @@ def _dask_cluster(tmp_path: Path, workers: int, nanny: bool = True):
                 processes.append(subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
                                                   env=env, cwd=tmp_path))
             if k == 0:
+                if scheduler is not None:
+                    scheduler.append(processes[0])
                 deadline = time.monotonic() + 60
                 while True:  # the scheduler accepts connections
                     try:
@@ -326,13 +330,16 @@ def test_scheduler_option_runs_on_a_cluster_started_with_dask_commands(tmp_path,
         assert rows["nan.xyz"]["status"] == "failed"
 
 
-def _kill_the_worker_after(tmp_path, results: int) -> tuple[subprocess.Popen, str, dict]:
-    """A batch of 8 clouds on a cluster of one worker (--scheduler), the worker SIGKILLed once
-    ``results`` whole results are written: (the ended batch, its stderr, the summary's rows)."""
+def _kill_the_worker_after(tmp_path, results: int,
+                           the_scheduler: bool = False) -> tuple[subprocess.Popen, str, dict]:
+    """A batch of 8 clouds on a cluster of one worker (--scheduler), the worker (or
+    ``the_scheduler``) SIGKILLed once ``results`` whole results are written: (the ended batch,
+    its stderr, the summary's rows). Every row "ok" names a whole result."""
     folder = tmp_path / "scans"
     _write_clouds(folder, "part", [samples.height_field(6000, seed=k).points for k in range(8)])
     out = tmp_path / "fits"
-    with _dask_cluster(tmp_path, 1, nanny=False) as (address, (worker,)):
+    scheduler: list[subprocess.Popen] = []
+    with _dask_cluster(tmp_path, 1, nanny=False, scheduler=scheduler) as (address, (worker,)):
         code = ("import sys\n"
                 "import nurbs_core.batch.executors as executors\n"
                 "executors.WORKERLESS_S = 3.0\n"
@@ -349,14 +356,19 @@ def _kill_the_worker_after(tmp_path, results: int) -> tuple[subprocess.Popen, st
                                           batch.communicate())
             assert time.monotonic() < deadline, f"not {results} results within 300 s"
             time.sleep(0.05)
-        worker.kill()
+        (scheduler[0] if the_scheduler else worker).kill()
         try:
             _, stderr = batch.communicate(timeout=180)
         except subprocess.TimeoutExpired:
             batch.kill()
             raise AssertionError(("the batch did not end within 180 s of its last worker's "
                                   "death", batch.communicate())) from None
-    return batch, stderr, _summary(out / "summary.jsonl")
+    rows = _summary(out / "summary.jsonl")
+    for row in rows.values():                          # the finished results are kept, whole
+        if row["status"] == "ok":
+            assert np.isfinite(_control_points(Path(row["output"]))).all()
+    assert "Traceback" not in stderr, stderr
+    return batch, stderr, rows
 
 
 @pytest.mark.timeout(480)
@@ -385,6 +397,20 @@ def test_a_worker_that_dies_as_its_task_ends_never_hangs_the_batch(tmp_path):
     failed = [row for row in rows.values() if row["status"] == "failed"]
     assert batch.returncode == (SOME_FAILED_STATUS if failed else 0), stderr
     assert all("no Dask worker left" in row["error"] for row in failed), rows
+
+
+@pytest.mark.timeout(480)
+@pytest.mark.slow
+def test_a_batch_whose_scheduler_dies_ends_with_the_waiting_inputs_failed(tmp_path):
+    """--scheduler, and the scheduler is killed mid-batch: the batch stopped with "internal error
+    (FuturesCancelledError ...)", status 1, and no row for the waiting inputs. Now they fail
+    with a message, status 3, the finished results and their rows kept."""
+    batch, stderr, rows = _kill_the_worker_after(tmp_path, 1, the_scheduler=True)
+    assert batch.returncode == SOME_FAILED_STATUS, stderr
+    assert len(rows) == 8
+    lost = [row for row in rows.values() if row["status"] == "failed"]
+    assert lost and all("lost the Dask scheduler" in row["error"] for row in lost), rows
+    assert all("internal error" not in row["error"] for row in lost), rows
 
 
 @pytest.mark.timeout(120)

@@ -355,3 +355,31 @@ def test_an_output_where_no_file_can_be_created_fails_before_the_fit(tmp_path, c
     assert "/proc/result.json" in error and ".tmp" not in error
     assert time.perf_counter() - started < 5
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".nurbs-fit-probe")]
+
+
+def test_a_failed_write_names_the_users_file_not_the_temporary_one(tmp_path, monkeypatch):
+    """A full disk fails the flush of the hidden temporary file, with no file name (before:
+    "[Errno 28] No space left on device", or the temporary's name): the error names the user's
+    file, keeps its type and errno, and the old file stays. An error about another file (a
+    writer reading something) passes as it is."""
+    import errno
+
+    from nurbs_core.atomic import atomic_write
+
+    target = tmp_path / "fit.json"
+    target.write_text("old")
+
+    def full_disk(_descriptor):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full_disk)
+    with pytest.raises(OSError) as caught:
+        save(_surface(4), target)
+    monkeypatch.undo()
+    assert str(caught.value) == f"cannot write {target}: No space left on device"
+    assert caught.value.errno == errno.ENOSPC and ".tmp" not in str(caught.value)
+    assert target.read_text() == "old" and _leftovers(tmp_path) == []
+    other = FileNotFoundError(errno.ENOENT, "No such file or directory", str(tmp_path / "in.ply"))
+    with pytest.raises(FileNotFoundError) as caught, atomic_write(target, "w"):
+        raise other
+    assert caught.value is other
