@@ -25,6 +25,7 @@ from nurbs_core.fitting.normalised import NormalisedCloud
 from nurbs_core.fitting.principal import pca_parameters, principal_axes
 from nurbs_core.foot_points import gauss_newton_steps, project_onto_surface
 from nurbs_core.geometry_arrays import SurfaceArrays
+from nurbs_core.streaming import cancelled
 from nurbs_core.surfacing.core import CorePass, LeastSquaresCore
 from nurbs_core.surfacing.mesh import CloudMesh, median_spacing, points_to_map, voxel_subsample
 from nurbs_core.surfacing.neighbours import estimate_noise, local_frames
@@ -230,6 +231,14 @@ def core_snapshots(cloud: NormalisedCloud, config: FitConfig, start: SheetStart,
     assert last is not None, "the core runs at least one pass"
     result["records"] = [_record(last, core.fairing_scale)]
     surface = last.geometry
+    if last.stopped and cancelled(stop):
+        # the caller drops this result (a restart, Reset, closing the window): no final
+        # distances of every point (14 s at 10,000,000 points)
+        result.update(geometry=surface, parameters=None, distances=None, iteration=last.index,
+                      status="stopped", message=last.message, tolerance=tolerance * cloud.scale,
+                      noise=noise * cloud.scale, fairing_scale=core.fairing_scale or 1.0,
+                      tolerance_met=bool(last.met), tolerance_set=config.tolerance is not None)
+        return
     if config.custom_knots:  # the start of the gradient fit (torch) on the user's knots
         from nurbs_core.fitting.problem import conform
         from nurbs_core.geometry import NurbsSurface

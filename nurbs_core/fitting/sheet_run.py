@@ -48,6 +48,13 @@ def sheet_run(cloud: NormalisedCloud, config: FitConfig, start: SheetStart, stop
     result = yield from core_passes(cloud, config, start, stop, started)
     if result is None:
         return
+    if result["distances"] is None:  # cancelled: the result is dropped, it is not measured
+        yield FitSnapshot(iteration=result["iteration"],
+                          geometry=core_geometry_numpy(result["geometry"], cloud),
+                          losses=result["records"], elapsed=time.perf_counter() - started,
+                          done=True, status=result["status"], message=result["message"],
+                          stage="least_squares")
+        return
     final = core_final(cloud, start, result, started)
     if result["status"] != "stopped":
         final = yield from unfolded(cloud, config, start, stop, started, final)

@@ -79,6 +79,24 @@ def test_both_routes_stop_on_the_token_and_end_with_status_stopped():
     assert all(event.status == RunStatus.RUNNING and not event.done for event in network[:-1])
 
 
+@pytest.mark.parametrize("count", [3000, 60_000])  # all points in the passes; a subset
+def test_a_cancelled_single_patch_ends_without_measuring_every_point(count):
+    """A restart or closing the window cancels: its result is dropped, yet the engine measured
+    every point first (14 s at 10,000,000 points, which the app's restart waited for). A stop
+    (Ctrl-C, Stop) still measures the result it gives."""
+    points = samples.saddle(count, seed=0).points
+    finals = {}
+    for how in ("cancel", "stop"):
+        stop = StopToken()
+        for snapshot in iter_fit(points, FitConfig(), stop=stop):
+            getattr(stop, how)()
+            if snapshot.done:
+                finals[how] = snapshot
+    assert finals["cancel"].status == finals["stop"].status == RunStatus.STOPPED
+    assert finals["cancel"].statistics is None and finals["cancel"].geometry
+    assert finals["stop"].statistics is not None and finals["stop"].statistics["points"] == count
+
+
 def test_a_cancelled_or_early_network_stop_ends_without_final_measures():
     stop = StopToken()
     events = []
