@@ -42,8 +42,8 @@ def homogeneous(surface: SurfaceArrays) -> np.ndarray:
     if control.ndim != 3:
         raise ValueError(f"needs a single surface (control points (n_u, n_v, 3)), got shape "
                          f"{control.shape}")
-    check_knot_count(np.size(surface.knots_u), control.shape[0], surface.degree_u, "knots_u")
-    check_knot_count(np.size(surface.knots_v), control.shape[1], surface.degree_v, "knots_v")
+    check_knot_count(np.shape(surface.knots_u)[-1], control.shape[0], surface.degree_u, "knots_u")
+    check_knot_count(np.shape(surface.knots_v)[-1], control.shape[1], surface.degree_v, "knots_v")
     weights = np.broadcast_to(np.asarray(surface.weights, np.float64), control.shape[:-1])
     return np.concatenate([control * weights[..., None], weights[..., None]], axis=-1)
 
@@ -123,7 +123,7 @@ def curve_points(curve: CurveArrays, t: ArrayLike) -> np.ndarray:
     if control.ndim != 2:
         raise ValueError(f"needs a single curve (control points (n, d)), got shape "
                          f"{control.shape}")
-    check_knot_count(np.size(curve.knots), control.shape[0], curve.degree)
+    check_knot_count(np.shape(curve.knots)[-1], control.shape[0], curve.degree)
     weights = np.broadcast_to(np.asarray(curve.weights, np.float64), control.shape[:-1])
     pw = np.concatenate([control * weights[:, None], weights[:, None]], axis=-1)   # (n, d + 1)
     h = dense_basis(curve.knots, curve.degree, t)[0] @ pw                          # (M, d + 1)
