@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from nurbs_core.coordinate_range import scale_problem
 from nurbs_core.fitting.config import FitConfig
 from nurbs_core.fitting.principal import principal_axes
 
@@ -43,7 +44,9 @@ def normalise(target: ArrayLike, config: FitConfig) -> NormalisedCloud:
 
 def check_spread(points: np.ndarray, kind: str = "surface") -> None:
     """ValueError naming what keeps the points (N, d) from holding a ``kind`` ("surface" or
-    "curve"): none, one, NaN or inf, all at one place, or (a surface) all on one line. The
+    "curve"): none, one, NaN or inf, a scale the arithmetic cannot hold
+    (:func:`nurbs_core.coordinate_range.scale_problem`), all at one place, or (a surface) all on
+    one line. The
     automatic route asks it before deciding anything, the fits again."""
     n = points.shape[0]
     if n == 0:
@@ -55,6 +58,9 @@ def check_spread(points: np.ndarray, kind: str = "surface") -> None:
         rows = np.flatnonzero(bad)
         raise ValueError(f"the point cloud contains NaN or inf in {rows.size} row(s), first at "
                          f"row {rows[0]} (0-based)")
+    problem = scale_problem(points)
+    if problem is not None:
+        raise ValueError(problem)
     extent = points.max(axis=0) - points.min(axis=0)
     if not np.linalg.norm(extent) > 0:
         raise ValueError(f"all {n} points coincide; a {kind} needs points that spread out")
