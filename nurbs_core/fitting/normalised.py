@@ -16,6 +16,7 @@ from numpy.typing import ArrayLike
 from nurbs_core.coordinate_range import scale_problem
 from nurbs_core.fitting.config import FitConfig
 from nurbs_core.fitting.principal import principal_axes
+from nurbs_core.quality import NEIGHBOURS
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,12 @@ def normalise(target: ArrayLike, config: FitConfig) -> NormalisedCloud:
     if config.dtype == "float32":
         normalised = normalised.astype(np.float32).astype(np.float64)
     return NormalisedCloud(points, normalised, center, scale)
+
+
+#: The fewest points a surface fit takes whatever its degree: its quality report judges each
+#: point among NEIGHBOURS others (12 points fitted at degree 2 failed after the fit with "too
+#: few to judge a surface"; 4 at degree 1 with "a mesh needs at least 8 points").
+MIN_SURFACE_POINTS = NEIGHBOURS + 1
 
 
 def check_spread(points: np.ndarray, kind: str = "surface") -> None:
@@ -86,7 +93,7 @@ def check_points(target: ArrayLike, config: FitConfig) -> np.ndarray:
     n = points.shape[0]
     surface = config.kind == "surface"
     controls = config.control_points_u * (config.control_points_v if surface else 1)
-    if n < controls:
+    if n < controls or (surface and n < MIN_SURFACE_POINTS):
         raise ValueError(_too_few_points(n, controls, config))
     return points
 
@@ -94,14 +101,18 @@ def check_points(target: ArrayLike, config: FitConfig) -> np.ndarray:
 def _too_few_points(n: int, controls: int, config: FitConfig) -> str:
     """What to do when ``n`` points cannot determine ``controls`` control points: a smaller
     grid when the degree allows one, else a lower degree (the fewest control points a degree
-    p needs is p + 1 per direction), or more points."""
+    p needs is p + 1 per direction), or more points (a surface needs MIN_SURFACE_POINTS
+    whatever its degree)."""
     surface = config.kind == "surface"
     degrees = (config.degree_u, config.degree_v) if surface else (config.degree_u,)
-    fewest = (degrees[0] + 1) * (degrees[-1] + 1 if surface else 1)
+    least = MIN_SURFACE_POINTS if surface else 2
+    fewest = max(least, (degrees[0] + 1) * (degrees[-1] + 1 if surface else 1))
     if n >= fewest:
         return (f"{n} points cannot determine {controls} control points; use at most {n} "
                 f"(e.g. {' x '.join(str(p + 1) for p in degrees)})")
     degree = " x ".join(map(str, degrees))
+    advice = (f"give more points (a {config.kind} of any degree needs at least {least}: its "
+              f"quality report judges each point among {NEIGHBOURS} others)" if n < least else
+              f"give more points, or a lower degree (degree 1 needs {least})")
     return (f"{n} points are too few for a {config.kind} of degree {degree}, which needs at "
-            f"least {fewest} points; give more points, or a lower degree (degree 1 needs "
-            f"{4 if surface else 2})")
+            f"least {fewest} points; {advice}")
