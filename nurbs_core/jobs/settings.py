@@ -203,6 +203,19 @@ def patch_options(job: FitJob, automatic: bool = False) -> PatchOptions:
     return options
 
 
+def check_settings(job: FitJob) -> None:
+    """Every fit setting of ``job`` checked before its input is read, with the engine's own
+    bounds (FitConfig.validate, PatchOptions.validate: threads, samples, control points, patch
+    counts and sizes): the network's for ``--patches``, else the single fit's and, on the
+    automatic route, the network's it may take. ValueError naming the first bad setting."""
+    if job.patches is not None:
+        patch_options(job)
+        return
+    if is_automatic(job):
+        patch_options(job, automatic=True)
+    fit_config(job, 3).validate()
+
+
 def is_automatic(job: FitJob) -> bool:
     """Whether the route is the automatic one (nothing forces a curve, one patch or a network,
     and no option applies to one patch only)."""
