@@ -34,6 +34,19 @@ def test_a_setting_beyond_the_engines_bounds_is_refused_before_the_cloud_is_read
         check_before_work(job)
 
 
+@pytest.mark.parametrize("changes, line", [
+    (dict(control_points=[3000, 3000]),
+     "--control-points 3000 3000: control_points_u must be at most 1000, got 3000"),
+    (dict(patches="2000", patch_size=40), "--patch-size 40: 2000 patches of 40 x 40"),
+    (dict(patches="100000"), "--patches 100000: at most 2000 patches"),
+    (dict(settings=["threads=10000"]), "threads must be at most"),     # --set named the field
+])
+def test_a_refusal_names_the_option_the_user_gave(changes, line):
+    with pytest.raises(ValueError) as refused:
+        check_settings(FitJob(input="a.xyz", **changes))
+    assert str(refused.value).startswith(line)
+
+
 def test_settings_within_the_bounds_pass():
     for job in (FitJob(input="a.xyz"), FitJob(input="a.xyz", patches="100", patch_size=16),
                 FitJob(input="a.xyz", curve=True, samples=[100000]),
