@@ -32,6 +32,7 @@ from nurbs_core.basis import (
     dense_basis_matrix,
     find_span,
 )
+from nurbs_core.knot_vectors import check_knot_count
 from nurbs_core.sparse import curve_sparse_basis, surface_sparse_basis
 
 #: Standard deviation of the Gaussian that smooths the derivative of the degree-0 indicator,
@@ -79,15 +80,6 @@ def _basis(knots: torch.Tensor, degree: int, u: torch.Tensor, bandwidth: float,
         return span, basis, d_basis
 
 
-def check_knot_count(knots: torch.Tensor, count: int, degree: int, what: str = "knots") -> None:
-    """ValueError unless the knot vector's last axis holds ``count + degree + 1`` entries (a
-    vector one entry too long or short would otherwise be evaluated silently)."""
-    if knots.shape[-1] != count + degree + 1:
-        raise ValueError(f"{what}: {count} control points of degree {degree} need "
-                         f"{count + degree + 1} knots, got {knots.shape[-1]} (shape "
-                         f"{tuple(knots.shape)})")
-
-
 def _directions(batch_shape: Sequence[int], dtype: torch.dtype,
                 knots_and_params: Sequence[torch.Tensor]) -> list[torch.Tensor]:
     """Shared (Bb = 1) when every knot vector and parameter array is 1-D, else batched (Bb = B)."""
@@ -114,7 +106,7 @@ def curve_points(control_points: torch.Tensor, weights: torch.Tensor, knots: tor
     Raises ValueError there if ``knots`` requires grad (no knot derivatives in that mode).
     """
     batch_shape = control_points.shape[:-2]
-    check_knot_count(knots, control_points.shape[-2], degree)
+    check_knot_count(knots.shape[-1], control_points.shape[-2], degree)
     weights = weights.expand(control_points.shape[:-1])
     k, t = _directions(batch_shape, control_points.dtype, (knots, u))
     if higher_order:
@@ -130,8 +122,8 @@ def _surface_basis(control_points: torch.Tensor, knots_u: torch.Tensor, knots_v:
                    bandwidth: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None,
                                               torch.Tensor, torch.Tensor, torch.Tensor | None]:
     batch_shape = control_points.shape[:-3]
-    check_knot_count(knots_u, control_points.shape[-3], degree_u, "knots_u")
-    check_knot_count(knots_v, control_points.shape[-2], degree_v, "knots_v")
+    check_knot_count(knots_u.shape[-1], control_points.shape[-3], degree_u, "knots_u")
+    check_knot_count(knots_v.shape[-1], control_points.shape[-2], degree_v, "knots_v")
     ku, kv, fu, fv = _directions(batch_shape, control_points.dtype, (knots_u, knots_v, u, v))
     span_u, basis_u, d_u = _basis(ku, degree_u, fu, bandwidth, _needs_knot_grad(knots_u))
     span_v, basis_v, d_v = _basis(kv, degree_v, fv, bandwidth, _needs_knot_grad(knots_v))
@@ -284,7 +276,7 @@ def _rational_derivatives(hom: torch.Tensor) -> torch.Tensor:
 def curve_derivatives(control_points: torch.Tensor, weights: torch.Tensor, knots: torch.Tensor, degree: int,
                       u: torch.Tensor, order: int = 1) -> torch.Tensor:
     """Curve points and derivatives up to ``order``: (*B, order + 1, M, d)."""
-    check_knot_count(knots, control_points.shape[-2], degree)
+    check_knot_count(knots.shape[-1], control_points.shape[-2], degree)
     batch_shape = control_points.shape[:-2]
     control_w = _flatten_batch(homogeneous(control_points, weights), batch_shape, 2)
     fk = _flatten_batch(knots, batch_shape, 1)
@@ -306,8 +298,8 @@ def surface_derivatives(control_points: torch.Tensor, weights: torch.Tensor, kno
     batch_shape = control_points.shape[:-3]
     n, m = control_points.shape[-3], control_points.shape[-2]
     weights = weights.expand(control_points.shape[:-1])
-    check_knot_count(knots_u, n, degree_u, "knots_u")
-    check_knot_count(knots_v, m, degree_v, "knots_v")
+    check_knot_count(knots_u.shape[-1], n, degree_u, "knots_u")
+    check_knot_count(knots_v.shape[-1], m, degree_v, "knots_v")
     control_w = homogeneous(control_points, weights).reshape(-1, 4)
     batch = control_w.shape[0] // (n * m)
     ku, kv, fu, fv = _directions(batch_shape, control_points.dtype, (knots_u, knots_v, u, v))
@@ -362,7 +354,7 @@ class CurveEvaluator:
 
     def __call__(self, control_points: torch.Tensor, weights: torch.Tensor | None = None, *,
                  higher_order: bool = False) -> torch.Tensor:
-        check_knot_count(self.knots, control_points.shape[-2], self.degree)
+        check_knot_count(self.knots.shape[-1], control_points.shape[-2], self.degree)
         weights = _default_weights(control_points, weights)
         if higher_order:
             return _native_curve_points(control_points, weights, self.basis, self.span,
@@ -403,8 +395,8 @@ class _FixedSurfaceBasis:
     def _check(self, control_points: torch.Tensor) -> None:
         """ValueError unless the knot vectors match the control grid (a vector one entry too
         long was evaluated silently)."""
-        check_knot_count(self.knots_u, control_points.shape[-3], self.degrees[0], "knots_u")
-        check_knot_count(self.knots_v, control_points.shape[-2], self.degrees[1], "knots_v")
+        check_knot_count(self.knots_u.shape[-1], control_points.shape[-3], self.degrees[0], "knots_u")
+        check_knot_count(self.knots_v.shape[-1], control_points.shape[-2], self.degrees[1], "knots_v")
 
 
 class SurfaceEvaluator(_FixedSurfaceBasis):

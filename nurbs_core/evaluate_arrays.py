@@ -17,6 +17,7 @@ from numpy.typing import ArrayLike
 
 from nurbs_core.basis_arrays import basis_derivatives
 from nurbs_core.geometry_arrays import CurveArrays, SurfaceArrays
+from nurbs_core.knot_vectors import check_knot_count
 
 #: Scattered parameters evaluated per block (bounds the (M, p + 1, q + 1, 4) gather).
 CHUNK = 65536
@@ -35,11 +36,14 @@ def surface_domain(surface: SurfaceArrays) -> tuple[tuple[float, float], tuple[f
 
 
 def homogeneous(surface: SurfaceArrays) -> np.ndarray:
-    """The weighted control points ``(w P, w)``: (n_u, n_v, 4) float64."""
+    """The weighted control points ``(w P, w)``: (n_u, n_v, 4) float64; ValueError when a knot
+    vector does not suit them (as the constructors refuse it)."""
     control = np.asarray(surface.control_points, np.float64)
     if control.ndim != 3:
         raise ValueError(f"needs a single surface (control points (n_u, n_v, 3)), got shape "
                          f"{control.shape}")
+    check_knot_count(np.shape(surface.knots_u)[-1], control.shape[0], surface.degree_u, "knots_u")
+    check_knot_count(np.shape(surface.knots_v)[-1], control.shape[1], surface.degree_v, "knots_v")
     weights = np.broadcast_to(np.asarray(surface.weights, np.float64), control.shape[:-1])
     return np.concatenate([control * weights[..., None], weights[..., None]], axis=-1)
 
@@ -119,6 +123,7 @@ def curve_points(curve: CurveArrays, t: ArrayLike) -> np.ndarray:
     if control.ndim != 2:
         raise ValueError(f"needs a single curve (control points (n, d)), got shape "
                          f"{control.shape}")
+    check_knot_count(np.shape(curve.knots)[-1], control.shape[0], curve.degree)
     weights = np.broadcast_to(np.asarray(curve.weights, np.float64), control.shape[:-1])
     pw = np.concatenate([control * weights[:, None], weights[:, None]], axis=-1)   # (n, d + 1)
     h = dense_basis(curve.knots, curve.degree, t)[0] @ pw                          # (M, d + 1)

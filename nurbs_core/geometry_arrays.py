@@ -18,6 +18,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from nurbs_core.knot_vectors import check_knot_count
+
 
 class _Arrays(Mapping[str, Any]):
     """Read-only mapping over a twin's fields, with ``kind`` first."""
@@ -137,9 +139,7 @@ def _check_direction(name: str, knots: np.ndarray, count: int, degree: int) -> N
     if not 1 <= degree < count:
         raise ValueError(f"{name}: degree {degree} must be at least 1 and less than the "
                          f"{count} control points")
-    if knots.shape[-1] != count + degree + 1:
-        raise ValueError(f"{name}: {count} control points of degree {degree} need "
-                         f"{count + degree + 1} knots, got {knots.shape[-1]}")
+    check_knot_count(knots.shape[-1], count, degree, name)
     if not np.isfinite(knots).all() or (np.diff(knots, axis=-1) < 0).any():
         raise ValueError(f"{name} must be finite and non-decreasing")
 

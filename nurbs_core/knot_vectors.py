@@ -71,6 +71,15 @@ def averaged_on_plane(points: np.ndarray, count_u: int, degree_u: int, count_v: 
     return result[0], result[1]
 
 
+def check_knot_count(length: int, count: int, degree: int, name: str = "knots") -> None:
+    """ValueError unless a knot vector of ``length`` entries suits ``count`` control points of
+    ``degree`` (n + p + 1 of them): the one count check of every constructor and evaluator (a
+    vector one entry too long would otherwise be evaluated silently)."""
+    if length != count + degree + 1:
+        raise ValueError(f"{name}: {count} control points of degree {degree} need "
+                         f"{count + degree + 1} knots, got {length}")
+
+
 def clamped_problem(values: np.ndarray, degree: int, count: int) -> str | None:
     """None if ``values`` is a clamped knot vector for count control points, else the problem
     (a sentence for the user)."""

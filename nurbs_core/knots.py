@@ -5,7 +5,10 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from nurbs_core.knot_vectors import averaged  # noqa: F401  (the torch-free half, re-exported)
+from nurbs_core.knot_vectors import (
+    averaged,  # noqa: F401  (the torch-free half, re-exported)
+    check_knot_count,
+)
 
 
 def clamped_uniform(n_control_points: int, degree: int, domain: tuple[float, float] = (0.0, 1.0), *,
@@ -32,11 +35,7 @@ def check_knots(knots: torch.Tensor, degree: int, n_control_points: int, name: s
     them) for n control points of degree p: finite, non-decreasing, a non-empty domain
     [U[p], U[n]], no knot of multiplicity above p + 1. Checked in numpy in one transfer (a few
     microseconds for one curve; readers build thousands of items)."""
-    if knots.shape[-1] != n_control_points + degree + 1:
-        raise ValueError(
-            f"{name} has {knots.shape[-1]} entries (shape {tuple(knots.shape)}), but "
-            f"{n_control_points} control points of degree {degree} need n + p + 1 = "
-            f"{n_control_points + degree + 1}")
+    check_knot_count(knots.shape[-1], n_control_points, degree, name)
     flat = knots.detach().reshape(-1, knots.shape[-1]).cpu().numpy()
     if not np.isfinite(flat).all():
         raise ValueError(f"{name} contains NaN or inf (shape {tuple(knots.shape)})")

@@ -43,6 +43,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from nurbs_core.coordinate_range import scale_problem
 from nurbs_core.patches.defaults import MIN_NETWORK_POINTS
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import quality_problems
@@ -103,7 +104,10 @@ def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
     ``part``: None tries the part route on a closed object and on an open scan that is not a
     height field, False skips it, True takes it whatever the segmentation finds (an open shell
     on an open scan; ValueError when the cloud has no bounded mesh or OpenCASCADE is
-    missing)."""
+    missing; ValueError naming the scale when the coordinates are out of the fits' range)."""
+    problem = scale_problem(np.asarray(points, np.float64))
+    if problem is not None:
+        raise ValueError(problem)
     started = time.perf_counter()
     route = _decide(points, file_mesh, file_mesh_note, max_hole, part)
     if route.kind == "network" and not route.open_network and part is not False:

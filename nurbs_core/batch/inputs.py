@@ -57,9 +57,7 @@ def hdf5_count(path: str) -> int:
         import h5py
     except ImportError:
         raise ImportError(f"{path}: reading HDF5 files needs h5py: {BATCH_EXTRA_HINT}") from None
-    import numpy as np
-
-    from nurbs_core.io.limits import check_decompressed_size
+    from nurbs_core.io.limits import check_dataset_size
 
     with h5py.File(path, "r") as handle:
         if HDF5_DATASET not in handle:
@@ -70,8 +68,7 @@ def hdf5_count(path: str) -> int:
         raise ValueError(f"{path}: '{HDF5_DATASET}' has shape {shape}, expected (N, n, 3)")
     # a small file may declare a billion clouds (each an item of the batch: gigabytes before the
     # first fit): the whole dataset is capped like one cloud, its clouds by MAX_HDF5_CLOUDS
-    claimed = int(np.prod(shape, dtype=np.float64)) * 8
-    check_decompressed_size(path, claimed, os.path.getsize(path), f"'{HDF5_DATASET}' {shape}")
+    check_dataset_size(path, shape, 8, f"'{HDF5_DATASET}'")
     if shape[0] > MAX_HDF5_CLOUDS:
         raise ValueError(f"{path}: '{HDF5_DATASET}' holds {shape[0]} clouds, more than the "
                          f"{MAX_HDF5_CLOUDS} a batch takes from one file; split the file")
@@ -84,14 +81,11 @@ def hdf5_points(path: str, index: int) -> np.ndarray:
     import numpy as np
 
     from nurbs_core.io.cloud import check_points
-    from nurbs_core.io.limits import check_decompressed_size
+    from nurbs_core.io.limits import check_dataset_size
 
     with h5py.File(path, "r") as handle:
         dataset = handle[HDF5_DATASET]
-        # a small file may declare a huge dataset (chunked, compressed or never written):
-        # capped like the other compressed formats before anything is allocated
-        claimed = int(np.prod(dataset.shape[1:])) * 8
-        check_decompressed_size(path, claimed, os.path.getsize(path), f"cloud {index}")
+        check_dataset_size(path, dataset.shape[1:], 8, f"cloud {index}")
         points = np.asarray(dataset[index], dtype=np.float64)
     return check_points(f"{path}[{index}]", points)
 

@@ -13,8 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from nurbs_core.coordinate_range import scale_problem
 from nurbs_core.fitting.config import FitConfig
 from nurbs_core.fitting.principal import principal_axes
+from nurbs_core.quality import NEIGHBOURS
 
 
 @dataclass(frozen=True)
@@ -41,9 +43,17 @@ def normalise(target: ArrayLike, config: FitConfig) -> NormalisedCloud:
     return NormalisedCloud(points, normalised, center, scale)
 
 
+#: The fewest points a surface fit takes whatever its degree: its quality report judges each
+#: point among NEIGHBOURS others (12 points fitted at degree 2 failed after the fit with "too
+#: few to judge a surface"; 4 at degree 1 with "a mesh needs at least 8 points").
+MIN_SURFACE_POINTS = NEIGHBOURS + 1
+
+
 def check_spread(points: np.ndarray, kind: str = "surface") -> None:
     """ValueError naming what keeps the points (N, d) from holding a ``kind`` ("surface" or
-    "curve"): none, one, NaN or inf, all at one place, or (a surface) all on one line. The
+    "curve"): none, one, NaN or inf, a scale the arithmetic cannot hold
+    (:func:`nurbs_core.coordinate_range.scale_problem`), all at one place, or (a surface) all on
+    one line. The
     automatic route asks it before deciding anything, the fits again."""
     n = points.shape[0]
     if n == 0:
@@ -55,6 +65,9 @@ def check_spread(points: np.ndarray, kind: str = "surface") -> None:
         rows = np.flatnonzero(bad)
         raise ValueError(f"the point cloud contains NaN or inf in {rows.size} row(s), first at "
                          f"row {rows[0]} (0-based)")
+    problem = scale_problem(points)
+    if problem is not None:
+        raise ValueError(problem)
     extent = points.max(axis=0) - points.min(axis=0)
     if not np.linalg.norm(extent) > 0:
         raise ValueError(f"all {n} points coincide; a {kind} needs points that spread out")
@@ -80,7 +93,7 @@ def check_points(target: ArrayLike, config: FitConfig) -> np.ndarray:
     n = points.shape[0]
     surface = config.kind == "surface"
     controls = config.control_points_u * (config.control_points_v if surface else 1)
-    if n < controls:
+    if n < controls or (surface and n < MIN_SURFACE_POINTS):
         raise ValueError(_too_few_points(n, controls, config))
     return points
 
@@ -88,14 +101,18 @@ def check_points(target: ArrayLike, config: FitConfig) -> np.ndarray:
 def _too_few_points(n: int, controls: int, config: FitConfig) -> str:
     """What to do when ``n`` points cannot determine ``controls`` control points: a smaller
     grid when the degree allows one, else a lower degree (the fewest control points a degree
-    p needs is p + 1 per direction), or more points."""
+    p needs is p + 1 per direction), or more points (a surface needs MIN_SURFACE_POINTS
+    whatever its degree)."""
     surface = config.kind == "surface"
     degrees = (config.degree_u, config.degree_v) if surface else (config.degree_u,)
-    fewest = (degrees[0] + 1) * (degrees[-1] + 1 if surface else 1)
+    least = MIN_SURFACE_POINTS if surface else 2
+    fewest = max(least, (degrees[0] + 1) * (degrees[-1] + 1 if surface else 1))
     if n >= fewest:
         return (f"{n} points cannot determine {controls} control points; use at most {n} "
                 f"(e.g. {' x '.join(str(p + 1) for p in degrees)})")
     degree = " x ".join(map(str, degrees))
+    advice = (f"give more points (a {config.kind} of any degree needs at least {least}: its "
+              f"quality report judges each point among {NEIGHBOURS} others)" if n < least else
+              f"give more points, or a lower degree (degree 1 needs {least})")
     return (f"{n} points are too few for a {config.kind} of degree {degree}, which needs at "
-            f"least {fewest} points; give more points, or a lower degree (degree 1 needs "
-            f"{4 if surface else 2})")
+            f"least {fewest} points; {advice}")

@@ -128,14 +128,19 @@ def _sheet_start(points: np.ndarray, config: FitConfig,
         if exc.topology.kind != "closed" and is_height_field(points):
             # the mesh of a sparse or unevenly sampled sheet can come out with spurious handles;
             # a cloud that is a height field over its principal plane is a sheet all the same
-            return SheetStart(plane, None, "the cloud's mesh is not a clean disk "
-                              f"({exc.topology.kind}); it is a height field over its principal "
+            why = (f"{len(points)} points are too few for a mesh to tell the cloud's shape"
+                   if exc.topology.kind == "sparse" else
+                   f"the cloud's mesh is not a clean disk ({exc.topology.kind})")
+            return SheetStart(plane, None, f"{why}; it is a height field over its principal "
                               "plane, so that plane parameterises it")
         if not config.single_patch:
             raise ValueError(f"{exc} (or force one patch: single_patch / --single-patch)") \
                 from None
-        return SheetStart(plane, None, "forced a single patch on a cloud that is not a sheet "
-                          f"({exc.topology.kind}): expect folds; see the quality report")
+        what = (f"{len(points)} points, too few to tell the cloud's shape"
+                if exc.topology.kind == "sparse" else
+                f"a cloud that is not a sheet ({exc.topology.kind})")
+        return SheetStart(plane, None, f"forced a single patch on {what}: expect folds; see the "
+                          "quality report")
     notes = []
     if param.closed is not None:
         notes.append(f"the cloud is a tube: one patch closed in {param.closed}, cut open along "

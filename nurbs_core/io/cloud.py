@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from nurbs_core.coordinate_range import scale_problem
 from nurbs_core.io.errors import FileFormatError, StrPath
 from nurbs_core.surfacing.repeats import DUPLICATE_SHARE, distinct_points
 
@@ -49,13 +50,6 @@ class PointCloud:
         return self.attributes.get("colors")
 
 
-#: Coordinates beyond this (in magnitude), or a cloud narrower than MIN_EXTENT, leave the fit's
-#: arithmetic out of range: float64 products of four coordinates (a sheet at 1e80 ended in
-#: "'x' must be finite", one at 1e-90 in "No surface found at the given iso value") and the
-#: closed-surface reconstruction's single-precision distances (a sphere at 1e40 or 1e-50 failed
-#: so; 3.4e38 is the largest float32). Every route fits clouds at 1e30 and 1e-30.
-MAX_COORDINATE = 1e30
-MIN_EXTENT = 1e-30
 
 
 def without_repeats(points: np.ndarray) -> tuple[np.ndarray, str]:
@@ -88,16 +82,9 @@ def check_points(path: StrPath | None, points: np.ndarray,
         line = line_of_row(row) if line_of_row is not None else None
         raise FileFormatError(path, f"{bad} point(s) have NaN or infinite coordinates; the first "
                                     f"is point {row} ({points[row].tolist()})", line=line)
-    largest = float(np.abs(points).max())
-    if largest > MAX_COORDINATE:
-        raise FileFormatError(path, f"coordinates reach {largest:.3g}: beyond {MAX_COORDINATE:g} "
-                                    "the fit's arithmetic overflows; rescale the cloud (a unit "
-                                    "error?)")
-    extent = float(np.ptp(points, axis=0).max()) if len(points) > 1 else 0.0
-    if 0.0 < extent < MIN_EXTENT:
-        raise FileFormatError(path, f"the cloud spans only {extent:.3g}: below {MIN_EXTENT:g} "
-                                    "the fit's arithmetic underflows; rescale the cloud (a "
-                                    "unit error?)")
+    problem = scale_problem(points)
+    if problem is not None:
+        raise FileFormatError(path, problem)
     return points
 
 

@@ -16,6 +16,7 @@ suffix: ``8G``), which replaces the formula by a fixed cap, or with
 
 from __future__ import annotations
 
+import math
 import os
 import re
 
@@ -98,6 +99,16 @@ def check_decompressed_size(path: StrPath, claimed: int, compressed_size: int, w
                                     f"{format_size(limit)} (a decompression bomb?); to read it "
                                     f"anyway, raise the limit with {MAX_DECOMPRESSED_ENV}=SIZE "
                                     f"(for example 16G) or nurbs-fit --max-decompressed SIZE")
+
+
+def check_dataset_size(path: StrPath, shape: tuple[int, ...], itemsize: int,
+                       what: str = "the dataset") -> None:
+    """Raise FileFormatError when reading an array of ``shape`` (``itemsize`` bytes a value, as
+    read) out of the file at ``path`` would pass the decompression limit of its size: an HDF5
+    file of a few KB may declare a dataset of any size (chunked, compressed or never written),
+    so its datasets are capped like the other compressed formats before anything is read."""
+    claimed = math.prod(int(n) for n in shape) * int(itemsize)
+    check_decompressed_size(path, claimed, os.path.getsize(path), f"{what} {tuple(shape)}")
 
 
 def check_claimed_size(path: StrPath, count: int, record_bytes: int, available: int,

@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from nurbs_core.jobs.settings import FitJob, field_settings, is_automatic
+from nurbs_core.jobs.settings import FitJob, check_settings, field_settings, is_automatic
 
 if TYPE_CHECKING:
     from nurbs_core.route import Route
@@ -41,7 +41,9 @@ def offset_path(path: Path) -> Path:
 
 def check_before_work(job: FitJob) -> list[Path]:
     """What must hold before any input is read: the ``--max-decompressed`` limit applied, every
-    output checked (:func:`check_outputs`), the ``--set`` fields known. Returns the outputs."""
+    output checked (:func:`check_outputs`), the ``--set`` fields known and every setting within
+    the engine's bounds (:func:`~nurbs_core.jobs.settings.check_settings`). Returns the
+    outputs."""
     from nurbs_core.io.limits import set_decompression_limit
 
     if job.max_decompressed is not None:
@@ -49,6 +51,7 @@ def check_before_work(job: FitJob) -> list[Path]:
     outputs = check_outputs(job)
     # a bad option fails before the cloud is read
     field_settings(job.settings)
+    check_settings(job)
     if job.offset is not None and not math.isfinite(job.offset):
         raise ValueError(f"--offset {job.offset}: the offset distance must be a finite number")
     return outputs

@@ -203,6 +203,51 @@ def patch_options(job: FitJob, automatic: bool = False) -> PatchOptions:
     return options
 
 
+#: The option (and FitJob field) that sets each engine field a refusal may name first.
+_OPTIONS = {"control_points_u": "control_points", "control_points_v": "control_points",
+            "max_control_points": "max_control_points", "samples": "samples",
+            "samples_u": "samples", "samples_v": "samples", "threads": "threads",
+            "degree_u": "degree", "degree_v": "degree", "iterations": "iterations",
+            "learning_rate": "learning_rate", "tolerance": "tolerance",
+            "outlier_fraction": "outliers", "stiffness": "stiffness", "refinements": "refine",
+            "seed": "seed", "patches": "patches", "size": "patch_size"}
+
+
+def check_settings(job: FitJob) -> None:
+    """Every fit setting of ``job`` checked before its input is read, with the engine's own
+    bounds (FitConfig.validate, PatchOptions.validate: threads, samples, control points, patch
+    counts and sizes): the network's for ``--patches``, else the single fit's and, on the
+    automatic route, the network's it may take. ValueError naming the first bad setting, led
+    by the option that set it (``--control-points 3000 3000: control_points_u must be at most
+    1000, got 3000``) unless ``--set`` named the field itself."""
+    try:
+        if job.patches is not None:
+            patch_options(job)
+            return
+        if is_automatic(job):
+            patch_options(job, automatic=True)
+        fit_config(job, 3).validate()
+    except ValueError as exc:
+        raise ValueError(_in_options(job, str(exc))) from None
+
+
+def _in_options(job: FitJob, message: str) -> str:
+    """``message`` led by the option that set the engine field it starts with."""
+    import re
+
+    match = re.match(r"(\w+)", message)
+    field_name = match.group(1) if match else ""
+    if field_name not in _OPTIONS or field_name in field_settings(job.settings):
+        return message
+    name = _OPTIONS[field_name]
+    value = getattr(job, name)
+    if value is None:
+        return message
+    shown = " ".join(map(str, value)) if isinstance(value, list) else str(value)
+    message = message.removeprefix(f"{field_name}: ")   # the option names it now
+    return f"--{name.replace('_', '-')} {shown}: {message}"
+
+
 def is_automatic(job: FitJob) -> bool:
     """Whether the route is the automatic one (nothing forces a curve, one patch or a network,
     and no option applies to one patch only)."""

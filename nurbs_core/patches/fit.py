@@ -70,6 +70,7 @@ from nurbs_core.patches.evaluate import (
 )
 from nurbs_core.patches.measures import seam_statistics
 from nurbs_core.patches.network import SIDES, PatchNetwork, build_network
+from nurbs_core.patches.options import MAX_NETWORK_BYTES, check_network_memory, network_bytes
 from nurbs_core.sparse_solve import solve_spd
 from nurbs_core.surfacing.fairing import fairing_matrices
 from nurbs_core.surfacing.neighbours import estimate_noise
@@ -170,7 +171,8 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
     """Fit a network over the layout (``vertices`` (V, 3), ``quads`` (P, 4)) to ``points``
     (N, 3), passes as they finish; the last has ``done``. ``reference`` (M, 3): points of the
     scan's mesh for the wrap passes. ``size``: control points per patch side (None: grow while
-    Cp falls, from 6); ``tolerance``: grow until the RMS distance is below it (cloud units);
+    Cp falls, from 6, within MAX_NETWORK_BYTES (:func:`network_bytes`); ValueError when a given
+    size needs more); ``tolerance``: grow until the RMS distance is below it (cloud units);
     ``border`` (B, 3): points along the scan's border, densely (an open network's free sides
     are drawn to them); ``creases``: layout edges (lower, higher vertex) on a crease of the
     scan, left G0 (no tangent rows along them, none at their ends' corners)."""
@@ -183,12 +185,17 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
     tol = None if tolerance is None else tolerance / frame.scale
     quads = np.asarray(quads, np.int64)
     if size is not None:
+        # the layout may hold a few more patches than were asked for (or the count was 'auto')
+        check_network_memory(len(quads), size, control_count(quads, size))
         sizes = [size]
     else:
         budget = len(q) / POINTS_PER_CONTROL
-        fits = [s for s in SIZES if s <= max_size and control_count(quads, s) <= budget]
+        # the grid grows no further than memory allows (the cloud's budget ends it as it grows)
+        held = [s for s in SIZES if s <= max_size
+                and network_bytes(len(quads), s, control_count(quads, s)) <= MAX_NETWORK_BYTES]
+        fits = [s for s in held if control_count(quads, s) <= budget]
         first = max([s for s in fits if s <= START_SIZE], default=SIZES[0])
-        sizes = [s for s in SIZES if first <= s <= max_size] or [first]
+        sizes = [s for s in held if first <= s] or [first]
     network = build_network(frame.inward(vertices), quads, size=sizes[0], creases=creases)
     solver = _Solver(stiffness, seam_weight,
                      None if border is None or not len(border) else frame.inward(border))

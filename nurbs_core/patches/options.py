@@ -17,6 +17,52 @@ from nurbs_core.patches.defaults import SEAM_WEIGHT, STIFFNESS
 #: and the fewest cloud points each patch needs (:func:`check_patch_count`).
 MAX_PATCHES = 2000
 POINTS_PER_PATCH = 4
+#: A network's memory (:func:`network_bytes`): a base, a share per control point (the fit's
+#: sample grids hold 9 samples per control point) and a dense block per patch over its
+#: interior, (s - 2)^4 entries (the condensed solve). Fitted to nurbs-fit on a 10,000-point
+#: sphere: 2,005 patches of 4 x 4 (18,000 control points) peaked at 0.81 GB, 1,963 of 6 x 6
+#: (49,000) at 1.87 GB, 205 of 16 x 16 (46,000) at 1.68 GB, 29 of 40 x 40 (44,000) at 2.52 GB;
+#: 2,005 of 40 x 40 reached 23.7 GB. The estimate was never below the measured peak (+0.01 to
+#: +0.22 GB; 40 of 30 x 30, not used to fit it: 1.74 estimated, 1.52 GB measured), so
+#: MAX_NETWORK_BYTES keeps a small cloud's network under 2 GB (docs/fitting.md, "Bounds").
+NETWORK_BASE_BYTES = 200e6
+BYTES_PER_CONTROL_POINT = 34e3
+BYTES_PER_BLOCK_ENTRY = 16
+MAX_NETWORK_BYTES = 1.9e9
+
+
+def network_control_points(patches: int, size: int) -> int:
+    """The control points a closed network of ``patches`` quads with ``size`` x ``size`` per
+    patch shares: F (s - 1)^2 + 2 (corners and sides are shared; an open network has a few
+    more along its border)."""
+    return patches * (size - 1) ** 2 + 2
+
+
+def network_bytes(patches: int, size: int, control_points: int | None = None) -> float:
+    """About the memory a network fit of ``patches`` patches of ``size`` x ``size`` control
+    points takes (``control_points`` in all; by default :func:`network_control_points`)."""
+    if control_points is None:
+        control_points = network_control_points(patches, size)
+    return (NETWORK_BASE_BYTES + BYTES_PER_CONTROL_POINT * control_points
+            + BYTES_PER_BLOCK_ENTRY * patches * max(0, size - 2) ** 4)
+
+
+def check_network_memory(patches: int, size: int, control_points: int | None = None) -> None:
+    """ValueError when a network of ``patches`` patches of ``size`` per side would take more
+    than :data:`MAX_NETWORK_BYTES` (:func:`network_bytes`); the message says what fits."""
+    needed = network_bytes(patches, size, control_points)
+    if needed <= MAX_NETWORK_BYTES:
+        return
+    sizes = [s for s in range(4, size) if network_bytes(patches, s) <= MAX_NETWORK_BYTES]
+    fewer = next((n for n in range(patches - 1, 3, -1) if network_bytes(n, size) <= MAX_NETWORK_BYTES),
+                 None)
+    choices = (([f"at most {fewer} patches of that size"] if fewer is not None else [])
+               + ([f"a size of at most {sizes[-1]}"] if sizes else []))
+    advice = ", ".join(choices + ["or no size (it grows by itself)"])
+    raise ValueError(f"size: {patches} patches of {size} x {size} control points would take about "
+                     f"{needed / 1e9:.1f} GB, more than the {MAX_NETWORK_BYTES / 1e9:.2f} GB a "
+                     f"network fit may (its memory grows with the control points); ask for "
+                     f"{advice}")
 
 
 def check_patch_count(patches: int | str, points: int) -> None:
@@ -76,6 +122,8 @@ class PatchOptions:
                                           and self.degree < self.size <= 40):
             raise ValueError(f"size must be an integer from {self.degree + 1} to 40, got "
                              f"{self.size!r}")
+        if isinstance(self.patches, numbers.Integral) and self.size is not None:
+            check_network_memory(self.patches, self.size)
         if not self.degree < self.max_size <= 40:
             raise ValueError(f"max_size must be an integer from {self.degree + 1} to 40, got "
                              f"{self.max_size!r}")

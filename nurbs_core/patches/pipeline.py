@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from nurbs_core.coordinate_range import scale_problem
 from nurbs_core.patches.border_layout import trim_to_border
 from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
 from nurbs_core.patches.coarsen import coarsen, reach_ratios
@@ -424,6 +425,9 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
                          f"{len(points)}: fit it as one patch")
     if not np.isfinite(points).all():
         raise ValueError("the cloud has NaN or infinite coordinates")
+    problem = scale_problem(points)
+    if problem is not None:
+        raise ValueError(problem)
     check_patch_count(options.patches, len(points))
     timings: dict[str, float] = {}
     start = time.perf_counter()

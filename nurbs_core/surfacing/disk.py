@@ -83,8 +83,10 @@ class Topology:
 
     kind: "disk" (one open sheet: a single patch holds it), "closed" (no boundary), "tube" (two
     long boundary loops: open in one direction, closed in the other), "complex" (handles or
-    several long loops). loops: boundary loops, longest first; euler: V - E + F after filling
-    the small holes; message: why one patch cannot hold it (None for a disk)."""
+    several long loops), "sparse" (too few points for the mesh to tell; set by
+    :func:`nurbs_core.surfacing.parameterize.mesh_parameterization`). loops: boundary loops,
+    longest first; euler: V - E + F after filling the small holes; message: why one patch
+    cannot hold it (None for a disk)."""
 
     kind: str
     loops: list[np.ndarray]

@@ -20,11 +20,16 @@ import scipy.sparse.linalg
 from scipy.spatial import cKDTree
 
 from nurbs_core.surfacing.disk import Topology, choose_corners, classify, loop_length
-from nurbs_core.surfacing.mesh import CloudMesh, cloud_mesh, without_faces
+from nurbs_core.surfacing.mesh import RING_CANDIDATES, CloudMesh, cloud_mesh, without_faces
 from nurbs_core.surfacing.tube import cut_open, shortest_seam
 
 #: Rounds of removing folded triangles from the mesh when its map still flips some.
 MAX_REPAIRS = 3
+#: Below this many points a cloud's mesh cannot tell its shape: each point's ring of
+#: RING_CANDIDATES neighbours spans half the cloud or more, and the umbrellas close over a sheet
+#: (every random or gridded sheet of 9-20 points, 2 of 5 of 25-30, came out "closed"; see
+#: docs/fitting.md). Such a "closed" verdict is "sparse" instead: not a claim about the shape.
+MIN_SHAPE_POINTS = 2 * RING_CANDIDATES
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 
@@ -94,6 +99,12 @@ def _map(points: np.ndarray, mesh: CloudMesh, corners: np.ndarray | None,
                             "too close for its sampling): one patch cannot cover it without "
                             "folding; split it into patches "
                             "(multi-patch surfacing: nurbs-fit --patches auto)")
+    if topology.kind == "closed" and len(mesh.vertices) < MIN_SHAPE_POINTS:
+        topology = Topology("sparse", topology.loops, topology.euler,
+                            f"{len(mesh.vertices)} points are too few to tell the cloud's shape "
+                            f"(its mesh closes over them; a shape needs about {MIN_SHAPE_POINTS}): "
+                            "one patch over them would be a guess; give more points, or fit "
+                            "them over their principal plane (parameterization 'plane')")
     closed = None
     if topology.kind == "tube" and allow_tube:
         # cut the tube open along its shortest seam: a disk whose corners are the seam's ends

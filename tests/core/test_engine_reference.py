@@ -214,6 +214,39 @@ def test_the_functional_api_refuses_a_knot_vector_of_the_wrong_length(extra):
 
 
 @pytest.mark.parametrize("extra", [1, -1])
+def test_every_evaluator_refuses_a_wrong_knot_count_as_the_constructor_does(extra):
+    """The constructor, the torch evaluators and their numpy twins (surface_points,
+    surface_grid, curve_points of nurbs_core.evaluate_arrays, which evaluated a vector one entry
+    too long silently) share one count check: the same message from each."""
+    from nurbs_core import evaluate, evaluate_arrays
+    from nurbs_core.geometry import NurbsCurve, NurbsSurface
+    from nurbs_core.geometry_arrays import CurveArrays, SurfaceArrays
+    from nurbs_core.knots import clamped_uniform
+
+    net = torch.randn(5, 6, 3, dtype=torch.float64)
+    weights = torch.ones(5, 6, dtype=torch.float64)
+    knots_u, knots_v = clamped_uniform(5, 3).double(), clamped_uniform(6, 3).double()
+    wrong = torch.cat([knots_u, knots_u[-1:]]) if extra > 0 else knots_u[1:]
+    t = torch.linspace(0.1, 0.9, 4, dtype=torch.float64)
+    surface = SurfaceArrays(3, 3, net.numpy(), weights.numpy(), wrong.numpy(), knots_v.numpy())
+    curve = CurveArrays(3, net[:, 0].numpy(), weights[:, 0].numpy(), wrong.numpy())
+    calls = [lambda: NurbsSurface(net, 3, 3, wrong, knots_v),
+             lambda: evaluate.surface_points(net, weights, wrong, knots_v, 3, 3, t, t),
+             lambda: evaluate_arrays.surface_points(surface, t.numpy(), t.numpy()),
+             lambda: evaluate_arrays.surface_grid(surface, t.numpy(), t.numpy())]
+    messages = set()
+    for call in calls:
+        with pytest.raises(ValueError) as refused:
+            call()
+        messages.add(str(refused.value))
+    assert messages == {f"knots_u: 5 control points of degree 3 need 9 knots, got {9 + extra}"}
+    for call in (lambda: NurbsCurve(net[:, 0], 3, wrong),
+                 lambda: evaluate_arrays.curve_points(curve, t.numpy())):
+        with pytest.raises(ValueError, match=f"need 9 knots, got {9 + extra}"):
+            call()
+
+
+@pytest.mark.parametrize("extra", [1, -1])
 def test_the_evaluators_refuse_a_knot_vector_of_the_wrong_length(extra):
     """SurfaceEvaluator and CurveEvaluator (fixed knots and parameters) with a knot vector one
     entry too long or short for the control points they are called on: ValueError naming the

@@ -32,6 +32,27 @@ def test_bad_clouds(points, message):
         iter_fit(points, FitConfig(control_points_u=4, control_points_v=4))
 
 
+@pytest.mark.parametrize("count, degree, message", [
+    (4, 1, "4 points are too few for a surface of degree 1 x 1, which needs at least 13 points"),
+    (12, 2, "12 points are too few for a surface of degree 2 x 2, which needs at least 13"),
+    (9, 3, "9 points are too few for a surface of degree 3 x 3, which needs at least 16"),
+    (14, 3, "or a lower degree \\(degree 1 needs 13\\)"),
+])
+def test_a_cloud_too_small_for_the_asked_surface_says_so_before_the_fit(count, degree, message):
+    """4 points at degree 1 failed inside the fit ("a mesh needs at least 8 points"), 12 at
+    degree 2 after it ("12 points are too few to judge a surface (need > 12)"), and 9 points
+    were told to try a lower degree that could not help them: every surface needs 13 (its
+    quality report judges each point among 12 others), and says so up front."""
+    config = FitConfig(degree_u=degree, degree_v=degree, control_points_u=degree + 1,
+                       control_points_v=degree + 1)
+    with pytest.raises(ValueError, match=message):
+        iter_fit(_sheet(count), config)
+    if count < 13:
+        fitted = fit(_sheet(13), FitConfig(degree_u=1, degree_v=1, control_points_u=2,
+                                           control_points_v=2))
+        assert fitted.statistics["rms"] >= 0       # the smallest cloud fits and is reported
+
+
 @pytest.mark.parametrize("settings, message", [
     (dict(degree_u=5, control_points_u=4), "cannot carry degree_u=5"),
     (dict(degree_v=0), "degree_v must be at least 1"),

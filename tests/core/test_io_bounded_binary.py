@@ -278,6 +278,40 @@ def _compressed_pcd(points, compressed_size=None, size=None, n=None) -> bytes:
         + payload
 
 
+@pytest.mark.parametrize("shape,refused", [((1, 100_000_000, 3), True), ((1_000_000_000, 400, 3), True),
+                                            ((4, 500, 3), False)])
+def test_hdf5_datasets_are_capped_like_the_other_compressed_formats(tmp_path, shape, refused):
+    """An HDF5 file of a few KB may declare any dataset (1e8 points took 3.0 GB in a batch):
+    check_dataset_size caps what it declares against the file's size, as .npz and PCD are, and
+    the batch readers (hdf5_count, hdf5_points) use it before reading."""
+    h5py = pytest.importorskip("h5py")
+    from nurbs_core.batch.inputs import hdf5_count, hdf5_points
+    from nurbs_core.io.limits import check_dataset_size
+
+    path = tmp_path / "clouds.h5"
+    with h5py.File(path, "w") as handle:
+        handle.create_dataset("points", shape=shape, dtype="f8", chunks=(1, min(shape[1], 1000), 3),
+                              compression="gzip")
+    assert path.stat().st_size < 64 * 1024
+    tracemalloc.start()
+    try:
+        if refused:
+            with pytest.raises(FileFormatError, match="would decompress to .* more than the limit"):
+                check_dataset_size(path, shape, 8, "'points'")
+            with pytest.raises(FileFormatError, match="NURBS_STUDIO_MAX_DECOMPRESSED"):
+                hdf5_count(str(path))
+            if shape[0] == 1:
+                with pytest.raises(FileFormatError, match="cloud 0"):
+                    hdf5_points(str(path), 0)
+        else:
+            check_dataset_size(path, shape, 8)
+            assert hdf5_count(str(path)) == 4 and hdf5_points(str(path), 3).shape == (500, 3)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 32 * 2**20
+
+
 def test_pcd_compressed_lying_sizes(tmp_path):
     points = np.arange(30, dtype=np.float64).reshape(10, 3)
     path = tmp_path / "valid.pcd"

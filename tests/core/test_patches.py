@@ -258,6 +258,71 @@ def test_patch_counts_are_bounded_by_the_machine_and_the_cloud():
         fit_patches(points, PatchOptions(patches=200))
 
 
+@pytest.mark.parametrize("patches,size", [(2000, 40), (29, 40), (1000, 10)])
+def test_a_network_that_would_pass_the_memory_bound_is_refused_with_what_fits(patches, size):
+    """2,005 patches of 40 x 40 reached 23.7 GB and 29 of 40 x 40 2.5 GB on small clouds; such
+    settings are refused before any work, and every alternative the message offers is taken."""
+    import re
+
+    from nurbs_core.patches.options import MAX_NETWORK_BYTES, network_bytes
+
+    assert network_bytes(patches, size) > MAX_NETWORK_BYTES
+    with pytest.raises(ValueError, match="would take about") as refused:
+        PatchOptions(patches=patches, size=size).validate()
+    message = str(refused.value)
+    fewer = re.search(r"at most (\d+) patches of that size", message)
+    smaller = re.search(r"a size of at most (\d+)", message)
+    assert fewer or smaller
+    if fewer:
+        PatchOptions(patches=int(fewer.group(1)), size=size).validate()
+        with pytest.raises(ValueError):
+            PatchOptions(patches=int(fewer.group(1)) + 1, size=size).validate()
+    if smaller:
+        PatchOptions(patches=patches, size=int(smaller.group(1))).validate()
+    PatchOptions(patches=patches).validate()                 # the size grows within the bound
+
+
+def test_a_network_fit_checks_the_layouts_own_patch_count_and_grows_within_the_bound(monkeypatch):
+    """The layout may hold more patches than asked (or 'auto'): fit_network refuses a given size
+    the layout's network cannot hold before its first pass, and grows a free size only as far
+    as the bound allows."""
+    from nurbs_core.patches import options
+
+    points = samples.sphere(3000, truth_count=100).points
+    monkeypatch.setattr(options, "MAX_NETWORK_BYTES", options.network_bytes(6, 8))
+    monkeypatch.setattr("nurbs_core.patches.fit.MAX_NETWORK_BYTES", options.network_bytes(6, 8))
+    with pytest.raises(ValueError, match="6 patches of 10 x 10 control points would take"):
+        next(fit_network(points, CUBE_VERTICES, CUBE_QUADS, points, size=10))
+    sizes = {step.size for step in fit_network(points, CUBE_VERTICES, CUBE_QUADS, points,
+                                               passes_per_grid=1)}
+    assert max(sizes) <= 8
+
+
+def test_nurbs_fit_refuses_a_network_too_large_for_memory_before_it_grows(tmp_path):
+    """nurbs-fit on a 2,000-point sphere: --patches 2000 --patch-size 40 (23.7 GB before) is
+    refused at once; --patch-size 40 with the count left to the layout (29 patches, 2.5 GB and
+    a fit before) is refused once the layout is known. One line each, under 1 GB."""
+    import subprocess
+    import sys
+
+    cloud = tmp_path / "sphere.xyz"
+    np.savetxt(cloud, samples.sphere(2000, truth_count=100).points)
+    script = ("import resource, subprocess, sys\n"
+              "run = subprocess.run(sys.argv[1:], capture_output=True, text=True)\n"
+              "peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024\n"
+              "print(run.returncode, int(peak)); print(run.stderr, file=sys.stderr)")
+    for extra in (["--patches", "2000", "--patch-size", "40"], ["--patch-size", "40"]):
+        run = subprocess.run([sys.executable, "-c", script, sys.executable, "-m", "nurbs_core.cli",
+                              str(cloud), "-o", str(tmp_path / "out.json"), *extra],
+                             capture_output=True, text=True, timeout=300)
+        code, peak_mb = map(int, run.stdout.split())
+        errors = [line for line in run.stderr.splitlines() if "error" in line]
+        assert code == 1 and len(errors) == 1 and "would take about" in errors[0], run.stderr
+        assert "Traceback" not in run.stderr
+        assert peak_mb < 1000
+        assert not (tmp_path / "out.json").exists()
+
+
 def test_stray_points_are_left_out_instead_of_pulling_spikes():
     # A scan with 1% stray returns drawn anywhere in its box: the patches were pulled out to
     # them (4.6% of the area farther than the far limit from every true point, seams up to 134

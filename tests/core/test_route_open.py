@@ -286,3 +286,23 @@ def test_a_dense_noisy_height_field_is_still_one_over_its_plane():
     assert is_height_field(np.column_stack([xy, z]))
     curled = samples.curled_sheet(count, seed=0, truth_count=1000).points
     assert not is_height_field(curled)
+
+
+@pytest.mark.parametrize("scale, message", [(1e200, r"coordinates reach [0-9.]+e\+200"),
+                                            (1e160, r"coordinates reach [0-9.]+e\+160"),
+                                            (1e-200, "the cloud spans only")])
+def test_the_engine_refuses_a_cloud_beyond_its_range_by_its_scale(scale, message):
+    """Points handed to the engine (as the app does), not read from a file: at 1e200 the route
+    failed with an IndexError and the fit with "Eigenvalues did not converge"; at 1e-200 the
+    fit said the points coincide. The route, the single patch and the network now say what is
+    wrong - the scale - as the file readers do."""
+    from nurbs_core.fitting import FitConfig, fit
+    from nurbs_core.patches.pipeline import fit_patches
+    from nurbs_core.route import choose_route
+
+    u, v = np.random.default_rng(0).random((2, 400))
+    points = np.stack([u, v, 0.1 * np.sin(3 * u) * v], -1) * scale
+    for run in (lambda: choose_route(points), lambda: fit(points, FitConfig()),
+                lambda: fit_patches(points)):
+        with pytest.raises(ValueError, match=message + ".*rescale the cloud"):
+            run()

@@ -87,6 +87,41 @@ def test_closed_cloud_is_refused():
         mesh_parameterization(samples.sphere(2000).points)
 
 
+def _small_sheet(kind: str, count: int) -> np.ndarray:
+    if kind == "grid":
+        side = int(round(np.sqrt(count)))
+        u, v = (a.ravel() for a in np.meshgrid(np.linspace(0, 1, side), np.linspace(0, 1, side)))
+    else:
+        u, v = np.random.default_rng(count).random((2, count))
+    return np.stack([u, v, 0.1 * np.sin(3 * u) * v], -1)
+
+
+@pytest.mark.parametrize("kind,count", [("grid", 16), ("random", 16), ("random", 20)])
+def test_a_sheet_of_a_few_dozen_points_is_not_called_closed(kind, count, one_torch_thread):
+    """A 16-point sheet was refused as "a closed surface (no boundary)" (its mesh closes over so
+    few points): its mesh now says it is too small to tell the shape, and the fit takes the
+    sheet over its principal plane (a height field) without a word about a closed surface."""
+    points = _small_sheet(kind, count)
+    with pytest.raises(NotADiskError, match=f"{count} points are too few to tell") as refused:
+        mesh_parameterization(points)
+    assert refused.value.topology.kind == "sparse"
+    assert "closed" not in str(refused.value)
+    result = fit(points, FitConfig(control_points_u=4, control_points_v=4))
+    assert "closed" not in result.message and "forced" not in result.message
+    assert "too few for a mesh to tell" in result.message
+    assert result.statistics["rms"] < 1e-3
+
+
+def test_a_small_closed_cloud_that_is_no_height_field_is_still_refused(one_torch_thread):
+    """Too few points to tell, and not a height field: refused (or forced) with the reason."""
+    points = np.random.default_rng(3).normal(size=(16, 3))
+    points /= np.linalg.norm(points, axis=1)[:, None]
+    with pytest.raises(ValueError, match="16 points are too few to tell the cloud's shape"):
+        fit(points, FitConfig(control_points_u=4, control_points_v=4))
+    forced = fit(points, FitConfig(single_patch=True, control_points_u=4, control_points_v=4))
+    assert "forced a single patch on 16 points, too few to tell" in forced.message
+
+
 def test_thin_plate_and_membrane_energies_are_exact():
     # z = x^2 + y^2 on [0, 1]^2 is a bicubic patch exactly: thin plate = int 4 + 4 = 8,
     # membrane of (x, y, z) = int (1 + 4x^2) + (1 + 4y^2) = 2 + 8/3
