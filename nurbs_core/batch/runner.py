@@ -133,7 +133,7 @@ def _check(batch: BatchSettings, summary: Path) -> None:
     """Settings that would fail every input fail the run before any work (status 1)."""
     from nurbs_core.io.outputs import check_output_paths
     from nurbs_core.io.suffixes import EXPORT_SUFFIXES, NETWORK_SUFFIXES
-    from nurbs_core.jobs.settings import field_settings, fit_config, patch_options
+    from nurbs_core.jobs.settings import check_settings, field_settings
 
     job = batch.job
     suffixes = NETWORK_SUFFIXES if job.patches is not None else EXPORT_SUFFIXES
@@ -141,10 +141,7 @@ def _check(batch: BatchSettings, summary: Path) -> None:
         raise ValueError(f"--format {batch.format}: the results can be written as "
                          f"{', '.join(suffixes)}")
     field_settings(job.settings)
-    if job.patches is not None:
-        patch_options(job)
-    else:
-        fit_config(job, 3)
+    check_settings(job)  # the engine's bounds, as one input's run checks them
     if job.max_decompressed is not None:
         from nurbs_core.io.limits import set_decompression_limit
 

@@ -370,3 +370,19 @@ def test_a_scheduler_that_does_not_answer_is_one_clear_line(tmp_path):
     assert lines[0].startswith(f"nurbs-fit: error: no Dask scheduler answered at "
                                f"tcp://127.0.0.1:{port} within 1 s")
     assert "dask scheduler" in lines[0]
+
+
+@pytest.mark.parametrize("option", [["--control-points", "3000", "3000"],
+                                    ["--set", "threads=10000"]])
+def test_a_batch_refuses_a_setting_beyond_the_engines_bounds_before_any_input(tmp_path, capsys,
+                                                                              option):
+    """A single run refuses these before reading its cloud; a batch built the settings without
+    checking them and failed every input in turn."""
+    folder = tmp_path / "d"
+    for k in range(3):
+        _cloud_file(folder / f"c{k}.xyz", k)
+    out = tmp_path / "out"
+    assert main([str(folder), "--output-dir", str(out), "-q", *option]) == 1
+    error = capsys.readouterr().err
+    assert len([line for line in error.splitlines() if line.strip()]) == 1, error
+    assert not list(out.glob("c*"))
