@@ -48,13 +48,6 @@ def sheet_run(cloud: NormalisedCloud, config: FitConfig, start: SheetStart, stop
     result = yield from core_passes(cloud, config, start, stop, started)
     if result is None:
         return
-    if result["distances"] is None:  # cancelled: the result is dropped, it is not measured
-        yield FitSnapshot(iteration=result["iteration"],
-                          geometry=core_geometry_numpy(result["geometry"], cloud),
-                          losses=result["records"], elapsed=time.perf_counter() - started,
-                          done=True, status=result["status"], message=result["message"],
-                          stage="least_squares")
-        return
     final = core_final(cloud, start, result, started)
     if result["status"] != "stopped":
         final = yield from unfolded(cloud, config, start, stop, started, final)
@@ -128,8 +121,14 @@ def unfolded(cloud: NormalisedCloud, config: FitConfig, start: SheetStart, stop:
 def core_final(cloud: NormalisedCloud, start: SheetStart, result: dict,
                started: float) -> FitSnapshot:
     """The done snapshot of the least-squares core's ``result`` (see
-    :func:`~nurbs_core.fitting.sheet.core_snapshots`), with its statistics."""
+    :func:`~nurbs_core.fitting.sheet.core_snapshots`), with its statistics; without them when
+    the run was cancelled (its caller drops it: the points were not measured)."""
     snapshot_geometry = core_geometry_numpy(result["geometry"], cloud)
+    if result["distances"] is None:
+        return FitSnapshot(iteration=result["iteration"], geometry=snapshot_geometry,
+                           losses=result["records"], elapsed=time.perf_counter() - started,
+                           done=True, status=result["status"], message=result["message"],
+                           stage="least_squares")
     stats = surface_statistics(snapshot_geometry, cloud.points_input, mesh=start.mesh,
                                scale=cloud.scale, distances=result["distances"] * cloud.scale)
     stats.update(tolerance=result["tolerance"], noise=result["noise"],

@@ -153,7 +153,10 @@ def _iges_length_unit(path: str) -> str | None:
 
 
 def _length_unit(path: str, kind: str) -> str | None:
-    """The length unit a STEP or IGES file states (OpenCASCADE's name; None: none known)."""
+    """The length unit a STEP or IGES file states (OpenCASCADE's name; None: none known, and
+    for .brep, which states none)."""
+    if kind == "brep":
+        return None
     return _step_length_unit(path) if kind == "step" else _iges_length_unit(path)
 
 
@@ -170,6 +173,8 @@ def _read_shape(path: str, kind: str) -> OccObject:
     # file in metres read under "M" came back 1000 x smaller), so IGES reads under "MM"
     # (the reader serves many files: every read sets it; an IGES file took the unit of the STEP
     # file read before it, and came back 25.4 x smaller after one in inches)
+    if kind == "brep":
+        return _read_brep(path)
     unit = _step_length_unit(path) if kind == "step" else None
     Interface_Static.SetCVal_s("xstep.cascade.unit", unit or "MM")
     reader = STEPControl_Reader() if kind == "step" else IGESControl_Reader()
@@ -180,6 +185,18 @@ def _read_shape(path: str, kind: str) -> OccObject:
     if reader.NbShapes() == 0:
         raise ReadError(f"the {kind.upper()} file has no shapes")
     return reader.OneShape()
+
+
+def _read_brep(path: str) -> OccObject:
+    """The shape of an OpenCASCADE .brep file (ReadError when it holds none)."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepTools import BRepTools
+    from OCP.TopoDS import TopoDS_Shape
+
+    shape = TopoDS_Shape()
+    if not BRepTools.Read_s(shape, path, BRep_Builder()) or shape.IsNull():
+        raise ReadError("not a readable .brep file (OpenCASCADE could not read a shape)")
+    return shape
 
 
 def _bspline_surface_of_face(face: OccObject) -> OccObject | None:

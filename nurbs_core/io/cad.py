@@ -427,13 +427,13 @@ _READER = _ReaderProcess()
 atexit.register(_READER.close)
 
 _LIBRARIES = {"step": ("OpenCASCADE", "STEP"), "iges": ("OpenCASCADE", "IGES"),
-              "3dm": ("openNURBS (rhino3dm)", ".3dm")}
+              "brep": ("OpenCASCADE", ".brep"), "3dm": ("openNURBS (rhino3dm)", ".3dm")}
 
 
 def read_in_worker(path: StrPath, kind: str,
                    timeout: float | None = None) -> list[NurbsCurve | NurbsSurface]:
-    """Every surface and curve the worker process reads from ``path`` (``kind`` "step", "iges" or
-    "3dm"), as validated geometry with ``.metadata`` (``"name"`` when the object has one,
+    """Every surface and curve the worker process reads from ``path`` (``kind`` "step", "iges",
+    "brep" or "3dm"), as validated geometry with ``.metadata`` (``"name"`` when the object has one,
     ``"units"`` when the file states a length unit :mod:`nurbs_core.io.units` knows); a crash,
     a timeout (``timeout`` seconds, by default :func:`read_timeout` of the file's size), running
     out of the memory cap (:func:`reader_memory`) or bad data: FileFormatError naming the

@@ -63,7 +63,8 @@ def load(path: StrPath) -> list[NurbsCurve | NurbsSurface]:
     weights (n,) / (n_u, n_v) and full knot vectors.
 
     .3dm (rhino3dm), .json (ours, geomdl, nurbs-surface-json-v1; sniffed), .dat/.smesh,
-    .step/.stp/.iges/.igs (OCP extra). Each item carries a ``metadata`` dict attribute.
+    .step/.stp/.iges/.igs/.brep (OCP extra; a solid's faces as their untrimmed surfaces). Each
+    item carries a ``metadata`` dict attribute.
     """
     suffix = suffix_of(path)
     if suffix not in NURBS_SUFFIXES:
@@ -82,7 +83,8 @@ def load(path: StrPath) -> list[NurbsCurve | NurbsSurface]:
         return read_smesh(path)
     from nurbs_core.io.cad import read_cad
 
-    return read_cad(path, "step" if suffix in (".step", ".stp") else "iges")
+    kind = {".step": "step", ".stp": "step", ".brep": "brep"}.get(suffix, "iges")
+    return read_cad(path, kind)
 
 
 def load_any(path: StrPath, **point_options: Any) -> PointCloud | list[NurbsCurve | NurbsSurface]:

@@ -36,10 +36,10 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
     from nurbs_core.jobs.local_frame import shifted
     from nurbs_core.patches.pipeline import iter_patch_fit
 
-    if points is None:
-        from nurbs_core.jobs.input_cloud import surface_input
+    if points is None:  # read, repeats merged, spread checked, a far scan in a local frame
+        from nurbs_core.jobs.input_cloud import input_cloud
 
-        points, mesh, _ = surface_input(job.input, quiet=job.quiet)
+        points, mesh, _, job = input_cloud(job, None)
     if "torch" in sys.modules:   # the network route itself runs on numpy and scipy
         sys.modules["torch"].set_num_threads(max(1, job.threads))
     print(f"{job.input}: {len(points)} points; fitting a network of bicubic patches "

@@ -60,9 +60,8 @@ def prepare_fit(job: FitJob, points: np.ndarray | None = None) -> PreparedFit:
     from nurbs_core.jobs.input_cloud import input_cloud
 
     outputs = check_before_work(job)
-    # read, repeats merged, spread checked, far scans in a local frame (nothing more to do for
-    # a cloud fit_one prepared so already)
-    points, _, _, job = input_cloud(job, points)
+    if points is None:  # read, repeats merged, spread checked, a far scan in a local frame
+        points, _, _, job = input_cloud(job, None)
     flat_z = bool(job.curve and len(points) and np.ptp(points[:, 2]) == 0)
     target = points[:, :2] if flat_z else points
     config = _default_grid_for(job, fit_config(job, target.shape[1]), len(target))
@@ -289,12 +288,21 @@ def _lift(curve: CurveArrays, z: float) -> CurveArrays:
 
 
 def check_trim_options(job: FitJob) -> None:
-    """ValueError for the options ``--trim`` does not combine with (before any input is read)."""
+    """ValueError for the options ``--trim`` does not combine with, FileFormatError for an
+    output that cannot hold a trimmed patch (before any input is read)."""
+    from nurbs_core.io.errors import FileFormatError
+    from nurbs_core.io.points import suffix_of
+    from nurbs_core.io.trimmed_io import TRIMMED_SUFFIXES
+
     if job.curve or job.patches is not None or job.part or job.grid is not None \
             or job.initial is not None or job.offset is not None or job.report is not None:
         raise ValueError("--trim fits one trimmed patch of an open sheet: it cannot be combined "
                          "with --curve, --patches, --part, --grid, --initial, --offset or "
                          "--report")
+    for path in job.output:
+        if suffix_of(path) not in TRIMMED_SUFFIXES:
+            raise FileFormatError(path, f"a trimmed patch is written as "
+                                        f"{', '.join(TRIMMED_SUFFIXES)}")
 
 
 def fit_trimmed_job(job: FitJob, points: np.ndarray | None = None) -> dict[str, Any]:
@@ -307,22 +315,16 @@ def fit_trimmed_job(job: FitJob, points: np.ndarray | None = None) -> dict[str, 
 
     import numpy as np
 
-    from nurbs_core.io import load_points
     from nurbs_core.io.dispatch import save_all
-    from nurbs_core.io.errors import FileFormatError
-    from nurbs_core.io.points import suffix_of
-    from nurbs_core.io.trimmed_io import TRIMMED_SUFFIXES
     from nurbs_core.jobs.local_frame import shifted
     from nurbs_core.trim.fit import fit_trimmed
 
     check_trim_options(job)
     outputs = check_before_work(job)
-    for path in outputs:
-        if suffix_of(path) not in TRIMMED_SUFFIXES:
-            raise FileFormatError(path, f"a trimmed patch is written as "
-                                        f"{', '.join(TRIMMED_SUFFIXES)}")
-    if points is None:
-        points = load_points(job.input).points
+    if points is None:  # read, repeats merged, spread checked, a far scan in a local frame
+        from nurbs_core.jobs.input_cloud import input_cloud
+
+        points, _, _, job = input_cloud(job, None)
     config = fit_config(job, 3)
     print(f"{job.input}: {len(points)} points; fitting a patch over the outline's rectangle by "
           f"fairing least squares (stiffness {config.stiffness:g}), trimmed at the scan's "

@@ -79,8 +79,9 @@ def test_both_routes_stop_on_the_token_and_end_with_status_stopped():
     assert all(event.status == RunStatus.RUNNING and not event.done for event in network[:-1])
 
 
-@pytest.mark.parametrize("count", [3000, 60_000])  # all points in the passes; a subset
-def test_a_cancelled_single_patch_ends_without_measuring_every_point(count):
+@pytest.mark.parametrize(("count", "solver"), [(3000, "auto"), (60_000, "auto"),
+                                               (3000, "gradient")])  # 60,000: passes on a subset
+def test_a_cancelled_single_patch_ends_without_measuring_every_point(count, solver):
     """A restart or closing the window cancels: its result is dropped, yet the engine measured
     every point first (14 s at 10,000,000 points, which the app's restart waited for). A stop
     (Ctrl-C, Stop) still measures the result it gives."""
@@ -88,7 +89,7 @@ def test_a_cancelled_single_patch_ends_without_measuring_every_point(count):
     finals = {}
     for how in ("cancel", "stop"):
         stop = StopToken()
-        for snapshot in iter_fit(points, FitConfig(), stop=stop):
+        for snapshot in iter_fit(points, FitConfig(solver=solver, iterations=5), stop=stop):
             getattr(stop, how)()
             if snapshot.done:
                 finals[how] = snapshot
