@@ -190,7 +190,7 @@ def run_batch(batch: BatchSettings) -> int:
     from nurbs_core.batch.inputs import check_planned_writes, expand, name_outputs
     from nurbs_core.batch.interrupts import held_signals
     from nurbs_core.batch.resume import earlier_outputs
-    from nurbs_core.batch.summary import SummaryJournal, earlier_rows, is_summary
+    from nurbs_core.batch.summary import SummaryJournal, earlier_rows, is_summary, output_key
     from nurbs_core.jobs import SOME_FAILED_STATUS
 
     if not batch.format.startswith("."):
@@ -231,7 +231,10 @@ def run_batch(batch: BatchSettings) -> int:
     started = time.time()
     # each row is appended (and flushed) as its result arrives: a run killed at any moment
     # leaves an accurate summary; the table is rewritten in input order at the end
-    with SummaryJournal(summary, [r for r in records if r is not None]) as journal:
+    # the earlier run's rows of results this run fits again: kept until each gets its own
+    carried = [row for position, _ in todo if items[position].outputs
+               and (row := earlier.get(output_key(items[position].outputs[0]))) is not None]
+    with SummaryJournal(summary, [r for r in records if r is not None], carried) as journal:
         try:
             if todo and (jobs > 1 or batch.scheduler is not None):
                 with DaskExecutor(jobs, batch.scheduler, job.threads, job.debug) as executor:

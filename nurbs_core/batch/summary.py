@@ -3,7 +3,8 @@
 :class:`SummaryJournal` keeps it accurate while the batch runs: each row is appended and flushed
 as its result arrives (a CSV whose columns must grow is rewritten atomically, with the wider
 header), and the whole table is rewritten atomically in input order at the end. A run killed at
-any moment (SIGKILL, a power cut after the flush) leaves a summary of exactly what it finished.
+any moment (SIGKILL) leaves a summary of exactly what it finished, and the earlier run's rows of
+results it had not reached yet.
 :func:`earlier_rows` reads back an earlier run's summary for a resume (``--skip-existing``),
 whatever a kill left in it (a cut-short last line is skipped)."""
 
@@ -75,19 +76,31 @@ class SummaryJournal:
     :meth:`finish` rewrites the table atomically in the order given. Use as a context manager
     (the append handle is closed on exit)."""
 
-    def __init__(self, path: Path, settled: list[dict]) -> None:
+    def __init__(self, path: Path, settled: list[dict], carried: list[dict] | None = None
+                 ) -> None:
         """Start the summary with the records ``settled`` before any fit (written atomically:
-        an earlier summary at ``path`` is replaced only by a complete one)."""
+        an earlier summary at ``path`` is replaced only by a complete one). ``carried``: the
+        earlier run's rows of results this run may fit again; each stays in the table until
+        this run gives its output a row of its own (a rerun interrupted before reaching them
+        keeps them, and with them what tells a resume those files are results, not inputs)."""
         self.path = path
+        self.carried = list(carried or [])
         self.records: list[dict] = list(settled)
         self.columns = _columns(self.records)
         self.handle: TextIO | None = None
         self._rewrite()
 
+    def _table(self) -> list[dict]:
+        """The records, then the carried rows of outputs that have none among them."""
+        own = {output_key(str(r["output"])) for r in self.records if r.get("output")}
+        return self.records + [row for row in self.carried
+                               if output_key(str(row["output"])) not in own]
+
     def _rewrite(self) -> None:
         self.close()
-        write_summary(self.path, self.records)
-        self.columns = _columns(self.records)
+        table = self._table()
+        write_summary(self.path, table)
+        self.columns = _columns(table)
         self.handle = open(self.path, "a", encoding="utf-8", newline="")  # noqa: SIM115
 
     def add(self, record: dict) -> None:
@@ -108,10 +121,11 @@ class SummaryJournal:
             raise type(exc)(f"cannot write {self.path}: {exc.strerror or exc}") from exc
 
     def finish(self, records: list[dict]) -> None:
-        """The final table: ``records`` (every input's row, in input order), written atomically."""
+        """The final table: ``records`` (every input's row, in input order; then the carried
+        rows of outputs they have none for), written atomically."""
         self.close()
         self.records = list(records)
-        write_summary(self.path, self.records)
+        write_summary(self.path, self._table())
 
     def close(self) -> None:
         """Close the append handle (a row it could not flush, on a full disk, is dropped: the

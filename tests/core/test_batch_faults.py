@@ -386,3 +386,38 @@ def test_a_batch_refuses_a_setting_beyond_the_engines_bounds_before_any_input(tm
     error = capsys.readouterr().err
     assert len([line for line in error.splitlines() if line.strip()]) == 1, error
     assert not list(out.glob("c*"))
+
+
+def test_a_rerun_interrupted_before_its_first_result_keeps_the_earlier_rows(tmp_path, capsys,
+                                                                            monkeypatch):
+    """A plain rerun replaced the earlier summary with the rows it had settled (none) at its
+    start: interrupted there, the next run took the earlier results for inputs (fitted 6 of 3,
+    every result renamed) and their statistics were lost. The earlier rows stay until this
+    run's own rows replace them."""
+    import nurbs_core.batch.runner as runner
+
+    folder = tmp_path / "d"
+    for k, name in enumerate(("a.xyz", "a.ply", "a.xyz.ply")):
+        _cloud_file(folder / name, k)
+    arguments = [str(folder), "--output-dir", str(folder), "--format", ".ply", "-q", *FIT]
+    assert main(arguments) == 0
+    first = _files(folder)
+    statistics = {name: row["rms"] for name, row in _rows(folder / "summary.jsonl").items()}
+
+    def interrupted(*_args, **_kwargs):
+        raise KeyboardInterrupt
+        yield  # a generator, as serial is
+
+    with monkeypatch.context() as patch:
+        patch.setattr(runner, "serial", interrupted, raising=False)
+        patch.setattr("nurbs_core.batch.executors.serial", interrupted)
+        assert main(arguments) == 130
+    rows = _rows(folder / "summary.jsonl")
+    assert {name: row["rms"] for name, row in rows.items()} == statistics
+    capsys.readouterr()
+    assert main([*arguments, "--skip-existing"]) == 0
+    rows = _rows(folder / "summary.jsonl")
+    assert sorted(rows) == ["a.ply", "a.xyz", "a.xyz.ply"]
+    assert all(row["status"] == "skipped" for row in rows.values())
+    assert {name: row["rms"] for name, row in rows.items()} == statistics
+    assert sorted(_files(folder)) == sorted(first)
