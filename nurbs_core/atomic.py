@@ -110,6 +110,18 @@ def atomic_paths(paths: Iterable[StrPath]) -> Iterator[list[Path]]:
         raise
 
 
+def cannot_write(error: OSError, names: str) -> OSError:
+    """``error`` (same type, or OSError for a subclass with a constructor of its own, and the
+    same errno) saying ``cannot write NAMES: <reason>``."""
+    reason = error.strerror or str(error)
+    try:
+        named = type(error)(f"cannot write {names}: {reason}")
+    except TypeError:  # an OSError subclass with a constructor of its own
+        named = OSError(f"cannot write {names}: {reason}")
+    named.errno = error.errno
+    return named
+
+
 def _naming_targets(error: OSError, temporaries: list[Path], targets: list[Path],
                     given: list[Path]) -> OSError:
     """``error`` (same type and errno) saying which of the user's files could not be written,
@@ -124,10 +136,4 @@ def _naming_targets(error: OSError, temporaries: list[Path], targets: list[Path]
         if not ours:
             return error
         names = [os.fspath(ours[0])]
-    reason = error.strerror or str(error)
-    try:
-        named = type(error)(f"cannot write {', '.join(names)}: {reason}")
-    except TypeError:  # an OSError subclass with a constructor of its own
-        named = OSError(f"cannot write {', '.join(names)}: {reason}")
-    named.errno = error.errno
-    return named
+    return cannot_write(error, ", ".join(names))

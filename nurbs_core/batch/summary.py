@@ -118,7 +118,9 @@ class SummaryJournal:
             self.handle.write(line)
             self.handle.flush()
         except OSError as exc:  # a full disk: name the summary (the rows before stay whole)
-            raise type(exc)(f"cannot write {self.path}: {exc.strerror or exc}") from exc
+            from nurbs_core.atomic import cannot_write
+
+            raise cannot_write(exc, str(self.path)) from exc
 
     def finish(self, records: list[dict]) -> None:
         """The final table: ``records`` (every input's row, in input order; then the carried

@@ -172,7 +172,7 @@ def _read_shape(path: str, kind: str) -> OccObject:
     # millimetres and divides them by the session unit's millimetres otherwise (measured: a
     # file in metres read under "M" came back 1000 x smaller), so IGES reads under "MM"
     # (the reader serves many files: every read sets it; an IGES file took the unit of the STEP
-    # file read before it, and came back 25.4 x smaller after one in inches)
+    # file read before it: exported in inches, it came back 25.4 x smaller after one in metres)
     if kind == "brep":
         return _read_brep(path)
     unit = _step_length_unit(path) if kind == "step" else None

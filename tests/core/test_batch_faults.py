@@ -385,6 +385,7 @@ def test_a_batch_refuses_a_setting_beyond_the_engines_bounds_before_any_input(tm
     assert main([str(folder), "--output-dir", str(out), "-q", *option]) == 1
     error = capsys.readouterr().err
     assert len([line for line in error.splitlines() if line.strip()]) == 1, error
+    assert "must be at most" in error
     assert not list(out.glob("c*"))
 
 

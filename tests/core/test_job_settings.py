@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from nurbs_core.jobs import FitJob
+from nurbs_core.jobs import FitJob, fit_one
 from nurbs_core.jobs.checks import check_before_work
 from nurbs_core.jobs.settings import check_settings
 
@@ -32,6 +32,8 @@ def test_a_setting_beyond_the_engines_bounds_is_refused_before_the_cloud_is_read
     job = FitJob(input=str(tmp_path / "scan.xyz"), output=[str(tmp_path / "fit.json")], **changes)
     with pytest.raises(ValueError, match=message):
         check_before_work(job)
+    with pytest.raises(ValueError, match=message):  # a whole fit refuses it before reading
+        fit_one(job)
 
 
 @pytest.mark.parametrize("changes, line", [

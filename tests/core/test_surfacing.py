@@ -334,6 +334,7 @@ def test_the_noise_estimate_reads_noise_as_wide_as_the_neighbourhoods(shape, noi
     assert estimate_noise(cloud.points) == pytest.approx(cloud.noise, rel=0.2)
 
 
+@pytest.mark.slow
 def test_a_thin_skin_is_not_read_as_wider_noise(paper_data):
     """The paper's stabiliser: its aerofoil's two skins lie inside the neighbourhoods, which
     reads 1.8x its noise; widening the neighbourhoods read 6.2x (each halving of the cloud
