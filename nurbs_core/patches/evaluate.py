@@ -93,7 +93,10 @@ def evaluate(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.ndar
     offsets = (np.arange(n)[:, None] * index.shape[2] + np.arange(n)).ravel()
     dim = c.shape[1]
     m = len(first)
-    nets = c[index.reshape(-1)[first[:, None] + offsets]].reshape(m, n, n * dim)   # (M, i, j c)
+    # every patch's grid (P s s, dim) first, then each parameter's span from it: two row
+    # gathers by np.take (a fancy index of fancy indices cost 4x more, the same values)
+    grids = np.take(c, index.reshape(-1), axis=0)
+    nets = np.take(grids, first[:, None] + offsets, axis=0).reshape(m, n, n * dim)  # (M, i, j c)
     # contracted along u with (value, d/du) as one (2, n) x (n, n dim) product per parameter,
     # then along v with (value, d/dv) as one (2 dim, n) x (n, 2): two plain batched products
     # (the broadcast (1, 2, n) x (n, n, dim) of n products per parameter cost 1.2-1.3x more;
