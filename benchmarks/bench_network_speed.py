@@ -127,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=1, help="runs per tree and case")
     arguments = parser.parse_args(argv)
     cases = _scan_cases()
-    cases.update({f"patches:{name}": _patch_case(name) for name in arguments.cases
+    cases.update({name: _patch_case(name.removeprefix("patches:")) for name in arguments.cases
                   if name.startswith("patches:")})
     unknown = [name for name in arguments.cases if name not in cases]
     if unknown:

@@ -118,9 +118,10 @@ def _cells(network: PatchNetwork, terms: PatchTerms) -> _Cells:
     order = np.argsort(key, kind="stable")
     cell, start, count = np.unique(key[order], return_index=True, return_counts=True)
     x = np.zeros((m + 1, n * n))
-    x[:m] = rows.values.reshape(m, n * n)[order]
+    x[:m] = np.take(rows.values.reshape(m, n * n), order, axis=0)
     y = np.zeros((m + 1, n * n, 6))
-    np.multiply(x[:m, :, None], terms.matrix[order][:, _UPPER[0], _UPPER[1]][:, None], out=y[:m])
+    six = np.take(terms.matrix.reshape(m, 9), _UPPER[0] * 3 + _UPPER[1], axis=1)
+    np.multiply(x[:m, :, None], np.take(six, order, axis=0)[:, None], out=y[:m])
     y = y.reshape(m + 1, n * n * 6)
     packed = np.empty((len(cell), n * n, n * n * 6))
     low = 0
