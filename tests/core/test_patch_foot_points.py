@@ -8,11 +8,13 @@ import pytest
 from scipy.interpolate import BSpline
 
 from nurbs_core.patches.evaluate import (
+    basis_1d,
     evaluate,
     foot_points,
     grid_points,
     grid_samples,
     grid_starts,
+    network_knots,
     unit,
 )
 from nurbs_core.patches.fit import _reassign
@@ -53,6 +55,35 @@ def test_evaluate_is_the_sum_over_every_control_point(size):
     got = evaluate(network, patch, uv[:, 0], uv[:, 1])
     for ours, reference in zip(got, _reference(network, patch, uv[:, 0], uv[:, 1]), strict=True):
         np.testing.assert_allclose(ours, reference, rtol=0, atol=1e-13)
+
+
+def test_evaluate_is_the_plainly_gathered_contraction_bit_for_bit():
+    # the grids gathered by np.take give the same numbers as one fancy index into the control
+    # points, the same two products after: a fit repeats from identical values
+    network = _bumpy_sphere(6)
+    rng = np.random.default_rng(1)
+    patch, u, v = rng.integers(0, network.patch_count, 300), rng.random(300), rng.random(300)
+    p, n = network.degree, network.degree + 1
+    bu, bv = basis_1d(network.knots, p, u), basis_1d(network.knots, p, v)
+    cols = network.index[patch[:, None, None], bu.first[:, None, None] + np.arange(n)[:, None],
+                         bv.first[:, None, None] + np.arange(n)]                  # (M, n, n)
+    nets = network.control_points[cols].reshape(300, n, n * 3)
+    along_u = np.matmul(np.stack([bu.values, bu.derivative], 1), nets)
+    along_u = along_u.reshape(300, 2, n, 3).transpose(0, 1, 3, 2).reshape(300, 6, n)
+    out = np.matmul(along_u, np.stack([bv.values, bv.derivative], -1))
+    for got, expected in zip(evaluate(network, patch, u, v),
+                             (out[:, :3, 0], out[:, 3:, 0], out[:, :3, 1]), strict=True):
+        np.testing.assert_array_equal(got, expected)
+
+
+@pytest.mark.parametrize("size", [4, 6, 9])
+def test_the_cached_knots_are_the_networks_own(size):
+    network = build_network(CUBE_VERTICES, CUBE_QUADS, size=size)
+    knots = network_knots(network)
+    assert knots.tobytes() == network.knots.tobytes()
+    assert network_knots(network) is knots                # made once
+    with pytest.raises(ValueError):
+        knots[0] = 1.0                                    # and shared, so read-only
 
 
 @pytest.mark.parametrize("resolution", [2, 7, 14])
