@@ -34,10 +34,6 @@ SESSION_SUFFIX = ".nstudio"
 MANIFEST = "session.json"
 #: At most this many members (a session holds a few clouds and one network).
 MAX_MEMBERS = 10_000
-#: The largest offset distance a session may hold: the Offsets dock's range
-#: (app/panels/offset_panel.py). 1e300 opened, the dock showed 1,000,000 and the offsets were
-#: computed at 1e300 (overflowing).
-MAX_OFFSET_DISTANCE = 1e6
 
 
 def is_archive(path: str | Path) -> bool:
@@ -405,10 +401,6 @@ def _session_settings(data: dict[str, Any]) -> Settings:
                 raise ValueError(f"settings.{part} must be an object, got {_kind(value[part])}")
         settings = Settings.from_json(value)
     settings.validate()
-    if abs(settings.offset_distance) > MAX_OFFSET_DISTANCE:
-        raise ValueError(f"settings.offset_distance {settings.offset_distance:g} is beyond the "
-                         f"Offsets dock's range (-{MAX_OFFSET_DISTANCE:g} to "
-                         f"{MAX_OFFSET_DISTANCE:g})")
     return settings
 
 

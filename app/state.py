@@ -92,6 +92,9 @@ def parse_tolerance(text: str) -> float | None:
     return value
 
 
+#: The offset distance's range (the Offsets dock's spin box, a session's setting), model units.
+MAX_OFFSET_DISTANCE = 1e6
+
 @dataclass(frozen=True)
 class Settings:
     """Everything the user can edit. Immutable: edits make a new object (undo keeps the old).
@@ -128,6 +131,10 @@ class Settings:
                 or not np.isfinite(self.offset_distance)):
             raise ValueError(f"offset_distance must be a finite number, got "
                              f"{self.offset_distance!r}")
+        if abs(self.offset_distance) > MAX_OFFSET_DISTANCE:
+            raise ValueError(f"offset_distance {self.offset_distance:g} is beyond the Offsets "
+                             f"dock's range (-{MAX_OFFSET_DISTANCE:g} to "
+                             f"{MAX_OFFSET_DISTANCE:g})")
         for name in ("constrain_shared_edges", "show_offsets"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")

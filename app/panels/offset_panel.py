@@ -13,7 +13,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.state import OffsetDisplay, Settings
+from app.state import MAX_OFFSET_DISTANCE, OffsetDisplay, Settings
 
 
 class OffsetPanel(QWidget):
@@ -28,7 +28,7 @@ class OffsetPanel(QWidget):
         form.addRow(note)
         self.show_offsets = QCheckBox("Show offset patches")
         self.distance = QDoubleSpinBox()
-        self.distance.setRange(-1e6, 1e6)
+        self.distance.setRange(-MAX_OFFSET_DISTANCE, MAX_OFFSET_DISTANCE)
         self.distance.setDecimals(4)
         self.distance.setStepType(QAbstractSpinBox.StepType.AdaptiveDecimalStepType)
         self.distance.setKeyboardTracking(False)

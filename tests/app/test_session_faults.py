@@ -248,7 +248,7 @@ def test_the_window_refuses_damaged_sessions_and_keeps_its_document(
         assert window.document.targets is targets and window.document.network is None
     assert not [record for record in caplog.records if record.exc_info], "a traceback was logged"
     # the offset distance a session may hold is the one the Offsets dock can show
-    from app.session_file import MAX_OFFSET_DISTANCE
+    from app.state import MAX_OFFSET_DISTANCE
 
     box = window.offset_panel.distance
     assert (box.minimum(), box.maximum()) == (-MAX_OFFSET_DISTANCE, MAX_OFFSET_DISTANCE)
