@@ -52,7 +52,6 @@ def corpus() -> None:
 
     from nurbs_core.brep.sample_parts import HOLED_PARTS, PARTS, scan_part
     from nurbs_core.io import load_points
-    from nurbs_core.paper_data import paper_data_dir
 
     print("\n| cloud | points | estimate |\n|---|---|---|")
 
@@ -64,12 +63,11 @@ def corpus() -> None:
             row(name, build(bench.COUNT, 2000, None).points)
     for name, part in {**PARTS, **HOLED_PARTS}.items():
         row(f"part {name}", scan_part(part(), 20_000, seed=0)[0])
-    root = paper_data_dir()
-    if root is None:
+    scans = bench.paper_scans()
+    if scans is None:
         print("the paper's data set is not found: its scans left out")
         return
-    for path in sorted((root / "valve_reconstruction").glob("data.*.txt")) + sorted(
-            (root / "step_fitting").glob("*.txt")):
+    for path in scans:
         row(f"{path.parent.name}/{path.name}", load_points(path).points)
 
 

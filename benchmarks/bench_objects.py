@@ -139,7 +139,6 @@ def audit() -> None:
 
     from nurbs_core.brep.sample_parts import HOLED_PARTS, PARTS, scan_part
     from nurbs_core.io import load_points
-    from nurbs_core.paper_data import paper_data_dir
     from nurbs_core.patches import closed_mesh, open_mesh
     from nurbs_core.surfacing.mesh import face_pieces
 
@@ -178,12 +177,11 @@ def audit() -> None:
                 scan_part(part(), 20_000, seed=seed)[0])
     for name in opened:
         row(f"open {name}", open_mesh.open_mesh, builders[name](bench.COUNT, 2000, None).points)
-    root = paper_data_dir()
-    if root is None:
+    scans = bench.paper_scans()
+    if scans is None:
         print("the paper's data set is not found: its scans left out")
         return
-    for path in sorted((root / "valve_reconstruction").glob("data.*.txt")) + sorted(
-            (root / "step_fitting").glob("*.txt")):
+    for path in scans:
         row(f"open {path.name}", open_mesh.open_mesh, load_points(path).points)
 
 

@@ -418,6 +418,18 @@ def _mesh_case(label: str, mesh: Any, count: int, truth_count: int, name: str) -
 BUNNY = Path(__file__).resolve().parents[1] / "tests" / "data" / "stanford_bunny_1839.ply"
 
 
+def paper_scans() -> list[Path] | None:
+    """The paper's real scans (the valve rings and leaflets, the registered scans), or None when
+    its data set is not on this machine."""
+    from nurbs_core.paper_data import paper_data_dir
+
+    root = paper_data_dir()
+    if root is None:
+        return None
+    return sorted((root / "valve_reconstruction").glob("data.*.txt")) + sorted(
+        (root / "step_fitting").glob("*.txt"))
+
+
 def case_builders() -> dict[str, Callable[..., Case]]:
     """Every case by name, in table order; a builder takes (count, truth_count, data)."""
     g = samples

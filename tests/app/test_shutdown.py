@@ -45,22 +45,28 @@ def test_closing_the_window_does_not_wait_for_a_step_that_ignores_the_stop_token
     qtbot.waitUntil(lambda: not work_left_running(), timeout=30000)
 
 
-def _start_app(cloud: Path, env: dict[str, str]) -> tuple[subprocess.Popen, threading.Event,
-                                                          list[str]]:
-    process = subprocess.Popen([sys.executable, "-m", "app", str(cloud), "--fit"], cwd=ROOT,
-                               env={**env, "OMP_NUM_THREADS": "1"}, stderr=subprocess.PIPE,
-                               text=True)
-    opened, seen = threading.Event(), []
+def _start(command: list[str], env: dict[str, str], marker: str
+           ) -> tuple[subprocess.Popen, threading.Event, list[str]]:
+    """``command`` started with its stderr read aside: the process, an event set when a line
+    holds ``marker``, and the lines so far."""
+    process = subprocess.Popen(command, cwd=ROOT, env={**env, "OMP_NUM_THREADS": "1"},
+                               stderr=subprocess.PIPE, text=True)
+    seen_marker, seen = threading.Event(), []
 
     def read() -> None:
         assert process.stderr is not None
         for line in process.stderr:
             seen.append(line)
-            if "INFO app: Opened" in line:
-                opened.set()
+            if marker in line:
+                seen_marker.set()
 
     threading.Thread(target=read, daemon=True).start()
-    return process, opened, seen
+    return process, seen_marker, seen
+
+
+def _start_app(cloud: Path, env: dict[str, str]) -> tuple[subprocess.Popen, threading.Event,
+                                                          list[str]]:
+    return _start([sys.executable, "-m", "app", str(cloud), "--fit"], env, "INFO app: Opened")
 
 
 @pytest.mark.slow
@@ -156,19 +162,8 @@ def test_sigterm_while_a_big_session_saves_during_a_fit_loses_nothing(tmp_path):
     driver = tmp_path / "saving_app.py"
     driver.write_text(SAVING_APP)
     with app_process_env() as env:
-        process = subprocess.Popen([sys.executable, str(driver), str(cloud), str(session)],
-                                   cwd=ROOT, env={**env, "OMP_NUM_THREADS": "1"},
-                                   stderr=subprocess.PIPE, text=True)
-        saving, seen = threading.Event(), []
-
-        def read() -> None:
-            assert process.stderr is not None
-            for line in process.stderr:
-                seen.append(line)
-                if "SAVING the session" in line:
-                    saving.set()
-
-        threading.Thread(target=read, daemon=True).start()
+        process, saving, seen = _start([sys.executable, str(driver), str(cloud), str(session)],
+                                       env, "SAVING the session")
         try:
             assert saving.wait(300), "".join(seen)
             assert process.poll() is None, "".join(seen)
