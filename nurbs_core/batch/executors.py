@@ -262,6 +262,12 @@ def _logging_disabled() -> Iterator[None]:
         logging.disable(previous)
 
 
+#: How the errors of inputs a lost cluster failed begin (after ``nurbs-fit: error: ``): their
+#: fits may have written the result before the loss, so only these are taken back as written
+#: when their files are there (an input whose own fit failed is never)
+CLUSTER_LOSSES = ("lost the Dask scheduler", "the worker failed", "no Dask worker left")
+
+
 def _failed(chunk: PositionedItems, why: str) -> Iterator[tuple[int, dict]]:
     """A failed record for each item of ``chunk``, saying ``why``."""
     from nurbs_core.jobs import error_line

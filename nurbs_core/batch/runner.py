@@ -82,12 +82,17 @@ def _written_since(path: str, since: float) -> bool:
 
 def _record_written(records: list[dict | None], items: list[Item], since: float) -> None:
     """Rows "ok" for the inputs whose outputs this run wrote (after ``since``, a time.time()) but
-    which have no record (the run was interrupted between the files and the record) or a failed
-    one (a worker or the scheduler was lost after the files were written; a fit that fails
-    writes nothing: its outputs are all-or-nothing). Their statistics are not known."""
+    which have no record (the run was interrupted between the files and the record) or one
+    failed by the cluster (a worker or the scheduler was lost after the files were written:
+    ``executors.CLUSTER_LOSSES``; an input whose own fit failed keeps its failure, whatever the
+    files' times say). Their statistics are not known."""
+    from nurbs_core.batch.executors import CLUSTER_LOSSES
+
     for position, item in enumerate(items):
         record = records[position]
-        if record is not None and record["status"] != "failed":
+        if record is not None and not (
+                record["status"] == "failed" and str(record.get("error", "")).removeprefix(
+                    "nurbs-fit: error: ").startswith(CLUSTER_LOSSES)):
             continue
         if item.error is not None or not item.outputs:
             continue

@@ -422,3 +422,26 @@ def test_a_rerun_interrupted_before_its_first_result_keeps_the_earlier_rows(tmp_
     assert all(row["status"] == "skipped" for row in rows.values())
     assert {name: row["rms"] for name, row in rows.items()} == statistics
     assert sorted(_files(folder)) == sorted(first)
+
+
+def test_only_a_cluster_loss_turns_a_failed_row_with_fresh_files_into_a_result(tmp_path):
+    """A row failed by a lost worker or scheduler whose files were written before the loss is a
+    result ("ok", with a note); a fit that failed on its own input stays failed, whatever its
+    files' times say (a shared filesystem's clock, a report that failed after the results)."""
+    import time as clock
+
+    from nurbs_core.batch.inputs import Item
+    from nurbs_core.batch.runner import _record_written
+
+    started = clock.time() - 1.0
+    items, records = [], []
+    for name, error in (("lost", "nurbs-fit: error: the worker failed: KilledWorker"),
+                        ("own", "nurbs-fit: error: the fit failed: no surface")):
+        output = tmp_path / f"{name}.json"
+        output.write_text("{}")
+        items.append(Item(label=name, path=name, name=name, outputs=[str(output)]))
+        records.append({"input": name, "output": str(output), "status": "failed",
+                        "seconds": None, "error": error})
+    _record_written(records, items, started)
+    assert records[0]["status"] == "ok" and "record was lost" in records[0]["note"]
+    assert records[1]["status"] == "failed"
