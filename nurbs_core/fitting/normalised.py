@@ -53,8 +53,7 @@ def check_spread(points: np.ndarray, kind: str = "surface") -> None:
     """ValueError naming what keeps the points (N, d) from holding a ``kind`` ("surface" or
     "curve"): none, one, NaN or inf, a scale the arithmetic cannot hold
     (:func:`nurbs_core.coordinate_range.scale_problem`), all at one place, or (a surface) all on
-    one line. The
-    automatic route asks it before deciding anything, the fits again."""
+    one line. The automatic route asks it before deciding anything, the fits again."""
     n = points.shape[0]
     if n == 0:
         raise ValueError("the point cloud is empty")

@@ -39,8 +39,8 @@ def to_local(points: np.ndarray, file_mesh: ScanMesh | None = None
 
 def shifted(geometry: Any, offset: np.ndarray | tuple[float, float, float] | None) -> Any:
     """``geometry`` moved by ``offset`` (3,): points (N, 3), a surface or curve (numpy twin), a
-    trimmed surface, a patch network or an OpenCASCADE shape (a solid, an open shell); the same object when
-    ``offset`` is None."""
+    trimmed surface, a patch network or an OpenCASCADE shape (a solid, an open shell); the same
+    object when ``offset`` is None."""
     if offset is None:
         return geometry
     offset = np.asarray(offset, np.float64)

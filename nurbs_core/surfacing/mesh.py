@@ -165,11 +165,12 @@ def median_spacing(points: np.ndarray) -> float:
     points = np.asarray(points, np.float64)
     if len(points) < 2:
         return 1.0
-    diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
-    distances, _ = cKDTree(points).query(points[: min(len(points), 5000)],
-                                         k=min(len(points), REPEATS_SKIPPED + 2))
-    distinct = np.where(distances[:, 1:] > DUPLICATE_SHARE * diagonal, distances[:, 1:],
-                        np.inf).min(axis=1)
+    tiny = DUPLICATE_SHARE * float(np.linalg.norm(np.ptp(points, axis=0)))
+    tree, queried = cKDTree(points), points[: min(len(points), 5000)]
+    distances, _ = tree.query(queried, k=2)
+    if not (distances[:, 1] > tiny).all():  # repeats: look past up to REPEATS_SKIPPED copies
+        distances, _ = tree.query(queried, k=min(len(points), REPEATS_SKIPPED + 2))
+    distinct = np.where(distances[:, 1:] > tiny, distances[:, 1:], np.inf).min(axis=1)
     distinct = distinct[np.isfinite(distinct)]
     return float(np.median(distinct)) if distinct.size else 1.0
 
