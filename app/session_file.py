@@ -27,6 +27,7 @@ import numpy as np
 
 from app.state import JSON_SESSION_FORMAT, OLD_SESSION_FORMATS, Document, Settings, Target
 from nurbs_core.geometry_arrays import from_mapping, number_array
+from nurbs_core.io.json_format import json_kind
 
 #: The archive's manifest format (sessions of the JSON formats before it are still read).
 ARCHIVE_FORMAT = "nurbs-studio-session-v3"
@@ -392,23 +393,17 @@ def _session_settings(data: dict[str, Any]) -> Settings:
     "fast"`` was read letter by letter ("unknown fit settings: a, f, s, t")."""
     value = data.get("settings", {})
     if not isinstance(value, dict):
-        raise ValueError(f"settings must be an object, got {_kind(value)}")
+        raise ValueError(f"settings must be an object, got {json_kind(value)}")
     if data["format"] == OLD_SESSION_FORMATS[0]:
         settings = Settings.from_flat_json(value)
     else:
         for part in ("fit", "patches"):
             if part in value and not isinstance(value[part], dict):
-                raise ValueError(f"settings.{part} must be an object, got {_kind(value[part])}")
+                raise ValueError(f"settings.{part} must be an object, "
+                                 f"got {json_kind(value[part])}")
         settings = Settings.from_json(value)
     settings.validate()
     return settings
-
-
-def _kind(value: Any) -> str:
-    """What a JSON value is, in words (for messages)."""
-    names = {bool: "true/false", int: "a number", float: "a number", str: "text",
-             list: "a list", dict: "an object", type(None): "null"}
-    return names.get(type(value), type(value).__name__)
 
 
 def _session_solid(data: dict[str, Any], archive: Any) -> Any:

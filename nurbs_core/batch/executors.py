@@ -12,6 +12,7 @@ import math
 import os
 import time
 from collections.abc import Iterator
+from concurrent.futures import CancelledError
 from typing import TYPE_CHECKING, Any, TypeAlias
 
 from nurbs_core.batch.inputs import BATCH_EXTRA_HINT
@@ -195,6 +196,7 @@ class DaskExecutor:
                                         pure=False, key=f"nurbs-fit-{chunk[0][0]}-{os.getpid()}")
             futures[future] = chunk
         pending = set(futures)
+        where = self.scheduler or "the local cluster"
         workerless_since: float | None = None
         try:
             while pending:
@@ -203,9 +205,9 @@ class DaskExecutor:
                                                      return_when="FIRST_COMPLETED")
                 except TimeoutError:
                     done = set()
-                except Exception as exc:  # noqa: BLE001 - the scheduler is gone (its futures
-                    # cancelled): every input still waiting fails, the finished ones stay
-                    where = self.scheduler or "the local cluster"
+                except (CancelledError, OSError) as exc:  # the scheduler is gone (its futures
+                    # cancelled, its connection closed): every input still waiting fails, the
+                    # finished ones stay
                     why = ", ".join(sorted({str(group.reason) for group in
                                             getattr(exc, "error_groups", ())})) or type(exc).__name__
                     for future in pending:
@@ -238,7 +240,6 @@ class DaskExecutor:
                 workerless_since = workerless_since or time.monotonic()
                 if time.monotonic() - workerless_since < WORKERLESS_S:
                     continue
-                where = self.scheduler or "the local cluster"
                 for future in pending:
                     yield from _failed(futures[future], f"no Dask worker left on {where} "
                                        f"for {WORKERLESS_S:g} s (start workers, then "
@@ -262,17 +263,18 @@ def _logging_disabled() -> Iterator[None]:
         logging.disable(previous)
 
 
-#: How the errors of inputs a lost cluster failed begin (after ``nurbs-fit: error: ``): their
-#: fits may have written the result before the loss, so only these are taken back as written
-#: when their files are there (an input whose own fit failed is never)
-CLUSTER_LOSSES = ("lost the Dask scheduler", "the worker failed", "no Dask worker left")
+#: The record field that marks an input the cluster failed (a lost worker or scheduler), not
+#: its own fit: its result may have been written before the loss, and is taken back as written
+#: when its files are there (``runner._record_written``)
+CLUSTER_LOST = "cluster_lost"
 
 
 def _failed(chunk: PositionedItems, why: str) -> Iterator[tuple[int, dict]]:
-    """A failed record for each item of ``chunk``, saying ``why``."""
+    """A failed record for each item of ``chunk``, saying ``why``, marked CLUSTER_LOST."""
     from nurbs_core.jobs import error_line
 
     error = error_line(OSError(why))  # the environment failed, not the input
     for position, item in chunk:
         yield position, {"input": item["input"], "output": item["outputs"][0],
-                         "status": "failed", "seconds": None, "error": error}
+                         "status": "failed", "seconds": None, "error": error,
+                         CLUSTER_LOST: True}

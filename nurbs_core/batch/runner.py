@@ -84,15 +84,13 @@ def _record_written(records: list[dict | None], items: list[Item], since: float)
     """Rows "ok" for the inputs whose outputs this run wrote (after ``since``, a time.time()) but
     which have no record (the run was interrupted between the files and the record) or one
     failed by the cluster (a worker or the scheduler was lost after the files were written:
-    ``executors.CLUSTER_LOSSES``; an input whose own fit failed keeps its failure, whatever the
-    files' times say). Their statistics are not known."""
-    from nurbs_core.batch.executors import CLUSTER_LOSSES
+    marked ``executors.CLUSTER_LOST``; an input whose own fit failed keeps its failure,
+    whatever the files' times say). Their statistics are not known."""
+    from nurbs_core.batch.executors import CLUSTER_LOST
 
     for position, item in enumerate(items):
         record = records[position]
-        if record is not None and not (
-                record["status"] == "failed" and str(record.get("error", "")).removeprefix(
-                    "nurbs-fit: error: ").startswith(CLUSTER_LOSSES)):
+        if record is not None and not record.get(CLUSTER_LOST):
             continue
         if item.error is not None or not item.outputs:
             continue

@@ -86,7 +86,7 @@ class SummaryJournal:
         self.path = path
         self.carried = list(carried or [])
         self.records: list[dict] = list(settled)
-        self.columns = _columns(self.records)
+        self.columns: list[str] = []  # the table's, set by _rewrite
         self.handle: TextIO | None = None
         self._rewrite()
 

@@ -160,7 +160,7 @@ def _length_unit(path: str, kind: str) -> str | None:
     return _step_length_unit(path) if kind == "step" else _iges_length_unit(path)
 
 
-def _read_shape(path: str, kind: str) -> OccObject:
+def _read_shape(path: str, kind: str, unit: str | None) -> OccObject:
     from OCP.IFSelect import IFSelect_ReturnStatus
     from OCP.IGESControl import IGESControl_Reader
     from OCP.Interface import Interface_Static
@@ -175,8 +175,7 @@ def _read_shape(path: str, kind: str) -> OccObject:
     # file read before it: exported in inches, it came back 25.4 x smaller after one in metres)
     if kind == "brep":
         return _read_brep(path)
-    unit = _step_length_unit(path) if kind == "step" else None
-    Interface_Static.SetCVal_s("xstep.cascade.unit", unit or "MM")
+    Interface_Static.SetCVal_s("xstep.cascade.unit", (unit if kind == "step" else None) or "MM")
     reader = STEPControl_Reader() if kind == "step" else IGESControl_Reader()
     status = reader.ReadFile(path)
     if status != IFSelect_ReturnStatus.IFSelect_RetDone:
@@ -213,8 +212,10 @@ def _bspline_surface_of_face(face: OccObject) -> OccObject | None:
     return surface if isinstance(surface, Geom_BSplineSurface) else None
 
 
-def read_items(path: str, kind: str) -> list[Arrays]:
-    """Every face's untrimmed B-spline surface; the edges as curves when there are no faces."""
+def read_items(path: str, kind: str, unit: str | None) -> list[Arrays]:
+    """Every face's untrimmed B-spline surface; the edges as curves when there are no faces.
+    ``unit``: the length unit the file states (:func:`_length_unit`), read once by the
+    caller."""
     from OCP.BRep import BRep_Tool
     from OCP.BRepAdaptor import BRepAdaptor_Curve
     from OCP.Geom import Geom_BSplineCurve, Geom_TrimmedCurve
@@ -223,7 +224,7 @@ def read_items(path: str, kind: str) -> list[Arrays]:
     from OCP.TopExp import TopExp_Explorer
     from OCP.TopoDS import TopoDS
 
-    shape = _read_shape(path, kind)
+    shape = _read_shape(path, kind, unit)
     items: list[Arrays] = []
     explorer = TopExp_Explorer(shape, TopAbs_ShapeEnum.TopAbs_FACE)
     while explorer.More():
@@ -437,9 +438,9 @@ def _handle(request: dict[str, Any], replies: TextIO) -> dict[str, Any]:
         if kind == "3dm":
             items, objects, units = read_3dm_items(request["path"])
         else:
-            items = read_items(request["path"], kind)
-            objects = len(items)
             units = _length_unit(request["path"], kind)
+            items = read_items(request["path"], kind, units)
+            objects = len(items)
         # Any values: numpy's stubs match **kwds against allow_pickle otherwise
         arrays: dict[str, Any] = {f"{key}_{k}": value for k, item in enumerate(items)
                                   for key, value in item.items()}

@@ -3,7 +3,7 @@ written by the app's own writers (shapes in Single patch mode, the patch network
 mode, the solid in Solid mode) and read back by the app's own open (``loading.load_files``,
 what File > Open and a drop run): NURBS formats give the same patches back (our JSON and .3dm
 the same control points), meshes and the control-point CSV give a cloud on the shape. A format
-the mode cannot write is one clear refusal; a format the app does not open is named here."""
+the mode cannot write is one clear refusal."""
 
 from __future__ import annotations
 
@@ -20,9 +20,6 @@ from nurbs_core.patches.network import build_network
 HAS_OCP = importlib.util.find_spec("OCP") is not None
 SUFFIXES = [suffix for _label, suffix, _needs_ocp in loading.EXPORT_FORMATS]
 NEEDS_OCP = {suffix for _label, suffix, needs_ocp in loading.EXPORT_FORMATS if needs_ocp}
-#: exported but not opened by the app (none: OpenCASCADE's own B-rep text, a solid's format,
-#: opens as its faces, as STEP does)
-NOT_OPENED: set[str] = set()
 #: NURBS formats whose control points come back as they were written (STEP and IGES are
 #: rebuilt by OpenCASCADE: the same patches, compared by count)
 EXACT = {".json", ".3dm"}
@@ -84,9 +81,7 @@ def test_what_the_app_exports_it_opens_again(tmp_path, kind, suffix):
         assert not path.exists()
         return
     count, control, box = _export(kind, path)
-    if suffix in NOT_OPENED:
-        assert suffix not in loading.open_suffixes()
-        return
+    assert suffix in loading.open_suffixes()  # every export opens (.brep as its faces)
     opened = loading.load_files([str(path)])
     if suffix in (".3dm", ".step", ".iges", ".json", ".brep"):
         assert len(opened.patches) == count and not opened.targets

@@ -164,7 +164,7 @@ CASES: list[tuple[str, Callable[[Members], bytes], str]] = [
     ("settings not an object", _manifest(lambda m: m.update(settings=5)),
      "settings must be an object, got a number"),
     ("fit settings as text", _manifest(lambda m: m["settings"].update(fit="fast")),
-     "settings.fit must be an object, got text"),
+     "settings.fit must be an object, got a string"),
     ("offset distance as text", _manifest(lambda m: m["settings"].update(offset_distance="0.1")),
      "offset_distance must be a finite number"),
     # the dock showed 1,000,000 (its maximum) while the offsets were computed at 1e300

@@ -45,10 +45,11 @@ def test_closing_the_window_does_not_wait_for_a_step_that_ignores_the_stop_token
     qtbot.waitUntil(lambda: not work_left_running(), timeout=30000)
 
 
-def _start(command: list[str], env: dict[str, str], marker: str
-           ) -> tuple[subprocess.Popen, threading.Event, list[str]]:
-    """``command`` started with its stderr read aside: the process, an event set when a line
-    holds ``marker``, and the lines so far."""
+def _sigterm_once(command: list[str], env: dict[str, str], marker: str, delay: float,
+                  hang_s: float) -> tuple[int, float, str]:
+    """Start ``command`` (its stderr read aside), send it SIGTERM ``delay`` seconds after a line
+    holds ``marker``, and return its exit status, the seconds from the signal to its exit and
+    its stderr (the process is killed if it outlives ``hang_s``: a hang guard, not a bound)."""
     process = subprocess.Popen(command, cwd=ROOT, env={**env, "OMP_NUM_THREADS": "1"},
                                stderr=subprocess.PIPE, text=True)
     seen_marker, seen = threading.Event(), []
@@ -61,12 +62,18 @@ def _start(command: list[str], env: dict[str, str], marker: str
                 seen_marker.set()
 
     threading.Thread(target=read, daemon=True).start()
-    return process, seen_marker, seen
-
-
-def _start_app(cloud: Path, env: dict[str, str]) -> tuple[subprocess.Popen, threading.Event,
-                                                          list[str]]:
-    return _start([sys.executable, "-m", "app", str(cloud), "--fit"], env, "INFO app: Opened")
+    try:
+        assert seen_marker.wait(300), "".join(seen)
+        time.sleep(delay)
+        assert process.poll() is None, "".join(seen)
+        sent = time.monotonic()
+        process.send_signal(signal.SIGTERM)
+        status = process.wait(hang_s)
+        return status, time.monotonic() - sent, "".join(seen)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
 
 
 @pytest.mark.slow
@@ -80,21 +87,10 @@ def test_sigterm_during_a_fit_on_ten_million_points_exits_within_seconds(tmp_pat
     points[:, 2] += np.random.default_rng(6).normal(0.0, 0.01, len(points))
     np.save(cloud, points)
     with app_process_env() as env:
-        process, opened, seen = _start_app(cloud, env)
-        try:
-            assert opened.wait(300), "".join(seen)
-            time.sleep(10)                          # well into the fit
-            assert process.poll() is None, "".join(seen)
-            sent = time.monotonic()
-            process.send_signal(signal.SIGTERM)
-            status = process.wait(120)              # a hang guard; the bound is below
-            seconds = time.monotonic() - sent
-        finally:
-            if process.poll() is None:
-                process.kill()
-                process.wait()
-    assert status == 128 + signal.SIGTERM, "".join(seen)
-    assert "Traceback" not in "".join(seen)
+        status, seconds, seen = _sigterm_once([sys.executable, "-m", "app", str(cloud), "--fit"],
+                                              env, "INFO app: Opened", 10, 120)  # well into it
+    assert status == 128 + signal.SIGTERM, seen
+    assert "Traceback" not in seen
     assert seconds < 10, f"exit took {seconds:.1f} s after SIGTERM"
 
 
@@ -162,19 +158,10 @@ def test_sigterm_while_a_big_session_saves_during_a_fit_loses_nothing(tmp_path):
     driver = tmp_path / "saving_app.py"
     driver.write_text(SAVING_APP)
     with app_process_env() as env:
-        process, saving, seen = _start([sys.executable, str(driver), str(cloud), str(session)],
-                                       env, "SAVING the session")
-        try:
-            assert saving.wait(300), "".join(seen)
-            assert process.poll() is None, "".join(seen)
-            process.send_signal(signal.SIGTERM)
-            status = process.wait(300)              # a hang guard, not a bound
-        finally:
-            if process.poll() is None:
-                process.kill()
-                process.wait()
-    assert status == 128 + signal.SIGTERM, "".join(seen)
-    assert "Traceback" not in "".join(seen)
+        status, _, seen = _sigterm_once([sys.executable, str(driver), str(cloud), str(session)],
+                                        env, "SAVING the session", 0, 300)
+    assert status == 128 + signal.SIGTERM, seen
+    assert "Traceback" not in seen
     saved = read_session(session)
     np.testing.assert_array_equal(saved["targets"][0].points, points)
     assert sorted(p.name for p in folder.iterdir()) == ["work.nstudio"]

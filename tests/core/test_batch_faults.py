@@ -395,7 +395,6 @@ def test_a_rerun_interrupted_before_its_first_result_keeps_the_earlier_rows(tmp_
     start: interrupted there, the next run took the earlier results for inputs (fitted 6 of 3,
     every result renamed) and their statistics were lost. The earlier rows stay until this
     run's own rows replace them."""
-    import nurbs_core.batch.runner as runner
 
     folder = tmp_path / "d"
     for k, name in enumerate(("a.xyz", "a.ply", "a.xyz.ply")):
@@ -410,7 +409,6 @@ def test_a_rerun_interrupted_before_its_first_result_keeps_the_earlier_rows(tmp_
         yield  # a generator, as serial is
 
     with monkeypatch.context() as patch:
-        patch.setattr(runner, "serial", interrupted, raising=False)
         patch.setattr("nurbs_core.batch.executors.serial", interrupted)
         assert main(arguments) == 130
     rows = _rows(folder / "summary.jsonl")
@@ -428,20 +426,21 @@ def test_only_a_cluster_loss_turns_a_failed_row_with_fresh_files_into_a_result(t
     """A row failed by a lost worker or scheduler whose files were written before the loss is a
     result ("ok", with a note); a fit that failed on its own input stays failed, whatever its
     files' times say (a shared filesystem's clock, a report that failed after the results)."""
-    import time as clock
-
+    from nurbs_core.batch.executors import _failed
     from nurbs_core.batch.inputs import Item
     from nurbs_core.batch.runner import _record_written
 
-    started = clock.time() - 1.0
+    started = time.time() - 1.0
     items, records = [], []
-    for name, error in (("lost", "nurbs-fit: error: the worker failed: KilledWorker"),
-                        ("own", "nurbs-fit: error: the fit failed: no surface")):
+    for name in ("lost", "own"):
         output = tmp_path / f"{name}.json"
         output.write_text("{}")
         items.append(Item(label=name, path=name, name=name, outputs=[str(output)]))
-        records.append({"input": name, "output": str(output), "status": "failed",
-                        "seconds": None, "error": error})
+    # the executor's record of a lost worker; the fit's own failure as worker.py records it
+    lost = next(_failed([(0, items[0].plain())], "the worker failed: KilledWorker"))[1]
+    own = {"input": "own", "output": items[1].outputs[0], "status": "failed", "seconds": None,
+           "error": "nurbs-fit: error: the fit failed: no surface"}
+    records = [lost, own]
     _record_written(records, items, started)
     assert records[0]["status"] == "ok" and "record was lost" in records[0]["note"]
     assert records[1]["status"] == "failed"
