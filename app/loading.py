@@ -39,6 +39,8 @@ EXPORT_FORMATS = (
     ("Control points CSV", ".csv", False),
 )
 CAD_INSTALL_HINT = 'pip install "nurbs-studio[cad]"'
+#: files read whole (:mod:`nurbs_core.io.cad_shape`): a solid when their faces are trimmed
+SHAPE_SUFFIXES = (".step", ".stp", ".iges", ".igs", ".brep")
 
 
 @dataclass
@@ -50,6 +52,9 @@ class LoadedFiles:
     stated_units: dict[str, str | None] = field(default_factory=dict)
     #: what the window reports about the files read (duplicate points merged, ...)
     notes: list[str] = field(default_factory=list)
+    #: a solid opened from a STEP, IGES or .brep file with trimmed faces (a
+    #: :class:`app.solid_types.PartOutcome`, :mod:`app.workers.file_solid`), or None
+    solid: Any = None
 
 
 def open_suffixes() -> tuple[str, ...]:
@@ -117,8 +122,18 @@ def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
                                      read_points=points))
         loaded.stated_units[path.name] = units_of_file(path)
         return
-    result = _read(path)  # the engine's reader checks the file (missing, link loop, folder...)
-    _check(cancel)
+    if path.suffix.lower() in SHAPE_SUFFIXES:  # STEP, IGES, .brep: a solid when trimmed
+        from nurbs_core.io.cad_shape import read_cad_content
+
+        content = read_cad_content(path)  # checks the file as the engine's readers do
+        _check(cancel)
+        if content.shape is not None:
+            _add_solid(path, content.shape, loaded)
+            return
+        result: Any = content.items
+    else:
+        result = _read(path)  # the engine's reader checks the file (missing, link loop, folder...)
+        _check(cancel)
     if isinstance(result, (list, tuple)):
         if not result:
             raise ValueError(f"{path}: contains no curves or surfaces")
@@ -138,6 +153,19 @@ def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
             raise ValueError(f"{path}: needs at least 4 points, has {len(points)}")
         loaded.targets.append(Target(path.name, points, str(path)))
         loaded.stated_units[path.name] = units_of_file(path)  # E57: metres
+
+
+def _add_solid(path: Path, shape: Any, loaded: LoadedFiles) -> None:
+    """The solid of a file with trimmed faces (a :class:`nurbs_core.io.cad_shape.CadShape`)
+    into ``loaded``: one a load (the document shows one solid)."""
+    from app.workers.file_solid import opened_solid
+
+    if loaded.solid is not None:
+        raise ValueError(f"{path}: holds a solid (or trimmed faces) too, and the window shows "
+                         f"one solid at a time ({loaded.solid.report.source} is open): open "
+                         "them one by one")
+    loaded.solid = opened_solid(shape.shape, path.name)
+    loaded.stated_units[path.name] = shape.units
 
 
 def _mesh_file(path: Path) -> tuple[np.ndarray, Any, str] | None:

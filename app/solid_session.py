@@ -1,7 +1,8 @@
 """A session's solid (:mod:`app.session_file`): the OpenCASCADE shape as its B-rep text (exact:
 OpenCASCADE's own format) and the face report as JSON (with the face edits that made it, replayed
-when the solid is edited again), the per-point distances and nearest faces as arrays. Reading
-checks every value and rebuilds the viewport's triangles. Qt-free; OCP is imported when a solid
+when the solid is edited again), the per-point distances and nearest faces as arrays (none for
+a solid opened from a file, whose ``source`` names it). Reading checks every value and rebuilds
+the viewport's triangles. Qt-free; OCP is imported when a solid
 is written or read.
 """
 
@@ -40,7 +41,7 @@ def solid_document(outcome: PartOutcome) -> tuple[dict[str, Any], dict[str, np.n
                    "points": f.points, "mean": f.mean, "p99": f.p99, "region": f.region}
                   for f in report.faces],
         "edits": [dict(edit) for edit in report.edits],
-        "distances": DISTANCES, "point_faces": POINT_FACES,
+        "distances": DISTANCES, "point_faces": POINT_FACES, "source": report.source,
     }
     return document, {DISTANCES: report.distances, POINT_FACES: report.point_faces}
 
@@ -97,6 +98,13 @@ def _positive(data: dict[str, Any], key: str) -> float:
     if value <= 0:
         raise ValueError(f"the solid's {key} must be positive, got {value:g}")
     return value
+
+
+def _noise(data: dict[str, Any], source: str) -> float:
+    """The noise sigma: positive, or 0 for a solid opened from a file (no scan measured)."""
+    if source and _number(data, "noise") == 0:
+        return 0.0
+    return _positive(data, "noise")
 
 
 def _check_tolerance(tolerance: float, shape: Any) -> None:
@@ -182,19 +190,23 @@ def solid_from_document(document: Any, arrays: dict[str, np.ndarray]) -> PartOut
     problems = document.get("problems", [])
     if not isinstance(problems, list) or not all(isinstance(p, str) for p in problems):
         raise ValueError("the solid's problems must be a list of text")
+    source = document.get("source", "")  # a solid opened from a file: no points, no noise
+    if not isinstance(source, str):
+        raise ValueError("the solid's source must be a file name")
     distances = np.asarray(arrays[DISTANCES], np.float64)
     if np.asarray(arrays[POINT_FACES]).dtype.kind not in "iu":
         raise ValueError(f"the solid's nearest faces are {np.asarray(arrays[POINT_FACES]).dtype}"
                          ", not face numbers")
     point_faces = np.asarray(arrays[POINT_FACES], np.int64)
-    if distances.ndim != 1 or point_faces.shape != distances.shape or not len(distances):
+    if distances.ndim != 1 or point_faces.shape != distances.shape or (
+            not len(distances) and not source):
         raise ValueError(f"the solid's per-point arrays have shapes {distances.shape} and "
                          f"{point_faces.shape}: one value per point each")
     rows = tuple(_face(k, item, len(distances)) for k, item in enumerate(faces))
     if not np.isfinite(distances).all():
         raise ValueError(f"the solid's distances hold {int((~np.isfinite(distances)).sum())} "
                          "NaN or infinite values: every point's distance is measured")
-    if point_faces.min() < 0 or point_faces.max() >= len(rows):
+    if len(point_faces) and (point_faces.min() < 0 or point_faces.max() >= len(rows)):
         raise ValueError("the solid's nearest faces name faces it does not have")
     status = document.get("status")
     if status not in ("converged", "warnings"):
@@ -202,10 +214,11 @@ def solid_from_document(document: Any, arrays: dict[str, np.ndarray]) -> PartOut
     reason = document.get("reason", "")
     report = SolidReport(rows, bool(document.get("valid")), bool(document.get("closed")),
                          _number(document, "volume"), status, tuple(problems),
-                         _positive(document, "noise"), _positive(document, "tolerance"),
+                         _noise(document, source), _positive(document, "tolerance"),
                          distances, point_faces, reason if isinstance(reason, str) else "",
                          _number(document, "seconds"), _edits(document, len(distances)),
-                         bool(document.get("open_shell")), _count(document, "solids"))
+                         bool(document.get("open_shell")), _count(document, "solids"),
+                         source)
     shape = shape_from_brep(document["brep"])
     _check_tolerance(report.tolerance, shape)
     display = solid_display(shape, report.tolerance)

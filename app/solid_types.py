@@ -56,6 +56,9 @@ class SolidReport:
     open_shell: bool = False
     #: how many solids: one per object of a scan of several parts scanned together
     solids: int = 1
+    #: the file the solid was opened from ("": the part route made it from the scan); an
+    #: opened solid has no points (no distances, no regions: its faces take no edits)
+    source: str = ""
 
     def face_types(self) -> dict[str, int]:
         """How many faces of each type, types in alphabetical order."""
@@ -68,7 +71,8 @@ class SolidReport:
         from nurbs_core.status import counted_kinds
 
         kinds = counted_kinds(self.face_types())
-        shape = ("an open shell, open where the scan stops" if self.open_shell
+        open_where = "" if self.source else ", open where the scan stops"
+        shape = (f"an open shell{open_where}" if self.open_shell
                  else "closed" if self.closed else "NOT closed")
         solids = f"{self.solids} solids, " if self.solids > 1 else ""
         return (f"{solids}{len(self.faces)} faces ({kinds}), "

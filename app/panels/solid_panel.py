@@ -166,6 +166,9 @@ class SolidPanel(QWidget):
         warned = bool(report.problems)
         status = report.status if not warned else (
             "fitted with warnings: " + "; ".join(report.problems))
+        if report.source:  # opened from a file: nothing was fitted
+            status = f"opened from {report.source}" + (
+                f": {'; '.join(report.problems)}" if warned else "")
         self._set("status", status, WARNING_COLOR if warned else GOOD_COLOR)
         self._set("solid", report.summary(), None if report.sound else WARNING_COLOR)
         unit3 = f" {units}\N{SUPERSCRIPT THREE}" if units else ""
@@ -186,9 +189,10 @@ class SolidPanel(QWidget):
         self.values["solid"].setToolTip(route)
         self.table.setRowCount(len(report.faces))
         for row, face in enumerate(report.faces):
+            measured = ("-", "-", "-") if report.source else (  # an opened solid: no points
+                f"{face.points:,}", length_text(face.mean, units), length_text(face.p99, units))
             cells = (str(row), TYPE_LABELS.get(face.kind, face.kind),
-                     parameter_text(face, units), f"{face.points:,}",
-                     length_text(face.mean, units), length_text(face.p99, units))
+                     parameter_text(face, units), *measured)
             for column, text in enumerate(cells):
                 item = QTableWidgetItem(text)
                 if column == 1:

@@ -79,10 +79,18 @@ class SessionOpener(Protocol):
 
 
 @runtime_checkable
+class SolidOpener(Protocol):
+    """What becomes of a solid a load opened from a file (the solid policy)."""
+
+    def show_opened(self) -> str: ...
+
+
+@runtime_checkable
 class LoadHost(Reporter, Protocol):
     document: Document
     controller: FitController
     part_controller: PartController
+    solid_policy: SolidOpener
     jobs: JobRunner
     job_indicator: JobIndicator
     session_policy: SessionOpener

@@ -226,6 +226,8 @@ class LoadPolicy(QObject):
         window.run_labels.clear()
         units, units_note = units_of_load(loaded)  # the files' own unit, else unknown
         document.replace_content(loaded.targets, loaded.patches, loaded.patch_names, units)
+        if loaded.solid is not None:  # a STEP, IGES or .brep file with trimmed faces
+            document.set_solid(loaded.solid)
         count = document.visible_point_count()  # not stacked again: the viewport just did
         if count and flat_in_z(document.targets) and document.settings.fit.kind != "curve":
             document.edit_settings("Kind (planar cloud)", kind="curve")
@@ -240,8 +242,11 @@ class LoadPolicy(QObject):
             self.recent.add(path)
         counts = [f"{len(t.points)} points in {t.name}{mesh_words(t)}" for t in loaded.targets]
         if loaded.patch_names:
-            sources = sorted({Path(p).name for p in paths} - {t.name for t in loaded.targets})
+            sources = sorted({Path(p).name for p in paths} - {t.name for t in loaded.targets}
+                             - {loaded.solid.report.source if loaded.solid else ""})
             counts.append(f"{len(loaded.patch_names)} NURBS shape(s) from {names(sources)}")
+        if loaded.solid is not None:
+            counts.append(window.solid_policy.show_opened())
         shown = window.scene.shown_points_text()  # a big cloud is drawn reduced
         self.message = f"Opened {'; '.join(counts)}" + (f" ({shown})" if shown else "")
         window.report(" ".join(part for part in [f"{self.message}.", *loaded.notes, units_note] if part))

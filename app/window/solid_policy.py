@@ -132,6 +132,21 @@ class SolidPolicy(QObject):
         window.report(f"Solid: {report.summary()}; {verdict} ({report.seconds:.1f} s). "
                       "File > Export writes it (STEP, IGES, B-rep, STL, OBJ, PLY).")
 
+    def show_opened(self) -> str:
+        """A solid opened from a file is the document's (:mod:`app.workers.file_solid`): the
+        window switches to Solid mode (an undoable mode edit) and frames it; returns what the
+        load's message says of it."""
+        window = self._window
+        report = window.document.solid.report
+        if window.document.settings.fit_mode != "solid":
+            window.document.edit_settings(SOLID_STEP, fit_mode="solid")
+        window.solid_dock.raise_()
+        window.resizeDocks([window.solid_dock], [SOLID_DOCK_HEIGHT], Qt.Orientation.Vertical)
+        window.scene.reset_camera()
+        problems = f" ({'; '.join(report.problems)})" if report.problems else ""
+        return (f"a solid from {report.source}: {report.summary()}{problems}; "
+                "File > Export writes it (STEP, IGES, B-rep, STL, OBJ, PLY)")
+
     @Slot(str)
     def on_fallback(self, reason: str) -> None:
         """No solid: say why and fit the network (the CLI's fallback)."""
@@ -231,7 +246,8 @@ class SolidPolicy(QObject):
 
     def _follow_editable(self) -> None:
         window = self._window
-        window.solid_panel.set_editable(window.document.solid is not None
+        solid = window.document.solid  # an opened solid has no scan regions to edit
+        window.solid_panel.set_editable(solid is not None and not solid.report.source
                                         and not window.part_controller.is_busy())
 
     # --- export --------------------------------------------------------------------------------

@@ -7,15 +7,17 @@ gigabytes on damaged files (a .3dm of 10 KB with a few bytes changed makes openN
 long-lived child process, under a memory cap (RLIMIT_AS) and a time limit, and turns a crash or
 a timeout into a FileFormatError. The script imports only numpy at start (OCP and rhino3dm when a
 file needs them). Protocol: one ``{"ready": true}`` line once started; then one JSON request per
-line on stdin ``{"path", "kind" ("step" | "iges" | "3dm"), "output", "memory" (bytes or
-null)}``; on the original stdout, ``{"reading": true}`` once the library is imported (the time
-limit starts then), then the reply ``{"ok": true, "count": k, "objects": m}`` or ``{"ok": false,
-"error": "..."}`` (a successful reply also has ``"units"``: the length unit the file states, as
-openNURBS names it for .3dm ("Meters"; "None" when it states none) or OpenCASCADE for STEP
-("M"), else null). The B-spline data goes to ``output`` as an .npz:
+line on stdin ``{"path", "kind" ("step" | "iges" | "brep" | "3dm"), "output", "memory" (bytes
+or null), "shape_output" (optional)}``; on the original stdout, ``{"reading": true}`` once the
+library is imported (the time limit starts then), then the reply ``{"ok": true, "count": k,
+"objects": m}`` or ``{"ok": false, "error": "..."}`` (a successful reply also has ``"units"``:
+the length unit the file states, as openNURBS names it for .3dm ("Meters"; "None" when it
+states none) or OpenCASCADE for STEP ("M"), else null). The B-spline data goes to ``output`` as an .npz:
 ``kind_<k>`` ("surface" | "curve"), ``control_<k>`` (n_u, n_v, 3) or (n, d), ``weights_<k>``,
 ``knots_u_<k>``/``knots_v_<k>`` or ``knots_<k>``, ``degrees_<k>``, and for .3dm items
-``label_<k>`` (which object) and ``name_<k>`` (its name).
+``label_<k>`` (which object) and ``name_<k>`` (its name). Given a ``"shape_output"`` path, a STEP,
+IGES or .brep file with trimmed faces is written whole there as OpenCASCADE's B-rep instead,
+and the reply says ``"shape": true, "trimmed": <trimmed faces>`` (``count`` 0).
 """
 
 from __future__ import annotations
@@ -212,10 +214,63 @@ def _bspline_surface_of_face(face: OccObject) -> OccObject | None:
     return surface if isinstance(surface, Geom_BSplineSurface) else None
 
 
+#: a face whose area differs from its surface's untrimmed area by more than this share is trimmed
+TRIMMED_AREA_SHARE = 1e-6
+
+
+def _face_area(face: OccObject) -> float:
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    properties = GProp_GProps()
+    BRepGProp.SurfaceProperties_s(face, properties)
+    return abs(properties.Mass())
+
+
+def _is_trimmed(face: OccObject) -> bool:
+    """Whether a face is less than its surface's natural bounds: an unbounded (analytic)
+    surface, more than one wire (a hole), or an area short of the whole surface's."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.Geom import Geom_BezierSurface, Geom_BSplineSurface
+    from OCP.TopAbs import TopAbs_ShapeEnum
+    from OCP.TopExp import TopExp_Explorer
+
+    surface = BRep_Tool.Surface_s(face)
+    if not isinstance(surface, (Geom_BSplineSurface, Geom_BezierSurface)):
+        return True
+    wires, explorer = 0, TopExp_Explorer(face, TopAbs_ShapeEnum.TopAbs_WIRE)
+    while explorer.More():
+        wires += 1
+        explorer.Next()
+    if wires != 1:
+        return True
+    whole = _face_area(BRepBuilderAPI_MakeFace(surface, 1e-7).Face())
+    return abs(_face_area(face) - whole) > TRIMMED_AREA_SHARE * max(whole, 1e-300)
+
+
+def trimmed_face_count(shape: OccObject) -> int:
+    """How many of the shape's faces are trimmed (:func:`_is_trimmed`)."""
+    from OCP.TopAbs import TopAbs_ShapeEnum
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    count, explorer = 0, TopExp_Explorer(shape, TopAbs_ShapeEnum.TopAbs_FACE)
+    while explorer.More():
+        count += _is_trimmed(TopoDS.Face(explorer.Current()))
+        explorer.Next()
+    return count
+
+
 def read_items(path: str, kind: str, unit: str | None) -> list[Arrays]:
     """Every face's untrimmed B-spline surface; the edges as curves when there are no faces.
     ``unit``: the length unit the file states (:func:`_length_unit`), read once by the
     caller."""
+    return shape_items(_read_shape(path, kind, unit), kind)
+
+
+def shape_items(shape: OccObject, kind: str) -> list[Arrays]:
+    """:func:`read_items` of a shape read already."""
     from OCP.BRep import BRep_Tool
     from OCP.BRepAdaptor import BRepAdaptor_Curve
     from OCP.Geom import Geom_BSplineCurve, Geom_TrimmedCurve
@@ -224,7 +279,6 @@ def read_items(path: str, kind: str, unit: str | None) -> list[Arrays]:
     from OCP.TopExp import TopExp_Explorer
     from OCP.TopoDS import TopoDS
 
-    shape = _read_shape(path, kind, unit)
     items: list[Arrays] = []
     explorer = TopExp_Explorer(shape, TopAbs_ShapeEnum.TopAbs_FACE)
     while explorer.More():
@@ -439,7 +493,16 @@ def _handle(request: dict[str, Any], replies: TextIO) -> dict[str, Any]:
             items, objects, units = read_3dm_items(request["path"])
         else:
             units = _length_unit(request["path"], kind)
-            items = read_items(request["path"], kind, units)
+            shape = _read_shape(request["path"], kind, units)
+            trimmed = trimmed_face_count(shape) if request.get("shape_output") else 0
+            if trimmed:  # the whole shape, as OpenCASCADE's B-rep (its faces keep their trims)
+                from OCP.BRepTools import BRepTools
+
+                if not BRepTools.Write_s(shape, request["shape_output"]):
+                    raise ReadError("OpenCASCADE could not write the shape's B-rep")
+                return {"ok": True, "count": 0, "objects": 0, "units": units,
+                        "shape": True, "trimmed": trimmed}
+            items = shape_items(shape, kind)
             objects = len(items)
         # Any values: numpy's stubs match **kwds against allow_pickle otherwise
         arrays: dict[str, Any] = {f"{key}_{k}": value for k, item in enumerate(items)

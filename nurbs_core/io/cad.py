@@ -23,7 +23,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -375,7 +375,7 @@ class _ReaderProcess:
             return None
 
     def request(self, path: str, kind: str, output: str, timeout: float,
-                memory: int | None = None) -> dict[str, Any]:
+                memory: int | None = None, shape_output: str | None = None) -> dict[str, Any]:
         with self._lock:
             if self._process is None or self._process.poll() is not None:
                 self._pending = b""
@@ -392,7 +392,8 @@ class _ReaderProcess:
             assert process.stdin is not None  # started with stdin=PIPE
             try:
                 process.stdin.write(json.dumps({"path": path, "kind": kind, "output": output,
-                                                "memory": memory}) + "\n")
+                                                "memory": memory,
+                                                "shape_output": shape_output}) + "\n")
                 process.stdin.flush()
             except BrokenPipeError:
                 process.wait()
@@ -438,6 +439,17 @@ def read_in_worker(path: StrPath, kind: str,
     a timeout (``timeout`` seconds, by default :func:`read_timeout` of the file's size), running
     out of the memory cap (:func:`reader_memory`) or bad data: FileFormatError naming the
     file."""
+    reply, arrays = worker_read(path, kind, timeout)
+    return geometry_of_reply(path, kind, reply, arrays)
+
+
+def worker_read(path: StrPath, kind: str, timeout: float | None = None,
+                shape: Callable[[str], Any] | None = None
+                ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The worker's reply for ``path`` and the item arrays it wrote (see ``_occ_reader.py``);
+    FileFormatError for a crash, a timeout or an error. ``shape``: ask for the whole shape of a
+    file with trimmed faces; when the reply has it, ``shape(brep_path)`` is called on its B-rep
+    file while it exists and the reply's ``"shape"`` becomes what it returned."""
     library, label = _LIBRARIES[kind]
     with open(path, "rb") as handle:
         if not handle.read(1):
@@ -449,9 +461,11 @@ def read_in_worker(path: StrPath, kind: str,
     warm = threading.Thread(target=importlib.import_module, args=("nurbs_core.io.geometry_io",),
                             daemon=True)
     warm.start()
+    arrays: dict[str, np.ndarray] = {}
     with tempfile.TemporaryDirectory(prefix="nurbs_io_") as folder:
-        output = os.path.join(folder, "items.npz")
-        reply = _READER.request(os.path.abspath(path), kind, output, timeout, reader_memory(size))
+        output, shape_output = os.path.join(folder, "items.npz"), os.path.join(folder, "shape.brep")
+        reply = _READER.request(os.path.abspath(path), kind, output, timeout, reader_memory(size),
+                                shape_output if shape is not None else None)
         if "crashed" in reply:
             raise FileFormatError(path, f"{library} crashed reading this {label} file "
                                         f"(exit status {reply['crashed']}): it is damaged or "
@@ -461,9 +475,19 @@ def read_in_worker(path: StrPath, kind: str,
                                         f"{reply['timeout']:.1f} s: stopped (a damaged file?)")
         if not reply["ok"]:
             raise FileFormatError(path, reply["error"])
-        with np.load(output, allow_pickle=False) as data:
-            arrays = {key: data[key] for key in data.files}
+        if reply.get("shape") and shape is not None:
+            reply["shape"] = shape(shape_output)
+        else:
+            with np.load(output, allow_pickle=False) as data:
+                arrays = {key: data[key] for key in data.files}
     warm.join()
+    return reply, arrays
+
+
+def geometry_of_reply(path: StrPath, kind: str, reply: dict[str, Any],
+                      arrays: dict[str, np.ndarray]) -> list[NurbsCurve | NurbsSurface]:
+    """The validated geometry of a worker's reply and item arrays (:func:`read_in_worker`)."""
+    _library, label = _LIBRARIES[kind]
     from nurbs_core.io.geometry_io import make_curve, make_surface
     from nurbs_core.io.units import units_from_library
 

@@ -3,7 +3,8 @@ written by the app's own writers (shapes in Single patch mode, the patch network
 mode, the solid in Solid mode) and read back by the app's own open (``loading.load_files``,
 what File > Open and a drop run): NURBS formats give the same patches back (our JSON and .3dm
 the same control points), meshes and the control-point CSV give a cloud on the shape. A format
-the mode cannot write is one clear refusal."""
+the mode cannot write is one clear refusal. A solid written as STEP, IGES or .brep opens as a
+solid (its trimmed faces kept), not as patches."""
 
 from __future__ import annotations
 
@@ -81,9 +82,16 @@ def test_what_the_app_exports_it_opens_again(tmp_path, kind, suffix):
         assert not path.exists()
         return
     count, control, box = _export(kind, path)
-    assert suffix in loading.open_suffixes()  # every export opens (.brep as its faces)
+    assert suffix in loading.open_suffixes()  # every export opens
     opened = loading.load_files([str(path)])
-    if suffix in (".3dm", ".step", ".iges", ".json", ".brep"):
+    if kind == "solid" and suffix in (".step", ".iges", ".brep"):  # a solid again, trims kept
+        assert opened.solid is not None and not opened.patches and not opened.targets
+        report = opened.solid.report
+        assert len(report.faces) == count and report.valid and report.closed
+        vertices = opened.solid.display.vertices
+        np.testing.assert_allclose([vertices.min(0), vertices.max(0)], box, atol=1e-6)
+        assert opened.stated_units == {path.name: None if suffix == ".brep" else "mm"}
+    elif suffix in (".3dm", ".step", ".iges", ".json", ".brep"):
         assert len(opened.patches) == count and not opened.targets
         if suffix in EXACT and control is not None:
             back = np.stack([np.asarray(p.control_points) for p in opened.patches])
