@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from nurbs_core.jobs.report import length_unit, plain, print_patch_event, print_units, units_of
 from nurbs_core.jobs.settings import FitJob
+from nurbs_core.patches.defaults import NOISE_FAIRING_FROM
 from nurbs_core.streaming import StopToken
 
 if TYPE_CHECKING:
@@ -79,6 +80,11 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
     print(f"patches: {quality.patches} ({quality.size}x{quality.size} control points each, "
           f"bicubic); {result.passes} passes in {sum(result.timings.values()):.2f} s "
           f"({', '.join(f'{k} {v:.1f} s' for k, v in result.timings.items())})")
+    if result.stiffness > options.stiffness:
+        print(f"noisy scan (noise estimate over {NOISE_FAIRING_FROM:.1%} of the diagonal): "
+              f"stiffness {result.stiffness:.3g} and seam weight {result.seam_weight:.3g} (the "
+              f"{options.stiffness:g} and {options.seam_weight:g} asked for, raised with the "
+              "noise)")
     free = len(result.network.free_sides())
     shape = ("closed (watertight)" if result.network.closed
              else f"open: {free} patch sides on the scan's border")

@@ -25,7 +25,7 @@ from nurbs_core.patches.closed_mesh import NotClosedError, closed_mesh
 from nurbs_core.patches.coarsen import coarsen, reach_ratios
 from nurbs_core.patches.crease_layout import coverage, layout_edges, snap_to_creases
 from nurbs_core.patches.creases import Creases, detect_creases, no_creases, sharpened
-from nurbs_core.patches.defaults import MIN_NETWORK_POINTS
+from nurbs_core.patches.defaults import MIN_NETWORK_POINTS, noise_weights
 from nurbs_core.patches.fit import NetworkPass, fit_network
 from nurbs_core.patches.layout import LayoutError, QuadLayout, mesh_digest, quad_layout
 from nurbs_core.patches.measures import NetworkQuality, network_quality
@@ -127,6 +127,10 @@ class PatchResult:
     #: the creases found in the scan (:func:`nurbs_core.patches.creases.detect_creases`); the
     #: network's crease seams (``network.creases``) lie on them
     creases: Creases | None = field(default=None, repr=False)
+    #: the stiffness and seam weight the fit used: the options' own, raised over a noisy scan
+    #: (:func:`nurbs_core.patches.defaults.noise_weights`)
+    stiffness: float = math.nan
+    seam_weight: float = math.nan
 
     @property
     def status(self) -> str:
@@ -470,9 +474,13 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     stopped = False
     # the wrap passes draw the network to the mesh: to its sharpened creases where it has any
     reference = sharpened(mesh, creases).vertices if layout.creases else mesh.vertices
+    # the fairing and the seams' weight grow over noisy scans (their wrinkles grow with it)
+    stiffness, seam_weight = noise_weights(
+        options.stiffness, options.seam_weight,
+        noise / (float(np.linalg.norm(np.ptp(fitted, axis=0))) or 1.0))
     for last in fit_network(fitted, layout.vertices, layout.quads, reference,
-                            size=options.size, stiffness=options.stiffness,
-                            seam_weight=options.seam_weight, tolerance=options.tolerance,
+                            size=options.size, stiffness=stiffness,
+                            seam_weight=seam_weight, tolerance=options.tolerance,
                             max_size=options.max_size, border=border, noise=noise,
                             creases=layout.creases):
         yield PatchEvent("pass", layout=layout, fit_pass=last)
@@ -504,7 +512,8 @@ def iter_patch_fit(points: np.ndarray, options: PatchOptions | None = None, *,
     assert quality.distances is not None, "network_quality keeps the point distances"
     deviation[np.flatnonzero(inliers)[sample]] = quality.distances
     result = PatchResult(last.network, quality, layout, mesh, timings, warnings, last.index + 1,
-                         deviation, stopped, outliers, creases)
+                         deviation, stopped, outliers, creases, stiffness,
+                         seam_weight)
     yield PatchEvent("done", mesh=mesh, layout=layout, fit_pass=last, result=result)
 
 
