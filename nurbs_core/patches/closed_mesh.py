@@ -49,6 +49,16 @@ OBJECT_GAP = 3.0
 PAD = 6
 #: Gaussian blur of the sampled distance (cells).
 SMOOTHING = 1.0
+#: A zero set with handles is sampled again with these wider blurs (cells), in turn: noise
+#: wider than a cell leaves tunnels through the band (a blob at 2% noise, its cells 0.9 noise
+#: sigmas wide, got a handle and no layout), which a wider blur closes while a real handle (a
+#: torus's) stays. The first with fewer handles that passes as close by the points
+#: (:data:`HANDLE_CLOSENESS`) replaces it.
+HANDLE_SMOOTHING = (1.5, 2.0)
+#: ... passing as close: the points' 99.5th-percentile distance to its vertices at most this
+#: many times the first zero set's, plus a quarter cell (a handle the blur closed that the
+#: points hold, a thin loop, moves the surface away from them).
+HANDLE_CLOSENESS = 1.25
 #: Clouds larger than this are reconstructed from about this many voxel centroids.
 WRAP_POINTS = 100_000
 #: A closed cloud's surface passes through its points: at most MAX_AWAY of the marching-cubes
@@ -195,7 +205,8 @@ def closed_mesh(points: np.ndarray, normals: np.ndarray | None = None,
     missed = None
     if wrapped.encloses:
         try:
-            return _zero_set(points, normals, wrapped, tree, 0.0)
+            return _without_noise_handles(_zero_set(points, normals, wrapped, tree, 0.0),
+                                          points, normals, wrapped, tree)
         except NotClosedError as error:
             # what the wrap enclosed misses points: a pocket (holes let the outside into the
             # object: sealed below) or a thin fin the zero set passed by (finer grids below)
@@ -278,6 +289,28 @@ def _on_finer_grids(points: np.ndarray, normals: np.ndarray | None, tree: cKDTre
     return None
 
 
+def _without_noise_handles(mesh: ScanMesh, points: np.ndarray, normals: np.ndarray | None,
+                           wrapped: Wrap, tree: cKDTree) -> ScanMesh:
+    """``mesh``, or when it has handles the zero set of a wider blur
+    (:data:`HANDLE_SMOOTHING`) with fewer handles, as many pieces, that passes as close by the
+    points (:data:`HANDLE_CLOSENESS`)."""
+    from nurbs_core.patches.layout import euler_characteristic
+
+    characteristic = euler_characteristic(mesh.faces.tolist())
+    if characteristic >= 2 * mesh.pieces:
+        return mesh  # every piece a sphere: no handle
+    reach = HANDLE_CLOSENESS * _closeness(mesh, points)[1] + 0.25 * mesh.cell
+    for smoothing in HANDLE_SMOOTHING:
+        try:
+            wider = _zero_set(points, normals, wrapped, tree, 0.0, smoothing)
+        except NotClosedError:
+            continue
+        handles, distance = _closeness(wider, points)
+        if -handles > characteristic and wider.pieces == mesh.pieces and distance <= reach:
+            return wider
+    return mesh
+
+
 def _closeness(mesh: ScanMesh, points: np.ndarray) -> tuple[int, float]:
     """How a candidate closed mesh of the cloud ranks (smaller is better): first its handles
     (a larger Euler characteristic: finer grids punch handles through a scan's holes), then the
@@ -309,8 +342,9 @@ def compacted(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def _zero_set(points: np.ndarray, normals: np.ndarray | None, wrapped: Wrap, tree: cKDTree,
-              max_hole: float) -> ScanMesh:
-    """Marching cubes of the signed field over the wrap (see the module docstring)."""
+              max_hole: float, smoothing: float = SMOOTHING) -> ScanMesh:
+    """Marching cubes of the signed field over the wrap (see the module docstring), blurred by
+    ``smoothing`` cells."""
     from skimage.measure import marching_cubes
 
     grid = wrapped.grid
@@ -324,7 +358,7 @@ def _zero_set(points: np.ndarray, normals: np.ndarray | None, wrapped: Wrap, tre
                                                   cell), -reach, reach)
     volume = signed.reshape(grid.shape)
     # a one-cell blur closes the pin-holes and tiny handles that noisy normals leave in the band
-    volume = scipy.ndimage.gaussian_filter(volume, SMOOTHING)
+    volume = scipy.ndimage.gaussian_filter(volume, smoothing)
     if volume.min() >= 0 or volume.max() <= 0:
         raise NotClosedError("the cloud encloses no volume: it is not a closed surface")
     verts, faces, _, _ = marching_cubes(volume, level=0.0, spacing=(cell, cell, cell))

@@ -112,6 +112,16 @@ def test_closed_mesh_and_layout_keep_the_genus(name, genus):
     assert (s * normals).sum(1) @ area > 0
 
 
+def test_noise_wider_than_a_cell_punches_no_handle_through_a_closed_mesh():
+    """A blob at 2% noise (its cells 0.9 noise sigmas wide): the band's zero set had a tunnel
+    (Euler characteristic 0), so no layout fitted and the scan was fitted as one folded patch.
+    A wider blur closes it, and a real handle (the torus above) stays."""
+    shape = samples.blob(5000, seed=2, noise=0.02)
+    mesh = closed_mesh(shape.points)
+    assert euler_characteristic(mesh.faces.tolist()) == 2
+    assert abs(mesh.area / shape.true_area - 1) < 0.1
+
+
 def test_layout_error_names_what_failed():
     with pytest.raises(LayoutError, match="at least 4"):
         quad_layout(CUBE_VERTICES, np.array([[0, 1, 2]]), 2)
