@@ -21,6 +21,7 @@ from PySide6.QtCore import Signal
 from app.live_controller import LiveController
 from app.state import FitAccount, Settings, grid_setting
 from app.workers.fit_worker import DisplaySnapshot, FitRequest, FitWorker, start_config
+from nurbs_core.io.cloud import keeps_every_point
 from nurbs_core.streaming import StopToken
 
 RATE_WINDOW_S = 2.0
@@ -40,6 +41,13 @@ class FitController(LiveController):
         self._rate_history: deque[tuple[float, int]] = deque()
         #: the settings of the run under way (or the last), as the user set them
         self._run_settings = Settings()
+
+    def _listed_points(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """A curve fits every point of a file in its order, repeats too (as ``nurbs-fit
+        --curve``: :func:`nurbs_core.io.cloud.keeps_every_point`); a surface each point once."""
+        if not keeps_every_point(curve=self._document.settings.fit.kind == "curve"):
+            return None
+        return self._document.ordered_points()
 
     def _request(self, run_id: int, points: np.ndarray) -> FitRequest:
         document = self._document

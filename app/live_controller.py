@@ -80,6 +80,10 @@ class LiveController(QObject):
         self.latest_shown: Any = None
         #: the selection (bool over the visible clouds) the run fits, None: every visible point
         self.run_selection: np.ndarray | None = None
+        #: the row of the points the run fits each visible point is (N,) int, when it fits the
+        #: files' points as listed (a curve's: :meth:`Document.ordered_points`), None: it fits
+        #: the visible points (or the selection)
+        self.run_rows: np.ndarray | None = None
         #: the document's shapes before the fit under way began (None while idle): what Undo
         #: of the fit puts back
         self.fit_before: ShapeState | None = None
@@ -96,6 +100,12 @@ class LiveController(QObject):
         """What run ``run_id`` fits to ``points`` (N, 3), with the document's settings, checked
         (ValueError / TypeError: the settings cannot run)."""
         raise NotImplementedError
+
+    def _listed_points(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """What this kind of fit fits instead of the visible points (all, no selection): the
+        files' points as listed and the row of them each visible point is
+        (:meth:`Document.ordered_points`); None: the visible points."""
+        return None
 
     def _worker_for(self, request: Any, stop_token: StopToken) -> LiveWorker:
         raise NotImplementedError
@@ -138,13 +148,17 @@ class LiveController(QObject):
         if points is None:
             self.fit_failed.emit("Nothing to fit: open or drop a point cloud first.")
             return False
+        listed = self._listed_points()
+        rows = None
+        if listed is not None:
+            points, rows = listed
         try:
             request = self._request(self._run_id + 1, points)
         except (ImportError, ValueError, TypeError) as exc:
             self.fit_failed.emit(f"Cannot start the {self.JOB}: {exc}")
             return False
         self._run_id += 1
-        self.run_selection = selection
+        self.run_selection, self.run_rows = selection, rows
         if begins:
             self.fit_before = self._document.shape_state()
         self._stop_token = StopToken()
@@ -246,6 +260,12 @@ class LiveController(QObject):
             if snapshot.signed is not None:
                 snapshot.signed = dataclasses.replace(snapshot.signed, distances=spread_over_cloud(
                     snapshot.signed.distances, self.run_selection))
+        if self.run_rows is not None:  # per-point values of the points as listed -> shown
+            if snapshot.deviation is not None:
+                snapshot.deviation = snapshot.deviation[self.run_rows]
+            if snapshot.signed is not None:
+                snapshot.signed = dataclasses.replace(
+                    snapshot.signed, distances=snapshot.signed.distances[self.run_rows])
         if self._latest is not None and self._latest.deviation is not None and (
                 snapshot.deviation is None):
             snapshot.deviation = self._latest.deviation  # keep the newest deviation we have

@@ -18,7 +18,7 @@ import numpy as np
 from app.cloud_detail import shown_indices
 from app.cloud_normals import display_normals
 from app.display_types import DeviationMap
-from app.state import OffsetDisplay, Target
+from app.state import FileOrder, OffsetDisplay, Target
 from app.workers.deviation_map import fit_triangles
 from app.workers.display import DisplayGeometry, display_geometry
 from app.workers.fit_worker import FINAL_DEVIATION_POINTS, sampled_deviation, signed_map
@@ -143,15 +143,21 @@ def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
             suffix = f" #{index + 1}" if len(result) > 1 else ""
             loaded.patch_names.append(f"{path.name}{suffix}")
     else:
-        from nurbs_core.io.cloud import without_repeats
+        from nurbs_core.io.cloud import distinct_rows
 
-        # the engine's PointCloud checked it: (N, 3) float64; repeated points merged
-        points, note = without_repeats(result.points)
+        # the engine's PointCloud checked it: (N, 3) float64; repeated points merged, kept as
+        # listed for a curve
+        listed = result.points
+        rows, note = distinct_rows(listed)
+        points = listed if rows is None else listed[rows]
         if note:
-            loaded.notes.append(f"{path.name}: {note}.")
+            loaded.notes.append(f"{path.name}: {note} (a curve fits every one, in the file's "
+                                "order).")
         if len(points) < 4:
             raise ValueError(f"{path}: needs at least 4 points, has {len(points)}")
-        loaded.targets.append(Target(path.name, points, str(path)))
+        order = None if rows is None else FileOrder(listed, rows)
+        loaded.targets.append(Target(path.name, points, str(path), read_points=points,
+                                     file_order=order))
         loaded.stated_units[path.name] = units_of_file(path)  # E57: metres
 
 

@@ -240,6 +240,17 @@ class FitAccount:
                    None if grid_setting is None else tuple(grid_setting))
 
 
+@dataclass(frozen=True, eq=False)
+class FileOrder:
+    """A cloud file's points as it lists them, when some repeat an earlier one: ``points``
+    (K, 3) in the file's order, repeats kept (what a curve fits, as ``nurbs-fit --curve`` does:
+    a closed polyline repeats its first point last), and ``rows`` (M,) int, the row of them each
+    point loaded is (the loaded points are each point once: ``points[rows]``)."""
+
+    points: np.ndarray
+    rows: np.ndarray
+
+
 @dataclass(eq=False)
 class Target:
     """A point cloud to fit: points (N, 3) float64. A mesh file's cloud (points sampled over
@@ -247,7 +258,9 @@ class Target:
     closed mesh for the route and a network's layout (``mesh``, a
     :class:`nurbs_core.patches.scan_mesh.ScanMesh`; None for a cloud or a mesh that cannot
     serve, ``mesh_note`` then saying why) while its points are the ones read
-    (``read_points``: an edit replaces them, and the mesh no longer stands for them)."""
+    (``read_points``: an edit replaces them, and the mesh no longer stands for them). A cloud
+    file whose points repeat is loaded with each point once; ``file_order`` keeps its points
+    as listed, for a curve while the points are the ones read."""
 
     name: str
     points: np.ndarray
@@ -256,6 +269,7 @@ class Target:
     mesh: Any = None
     mesh_note: str = ""
     read_points: np.ndarray | None = field(default=None, repr=False)
+    file_order: FileOrder | None = field(default=None, repr=False)
 
 
 @dataclass
@@ -698,6 +712,26 @@ class Document(QObject):
         if target.read_points is None or target.points is not target.read_points:
             return None, ""
         return target.mesh, target.mesh_note
+
+    def ordered_points(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """What a fit that keeps every point in the file's order (a curve's:
+        :func:`nurbs_core.io.cloud.keeps_every_point`) fits instead of the visible points, while
+        they are fitted whole (no selection) and as read (no point deleted) and a file lists
+        some twice: (the visible files' points as listed, stacked (K, 3), the row of them each
+        visible point is (N,) int); None otherwise (the visible points are what it fits)."""
+        visible = [t for t in self.targets if t.visible and len(t.points)]
+        if self.selection is not None or all(t.file_order is None for t in visible):
+            return None
+        if any(t.read_points is None or t.points is not t.read_points for t in visible):
+            return None
+        listed, rows, start = [], [], 0
+        for target in visible:
+            order = target.file_order
+            points = target.points if order is None else order.points
+            listed.append(points)
+            rows.append(start + (np.arange(len(points)) if order is None else order.rows))
+            start += len(points)
+        return np.concatenate(listed, axis=0), np.concatenate(rows)
 
     def fit_points(self) -> tuple[np.ndarray | None, np.ndarray | None]:
         """What Start fits: (the selected points (M, 3), the selection (N,)) while points are

@@ -55,12 +55,28 @@ class PointCloud:
 def without_repeats(points: np.ndarray) -> tuple[np.ndarray, str]:
     """The points (M, 3) of ``points`` (N, 3) that do not repeat an earlier one
     (:func:`distinct_points`), and a sentence saying how many were merged ("" when none)."""
+    rows, note = distinct_rows(points)
+    return (points, note) if rows is None else (points[rows], note)
+
+
+def distinct_rows(points: np.ndarray) -> tuple[np.ndarray | None, str]:
+    """The rows (M,) of ``points`` (N, 3) that do not repeat an earlier one
+    (:func:`distinct_points`; None when none repeats), and a sentence saying how many were
+    merged ("" when none)."""
     kept = distinct_points(points)
     dropped = len(points) - len(kept)
     if not dropped:
-        return points, ""
-    return points[kept], (f"{dropped:,} of {len(points):,} points repeat an earlier one (closer "
-                          f"than {DUPLICATE_SHARE:g} of the diagonal): each is fitted once")
+        return None, ""
+    return kept, (f"{dropped:,} of {len(points):,} points repeat an earlier one (closer than "
+                  f"{DUPLICATE_SHARE:g} of the diagonal): each is fitted once")
+
+
+def keeps_every_point(curve: bool, grid: bool = False) -> bool:
+    """Whether a fit takes its cloud as read, every point in the file's order, repeats too: a
+    curve's (a closed polyline repeats its first point last) and a surface's on a grid of known
+    rows (``--grid``); any other fit takes each point once (:func:`without_repeats`). The rule
+    of ``nurbs-fit`` (:func:`nurbs_core.jobs.input_cloud.input_cloud`) and of the app's fits."""
+    return curve or grid
 
 
 def check_points(path: StrPath | None, points: np.ndarray,

@@ -86,9 +86,10 @@ def input_cloud(job: FitJob, points: np.ndarray | None
     import numpy as np
 
     from nurbs_core.fitting.normalised import check_spread
+    from nurbs_core.io.cloud import keeps_every_point
 
     file_mesh, note = None, ""
-    ordered = job.curve or job.grid is not None
+    ordered = keeps_every_point(job.curve, job.grid is not None)
     if points is None and ordered:
         from nurbs_core.io import load_points
 
