@@ -125,8 +125,11 @@ class NetworkQualityPanel(QWidget):
             return
         seam = quality["seam"]
         get = lambda key, where=quality: float(where.get(key, math.nan))  # noqa: E731
-        self.values["patches"].setText(f"{quality['patches']} ({quality['size']} x "
-                                       f"{quality['size']} control points each)")
+        raised = get("stiffness") > get("asked_stiffness")  # False when either is missing
+        self.values["patches"].setText(
+            f"{quality['patches']} ({quality['size']} x {quality['size']} control points each)"
+            + (f"; stiffness {get('stiffness'):.3g} and seam weight {get('seam_weight'):.3g}, "
+               "raised over a noisy scan" if raised else ""))
         self.values["gap"].setText(f"{_length(get('gap', seam), units)} "
                                    f"({_number(get('gap_relative'))} of the diagonal)")
         creases = int(seam.get("crease_seams", 0))

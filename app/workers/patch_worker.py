@@ -169,7 +169,11 @@ class PatchWorker(LiveWorker):
                         quality={**result.quality.as_dict(), "outliers": result.outliers,
                                  "points": len(request.points),
                                  "filled_fraction": result.mesh.filled_fraction,
-                                 "spacing": cloud_spacing(request.points)},
+                                 "spacing": cloud_spacing(request.points),
+                                 # what the fit used (raised over a noisy scan)
+                                 "stiffness": result.stiffness,
+                                 "seam_weight": result.seam_weight,
+                                 "asked_stiffness": request.options.stiffness},
                         warnings=list(result.warnings), done=True,
                         deviation=result.deviation, signed=signed))
                     return
