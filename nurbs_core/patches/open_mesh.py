@@ -54,7 +54,7 @@ from nurbs_core.reconstruct import poisson
 from nurbs_core.reconstruct.wrap import NEIGHBOURS as NORMAL_NEIGHBOURS
 from nurbs_core.reconstruct.wrap import VoxelGrid, blocked_voxels, point_radii
 from nurbs_core.surfacing.mesh import voxel_subsample
-from nurbs_core.surfacing.neighbours import local_frames
+from nurbs_core.surfacing.neighbours import local_frames, stray_points
 
 #: The band the distance is sampled in: the blocked voxels grown by this many cells (the blur
 #: needs room), and the marching-cubes mask: grown by MASK_GROWTH.
@@ -243,23 +243,29 @@ def _thin_tips(points: np.ndarray, normals: np.ndarray, blocked: np.ndarray, gri
                tree: cKDTree, handles: int, vertices: np.ndarray, faces: np.ndarray,
                pieces: int) -> tuple[int, np.ndarray, np.ndarray, int] | None:
     """Where the grid's mesh (``vertices`` (V, 3), ``faces`` (F, 3) with ``handles`` and
-    ``pieces``) passes some of the ``points`` (N, 3) by (:data:`MISSED_TIP`), the screened
-    Poisson surface of the points (:func:`_poisson_set`) instead, as (handles, vertices, faces,
-    pieces), when it is there to take (Open3D), reaches those points, has no more handles and
-    lies on its points (their median distance to it within ``BETWEEN_DISTANCE`` cells: not a
-    sheet between two sides whose normals came out alike); None to keep the grid's mesh."""
-    missed = cKDTree(vertices).query(points)[0].max()
+    ``pieces``) passes some of the ``points`` (N, 3) by (:data:`MISSED_TIP`; stray points
+    aside), the screened Poisson surface of the points (:func:`_poisson_set`) instead, as
+    (handles, vertices, faces, pieces), when it is there to take (Open3D), brings every one of
+    them within MISSED_TIP cells (a stray return the stray test let through is not a tip), has
+    no more handles and lies on its points (their median distance to it within
+    ``BETWEEN_DISTANCE`` cells: not a sheet between two sides whose normals came out alike);
+    None to keep the grid's mesh."""
+    # stray returns lie off every surface: a tip is missed by the scan's own points
+    kept = ~stray_points(points, tree)
+    missed = cKDTree(vertices).query(points[kept])[0].max()
     if missed <= MISSED_TIP * grid.cell or not poisson.available():
         return None
     try:
         found = _poisson_set(points, normals, blocked, grid, tree)
     except NotASurfaceError:
         return None
-    reach = cKDTree(found[0]).query(points)[0]
-    if reach.max() >= missed or (reach <= HANDLE_REACH * grid.cell).mean() < HANDLE_COVER:
+    reach = cKDTree(found[0]).query(points[kept])[0]
+    if (reach.max() > MISSED_TIP * grid.cell
+            or (reach <= HANDLE_REACH * grid.cell).mean() < HANDLE_COVER):
         return None
     found_handles = genus(found[1])
-    if found_handles > handles or median_distance(points, *found[:2]) > BETWEEN_DISTANCE * grid.cell:
+    if (found_handles > handles
+            or median_distance(points, *found[:2]) > BETWEEN_DISTANCE * grid.cell):
         return None
     return (found_handles, *found)
 
