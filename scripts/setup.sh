@@ -10,6 +10,7 @@ SYSTEM_PACKAGES=(
   libxkbcommon-x11-0 libx11-xcb1 libxcb-cursor0 libxcb-icccm4 libxcb-keysyms1 libxcb-image0
   libxcb-render-util0 libxcb-randr0 libxcb-shape0 libxcb-xfixes0 libxcb-xkb1 libfontconfig1
   fontconfig fonts-dejavu-core libdbus-1-3
+  libusb-1.0-0
 )
 
 if command -v apt-get >/dev/null 2>&1 && [ "${NURBS_STUDIO_SKIP_APT:-0}" != 1 ]; then
