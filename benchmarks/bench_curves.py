@@ -9,9 +9,11 @@ closed (the first point appended at the end), and a smoothing ``s`` from the tru
 (``s = N * sigma**2 * (d - 1)``, the expected sum of squared distances; ``s = 0``, interpolation,
 for exact points). splprep needs ordered points: on shuffled ones it is not run ("-").
 
-Both are measured alike: every point's distance to a polyline of 20,000 samples of the curve
-(mean and max, relative to the bounding-box diagonal), whether the curve closes (ends within
-1e-9 of the diagonal), the control points and the time.
+Both are measured alike, relative to the bounding-box diagonal: every point's distance to a
+polyline of 20,000 samples of the curve (mean, max), the farthest a sample strays from the
+points ("strays": a loop or excursion between the points that the first two do not see),
+whether the curve closes ("clsd": ends within 1e-9 of the diagonal), its control points and
+the time in milliseconds.
 
     python benchmarks/bench_curves.py            # the table (about a minute)
 """
@@ -95,19 +97,21 @@ def scipy_splprep(points: np.ndarray, closed: bool, sigma: float
 
 
 def row(points: np.ndarray, samples: np.ndarray, count: int, seconds: float) -> str:
-    """Mean / max distance (per mille of the diagonal), closed, control points, time."""
+    """Mean / max distance of the points to the curve and the farthest the curve strays from
+    the points (relative to the diagonal), closed, control points, time."""
     diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
     distances = polyline_distances(points, samples) / diagonal
+    strays = float(cKDTree(points).query(samples)[0].max()) / diagonal
     closed = np.linalg.norm(samples[0] - samples[-1]) < 1e-9 * diagonal
-    return (f"{distances.mean():9.2e} {distances.max():9.2e} {'yes' if closed else 'no':>6} "
-            f"{count:5d} {seconds * 1000:8.1f}")
+    return (f"{distances.mean():8.1e} {distances.max():8.1e} {strays:8.1e} "
+            f"{'yes' if closed else 'no':>4} {count:4d} {seconds * 1000:6.0f}")
 
 
 def main() -> None:
     rng = np.random.default_rng(0)
-    print(f"{'case':22s} {'noise':>6s} {'order':>9s} | {'ours: mean/diag':>15s} {'max/diag':>9s} "
-          f"{'closed':>6s} {'ctrl':>5s} {'ms':>8s} | {'splprep: mean':>13s} {'max':>9s} "
-          f"{'closed':>6s} {'ctrl':>5s} {'ms':>8s}")
+    columns = f"{'mean':>8s} {'max':>8s} {'strays':>8s} {'clsd':>4s} {'ctrl':>4s} {'ms':>6s}"
+    print(f"{'':40s} | {'ours':^43s} | {'scipy splprep':^43s}")
+    print(f"{'case':20s} {'noise':>6s} {'order':>9s}   | {columns} | {columns}")
     for name, exact, closed, _ in synthetic_cases() + outline_cases():
         diagonal = float(np.linalg.norm(np.ptp(exact, axis=0)))
         pixels = "outline" in name
@@ -118,10 +122,10 @@ def main() -> None:
                 line = ours(given)
                 mine = row(points, *line)
                 theirs = (row(points, *scipy_splprep(points, closed, sigma)) if ordered
-                          else f"{'-':>9s} {'-':>9s} {'-':>6s} {'-':>5s} {'-':>8s}")
+                          else f"{'-':>8s} {'-':>8s} {'-':>8s} {'-':>4s} {'-':>4s} {'-':>6s}")
                 noise = f"{sigma:.3g}" if sigma else "exact"
-                print(f"{name:22s} {noise:>6s} {'ordered' if ordered else 'unordered':>9s} | "
-                      f"{mine:>15s} | {theirs}", flush=True)
+                print(f"{name:20s} {noise:>6s} {'ordered' if ordered else 'unordered':>9s}   | "
+                      f"{mine} | {theirs}", flush=True)
 
 
 if __name__ == "__main__":

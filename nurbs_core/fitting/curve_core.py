@@ -10,11 +10,13 @@ least-squares core (:mod:`nurbs_core.surfacing.core`), passes of growing size:
    term (second differences) that only keeps empty spans determined;
 2. move every parameter to its point's foot on the curve (Newton steps from the current
    parameter and from the nearest of dense samples), solve again, a few rounds;
-3. grow the control count by :data:`GROWTH` up to the cap (:func:`control_cap`) until all but
-   ``outlier_fraction`` of the points lie within the tolerance (automatic: :data:`NOISE_TOLERANCE`
-   times the noise :func:`curve_noise` estimates, which over-reads sparse exact samples of a
-   curved shape); with the automatic tolerance, on while a pass still divides the rms distance
-   by :data:`PLATEAU_GAIN` (exact samples go on towards exact, noisy ones stop at the noise).
+3. split the knot spans that hold points beyond the tolerance (:func:`refined_breaks`: knots go
+   where the curve turns sharply, an outline's corners) up to the cap (:func:`control_cap`)
+   until all but ``outlier_fraction`` of the points lie within the tolerance (automatic:
+   :data:`NOISE_TOLERANCE` times the noise :func:`curve_noise` estimates, which over-reads
+   sparse exact samples of a curved shape); with the automatic tolerance, every span on while a
+   pass still divides the rms distance by :data:`PLATEAU_GAIN` (exact samples go on towards
+   exact, noisy ones stop at the noise).
 
 A closed curve is returned as the clamped NURBS of the same periodic spline (its ends meet, and
 its first and second derivatives match across them), so every reader and writer takes it.
@@ -22,7 +24,6 @@ its first and second derivatives match across them), so every reader and writer 
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -43,15 +44,14 @@ from nurbs_core.geometry_arrays import CurveArrays
 #: floor relative to the bounding-box diagonal.
 NOISE_TOLERANCE = 3.0
 MIN_TOLERANCE = 1e-5
-#: The first pass's control points, and the factor each further pass grows them by.
+#: The first pass's control points.
 FIRST_CONTROL_POINTS = 8
-GROWTH = 1.5
 #: A curve grows to at most this many times the configured cap per direction of a surface
 #: (``FitConfig.max_control_points``: 40, so 200) and never over half its points.
 CURVE_CAP_FACTOR = 5
 #: Foot-point rounds per pass, and the fairing weight relative to the data term's scale.
 FOOT_ROUNDS = 4
-FAIRING = 1e-7
+FAIRING = 1e-3
 #: Once the automatic tolerance is met, the control points grow on while a pass divides the rms
 #: distance by at least this much (the curve, not the noise, still limits it: exact samples).
 PLATEAU_GAIN = 2.0
@@ -61,10 +61,12 @@ NOISE_NEIGHBOURS = 10
 
 @dataclass(frozen=True)
 class CurvePass:
-    """One pass: its control points (n, d) (unique ones of a closed curve), the parameters
+    """One pass: its control points (n, d) (unique ones of a closed curve), the breakpoints
+    (spans + 1,) on [0, 1] of its knots, the parameters
     (N,) of the points' feet, their distances (N,) and whether the tolerance is met."""
 
     control_points: np.ndarray
+    breaks: np.ndarray
     parameters: np.ndarray
     distances: np.ndarray
     met: bool
@@ -109,37 +111,50 @@ def control_cap(config: FitConfig, point_count: int, closed: bool) -> int:
     return max(cap, degree + 1)
 
 
-def periodic_knots(count: int, degree: int) -> np.ndarray:
-    """The uniform knots (count + 2 degree + 1,) of a periodic spline with ``count`` unique
-    control points on the domain [0, 1]."""
-    return (np.arange(count + 2 * degree + 1) - degree) / count
+def uniform_breaks(count: int, degree: int, closed: bool) -> np.ndarray:
+    """The evenly spaced breakpoints (spans + 1,) on [0, 1] of a spline with ``count`` control
+    points (unique ones when ``closed``: as many spans; open: count - degree spans)."""
+    return np.linspace(0.0, 1.0, (count if closed else count - degree) + 1)
 
 
-def clamped_knots(count: int, degree: int) -> np.ndarray:
-    """Clamped uniform knots (count + degree + 1,) on [0, 1]."""
-    inner = np.linspace(0.0, 1.0, count - degree + 1)
-    return np.concatenate([np.zeros(degree), inner, np.ones(degree)])
+def control_count(breaks: np.ndarray, degree: int, closed: bool) -> int:
+    """The control points (unique ones when ``closed``) of a spline on the breakpoints."""
+    return len(breaks) - 1 + (0 if closed else degree)
 
 
-def spline_of(control: np.ndarray, degree: int, closed: bool) -> BSpline:
-    """The scipy BSpline of control points (n, d): periodic (n unique, wrapped) or clamped."""
+def spline_knots(breaks: np.ndarray, degree: int, closed: bool) -> np.ndarray:
+    """The knot vector on the breakpoints (spans + 1,): clamped (open), or the periodic
+    extension of the breakpoints by ``degree`` knots each side (closed)."""
+    if closed:
+        return np.concatenate([breaks[-degree - 1:-1] - 1.0, breaks, breaks[1:degree + 1] + 1.0])
+    return np.concatenate([np.zeros(degree), breaks, np.ones(degree)])
+
+
+def clamped_knots(breaks: np.ndarray, degree: int) -> np.ndarray:
+    """The clamped knot vector on the breakpoints (spans + 1,)."""
+    return np.concatenate([np.zeros(degree), breaks, np.ones(degree)])
+
+
+def spline_of(control: np.ndarray, breaks: np.ndarray, degree: int, closed: bool) -> BSpline:
+    """The scipy BSpline of control points (n, d) on the breakpoints: periodic (n unique,
+    wrapped) or clamped."""
+    knots = spline_knots(breaks, degree, closed)
     if closed:
         wrapped = np.concatenate([control, control[:degree]])
-        return BSpline(periodic_knots(len(control), degree), wrapped, degree,
-                       extrapolate="periodic")
-    return BSpline(clamped_knots(len(control), degree), control, degree)
+        return BSpline(knots, wrapped, degree, extrapolate="periodic")
+    return BSpline(knots, control, degree)
 
 
-def _design(parameters: np.ndarray, count: int, degree: int,
+def _design(parameters: np.ndarray, breaks: np.ndarray, degree: int,
             closed: bool) -> scipy.sparse.csr_matrix:
     """The basis functions' values (N, count) at the parameters; a closed curve's columns of
     the wrapped control points folded onto the unique ones."""
+    count = control_count(breaks, degree, closed)
+    knots = spline_knots(breaks, degree, closed)
     if closed:
-        knots = periodic_knots(count, degree)
         matrix = BSpline.design_matrix(np.mod(parameters, 1.0), knots, degree).tocoo()
         return scipy.sparse.csr_matrix((matrix.data, (matrix.row, matrix.col % count)),
                                        shape=(len(parameters), count))
-    knots = clamped_knots(count, degree)
     return BSpline.design_matrix(np.clip(parameters, 0.0, 1.0), knots, degree).tocsr()
 
 
@@ -153,10 +168,11 @@ def _second_differences(count: int, closed: bool) -> scipy.sparse.csr_matrix:
                                    shape=(rows, count))
 
 
-def _solve(points: np.ndarray, parameters: np.ndarray, count: int, degree: int,
+def _solve(points: np.ndarray, parameters: np.ndarray, breaks: np.ndarray, degree: int,
            closed: bool) -> np.ndarray:
     """The least-squares control points (count, d) at the parameters (faintly faired)."""
-    basis = _design(parameters, count, degree, closed)
+    count = control_count(breaks, degree, closed)
+    basis = _design(parameters, breaks, degree, closed)
     normal = (basis.T @ basis).tocsc()
     weight = FAIRING * normal.diagonal().sum() / count
     difference = _second_differences(count, closed)
@@ -205,38 +221,60 @@ def curve_passes(points: np.ndarray, parameters: np.ndarray, closed: bool, confi
     cap = control_cap(config, len(points), closed)
     count = cap if not config.max_control_points else min(max(FIRST_CONTROL_POINTS,
                                                               degree + 1), cap)
+    breaks = uniform_breaks(count, degree, closed)
     quantile = 1.0 - config.outlier_fraction
     kept: CurvePass | None = None
     while True:
-        report = _pass(points, parameters, count, degree, closed, tolerance, quantile)
+        report = _pass(points, parameters, breaks, degree, closed, tolerance, quantile)
         if kept is not None and kept.met and not _rms(report) < _rms(kept) / PLATEAU_GAIN:
             # the tolerance was met and more control points no longer pay: the noise floor
             yield kept
             return
         kept, parameters = report, report.parameters
+        count = control_count(breaks, degree, closed)
         if count >= cap or (stop is not None and stop.stopped) or (
-                report.met and not config.max_control_points):
-            yield report
-            return
-        if report.met and config.tolerance is not None:
-            yield report     # a tolerance the user set is the target, not more
+                report.met and (not config.max_control_points or config.tolerance is not None)):
+            yield report     # the cap, a stop, or a tolerance the user set: the target
             return
         if not report.met:
             yield report
-        count = min(cap, max(count + 1, math.ceil(count * GROWTH)))
+        breaks = refined_breaks(breaks, report, tolerance, cap - count)
 
 
-def _pass(points: np.ndarray, parameters: np.ndarray, count: int, degree: int, closed: bool,
-          tolerance: float, quantile: float) -> CurvePass:
-    """One pass at ``count`` control points from the ``parameters`` (N,) (see the module)."""
-    control = _solve(points, parameters, count, degree, closed)
+def refined_breaks(breaks: np.ndarray, report: CurvePass, tolerance: float,
+                   room: int) -> np.ndarray:
+    """The breakpoints with their spans split in half where the pass's points lie beyond the
+    tolerance (every span once the tolerance is met: the search for the noise floor), the worst
+    first, at most ``room`` of them (each split adds one control point)."""
+    spans = len(breaks) - 1
+    index = np.clip(np.searchsorted(breaks, report.parameters, side="right") - 1, 0, spans - 1)
+    worst = np.zeros(spans)
+    np.maximum.at(worst, index, report.distances)
+    chosen = np.flatnonzero(worst > tolerance) if not report.met else np.arange(spans)
+    if len(chosen) == 0:
+        chosen = np.arange(spans)
+    chosen = chosen[np.argsort(-worst[chosen])][:max(room, 1)]
+    middles = (breaks[chosen] + breaks[chosen + 1]) / 2
+    return np.sort(np.concatenate([breaks, middles]))
+
+
+def _pass(points: np.ndarray, parameters: np.ndarray, breaks: np.ndarray, degree: int,
+          closed: bool, tolerance: float, quantile: float) -> CurvePass:
+    """One pass on the breakpoints from the ``parameters`` (N,) (see the module)."""
+    control = _solve(points, parameters, breaks, degree, closed)
     for _ in range(FOOT_ROUNDS):
-        parameters, _ = foot_parameters(spline_of(control, degree, closed), points, parameters,
-                                        closed)
-        control = _solve(points, parameters, count, degree, closed)
-    parameters, distances = foot_parameters(spline_of(control, degree, closed), points,
+        parameters, _ = foot_parameters(spline_of(control, breaks, degree, closed), points,
+                                        parameters, closed)
+        if not closed:
+            # an open curve ends at its end points: feet stretched over [0, 1] again, or the
+            # ends would run on past the points with nothing to hold them
+            low, high = parameters.min(), parameters.max()
+            if high > low:
+                parameters = (parameters - low) / (high - low)
+        control = _solve(points, parameters, breaks, degree, closed)
+    parameters, distances = foot_parameters(spline_of(control, breaks, degree, closed), points,
                                             parameters, closed)
-    return CurvePass(control, parameters, distances,
+    return CurvePass(control, breaks, parameters, distances,
                      bool(np.quantile(distances, quantile) <= tolerance))
 
 
@@ -245,17 +283,17 @@ def _rms(report: CurvePass) -> float:
     return float(np.sqrt((report.distances ** 2).mean()))
 
 
-def clamped_form(control: np.ndarray, degree: int, closed: bool) -> tuple[np.ndarray,
-                                                                            np.ndarray]:
+def clamped_form(control: np.ndarray, breaks: np.ndarray, degree: int,
+                 closed: bool) -> tuple[np.ndarray, np.ndarray]:
     """Control points and knots of the clamped curve that is the pass's spline: itself when
     open; a closed one's periodic spline restricted to [0, 1], exactly (a least-squares fit in
-    the clamped space that holds it, on dense samples)."""
+    the clamped space that holds it, on samples inside every span)."""
+    knots = clamped_knots(breaks, degree)
     if not closed:
-        return control, clamped_knots(len(control), degree)
-    count = len(control) + degree
-    knots = clamped_knots(count, degree)
-    samples = np.linspace(0.0, 1.0, 8 * count)
-    clamped = make_lsq_spline(samples, spline_of(control, degree, True)(samples), knots,
+        return control, knots
+    inside = np.linspace(0.0, 1.0, degree + 3)[:-1]
+    samples = np.append((breaks[:-1, None] + np.diff(breaks)[:, None] * inside).ravel(), 1.0)
+    clamped = make_lsq_spline(samples, spline_of(control, breaks, degree, True)(samples), knots,
                               degree)
     return np.asarray(clamped.c), knots
 
@@ -307,7 +345,8 @@ def iter_curve_fit(target: np.ndarray, config: FitConfig,
 def _arrays(report: CurvePass, config: FitConfig, closed: bool, center: np.ndarray,
             scale: float) -> CurveArrays:
     """The pass's curve in the input's coordinates, clamped."""
-    control, knots = clamped_form(report.control_points, config.degree_u, closed)
+    control, knots = clamped_form(report.control_points, report.breaks, config.degree_u,
+                                  closed)
     dtype = np.float32 if config.dtype == "float32" else np.float64
     return CurveArrays(degree=config.degree_u,
                        control_points=(control * scale + center).astype(dtype),
