@@ -30,6 +30,11 @@
   uncovered part: a bowl too deep for one map, a head without its base),
   :func:`open_network_instead` turns to that open network after the fact.
 
+* ``curve``: a cloud that is one-dimensional, thin across in (almost) every neighbourhood
+  (:func:`nurbs_core.curve_cloud.is_curve_cloud`: an outline, a wire, a helix; a planar ring at one
+  height), with no mesh of its own and no part forced: a curve, fitted in 2-D when it lies at
+  one height.
+
 A route forced by the caller (``--single-patch``, ``--patches``) is taken as it is. The decision
 carries its reason (printed by the CLI) and the closed or open mesh it built, so the network does
 not rebuild it. numpy + scipy + scikit-image only: deciding imports no torch.
@@ -48,7 +53,7 @@ from nurbs_core.patches.defaults import MIN_NETWORK_POINTS
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import quality_problems
 
-RouteKind = Literal["single_patch", "network", "part"]
+RouteKind = Literal["single_patch", "network", "part", "curve"]
 
 #: An open surface whose map to one patch gives its most crowded 5% this many times less room
 #: than the median part (:func:`nurbs_core.surfacing.map_crowding.map_crowding`) goes straight
@@ -60,7 +65,7 @@ MAX_MAP_CROWDING = 20.0
 
 @dataclass
 class Route:
-    """kind: "single_patch", "network" or "part"; finding: what decided it (one clause for the
+    """kind: "single_patch", "network", "part" or "curve"; finding: what decided it (one clause for the
     report); mesh: the mesh of a network (the file's own or rebuilt from the points: closed, or
     bounded for an open network), None for a single patch."""
 
@@ -80,6 +85,8 @@ class Route:
         """The report's line: the finding and the route it leads to."""
         if self.kind == "single_patch":
             return f"{self.finding}: one patch"
+        if self.kind == "curve":
+            return f"{self.finding}: a curve"
         if self.kind == "part":
             return f"{self.finding}: " + ("an open shell with analytic faces" if self.open_shell
                                           else "a solid with analytic faces")
@@ -109,6 +116,13 @@ def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
     if problem is not None:
         raise ValueError(problem)
     started = time.perf_counter()
+    if file_mesh is None and not part:
+        from nurbs_core.curve_cloud import is_curve_cloud, thin_share
+
+        if is_curve_cloud(points):
+            share = thin_share(points)
+            return Route("curve", f"the cloud is one-dimensional (thin across in {share:.0%} of "
+                                  f"its neighbourhoods)", seconds=time.perf_counter() - started)
     route = _decide(points, file_mesh, file_mesh_note, max_hole, part)
     if route.kind == "network" and not route.open_network and part is not False:
         route = _part_or(route, points, forced=bool(part), max_hole=max_hole)

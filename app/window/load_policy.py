@@ -5,9 +5,10 @@ cancelled); the status bar's indicator (:class:`app.window.job_indicator.JobIndi
 with Cancel; a session file is read in the same way, and what it changes is the session
 policy's; the document changes only when every file reads, and takes the
 length unit the files state (:func:`app.window.units_policy.units_of_load`); a load resets
-both fits; a planar cloud switches the fit to a curve and a small cloud gets the smaller control
-grid :func:`app.state.control_grid_for` asks for (both undoable settings edits); what the user is
-told when a load opens, fails or is cancelled; and which files the Open Recent menu lists.
+both fits; a cloud that is a curve (one-dimensional) switches the fit to a curve and a small
+cloud gets the smaller control grid :func:`app.state.control_grid_for` asks for (both undoable
+settings edits); what the user is told when a load opens, fails or is cancelled; and which
+files the Open Recent menu lists.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from PySide6.QtCore import QObject, QSettings
 from PySide6.QtWidgets import QFileDialog, QMenu
 
@@ -43,11 +45,15 @@ def mesh_words(target: Target) -> str:
     return f" ({target.mesh_note}: the points' own mesh is built)" if target.mesh_note else ""
 
 
-def flat_in_z(targets: list[Target]) -> bool:
-    """Whether the visible targets' points (each (N_i, 3)) all lie at one height (a planar
-    cloud: fitted as a curve)."""
-    heights = [t.points[:, 2] for t in targets if t.visible and len(t.points)]
-    return bool(heights) and max(h.max() for h in heights) == min(h.min() for h in heights)
+def is_curve(targets: list[Target]) -> bool:
+    """Whether the visible targets' points (each (N_i, 3)) together form a curve: one-dimensional,
+    thin across in every neighbourhood (:func:`nurbs_core.curve_cloud.is_curve_cloud`, the test
+    ``nurbs-fit``'s automatic route takes). A curve at one height is fitted in 2-D (the
+    controller)."""
+    from nurbs_core.curve_cloud import is_curve_cloud
+
+    clouds = [t.points for t in targets if t.visible and len(t.points)]
+    return bool(clouds) and is_curve_cloud(np.concatenate(clouds))
 
 
 @dataclass
@@ -229,9 +235,10 @@ class LoadPolicy(QObject):
         if loaded.solid is not None:  # a STEP, IGES or .brep file with trimmed faces
             document.set_solid(loaded.solid)
         count = document.visible_point_count()  # not stacked again: the viewport just did
-        if count and flat_in_z(document.targets) and document.settings.fit.kind != "curve":
-            document.edit_settings("Kind (planar cloud)", kind="curve")
-            window.report("The cloud is planar: switched to curve fitting (2D).")
+        if count and document.settings.fit.kind != "curve" and is_curve(document.targets):
+            document.edit_settings("Kind (curve cloud)", kind="curve")
+            window.report("The cloud is a curve (thin across everywhere): switched to curve "
+                          "fitting.")
         grid = control_grid_for(count, document.settings.fit) if count else None
         if grid is not None:
             document.edit_settings("Control grid (small cloud)", control_points_u=grid[0],

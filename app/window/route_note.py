@@ -38,8 +38,13 @@ CAUSES = {"solver": "Solver gradient",
           "custom_knots": "Custom knots (Knots dock) need the gradient fit"}
 PATCHES_NOTE = ("Mode Patches: Start fits a network of patches (its settings are in the "
                 "Patches dock); these settings apply to single-patch fits.")
-CURVE_NOTE = ("Curves are fitted by the gradient fit: the Surfacing settings and the tolerance "
-              "do not apply.")
+CURVE_NOTE = ("Curves with these settings are fitted by the gradient fit: the Surfacing settings "
+              "and the tolerance do not apply.")
+#: the note of a curve on its default route, the least-squares curve
+#: (:mod:`nurbs_core.fitting.curve_core`)
+CURVE_CORE_NOTE = ("Curves are fitted by least squares, closed where the points close, the control "
+                   "points growing until the tolerance is met: the other Surfacing settings do "
+                   "not apply.")
 
 
 def _counts(counts: tuple[int, ...]) -> str:
@@ -55,7 +60,7 @@ def route_note(settings: Settings, shape: GeometryArrays | None,
     fit = start_config(settings.fit, shape, account)
     plan = fit_plan(fit, has_initial=continues_from(fit, shape))
     if plan.tolerance_applies:
-        return None, ""
+        return ("model", CURVE_CORE_NOTE) if fit.kind == "curve" else (None, "")
     if plan.why == "curve":
         return "model", CURVE_NOTE
     if plan.why == "initial":

@@ -30,7 +30,7 @@ MAX_PATH_POINTS = 4000
 NEIGHBOURS = 10
 
 
-def _knn_graph(points: np.ndarray) -> scipy.sparse.csr_matrix:
+def knn_graph(points: np.ndarray) -> scipy.sparse.csr_matrix:
     """Symmetric k-NN graph (N x N, edge weights = distances); disconnected components are joined
     through their closest pair of points so the spanning tree covers the whole cloud."""
     n = len(points)
@@ -64,7 +64,7 @@ def _knn_graph(points: np.ndarray) -> scipy.sparse.csr_matrix:
 
 def backbone_path(points: np.ndarray) -> np.ndarray:
     """Indices of the longest path through the minimum spanning tree of ``points`` (N, d)."""
-    spanning = minimum_spanning_tree(_knn_graph(points))
+    spanning = minimum_spanning_tree(knn_graph(points))
     spanning = spanning + spanning.T
     first = dijkstra(spanning, directed=False, indices=0)
     start = int(np.argmax(np.where(np.isfinite(first), first, -1.0)))

@@ -3,8 +3,11 @@ torch-free route runs without importing torch).
 
 * the least-squares core (:mod:`nurbs_core.fitting.sheet`) for an unordered surface cloud,
   alone (:func:`torch_free`: numpy + scipy) or followed by the gradient fit;
-* the gradient fit (:mod:`nurbs_core.fitting.engine`, torch) for everything else: curves,
-  known parameters, an initial shape, another loss, free knots or weights, the learned start.
+* the least-squares curve (:mod:`nurbs_core.fitting.curve_core`: numpy + scipy) for a curve with
+  the default loss (:func:`uses_curve_core`), closed where its points close;
+* the gradient fit (:mod:`nurbs_core.fitting.engine`, torch) for everything else: curves with
+  another loss or free knots or weights, known parameters, an initial shape, another loss,
+  free knots or weights, the learned start.
 
 :func:`fit_plan` says it as a value (the stages and why the gradient fit runs), for the front
 ends to tell before a fit runs: the CLI's plan line, the app's route note and result line.
@@ -68,6 +71,24 @@ def resolved_solver(config: FitConfig) -> str:
     return "least_squares" if gradient_reason(config) is None else "gradient"
 
 
+def uses_curve_core(config: FitConfig, known: bool, has_initial: bool) -> bool:
+    """Whether this curve fit is the least-squares curve (:mod:`nurbs_core.fitting.curve_core`):
+    a curve without known parameters or an initial shape, solver "auto" or "least_squares",
+    no learned start, free knots or weights, pinned boundary, custom knots or refinements, and
+    a loss the least squares answers: the curves' default ``chamfer+p2s`` (the fit covers the
+    points end to end, what its Chamfer term asks) or any :func:`core_answers` accepts."""
+    from nurbs_core.fitting.config import DEFAULT_CURVE_LOSS
+
+    if config.kind != "curve" or known or has_initial or config.solver == "gradient":
+        return False
+    if config.init == "learned" or config.refinements:
+        return False
+    if any(getattr(config, name) for name in ("free_knots", "free_weights", "pin_boundary",
+                                              "custom_knots")):
+        return False
+    return core_answers(config.loss) or config.loss == Loss.of(DEFAULT_CURVE_LOSS)
+
+
 def uses_core(config: FitConfig, known: bool, has_initial: bool) -> bool:
     """Whether this fit starts with the least-squares core (unordered surface clouds): not with
     ``known`` parameters or an initial shape (``has_initial``)."""
@@ -78,7 +99,10 @@ def uses_core(config: FitConfig, known: bool, has_initial: bool) -> bool:
 
 def torch_free(config: FitConfig, known: bool, has_initial: bool) -> bool:
     """Whether the fit is the least-squares core alone (:func:`uses_core` without the gradient
-    fit after it or the learned start before it): it runs on numpy and scipy only."""
+    fit after it or the learned start before it), or the least-squares curve
+    (:func:`uses_curve_core`): it runs on numpy and scipy only."""
+    if uses_curve_core(config, known, has_initial):
+        return True
     return (uses_core(config, known, has_initial) and config.init != "learned"
             and resolved_solver(config) == "least_squares")
 
@@ -113,6 +137,8 @@ def fit_plan(config: FitConfig, known: bool = False, has_initial: bool = False) 
     "pca" at run time, which may leave the core alone."""
     if known and config.solver == "least_squares":
         return FitPlan(("exact",))
+    if uses_curve_core(config, known, has_initial):
+        return FitPlan(("least_squares",))
     if uses_core(config, known, has_initial):
         why = gradient_reason(config)
         return FitPlan(("least_squares",) if why is None else ("least_squares", "gradient"), why)

@@ -39,6 +39,10 @@ def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopTo
     config = FitConfig() if config is None else config
     config.validate()
     if parameters is None and torch_free(config, known=False, has_initial=initial is not None):
+        if config.kind == "curve":
+            from nurbs_core.fitting.curve_core import iter_curve_fit
+
+            return iter_curve_fit(np.asarray(target, np.float64), config, stop)
         return iter_sheet_fit(target, config, stop)
     from nurbs_core.fitting.engine import iter_fit as iter_torch_fit  # the gradient routes
 

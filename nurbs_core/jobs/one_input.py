@@ -1,6 +1,6 @@
 """One input from its settings to its written files: :func:`fit_one` follows the route
-(:mod:`nurbs_core.route` decides the automatic one: a solid, a closed network, one patch or an
-open network) and falls back where a route fails (no valid solid, no layout, one patch that
+(:mod:`nurbs_core.route` decides the automatic one: a curve, a solid, a closed network, one
+patch or an open network) and falls back where a route fails (no valid solid, no layout, one patch that
 folds)."""
 
 from __future__ import annotations
@@ -68,6 +68,9 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
                              part=part_allowed(job, outputs))
         if not job.quiet:
             print(f"route: {route.reason} ({route.seconds:.1f} s)", file=sys.stderr)
+        if route.kind == "curve":
+            prepared = prepare_fit(job.replace(curve=True), points)
+            return finish_fit(prepared, run_fit(prepared, stoppable))
         if route.kind == "part":
             from nurbs_core.brep.solid import SolidError
 

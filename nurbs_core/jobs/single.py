@@ -114,6 +114,12 @@ def _print_plan(job: FitJob, config: FitConfig, count: int,
     plan = fit_plan(config, known_parameters, job.initial is not None)
     if plan.stages == ("exact",):
         how = "by exact least squares at the known parameters"
+    elif plan.stages == ("least_squares",) and config.kind == "curve":
+        from nurbs_core.fitting.curve_core import control_cap
+
+        how = ("by least squares (closed and periodic where the points close; control points "
+               + (f"growing to at most {control_cap(config, count, False)})"
+                  if config.max_control_points else "fixed)"))
     elif plan.stages == ("least_squares",):
         how = (f"by fairing least squares (stiffness {config.stiffness:g}"
                + (f", grid growing to at most {config.max_control_points} per direction"
@@ -205,6 +211,9 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
     print(f"point-to-{config.kind} distance: mean {stats['mean']:.6g}{u}, rms "
           f"{stats['rms']:.6g}{u}, max {stats['max']:.6g}{u}  (bounding-box diagonal "
           f"{diagonal:.6g}{u})")
+    if "closed" in stats:
+        print("closed curve (periodic: its ends meet, C2 across the join)" if stats["closed"]
+              else "open curve")
     if "paired_mean" in stats:
         print(f"at the known parameters: mean {stats['paired_mean']:.6g}{u}, "
               f"rms {stats['paired_rms']:.6g}{u}, max {stats['paired_max']:.6g}{u}")

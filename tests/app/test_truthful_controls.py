@@ -116,7 +116,9 @@ def test_a_setting_that_changes_the_route_says_so_before_start(qtbot, window):
     assert "network of patches" in panel.route_notes["model"].text()
     window.mode_selector.setCurrentIndex(window.mode_selector.findData("single"))
     panel.kind.setCurrentIndex(panel.kind.findData("curve"))
-    assert panel.route_note().startswith("Curves are fitted by the gradient fit")
+    assert panel.route_note().startswith("Curves are fitted by least squares")
+    panel.term_checks["hausdorff"].setChecked(True)
+    assert panel.route_note().startswith("Curves with these settings are fitted by the gradient")
 
 
 def test_a_long_status_message_ends_before_the_fit_labels_and_stays_readable(qtbot, window):

@@ -61,8 +61,9 @@ def test_the_core_answers_a_loss_by_its_terms_not_its_text():
 
 
 def test_the_plan_of_curves_known_parameters_and_a_starting_shape():
-    assert fit_plan(FitConfig(kind="curve")).stages == ("gradient",)
-    assert fit_plan(FitConfig(kind="curve")).why == "curve"
+    assert fit_plan(FitConfig(kind="curve")).stages == ("least_squares",)
+    assert fit_plan(FitConfig(kind="curve", loss="p2s+hausdorff")).stages == ("gradient",)
+    assert fit_plan(FitConfig(kind="curve", loss="p2s+hausdorff")).why == "curve"
     assert fit_plan(FitConfig(), known=True).why == "known"
     assert fit_plan(FitConfig(solver="least_squares"), known=True).stages == ("exact",)
     plan = fit_plan(FitConfig(), has_initial=True)

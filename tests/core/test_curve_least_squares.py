@@ -1,0 +1,112 @@
+"""The least-squares curve (nurbs_core.fitting.curve_core), closed where the points close, and
+the automatic route's curve detection (nurbs_core.curve_cloud)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nurbs_core.cli import main
+from nurbs_core.curve_cloud import is_curve_cloud
+from nurbs_core.evaluate_arrays import curve_points
+from nurbs_core.fitting.config import FitConfig
+from nurbs_core.fitting.plan import fit_plan
+from nurbs_core.fitting.run import fit_arrays
+from nurbs_core.geometry_arrays import CurveArrays
+
+
+def _ellipse(count: int) -> np.ndarray:
+    angle = np.linspace(0.0, 2.0 * np.pi, count, endpoint=False)
+    return np.column_stack([2.0 * np.cos(angle), np.sin(angle), np.zeros(count)])
+
+
+def _written_curves(path) -> list[CurveArrays]:
+    from nurbs_core.geometry import NurbsCurve
+    from nurbs_core.io import load
+
+    shapes = load(path)
+    assert all(isinstance(shape, NurbsCurve) for shape in shapes)
+    return [shape.numpy() for shape in shapes]
+
+
+def _derivatives(curve: CurveArrays, t: float) -> list[np.ndarray]:
+    from scipy.interpolate import BSpline
+
+    spline = BSpline(curve.knots, curve.control_points, curve.degree)
+    return [spline.derivative(order)(t) if order else spline(t) for order in range(3)]
+
+
+def test_exact_ellipse_comes_back_closed_and_near_exact(tmp_path):
+    source, out = tmp_path / "ellipse.xyz", tmp_path / "ellipse.json"
+    np.savetxt(source, _ellipse(60))   # in order, the last point not repeated
+    assert main([str(source), "--curve", "-o", str(out), "--quiet"]) == 0
+    curve = _written_curves(out)[0]
+    points = _ellipse(60)
+    diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
+    dense = curve_points(curve, np.linspace(0.0, 1.0, 20000))
+    distances = np.min(np.linalg.norm(points[:, None] - dense[None], axis=2), axis=1)
+    assert distances.mean() < 1e-3 * diagonal
+    start, end = _derivatives(curve, 0.0), _derivatives(curve, 1.0)
+    for order, (a, b) in enumerate(zip(start, end, strict=True)):   # closed and C2 at the join
+        scale = max(float(np.linalg.norm(a)), 1.0)
+        assert np.linalg.norm(a - b) < 1e-6 * scale, f"derivative {order} jumps at the join"
+
+
+def test_an_open_arc_stays_open():
+    angle = np.linspace(0.0, 1.5 * np.pi, 80)
+    arc = np.column_stack([np.cos(angle), np.sin(angle)])
+    result = fit_arrays(arc, FitConfig(kind="curve"))
+    assert result.statistics["closed"] == 0.0
+    ends = curve_points(result.geometry, np.array([0.0, 1.0]))
+    np.testing.assert_allclose(ends, arc[[0, -1]], atol=1e-4)
+    assert result.statistics["max"] < 1e-4
+
+
+def test_a_noisy_unordered_ring_closes_and_a_noisy_unordered_arc_does_not():
+    rng = np.random.default_rng(5)
+    for turn, closed in ((2.0 * np.pi, 1.0), (1.2 * np.pi, 0.0)):
+        angle = rng.uniform(0.0, turn, 500)
+        points = np.column_stack([2.0 * np.cos(angle), np.sin(angle)])
+        points += rng.normal(scale=0.01, size=points.shape)
+        result = fit_arrays(points, FitConfig(kind="curve"))
+        assert result.statistics["closed"] == closed
+        assert result.statistics["rms"] < 0.02          # the noise's 0.014 rms distance
+
+
+def test_the_default_curve_loss_takes_least_squares_and_other_losses_the_gradient_fit():
+    assert fit_plan(FitConfig(kind="curve", loss="chamfer+p2s")).stages == ("least_squares",)
+    assert fit_plan(FitConfig(kind="curve", loss="p2s+0.1*laplacian")).stages == ("gradient",)
+    assert fit_plan(FitConfig(kind="curve", solver="gradient")).stages == ("gradient",)
+
+
+@pytest.mark.parametrize(("name", "points", "curve"), [
+    ("helix", None, True), ("noisy ring", None, True), ("flat square", None, False),
+    ("sphere", None, False)])
+def test_is_curve_cloud(name, points, curve):
+    rng = np.random.default_rng(1)
+    if name == "helix":
+        angle = rng.uniform(0.0, 4.0 * np.pi, 400)
+        points = np.column_stack([np.cos(angle), np.sin(angle), 0.15 * angle])
+    elif name == "noisy ring":
+        points = _ellipse(400) + np.column_stack([rng.normal(scale=0.01, size=(400, 2)),
+                                                  np.zeros(400)])
+    elif name == "flat square":
+        points = np.column_stack([rng.uniform(-1, 1, (2000, 2)), np.zeros(2000)])
+    else:
+        points = rng.normal(size=(3000, 3))
+        points /= np.linalg.norm(points, axis=1, keepdims=True)
+    assert is_curve_cloud(points) is curve
+
+
+def test_the_automatic_route_fits_an_unordered_planar_ring_as_a_curve(tmp_path, capsys):
+    rng = np.random.default_rng(3)
+    angle = rng.uniform(0.0, 2.0 * np.pi, 400)
+    points = np.column_stack([2.0 * np.cos(angle), np.sin(angle), np.zeros(400)])
+    points[:, :2] += rng.normal(scale=0.01, size=(400, 2))
+    source, out = tmp_path / "ring.xyz", tmp_path / "ring.json"
+    np.savetxt(source, points)
+    assert main([str(source), "-o", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert "one-dimensional" in captured.err and ": a curve" in captured.err
+    assert len(_written_curves(out)) == 1    # one curve, not a network of patches
+    assert "closed curve" in captured.out
