@@ -122,7 +122,8 @@ def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
         if is_curve_cloud(points):
             share = thin_share(points)
             return Route("curve", f"the cloud is one-dimensional (thin across in {share:.0%} of "
-                                  f"its neighbourhoods)", seconds=time.perf_counter() - started)
+                                  f"its neighbourhoods, one chain)",
+                         seconds=time.perf_counter() - started)
     route = _decide(points, file_mesh, file_mesh_note, max_hole, part)
     if route.kind == "network" and not route.open_network and part is not False:
         route = _part_or(route, points, forced=bool(part), max_hole=max_hole)

@@ -81,7 +81,7 @@ def test_the_default_curve_loss_takes_least_squares_and_other_losses_the_gradien
 
 @pytest.mark.parametrize(("name", "points", "curve"), [
     ("helix", None, True), ("noisy ring", None, True), ("flat square", None, False),
-    ("sphere", None, False)])
+    ("sphere", None, False), ("saddle in 40 scan lines", None, False)])
 def test_is_curve_cloud(name, points, curve):
     rng = np.random.default_rng(1)
     if name == "helix":
@@ -90,12 +90,25 @@ def test_is_curve_cloud(name, points, curve):
     elif name == "noisy ring":
         points = _ellipse(400) + np.column_stack([rng.normal(scale=0.01, size=(400, 2)),
                                                   np.zeros(400)])
+    elif name == "saddle in 40 scan lines":  # a line scanner's surface: thin everywhere too
+        u, v = np.meshgrid(np.linspace(-1, 1, 500), np.linspace(-1, 1, 40))
+        points = np.column_stack([u.ravel(), v.ravel(), (u ** 2 - v ** 2).ravel()])
+        points += rng.normal(scale=1e-3, size=points.shape)
     elif name == "flat square":
         points = np.column_stack([rng.uniform(-1, 1, (2000, 2)), np.zeros(2000)])
     else:
         points = rng.normal(size=(3000, 3))
         points /= np.linalg.norm(points, axis=1, keepdims=True)
     assert is_curve_cloud(points) is curve
+
+
+@pytest.mark.parametrize("image", ["apple", "barbell", "cat", "device"])
+def test_the_papers_image_outlines_are_curves(paper_data, image):
+    """Boundary pixels of the SkelNetOn images, two pixels thick where the outline turns."""
+    from nurbs_core.images import boundary_points, load_image
+
+    outline = boundary_points(load_image(paper_data / "skeletons" / f"{image}.png"))
+    assert is_curve_cloud(np.column_stack([outline, np.zeros(len(outline))]))
 
 
 def test_the_automatic_route_fits_an_unordered_planar_ring_as_a_curve(tmp_path, capsys):
