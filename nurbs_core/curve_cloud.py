@@ -34,8 +34,9 @@ CHAIN_PIECE = 0.9
 CHAIN_SHARE = 0.8
 
 
-def _judged(points: np.ndarray, seed: int) -> np.ndarray:
-    """Up to :data:`JUDGED_POINTS` of the points (N, d): a seeded random subset."""
+def judged_points(points: np.ndarray, seed: int = 0) -> np.ndarray:
+    """Up to :data:`JUDGED_POINTS` of the points (N, d): a seeded random subset (all when
+    fewer)."""
     if len(points) <= JUDGED_POINTS:
         return points
     return points[np.random.default_rng(seed).choice(len(points), JUDGED_POINTS, replace=False)]
@@ -49,7 +50,7 @@ def chain_share(points: np.ndarray, seed: int = 0) -> float:
     import scipy.sparse
     from scipy.sparse.csgraph import connected_components, minimum_spanning_tree, shortest_path
 
-    judged = _judged(np.asarray(points, np.float64), seed)
+    judged = judged_points(np.asarray(points, np.float64), seed)
     count = len(judged)
     k = min(CHAIN_NEIGHBOURS + 1, count)
     distance, index = cKDTree(judged).query(judged, k=k)
@@ -75,7 +76,7 @@ def thin_share(points: np.ndarray, seed: int = 0) -> float:
     """The share of the neighbourhoods of (up to :data:`JUDGED_POINTS` of) the points (N, d),
     d = 2 or 3, whose spread across is at most :data:`THIN_RATIO` of their spread along."""
     points = np.asarray(points, np.float64)
-    centres = _judged(points, seed)
+    centres = judged_points(points, seed)
     _, index = cKDTree(points).query(centres, k=min(NEIGHBOURS, len(points)))
     local = points[index] - points[index].mean(axis=1, keepdims=True)       # (M, k, d)
     spread = np.linalg.svd(local, compute_uv=False)                          # (M, min(k, d))

@@ -202,13 +202,23 @@ class _Measures:
 
 def _measure(surface: SurfaceArrays, points: np.ndarray, normals: np.ndarray | None,
              samples: int, max_points: int, seed: int) -> _Measures:
-    """Everything both public functions need: surface samples against nested cloud subsets."""
-    count = len(points)
+    """Everything both public functions need: surface samples against nested cloud subsets. A
+    surface scanned in lines (:mod:`nurbs_core.surfacing.scan_lines`: a neighbourhood along one
+    line has no normal and no area) is judged on its points' centroids in cells half the lines'
+    gap wide, unless the caller gives the points' normals."""
+    given = len(points)
     g = int(samples)
     if g < 2:
         raise ValueError(f"samples must be at least 2, got {samples}")
     if normals is not None and np.shape(normals) != points.shape:
         raise ValueError(f"normals must have shape {points.shape}, got {np.shape(normals)}")
+    if normals is None:
+        from nurbs_core.surfacing.scan_lines import line_centroids, line_gap
+
+        gap = line_gap(points, seed)
+        if gap is not None:
+            points = line_centroids(points, gap)
+    count = len(points)
     n_sub = min(count, int(max_points))
     n_normal = min(n_sub, NORMAL_POINTS)
     n_cells = min(n_normal, max(g * g // 2, 64))
@@ -303,7 +313,7 @@ def _measure(surface: SurfaceArrays, points: np.ndarray, normals: np.ndarray | N
         "overlap_fraction": overlap_fraction,
         "coverage": coverage,
         "max_curvature": float(finite.max()) if finite.size else 0.0,
-        "points": float(count),
+        "points": float(given),
         "samples": float(g * g),
     }
     return _Measures(stats, maps, sub, multiplicity)
