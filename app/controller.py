@@ -52,7 +52,9 @@ class FitController(LiveController):
     def _request(self, run_id: int, points: np.ndarray) -> FitRequest:
         document = self._document
         settings = document.settings
-        if settings.fit.kind == "curve" and np.allclose(points[:, 2], points[0, 2]):
+        from nurbs_core.curve_cloud import flat_height
+
+        if settings.fit.kind == "curve" and flat_height(points):
             points = points[:, :2]  # a planar cloud: fit a 2D curve
         fit = start_config(settings.fit, document.fitted, document.fitted_account)
         fit.validate()

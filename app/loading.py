@@ -55,6 +55,9 @@ class LoadedFiles:
     #: a solid opened from a STEP, IGES or .brep file with trimmed faces (a
     #: :class:`app.solid_types.PartOutcome`, :mod:`app.workers.file_solid`), or None
     solid: Any = None
+    #: the visible clouds together are a curve (:func:`nurbs_core.curve_cloud.is_curve_cloud`),
+    #: judged here in the load job (its neighbour searches take seconds on millions of points)
+    curve: bool = False
 
 
 def open_suffixes() -> tuple[str, ...]:
@@ -95,7 +98,19 @@ def load_files(paths: list[str], cancel: threading.Event | None = None) -> Loade
             raise
     _check(cancel)
     draw_display_subset(loaded.targets)
+    loaded.curve = is_curve(loaded.targets)
     return loaded
+
+
+def is_curve(targets: list[Target]) -> bool:
+    """Whether the visible targets' points (each (N_i, 3)) together form a curve: one-dimensional,
+    thin across in every neighbourhood (:func:`nurbs_core.curve_cloud.is_curve_cloud`, the test
+    ``nurbs-fit``'s automatic route takes). A curve at one height is fitted in 2-D (the
+    controller)."""
+    from nurbs_core.curve_cloud import is_curve_cloud
+
+    clouds = [t.points for t in targets if t.visible and len(t.points)]
+    return bool(clouds) and is_curve_cloud(np.concatenate(clouds))
 
 
 def draw_display_subset(targets: list[Target]) -> None:

@@ -117,10 +117,11 @@ def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
         raise ValueError(problem)
     started = time.perf_counter()
     if file_mesh is None and not part:
-        from nurbs_core.curve_cloud import is_curve_cloud, thin_share
+        from nurbs_core.curve_cloud import curve_measures
 
-        if is_curve_cloud(points):
-            share = thin_share(points)
+        measures = curve_measures(points)
+        if measures is not None:
+            share = measures[0]
             return Route("curve", f"the cloud is one-dimensional (thin across in {share:.0%} of "
                                   f"its neighbourhoods, one chain)",
                          seconds=time.perf_counter() - started)

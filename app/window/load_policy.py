@@ -19,7 +19,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 from PySide6.QtCore import QObject, QSettings
 from PySide6.QtWidgets import QFileDialog, QMenu
 
@@ -43,17 +42,6 @@ def mesh_words(target: Target) -> str:
     if target.mesh is not None:
         return " (its mesh is closed: its own triangles lay out the patches)"
     return f" ({target.mesh_note}: the points' own mesh is built)" if target.mesh_note else ""
-
-
-def is_curve(targets: list[Target]) -> bool:
-    """Whether the visible targets' points (each (N_i, 3)) together form a curve: one-dimensional,
-    thin across in every neighbourhood (:func:`nurbs_core.curve_cloud.is_curve_cloud`, the test
-    ``nurbs-fit``'s automatic route takes). A curve at one height is fitted in 2-D (the
-    controller)."""
-    from nurbs_core.curve_cloud import is_curve_cloud
-
-    clouds = [t.points for t in targets if t.visible and len(t.points)]
-    return bool(clouds) and is_curve_cloud(np.concatenate(clouds))
 
 
 @dataclass
@@ -235,7 +223,7 @@ class LoadPolicy(QObject):
         if loaded.solid is not None:  # a STEP, IGES or .brep file with trimmed faces
             document.set_solid(loaded.solid)
         count = document.visible_point_count()  # not stacked again: the viewport just did
-        if count and document.settings.fit.kind != "curve" and is_curve(document.targets):
+        if count and document.settings.fit.kind != "curve" and loaded.curve:
             document.edit_settings("Kind (curve cloud)", kind="curve")
             window.report("The cloud is a curve (thin across everywhere): switched to curve "
                           "fitting.")

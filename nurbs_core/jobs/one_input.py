@@ -52,6 +52,7 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
     outputs = check_before_work(job)
     # every route fits the same cloud: read once, repeats merged, its spread checked and moved
     # to a local frame when it lies far from the origin, before any route is decided or printed
+    given, asked = points, job
     points, file_mesh, note, job = input_cloud(job, points)
     if job.trim:
         from nurbs_core.jobs.single import fit_trimmed_job
@@ -69,7 +70,9 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
         if not job.quiet:
             print(f"route: {route.reason} ({route.seconds:.1f} s)", file=sys.stderr)
         if route.kind == "curve":
-            prepared = prepare_fit(job.replace(curve=True), points)
+            # a curve fits the points as listed, repeats too, as --curve does
+            curve_points, _, _, curve_job = input_cloud(asked.replace(curve=True), given)
+            prepared = prepare_fit(curve_job, curve_points)
             return finish_fit(prepared, run_fit(prepared, stoppable))
         if route.kind == "part":
             from nurbs_core.brep.solid import SolidError

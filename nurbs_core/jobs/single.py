@@ -55,14 +55,13 @@ def prepare_fit(job: FitJob, points: np.ndarray | None = None) -> PreparedFit:
     outputs and options, read ``job.input`` (unless ``points``, the (N, 3) cloud read from it,
     are given), build the FitConfig, the ``--grid`` parameters and the ``--initial`` start, and
     print the report's first line (stderr). Raises on a bad input or option."""
-    import numpy as np
-
+    from nurbs_core.curve_cloud import flat_height
     from nurbs_core.jobs.input_cloud import input_cloud
 
     outputs = check_before_work(job)
     if points is None:  # read, repeats merged, spread checked, a far scan in a local frame
         points, _, _, job = input_cloud(job, None)
-    flat_z = bool(job.curve and len(points) and np.ptp(points[:, 2]) == 0)
+    flat_z = bool(job.curve) and flat_height(points)
     target = points[:, :2] if flat_z else points
     config = _default_grid_for(job, fit_config(job, target.shape[1]), len(target))
     parameters = None

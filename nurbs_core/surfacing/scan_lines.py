@@ -14,14 +14,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from nurbs_core.curve_cloud import (
-    CHAIN_SHARE,
-    NEIGHBOURS,
-    THIN_SHARE,
-    chain_share,
-    judged_points,
-    thin_share,
-)
+from nurbs_core.curve_cloud import NEIGHBOURS, THIN_SHARE, is_curve_cloud, judged_points, thin_share
 
 #: A neighbour lies across the line through a point when its offset makes at least this angle's
 #: cosine ... at most this cosine with the line's direction (60 degrees and more from it).
@@ -36,11 +29,11 @@ MIN_GAP_RATIO = 2.5
 
 def line_gap(points: np.ndarray, seed: int = 0) -> float | None:
     """The spacing across the scan lines of ``points`` (N, 3) when they are a surface scanned in
-    lines (thin across in :data:`THIN_SHARE` of their neighbourhoods, not one chain, the gap
+    lines (thin across in :data:`THIN_SHARE` of their own neighbourhoods, not a curve, the gap
     :data:`MIN_GAP_RATIO` spacings or more), else None."""
     points = np.asarray(points, np.float64)
-    if len(points) <= NEIGHBOURS or thin_share(points, seed) < THIN_SHARE or \
-            chain_share(points, seed) >= CHAIN_SHARE:
+    if len(points) <= NEIGHBOURS or thin_share(points, seed, dense=True) < THIN_SHARE or \
+            is_curve_cloud(points, seed):
         return None
     centres = judged_points(points, seed)
     tree = cKDTree(points)

@@ -123,3 +123,41 @@ def test_the_automatic_route_fits_an_unordered_planar_ring_as_a_curve(tmp_path, 
     assert "one-dimensional" in captured.err and ": a curve" in captured.err
     assert len(_written_curves(out)) == 1    # one curve, not a network of patches
     assert "closed curve" in captured.out
+
+
+def _noisy_ring(count: int, seed: int = 1) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    angle = rng.uniform(0.0, 2.0 * np.pi, count)
+    points = np.column_stack([2.0 * np.cos(angle), np.sin(angle), np.zeros(count)])
+    points[:, :2] += rng.normal(scale=0.01, size=(count, 2))
+    return points
+
+
+@pytest.mark.parametrize("count", [2000, 20000])
+def test_a_densely_sampled_noisy_ring_is_a_curve_and_its_noise_is_read_whole(count):
+    """12 neighbours of 20,000 points span a stretch of the ring narrower than its noise: the
+    ring was no curve (thin in 0.6% of them) and its noise read 0.0028 for a sigma of 0.01."""
+    from nurbs_core.fitting.curve_core import curve_noise
+
+    points = _noisy_ring(count)
+    assert is_curve_cloud(points)
+    assert curve_noise(points[:, :2]) == pytest.approx(0.01, rel=0.3)
+
+
+@pytest.mark.parametrize("count", [20, 40])
+def test_a_small_outline_is_a_curve(count):
+    assert is_curve_cloud(_ellipse(count))
+
+
+def test_the_automatic_route_fits_a_curve_to_the_points_as_listed(tmp_path, capsys):
+    """A closed outline whose last row repeats the first: --curve fits all 61 rows; the
+    automatic route, which reads the cloud as a surface first, fitted the 60 merged ones."""
+    points = _ellipse(60)
+    source = tmp_path / "closed.xyz"
+    np.savetxt(source, np.vstack([points, points[:1]]))
+    assert main([str(source), "-o", str(tmp_path / "auto.json")]) == 0
+    automatic = capsys.readouterr().err
+    assert main([str(source), "-o", str(tmp_path / "curve.json"), "--curve"]) == 0
+    forced = capsys.readouterr().err
+    assert "61 points; fitting a curve" in automatic
+    assert "61 points; fitting a curve" in forced
