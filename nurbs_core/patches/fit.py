@@ -40,7 +40,9 @@ where the scan ends instead of running on past it (and may slide along it).
 Before the cloud, a few *wrap* passes fit the network to the nearest points of the closed mesh
 from a grid on each patch (the layout's bilinear quads lie inside convex parts, so foot points
 from the cloud would pile up along its edges). After the passes settle, the control grid of
-every patch grows while Mallows' Cp falls (or until a tolerance is met). Coordinates are
+every patch grows while Mallows' Cp falls (or until a tolerance is met); a larger grid's passes
+end early once its Cp, still falling as slowly as it does, cannot come below the best grid's
+(:func:`_cannot_win`: the same network in fewer passes while its falls shrink). Coordinates are
 normalised (bounding-box diagonal 1, centred) inside; passes report the original units.
 """
 
@@ -105,6 +107,9 @@ START_SIZE = 6
 #: Cp charges this many noise variances per control point (Mallows' 2: only the normal
 #: component of a residual is measured, so a control point counts once, not three times).
 CP_PENALTY = 2.0
+#: A larger grid's trial ends once its Cp, falling by this many times its last pass's fall on
+#: each pass it has left, would still stay above the best grid's (:func:`_cannot_win`).
+CP_REACH = 2.0
 #: A grid has at most one control point per this many cloud points (the fairing holds sparse
 #: regions; Cp chooses among the sizes this allows).
 POINTS_PER_CONTROL = 1.25
@@ -215,20 +220,23 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
         if grid_size != network.size:
             network = _resized(network, grid_size)
         previous = math.inf
-        for _ in range(passes_per_grid):
+        penalty = CP_PENALTY * sigma ** 2 * len(network.control_points)
+        cps: list[float] = []
+        for done in range(1, passes_per_grid + 1):
             network, seam = solver.solve(network, patch, uv, q, huber_weights(dist, _spread(dist, sigma)))
             patch, uv, dist = _reassign(network, q, patch, uv)
             rms = float(np.sqrt(np.mean(dist ** 2)))
             settled = previous - rms < SETTLED * rms
             previous = rms
+            cps.append(huber_loss(dist, sigma) + penalty)
             yield NetworkPass(count, "fit", frame.outward(network), patch, uv * 1.0,
                               dist * frame.scale, rms * frame.scale, float(dist.mean()) * frame.scale,
                               seam, network.size)
             count += 1
-            if settled:
+            if settled or (tol is None and best is not None
+                           and _cannot_win(cps, best[0], passes_per_grid - done)):
                 break
-        rss = huber_loss(dist, sigma)
-        cp = rss + CP_PENALTY * sigma ** 2 * len(network.control_points)
+        cp = cps[-1]
         met = tol is not None and rms <= tol
         current = (cp, network, patch, uv, dist, rms)
         if best is None or (cp < best[0] if tol is None else True):
@@ -285,6 +293,19 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
                       rms * frame.scale, float(dist.mean()) * frame.scale, solver.last_seam,
                       network.size, done=True, met=tol is not None and rms <= tol, message=message,
                       cp=cp)
+
+
+def _cannot_win(cps: list[float], best: float, remaining: int) -> bool:
+    """Whether a larger grid whose passes so far gave Mallows' Cp ``cps`` cannot fall below the
+    ``best`` grid's Cp within its ``remaining`` passes: its Cp falls less from pass to pass as
+    the passes settle (a grid's passes converge), so even ``CP_REACH`` times its last fall on
+    every remaining pass leaves it above. On the bunny's 10,000 points the 8 x 8 grid stood
+    at 0.0906 after two passes against the 6 x 6 grid's 0.0745, falling by 0.0006 a pass
+    (0.0003, 0.0002, 0.0002 on the next passes, which it no longer runs)."""
+    if len(cps) < 2:
+        return False
+    fall = max(cps[-2] - cps[-1], 0.0)
+    return cps[-1] - CP_REACH * fall * remaining > best
 
 
 def _along_normals(ref: np.ndarray, tree: cKDTree, s: np.ndarray, normals: np.ndarray,

@@ -308,6 +308,35 @@ def test_a_network_fit_checks_the_layouts_own_patch_count_and_grows_within_the_b
     assert max(sizes) <= 8
 
 
+def test_a_larger_grid_that_cannot_win_on_cp_is_left_after_two_passes():
+    """A grid's trial ends once its Cp, falling twice as fast as on its last pass for every
+    pass it has left, would stay above the best grid's; a Cp still falling that fast goes on."""
+    from nurbs_core.patches.fit import _cannot_win
+
+    assert not _cannot_win([0.0912], 0.0745, 5)             # one pass: no fall measured yet
+    assert _cannot_win([0.0912, 0.0906], 0.0745, 4)         # the bunny's 8 x 8 trial
+    assert not _cannot_win([0.0912, 0.0806], 0.0745, 4)     # falling fast: it may still win
+    assert not _cannot_win([0.0912, 0.0906], 0.0910, 0)      # already below the best
+
+
+def test_leaving_a_losing_grid_early_gives_the_same_network_in_fewer_passes(monkeypatch):
+    """On a blob over the cube's layout the 16 x 16 grid loses on Cp to the 14 x 14 one: its
+    trial stops early, and the network and its foot points are those of the full trial."""
+    from nurbs_core.patches import fit
+
+    points = samples.blob(3000).points
+    centre = points.mean(axis=0)
+    vertices = centre + CUBE_VERTICES * np.ptp(points, axis=0) / 2.0
+    early = list(fit_network(points, vertices, CUBE_QUADS, points))
+    monkeypatch.setattr(fit, "_cannot_win", lambda *args: False)
+    full = list(fit_network(points, vertices, CUBE_QUADS, points))
+    assert len(early) < len(full)
+    assert early[-1].size == full[-1].size
+    np.testing.assert_array_equal(early[-1].network.control_points,
+                                  full[-1].network.control_points)
+    np.testing.assert_array_equal(early[-1].uv, full[-1].uv)
+
+
 def test_nurbs_fit_refuses_a_network_too_large_for_memory_before_it_grows(tmp_path):
     """nurbs-fit on a 2,000-point sphere: --patches 2000 --patch-size 40 (23.7 GB before) is
     refused at once; --patch-size 40 with the count left to the layout (29 patches, 2.5 GB and
