@@ -40,7 +40,6 @@ EXPORT_FORMATS = (
 )
 CAD_INSTALL_HINT = 'pip install "nurbs-studio[cad]"'
 #: files read whole (:mod:`nurbs_core.io.cad_shape`): a solid when their faces are trimmed
-SHAPE_SUFFIXES = (".step", ".stp", ".iges", ".igs", ".brep")
 
 
 @dataclass
@@ -137,7 +136,9 @@ def _load_one(path: Path, loaded: LoadedFiles, cancel: threading.Event | None):
                                      read_points=points))
         loaded.stated_units[path.name] = units_of_file(path)
         return
-    if path.suffix.lower() in SHAPE_SUFFIXES:  # STEP, IGES, .brep: a solid when trimmed
+    from nurbs_core.io.cad_shape import SHAPE_KINDS
+
+    if path.suffix.lower() in SHAPE_KINDS:  # STEP, IGES, .brep: a solid when trimmed
         from nurbs_core.io.cad_shape import read_cad_content
 
         content = read_cad_content(path)  # checks the file as the engine's readers do

@@ -80,7 +80,7 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
     print(f"patches: {quality.patches} ({quality.size}x{quality.size} control points each, "
           f"bicubic); {result.passes} passes in {sum(result.timings.values()):.2f} s "
           f"({', '.join(f'{k} {v:.1f} s' for k, v in result.timings.items())})")
-    if result.stiffness > options.stiffness:
+    if result.stiffness > options.stiffness or result.seam_weight > options.seam_weight:
         print(f"noisy scan (noise estimate over {NOISE_FAIRING_FROM:.1%} of the diagonal): "
               f"stiffness {result.stiffness:.3g} and seam weight {result.seam_weight:.3g} (the "
               f"{options.stiffness:g} and {options.seam_weight:g} asked for, raised with the "

@@ -252,6 +252,8 @@ def _thin_tips(points: np.ndarray, normals: np.ndarray, blocked: np.ndarray, gri
     None to keep the grid's mesh."""
     # stray returns lie off every surface: a tip is missed by the scan's own points
     kept = ~stray_points(points, tree)
+    if not kept.any():
+        return None
     missed = cKDTree(vertices).query(points[kept])[0].max()
     if missed <= MISSED_TIP * grid.cell or not poisson.available():
         return None

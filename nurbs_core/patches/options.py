@@ -84,7 +84,9 @@ def _number(value: object) -> bool:
 class PatchOptions:
     """Settings of a network fit. patches: "auto" or a target patch count (>= 4); size: control
     points per patch side (None: grow while Cp falls); degree: of every patch; stiffness:
-    fairing weight relative to the data term; seam_weight: of tangent continuity; tolerance: RMS
+    fairing weight relative to the data term; seam_weight: of tangent continuity (both raised
+    with the noise over a scan noisier than 0.5% of its diagonal, whoever set them:
+    :func:`nurbs_core.patches.defaults.noise_weights`); tolerance: RMS
     distance to reach (cloud units, None: automatic); max_size: largest control grid per side;
     max_hole: the widest opening of the scan sealed by a smooth cap (cloud units; None: 10% of
     the diagonal; 0: none); creases: find the scan's creases and lay patch boundaries on them,

@@ -11,6 +11,8 @@ Open3D is imported on first use; :func:`available` says whether it can be.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 #: Octree depth: the finest cells are the bounding cube (``SCALE`` x the cloud's largest side)
@@ -22,8 +24,9 @@ DEPTH = 8
 SCALE = 1.1
 
 
+@functools.cache
 def available() -> bool:
-    """Whether Open3D can be imported (it needs the system's libusb-1.0 on Linux)."""
+    """Whether Open3D can be imported (it needs the system's libusb-1.0 on Linux); asked once."""
     try:
         import open3d  # noqa: F401
     except (ImportError, OSError):

@@ -282,6 +282,12 @@ def test_stray_returns_are_not_thin_tips(monkeypatch):
     mesh = open_mesh(points)
     monkeypatch.setattr(poisson, "available", lambda: False)
     grid_mesh = open_mesh(points)
+    from scipy.spatial import cKDTree
+
+    from nurbs_core.patches.open_mesh import MISSED_TIP
+
+    # the premise: a stray lies as far from the grid's mesh as a lost tip would
+    assert cKDTree(grid_mesh.vertices).query(points)[0].max() > MISSED_TIP * grid_mesh.cell
     assert np.array_equal(mesh.faces, grid_mesh.faces)
     assert np.allclose(mesh.vertices, grid_mesh.vertices)
 
