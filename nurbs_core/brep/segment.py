@@ -615,23 +615,23 @@ def _cylinder_rival(best: tuple[Primitive, np.ndarray], points: np.ndarray,
                     graph: scipy.sparse.csr_matrix, tolerance: float, reach: float,
                     axes: np.ndarray | None = None) -> tuple[Primitive, np.ndarray]:
     """The round's winner (surface, its points (indices)), or, when it is a sphere, a
-    cylinder that explains its points better. Either the cylinder fitted by least squares on
-    them when it holds more of the free points (``free_index``), weighted as the round weighs
-    types (:func:`_weighted`), or when the distances decide for it: its sum
-    of squared distances to the sphere's points is smaller by more than its one parameter more
-    is worth (the Bayesian information criterion: noise sigma squared times the log of their
-    count; the noise is a third of the tolerance), and it holds at least :data:`RIVAL_SHARE`
-    of the sphere's count of the free points (``free_index``), unbiased. A belt around a
-    sphere's equator, short along the axis, lies on a cylinder within the tolerance too, and
-    counting inliers cannot tell the two apart: a flange's rim (radius 1, 0.2 high) was taken
-    for a sphere, whose normals even agreed better with the rim's blurred ones beside its two
-    edges (each neighbourhood reaches over them), 1,839 inliers to the cylinder's 1,729. The
-    distances measure the sag a sphere adds along the axis; a sphere's own band (a rounded
-    corner, a dome) lies on no cylinder. Or, with ``axes`` (K, 3; :func:`_axes`), the
-    cylinder along one of them whose circle fits the sphere's points (:func:`_circle_along`)
-    when it holds more of the free points, weighted: a
-    few dozen points of a counterbore's wall, whose blurred normals meet as a sphere's do,
-    fit no free cylinder."""
+    cylinder that explains its points better, refined on the free points it holds (of
+    ``free_index``; unbiased, plausible). Its rivals: the cylinder fitted by least squares on
+    the sphere's points (:func:`_belt_cylinder`), when it holds more of the free points
+    weighted as the round weighs types (:func:`_weighted`), or when the distances decide for
+    it: its sum of squared distances to the sphere's points is smaller by more than its one
+    parameter more is worth (the Bayesian information criterion: noise sigma squared times
+    the log of their count; the noise is a third of the tolerance) and it holds at least
+    :data:`RIVAL_SHARE` of the sphere's count. A belt around a sphere's equator, short along
+    the axis, lies on a cylinder within the tolerance too, and counting inliers cannot tell the
+    two apart: a flange's rim (radius 1, 0.2 high) was taken for a sphere, whose normals even
+    agreed better with the rim's blurred ones beside its two edges (each neighbourhood reaches
+    over them), 1,839 inliers to the cylinder's 1,729. The distances measure the sag a sphere
+    adds along the axis; a sphere's own band (a rounded corner, a dome) lies on no cylinder.
+    And with ``axes`` (K, 3; :func:`_axes`, in retried rounds), the cylinders along them whose
+    circles fit the sphere's points (:func:`_circle_along`), when they hold more of the free
+    points, weighted: a few dozen points of a counterbore's wall, whose blurred normals meet as
+    a sphere's do, fit no free cylinder."""
     surface, members = best
     if surface.kind != "sphere" or len(members) < 8:
         return best
