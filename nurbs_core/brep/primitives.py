@@ -187,6 +187,29 @@ def cylinder_from(p: np.ndarray, n: np.ndarray) -> Primitive | None:
     return Primitive("cylinder", origin, axis, radius=radius)
 
 
+def cylinder_along(axis: np.ndarray, p: np.ndarray, n: np.ndarray) -> Primitive | None:
+    """The cylinder along a given unit ``axis`` (3,) through two points p (2, 3) with normals
+    n (2, 3): the centre where the normals' lines cross once projected across the axis. Only
+    the normals' parts across the axis count, so normals tilted along it (blurred beside the
+    edges of a short wall, a counterbore's) still give the wall's cylinder."""
+    axis = _unit(np.asarray(axis, np.float64))
+    first, second = axis_frame(axis)
+    flat = np.stack([p @ first, p @ second], -1)
+    direction = np.stack([n @ first, n @ second], -1)
+    length = np.linalg.norm(direction, axis=1)
+    if length.min() < np.sin(np.radians(30.0)):
+        return None  # a normal along the axis: the point is on no wall around it
+    direction = direction / length[:, None]
+    matrix = np.stack([direction[0], -direction[1]], -1)
+    if abs(np.linalg.det(matrix)) < np.sin(np.radians(1.0)):
+        return None
+    t = np.linalg.solve(matrix, flat[1] - flat[0])
+    centre2 = flat[0] + t[0] * direction[0]
+    radius = float(np.linalg.norm(flat - centre2, axis=1).mean())
+    origin = centre2[0] * first + centre2[1] * second
+    return Primitive("cylinder", origin, axis, radius=radius)
+
+
 def cone_from(p: np.ndarray, n: np.ndarray) -> Primitive | None:
     """The cone through three points p (3, 3) with normals n (3, 3): the apex where the three
     tangent planes meet, the axis across the three unit directions from the apex."""

@@ -15,8 +15,14 @@ detection"), written for numpy:
    plane does not take distant coplanar points across a gap. A region takes the simplest type
    that explains as many of its points (within 3%); a sphere that won gives way to the cone
    fitted by least squares on its points when that cone holds more (weighted as the round
-   weighs them: a cone's band lies on a sphere within the tolerance, :func:`_cone_rival`).
-   Rounds stop when no surface explains :func:`min_region` points.
+   weighs them: a cone's band lies on a sphere within the tolerance, :func:`_cone_rival`),
+   and before it to a cylinder that explains its points better (a short belt around a
+   sphere's equator lies on a cylinder too: :func:`_cylinder_rival`, by count or by the
+   distances' information criterion). A round won by under :func:`min_region` points is drawn
+   again (:data:`FAILED_ROUND_RETRIES`) with its seeds among the free points that no surface
+   found holds within the tolerance (late in the search most free points are the found
+   faces' blurred edge points) and cylinders along the axes found (:func:`_axes`); the
+   rounds stop when such retries fail too.
    **Narrow faces** (a thin plate's rims, a few spacings wide, where no normal is the face's
    own): planes through three nearby leftover points, scored by distance alone
    (:func:`_narrow_planes`).
@@ -50,7 +56,9 @@ from scipy.spatial import cKDTree
 from nurbs_core.brep.primitives import (
     SIMPLICITY,
     Primitive,
+    axis_frame,
     cone_from,
+    cylinder_along,
     cylinder_from,
     fit_kind,
     plane_through,
@@ -99,6 +107,14 @@ ROUND_REFINE_POINTS = 1000
 #: times before the search ends (a turned part scanned from above lost its whole segmentation to
 #: one such round); later rounds end the search as before (a freeform scan's second round)
 EMPTY_ROUND_RETRIES = 2
+#: a round whose winner holds under min_region points is drawn again this many times, its
+#: seeds among the free points that no surface found lies within the tolerance of, while
+#: there are at least RETRY_POINTS times min_region of them (smooth); then the search ends
+FAILED_ROUND_RETRIES = 3
+RETRY_POINTS = 5
+#: a cylinder that the distances prefer to a sphere that won a round holds at least this share
+#: of the sphere's count of points (:func:`_cylinder_rival`)
+RIVAL_SHARE = 0.9
 #: a candidate's points count this much less per step along SIMPLICITY (a torus needs about
 #: 1.5 times the points of a plane to win a round)
 COMPLEXITY = 0.9
@@ -172,12 +188,15 @@ def _inliers(surface: Primitive, points: np.ndarray, normals: np.ndarray,
 
 
 def _candidates(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np.ndarray,
-                neighbours: np.ndarray, rng: np.random.Generator, reach: float
-                ) -> list[Primitive]:
-    """Candidates of every type from minimal samples near random seeds among ``free`` (mask)."""
+                neighbours: np.ndarray, rng: np.random.Generator, reach: float,
+                axes: np.ndarray | None = None) -> list[Primitive]:
+    """Candidates of every type from minimal samples near random seeds among ``free`` (mask);
+    with ``axes`` (K, 3), each sample also gives a cylinder along one of them, in turn
+    (:func:`~nurbs_core.brep.primitives.cylinder_along`; no random draw, so the other
+    candidates stay those drawn without them)."""
     found: list[Primitive] = []
     free_index = np.flatnonzero(free)
-    for _ in range(CANDIDATES):
+    for trial in range(CANDIDATES):
         seed = int(free_index[rng.integers(len(free_index))])
         near = neighbours[seed][free[neighbours[seed]]]
         if len(near) >= 3:
@@ -193,11 +212,29 @@ def _candidates(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np
         p, n = points[pick], normals[pick]
         patch = rng.choice(ball, min(len(ball), 30), replace=False)
         torus = torus_from(points[patch], normals[patch]) if len(patch) >= 10 else None
+        along = (_along_axis(axes[trial % len(axes)], seed, ball, points, normals)
+                 if axes is not None and len(axes) else None)
         for candidate in (sphere_from(p[:2], n[:2]), cylinder_from(p[:2], n[:2]),
-                          cone_from(p, n), torus):
+                          cone_from(p, n), torus, along):
             if candidate is not None and _plausible(candidate, points[seed], reach):
                 found.append(candidate)
     return found
+
+
+def _along_axis(axis: np.ndarray, seed: int, ball: np.ndarray, points: np.ndarray,
+                normals: np.ndarray) -> Primitive | None:
+    """The cylinder along ``axis`` (3,) through the seed (an index) and the point of its ball
+    (indices) at the median distance from it among those whose normals lie across the axis
+    (within 60 degrees; a short wall's ball holds mostly its floor's and rim's points, on no
+    wall around the axis), or None. No random draw."""
+    across = ball[np.abs(normals[ball] @ axis) < np.cos(np.radians(30.0))]
+    across = across[across != seed]
+    if len(across) == 0:
+        return None
+    distance = np.linalg.norm(points[across] - points[seed], axis=1)
+    other = int(across[np.argsort(distance)[len(across) // 2]])
+    pair = np.array([seed, other])
+    return cylinder_along(axis, points[pair], normals[pair])
 
 
 def _plausible(surface: Primitive, seed: np.ndarray, reach: float) -> bool:
@@ -280,24 +317,47 @@ def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
     smallest = min_region(count)
     rounds = 0
     empty = 0
+    # the free points no surface found so far holds within the tolerance (by distance): where
+    # the faces still missing are, apart from the found faces' blurred edge points
+    unexplained = np.ones(count, bool)
+    # a failed round's retries draw from their own generator: the later stages' draws (narrow
+    # planes) stay those of a search that found the same surfaces
+    retry_rng = np.random.default_rng([seed, 1])
+    failed = 0
     while (free.sum() >= smallest and len(surfaces) < MAX_REGIONS
            and time.process_time() - cpu_started < time_limit):
         rounds += 1
-        found = _detect_one(points, normals, tree, free, free & smooth if (
-            free & smooth).sum() >= smallest else free, neighbours, graph, rng, tolerance,
-                            0.25 * diagonal)
+        if failed:
+            samples = free & smooth & unexplained
+            found = _detect_one(points, normals, tree, free, samples, neighbours, graph,
+                                retry_rng, tolerance, 0.25 * diagonal, _axes(surfaces))
+        else:
+            found = _detect_one(points, normals, tree, free, free & smooth if (
+                free & smooth).sum() >= smallest else free, neighbours, graph, rng, tolerance,
+                                0.25 * diagonal)
         if found is None and not surfaces and empty < EMPTY_ROUND_RETRIES:
             empty += 1
             rounds -= 1
             continue
         empty = 0
         if found is None or len(found[1]) < smallest:
-            break
+            # a round won by a few points (a 7-point plane across a bolt hole's edge) does
+            # not end the search while many points lie on no surface found: its seeds were
+            # drawn among the found faces' blurred edge points, which are most of the free
+            # ones late in the search; it is drawn again among the unexplained points
+            rounds -= 1
+            if (failed >= FAILED_ROUND_RETRIES
+                    or (free & smooth & unexplained).sum() < RETRY_POINTS * smallest):
+                break
+            failed += 1
+            continue
+        failed = 0
         surface, members = found
         if rounds == 1 and len(members) < give_up * count:
             break
         surfaces.append(surface)
         free[members] = False
+        unexplained &= surface.distance(points) >= tolerance
     if len(surfaces) < MAX_REGIONS and free.sum() >= smallest:
         surfaces += _narrow_planes(points, normals, free, graph, rng, tolerance, smallest,
                                    MAX_REGIONS - len(surfaces))
@@ -476,12 +536,13 @@ def _narrow_plane(points: np.ndarray, normals: np.ndarray, searched: np.ndarray,
 
 def _detect_one(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np.ndarray,
                 samples: np.ndarray, neighbours: np.ndarray, graph: scipy.sparse.csr_matrix,
-                rng: np.random.Generator, tolerance: float, reach: float
-                ) -> tuple[Primitive, np.ndarray] | None:
+                rng: np.random.Generator, tolerance: float, reach: float,
+                axes: np.ndarray | None = None) -> tuple[Primitive, np.ndarray] | None:
     """The surface of one round and its points (indices), or None. ``free``: the points not
-    yet taken (mask); ``samples``: those that candidates are drawn from (mask)."""
+    yet taken (mask); ``samples``: those that candidates are drawn from (mask); ``axes``
+    (K, 3): directions that cylinder candidates may also take (:func:`_candidates`)."""
     free_index = np.flatnonzero(free)
-    candidates = _candidates(points, normals, tree, samples, neighbours, rng, reach)
+    candidates = _candidates(points, normals, tree, samples, neighbours, rng, reach, axes)
     if not candidates:
         return None
     subset = free_index
@@ -529,7 +590,89 @@ def _detect_one(points: np.ndarray, normals: np.ndarray, tree: cKDTree, free: np
     if surface is not best[0]:
         mask = _inliers(surface, points[free_index], normals[free_index], tolerance)
         best = (surface, _largest_piece(graph, free_index[mask]))
+    best = _cylinder_rival(best, points, normals, free_index, graph, tolerance, reach, axes)
     return _cone_rival(best, points, normals, free_index, graph, tolerance, reach)
+
+
+def _axes(surfaces: list[Primitive]) -> np.ndarray:
+    """The distinct directions (K, 3) of the surfaces found: planes' normals, the axes of
+    cylinders, cones and tori (within 3 degrees one). A hole is drilled square to a face or
+    along another hole: a retry's cylinders take these axes too, since a short wall's normals,
+    blurred beside both its edges, give none (a counterbore 0.1 deep: the cylinder through
+    two of its points and their normals was tilted, a sphere took 18 of its 414 points).
+    Only retried rounds take them: in every round, cylinders along a thin plate's axes took
+    its rim (a half-cylinder of its blurred normals) and the solid lost it."""
+    found: list[np.ndarray] = []
+    for surface in surfaces:
+        if surface.kind != "sphere" and all(
+                abs(float(surface.axis @ axis)) < np.cos(np.radians(3.0)) for axis in found):
+            found.append(surface.axis)
+    return np.array(found).reshape(-1, 3)
+
+
+def _cylinder_rival(best: tuple[Primitive, np.ndarray], points: np.ndarray,
+                    normals: np.ndarray, free_index: np.ndarray,
+                    graph: scipy.sparse.csr_matrix, tolerance: float, reach: float,
+                    axes: np.ndarray | None = None) -> tuple[Primitive, np.ndarray]:
+    """The round's winner (surface, its points (indices)), or, when it is a sphere, a
+    cylinder that explains its points better, refined on the free points it holds (of
+    ``free_index``; unbiased, plausible). Its rivals: the cylinder fitted by least squares on
+    the sphere's points (:func:`_belt_cylinder`), when it holds more of the free points
+    weighted as the round weighs types (:func:`_weighted`), or when the distances decide for
+    it: its sum of squared distances to the sphere's points is smaller by more than its one
+    parameter more is worth (the Bayesian information criterion: noise sigma squared times
+    the log of their count; the noise is a third of the tolerance) and it holds at least
+    :data:`RIVAL_SHARE` of the sphere's count. A belt around a sphere's equator, short along
+    the axis, lies on a cylinder within the tolerance too, and counting inliers cannot tell the
+    two apart: a flange's rim (radius 1, 0.2 high) was taken for a sphere, whose normals even
+    agreed better with the rim's blurred ones beside its two edges (each neighbourhood reaches
+    over them), 1,839 inliers to the cylinder's 1,729. The distances measure the sag a sphere
+    adds along the axis; a sphere's own band (a rounded corner, a dome) lies on no cylinder.
+    And with ``axes`` (K, 3; :func:`_axes`, in retried rounds), the cylinders along them whose
+    circles fit the sphere's points (:func:`_circle_along`), when they hold more of the free
+    points, weighted: a few dozen points of a counterbore's wall, whose blurred normals meet as
+    a sphere's do, fit no free cylinder."""
+    surface, members = best
+    if surface.kind != "sphere" or len(members) < 8:
+        return best
+    noise = tolerance / 3.0
+
+    def held_by(cylinder: Primitive) -> np.ndarray:
+        mask = _inliers(cylinder, points[free_index], normals[free_index], tolerance)
+        return _largest_piece(graph, free_index[mask])
+
+    def acceptable(cylinder: Primitive, held: np.ndarray) -> bool:
+        return (len(held) >= 4 and _plausible(cylinder, points[held].mean(axis=0), reach)
+                and _unbiased(cylinder, points[held], tolerance))
+
+    rivals: list[tuple[Primitive, np.ndarray]] = []
+    fitted = _belt_cylinder(surface, points[members], normals[members])
+    if fitted is not None:
+        gain = float(np.sum(surface.signed(points[members]) ** 2)
+                     - np.sum(fitted.signed(points[members]) ** 2))
+        held = held_by(fitted)
+        closer = gain > noise ** 2 * math.log(len(members)) and len(held) >= (
+            RIVAL_SHARE * len(members))
+        if closer or _weighted(fitted, held) > _weighted(surface, members):
+            rivals.append((fitted, held))
+    for axis in (axes if axes is not None else np.zeros((0, 3))):
+        along = _circle_along(axis, points[members])
+        if along is None:
+            continue
+        held = held_by(along)
+        if _weighted(along, held) > _weighted(surface, members):
+            rivals.append((along, held))
+    rivals = [rival for rival in rivals if acceptable(*rival)]
+    if not rivals:
+        return best
+    cylinder, held = max(rivals, key=lambda rival: len(rival[1]))
+    try:  # refined on all the points it holds, kept when it holds as many
+        better = refine(cylinder, points[held])
+    except (ValueError, np.linalg.LinAlgError):
+        return cylinder, held
+    refined = held_by(better)
+    return (better, refined) if len(refined) >= len(held) and acceptable(
+        better, refined) else (cylinder, held)
 
 
 def _cone_rival(best: tuple[Primitive, np.ndarray], points: np.ndarray, normals: np.ndarray,
@@ -569,6 +712,54 @@ def _cone_rival(best: tuple[Primitive, np.ndarray], points: np.ndarray, normals:
     mask = _inliers(better, points[free_index], normals[free_index], tolerance)
     refined = _largest_piece(graph, free_index[mask])
     return (better, refined) if len(refined) >= len(held) else (cone, held)
+
+
+def _circle_along(axis: np.ndarray, points: np.ndarray) -> Primitive | None:
+    """The cylinder along ``axis`` (3,) whose circle fits the points (M >= 3, 3) projected
+    across it best algebraically (Kasa's fit), or None when they lie on a line."""
+    first, second = axis_frame(axis)
+    x, y = points @ first, points @ second
+    design = np.c_[x, y, np.ones(len(points))]
+    try:
+        solution, *_ = np.linalg.lstsq(design, x * x + y * y, rcond=None)
+    except np.linalg.LinAlgError:
+        return None
+    cx, cy = solution[0] / 2, solution[1] / 2
+    squared = solution[2] + cx * cx + cy * cy
+    if squared <= 0:
+        return None
+    return Primitive("cylinder", cx * first + cy * second, np.asarray(axis, np.float64),
+                     radius=float(np.sqrt(squared)))
+
+
+def _belt_cylinder(sphere: Primitive, points: np.ndarray, normals: np.ndarray
+                   ) -> Primitive | None:
+    """The cylinder that fits a sphere's region (points (M, 3), normals (M, 3)) best by least
+    squares, of two starts: along the region's thinnest direction (a belt's axis) through the
+    sphere's centre, and the cylinder of the region's normals (``fit_kind``; blurred normals
+    beside a short wall's edges tilt its axis); None when neither refines."""
+    sample = np.linspace(0, len(points) - 1, min(len(points), ROUND_REFINE_POINTS)).astype(int)
+    _, _, vt = np.linalg.svd(points[sample] - points[sample].mean(axis=0), full_matrices=False)
+    axis = vt[2]
+    radial = points[sample] - sphere.origin
+    radial -= np.outer(radial @ axis, axis)
+    starts = [Primitive("cylinder", sphere.origin, axis,
+                        radius=float(np.linalg.norm(radial, axis=1).mean()))]
+    try:
+        by_normals = fit_kind("cylinder", points[sample], normals[sample])
+    except (ValueError, np.linalg.LinAlgError):
+        by_normals = None
+    if by_normals is not None:
+        starts.append(by_normals)
+    fitted = []
+    for start in starts:
+        try:
+            fitted.append(refine(start, points))
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+    if not fitted:
+        return None
+    return min(fitted, key=lambda cylinder: float(np.sum(cylinder.signed(points) ** 2)))
 
 
 def _tube_arc(torus: Primitive, points: np.ndarray) -> float:
