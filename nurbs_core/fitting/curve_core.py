@@ -336,8 +336,10 @@ def iter_curve_fit(target: np.ndarray, config: FitConfig,
     verdict = ("tolerance met" if last.met else
                f"tolerance {tolerance * cloud.scale:.3g} not met at the cap")
     written = len(last.control_points) + (config.degree_u if order.closed else 0)
-    message = (f"least-squares {shape} curve, {written} control points, "
-               f"points {where}; {verdict}")
+    # a closed curve is a periodic spline written as a clamped one: `degree` more control points
+    count = (f"{written} control points (a periodic spline of {len(last.control_points)}, "
+             "written clamped)" if order.closed else f"{written} control points")
+    message = f"least-squares {shape} curve, {count}, points {where}; {verdict}"
     stopped = stop is not None and stop.stopped
     yield FitSnapshot(iteration=index + 1,
                       geometry=_arrays(last, config, order.closed, cloud.center, cloud.scale),
