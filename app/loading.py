@@ -39,7 +39,6 @@ EXPORT_FORMATS = (
     ("Control points CSV", ".csv", False),
 )
 CAD_INSTALL_HINT = 'pip install "nurbs-studio[cad]"'
-#: files read whole (:mod:`nurbs_core.io.cad_shape`): a solid when their faces are trimmed
 
 
 @dataclass

@@ -213,9 +213,10 @@ def _measure(surface: SurfaceArrays, points: np.ndarray, normals: np.ndarray | N
     if normals is not None and np.shape(normals) != points.shape:
         raise ValueError(f"normals must have shape {points.shape}, got {np.shape(normals)}")
     if normals is None:
+        from nurbs_core.curve_cloud import judged_points
         from nurbs_core.surfacing.scan_lines import line_centroids, line_gap
 
-        gap = line_gap(points, seed)
+        gap = line_gap(judged_points(points, seed, max_points), seed)
         if gap is not None:
             points = line_centroids(points, gap)
     count = len(points)
@@ -363,6 +364,11 @@ def surface_quality(surface: SurfaceArrays | NurbsSurface, points: np.ndarray, *
     running on past the cloud's edge does not pile up on the boundary points. These two are
     computed on the first ``min(N, samples^2 / 2)`` points of the subset (at least two samples
     per cell) and the normals on its first 50,000 points.
+
+    A surface scanned in lines (:mod:`nurbs_core.surfacing.scan_lines`) without ``normals`` is
+    judged on its points' centroids in cells half its lines' gap wide: every measure above from
+    a subset of the points (the spacing, the noise, averaged over each cell, and the rest) is
+    then of the centroids.
 
     ``area``: Gauss-Legendre quadrature of ``|S_u x S_v|`` per knot span; ``reference_area``
     (default: the area of ``nurbs_core.surfacing.mesh.cloud_mesh`` of the cloud or its subset);

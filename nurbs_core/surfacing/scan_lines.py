@@ -23,8 +23,11 @@ ACROSS_COSINE = 0.5
 #: half as many spacings).
 FIRST_SEARCH, LAST_SEARCH = 64, 1024
 #: A cloud is scanned in lines when the spacing across its lines is at least this many times the
-#: spacing along them (finer: its neighbourhoods are not thin, the fans hold).
+#: spacing along them (finer: its neighbourhoods are not thin, the fans hold), and its
+#: centroids (:func:`line_centroids`) are at least MIN_CENTROIDS (a "gap" between two separate
+#: small curves, or across one ring, leaves a few dozen).
 MIN_GAP_RATIO = 2.5
+MIN_CENTROIDS = 200
 
 
 def line_gap(points: np.ndarray, seed: int = 0) -> float | None:
@@ -60,7 +63,9 @@ def line_gap(points: np.ndarray, seed: int = 0) -> float | None:
     if len(finite) < 0.5 * len(centres):
         return None
     gap = float(np.median(finite))
-    return gap if gap >= MIN_GAP_RATIO * along else None
+    if gap < MIN_GAP_RATIO * along or len(line_centroids(points, gap)) < MIN_CENTROIDS:
+        return None  # no gap wider than the fans hold, or one found across separate objects
+    return gap
 
 
 #: The cells a cloud scanned in lines is averaged in are this share of the gap wide: two cells

@@ -81,7 +81,8 @@ def test_the_default_curve_loss_takes_least_squares_and_other_losses_the_gradien
 
 @pytest.mark.parametrize(("name", "points", "curve"), [
     ("helix", None, True), ("noisy ring", None, True), ("flat square", None, False),
-    ("sphere", None, False), ("saddle in 40 scan lines", None, False)])
+    ("sphere", None, False), ("saddle in 40 scan lines", None, False),
+    ("coil of 20 turns", None, True)])
 def test_is_curve_cloud(name, points, curve):
     rng = np.random.default_rng(1)
     if name == "helix":
@@ -90,6 +91,9 @@ def test_is_curve_cloud(name, points, curve):
     elif name == "noisy ring":
         points = _ellipse(400) + np.column_stack([rng.normal(scale=0.01, size=(400, 2)),
                                                   np.zeros(400)])
+    elif name == "coil of 20 turns":  # a random subset jumped between its turns
+        angle = np.linspace(0.0, 40.0 * np.pi, 20000)
+        points = np.column_stack([np.cos(angle), np.sin(angle), 0.3 * angle / (2 * np.pi)])
     elif name == "saddle in 40 scan lines":  # a line scanner's surface: thin everywhere too
         u, v = np.meshgrid(np.linspace(-1, 1, 500), np.linspace(-1, 1, 40))
         points = np.column_stack([u.ravel(), v.ravel(), (u ** 2 - v ** 2).ravel()])

@@ -317,6 +317,8 @@ def test_a_larger_grid_that_cannot_win_on_cp_is_left_after_two_passes():
     assert _cannot_win([0.0912, 0.0906], 0.0745, 4)         # the bunny's 8 x 8 trial
     assert not _cannot_win([0.0912, 0.0806], 0.0745, 4)     # falling fast: it may still win
     assert not _cannot_win([0.0912, 0.0906], 0.0910, 0)      # already below the best
+    # one pass that rose (points reassigned) after a fast fall: the trial goes on
+    assert not _cannot_win([0.0912, 0.0806, 0.0810], 0.0745, 3)
 
 
 def test_leaving_a_losing_grid_early_gives_the_same_network_in_fewer_passes(monkeypatch):

@@ -24,9 +24,16 @@ def test_the_gap_across_scan_lines_is_found():
     assert 3000 < len(centroids) < 6000  # two cells along a line per line gap
 
 
+def _circle(count: int, centre: float = 0.0) -> np.ndarray:
+    angle = np.linspace(0.0, 2.0 * np.pi, count, endpoint=False)
+    return np.column_stack([centre + np.cos(angle), np.sin(angle), np.zeros(count)])
+
+
 @pytest.mark.parametrize("points", [
-    samples.saddle(3000).points, samples.blob(4000).points, _saddle_in_lines(200, 100)],
-    ids=["random sheet", "closed blob", "lines closer than their points"])
+    samples.saddle(3000).points, samples.blob(4000).points, _saddle_in_lines(200, 100),
+    _circle(2000), np.vstack([_circle(300), _circle(300, 3.0)])],
+    ids=["random sheet", "closed blob", "lines closer than their points", "a curve",
+         "two small circles"])
 def test_clouds_not_scanned_in_lines_have_no_gap(points):
     assert line_gap(points) is None
 
