@@ -79,6 +79,9 @@ def route_note(settings: Settings, shape: GeometryArrays | None,
 def _going_on(settings: Settings, fit: FitConfig, shape: GeometryArrays) -> str:
     """Start goes on from the current shape with the gradient fit: on the shape's own grid
     while the grid setting is the one it was made under, else resampled onto the grid set."""
+    if shape.kind == "curve":
+        return ("Start goes on from the current curve with the gradient fit: slower, and the "
+                "tolerance does not apply. Reset first to fit afresh by least squares.")
     grid = control_grid(shape)
     assert grid is not None and shape.kind == "surface", "a fitted surface"
     runs_on, asked = grid_setting(fit), grid_setting(settings.fit)

@@ -69,6 +69,9 @@ def test_planar_cloud_fits_a_2d_curve(qtbot, window, tmp_path):
     assert fitted["control_points"].shape[0] >= 8
     # on the arc: every point within a thousandth of the radius of the curve
     assert _distances_to(fitted, points[:, :2]).max() < 1e-3
+    # Start would go on from this curve with the gradient fit, and the dock says so (it said the
+    # settings took the fit off least squares)
+    assert "goes on from the current curve" in window.fit_panel.route_note()
     assert window.scene._meshes["curve"].n_points > 100
     assert window.scene._meshes["surface"].n_points == 0
 

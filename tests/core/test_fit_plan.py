@@ -64,6 +64,8 @@ def test_the_plan_of_curves_known_parameters_and_a_starting_shape():
     assert fit_plan(FitConfig(kind="curve")).stages == ("least_squares",)
     assert fit_plan(FitConfig(kind="curve", loss="p2s+hausdorff")).stages == ("gradient",)
     assert fit_plan(FitConfig(kind="curve", loss="p2s+hausdorff")).why == "curve"
+    # a curve that goes on from a fitted one: the gradient fit, because of the shape
+    assert fit_plan(FitConfig(kind="curve"), has_initial=True).why == "initial"
     assert fit_plan(FitConfig(), known=True).why == "known"
     assert fit_plan(FitConfig(solver="least_squares"), known=True).stages == ("exact",)
     plan = fit_plan(FitConfig(), has_initial=True)
