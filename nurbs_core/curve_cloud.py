@@ -9,6 +9,8 @@ not (their neighbourhoods spread in two directions).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -112,24 +114,47 @@ def chain_share(points: np.ndarray, seed: int = 0, dense: bool = False) -> float
     return longest / length if length > 0 else 0.0
 
 
-def thin_share(points: np.ndarray, seed: int = 0, dense: bool = False) -> float:
-    """The share of the neighbourhoods of the points (N, d), d = 2 or 3, whose spread across is
-    at most :data:`THIN_RATIO` of their spread along: of up to :data:`CURVE_POINTS` of them,
-    evenly spaced (:func:`even_points`), among themselves (a coarser scale), or with ``dense``
-    of up to :data:`JUDGED_POINTS` of them among all the points (the sampling's own scale). A
+@dataclass
+class Neighbourhoods:
+    """The judged points' neighbourhoods (:func:`neighbourhoods`): ``centres`` (M, d), the
+    ``tree`` over the points they are taken among, the neighbours' ``distances`` (M, k) (the
+    first 0, the centre itself), the principal ``spread`` (M, min(k, d)) and ``axes`` (M, d, d)
+    (rows: along first)."""
+
+    centres: np.ndarray
+    tree: cKDTree
+    distances: np.ndarray
+    spread: np.ndarray
+    axes: np.ndarray
+
+    def thin_share(self) -> float:
+        """The share whose spread across is at most :data:`THIN_RATIO` of their spread along."""
+        return float((self.spread[:, 1] <= THIN_RATIO * self.spread[:, 0]).mean())
+
+
+def neighbourhoods(points: np.ndarray, seed: int = 0, dense: bool = False) -> Neighbourhoods:
+    """The neighbourhoods of up to :data:`CURVE_POINTS` of the points (N, d), d = 2 or 3, evenly
+    spaced (:func:`even_points`), among themselves (a coarser scale), or with ``dense`` of up to
+    :data:`JUDGED_POINTS` of them among all the points (the sampling's own scale). A
     neighbourhood holds :data:`NEIGHBOURS` points, an eighth of a small cloud (at least
-    :data:`MIN_NEIGHBOURS`); 0 for fewer than 3 points."""
+    :data:`MIN_NEIGHBOURS`). At least 3 points."""
     points = np.asarray(points, np.float64)
-    if len(points) < 3:
-        return 0.0
     centres = judged_points(points, seed) if dense else even_points(points, seed)
     among = points if dense else centres
-    k = min(NEIGHBOURS, max(MIN_NEIGHBOURS, len(among) // 8))
-    _, index = cKDTree(among).query(centres, k=min(k, len(among)))
+    k = min(NEIGHBOURS, max(MIN_NEIGHBOURS, len(among) // 8), len(among))
+    tree = cKDTree(among)
+    distances, index = tree.query(centres, k=k)
     local = among[index] - among[index].mean(axis=1, keepdims=True)         # (M, k, d)
-    spread = np.linalg.svd(local, compute_uv=False)                          # (M, min(k, d))
-    thin = spread[:, 1] <= THIN_RATIO * spread[:, 0]
-    return float(thin.mean())
+    _, spread, axes = np.linalg.svd(local, full_matrices=False)
+    return Neighbourhoods(centres, tree, distances, spread, axes)
+
+
+def thin_share(points: np.ndarray, seed: int = 0, dense: bool = False) -> float:
+    """The share of the :func:`neighbourhoods` of the points (N, d) whose spread across is at most
+    :data:`THIN_RATIO` of their spread along; 0 for fewer than 3 points."""
+    if len(points) < 3:
+        return 0.0
+    return neighbourhoods(points, seed, dense).thin_share()
 
 
 def curve_measures(points: np.ndarray, seed: int = 0) -> tuple[float, float] | None:

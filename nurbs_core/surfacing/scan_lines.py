@@ -12,9 +12,8 @@ neighbouring lines."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from nurbs_core.curve_cloud import NEIGHBOURS, THIN_SHARE, is_curve_cloud, judged_points, thin_share
+from nurbs_core.curve_cloud import NEIGHBOURS, THIN_SHARE, is_curve_cloud, neighbourhoods
 
 #: A neighbour lies across the line through a point when its offset makes at least this angle's
 #: cosine ... at most this cosine with the line's direction (60 degrees and more from it).
@@ -35,15 +34,14 @@ def line_gap(points: np.ndarray, seed: int = 0) -> float | None:
     lines (thin across in :data:`THIN_SHARE` of their own neighbourhoods, not a curve, the gap
     :data:`MIN_GAP_RATIO` spacings or more), else None."""
     points = np.asarray(points, np.float64)
-    if len(points) <= NEIGHBOURS or thin_share(points, seed, dense=True) < THIN_SHARE or \
-            is_curve_cloud(points, seed):
+    if len(points) <= NEIGHBOURS:
         return None
-    centres = judged_points(points, seed)
-    tree = cKDTree(points)
-    distance, index = tree.query(centres, k=NEIGHBOURS + 1)
-    local = points[index] - points[index].mean(axis=1, keepdims=True)
-    direction = np.linalg.svd(local, full_matrices=False)[2][:, 0]         # (M, 3) along
-    along = float(np.median(distance[:, 1]))
+    hoods = neighbourhoods(points, seed, dense=True)
+    if hoods.thin_share() < THIN_SHARE or is_curve_cloud(points, seed):
+        return None
+    centres, tree = hoods.centres, hoods.tree
+    direction = hoods.axes[:, 0]                                             # (M, 3) along
+    along = float(np.median(hoods.distances[:, 1]))
     gaps = np.full(len(centres), np.inf)
     count = FIRST_SEARCH
     while count <= min(LAST_SEARCH, len(points)):
