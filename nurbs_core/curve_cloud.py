@@ -157,18 +157,20 @@ def thin_share(points: np.ndarray, seed: int = 0, dense: bool = False) -> float:
     return neighbourhoods(points, seed, dense).thin_share()
 
 
-def curve_measures(points: np.ndarray, seed: int = 0) -> tuple[float, float] | None:
+def curve_measures(points: np.ndarray, seed: int = 0, dense_thin: float | None = None
+                   ) -> tuple[float, float] | None:
     """(thin share, chain share) of the cloud (N, 2) or (N, 3) at the first scale at which it is
     a curve (see the module), or None: at least :data:`MIN_POINTS` finite points, thin across in
     :data:`THIN_SHARE` of their neighbourhoods (:func:`thin_share`) and one chain
     (:func:`chain_share`: not a surface scanned in lines), either among all of them (an outline
     with narrow gaps between its parts, the cat's legs) or among a subset (a noisy curve sampled
-    more densely than its noise is wide)."""
+    more densely than its noise is wide). ``dense_thin``: the dense thin share when the caller
+    has it."""
     points = np.asarray(points, np.float64)
     if len(points) < MIN_POINTS or not np.isfinite(points).all():
         return None
     for dense in (True, False):
-        thin = thin_share(points, seed, dense)
+        thin = dense_thin if dense and dense_thin is not None else thin_share(points, seed, dense)
         if thin >= THIN_SHARE:
             chain = chain_share(points, seed, dense)
             if chain >= CHAIN_SHARE:

@@ -167,7 +167,7 @@ class SolidPanel(QWidget):
         status = report.status if not warned else (
             "fitted with warnings: " + "; ".join(report.problems))
         if report.source:  # opened from a file: nothing was fitted
-            status = f"opened from {report.source}" + (
+            status = report.reason + (
                 f": {'; '.join(report.problems)}" if warned else "")
         self._set("status", status, WARNING_COLOR if warned else GOOD_COLOR)
         self._set("solid", report.summary(), None if report.sound else WARNING_COLOR)

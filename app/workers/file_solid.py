@@ -59,15 +59,14 @@ def face_rows(shape: Any) -> tuple[FaceRow, ...]:
     return tuple(rows)
 
 
-def _closed(shape: Any) -> bool:
-    """Whether the shape holds solids and every shell of it is closed."""
+def _closed(shape: Any, solids: int) -> bool:
+    """Whether the shape holds ``solids`` > 0 and every shell of it is closed."""
     from OCP.BRep import BRep_Tool
 
     from nurbs_core.occ_topology import subshapes
 
     shells = subshapes(shape, "SHELL")
-    return bool(subshapes(shape, "SOLID")) and bool(shells) and all(
-        BRep_Tool.IsClosed_s(shell) for shell in shells)
+    return solids > 0 and bool(shells) and all(BRep_Tool.IsClosed_s(shell) for shell in shells)
 
 
 def opened_solid(shape: Any, source: str) -> PartOutcome:
@@ -80,7 +79,8 @@ def opened_solid(shape: Any, source: str) -> PartOutcome:
     rows = face_rows(shape)
     if not rows:
         raise ValueError(f"{source}: the shape has no faces")
-    valid, closed = is_valid(shape), _closed(shape)
+    solids = len(subshapes(shape, "SOLID"))
+    valid, closed = is_valid(shape), _closed(shape, solids)
     tolerance = FILE_TOLERANCE_SHARE * bounding_diagonal(shape)
     if not tolerance > 0:
         raise ValueError(f"{source}: the shape has no size")
@@ -90,6 +90,6 @@ def opened_solid(shape: Any, source: str) -> PartOutcome:
                          0.0, tolerance, np.zeros(0), np.zeros(0, np.int64),
                          f"opened from {source}", time.perf_counter() - started,
                          open_shell=not closed,
-                         solids=max(1, len(subshapes(shape, "SOLID"))), source=source)
+                         solids=max(1, solids), source=source)
     return PartOutcome(report.reason, shape, report, display,
                        timings={"triangles": report.seconds})

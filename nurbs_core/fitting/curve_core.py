@@ -34,6 +34,7 @@ import scipy.sparse.linalg
 from scipy.interpolate import BSpline, make_lsq_spline
 from scipy.spatial import cKDTree
 
+from nurbs_core.curve_cloud import judged_points
 from nurbs_core.fitting.config import FitConfig, FitSnapshot, StopToken
 from nurbs_core.fitting.curve_order import curve_order
 from nurbs_core.fitting.normalised import normalise
@@ -84,11 +85,8 @@ def curve_noise(points: np.ndarray, max_points: int = 1000, seed: int = 0) -> fl
     k = min(NOISE_NEIGHBOURS, len(points))
     if k < 8:
         return 0.0
-    if len(points) > max_points:
-        points = points[np.random.default_rng(seed).choice(len(points), max_points,
-                                                           replace=False)]
-    centres = points
-    _, index = cKDTree(points).query(centres, k=k)
+    points = judged_points(points, seed, max_points)
+    _, index = cKDTree(points).query(points, k=k)
     local = points[index] - points[index].mean(axis=1, keepdims=True)      # (M, k, d)
     _, _, axes = np.linalg.svd(local, full_matrices=False)
     along = np.einsum("mkd,md->mk", local, axes[:, 0])                       # (M, k)
@@ -102,7 +100,7 @@ def curve_noise(points: np.ndarray, max_points: int = 1000, seed: int = 0) -> fl
     return float(np.median(rms))
 
 
-def control_cap(config: FitConfig, point_count: int, closed: bool) -> int:
+def control_cap(config: FitConfig, point_count: int) -> int:
     """The most control points (unique ones when ``closed``) a fit grows to: the configured
     count when the cap is 0 (``--control-points`` fixes it), else :data:`CURVE_CAP_FACTOR`
     times the cap; at most half the points, at least degree + 1."""
@@ -222,7 +220,7 @@ def curve_passes(points: np.ndarray, parameters: np.ndarray, closed: bool, confi
     module); the last one yielded is the result (the tolerance met, the cap reached, or
     stopped)."""
     degree = config.degree_u
-    cap = control_cap(config, len(points), closed)
+    cap = control_cap(config, len(points))
     count = cap if not config.max_control_points else min(max(FIRST_CONTROL_POINTS,
                                                               degree + 1), cap)
     breaks = uniform_breaks(count, degree, closed)
@@ -318,8 +316,8 @@ def iter_curve_fit(target: np.ndarray, config: FitConfig,
     for index, report in enumerate(curve_passes(points, order.parameters, order.closed, config,
                                                 tolerance, stop)):
         last = report
-        yield FitSnapshot(iteration=index + 1, geometry=_arrays(report, config, order.closed,
-                                                                cloud.center, cloud.scale),
+        geometry = _arrays(report, config, order.closed, cloud.center, cloud.scale)
+        yield FitSnapshot(iteration=index + 1, geometry=geometry,
                           losses=[_record(index + 1, report)],
                           elapsed=time.perf_counter() - started, done=False, status="running",
                           stage="least_squares")
@@ -342,7 +340,7 @@ def iter_curve_fit(target: np.ndarray, config: FitConfig,
     message = f"least-squares {shape} curve, {count}, points {where}; {verdict}"
     stopped = stop is not None and stop.stopped
     yield FitSnapshot(iteration=index + 1,
-                      geometry=_arrays(last, config, order.closed, cloud.center, cloud.scale),
+                      geometry=geometry,
                       losses=[], elapsed=time.perf_counter() - started, done=True,
                       status="stopped" if stopped else "converged", message=message,
                       statistics=statistics, stage="least_squares")

@@ -142,8 +142,8 @@ def fit_plan(config: FitConfig, known: bool = False, has_initial: bool = False) 
     if uses_core(config, known, has_initial):
         why = gradient_reason(config)
         return FitPlan(("least_squares",) if why is None else ("least_squares", "gradient"), why)
-    if config.kind != "surface":  # a curve off the least-squares route
-        return FitPlan(("gradient",), "known" if known else "initial" if has_initial else "curve")
-    if known or has_initial:
+    if known or has_initial:  # a curve too: the gradient fit because of the shape or parameters
         return FitPlan(("gradient",), "known" if known else "initial")
+    if config.kind != "surface":
+        return FitPlan(("gradient",), "curve")
     return FitPlan(("gradient",), gradient_reason(config))  # plane parameters: no core

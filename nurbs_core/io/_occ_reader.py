@@ -262,15 +262,9 @@ def trimmed_face_count(shape: OccObject) -> int:
     return count
 
 
-def read_items(path: str, kind: str, unit: str | None) -> list[Arrays]:
-    """Every face's untrimmed B-spline surface; the edges as curves when there are no faces.
-    ``unit``: the length unit the file states (:func:`_length_unit`), read once by the
-    caller."""
-    return shape_items(_read_shape(path, kind, unit), kind)
-
-
 def shape_items(shape: OccObject, kind: str) -> list[Arrays]:
-    """:func:`read_items` of a shape read already."""
+    """Every face's untrimmed B-spline surface of a shape read already (:func:`_read_shape`);
+    the edges as curves when there are no faces."""
     from OCP.BRep import BRep_Tool
     from OCP.BRepAdaptor import BRepAdaptor_Curve
     from OCP.Geom import Geom_BSplineCurve, Geom_TrimmedCurve

@@ -82,9 +82,9 @@ def load(path: StrPath) -> list[NurbsCurve | NurbsSurface]:
 
         return read_smesh(path)
     from nurbs_core.io.cad import read_cad
+    from nurbs_core.io.cad_shape import SHAPE_KINDS
 
-    kind = {".step": "step", ".stp": "step", ".brep": "brep"}.get(suffix, "iges")
-    return read_cad(path, kind)
+    return read_cad(path, SHAPE_KINDS[suffix])
 
 
 def load_any(path: StrPath, **point_options: Any) -> PointCloud | list[NurbsCurve | NurbsSurface]:

@@ -117,7 +117,7 @@ def _print_plan(job: FitJob, config: FitConfig, count: int,
         from nurbs_core.fitting.curve_core import control_cap
 
         how = ("by least squares (closed and periodic where the points close; control points "
-               + (f"growing to at most {control_cap(config, count, False)})"
+               + (f"growing to at most {control_cap(config, count)})"
                   if config.max_control_points else "fixed)"))
     elif plan.stages == ("least_squares",):
         how = (f"by fairing least squares (stiffness {config.stiffness:g}"

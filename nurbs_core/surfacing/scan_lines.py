@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbs_core.curve_cloud import NEIGHBOURS, THIN_SHARE, is_curve_cloud, neighbourhoods
+from nurbs_core.curve_cloud import NEIGHBOURS, THIN_SHARE, curve_measures, neighbourhoods
 
 #: A neighbour lies across the line through a point when its offset makes at least this angle's
 #: cosine ... at most this cosine with the line's direction (60 degrees and more from it).
@@ -37,7 +37,8 @@ def line_gap(points: np.ndarray, seed: int = 0) -> float | None:
     if len(points) <= NEIGHBOURS:
         return None
     hoods = neighbourhoods(points, seed, dense=True)
-    if hoods.thin_share() < THIN_SHARE or is_curve_cloud(points, seed):
+    thin = hoods.thin_share()
+    if thin < THIN_SHARE or curve_measures(points, seed, thin) is not None:
         return None
     centres, tree = hoods.centres, hoods.tree
     direction = hoods.axes[:, 0]                                             # (M, 3) along

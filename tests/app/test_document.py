@@ -68,7 +68,9 @@ def test_planar_cloud_fits_a_2d_curve(qtbot, window, tmp_path):
     assert fitted["kind"] == "curve" and fitted["control_points"].shape[1] == 2
     assert fitted["control_points"].shape[0] >= 8
     # on the arc: every point within a thousandth of the radius of the curve
-    assert _distances_to(fitted, points[:, :2]).max() < 1e-3
+    from nurbs_core.fitting import deviation
+
+    assert deviation(fitted, points[:, :2]).max() < 1e-3
     # Start would go on from this curve with the gradient fit, and the dock says so (it said the
     # settings took the fit off least squares)
     assert "goes on from the current curve" in window.fit_panel.route_note()
@@ -93,24 +95,9 @@ def test_helix_fits_a_3d_curve(qtbot, window, tmp_path):
         window.controller.start()   # the least-squares curve ends by itself, in passes
     control = window.document.fitted["control_points"]
     assert control.shape[1] == 3 and control.shape[0] >= 12
-    assert _distances_to(window.document.fitted, points).max() < 1e-2
+    from nurbs_core.fitting import deviation
 
-
-def _distances_to(fitted: dict, points: np.ndarray) -> np.ndarray:
-    """Each point's distance (N,) to 20,000 samples of the fitted curve (a dict of arrays)."""
-    from scipy.spatial import cKDTree
-
-    from nurbs_core.evaluate_arrays import curve_points
-    from nurbs_core.geometry_arrays import CurveArrays
-
-    control = np.asarray(fitted["control_points"], np.float64)
-    weights = fitted.get("weights")
-    curve = CurveArrays(int(fitted["degree"]), control,
-                        np.ones(len(control)) if weights is None else np.asarray(weights),
-                        np.asarray(fitted["knots"]))
-    knots = curve.knots
-    t = np.linspace(knots[curve.degree], knots[-curve.degree - 1], 20000)
-    return cKDTree(curve_points(curve, t)).query(points)[0]
+    assert deviation(window.document.fitted, points).max() < 1e-2
 
 
 def test_missing_demo_file_is_regenerated(tmp_path, monkeypatch):
