@@ -23,12 +23,12 @@ if TYPE_CHECKING:
     from nurbs_core.patches.scan_mesh import ScanMesh
 
 
-def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
-                points: np.ndarray | None = None, mesh: ScanMesh | None = None,
+def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path], *,
+                points: np.ndarray, mesh: ScanMesh | None = None,
                 mesh_seconds: float = 0.0, stoppable: bool = True) -> dict[str, Any]:
     """``--patches`` (or the automatic route's network): the network fit (``options``: its
-    PatchOptions), its report and files; returns the statistics (``points``: the cloud when it
-    is not read from ``job.input``; ``mesh``: its mesh when already built, in
+    PatchOptions), its report and files; returns the statistics (``points``: the prepared cloud
+    (:func:`nurbs_core.jobs.input_cloud.input_cloud`); ``mesh``: its mesh when already built, in
     ``mesh_seconds``, which the report's mesh time includes). ``stoppable``: the first Ctrl-C
     ends the fit after the pass under way and writes the network as it stands (status
     "stopped"); a second one, or one before the first pass, quits without writing."""
@@ -37,10 +37,6 @@ def run_patches(job: FitJob, options: PatchOptions, outputs: list[Path],
     from nurbs_core.jobs.local_frame import shifted
     from nurbs_core.patches.pipeline import iter_patch_fit
 
-    if points is None:  # read, repeats merged, spread checked, a far scan in a local frame
-        from nurbs_core.jobs.input_cloud import input_cloud
-
-        points, mesh, _, job = input_cloud(job, None)
     if "torch" in sys.modules:   # the network route itself runs on numpy and scipy
         sys.modules["torch"].set_num_threads(max(1, job.threads))
     print(f"{job.input}: {len(points)} points; fitting a network of bicubic patches "
