@@ -354,7 +354,22 @@ def _valid_files(w: _Writer) -> dict[str, tuple[str, bytes, int | None]]:
         data = _saved(w.folder, surface, suffix)
         if data is not None:
             bases[suffix[1:]] = (suffix, data, None)
+    bases["brep"] = (".brep", _box_brep(w.folder), None)  # a B-rep holds shapes, not one surface
     return {name: value for name, value in bases.items() if value[1] is not None}
+
+
+def _box_brep(folder: Path) -> bytes | None:
+    """A box written by OpenCASCADE as .brep (None without OCP, like the other CAD bases)."""
+    try:
+        from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+        from OCP.BRepTools import BRepTools
+    except ImportError:
+        return None
+    path = folder / "_scratch_box.brep"
+    BRepTools.Write_s(BRepPrimAPI_MakeBox(1.0, 0.8, 0.6).Shape(), str(path))
+    data = path.read_bytes()
+    path.unlink()
+    return data
 
 
 # --- generic damage ----------------------------------------------------------------------------
@@ -1321,7 +1336,7 @@ def _generic_cases(w: _Writer, bases):
     w.add("whitespace_only.json", b" \n\n ", "empty", "fail")
     rng = w.rng
     for suffix in ("xyz", "txt", "pts", "asc", "csv", "obj", "off", "stl", "ply", "pcd", "gltf",
-                   "json", "dat", "smesh", "step", "stp", "iges", "igs"):
+                   "json", "dat", "smesh", "step", "stp", "iges", "igs", "brep"):
         w.add(f"binary_random.{suffix}", rng.integers(0, 256, 65536, np.uint8).tobytes(),
               "binary-as-text", "fail", note="64 KiB of random bytes")
     prose = ("This is a note about a point cloud, not the cloud itself.\n" * 200).encode()
