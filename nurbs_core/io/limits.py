@@ -7,26 +7,28 @@ check every count a header claims against the bytes the file really has
 (:func:`check_decompressed_size`), and look at the first block of a text file before reading the
 rest (:func:`sniff_text`).
 
-The decompression limit is ``FLOOR + RATIO x compressed size`` (64 MiB + 32x by default: real
-point data compresses 1.2-8x, a bomb 1000x). Users with unusually compressible data raise it
-with the environment variable ``NURBS_STUDIO_MAX_DECOMPRESSED`` (bytes, or with a K/M/G/T
-suffix: ``8G``), which replaces the formula by a fixed cap, or with
-:func:`set_decompression_limit` (``nurbs-fit --max-decompressed``).
+The decompression limit (``FLOOR + RATIO x compressed size``, or the user's cap) is
+:mod:`nurbs_core.size_limits`'s, re-exported here: the training data reader, a floor below io,
+applies the same one.
 """
 
 from __future__ import annotations
 
-import math
 import os
-import re
 
 import numpy as np
 
 from nurbs_core.io.errors import FileFormatError, StrPath
+from nurbs_core.size_limits import DECOMPRESSED_FLOOR as DECOMPRESSED_FLOOR
+from nurbs_core.size_limits import DECOMPRESSED_RATIO as DECOMPRESSED_RATIO
+from nurbs_core.size_limits import MAX_DECOMPRESSED_ENV as MAX_DECOMPRESSED_ENV
+from nurbs_core.size_limits import configured_size as configured_size
+from nurbs_core.size_limits import dataset_problem, decompression_problem
+from nurbs_core.size_limits import decompression_limit as decompression_limit
+from nurbs_core.size_limits import format_size as format_size
+from nurbs_core.size_limits import parse_size as parse_size
+from nurbs_core.size_limits import set_decompression_limit as set_decompression_limit
 
-MAX_DECOMPRESSED_ENV = "NURBS_STUDIO_MAX_DECOMPRESSED"
-DECOMPRESSED_FLOOR = 64 * 2**20
-DECOMPRESSED_RATIO = 32
 #: The longest text line a reader accepts (a point line is a few dozen bytes; a header line with
 #: every attribute a scanner writes is a few KiB).
 MAX_LINE_BYTES = 64 * 2**10
@@ -35,70 +37,14 @@ MAX_COLUMNS = 1024
 #: Bytes sniffed at the start of a text file to tell it from binary data.
 SNIFF_BYTES = 4096
 
-_UNITS = {"": 1, "K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
-_override: int | None = None
-
-
-def parse_size(text: str) -> int:
-    """``"123"``, ``"64M"``, ``"8G"``, ``"1.5T"`` (binary units, optional trailing B) -> bytes."""
-    match = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([KMGT]?)i?B?\s*", str(text), re.IGNORECASE)
-    if match is None:
-        raise ValueError(f"not a size: {text!r} (examples: 500000000, 512M, 8G)")
-    value = float(match.group(1)) * _UNITS[match.group(2).upper()]
-    if value < 1:
-        raise ValueError(f"a size limit must be at least one byte, got {text!r}")
-    return int(value)
-
-
-def format_size(count: float) -> str:
-    """Bytes in a short human form: ``4.5 GiB``."""
-    for unit, scale in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
-        if abs(count) >= scale:
-            return f"{count / scale:.3g} {unit}"
-    return f"{int(count)} bytes"
-
-
-def set_decompression_limit(limit: int | str | None) -> None:
-    """Fix the decompression cap for this process (bytes or a size string); None restores the
-    default (the environment variable, else the formula)."""
-    global _override
-    _override = None if limit is None else (parse_size(limit) if isinstance(limit, str)
-                                            else int(limit))
-
-
-def configured_size(variable: str) -> int | None:
-    """The size an environment variable sets (bytes, or with a K/M/G/T suffix), None if unset;
-    ValueError naming the variable when it is not a size."""
-    configured = os.environ.get(variable)
-    if not configured:
-        return None
-    try:
-        return parse_size(configured)
-    except ValueError as exc:
-        raise ValueError(f"{variable}: {exc}") from None
-
-
-def decompression_limit(compressed_size: int) -> int:
-    """The most bytes a reader may inflate from ``compressed_size`` compressed bytes."""
-    if _override is not None:
-        return _override
-    configured = configured_size(MAX_DECOMPRESSED_ENV)
-    if configured is not None:
-        return configured
-    return DECOMPRESSED_FLOOR + DECOMPRESSED_RATIO * max(0, int(compressed_size))
-
 
 def check_decompressed_size(path: StrPath, claimed: int, compressed_size: int, what: str = "data") -> None:
     """Raise FileFormatError when inflating ``claimed`` bytes from ``compressed_size`` would pass
     the decompression limit; the message names the file, the claimed size, the cap and how to
     raise it."""
-    limit = decompression_limit(compressed_size)
-    if claimed > limit:
-        raise FileFormatError(path, f"{what} would decompress to {format_size(claimed)} from "
-                                    f"{format_size(compressed_size)}, more than the limit of "
-                                    f"{format_size(limit)} (a decompression bomb?); to read it "
-                                    f"anyway, raise the limit with {MAX_DECOMPRESSED_ENV}=SIZE "
-                                    f"(for example 16G) or nurbs-fit --max-decompressed SIZE")
+    problem = decompression_problem(claimed, compressed_size, what)
+    if problem is not None:
+        raise FileFormatError(path, problem)
 
 
 def check_dataset_size(path: StrPath, shape: tuple[int, ...], itemsize: int,
@@ -107,8 +53,9 @@ def check_dataset_size(path: StrPath, shape: tuple[int, ...], itemsize: int,
     read) out of the file at ``path`` would pass the decompression limit of its size: an HDF5
     file of a few KB may declare a dataset of any size (chunked, compressed or never written),
     so its datasets are capped like the other compressed formats before anything is read."""
-    claimed = math.prod(int(n) for n in shape) * int(itemsize)
-    check_decompressed_size(path, claimed, os.path.getsize(path), f"{what} {tuple(shape)}")
+    problem = dataset_problem(shape, itemsize, os.path.getsize(path), what)
+    if problem is not None:
+        raise FileFormatError(path, problem)
 
 
 def check_claimed_size(path: StrPath, count: int, record_bytes: int, available: int,

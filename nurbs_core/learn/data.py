@@ -283,12 +283,31 @@ def load_spline_dataset(path: str | Path, limit: int | None = None) -> SplineDat
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no SplineDataset file at {path}")
+    from nurbs_core.size_limits import dataset_problem
+
     with h5py.File(path, "r") as handle:
         if "points" not in handle:
             raise ValueError(f"{path} has no 'points' dataset (found: {sorted(handle.keys())})")
+        # a file of a few KB may declare a dataset of any size (chunked, compressed or never
+        # written): what would be read is capped like the other compressed formats first
+        for name in ("points", "controlpoints"):
+            if name not in handle:
+                continue
+            dataset = handle[name]
+            problem = dataset_problem(_read_shape(dataset.shape, limit), dataset.dtype.itemsize,
+                                      path.stat().st_size, f"'{name}'")
+            if problem is not None:
+                raise ValueError(f"{path}: {problem}")
         stop = slice(None) if limit is None else slice(0, int(limit))
         points = np.asarray(handle["points"][stop], np.float32)
         control_points = None
         if "controlpoints" in handle:
             control_points = np.asarray(handle["controlpoints"][stop], np.float32)
     return SplineDataset(points, control_points)
+
+
+def _read_shape(shape: tuple[int, ...], limit: int | None) -> tuple[int, ...]:
+    """The shape of what is read of a dataset of ``shape``: its first ``limit`` entries."""
+    if limit is None or not shape:
+        return tuple(shape)
+    return (min(int(shape[0]), max(0, int(limit))), *shape[1:])

@@ -251,7 +251,10 @@ def _train(args: argparse.Namespace, argv: list[str], grid: tuple[int, int], ran
     if args.cad_fraction > 0 and args.data is not None:
         parser.error("--cad-fraction mixes CAD faces into the generated patches: not with --data")
     if args.data is not None:
-        dataset = load_spline_dataset(args.data)
+        try:
+            dataset = load_spline_dataset(args.data)
+        except (OSError, ValueError) as exc:  # missing, not HDF5, lying sizes: one line
+            parser.error(f"--data {exc}")
         train_data, validation = dataset.split(args.validation)
         if args.loss == "supervised" and dataset.control_points is None:
             parser.error(f"{args.data} has no 'controlpoints': --loss supervised needs them")

@@ -106,6 +106,52 @@ def test_load_spline_dataset(tmp_path):
     assert torch.load(out / "last.pt", weights_only=True)["config"]["point_count"] == 96
 
 
+def _declared_bomb(path, clouds: int, points: int, name: str = "points") -> None:
+    """An HDF5 file of a few KB declaring ``clouds`` x ``points`` x 3 float64 (chunked and
+    compressed, never written): reading it whole allocates the declared size."""
+    h5py = pytest.importorskip("h5py")
+    with h5py.File(path, "w") as handle:
+        handle.create_dataset(name, shape=(clouds, points, 3), dtype="f8",
+                              chunks=(1, min(points, 100_000), 3), compression="gzip")
+        if name != "points":
+            handle["points"] = np.zeros((clouds, 8, 3), np.float32)
+
+
+def test_a_spline_dataset_declaring_a_huge_dataset_is_refused_before_reading(tmp_path, capsys):
+    """27 KB declaring 100,000,000 points (2.4 GB as float64, 3 GB with the float32 copy: read
+    whole before, with no cap): refused at once with the decompression cap's message, by the
+    reader and by nurbs-train (one line, status 2); a ``controlpoints`` bomb too."""
+    path = tmp_path / "bomb.h5"
+    _declared_bomb(path, 1, 100_000_000)
+    assert path.stat().st_size < 100_000
+    with pytest.raises(ValueError, match=r"'points' \(1, 100000000, 3\) would decompress to "
+                                         r"2.24 GiB.*NURBS_STUDIO_MAX_DECOMPRESSED"):
+        data.load_spline_dataset(path)
+    with pytest.raises(SystemExit) as exit_info:
+        train.main(["--data", str(path), "--validation", "1", "--out", str(tmp_path / "run"),
+                    "-q"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "would decompress to" in err[-1] and "Traceback" not in "\n".join(err)
+    controls = tmp_path / "controls.h5"
+    _declared_bomb(controls, 2, 50_000_000, name="controlpoints")
+    with pytest.raises(ValueError, match="'controlpoints'"):
+        data.load_spline_dataset(controls)
+
+
+def test_a_spline_dataset_is_capped_on_what_is_read(tmp_path, monkeypatch):
+    """``limit`` reads the first clouds only: the cap judges those, so the first cloud of a file
+    declaring many is read; the user's cap (the environment variable) is the one applied."""
+    path = tmp_path / "many.h5"
+    _declared_bomb(path, 10_000, 10_000)                   # 2.2 GiB declared, 0.7 MiB per cloud
+    assert data.load_spline_dataset(path, limit=1).points.shape == (1, 10_000, 3)
+    with pytest.raises(ValueError, match="decompress"):
+        data.load_spline_dataset(path)
+    monkeypatch.setenv("NURBS_STUDIO_MAX_DECOMPRESSED", "100K")
+    with pytest.raises(ValueError, match="more than the limit of 100 KiB"):
+        data.load_spline_dataset(path, limit=1)
+
+
 # --- normalisation ----------------------------------------------------------------------------
 
 
