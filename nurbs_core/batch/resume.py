@@ -12,8 +12,10 @@ if TYPE_CHECKING:
 
 #: The kinds of result a batch writes (:func:`result_kind`).
 CURVE, SURFACE, NETWORK = "curve", "surface", "network"
-#: The summary column holding each result's size in bytes (a resume compares it).
-OUTPUT_BYTES = "output_bytes"
+#: The summary columns holding each result's size in bytes and its ``--offset`` companion's
+#: (a resume compares them), in the order of an item's outputs.
+OUTPUT_BYTES, OFFSET_BYTES = "output_bytes", "offset_bytes"
+SIZE_COLUMNS = (OUTPUT_BYTES, OFFSET_BYTES)
 
 
 def result_kind(job: FitJob) -> str:
@@ -52,15 +54,25 @@ def _readable_as(path: str, kind: str) -> bool:
     return all(curves) if kind == CURVE else not all(curves)
 
 
+def has_recorded_size(size: int, recorded_bytes: object) -> bool:
+    """Whether a file of ``size`` bytes has the size its summary row recorded
+    (``recorded_bytes``, the :data:`OUTPUT_BYTES` cell: blank when the row recorded none, which
+    any size matches; a cell that is not a whole number matches none)."""
+    if recorded_bytes in (None, ""):
+        return True
+    try:
+        return int(str(recorded_bytes)) == size
+    except ValueError:
+        return False
+
+
 def is_complete(path: str, kind: str, recorded_bytes: object = None) -> bool:
     """Whether an earlier result can be skipped: it reads back whole as a ``kind`` result
     (an empty file, one a killed run cut short, a curve where a surface is due: fitted again)
     and, when its summary row recorded its size (``recorded_bytes``), has that size."""
     try:
         size = os.path.getsize(path)
-        if size == 0:
-            return False
-        if recorded_bytes not in (None, "") and int(str(recorded_bytes)) != size:
+        if size == 0 or not has_recorded_size(size, recorded_bytes):
             return False
         return _readable_as(path, kind)
     except Exception:  # noqa: BLE001 - unreadable for any reason: not a finished result
@@ -77,11 +89,10 @@ def earlier_outputs(rows: dict[str, dict]) -> tuple[Path, ...]:
     paths: list[Path] = []
     for row in rows.values():
         output = Path(str(row["output"]))
-        recorded = row.get(OUTPUT_BYTES)
         try:
-            if recorded not in (None, "") and int(str(recorded)) != output.stat().st_size:
+            if not has_recorded_size(output.stat().st_size, row.get(OUTPUT_BYTES)):
                 continue
-        except (OSError, ValueError):
+        except OSError:
             continue
         paths += [output, offset_path(output)]
     return tuple(paths)

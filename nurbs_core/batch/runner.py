@@ -95,7 +95,7 @@ def _record_written(records: list[dict | None], items: list[Item], since: float)
         if item.error is not None or not item.outputs:
             continue
         if all(_written_since(p, since) for p in item.outputs):
-            records[position] = _with_size({
+            records[position] = _with_size(item.outputs, {
                 "input": item.label, "output": item.outputs[0], "status": "ok",
                 "seconds": None, "error": "",
                 "note": ("written just before the interruption" if record is None else
@@ -104,15 +104,17 @@ def _record_written(records: list[dict | None], items: list[Item], since: float)
                         + ": its statistics were not recorded"})
 
 
-def _with_size(record: dict) -> dict:
-    """``record`` with its result's size (a resume compares it), when it is ok."""
-    from nurbs_core.batch.resume import OUTPUT_BYTES
+def _with_size(outputs: list[str], record: dict) -> dict:
+    """``record`` with the sizes of its result and ``--offset`` companion (``outputs``; a resume
+    compares them), when it is ok."""
+    from nurbs_core.batch.resume import SIZE_COLUMNS
 
-    if record.get("status") == "ok" and record.get("output"):
-        try:
-            record[OUTPUT_BYTES] = os.path.getsize(record["output"])
-        except OSError:
-            pass
+    if record.get("status") == "ok":
+        for column, path in zip(SIZE_COLUMNS, outputs, strict=False):
+            try:
+                record[column] = os.path.getsize(path)
+            except OSError:
+                pass
     return record
 
 
@@ -162,7 +164,7 @@ def _settle_before_work(batch: BatchSettings, items: list[Item],
     """The records known before any fit (inputs that cannot be fitted; with ``--skip-existing``
     the results already whole, which keep the ``earlier`` run's statistics) and the items left
     to fit, with their positions."""
-    from nurbs_core.batch.resume import OUTPUT_BYTES, is_complete, result_kind
+    from nurbs_core.batch.resume import SIZE_COLUMNS, is_complete, result_kind
     from nurbs_core.batch.summary import output_key
 
     kind = result_kind(batch.job)
@@ -174,9 +176,9 @@ def _settle_before_work(batch: BatchSettings, items: list[Item],
             records[position] = {"input": item.label, "output": None, "status": "failed",
                                  "seconds": 0.0, "error": item.error}
         elif batch.skip_existing and all(
-                is_complete(p, kind, (row or {}).get(OUTPUT_BYTES) if k == 0 else None)
-                for k, p in enumerate(item.outputs)):
-            records[position] = _with_size({**(row or {}), "input": item.label,
+                is_complete(p, kind, (row or {}).get(column))
+                for column, p in zip(SIZE_COLUMNS, item.outputs, strict=False)):
+            records[position] = _with_size(item.outputs, {**(row or {}), "input": item.label,
                                             "output": item.outputs[0], "status": "skipped",
                                             "error": ""})
         else:
@@ -193,7 +195,7 @@ def run_batch(batch: BatchSettings) -> int:
     from nurbs_core.batch.inputs import check_planned_writes, expand, name_outputs
     from nurbs_core.batch.interrupts import held_signals
     from nurbs_core.batch.resume import earlier_outputs
-    from nurbs_core.batch.summary import SummaryJournal, earlier_rows, is_summary, output_key
+    from nurbs_core.batch.summary import SummaryJournal, earlier_summary, output_key
     from nurbs_core.jobs import SOME_FAILED_STATUS
 
     if not batch.format.startswith("."):
@@ -205,9 +207,10 @@ def run_batch(batch: BatchSettings) -> int:
     # an earlier run's summary in an input folder is not a cloud, nor are the results it lists
     # (a rerun into the input folder fitted its own results); any other file named as the
     # summary is an input, and the check below refuses to overwrite it
-    earlier = earlier_rows(summary)
+    found = earlier_summary(summary)
+    earlier = found or {}
     items = expand(batch.inputs, exclude=((summary, *earlier_outputs(earlier))
-                                          if is_summary(summary) else ()))
+                                          if found is not None else ()))
     name_outputs(items, directory, batch.format.lower(), offset=job.offset is not None)
     check_planned_writes(items, summary, read=(job.initial,))
     records, todo = _settle_before_work(batch, items, earlier)
@@ -245,10 +248,11 @@ def run_batch(batch: BatchSettings) -> int:
                     for position, record in executor.run(job, todo, batch.batch_fits):
                         _arrived(records, position,
                                  {**record, "output": items[position].outputs[0]},
-                                 journal, progress)
+                                 items[position].outputs, journal, progress)
             else:
                 for position, record in serial(job, todo, batch.batch_fits):
-                    _arrived(records, position, record, journal, progress)
+                    _arrived(records, position, record, items[position].outputs, journal,
+                             progress)
         except KeyboardInterrupt:
             # a second Ctrl-C must not cut the summary short: held, then dropped
             with held_signals(replay=False):
@@ -273,10 +277,11 @@ def run_batch(batch: BatchSettings) -> int:
     return SOME_FAILED_STATUS if failed else 0
 
 
-def _arrived(records: list[dict | None], position: int, record: dict, journal: SummaryJournal,
-             progress: Progress) -> None:
-    """A settled input: its record kept (with its result's size) and appended to the summary."""
-    records[position] = _with_size(record)
+def _arrived(records: list[dict | None], position: int, record: dict, outputs: list[str],
+             journal: SummaryJournal, progress: Progress) -> None:
+    """A settled input: its record kept (with its ``outputs``' sizes) and appended to the
+    summary."""
+    records[position] = _with_size(outputs, record)
     journal.add(record)
     progress.update(record)
 

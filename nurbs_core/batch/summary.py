@@ -5,7 +5,7 @@ as its result arrives (a CSV whose columns must grow is rewritten atomically, wi
 header), and the whole table is rewritten atomically in input order at the end. A run killed at
 any moment (SIGKILL) leaves a summary of exactly what it finished, and the earlier run's rows of
 results it had not reached yet.
-:func:`earlier_rows` reads back an earlier run's summary for a resume (``--skip-existing``),
+:func:`earlier_summary` reads back an earlier run's summary for a resume (``--skip-existing``),
 whatever a kill left in it (a cut-short last line is skipped)."""
 
 from __future__ import annotations
@@ -187,12 +187,13 @@ def output_key(path: str) -> str:
     return os.path.normcase(os.path.realpath(path))
 
 
-def earlier_rows(summary: Path) -> dict[str, dict]:
+def earlier_summary(summary: Path) -> dict[str, dict] | None:
     """The finished rows (``ok``, ``skipped``) of an earlier run's summary by the
-    :func:`output_key` of their output, blank cells left out (empty when there is none or it
-    cannot be read)."""
+    :func:`output_key` of their output, blank cells left out; None when ``summary`` holds no
+    summary this tool wrote (missing, or another file: an input), an empty dict when it cannot
+    be read. The file's first line is read once, here."""
     if not is_summary(summary):
-        return {}
+        return None
     try:
         rows = _rows(summary)
     except OSError:
@@ -200,3 +201,8 @@ def earlier_rows(summary: Path) -> dict[str, dict]:
     return {output_key(str(row["output"])): {k: v for k, v in row.items() if v not in ("", None)}
             for row in rows if isinstance(row.get("output"), str) and row["output"]
             and row.get("status") in FINISHED}
+
+
+def earlier_rows(summary: Path) -> dict[str, dict]:
+    """:func:`earlier_summary`'s rows, empty when there is no earlier summary."""
+    return earlier_summary(summary) or {}

@@ -211,6 +211,37 @@ def test_skip_existing_skips_only_whole_results_of_the_right_kind_and_size(tmp_p
         assert is_complete(str(out / f"c{k}.json"), SURFACE, rows[f"c{k}.xyz"]["output_bytes"])
 
 
+def test_skip_existing_refits_an_input_whose_offset_companion_is_cut_short(tmp_path):
+    """``--offset`` writes a companion beside each result: an empty one, one cut short mid-line
+    (unreadable) and one cut short at a line break (an .obj that still reads, fewer triangles)
+    are not done; their inputs are fitted again, companions and all. The intact one is skipped
+    with its earlier statistics and sizes."""
+    folder = tmp_path / "scans"
+    for k in range(4):
+        _cloud_file(folder / f"c{k}.xyz", k, points=100)
+    out = tmp_path / "fits"
+    arguments = [str(folder), "--output-dir", str(out), "--format", ".obj", "--offset", "0.01",
+                 "-q", *FIT]
+    assert main(arguments) == 0
+    first = _rows(out / "summary.jsonl")
+    companions = {k: out / f"c{k}_offset.obj" for k in range(4)}
+    whole = {k: path.read_bytes() for k, path in companions.items()}
+    assert all(first[f"c{k}.xyz"]["offset_bytes"] == len(whole[k]) for k in range(4))
+    companions[1].write_bytes(b"")
+    companions[2].write_bytes(whole[2][: len(whole[2]) // 2])
+    cut = whole[3].rindex(b"\n", 0, len(whole[3]) // 2) + 1
+    companions[3].write_bytes(whole[3][:cut])
+    assert is_complete(str(companions[3]), SURFACE)               # it still reads: its size tells
+    assert main([*arguments, "--skip-existing"]) == 0
+    rows = _rows(out / "summary.jsonl")
+    assert rows["c0.xyz"]["status"] == "skipped"
+    assert rows["c0.xyz"]["rms"] == first["c0.xyz"]["rms"]
+    assert rows["c0.xyz"]["offset_bytes"] == len(whole[0])
+    assert [rows[f"c{k}.xyz"]["status"] for k in range(1, 4)] == ["ok"] * 3
+    for k in range(4):
+        assert companions[k].read_bytes() == whole[k]             # refitted: the same result
+
+
 def _batch(folder: Path, out: Path, *extra: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "nurbs_core.cli", str(folder), "--output-dir",
                              str(out), "-q", *FIT, *extra],
