@@ -191,6 +191,19 @@ def run_batch(batch: BatchSettings) -> int:
     (see the module's docstring)."""
     import dataclasses
 
+    from nurbs_core.batch.summary_lock import summary_lock
+
+    if not batch.format.startswith("."):
+        batch = dataclasses.replace(batch, format="." + batch.format)
+    directory = Path(batch.output_dir)
+    summary = Path(batch.summary) if batch.summary else directory / "summary.jsonl"
+    _check(batch, summary)
+    with summary_lock(summary):  # a second batch on this summary is refused, before any work
+        return _run(batch, summary)
+
+
+def _run(batch: BatchSettings, summary: Path) -> int:
+    """:func:`run_batch` once its settings are checked and its summary is locked."""
     from nurbs_core.batch.executors import DaskExecutor, serial
     from nurbs_core.batch.inputs import check_planned_writes, expand, name_outputs
     from nurbs_core.batch.interrupts import held_signals
@@ -198,12 +211,8 @@ def run_batch(batch: BatchSettings) -> int:
     from nurbs_core.batch.summary import SummaryJournal, earlier_summary, output_key
     from nurbs_core.jobs import SOME_FAILED_STATUS
 
-    if not batch.format.startswith("."):
-        batch = dataclasses.replace(batch, format="." + batch.format)
     job = batch.job
     directory = Path(batch.output_dir)
-    summary = Path(batch.summary) if batch.summary else directory / "summary.jsonl"
-    _check(batch, summary)
     # an earlier run's summary in an input folder is not a cloud, nor are the results it lists
     # (a rerun into the input folder fitted its own results); any other file named as the
     # summary is an input, and the check below refuses to overwrite it

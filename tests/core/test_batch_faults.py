@@ -298,6 +298,86 @@ def test_a_sigkilled_batch_leaves_an_accurate_summary_and_its_resume_equals_a_cl
                                    _control_points(clean / f"c{k}.json"), rtol=0, atol=1e-9)
 
 
+TRY_THE_LOCK = """
+import sys
+from pathlib import Path
+from nurbs_core.batch.summary_lock import summary_lock
+try:
+    with summary_lock(Path(sys.argv[1])):
+        print("locked")
+except ValueError as exc:
+    print(exc)
+"""
+
+
+def _try_the_lock(summary: Path) -> str:
+    return subprocess.run([sys.executable, "-c", TRY_THE_LOCK, str(summary)], text=True,
+                          capture_output=True, check=True, timeout=60).stdout.strip()
+
+
+def test_a_summary_is_locked_by_one_process_at_a_time(tmp_path):
+    """While this process holds a summary's lock another process is refused at once, naming
+    this process; once released (its hidden sidecar removed), the other process takes it."""
+    from nurbs_core.batch.summary_lock import lock_path, summary_lock
+
+    summary = tmp_path / "summary.jsonl"
+    with summary_lock(summary):
+        assert lock_path(summary).is_file() and lock_path(summary).name.startswith(".")
+        refused = _try_the_lock(summary)
+        assert refused == (f"cannot write {summary}: another nurbs-fit batch (process "
+                           f"{os.getpid()}) is writing this summary; wait for it to end, or "
+                           f"give this run another --summary")
+    assert not lock_path(summary).exists()
+    assert _try_the_lock(summary) == "locked"
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(400)
+def test_a_second_batch_on_a_running_batchs_summary_is_refused_and_a_killed_one_frees_it(
+        tmp_path):
+    """Two batches on one summary: the second, started while the first runs, is refused in one
+    line before any work (status 1, no file touched); the first ends with every row. A batch
+    SIGKILLed mid-run leaves no stale lock: the resume after it runs."""
+    folder = tmp_path / "scans"
+    count = 8
+    for k in range(count):
+        _cloud_file(folder / f"c{k}.xyz", k, points=3000)
+    out = tmp_path / "fits"
+    summary = out / "summary.jsonl"
+    first = _batch(folder, out)
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline and first.poll() is None:
+        if summary.exists() and summary.read_text().strip():
+            break
+        time.sleep(0.02)
+    assert first.poll() is None, ("the first batch ended too soon", first.communicate())
+    second = _batch(folder, out / ".." / "fits")              # the same summary, spelled anew
+    _, stderr = second.communicate(timeout=120)
+    running = first.poll() is None
+    assert second.returncode == 1
+    assert stderr.strip() == (f"nurbs-fit: error: cannot write {out / '..' / 'fits'}/summary.jsonl: "
+                              f"another nurbs-fit batch (process {first.pid}) is writing this "
+                              f"summary; wait for it to end, or give this run another --summary")
+    assert running, "the refusal must come while the first batch runs"
+    _, stderr = first.communicate(timeout=240)
+    assert first.returncode == 0, stderr
+    rows = _rows(summary)
+    assert len(rows) == count and all(row["status"] == "ok" for row in rows.values())
+    # killed mid-run: the kernel drops its lock with the process
+    (out / "c5.json").unlink()
+    killed = _batch(folder, out)
+    while time.monotonic() < deadline and killed.poll() is None:
+        if any(".lock" in p.name for p in out.iterdir()):
+            break
+        time.sleep(0.01)
+    killed.send_signal(signal.SIGKILL)
+    killed.communicate(timeout=60)
+    resumed = _batch(folder, out, "--skip-existing")
+    _, stderr = resumed.communicate(timeout=240)
+    assert resumed.returncode == 0, stderr
+    assert len(_rows(summary)) == count
+
+
 #: The batch in its own process (Dask's client threads stay out of pytest), one worker of its
 #: local cluster SIGKILLed as the first result arrives.
 KILL_A_WORKER = """
