@@ -186,6 +186,26 @@ def _settle_before_work(batch: BatchSettings, items: list[Item],
     return records, todo
 
 
+def _local_workers(requested: int, todo: list[Item], quiet: bool) -> int:
+    """The workers of a local cluster for ``--jobs requested``: never more than CPUs, inputs to
+    fit (``todo``) or what the memory available holds (each worker is a process of several
+    hundred MB, more for a large input: :mod:`nurbs_core.batch.memory`); one line on stderr
+    when that is fewer than asked (unless ``quiet``)."""
+    from nurbs_core.batch.memory import workers_in_memory
+    from nurbs_core.size_limits import format_size
+
+    cpus = os.cpu_count() or 1
+    by_memory, peak, available = workers_in_memory(todo)
+    jobs = max(1, min(requested, cpus, len(todo), by_memory or requested))
+    if jobs < requested and not quiet:
+        memory = ("" if by_memory is None or available is None else
+                  f", memory for {by_memory} (about {format_size(peak)} each for the largest "
+                  f"input, {format_size(available)} available)")
+        print(f"nurbs-fit: --jobs {requested}: {jobs} worker{'s' if jobs > 1 else ''} "
+              f"({cpus} CPUs, {len(todo)} inputs to fit{memory})", file=sys.stderr)
+    return jobs
+
+
 def run_batch(batch: BatchSettings) -> int:
     """Fit every input of ``batch``, write the results and the summary, return the exit status
     (see the module's docstring)."""
@@ -228,12 +248,7 @@ def _run(batch: BatchSettings, summary: Path) -> int:
                         failed=sum(r is not None and r["status"] == "failed" for r in records))
     jobs = batch.jobs
     if batch.scheduler is None and jobs > 1:
-        # a local cluster never starts more workers than CPUs or inputs to fit (each worker is
-        # a process of several hundred MB)
-        jobs = max(1, min(batch.jobs, os.cpu_count() or 1, len(todo)))
-        if jobs < batch.jobs and not job.quiet:
-            print(f"nurbs-fit: --jobs {batch.jobs}: {jobs} worker{'s' if jobs > 1 else ''} "
-                  f"({os.cpu_count()} CPUs, {len(todo)} inputs to fit)", file=sys.stderr)
+        jobs = _local_workers(batch.jobs, [items[position] for position, _ in todo], job.quiet)
         if jobs > 1:
             from nurbs_core.batch.executors import check_available
 

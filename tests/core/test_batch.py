@@ -801,6 +801,85 @@ def test_jobs_never_exceed_the_inputs_or_the_cpus(tmp_path, capsys):
     assert "--jobs 64: 1 worker" in err and "on this process" in err
 
 
+def test_available_memory_is_the_systems(monkeypatch):
+    """/proc/meminfo's MemAvailable agrees with psutil (what Dask reads); without /proc the
+    free pages stand in."""
+    psutil = pytest.importorskip("psutil")
+    from nurbs_core.batch import memory
+
+    if not Path("/proc/meminfo").exists():
+        pytest.skip("no /proc/meminfo")
+    mine, theirs = memory.available_memory(), psutil.virtual_memory().available
+    assert mine is not None and abs(mine - theirs) < 0.05 * psutil.virtual_memory().total
+    real_open = open
+
+    def no_proc(path, *args, **kwargs):
+        if str(path) == "/proc/meminfo":
+            raise FileNotFoundError(path)
+        return real_open(path, *args, **kwargs)
+
+    monkeypatch.setattr("builtins.open", no_proc)
+    pages = memory.available_memory()
+    assert pages == os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+
+
+def test_workers_are_bounded_by_the_memory_their_largest_input_needs(tmp_path, monkeypatch):
+    """A worker's peak is estimated from the largest input (float32 points in its bytes; an
+    HDF5 cloud from its dataset's shape): 16 GiB available hold 2 workers for a 120 MB cloud,
+    36 for 200-point clouds; an HDF5 file of 2 clouds of 1,000,000 points is judged by one
+    cloud, not the file."""
+    from nurbs_core.batch import memory
+    from nurbs_core.batch.inputs import expand
+
+    folder = tmp_path / "scans"
+    small = [_cloud_file(folder / f"s{k}.ply", k) for k in range(3)]
+    big = folder / "big.ply"
+    with open(big, "wb") as handle:
+        handle.truncate(120 * 10**6)                        # sparse: its size is what is judged
+    monkeypatch.setattr(memory, "available_memory", lambda: 16 * 2**30)
+    items = expand([str(folder)])
+    assert memory.estimated_points(next(i for i in items if i.path == str(big))) == 10**7
+    workers, peak, available = memory.workers_in_memory(items)
+    assert peak == memory.worker_peak(10**7) and peak > 6 * 10**9
+    assert (workers, available) == (16 * 2**30 // peak, 16 * 2**30) and workers == 2
+    assert memory.workers_in_memory(expand([str(p) for p in small]))[0] == 36  # 450 MiB each
+    h5py = pytest.importorskip("h5py")
+    path = tmp_path / "two.h5"
+    with h5py.File(path, "w") as handle:
+        handle.create_dataset("points", shape=(2, 10**6, 3), dtype="f4", chunks=(1, 1000, 3),
+                              compression="gzip")
+    clouds = expand([str(path)])
+    assert [memory.estimated_points(item) for item in clouds] == [10**6, 10**6]
+    monkeypatch.setattr(memory, "available_memory", lambda: None)
+    assert memory.workers_in_memory(clouds)[0] is None           # unknown: no memory cap
+
+
+def test_jobs_beyond_the_memory_available_are_capped_with_one_line(tmp_path, capsys,
+                                                                   monkeypatch):
+    """8 CPUs and 4 inputs, but memory for one worker: --jobs 4 runs on this process, saying
+    why in one line; with memory for all, CPUs and inputs decide as before."""
+    from nurbs_core.batch import memory
+
+    folder = tmp_path / "scans"
+    for k in range(4):
+        _cloud_file(folder / f"c{k}.ply", k)
+    monkeypatch.setattr(os, "cpu_count", lambda: 8)
+    monkeypatch.setattr(memory, "available_memory", lambda: 700 * 2**20)
+    code = main([str(folder), "--output-dir", str(tmp_path / "out"), "--jobs", "4", *FIT])
+    assert code == 0
+    lines = [line for line in capsys.readouterr().err.splitlines() if "--jobs" in line]
+    assert lines == ["nurbs-fit: --jobs 4: 1 worker (8 CPUs, 4 inputs to fit, memory for 1 "
+                     "(about 450 MiB each for the largest input, 700 MiB available))"]
+    from nurbs_core.batch.inputs import expand
+    from nurbs_core.batch.runner import _local_workers
+
+    monkeypatch.setattr(memory, "available_memory", lambda: 64 * 2**30)
+    assert _local_workers(4, expand([str(folder)]), quiet=True) == 4
+    assert _local_workers(16, expand([str(folder)]), quiet=True) == 4
+    monkeypatch.setattr(memory, "available_memory", lambda: 1400 * 2**20)
+    assert _local_workers(4, expand([str(folder)]), quiet=True) == 3
+
+
 def test_an_hdf5_file_declaring_a_huge_cloud_is_refused_before_allocating(tmp_path):
     """27 KB on disk declaring 100,000,000 points per cloud (3 GB when read): one failed input
     with the cap's message (the whole dataset is capped), at once, like the other compressed
