@@ -102,7 +102,7 @@ def iter_fit(target: ArrayLike, config: FitConfig | None = None, *, stop: StopTo
         config, note, sheet = config.replace(init="pca"), learned.message, learned.sheet
     if uses_core(config, problem.known, initial is not None):
         # the fold-free start runs (and refuses shapes one patch cannot hold) before iterating
-        start = sheet if sheet is not None else sheet_start(problem.cloud, config)
+        start = sheet if sheet is not None else sheet_start(problem.cloud, config, stop)
         return _noted(_sheet_run(problem, config, start, loss, stop, started), note)
     geometry = initial_geometry(problem, config, initial)
     return _noted(_gradient_run(problem, config, geometry, loss, stop, initial is not None), note)

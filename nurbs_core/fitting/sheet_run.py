@@ -36,8 +36,9 @@ def iter_sheet_fit(target: ArrayLike, config: FitConfig,
     started = time.perf_counter()
     config.validate()
     cloud = normalise(target, config)
-    start = sheet_start(cloud, config)
-    return sheet_run(cloud, config, start, stop or StopToken(), started)
+    stop = stop or StopToken()
+    start = sheet_start(cloud, config, stop)
+    return sheet_run(cloud, config, start, stop, started)
 
 
 def sheet_run(cloud: NormalisedCloud, config: FitConfig, start: SheetStart, stop: StopToken,
