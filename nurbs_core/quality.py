@@ -30,6 +30,7 @@ from scipy.spatial import cKDTree
 from nurbs_core.evaluate_arrays import dense_basis, homogeneous, surface_domain
 from nurbs_core.foot_points import project_onto_surface
 from nurbs_core.geometry_arrays import SurfaceArrays
+from nurbs_core.quality_defaults import NEIGHBOURS as NEIGHBOURS
 
 # the limits and warnings of the measures live with the status they decide (torch-free, for the
 # app's GUI thread); re-exported here beside the measures
@@ -59,8 +60,6 @@ OVER_CELL = 1.2
 NORMAL_POINTS = 50_000
 #: cloud points whose neighbourhoods give the spacing and the sampling scale
 PROBE_POINTS = 5000
-#: neighbours of the local frames (normals, area per point, smoothing of the multiplicity)
-NEIGHBOURS = 12
 #: cloud normals averaged to judge a surface sample's orientation
 FACING_NEIGHBOURS = 8
 #: at least this many Gauss-Legendre points per direction for area and bending energy
