@@ -246,7 +246,7 @@ def _measure(surface: SurfaceArrays, points: np.ndarray, normals: np.ndarray | N
     # the sampling scale: sqrt(area per point), pi r_k^2 / k from the k-th neighbour distance;
     # about the spacing on a grid, twice it on a random cloud, more across scan lines
     scale = max(spacing, float(np.sqrt(np.pi / NEIGHBOURS * np.median(probe_distance[:, -1] ** 2))))
-    noise = estimate_noise(sub, seed=seed)
+    noise = estimate_noise(sub, seed=seed, tree=tree)
     allowance = NEAR_SPACINGS * scale + NEAR_NOISE * noise
     near = distance <= allowance
     near_area = float(weight[near].sum())
