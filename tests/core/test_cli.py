@@ -417,6 +417,32 @@ def test_job_defaults_are_the_command_lines():
         assert getattr(job, name) == parsed[name], name
 
 
+@pytest.mark.parametrize("option, stiffness", [([], None), (["--stiffness", "0.02"], 0.02)])
+def test_stiffness_help_names_the_default_each_fit_takes(option, stiffness):
+    """--stiffness feeds a single patch's core (FitConfig.stiffness) and, with --patches, the
+    network (PatchOptions.stiffness), on two scales; its help named one default, written as
+    text (1e-3), and said nothing of the network's (3). Each default it names is the one the
+    fit takes."""
+    from nurbs_core.cli import build_parser
+    from nurbs_core.jobs.settings import FitJob, fit_config, patch_options
+
+    help_text = " ".join(build_parser().format_help().split())
+    named = re.search(r"--stiffness S .*?core \(default ([^)]+)\).*?--patches, the "
+                      r"network's \(default ([\d.e+-]+)", help_text)
+    assert named is not None, "the --stiffness help names no default of each scale"
+    job = FitJob(input="in.xyz", stiffness=stiffness)
+    single = fit_config(job, 3).stiffness
+    network = patch_options(job.replace(patches="20")).stiffness
+    automatic = patch_options(job, automatic=True).stiffness  # not the single patch's scale
+    if stiffness is None:
+        assert (float(named[1]), float(named[2])) == (single, network)
+    else:
+        assert single == network == stiffness
+    assert automatic == float(named[2])
+    seam = re.search(r"--seam-weight W .*?\(default ([\d.e+-]+)\)", help_text)
+    assert seam is not None and float(seam[1]) == patch_options(job.replace(patches="20")).seam_weight
+
+
 def test_surfacing_options_reach_the_fit(tmp_path):
     from nurbs_core.cli import build_parser
 
