@@ -133,8 +133,11 @@ def _print_plan(job: FitJob, config: FitConfig, count: int,
         how = (f"by fairing least squares (stiffness {config.stiffness:g}"
                + (f", grid growing to at most {config.max_control_points} per direction"
                   if config.max_control_points else "") + ")")
+    elif plan.stages == ("least_squares", "gradient"):
+        how = (f"by fairing least squares (stiffness {config.stiffness:g}), then the gradient "
+               f"fit with {config.optimizer}, loss {config.loss}")
     else:
-        how = f"with {config.optimizer}, loss {config.loss}"
+        how = f"by the gradient fit with {config.optimizer}, loss {config.loss}"
     print(f"{job.input}: {count} points; fitting a {config.kind} "
           f"(degree {config.degree_u}" + ("" if job.curve else f"x{config.degree_v}")
           + f", {config.control_points_u}" + ("" if job.curve else f"x{config.control_points_v}")

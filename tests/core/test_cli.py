@@ -443,6 +443,33 @@ def test_stiffness_help_names_the_default_each_fit_takes(option, stiffness):
     assert seam is not None and float(seam[1]) == patch_options(job.replace(patches="20")).seam_weight
 
 
+@pytest.mark.parametrize("changes", [
+    dict(),                                                # the core alone
+    dict(free_knots=True),                                 # the core, then the gradient fit
+    dict(loss="p2s+0.1*laplacian"),
+    dict(solver="gradient"),
+    dict(solver="gradient", parameterization="plane"),    # the gradient fit alone
+    dict(grid=[20, 20], solver="least_squares"),          # the exact solve
+])
+def test_the_plan_line_names_every_stage_the_plan_runs(tmp_path, capsys, changes):
+    """The report's first line said "with adam, loss ..." for a fit that runs the least-squares
+    core first and the gradient fit after it (the app's note for the same plan names both): it
+    now names each stage of the engine's plan, in order."""
+    from nurbs_core.fitting.plan import fit_plan
+    from nurbs_core.jobs import FitJob, prepare_fit
+
+    points = np.random.default_rng(0).uniform(-1.0, 1.0, (400, 3)) * [1.0, 1.0, 0.1]
+    prepared = prepare_fit(FitJob(input=str(tmp_path / "scan.xyz"), **changes), points)
+    line = capsys.readouterr().err
+    stages = fit_plan(prepared.config, prepared.parameters is not None).stages
+    named = [stage for stage, words in (("exact", "by exact least squares"),
+                                        ("least_squares", "by fairing least squares"),
+                                        ("gradient", "gradient fit with adam"))
+             if words in line]
+    assert tuple(named) == stages, line
+    assert ("least_squares" in stages) == ("stiffness 0.001" in line)
+
+
 def test_surfacing_options_reach_the_fit(tmp_path):
     from nurbs_core.cli import build_parser
 
