@@ -49,8 +49,10 @@ def build_parser() -> argparse.ArgumentParser:
         PAPER_POINT_CLOUD_LOSS,
         PARAMETERIZATIONS,
         SOLVERS,
+        FitConfig,
     )
     from nurbs_core.io.units import UNITS
+    from nurbs_core.patches.defaults import SEAM_WEIGHT, STIFFNESS
 
     parser = argparse.ArgumentParser(
         prog="nurbs-fit", description="Fit a NURBS surface (or curve) to a point cloud, or to "
@@ -118,8 +120,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--outliers", type=float, default=0.01, metavar="F",
                         help="fraction of the points allowed beyond --tolerance (default 0.01)")
     parser.add_argument("--stiffness", type=float, default=None, metavar="S",
-                        help="fairing weight (thin plate + membrane) of the least-squares "
-                             "core, relative to the data (default 1e-3; larger is smoother)")
+                        help="fairing weight (thin plate + membrane), relative to the data; "
+                             "larger is smoother. Two scales: a single patch's least-squares "
+                             f"core (default {FitConfig.stiffness:g}) and, with --patches, the "
+                             f"network's (default {STIFFNESS:g}; a network the automatic route "
+                             "chooses keeps its default)")
     parser.add_argument("--parameterization", default="auto", choices=PARAMETERIZATIONS,
                         help="(u, v) of an unordered surface cloud: 'mesh' maps the cloud's "
                              "triangle mesh onto the unit square without folds (the default "
@@ -161,7 +166,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "while it pays, from 6)")
     parser.add_argument("--seam-weight", type=float, default=None, metavar="W",
                         help="weight of tangent continuity across seams with --patches "
-                             "(default 2)")
+                             f"(default {SEAM_WEIGHT:g})")
     parser.add_argument("--solver", default="auto", choices=SOLVERS,
                         help="'least_squares': fairing least squares with parameter correction "
                              "(with --grid: the exact least-squares solve at the grid's "

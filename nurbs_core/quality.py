@@ -30,6 +30,7 @@ from scipy.spatial import cKDTree
 from nurbs_core.evaluate_arrays import dense_basis, homogeneous, surface_domain
 from nurbs_core.foot_points import project_onto_surface
 from nurbs_core.geometry_arrays import SurfaceArrays
+from nurbs_core.quality_defaults import NEIGHBOURS as NEIGHBOURS
 
 # the limits and warnings of the measures live with the status they decide (torch-free, for the
 # app's GUI thread); re-exported here beside the measures
@@ -59,8 +60,6 @@ OVER_CELL = 1.2
 NORMAL_POINTS = 50_000
 #: cloud points whose neighbourhoods give the spacing and the sampling scale
 PROBE_POINTS = 5000
-#: neighbours of the local frames (normals, area per point, smoothing of the multiplicity)
-NEIGHBOURS = 12
 #: cloud normals averaged to judge a surface sample's orientation
 FACING_NEIGHBOURS = 8
 #: at least this many Gauss-Legendre points per direction for area and bending energy
@@ -247,7 +246,7 @@ def _measure(surface: SurfaceArrays, points: np.ndarray, normals: np.ndarray | N
     # the sampling scale: sqrt(area per point), pi r_k^2 / k from the k-th neighbour distance;
     # about the spacing on a grid, twice it on a random cloud, more across scan lines
     scale = max(spacing, float(np.sqrt(np.pi / NEIGHBOURS * np.median(probe_distance[:, -1] ** 2))))
-    noise = estimate_noise(sub, seed=seed)
+    noise = estimate_noise(sub, seed=seed, tree=tree)
     allowance = NEAR_SPACINGS * scale + NEAR_NOISE * noise
     near = distance <= allowance
     near_area = float(weight[near].sum())

@@ -173,18 +173,7 @@ def cylinder_from(p: np.ndarray, n: np.ndarray) -> Primitive | None:
     axis = np.cross(n[0], n[1])
     if np.linalg.norm(axis) < np.sin(np.radians(1.0)):
         return None
-    axis = _unit(axis)
-    first, second = axis_frame(axis)
-    flat = np.stack([p @ first, p @ second], -1)
-    direction = np.stack([n @ first, n @ second], -1)
-    matrix = np.stack([direction[0], -direction[1]], -1)
-    if abs(np.linalg.det(matrix)) < 1e-9:
-        return None
-    t = np.linalg.solve(matrix, flat[1] - flat[0])
-    centre2 = flat[0] + t[0] * direction[0]
-    radius = float(np.linalg.norm(flat - centre2, axis=1).mean())
-    origin = centre2[0] * first + centre2[1] * second
-    return Primitive("cylinder", origin, axis, radius=radius)
+    return _cylinder_where_normals_cross(_unit(axis), p, n, unit_across=False)
 
 
 def cylinder_along(axis: np.ndarray, p: np.ndarray, n: np.ndarray) -> Primitive | None:
@@ -192,16 +181,30 @@ def cylinder_along(axis: np.ndarray, p: np.ndarray, n: np.ndarray) -> Primitive 
     n (2, 3): the centre where the normals' lines cross once projected across the axis. Only
     the normals' parts across the axis count, so normals tilted along it (blurred beside the
     edges of a short wall, a counterbore's) still give the wall's cylinder."""
-    axis = _unit(np.asarray(axis, np.float64))
+    return _cylinder_where_normals_cross(_unit(np.asarray(axis, np.float64)), p, n,
+                                         unit_across=True)
+
+
+def _cylinder_where_normals_cross(axis: np.ndarray, p: np.ndarray, n: np.ndarray,
+                                  unit_across: bool) -> Primitive | None:
+    """The cylinder along unit ``axis`` (3,) through points p (2, 3) whose centre is where the
+    lines of their normals n (2, 3) cross once projected across the axis (None when they are
+    parallel there). ``unit_across``: the projected normals scaled to unit length first, and
+    None when either is short (a normal within 60 degrees of the axis: its point is on no wall
+    around it); without it the normals are taken as across the axis already (:func:`cylinder_from`:
+    the axis is their cross product)."""
     first, second = axis_frame(axis)
     flat = np.stack([p @ first, p @ second], -1)
     direction = np.stack([n @ first, n @ second], -1)
-    length = np.linalg.norm(direction, axis=1)
-    if length.min() < np.sin(np.radians(30.0)):
-        return None  # a normal along the axis: the point is on no wall around it
-    direction = direction / length[:, None]
+    least_determinant = 1e-9
+    if unit_across:
+        length = np.linalg.norm(direction, axis=1)
+        if length.min() < np.sin(np.radians(30.0)):
+            return None
+        direction = direction / length[:, None]
+        least_determinant = np.sin(np.radians(1.0))
     matrix = np.stack([direction[0], -direction[1]], -1)
-    if abs(np.linalg.det(matrix)) < np.sin(np.radians(1.0)):
+    if abs(np.linalg.det(matrix)) < least_determinant:
         return None
     t = np.linalg.solve(matrix, flat[1] - flat[0])
     centre2 = flat[0] + t[0] * direction[0]

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike
 from nurbs_core.coordinate_range import scale_problem
 from nurbs_core.fitting.config import FitConfig
 from nurbs_core.fitting.principal import principal_axes
-from nurbs_core.quality import NEIGHBOURS
+from nurbs_core.quality_defaults import NEIGHBOURS
 
 
 @dataclass(frozen=True)

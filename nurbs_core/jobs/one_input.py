@@ -14,7 +14,7 @@ from nurbs_core.jobs.input_cloud import input_cloud
 from nurbs_core.jobs.network import run_patches
 from nurbs_core.jobs.part import part_allowed, run_part
 from nurbs_core.jobs.settings import FitJob, is_automatic, patch_options
-from nurbs_core.jobs.single import finish_fit, prepare_fit, run_fit
+from nurbs_core.jobs.single import finish_fit, prepare_checked, run_fit
 
 if TYPE_CHECKING:
     import numpy as np
@@ -57,7 +57,7 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
     if job.trim:
         from nurbs_core.jobs.single import fit_trimmed_job
 
-        return fit_trimmed_job(job, points)
+        return fit_trimmed_job(job, points, outputs)
     if job.patches is not None:
         return run_patches(job, patch_options(job), outputs, points=points, mesh=file_mesh,
                            stoppable=stoppable)
@@ -71,8 +71,9 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
             print(f"route: {route.reason} ({route.seconds:.1f} s)", file=sys.stderr)
         if route.kind == "curve":
             # a curve fits the points as listed, repeats too, as --curve does
+            check_no_solid_outputs(outputs, route)
             curve_points, _, _, curve_job = input_cloud(asked.replace(curve=True), given)
-            prepared = prepare_fit(curve_job, curve_points)
+            prepared = prepare_checked(curve_job, curve_points, outputs)
             return finish_fit(prepared, run_fit(prepared, stoppable))
         if route.kind == "part":
             from nurbs_core.brep.solid import SolidError
@@ -105,7 +106,7 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
                     print(f"route: {route.reason}", file=sys.stderr)
         return _single_patch_or_open_network(job, options, outputs, points, route, stoppable,
                                              try_open_network)
-    prepared = prepare_fit(job, points)
+    prepared = prepare_checked(job, points, outputs)
     return finish_fit(prepared, run_fit(prepared, stoppable))
 
 
@@ -131,7 +132,7 @@ def _single_patch_or_open_network(job: FitJob, options: PatchOptions,
         if not job.quiet:
             print(f"outliers: {int(stray.sum())} isolated points "
                   f"({stray.sum() / len(stray):.2%}) left out of the fit", file=sys.stderr)
-    prepared = prepare_fit(job, points)
+    prepared = prepare_checked(job, points, outputs)
     result, refusal = None, None
     try:
         result = run_fit(prepared, stoppable)
@@ -162,6 +163,6 @@ def _single_patch_or_open_network(job: FitJob, options: PatchOptions,
         print(f"route: {route.finding}; one patch cannot hold it cleanly ({problems}) and no "
               "network could be built: fitting one patch anyway (see the report's warnings)",
               file=sys.stderr)
-        prepared = prepare_fit(job.replace(single_patch=True), points)
+        prepared = prepare_checked(job.replace(single_patch=True), points, outputs)
         result = run_fit(prepared, stoppable)
     return finish_fit(prepared, result)

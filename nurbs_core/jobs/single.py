@@ -51,16 +51,26 @@ class PreparedFit:
 
 
 def prepare_fit(job: FitJob, points: np.ndarray | None = None) -> PreparedFit:
-    """The first step of :func:`fit_one` (a curve or surface; not ``--patches``): check the
-    outputs and options, read ``job.input`` (unless ``points``, the (N, 3) cloud read from it,
-    are given), build the FitConfig, the ``--grid`` parameters and the ``--initial`` start, and
-    print the report's first line (stderr). Raises on a bad input or option."""
-    from nurbs_core.curve_cloud import flat_height
+    """The first step of one curve or surface fit (not ``--patches``), for a caller that has not
+    checked the job: check the outputs and options (:func:`check_before_work`), read
+    ``job.input`` (unless ``points``, the (N, 3) cloud read from it, are given), then
+    :func:`prepare_checked`. Raises on a bad input or option."""
     from nurbs_core.jobs.input_cloud import input_cloud
 
     outputs = check_before_work(job)
     if points is None:  # read, repeats merged, spread checked, a far scan in a local frame
         points, _, _, job = input_cloud(job, None)
+    return prepare_checked(job, points, outputs)
+
+
+def prepare_checked(job: FitJob, points: np.ndarray, outputs: list[Path]) -> PreparedFit:
+    """:func:`prepare_fit` after its checks (as :func:`~nurbs_core.jobs.one_input.fit_one`
+    runs it, having checked the job once before any route): ``outputs`` what
+    :func:`check_before_work` returned for the job, ``points`` (N, 3) the cloud read from its
+    input. Builds the FitConfig, the ``--grid`` parameters and the ``--initial`` start, and
+    prints the report's first line (stderr). Raises on an option the fit cannot take."""
+    from nurbs_core.curve_cloud import flat_height
+
     flat_z = bool(job.curve) and flat_height(points)
     target = points[:, :2] if flat_z else points
     config = _default_grid_for(job, fit_config(job, target.shape[1]), len(target))
@@ -123,8 +133,11 @@ def _print_plan(job: FitJob, config: FitConfig, count: int,
         how = (f"by fairing least squares (stiffness {config.stiffness:g}"
                + (f", grid growing to at most {config.max_control_points} per direction"
                   if config.max_control_points else "") + ")")
+    elif plan.stages == ("least_squares", "gradient"):
+        how = (f"by fairing least squares (stiffness {config.stiffness:g}), then the gradient "
+               f"fit with {config.optimizer}, loss {config.loss}")
     else:
-        how = f"with {config.optimizer}, loss {config.loss}"
+        how = f"by the gradient fit with {config.optimizer}, loss {config.loss}"
     print(f"{job.input}: {count} points; fitting a {config.kind} "
           f"(degree {config.degree_u}" + ("" if job.curve else f"x{config.degree_v}")
           + f", {config.control_points_u}" + ("" if job.curve else f"x{config.control_points_v}")
@@ -313,12 +326,14 @@ def check_trim_options(job: FitJob) -> None:
                                         f"{', '.join(TRIMMED_SUFFIXES)}")
 
 
-def fit_trimmed_job(job: FitJob, points: np.ndarray | None = None) -> dict[str, Any]:
+def fit_trimmed_job(job: FitJob, points: np.ndarray, outputs: list[Path]) -> dict[str, Any]:
     """``nurbs-fit --trim``: one patch of an open sheet trimmed at the scan's outline
     (:func:`nurbs_core.trim.fit.fit_trimmed`), the report (distances, trimmed vs untrimmed area,
     the trim's deviation from the outline) and every output written all or nothing (trimmed
-    faces in .step/.iges/.3dm/.json, the trimmed face tessellated in mesh formats). Raises
-    ValueError for options trimming does not combine with and for a cloud it cannot trim."""
+    faces in .step/.iges/.3dm/.json, the trimmed face tessellated in mesh formats), for the cloud
+    ``points`` (N, 3) read from ``job.input``. The caller checked the job first
+    (:func:`check_trim_options`, then :func:`check_before_work`, which returned ``outputs``).
+    Raises ValueError for a cloud it cannot trim."""
     import time
 
     import numpy as np
@@ -327,12 +342,6 @@ def fit_trimmed_job(job: FitJob, points: np.ndarray | None = None) -> dict[str, 
     from nurbs_core.jobs.local_frame import shifted
     from nurbs_core.trim.fit import fit_trimmed
 
-    check_trim_options(job)
-    outputs = check_before_work(job)
-    if points is None:  # read, repeats merged, spread checked, a far scan in a local frame
-        from nurbs_core.jobs.input_cloud import input_cloud
-
-        points, _, _, job = input_cloud(job, None)
     config = fit_config(job, 3)
     print(f"{job.input}: {len(points)} points; fitting a patch over the outline's rectangle by "
           f"fairing least squares (stiffness {config.stiffness:g}), trimmed at the scan's "

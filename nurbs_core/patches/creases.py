@@ -245,7 +245,7 @@ def detect_creases(mesh: ScanMesh, points: np.ndarray, noise: float | None = Non
         kink[part], gain[part], explained[part], count[part] = _kink(
             points, cloud, vertices[index[part]], bisector[part], on_line[index[part]],
             line[index[part]], KINK_REACH * d)
-    sigma = estimate_noise(points) if noise is None else noise
+    sigma = estimate_noise(points, tree=cloud) if noise is None else noise
     significant = explained >= KINK_CHI2 * sigma ** 2
     resolved = count >= MIN_DENSITY * window_count(points, cloud, KINK_REACH * d)
     candidate[index] = (gain >= KINK_GAIN) & (kink > WEAK) & significant & resolved

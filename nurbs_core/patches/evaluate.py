@@ -8,7 +8,6 @@ numpy + scipy, float64.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -16,25 +15,10 @@ import numpy as np
 import scipy.sparse
 
 from nurbs_core.basis_arrays import basis_and_derivative
-from nurbs_core.knot_vectors import uniform
 from nurbs_core.patches.network import PatchNetwork
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
-
-
-@functools.lru_cache(maxsize=16)
-def _shared_knots(size: int, degree: int) -> np.ndarray:
-    """A network's knot vector (``PatchNetwork.knots``: :func:`uniform` of its size and degree),
-    made once per size and degree, read-only (a fit's passes evaluate ~1,400 times)."""
-    knots = uniform(size, degree)
-    knots.setflags(write=False)
-    return knots
-
-
-def network_knots(network: PatchNetwork) -> np.ndarray:
-    """``network.knots`` (size + degree + 1,), the same values, from a cache."""
-    return _shared_knots(network.size, network.degree)
 
 
 @dataclass
@@ -69,7 +53,7 @@ def local_rows(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.nd
                derivative: str | None = None) -> LocalRows:
     """The rows of :func:`rows` over each row's own patch (its control grid, not the global
     control points)."""
-    knots, p = network_knots(network), network.degree
+    knots, p = network.knots, network.degree
     bu, bv = basis_1d(knots, p, u), basis_1d(knots, p, v)
     wu = bu.derivative if derivative == "u" else bu.values
     wv = bv.derivative if derivative == "v" else bv.values
@@ -100,7 +84,7 @@ def global_rows(network: PatchNetwork, local: LocalRows) -> scipy.sparse.csr_mat
 def evaluate(network: PatchNetwork, patch: np.ndarray, u: np.ndarray, v: np.ndarray,
              control_points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Points, S_u and S_v (each (M, 3)) of patch[k] at (u[k], v[k])."""
-    knots, p = network_knots(network), network.degree
+    knots, p = network.knots, network.degree
     c = network.control_points if control_points is None else control_points
     bu, bv = basis_1d(knots, p, u), basis_1d(knots, p, v)
     n, index = p + 1, network.index
@@ -165,7 +149,7 @@ def grid_points(network: PatchNetwork, resolution: int) -> np.ndarray:
     are B C_p B^T: two small products per patch instead of a gather of (p + 1)^2 control
     points per sample."""
     t = np.linspace(0.0, 1.0, resolution)
-    basis = basis_1d(network_knots(network), network.degree, t)
+    basis = basis_1d(network.knots, network.degree, t)
     dense = np.zeros((resolution, network.size))
     columns = basis.first[:, None] + np.arange(network.degree + 1)
     dense[np.arange(resolution)[:, None], columns] = basis.values

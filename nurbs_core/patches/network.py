@@ -18,6 +18,7 @@ is what the fit adds (:mod:`nurbs_core.patches.fit`).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -99,10 +100,15 @@ class PatchNetwork:
     def patch_count(self) -> int:
         return int(len(self.quads))
 
-    @property
+    @functools.cached_property
     def knots(self) -> np.ndarray:
-        """The clamped uniform knot vector (size + degree + 1,) shared by every patch and direction."""
-        return uniform(self.size, self.degree)
+        """The clamped uniform knot vector (size + degree + 1,) shared by every patch and
+        direction: made once per network (a fit's passes evaluate it ~1,400 times) and
+        read-only, since every reader shares it. ``size`` and ``degree`` are never reassigned: a
+        finer grid is a new network (:func:`build_network`, :meth:`with_control_points`)."""
+        knots = uniform(self.size, self.degree)
+        knots.setflags(write=False)
+        return knots
 
     def patch_control_points(self, control_points: np.ndarray | None = None) -> np.ndarray:
         """(P, size, size, 3) control nets (of ``control_points`` (K, 3), default the network's)."""
@@ -113,7 +119,7 @@ class PatchNetwork:
         """One :class:`~nurbs_core.geometry.NurbsSurface` per patch."""
         from nurbs_core.geometry import NurbsSurface
 
-        knots = self.knots
+        knots = self.knots.copy()   # torch shares a numpy array's memory: never the read-only one
         return [NurbsSurface(net, self.degree, self.degree, knots, knots, dtype=dtype)
                 for net in self.patch_control_points()]
 

@@ -106,10 +106,11 @@ def cloud_mesh(points: np.ndarray, *, max_vertices: int = MAX_MESH_VERTICES,
     rng = np.random.default_rng(seed)
     spacing0 = median_spacing(vertices)
     # the umbrellas are built on denoised positions, so that neighbouring tangent planes agree
-    smoothed = smooth_points(vertices)
-    if estimate_noise(vertices) > NOISY * spacing0:
+    tree = cKDTree(vertices)
+    smoothed = smooth_points(vertices, tree=tree)
+    if estimate_noise(vertices, tree=tree) > NOISY * spacing0:
         # noise comparable to the spacing: a wider, repeated projection before the umbrellas
-        smoothed = smooth_points(smooth_points(vertices, k=40), k=40)
+        smoothed = smooth_points(smooth_points(vertices, k=40, tree=tree), k=40)
     jittered = smoothed + rng.normal(scale=JITTER * spacing0, size=vertices.shape)
     frames = local_frames(jittered, k=RING_CANDIDATES)
     faces = _vote(_umbrella_triangles(jittered, frames))

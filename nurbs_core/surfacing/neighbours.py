@@ -49,12 +49,12 @@ def local_frames(points: np.ndarray, k: int = 12, tree: cKDTree | None = None) -
     return LocalFrames(neighbours, distances, normals, tangents, spacing)
 
 
-def _quadric_residuals(points: np.ndarray, centres: np.ndarray, k: int,
-                       tree: cKDTree) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Fit ``h = a x^2 + b xy + c y^2 + d x + e y + f`` over each centre's k + 1 nearest points
-    in their principal frame. Returns (residuals (n, k+1), height of the fit at the centre's own
-    tangential position (n,), normal direction (n, 3), the centre's height (n,))."""
-    _, index = tree.query(centres, k=k + 1)
+def _quadric_residuals(points: np.ndarray, centres: np.ndarray,
+                       index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Fit ``h = a x^2 + b xy + c y^2 + d x + e y + f`` over each centre's neighbourhood
+    ``points[index]`` (``index`` (n, k+1): its k + 1 nearest points) in their principal frame.
+    Returns (residuals (n, k+1), height of the fit at the centre's own tangential position (n,),
+    normal direction (n, 3), the centre's height (n,))."""
     mean = points[index].mean(axis=1, keepdims=True)
     patch = points[index] - mean
     _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", patch, patch))
@@ -90,14 +90,16 @@ MIN_NOISE_POINTS = 400
 
 
 def estimate_noise(points: np.ndarray, k: int = 24, max_points: int = 4000,
-                   seed: int = 0) -> float:
+                   seed: int = 0, tree: cKDTree | None = None) -> float:
     """Robust estimate of the noise's standard deviation normal to the surface (points' units).
 
     Fits a quadric height function in the principal frame of each point's k-neighbourhood (so
     curvature does not count as noise) and returns the median of the residuals' RMS, corrected
     for the 6 fitted coefficients. ``max_points`` neighbourhoods (a seeded random subset) are
     enough. Noise as wide as the neighbourhoods (BIASED_RADII) is read again on the cloud
-    thinned by halves (NOISE_RADII, MAX_HALVING_GAIN)."""
+    thinned by halves (NOISE_RADII, MAX_HALVING_GAIN). ``tree``: a cKDTree the caller built
+    over these ``points``, queried for the first reading instead of a second tree (not used
+    when a cloud over NOISE_CLOUD points is thinned first)."""
     points = np.asarray(points, np.float64)
     k = int(min(k, len(points) - 1))
     if k < 8:
@@ -107,7 +109,10 @@ def estimate_noise(points: np.ndarray, k: int = 24, max_points: int = 4000,
         # in a very dense cloud a k-neighbourhood is thinner than the noise, and a quadric
         # through it fits the noise: estimate on a sparser random subset
         points = points[rng.choice(len(points), NOISE_CLOUD, replace=False)]
-    sigma, radius = _median_noise(points, k, max_points, rng)
+        tree = None
+    elif tree is not None and tree.n != len(points):
+        raise ValueError(f"the tree holds {tree.n} points, not the {len(points)} given")
+    sigma, radius = _median_noise(points, k, max_points, rng, tree)
     if not radius < BIASED_RADII * sigma:
         return sigma
     while radius < NOISE_RADII * sigma and len(points) // 2 >= MIN_NOISE_POINTS:
@@ -119,16 +124,17 @@ def estimate_noise(points: np.ndarray, k: int = 24, max_points: int = 4000,
     return sigma
 
 
-def _median_noise(points: np.ndarray, k: int, max_points: int,
-                  rng: np.random.Generator) -> tuple[float, float]:
-    """:func:`estimate_noise`'s reading on ``points`` (N, 3) and the median radius of the
-    k-neighbourhoods it was read over."""
+def _median_noise(points: np.ndarray, k: int, max_points: int, rng: np.random.Generator,
+                  tree: cKDTree | None = None) -> tuple[float, float]:
+    """:func:`estimate_noise`'s reading on ``points`` (N, 3) (``tree``: over them, None: built
+    here) and the median radius of the first 1000 k-neighbourhoods it was read over."""
     centres = points if len(points) <= max_points else points[
         rng.choice(len(points), max_points, replace=False)]
-    tree = cKDTree(points)
-    residual, _, _, _ = _quadric_residuals(points, centres, k, tree)
+    tree = cKDTree(points) if tree is None else tree
+    distances, index = tree.query(centres, k=k + 1)
+    residual, _, _, _ = _quadric_residuals(points, centres, index)
     rms = np.sqrt((residual ** 2).sum(axis=1) / max(k + 1 - 6, 1))
-    radius = float(np.median(tree.query(centres[:1000], k=k + 1)[0][:, -1]))
+    radius = float(np.median(distances[:1000, -1]))
     return float(np.median(rms)), radius
 
 
@@ -144,7 +150,8 @@ def smooth_points(points: np.ndarray, k: int = 20, tree: cKDTree | None = None) 
     out = np.empty_like(points)
     for start in range(0, len(points), 65536):
         chunk = points[start:start + 65536]
-        _, fitted, normal, height = _quadric_residuals(points, chunk, k, tree)
+        _, fitted, normal, height = _quadric_residuals(points, chunk,
+                                                       tree.query(chunk, k=k + 1)[1])
         out[start:start + 65536] = chunk + (fitted - height)[:, None] * normal
     return out
 

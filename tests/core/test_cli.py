@@ -417,6 +417,59 @@ def test_job_defaults_are_the_command_lines():
         assert getattr(job, name) == parsed[name], name
 
 
+@pytest.mark.parametrize("option, stiffness", [([], None), (["--stiffness", "0.02"], 0.02)])
+def test_stiffness_help_names_the_default_each_fit_takes(option, stiffness):
+    """--stiffness feeds a single patch's core (FitConfig.stiffness) and, with --patches, the
+    network (PatchOptions.stiffness), on two scales; its help named one default, written as
+    text (1e-3), and said nothing of the network's (3). Each default it names is the one the
+    fit takes."""
+    from nurbs_core.cli import build_parser
+    from nurbs_core.jobs.settings import FitJob, fit_config, patch_options
+
+    help_text = " ".join(build_parser().format_help().split())
+    named = re.search(r"--stiffness S .*?core \(default ([^)]+)\).*?--patches, the "
+                      r"network's \(default ([\d.e+-]+)", help_text)
+    assert named is not None, "the --stiffness help names no default of each scale"
+    job = FitJob(input="in.xyz", stiffness=stiffness)
+    single = fit_config(job, 3).stiffness
+    network = patch_options(job.replace(patches="20")).stiffness
+    automatic = patch_options(job, automatic=True).stiffness  # not the single patch's scale
+    if stiffness is None:
+        assert (float(named[1]), float(named[2])) == (single, network)
+    else:
+        assert single == network == stiffness
+    assert automatic == float(named[2])
+    seam = re.search(r"--seam-weight W .*?\(default ([\d.e+-]+)\)", help_text)
+    assert seam is not None and float(seam[1]) == patch_options(job.replace(patches="20")).seam_weight
+
+
+@pytest.mark.parametrize("changes", [
+    dict(),                                                # the core alone
+    dict(free_knots=True),                                 # the core, then the gradient fit
+    dict(loss="p2s+0.1*laplacian"),
+    dict(solver="gradient"),
+    dict(solver="gradient", parameterization="plane"),    # the gradient fit alone
+    dict(grid=[20, 20], solver="least_squares"),          # the exact solve
+])
+def test_the_plan_line_names_every_stage_the_plan_runs(tmp_path, capsys, changes):
+    """The report's first line said "with adam, loss ..." for a fit that runs the least-squares
+    core first and the gradient fit after it (the app's note for the same plan names both): it
+    now names each stage of the engine's plan, in order."""
+    from nurbs_core.fitting.plan import fit_plan
+    from nurbs_core.jobs import FitJob, prepare_fit
+
+    points = np.random.default_rng(0).uniform(-1.0, 1.0, (400, 3)) * [1.0, 1.0, 0.1]
+    prepared = prepare_fit(FitJob(input=str(tmp_path / "scan.xyz"), **changes), points)
+    line = capsys.readouterr().err
+    stages = fit_plan(prepared.config, prepared.parameters is not None).stages
+    named = [stage for stage, words in (("exact", "by exact least squares"),
+                                        ("least_squares", "by fairing least squares"),
+                                        ("gradient", "gradient fit with adam"))
+             if words in line]
+    assert tuple(named) == stages, line
+    assert ("least_squares" in stages) == ("stiffness 0.001" in line)
+
+
 def test_surfacing_options_reach_the_fit(tmp_path):
     from nurbs_core.cli import build_parser
 

@@ -52,3 +52,17 @@ def test_closed_networks_and_parts_fit_and_save_without_torch(tmp_path):
     )
     printed = _run(code, 600)
     assert printed.split()[-2:] == ["0", "False"], printed
+
+
+def test_the_fewest_points_of_a_surface_fit_are_read_without_the_quality_measures():
+    """``fitting.normalised`` (every fit's first step) needs only the quality report's
+    neighbourhood size, not its measures: importing it loads neither ``nurbs_core.quality`` nor
+    scipy's trees (on main it loaded 599 modules, 202 without them)."""
+    code = (
+        "import sys\n"
+        "from nurbs_core.fitting.normalised import MIN_SURFACE_POINTS\n"
+        "from nurbs_core.quality_defaults import NEIGHBOURS\n"
+        "print(MIN_SURFACE_POINTS == NEIGHBOURS + 1, 'nurbs_core.quality' in sys.modules,\n"
+        "      'scipy.spatial' in sys.modules)\n"
+    )
+    assert _run(code, 120).split() == ["True", "False", "False"]

@@ -54,3 +54,61 @@ def test_settings_within_the_bounds_pass():
                 FitJob(input="a.xyz", curve=True, samples=[100000]),
                 FitJob(input="a.xyz", settings=["threads=2"])):
         check_settings(job)
+
+
+def _sheet(count: int = 900):
+    import numpy as np
+
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(-1.0, 1.0, (count, 2))
+    return np.column_stack([xy, 0.2 * np.sin(xy[:, 0]) * np.cos(xy[:, 1])])
+
+
+def _ring(count: int = 200):
+    import numpy as np
+
+    angle = np.linspace(0.0, 2.0 * np.pi, count, endpoint=False)
+    return np.column_stack([2.0 * np.cos(angle), np.sin(angle), np.zeros(count)])
+
+
+@pytest.mark.parametrize("cloud, changes", [
+    (_sheet, dict(single_patch=True)),
+    (_sheet, dict(trim=True)),
+    (_ring, dict(curve=True)),
+    (_ring, dict()),                     # the automatic route, which finds a curve
+])
+def test_a_fit_checks_its_job_once(tmp_path, monkeypatch, cloud, changes):
+    """fit_one checked the job, then prepare_fit (the forced single patch, the automatic route's
+    curve) or fit_trimmed_job (--trim) checked it again: one place checks now."""
+    import numpy as np
+
+    from nurbs_core.jobs import checks
+
+    calls = []
+
+    def counted(job):
+        calls.append(job)
+        return checks.check_before_work(job)
+
+    monkeypatch.setattr("nurbs_core.jobs.one_input.check_before_work", counted)
+    monkeypatch.setattr("nurbs_core.jobs.single.check_before_work", counted)
+    source, out = tmp_path / "scan.xyz", tmp_path / "fit.json"
+    np.savetxt(source, cloud())
+    fit_one(FitJob(input=str(source), output=[str(out)], iterations=20, quiet=True, **changes))
+    assert out.exists() and len(calls) == 1
+
+
+def test_a_solid_output_of_a_cloud_the_automatic_route_fits_as_a_curve_is_refused_first(
+        tmp_path):
+    """The automatic route's curve was refused a .brep output by the second check of its job
+    (then with "unknown suffix"); with one check it is refused as every route that makes no
+    solid is, before the curve is fitted, and nothing is written."""
+    import numpy as np
+
+    from nurbs_core.io.errors import FileFormatError
+
+    source, out = tmp_path / "ring.xyz", tmp_path / "ring.brep"
+    np.savetxt(source, _ring())
+    with pytest.raises(FileFormatError, match="holds a solid, but the scan is not fitted as one"):
+        fit_one(FitJob(input=str(source), output=[str(out)], quiet=True))
+    assert list(tmp_path.iterdir()) == [source]

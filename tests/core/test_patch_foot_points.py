@@ -14,7 +14,6 @@ from nurbs_core.patches.evaluate import (
     grid_points,
     grid_samples,
     grid_starts,
-    network_knots,
     unit,
 )
 from nurbs_core.patches.fit import _reassign
@@ -77,13 +76,20 @@ def test_evaluate_is_the_plainly_gathered_contraction_bit_for_bit():
 
 
 @pytest.mark.parametrize("size", [4, 6, 9])
-def test_the_cached_knots_are_the_networks_own(size):
+def test_a_networks_knots_are_made_once_and_shared_read_only(size):
     network = build_network(CUBE_VERTICES, CUBE_QUADS, size=size)
-    knots = network_knots(network)
-    assert knots.tobytes() == network.knots.tobytes()
-    assert network_knots(network) is knots                # made once
+    knots = network.knots
+    p = network.degree
+    clamped = np.concatenate([np.zeros(p), np.linspace(0.0, 1.0, size - p + 1), np.ones(p)])
+    np.testing.assert_allclose(knots, clamped, rtol=0, atol=1e-15)
+    assert network.knots is knots                         # made once
     with pytest.raises(ValueError):
         knots[0] = 1.0                                    # and shared, so read-only
+    moved = network.with_control_points(network.control_points + 1.0)
+    assert moved.knots.tobytes() == knots.tobytes()
+    surfaces = network.surfaces()                         # torch tensors of their own
+    surfaces[0].knots_u[0] = -1.0
+    assert knots[0] == 0.0 and network.knots[0] == 0.0
 
 
 @pytest.mark.parametrize("resolution", [2, 7, 14])

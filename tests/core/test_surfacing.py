@@ -334,6 +334,38 @@ def test_the_noise_estimate_reads_noise_as_wide_as_the_neighbourhoods(shape, noi
     assert estimate_noise(cloud.points) == pytest.approx(cloud.noise, rel=0.2)
 
 
+@pytest.mark.parametrize("count", [5000, 25_000])
+def test_the_noise_estimate_queries_the_callers_tree_and_each_neighbourhood_once(count,
+                                                                                monkeypatch):
+    """A caller with a tree over the cloud (the quality report, the mesh, the creases) built a
+    second one in estimate_noise, and each reading queried its first 1000 neighbourhoods twice
+    (their radius). The caller's tree gives the same reading; a cloud over NOISE_CLOUD points is
+    thinned and read on its own tree; a tree over other points is refused."""
+    from scipy.spatial import cKDTree
+
+    from nurbs_core.surfacing import neighbours
+
+    points = samples.saddle(count, seed=5, noise=0.01).points
+    alone = neighbours.estimate_noise(points)
+    queries = []
+
+    class Counted(cKDTree):
+        def query(self, x, *args, **kwargs):
+            queries.append((self, len(x)))
+            return super().query(x, *args, **kwargs)
+
+    tree = Counted(points)
+    monkeypatch.setattr(neighbours, "cKDTree", Counted)
+    assert neighbours.estimate_noise(points, tree=tree) == alone
+    # one query per reading (one tree each): its first 1000 centres are not queried again
+    readers = [id(reader) for reader, _ in queries]
+    assert readers and len(set(readers)) == len(readers)
+    # the caller's tree is read first, unless the cloud was thinned before any reading
+    assert (queries[0][0] is tree) == (len(points) <= neighbours.NOISE_CLOUD)
+    with pytest.raises(ValueError, match="the tree holds"):
+        neighbours.estimate_noise(points[:4000], tree=cKDTree(points[:3000]))
+
+
 @pytest.mark.slow
 def test_a_thin_skin_is_not_read_as_wider_noise(paper_data):
     """The paper's stabiliser: its aerofoil's two skins lie inside the neighbourhoods, which
