@@ -220,7 +220,7 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
     if "flipped_fraction" in stats:
         print(quality_text(stats, diagonal, units))
     if prepared.flat_z:
-        geometry = _lift(cast("CurveArrays", geometry), float(prepared.points[0, 2]))
+        geometry = lifted_curve(cast("CurveArrays", geometry), float(prepared.points[0, 2]))
     geometry = shifted(geometry, job.origin)  # in the scan's own coordinates
     offset = None
     if job.offset is not None:
@@ -286,7 +286,7 @@ def _chamfer(geometry: GeometryArrays, points: np.ndarray, gen: np.random.Genera
     return chamfer(samples, points)
 
 
-def _lift(curve: CurveArrays, z: float) -> CurveArrays:
+def lifted_curve(curve: CurveArrays, z: float) -> CurveArrays:
     """A 2-D curve fitted in the xy-plane back in 3-D at height z (for the file writers)."""
     import numpy as np
 
