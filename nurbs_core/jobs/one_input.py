@@ -62,8 +62,24 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
     if job.patches is not None:
         return run_patches(job, patch_options(job), outputs, points=points, mesh=file_mesh,
                            stoppable=stoppable)
+    if job.curve and job.initial is None:
+        return _forced_curves(job, outputs, points, stoppable)
     prepared = prepare_fit(job, points)
     return finish_fit(prepared, run_fit(prepared, stoppable))
+
+
+def _forced_curves(job: FitJob, outputs: list[Path], points: np.ndarray,
+                   stoppable: bool) -> dict[str, Any]:
+    """``--curve``: one curve, or one per curve when the cloud holds several
+    (:func:`nurbs_core.curve_pieces.several_curves`: separate pieces, branches)."""
+    from nurbs_core.curve_cloud import curve_measures
+    from nurbs_core.curve_pieces import pieces_finding, several_curves
+    from nurbs_core.jobs.curves import run_curves
+
+    pieces = several_curves(points, whole_is_curve=curve_measures(points) is not None)
+    if pieces is not None and not job.quiet:
+        print(f"{job.input}: {pieces_finding(pieces)}: {pieces.count} curves", file=sys.stderr)
+    return run_curves(job, outputs, points, points, pieces, stoppable)
 
 
 def _automatic(job: FitJob, outputs: list[Path], given: np.ndarray | None,

@@ -252,3 +252,13 @@ def test_the_automatic_curve_route_reads_the_file_once_and_merges_nothing(tmp_pa
     captured = capsys.readouterr()
     assert len(reads) == 1
     assert captured.err.count("400 of 800 points repeat an earlier one") == 1
+
+
+def test_forced_curve_fits_each_curve_of_two_circles_too(tmp_path, capsys):
+    source = tmp_path / "two.xyz"
+    np.savetxt(source, _two_circles(200, 0.0))
+    assert main([str(source), "-o", str(tmp_path / "two.json"), "--curve"]) == 0
+    captured = capsys.readouterr()
+    assert "2 separate pieces" in captured.err
+    curves = _written(tmp_path / "two.json")
+    assert len(curves) == 2 and all(_closes(curve) for curve in curves)
