@@ -42,6 +42,9 @@ MIN_PIECE_POINTS = 8
 #: The ring around a point in which arms are counted, in point spacings.
 RING_INNER = 3.0
 RING_OUTER = 6.0
+#: The spacing that sizes the rings is at least this many times the noise
+#: (:func:`nurbs_core.fitting.curve_core.curve_noise`).
+NOISE_SPACINGS = 3.0
 #: Points of a ring closer than this many spacings belong to the same arm.
 ARM_LINK = 2.5
 #: Points within this many gaps (or RING_OUTER spacings) of a junction are cut from the branches
@@ -49,7 +52,7 @@ ARM_LINK = 2.5
 #: cut at radius r meeting at 60 degrees end r apart.
 CUT_GAPS = 1.5
 #: An arm holds at least this share of its ring's points (a stray neighbour is no arm).
-MIN_ARM_SHARE = 0.1
+MIN_ARM_SHARE = 0.2
 #: Clouds larger than this are judged on an even subset of this many points, then every point
 #: joins its nearest judged point's piece.
 JUDGED_POINTS = 20_000
@@ -58,7 +61,8 @@ JUDGED_POINTS = 20_000
 @dataclass
 class CurvePieces:
     """The curves a cloud holds (:func:`curve_pieces`): ``pieces``, index arrays into the
-    points (together every point once, each in the points' order), one per curve (separate
+    points (together every point once, each in the points' order but for the points about a
+    junction), one per curve (separate
     pieces, and the branches of a branched piece), the ``junctions`` (J, d) where branches
     met, the ``gap`` that separates pieces (in the points' units) and how many ``separate``
     pieces there are before any is cut at a junction."""
@@ -114,22 +118,25 @@ def junction_points(points: np.ndarray, spacing: float) -> np.ndarray:
     return at_junction
 
 
-def _branches(points: np.ndarray, gap: float) -> tuple[list[np.ndarray], np.ndarray]:
-    """The branches (index arrays) of one piece (N, d) cut at its junctions, and the junctions'
-    centres (J, d); the piece whole and no junctions when it is one chain
-    (:func:`nurbs_core.curve_cloud.chain_share` at least
+def _branches(points: np.ndarray, gap: float) -> tuple[list[np.ndarray], np.ndarray, float]:
+    """The branches (index arrays) of one piece (N, d) cut at its junctions, the junctions'
+    centres (J, d) and the radius about them cut out (then rejoined); the piece whole and no
+    junctions when it is one chain (:func:`nurbs_core.curve_cloud.chain_share` at least
     :data:`~nurbs_core.curve_cloud.CHAIN_SHARE` at either of its scales: an outline, however
     close its parts pass) or has no junction. Junctions are found among an even subset of the
     piece (:func:`~nurbs_core.curve_cloud.even_points`); ``gap``: the
     distance that joins points of one branch."""
     from nurbs_core.curve_cloud import CHAIN_SHARE, chain_share, even_points
 
-    whole = [np.arange(len(points))], np.zeros((0, points.shape[1]))
+    whole = [np.arange(len(points))], np.zeros((0, points.shape[1])), 0.0
     if len(points) < 3 * MIN_PIECE_POINTS or any(
             chain_share(points, dense=dense) >= CHAIN_SHARE for dense in (True, False)):
         return whole
+    from nurbs_core.fitting.curve_core import curve_noise
+
     judged = even_points(points)
-    spacing = point_spacing(judged)
+    # noise scatters a ring's arms into fragments: the rings widen with it
+    spacing = max(point_spacing(judged), NOISE_SPACINGS * curve_noise(judged))
     at_junction = junction_points(judged, spacing)
     if not at_junction.any():
         return whole
@@ -139,7 +146,8 @@ def _branches(points: np.ndarray, gap: float) -> tuple[list[np.ndarray], np.ndar
     tree = cKDTree(points)
     near = np.zeros(len(points), bool)
     # the arms' cut ends lie farther apart than the gap that joins a branch's points
-    for ball in tree.query_ball_point(centres, max(RING_OUTER * spacing, CUT_GAPS * gap)):
+    radius = max(RING_OUTER * spacing, CUT_GAPS * gap)
+    for ball in tree.query_ball_point(centres, radius):
         near[ball] = True
     rest = np.flatnonzero(~near)
     if len(rest) == 0:
@@ -149,14 +157,32 @@ def _branches(points: np.ndarray, gap: float) -> tuple[list[np.ndarray], np.ndar
     taken = np.flatnonzero(near)
     _, nearest = cKDTree(points[rest]).query(points[taken])
     labels[taken] = labels[rest[nearest]]
-    return [np.flatnonzero(labels == label) for label in range(labels.max() + 1)], centres
+    return ([np.flatnonzero(labels == label) for label in range(labels.max() + 1)], centres,
+            radius)
+
+
+def _arranged(points: np.ndarray, branch: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """A branch's indices (in the points' order) with its points ``near`` a junction (bool,
+    per index) moved to the end of the branch they are nearer, in order of their distance to
+    it: points the cut took back from the junction, listed wherever their own arm lists them,
+    would make an ordered file's branch jump back across the junction."""
+    rest, taken = branch[~near], branch[near]
+    if len(rest) == 0 or len(taken) == 0:
+        return branch
+    to_first = np.linalg.norm(points[taken] - points[rest[0]], axis=1)
+    to_last = np.linalg.norm(points[taken] - points[rest[-1]], axis=1)
+    front = to_first < to_last
+    before = taken[front][np.argsort(-to_first[front], kind="stable")]
+    after = taken[~front][np.argsort(to_last[~front], kind="stable")]
+    return np.concatenate([before, rest, after])
 
 
 def curve_pieces(points: np.ndarray, branches: bool = True) -> CurvePieces:
     """The curves the cloud (N, d), d = 2 or 3, holds (see the module): its separate pieces,
     each cut at its junctions into branches (unless ``branches`` is False); the pieces' indices
-    keep the points' order (an ordered file's order is each curve's). ValueError when the
-    points have no extent."""
+    keep the points' order (an ordered file's order is each curve's; a branch's points taken
+    back from its junction at the end nearer it: :func:`_arranged`). ValueError when the points
+    have no extent."""
     points = np.asarray(points, np.float64)
     judged = _even_subset(points)
     tree = cKDTree(points[judged])
@@ -176,7 +202,7 @@ def curve_pieces(points: np.ndarray, branches: bool = True) -> CurvePieces:
         # a large piece is cut on an even subset, every point following its nearest judged one
         local = members if len(members) <= JUDGED_POINTS else members[_even_subset(
             points[members])]
-        parts, centres = _branches(points[local], gap)
+        parts, centres, radius = _branches(points[local], gap)
         if len(parts) == 1:
             pieces.append(members)
             continue
@@ -187,7 +213,9 @@ def curve_pieces(points: np.ndarray, branches: bool = True) -> CurvePieces:
         if len(local) < len(members):
             part_of = part_of[cKDTree(points[local]).query(points[members])[1]]
         part_of = _strays_joined(points[members], part_of)
-        pieces.extend(members[part_of == number] for number in np.unique(part_of))
+        near = cKDTree(centres).query(points[members])[0] <= radius
+        pieces.extend(_arranged(points, members[part_of == number], near[part_of == number])
+                      for number in np.unique(part_of))
     return CurvePieces(pieces, np.asarray(junctions).reshape(-1, points.shape[1]), gap,
                        separate=len(found))
 

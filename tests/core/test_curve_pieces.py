@@ -262,3 +262,20 @@ def test_forced_curve_fits_each_curve_of_two_circles_too(tmp_path, capsys):
     assert "2 separate pieces" in captured.err
     curves = _written(tmp_path / "two.json")
     assert len(curves) == 2 and all(_closes(curve) for curve in curves)
+
+
+@pytest.mark.parametrize("shape", ["T", "Y", "X"])
+@pytest.mark.parametrize("sigma", [0.007, 0.02])     # a third of, and about, the spacing
+def test_noisy_junctions_are_found_once_with_every_arm_whole(shape, sigma):
+    arm = np.linspace(0.0, 1.0, 51)[1:, None]
+    directions = {"T": [(-1.0, 0.0), (1.0, 0.0), (0.0, -1.0)],
+                  "Y": [(0.0, -1.0), (np.sin(np.pi / 3), 0.5), (-np.sin(np.pi / 3), 0.5)],
+                  "X": [(-1.0, 0.0), (1.0, 0.0), (0.0, -1.0), (0.0, 1.0)]}[shape]
+    exact = np.vstack([[(0.0, 0.0)]] + [arm * direction for direction in directions])
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        points = exact + rng.normal(scale=sigma, size=exact.shape)
+        pieces = curve_pieces(points[rng.permutation(len(points))])
+        assert pieces.count == len(directions) and len(pieces.junctions) == 1
+        assert np.linalg.norm(pieces.junctions[0]) < 0.05
+        assert min(map(len, pieces.pieces)) >= 45     # each arm's 50 points, about
