@@ -271,8 +271,9 @@ def several_curves(points: np.ndarray, whole_is_curve: bool) -> CurvePieces | No
     from nurbs_core.curve_cloud import MIN_POINTS, THIN_SHARE, curve_measures, thin_share
 
     points = np.asarray(points, np.float64)
-    if len(points) < 2 * MIN_POINTS or not np.isfinite(points).all():
-        return None
+    if len(points) < 2 * MIN_POINTS or not np.isfinite(points).all() \
+            or not np.ptp(points, axis=0).any():
+        return None     # too few, or no extent: the fits say what is wrong
     if not whole_is_curve and thin_share(points) < THIN_SHARE:
         return None
     pieces = curve_pieces(points, branches=not whole_is_curve)

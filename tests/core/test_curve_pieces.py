@@ -279,3 +279,9 @@ def test_noisy_junctions_are_found_once_with_every_arm_whole(shape, sigma):
         assert pieces.count == len(directions) and len(pieces.junctions) == 1
         assert np.linalg.norm(pieces.junctions[0]) < 0.05
         assert min(map(len, pieces.pieces)) >= 45     # each arm's 50 points, about
+
+
+def test_coincident_points_are_no_curves_and_left_to_the_fits_to_refuse():
+    assert several_curves(np.ones((50, 3)), whole_is_curve=False) is None
+    with pytest.raises(ValueError, match="all points coincide"):
+        curve_pieces(np.ones((50, 2)))
