@@ -16,6 +16,8 @@ if TYPE_CHECKING:
     import numpy as np
 
     from nurbs_core.curve_pieces import CurvePieces
+    from nurbs_core.fitting.config import FitConfig, StopToken
+    from nurbs_core.geometry_arrays import CurveArrays
 
 
 def run_curves(job: FitJob, outputs: list[Path], listed: np.ndarray, distinct: np.ndarray,
@@ -34,11 +36,41 @@ def run_curves(job: FitJob, outputs: list[Path], listed: np.ndarray, distinct: n
     if job.report is not None:
         raise ValueError("--report maps the deviation over a surface: a cloud of several "
                          "curves has none (fit it without --report)")
-    return _run_pieces(job, outputs, listed, _listed_pieces(listed, distinct, pieces),
+    return _run_pieces(job, outputs, listed, listed_pieces(listed, distinct, pieces),
                        stoppable)
 
 
-def _listed_pieces(listed: np.ndarray, distinct: np.ndarray, pieces: CurvePieces
+def fit_curve_pieces(points: np.ndarray, pieces: list[np.ndarray],
+                     config: FitConfig | None = None, stop: StopToken | None = None
+                     ) -> list[tuple[CurveArrays, dict[str, Any]]]:
+    """Each piece (indices) of ``points`` (N, 3) fitted as its own curve by the engine's curve
+    fit (``config``: the engine's curve defaults), in 2-D when the points lie at one height and
+    lifted back: (curve, statistics) per piece, as far as a ``stop`` lets them run. ValueError
+    naming the piece whose fit failed."""
+    from nurbs_core.curve_cloud import flat_height
+    from nurbs_core.fitting.config import FitConfig
+    from nurbs_core.fitting.run import fit_arrays
+    from nurbs_core.jobs.single import lifted_curve
+
+    config = config or FitConfig(kind="curve")
+    flat_z = flat_height(points)
+    target = points[:, :2] if flat_z else points
+    fitted = []
+    for number, piece in enumerate(pieces, start=1):
+        if stop is not None and stop.stopped:
+            break
+        result = fit_arrays(target[piece], config, stop=stop)
+        if result.status == "failed":
+            raise ValueError(f"curve {number} of {len(pieces)} ({len(piece)} points): the fit "
+                             f"failed: {result.message}")
+        geometry = result.geometry
+        if flat_z:
+            geometry = lifted_curve(geometry, float(points[0, 2]))
+        fitted.append((geometry, dict(result.statistics)))
+    return fitted
+
+
+def listed_pieces(listed: np.ndarray, distinct: np.ndarray, pieces: CurvePieces
                    ) -> list[np.ndarray]:
     """The pieces as indices into ``listed`` (in their order): each listed point in the piece
     of its nearest distinct point."""
