@@ -31,7 +31,8 @@ def test_two_circles_open_as_two_fitted_curves_shown_and_exported(qtbot, window,
 
     open_by_drop(qtbot, window, [_two_circles(tmp_path)])
     document = window.document
-    assert "2 separate pieces" in window.statusBar().currentMessage()
+    message = window.statusBar().currentMessage()
+    assert "2 separate pieces" in message and "NURBS shape(s) from" not in message
     assert document.patch_names == ["two.xyz curve 1 (closed)", "two.xyz curve 2 (closed)"]
     radii = set()
     for curve in document.patches:
