@@ -285,3 +285,34 @@ def test_coincident_points_are_no_curves_and_left_to_the_fits_to_refuse():
     assert several_curves(np.ones((50, 3)), whole_is_curve=False) is None
     with pytest.raises(ValueError, match="all points coincide"):
         curve_pieces(np.ones((50, 2)))
+
+
+def test_the_cat_image_gives_all_its_outlines_none_crossing_a_slit(paper_data, tmp_path,
+                                                                    capsys):
+    """Through nurbs-fit's automatic route: one curve per outline of the cat (its boundary
+    pixels are one 8-connected outline), none running more than a pixel into the background
+    between its legs, every boundary pixel followed."""
+    from scipy import ndimage
+    from scipy.spatial import cKDTree
+
+    from nurbs_core.images import boundary_mask, boundary_points, foreground_mask
+
+    image = paper_data / "skeletons" / "cat.png"
+    mask = foreground_mask(image)
+    points = boundary_points(image)
+    source = tmp_path / "cat.xyz"
+    np.savetxt(source, np.column_stack([points, np.zeros(len(points))]))
+    assert main([str(source), "-o", str(tmp_path / "cat.json")]) == 0
+    capsys.readouterr()
+    curves = _written(tmp_path / "cat.json")
+    outlines = ndimage.label(boundary_mask(mask), structure=np.ones((3, 3)))[1]
+    assert len(curves) == outlines
+    depth = ndimage.distance_transform_edt(~mask)
+    samples = []
+    for curve in curves:
+        assert _closes(curve)
+        along = curve_points(curve, np.linspace(0.0, 1.0, 20_000))[:, :2]
+        pixel = np.clip(np.floor(along).astype(int), 0, np.array(mask.shape) - 1)
+        assert depth[pixel[:, 0], pixel[:, 1]].max() <= 1.0
+        samples.append(along)
+    assert cKDTree(np.vstack(samples)).query(points)[0].max() < 2.5
