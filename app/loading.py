@@ -119,12 +119,13 @@ def fit_several_curves(loaded: LoadedFiles, cancel: threading.Event | None = Non
     pieces = several_curves(distinct, whole_is_curve=loaded.curve)
     if pieces is None:
         return
-    from nurbs_core.jobs.curves import fit_curve_pieces, listed_pieces
+    from nurbs_core.jobs.curves import iter_curve_pieces, listed_pieces
 
     _check(cancel)
     listed = np.concatenate([t.points if t.file_order is None else t.file_order.points
                              for t in clouds])
-    fitted = fit_curve_pieces(listed, listed_pieces(listed, distinct, pieces))
+    fitted = [(curve, statistics) for curve, statistics, _ in
+              iter_curve_pieces(listed, listed_pieces(listed, distinct, pieces))]
     _check(cancel)
     source = clouds[0].name if len(clouds) == 1 else "the clouds"
     for number, (curve, statistics) in enumerate(fitted, start=1):

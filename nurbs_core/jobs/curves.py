@@ -6,8 +6,10 @@ output (.3dm, STEP, IGES, JSON, CSV hold several curves)."""
 from __future__ import annotations
 
 import sys
+from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
+from nurbs_core.curve_cloud import flat_height
 from nurbs_core.jobs.settings import FitJob
 
 if TYPE_CHECKING:
@@ -40,25 +42,24 @@ def run_curves(job: FitJob, outputs: list[Path], listed: np.ndarray, distinct: n
                        stoppable)
 
 
-def fit_curve_pieces(points: np.ndarray, pieces: list[np.ndarray],
-                     config: FitConfig | None = None, stop: StopToken | None = None
-                     ) -> list[tuple[CurveArrays, dict[str, Any]]]:
+def iter_curve_pieces(points: np.ndarray, pieces: list[np.ndarray],
+                      config: FitConfig | None = None, stop: StopToken | None = None
+                      ) -> Iterator[tuple[CurveArrays, dict[str, Any], str]]:
     """Each piece (indices) of ``points`` (N, 3) fitted as its own curve by the engine's curve
     fit (``config``: the engine's curve defaults), in 2-D when the points lie at one height and
-    lifted back: (curve, statistics) per piece, as far as a ``stop`` lets them run. ValueError
-    naming the piece whose fit failed."""
-    from nurbs_core.curve_cloud import flat_height
+    lifted back: (curve, statistics, status) per piece, as far as a ``stop`` lets them run (the
+    piece under way ends with its result so far). ValueError naming the piece whose fit
+    failed."""
     from nurbs_core.fitting.config import FitConfig
     from nurbs_core.fitting.run import fit_arrays
     from nurbs_core.jobs.single import lifted_curve
 
-    config = config or FitConfig(kind="curve")
     flat_z = flat_height(points)
     target = points[:, :2] if flat_z else points
-    fitted = []
+    config = config or FitConfig(kind="curve")
     for number, piece in enumerate(pieces, start=1):
         if stop is not None and stop.stopped:
-            break
+            return
         result = fit_arrays(target[piece], config, stop=stop)
         if result.status == "failed":
             raise ValueError(f"curve {number} of {len(pieces)} ({len(piece)} points): the fit "
@@ -66,8 +67,7 @@ def fit_curve_pieces(points: np.ndarray, pieces: list[np.ndarray],
         geometry = result.geometry
         if flat_z:
             geometry = lifted_curve(geometry, float(points[0, 2]))
-        fitted.append((geometry, dict(result.statistics)))
-    return fitted
+        yield geometry, dict(result.statistics), str(result.status)
 
 
 def listed_pieces(listed: np.ndarray, distinct: np.ndarray, pieces: CurvePieces
@@ -87,61 +87,59 @@ def listed_pieces(listed: np.ndarray, distinct: np.ndarray, pieces: CurvePieces
 
 def _run_pieces(job: FitJob, outputs: list[Path], points: np.ndarray,
                 pieces: list[np.ndarray], stoppable: bool) -> dict[str, Any]:
-    """Each piece of ``points`` (N, 3) fitted as its own curve (see :func:`run_curves`)."""
+    """Each piece of ``points`` (N, 3) fitted as its own curve (see :func:`run_curves`): one
+    line per curve; the first Ctrl-C stops the fit under way and writes the curves so far."""
+    import signal
+
     import numpy as np
 
-    from nurbs_core.curve_cloud import flat_height
-    from nurbs_core.failures import one_line
+    from nurbs_core.fitting.config import StopToken
     from nurbs_core.io.dispatch import save_all
     from nurbs_core.jobs.local_frame import shifted
     from nurbs_core.jobs.report import FitFailed, length_unit, plain, print_units, units_of
     from nurbs_core.jobs.settings import fit_config
-    from nurbs_core.jobs.single import PreparedFit, lifted_curve, run_fit
+    from nurbs_core.jobs.single import interrupt_handler
 
-    flat_z = flat_height(points)
-    target = points[:, :2] if flat_z else points
-    config = fit_config(job, target.shape[1])
+    config = fit_config(job, points.shape[1] - (1 if flat_height(points) else 0))
     units = units_of(job)
     u = length_unit(units)
     print(f"{job.input}: {len(points)} points in {len(pieces)} curves; fitting each by least "
           f"squares (degree {config.degree_u}, closed and periodic where its points close)",
           file=sys.stderr)
-    quiet = job.replace(quiet=True)  # one line per curve, not each curve's progress
-    curves, geometries, distances = [], [], []
-    for number, piece in enumerate(pieces, start=1):
-        prepared = PreparedFit(quiet, outputs, points[piece], target[piece], flat_z, config,
-                               None, None)
-        result = run_fit(prepared, stoppable)
-        if result.status == "failed":
-            raise FitFailed(f"curve {number} of {len(pieces)} ({len(piece)} points): the fit "
-                            f"failed: {one_line(str(result.message))}")
-        stats = result.statistics
-        geometry = result.geometry
-        count = len(np.asarray(geometry.control_points))
-        shape = "closed" if stats.get("closed") else "open"
-        print(f"curve {number}: {shape}, {count} control points, {len(piece)} points, rms "
-              f"{stats['rms']:.6g}{u}, max {stats['max']:.6g}{u}")
-        if flat_z:
-            geometry = lifted_curve(geometry, float(points[0, 2]))
-        geometries.append(shifted(geometry, job.origin))
-        distances.append(stats)
-        curves.append(plain({**stats, "points": len(piece), "control_points": [count],
-                             "fit_status": result.status}))
-        if result.status == "stopped":
-            print(f"stopped: curves {number + 1} to {len(pieces)} not fitted", file=sys.stderr)
-            break
-    jobs = [(geometries, path, {"units": units}) for path in outputs]
-    save_all(jobs)  # all or nothing
+    stop = StopToken()
+    if stoppable:
+        previous = signal.signal(signal.SIGINT, interrupt_handler(stop))
+    curves, geometries = [], []
+    try:
+        for number, (geometry, stats, status) in enumerate(
+                iter_curve_pieces(points, pieces, config, stop), start=1):
+            count = len(np.asarray(geometry.control_points))
+            size = len(pieces[number - 1])
+            print(f"curve {number}: {'closed' if stats.get('closed') else 'open'}, {count} "
+                  f"control points, {size} points, rms {stats['rms']:.6g}{u}, max "
+                  f"{stats['max']:.6g}{u}")
+            geometries.append(shifted(geometry, job.origin))
+            curves.append(plain({**stats, "points": size, "control_points": [count],
+                                 "fit_status": status}))
+    except ValueError as error:
+        raise FitFailed(str(error)) from None
+    finally:
+        if stoppable:
+            signal.signal(signal.SIGINT, previous)
+    if len(curves) < len(pieces):
+        print(f"stopped: curves {len(curves) + 1} to {len(pieces)} not fitted", file=sys.stderr)
+    if not curves:
+        raise FitFailed("stopped before the first curve was fitted: nothing written")
+    save_all([(geometries, path, {"units": units}) for path in outputs])  # all or nothing
     print_units(units, outputs)
     for path in outputs:
         print(f"wrote {path} ({len(geometries)} curves)")
     counts = np.array([curve["points"] for curve in curves], np.float64)
-    rms = float(np.sqrt((counts * np.array([s["rms"] ** 2 for s in distances])).sum()
-                        / counts.sum()))
+    share = counts / counts.sum()
+    every = len(curves) == len(pieces) and all(c["fit_status"] == "converged" for c in curves)
     return plain({"kind": "curve", "curves": curves, "points": len(points),
-                  "mean": float((counts * [s["mean"] for s in distances]).sum() / counts.sum()),
-                  "rms": rms, "max": max(s["max"] for s in distances),
-                  "fit_status": ("stopped" if len(curves) < len(pieces) else
-                                 "converged" if all(curve["fit_status"] == "converged"
-                                                    for curve in curves) else "stopped"),
-                  "control_points": [curve["control_points"][0] for curve in curves]})
+                  "mean": float((share * [c["mean"] for c in curves]).sum()),
+                  "rms": float(np.sqrt((share * [c["rms"] ** 2 for c in curves]).sum())),
+                  "max": max(c["max"] for c in curves),
+                  "fit_status": "converged" if every else "stopped",
+                  "control_points": [c["control_points"][0] for c in curves]})

@@ -149,7 +149,7 @@ def _initial(job: FitJob, flat_z: bool) -> NurbsCurve | NurbsSurface | None:
     return initial
 
 
-def _interrupt_handler(stop: StopToken) -> Callable[..., None]:
+def interrupt_handler(stop: StopToken) -> Callable[..., None]:
     """SIGINT during the fit: the first stops it (the result so far is still written), the
     second aborts (KeyboardInterrupt: status 130, the outputs untouched)."""
     def handler(*_: object) -> None:
@@ -170,7 +170,7 @@ def run_fit(prepared: PreparedFit, stoppable: bool = True) -> FitResult:
 
     stop = StopToken()
     if stoppable:
-        previous = signal.signal(signal.SIGINT, _interrupt_handler(stop))
+        previous = signal.signal(signal.SIGINT, interrupt_handler(stop))
     try:
         return fit_arrays(prepared.target, prepared.config, stop=stop, parameters=prepared.parameters,
                    initial=prepared.initial,

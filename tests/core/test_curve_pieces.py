@@ -316,3 +316,20 @@ def test_the_cat_image_gives_all_its_outlines_none_crossing_a_slit(paper_data, t
         assert depth[pixel[:, 0], pixel[:, 1]].max() <= 1.0
         samples.append(along)
     assert cKDTree(np.vstack(samples)).query(points)[0].max() < 2.5
+
+
+def test_a_stop_ends_the_curves_after_the_one_under_way():
+    """What the first Ctrl-C does to ``nurbs-fit`` on several curves: the curves so far are
+    kept (and written), the rest not fitted."""
+    from nurbs_core.fitting.config import StopToken
+    from nurbs_core.jobs.curves import iter_curve_pieces
+
+    points = _two_circles(200, 0.0)
+    pieces = curve_pieces(points).pieces
+    stop = StopToken()
+    fitted = []
+    for curve, statistics, status in iter_curve_pieces(points, pieces, stop=stop):
+        fitted.append((curve, statistics, status))
+        stop.stop()
+    assert len(fitted) == 1 and fitted[0][2] == "converged" and fitted[0][1]["closed"]
+    assert np.asarray(fitted[0][0].control_points).shape[1] == 3    # lifted back to z = 0
