@@ -56,6 +56,9 @@ class LoadedFiles:
     #: the visible clouds together are a curve (:func:`nurbs_core.curve_cloud.is_curve_cloud`),
     #: judged here in the load job (its neighbour searches take seconds on millions of points)
     curve: bool = False
+    #: how many curves the visible clouds hold when more than one (each fitted in the load job,
+    #: among ``patches``: :func:`fit_several_curves`); 0 otherwise
+    curves: int = 0
 
 
 def open_suffixes() -> tuple[str, ...]:
@@ -97,7 +100,44 @@ def load_files(paths: list[str], cancel: threading.Event | None = None) -> Loade
     _check(cancel)
     draw_display_subset(loaded.targets)
     loaded.curve = is_curve(loaded.targets)
+    fit_several_curves(loaded, cancel)
     return loaded
+
+
+def fit_several_curves(loaded: LoadedFiles, cancel: threading.Event | None = None) -> None:
+    """When the visible clouds hold several curves (separate pieces, a wire's branches:
+    :func:`nurbs_core.curve_pieces.several_curves`), each is fitted as its own curve, as
+    ``nurbs-fit`` fits them (a file's points as listed), and added to the loaded NURBS shapes:
+    the viewport shows them all, the document tree lists them, File > Export and sessions keep
+    them. One fit (Start) holds one shape, which would jump between the curves."""
+    from nurbs_core.curve_pieces import pieces_finding, several_curves
+
+    clouds = [t for t in loaded.targets if t.visible and len(t.points)]
+    if not clouds:
+        return
+    distinct = np.concatenate([t.points for t in clouds])
+    pieces = several_curves(distinct, whole_is_curve=loaded.curve)
+    if pieces is None:
+        return
+    from nurbs_core.jobs.curves import iter_curve_pieces, listed_pieces
+
+    _check(cancel)
+    listed = np.concatenate([t.points if t.file_order is None else t.file_order.points
+                             for t in clouds])
+    fitted = [(curve, statistics) for curve, statistics, _ in
+              iter_curve_pieces(listed, listed_pieces(listed, distinct, pieces))]
+    _check(cancel)
+    source = clouds[0].name if len(clouds) == 1 else "the clouds"
+    for number, (curve, statistics) in enumerate(fitted, start=1):
+        loaded.patches.append(curve)
+        shape = "closed" if statistics.get("closed") else "open"
+        loaded.patch_names.append(f"{source} curve {number} ({shape})")
+    worst = max(statistics["max"] for _, statistics in fitted)
+    loaded.curves = len(fitted)
+    loaded.notes.append(f"{pieces_finding(pieces).capitalize()}: each fitted as its own curve "
+                        f"({len(fitted)} curves, max distance {worst:.4g}), shown with the NURBS "
+                        "shapes and exported with them. Start fits one shape over all visible "
+                        "points: select one curve's points to fit it alone.")
 
 
 def is_curve(targets: list[Target]) -> bool:

@@ -25,7 +25,14 @@ from typing import Any
 
 import numpy as np
 
-from app.state import JSON_SESSION_FORMAT, OLD_SESSION_FORMATS, Document, Settings, Target
+from app.state import (
+    JSON_SESSION_FORMAT,
+    OLD_SESSION_FORMATS,
+    Document,
+    FileOrder,
+    Settings,
+    Target,
+)
 from nurbs_core.geometry_arrays import from_mapping, number_array
 from nurbs_core.io.json_format import json_kind
 
@@ -197,12 +204,20 @@ def session_content(document: Document,
     ``network_report`` (its quality, warnings, pass count, time and per-point ``deviation``
     (N,)), ready for :func:`write_session`."""
     arrays = {f"targets/{k}": t.points for k, t in enumerate(document.targets)}
+    targets = [{"name": t.name, "path": t.path, "visible": t.visible, "points": f"targets/{k}",
+                "as_read": as_read(t)} for k, t in enumerate(document.targets)]
+    for k, target in enumerate(document.targets):
+        if target.file_order is not None and as_read(target):
+            # a curve fits the file's points as listed (repeats too): kept with the session
+            arrays[f"targets/{k}/listed"] = target.file_order.points
+            arrays[f"targets/{k}/rows"] = target.file_order.rows
+            targets[k]["file_order"] = {"points": f"targets/{k}/listed",
+                                        "rows": f"targets/{k}/rows"}
     manifest: dict[str, Any] = {
         "format": ARCHIVE_FORMAT,
         "settings": document.settings.to_json(),
         "units": document.units,
-        "targets": [{"name": t.name, "path": t.path, "visible": t.visible,
-                     "points": f"targets/{k}"} for k, t in enumerate(document.targets)],
+        "targets": targets,
         "patches": [{"name": name, "geometry": g.to_json()}
                     for name, g in zip(document.patch_names, document.patches, strict=True)],
         "fitted": None if document.fitted is None else document.fitted.to_json(),
@@ -305,6 +320,33 @@ def _json_session(path: Path) -> Any:
                          f"a JSON session: {exc.problem})") from None
 
 
+def as_read(target: Target) -> bool:
+    """Whether the target's points are still the ones its file gave (no point deleted)."""
+    return target.read_points is not None and target.points is target.read_points
+
+
+def _file_order(number: int, item: dict[str, Any], points: np.ndarray,
+                archive: Any) -> FileOrder | None:
+    """A session target's file order (its points as listed and the row of them each point is),
+    checked against its points; None when the session keeps none (older sessions)."""
+    entry = item.get("file_order")
+    if entry is None or archive is None:
+        return None
+    if not isinstance(entry, dict) or not all(isinstance(entry.get(key), str)
+                                              for key in ("points", "rows")):
+        raise ValueError(f"targets[{number}].file_order needs the names of its points and rows")
+    listed = archive.array(entry["points"])
+    rows = archive.array(entry["rows"])
+    if listed.ndim != 2 or listed.shape[1:] != (3,) or rows.ndim != 1 \
+            or not np.issubdtype(rows.dtype, np.integer) or len(rows) != len(points):
+        raise ValueError(f"targets[{number}].file_order: {listed.shape} points and "
+                         f"{rows.shape} rows of {rows.dtype} do not list {len(points)} points")
+    if len(rows) and (rows.min() < 0 or rows.max() >= len(listed)
+                      or not np.array_equal(listed[rows], points)):
+        raise ValueError(f"targets[{number}].file_order does not list the target's points")
+    return FileOrder(np.asarray(listed, np.float64), np.asarray(rows, np.int64))
+
+
 def load_session(document: Document, path: str | Path) -> dict[str, Any]:
     """Read a session file and apply it to ``document`` (untouched when the file is refused:
     ValueError); returns the session (its network is the window's to show)."""
@@ -360,7 +402,12 @@ def _parsed_session(path: Path, data: dict[str, Any], archive: Any) -> dict[str,
                 if not isinstance(item.get("points"), str):
                     raise ValueError(f"targets[{number}] needs the name of its points")
                 item = {**item, "points": archive.array(item["points"])}
-            targets.append(_session_target(number, item))
+            target = _session_target(number, item)
+            if item.get("as_read") is True:
+                # the points as the file gave them: a curve fits them in the file's order
+                target.read_points = target.points
+                target.file_order = _file_order(number, item, target.points, archive)
+            targets.append(target)
         patches, names = [], []
         for number, item in enumerate(_list(data, "patches")):
             if not isinstance(item, dict) or not isinstance(item.get("name"), str):

@@ -33,7 +33,8 @@
 * ``curve``: a cloud that is one-dimensional, thin across in (almost) every neighbourhood
   (:func:`nurbs_core.curve_cloud.is_curve_cloud`: an outline, a wire, a helix; a planar ring at one
   height), with no mesh of its own and no part forced: a curve, fitted in 2-D when it lies at
-  one height.
+  one height. A cloud of several curves (separate pieces, or a wire branching at junctions:
+  :func:`nurbs_core.curve_pieces.several_curves`) carries its ``pieces``: one curve each.
 
 A route forced by the caller (``--single-patch``, ``--patches``) is taken as it is. The decision
 carries its reason (printed by the CLI) and the closed or open mesh it built, so the network does
@@ -76,6 +77,9 @@ class Route:
     seconds: float = 0.0
     #: a part's analytic regions (:class:`nurbs_core.brep.segment.Segmentation`)
     segmentation: Any = None
+    #: the curves of a cloud that holds several
+    #: (:class:`nurbs_core.curve_pieces.CurvePieces`; None for one curve)
+    pieces: Any = None
     #: the part's freeform region when the route found one
     #: (:class:`nurbs_core.brep.freeform.FreeformRegion`: the fit takes it, not measured twice)
     freeform: Any = None
@@ -86,7 +90,8 @@ class Route:
         if self.kind == "single_patch":
             return f"{self.finding}: one patch"
         if self.kind == "curve":
-            return f"{self.finding}: a curve"
+            return f"{self.finding}: " + (f"{self.pieces.count} curves" if self.pieces is not None
+                                          else "a curve")
         if self.kind == "part":
             return f"{self.finding}: " + ("an open shell with analytic faces" if self.open_shell
                                           else "a solid with analytic faces")
@@ -118,8 +123,13 @@ def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
     started = time.perf_counter()
     if file_mesh is None and not part:
         from nurbs_core.curve_cloud import curve_measures
+        from nurbs_core.curve_pieces import pieces_finding, several_curves
 
         measures = curve_measures(points)
+        pieces = several_curves(points, whole_is_curve=measures is not None)
+        if pieces is not None:
+            return Route("curve", pieces_finding(pieces), pieces=pieces,
+                         seconds=time.perf_counter() - started)
         if measures is not None:
             share = measures[0]
             return Route("curve", f"the cloud is one-dimensional (thin across in {share:.0%} of "

@@ -236,10 +236,11 @@ class LoadPolicy(QObject):
         for path in paths:
             self.recent.add(path)
         counts = [f"{len(t.points)} points in {t.name}{mesh_words(t)}" for t in loaded.targets]
-        if loaded.patch_names:
+        read_shapes = len(loaded.patch_names) - loaded.curves  # the fitted curves: see notes
+        if read_shapes:
             sources = sorted({Path(p).name for p in paths} - {t.name for t in loaded.targets}
                              - {loaded.solid.report.source if loaded.solid else ""})
-            counts.append(f"{len(loaded.patch_names)} NURBS shape(s) from {names(sources)}")
+            counts.append(f"{read_shapes} NURBS shape(s) from {names(sources)}")
         if loaded.solid is not None:
             counts.append(window.solid_policy.show_opened())
         shown = window.scene.shown_points_text()  # a big cloud is drawn reduced

@@ -56,6 +56,12 @@ FAIRING = 1e-3
 #: Once the automatic tolerance is met, the control points grow on while a pass divides the rms
 #: distance by at least this much (the curve, not the noise, still limits it: exact samples).
 PLATEAU_GAIN = 2.0
+#: A foot's parameter stays within this many median steps of the points' start parameters (at
+#: least MIN_DRIFT of the curve) from their order: a coarse early pass, cutting across an
+#: outline's slit, pulled the cat's feet onto the next leg (parameters drifting 8% of the
+#: outline away, the curve crossing the slit 12 pixels deep) and the later passes kept them.
+DRIFT_STEPS = 20.0
+MIN_DRIFT = 0.005
 #: Neighbours of the local cubic that :func:`curve_noise` reads the noise from.
 NOISE_NEIGHBOURS = 10
 
@@ -220,6 +226,7 @@ def curve_passes(points: np.ndarray, parameters: np.ndarray, closed: bool, confi
     module); the last one yielded is the result (the tolerance met, the cap reached, or
     stopped)."""
     degree = config.degree_u
+    anchor = Anchor(parameters.copy(), drift_reach(parameters))
     cap = control_cap(config, len(points))
     count = cap if not config.max_control_points else min(max(FIRST_CONTROL_POINTS,
                                                               degree + 1), cap)
@@ -227,7 +234,7 @@ def curve_passes(points: np.ndarray, parameters: np.ndarray, closed: bool, confi
     quantile = 1.0 - config.outlier_fraction
     kept: CurvePass | None = None
     while True:
-        report = _pass(points, parameters, breaks, degree, closed, tolerance, quantile)
+        report = _pass(points, parameters, breaks, degree, closed, tolerance, quantile, anchor)
         if kept is not None and kept.met and not _rms(report) < _rms(kept) / PLATEAU_GAIN:
             # the tolerance was met and more control points no longer pay: the noise floor
             yield kept
@@ -260,13 +267,42 @@ def refined_breaks(breaks: np.ndarray, report: CurvePass, tolerance: float,
     return np.sort(np.concatenate([breaks, middles]))
 
 
+@dataclass(frozen=True)
+class Anchor:
+    """The start parameters (N,) from the points' order, and how far (``reach``) a foot may
+    drift from them."""
+
+    parameters: np.ndarray
+    reach: float
+
+    def held(self, parameters: np.ndarray, closed: bool) -> np.ndarray:
+        """The parameters (N,) moved back within the reach of the start (cyclic when
+        ``closed``)."""
+        drift = parameters - self.parameters
+        if closed:
+            drift = np.mod(drift + 0.5, 1.0) - 0.5
+        held = self.parameters + np.clip(drift, -self.reach, self.reach)
+        return np.mod(held, 1.0) if closed else np.clip(held, 0.0, 1.0)
+
+
+def drift_reach(parameters: np.ndarray) -> float:
+    """How far a foot's parameter may drift from its start (:data:`DRIFT_STEPS` median steps
+    between the sorted start parameters, at least :data:`MIN_DRIFT`)."""
+    steps = np.diff(np.sort(parameters))
+    steps = steps[steps > 0]
+    step = float(np.median(steps)) if len(steps) else 0.0
+    return max(DRIFT_STEPS * step, MIN_DRIFT)
+
+
 def _pass(points: np.ndarray, parameters: np.ndarray, breaks: np.ndarray, degree: int,
-          closed: bool, tolerance: float, quantile: float) -> CurvePass:
-    """One pass on the breakpoints from the ``parameters`` (N,) (see the module)."""
+          closed: bool, tolerance: float, quantile: float, anchor: Anchor) -> CurvePass:
+    """One pass on the breakpoints from the ``parameters`` (N,) (see the module); the feet
+    held within the ``anchor``'s reach of the start."""
     control = _solve(points, parameters, breaks, degree, closed)
     for _ in range(FOOT_ROUNDS):
         parameters, _ = foot_parameters(spline_of(control, breaks, degree, closed), points,
                                         parameters, closed)
+        parameters = anchor.held(parameters, closed)
         if not closed:
             # an open curve ends at its end points: feet stretched over [0, 1] again, or the
             # ends would run on past the points with nothing to hold them
@@ -274,9 +310,11 @@ def _pass(points: np.ndarray, parameters: np.ndarray, breaks: np.ndarray, degree
             if high > low:
                 parameters = (parameters - low) / (high - low)
         control = _solve(points, parameters, breaks, degree, closed)
-    parameters, distances = foot_parameters(spline_of(control, breaks, degree, closed), points,
-                                            parameters, closed)
-    return CurvePass(control, breaks, parameters, distances,
+    # the distances are to the nearest foot anywhere on the curve; the parameters carried on
+    # are held near their start
+    feet, distances = foot_parameters(spline_of(control, breaks, degree, closed), points,
+                                      parameters, closed)
+    return CurvePass(control, breaks, anchor.held(feet, closed), distances,
                      bool(np.quantile(distances, quantile) <= tolerance))
 
 

@@ -6,6 +6,7 @@ spread checked, and a scan far from the origin moved to a local frame
 from __future__ import annotations
 
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -103,6 +104,50 @@ def input_cloud(job: FitJob, points: np.ndarray | None
     if job.initial is None:
         points, file_mesh, job = in_local_frame(job, points, file_mesh)
     return points, file_mesh, note, job
+
+
+@dataclass
+class AutomaticCloud:
+    """The cloud of an automatic job, read once (:func:`automatic_cloud`): ``points`` (N, 3), the
+    distinct points every surface route fits, ``listed`` (M, 3), the points as the file lists
+    them (repeats too, in its order: a curve's), in the same local frame; the file's own mesh
+    with why it cannot serve; ``merge_note``, the sentence saying how many repeats were merged
+    (printed once a surface route is chosen: a curve merges none); the job that writes back."""
+
+    points: np.ndarray
+    listed: np.ndarray
+    file_mesh: ScanMesh | None
+    note: str
+    merge_note: str
+    job: FitJob
+
+
+def automatic_cloud(job: FitJob, points: np.ndarray | None) -> AutomaticCloud:
+    """The cloud of an automatic job (the route is not decided yet), read from ``job.input``
+    once unless ``points`` (as read) are given: a mesh file as :func:`input_cloud` reads it (its
+    points listed as sampled); a cloud both as listed and without its repeats, checked and
+    moved to a local frame as :func:`input_cloud` does."""
+    import numpy as np
+
+    from nurbs_core.fitting.normalised import check_spread
+    from nurbs_core.io.cloud import without_repeats
+
+    if points is None and is_mesh_file(job.input):
+        distinct, file_mesh, note, job = input_cloud(job, None)
+        return AutomaticCloud(distinct, distinct, file_mesh, note, "", job)
+    if points is None:
+        from nurbs_core.io import load_points
+
+        points = load_points(job.input).points
+    listed = np.asarray(points, np.float64)
+    distinct, merge_note = without_repeats(listed)
+    check_spread(distinct, "surface")
+    if job.initial is not None:
+        return AutomaticCloud(distinct, listed, None, "", merge_note, job)
+    moved, _, moved_job = in_local_frame(job, distinct, None)
+    if moved_job is not job:   # moved: the listed points by the same origin
+        listed = listed - np.asarray(moved_job.origin)
+    return AutomaticCloud(moved, listed, None, "", merge_note, moved_job)
 
 
 #: mesh formats whose coordinates are single precision by their specifications

@@ -50,9 +50,10 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
 
         check_trim_options(job)
     outputs = check_before_work(job)
+    if is_automatic(job) and not job.trim:
+        return _automatic(job, outputs, points, stoppable)
     # every route fits the same cloud: read once, repeats merged, its spread checked and moved
     # to a local frame when it lies far from the origin, before any route is decided or printed
-    given, asked = points, job
     points, file_mesh, note, job = input_cloud(job, points)
     if job.trim:
         from nurbs_core.jobs.single import fit_trimmed_job
@@ -61,53 +62,79 @@ def _fit_one(job: FitJob, points: np.ndarray | None, stoppable: bool) -> dict[st
     if job.patches is not None:
         return run_patches(job, patch_options(job), outputs, points=points, mesh=file_mesh,
                            stoppable=stoppable)
-    if is_automatic(job):
-        from nurbs_core.route import choose_route, without_solid
-
-        options = patch_options(job, automatic=True)  # checked before the route is decided
-        route = choose_route(points, file_mesh, note, max_hole=options.max_hole,
-                             part=part_allowed(job, outputs))
-        if not job.quiet:
-            print(f"route: {route.reason} ({route.seconds:.1f} s)", file=sys.stderr)
-        if route.kind == "curve":
-            # a curve fits the points as listed, repeats too, as --curve does
-            check_no_solid_outputs(outputs, route)
-            curve_points, _, _, curve_job = input_cloud(asked.replace(curve=True), given)
-            prepared = prepare_checked(curve_job, curve_points, outputs)
-            return finish_fit(prepared, run_fit(prepared, stoppable))
-        if route.kind == "part":
-            from nurbs_core.brep.solid import SolidError
-
-            try:
-                return run_part(job, outputs, points, route)
-            except SolidError as error:
-                if job.part:
-                    raise
-                route = without_solid(route, error)
-                if not job.quiet:
-                    print(f"route: {route.reason}", file=sys.stderr)
-        check_no_solid_outputs(outputs, route)
-        try_open_network = True
-        if route.kind == "network":
-            from nurbs_core.patches.layout import LayoutError
-            from nurbs_core.route import without_layout
-
-            check_network_outputs(job, outputs)
-            try:
-                return run_patches(job, options, outputs, points=points, mesh=route.mesh,
-                                   mesh_seconds=route.seconds, stoppable=stoppable)
-            except LayoutError as error:
-                # a closed mesh no layout reproduces (handles a sparse scan invented): the
-                # cloud is fitted as an open surface instead, not refused; an open mesh no
-                # layout reproduces: one patch, without trying that open network again
-                try_open_network = not route.open_network
-                route = without_layout(route, error)
-                if not job.quiet:
-                    print(f"route: {route.reason}", file=sys.stderr)
-        return _single_patch_or_open_network(job, options, outputs, points, route, stoppable,
-                                             try_open_network)
+    if job.curve and job.initial is None:
+        return _forced_curves(job, outputs, points, stoppable)
     prepared = prepare_checked(job, points, outputs)
     return finish_fit(prepared, run_fit(prepared, stoppable))
+
+
+def _forced_curves(job: FitJob, outputs: list[Path], points: np.ndarray,
+                   stoppable: bool) -> dict[str, Any]:
+    """``--curve``: one curve, or one per curve when the cloud holds several
+    (:func:`nurbs_core.curve_pieces.several_curves`: separate pieces, branches)."""
+    from nurbs_core.curve_cloud import curve_measures
+    from nurbs_core.curve_pieces import pieces_finding, several_curves
+    from nurbs_core.jobs.curves import run_curves
+
+    pieces = several_curves(points, whole_is_curve=curve_measures(points) is not None)
+    if pieces is not None and not job.quiet:
+        print(f"{job.input}: {pieces_finding(pieces)}: {pieces.count} curves", file=sys.stderr)
+    return run_curves(job, outputs, points, points, pieces, stoppable)
+
+
+def _automatic(job: FitJob, outputs: list[Path], given: np.ndarray | None,
+               stoppable: bool) -> dict[str, Any]:
+    """The automatic route (:func:`nurbs_core.route.choose_route`) of ``job``'s cloud, read
+    once (``given``: as read), and the fit it leads to, with its fallbacks."""
+    from nurbs_core.jobs.input_cloud import automatic_cloud
+    from nurbs_core.route import choose_route, without_solid
+
+    cloud = automatic_cloud(job, given)
+    points, file_mesh, note, job = cloud.points, cloud.file_mesh, cloud.note, cloud.job
+    options = patch_options(job, automatic=True)  # checked before the route is decided
+    route = choose_route(points, file_mesh, note, max_hole=options.max_hole,
+                         part=part_allowed(job, outputs))
+    if not job.quiet:
+        print(f"route: {route.reason} ({route.seconds:.1f} s)", file=sys.stderr)
+    if route.kind == "curve":
+        from nurbs_core.jobs.curves import run_curves
+
+        # a curve fits the points as listed, repeats too, as --curve does
+        check_no_solid_outputs(outputs, route)
+        return run_curves(job, outputs, cloud.listed, points, route.pieces, stoppable)
+    if cloud.merge_note and not job.quiet:
+        print(f"{job.input}: {cloud.merge_note}", file=sys.stderr)
+    if route.kind == "part":
+        from nurbs_core.brep.solid import SolidError
+
+        try:
+            return run_part(job, outputs, points, route)
+        except SolidError as error:
+            if job.part:
+                raise
+            route = without_solid(route, error)
+            if not job.quiet:
+                print(f"route: {route.reason}", file=sys.stderr)
+    check_no_solid_outputs(outputs, route)
+    try_open_network = True
+    if route.kind == "network":
+        from nurbs_core.patches.layout import LayoutError
+        from nurbs_core.route import without_layout
+
+        check_network_outputs(job, outputs)
+        try:
+            return run_patches(job, options, outputs, points=points, mesh=route.mesh,
+                               mesh_seconds=route.seconds, stoppable=stoppable)
+        except LayoutError as error:
+            # a closed mesh no layout reproduces (handles a sparse scan invented): the
+            # cloud is fitted as an open surface instead, not refused; an open mesh no
+            # layout reproduces: one patch, without trying that open network again
+            try_open_network = not route.open_network
+            route = without_layout(route, error)
+            if not job.quiet:
+                print(f"route: {route.reason}", file=sys.stderr)
+    return _single_patch_or_open_network(job, options, outputs, points, route, stoppable,
+                                         try_open_network)
 
 
 def _single_patch_or_open_network(job: FitJob, options: PatchOptions,

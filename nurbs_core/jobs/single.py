@@ -162,7 +162,7 @@ def _initial(job: FitJob, flat_z: bool) -> NurbsCurve | NurbsSurface | None:
     return initial
 
 
-def _interrupt_handler(stop: StopToken) -> Callable[..., None]:
+def interrupt_handler(stop: StopToken) -> Callable[..., None]:
     """SIGINT during the fit: the first stops it (the result so far is still written), the
     second aborts (KeyboardInterrupt: status 130, the outputs untouched)."""
     def handler(*_: object) -> None:
@@ -183,7 +183,7 @@ def run_fit(prepared: PreparedFit, stoppable: bool = True) -> FitResult:
 
     stop = StopToken()
     if stoppable:
-        previous = signal.signal(signal.SIGINT, _interrupt_handler(stop))
+        previous = signal.signal(signal.SIGINT, interrupt_handler(stop))
     try:
         return fit_arrays(prepared.target, prepared.config, stop=stop, parameters=prepared.parameters,
                    initial=prepared.initial,
@@ -233,7 +233,7 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
     if "flipped_fraction" in stats:
         print(quality_text(stats, diagonal, units))
     if prepared.flat_z:
-        geometry = _lift(cast("CurveArrays", geometry), float(prepared.points[0, 2]))
+        geometry = lifted_curve(cast("CurveArrays", geometry), float(prepared.points[0, 2]))
     geometry = shifted(geometry, job.origin)  # in the scan's own coordinates
     offset = None
     if job.offset is not None:
@@ -299,7 +299,7 @@ def _chamfer(geometry: GeometryArrays, points: np.ndarray, gen: np.random.Genera
     return chamfer(samples, points)
 
 
-def _lift(curve: CurveArrays, z: float) -> CurveArrays:
+def lifted_curve(curve: CurveArrays, z: float) -> CurveArrays:
     """A 2-D curve fitted in the xy-plane back in 3-D at height z (for the file writers)."""
     import numpy as np
 

@@ -165,3 +165,33 @@ def test_the_automatic_route_fits_a_curve_to_the_points_as_listed(tmp_path, caps
     forced = capsys.readouterr().err
     assert "61 points; fitting a curve" in automatic
     assert "61 points; fitting a curve" in forced
+
+
+def background_depth(curve: CurveArrays, mask: np.ndarray, samples: int = 20_000) -> float:
+    """How deep (pixels) dense samples of a curve fitted to an image's boundary pixels (point
+    (i + 0.5, j + 0.5) for pixel (i, j)) run into the background: the largest distance from a
+    sampled pixel to the nearest foreground pixel (scipy's Euclidean distance transform)."""
+    from scipy import ndimage
+
+    depth = ndimage.distance_transform_edt(~mask)
+    along = curve_points(curve, np.linspace(0.0, 1.0, samples))
+    pixel = np.clip(np.floor(along[:, :2]).astype(int), 0, np.array(mask.shape) - 1)
+    return float(depth[pixel[:, 0], pixel[:, 1]].max())
+
+
+@pytest.mark.parametrize("shuffled", [False, True])
+def test_the_cat_outline_is_fitted_without_crossing_a_slit(paper_data, shuffled):
+    """The cat's legs and tail pass within a few pixels of each other: a coarse first pass cut
+    across those slits and pulled the feet's parameters onto the next leg (8% of the outline
+    away); the later passes kept them, and the curve crossed the background 12 pixels deep."""
+    from nurbs_core.images import boundary_points, foreground_mask
+
+    image = paper_data / "skeletons" / "cat.png"
+    mask = foreground_mask(image)
+    points = boundary_points(image)
+    if shuffled:
+        points = points[np.random.default_rng(0).permutation(len(points))]
+    result = fit_arrays(points, FitConfig(kind="curve"))
+    assert result.statistics["closed"]
+    assert background_depth(result.geometry, mask) <= 1.0
+    assert result.statistics["max"] < 2.5      # pixels: every boundary pixel is followed

@@ -1,0 +1,145 @@
+"""The curve route of one input: one curve (the single fit's three steps), or a cloud that holds
+several (separate pieces, branches cut at junctions: :mod:`nurbs_core.curve_pieces`), each fitted
+as its own curve (closed where it closes), one report line each, all written together to every
+output (.3dm, STEP, IGES, JSON, CSV hold several curves)."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any
+
+from nurbs_core.curve_cloud import flat_height
+from nurbs_core.jobs.settings import FitJob
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    import numpy as np
+
+    from nurbs_core.curve_pieces import CurvePieces
+    from nurbs_core.fitting.config import FitConfig, StopToken
+    from nurbs_core.geometry_arrays import CurveArrays
+
+
+def run_curves(job: FitJob, outputs: list[Path], listed: np.ndarray, distinct: np.ndarray,
+               pieces: CurvePieces | None, stoppable: bool = True) -> dict[str, Any]:
+    """Fit the curve route's cloud: the points as ``listed`` (N, 3) (repeats too, in the file's
+    order), one curve when ``pieces`` is None, else one per piece of ``distinct`` (M, 3), the
+    cloud the pieces index (each listed point follows its nearest distinct one, keeping its
+    order). Prints the report, writes every output and returns the statistics (``curves``: one
+    dict per curve)."""
+    from nurbs_core.jobs.single import finish_fit, prepare_checked, run_fit
+
+    job = job.replace(curve=True)
+    if pieces is None or pieces.count < 2:
+        prepared = prepare_checked(job, listed, outputs)
+        return finish_fit(prepared, run_fit(prepared, stoppable))
+    if job.report is not None:
+        raise ValueError("--report maps the deviation over a surface: a cloud of several "
+                         "curves has none (fit it without --report)")
+    return _run_pieces(job, outputs, listed, listed_pieces(listed, distinct, pieces),
+                       stoppable)
+
+
+def iter_curve_pieces(points: np.ndarray, pieces: list[np.ndarray],
+                      config: FitConfig | None = None, stop: StopToken | None = None
+                      ) -> Iterator[tuple[CurveArrays, dict[str, Any], str]]:
+    """Each piece (indices) of ``points`` (N, 3) fitted as its own curve by the engine's curve
+    fit (``config``: the engine's curve defaults), in 2-D when the points lie at one height and
+    lifted back: (curve, statistics, status) per piece, as far as a ``stop`` lets them run (the
+    piece under way ends with its result so far). ValueError naming the piece whose fit
+    failed."""
+    from nurbs_core.fitting.config import FitConfig
+    from nurbs_core.fitting.run import fit_arrays
+    from nurbs_core.jobs.single import lifted_curve
+
+    flat_z = flat_height(points)
+    target = points[:, :2] if flat_z else points
+    config = config or FitConfig(kind="curve")
+    for number, piece in enumerate(pieces, start=1):
+        if stop is not None and stop.stopped:
+            return
+        result = fit_arrays(target[piece], config, stop=stop)
+        if result.status == "failed":
+            raise ValueError(f"curve {number} of {len(pieces)} ({len(piece)} points): the fit "
+                             f"failed: {result.message}")
+        geometry = result.geometry
+        if flat_z:
+            geometry = lifted_curve(geometry, float(points[0, 2]))
+        yield geometry, dict(result.statistics), str(result.status)
+
+
+def listed_pieces(listed: np.ndarray, distinct: np.ndarray, pieces: CurvePieces
+                   ) -> list[np.ndarray]:
+    """The pieces as indices into ``listed`` (in their order): each listed point in the piece
+    of its nearest distinct point."""
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    piece_of = np.empty(len(distinct), np.int64)
+    for number, piece in enumerate(pieces.pieces):
+        piece_of[piece] = number
+    _, nearest = cKDTree(distinct).query(listed)
+    owner = piece_of[nearest]
+    return [np.flatnonzero(owner == number) for number in range(pieces.count)]
+
+
+def _run_pieces(job: FitJob, outputs: list[Path], points: np.ndarray,
+                pieces: list[np.ndarray], stoppable: bool) -> dict[str, Any]:
+    """Each piece of ``points`` (N, 3) fitted as its own curve (see :func:`run_curves`): one
+    line per curve; the first Ctrl-C stops the fit under way and writes the curves so far."""
+    import signal
+
+    import numpy as np
+
+    from nurbs_core.fitting.config import StopToken
+    from nurbs_core.io.dispatch import save_all
+    from nurbs_core.jobs.local_frame import shifted
+    from nurbs_core.jobs.report import FitFailed, length_unit, plain, print_units, units_of
+    from nurbs_core.jobs.settings import fit_config
+    from nurbs_core.jobs.single import interrupt_handler
+
+    config = fit_config(job, points.shape[1] - (1 if flat_height(points) else 0))
+    units = units_of(job)
+    u = length_unit(units)
+    print(f"{job.input}: {len(points)} points in {len(pieces)} curves; fitting each by least "
+          f"squares (degree {config.degree_u}, closed and periodic where its points close)",
+          file=sys.stderr)
+    stop = StopToken()
+    if stoppable:
+        previous = signal.signal(signal.SIGINT, interrupt_handler(stop))
+    curves, geometries = [], []
+    try:
+        for number, (geometry, stats, status) in enumerate(
+                iter_curve_pieces(points, pieces, config, stop), start=1):
+            count = len(np.asarray(geometry.control_points))
+            size = len(pieces[number - 1])
+            print(f"curve {number}: {'closed' if stats.get('closed') else 'open'}, {count} "
+                  f"control points, {size} points, rms {stats['rms']:.6g}{u}, max "
+                  f"{stats['max']:.6g}{u}")
+            geometries.append(shifted(geometry, job.origin))
+            curves.append(plain({**stats, "points": size, "control_points": [count],
+                                 "fit_status": status}))
+    except ValueError as error:
+        raise FitFailed(str(error)) from None
+    finally:
+        if stoppable:
+            signal.signal(signal.SIGINT, previous)
+    if len(curves) < len(pieces):
+        print(f"stopped: curves {len(curves) + 1} to {len(pieces)} not fitted", file=sys.stderr)
+    if not curves:
+        raise FitFailed("stopped before the first curve was fitted: nothing written")
+    save_all([(geometries, path, {"units": units}) for path in outputs])  # all or nothing
+    print_units(units, outputs)
+    for path in outputs:
+        print(f"wrote {path} ({len(geometries)} curves)")
+    counts = np.array([curve["points"] for curve in curves], np.float64)
+    share = counts / counts.sum()
+    every = len(curves) == len(pieces) and all(c["fit_status"] == "converged" for c in curves)
+    return plain({"kind": "curve", "curves": curves, "points": len(points),
+                  "mean": float((share * [c["mean"] for c in curves]).sum()),
+                  "rms": float(np.sqrt((share * [c["rms"] ** 2 for c in curves]).sum())),
+                  "max": max(c["max"] for c in curves),
+                  "fit_status": "converged" if every else "stopped",
+                  "control_points": [c["control_points"][0] for c in curves]})

@@ -1,0 +1,64 @@
+"""A cloud of several curves opened in the window: each curve fitted as its own (as
+``nurbs-fit`` fits them), all shown in the viewport and listed with the NURBS shapes, and
+exported together; the window says what it found."""
+
+from __future__ import annotations
+
+import numpy as np
+from app_helpers import open_by_drop
+
+from nurbs_core.evaluate_arrays import curve_points
+
+#: (centre x, centre y, radius) of the two circles
+CIRCLES = ((0.0, 0.0, 1.0), (3.0, 0.5, 0.5))
+
+
+def _two_circles(tmp_path):
+    rng = np.random.default_rng(0)
+    rings = []
+    for x, y, radius in CIRCLES:
+        angle = rng.uniform(0.0, 2.0 * np.pi, 250)
+        rings.append(np.column_stack([x + radius * np.cos(angle), y + radius * np.sin(angle),
+                                      np.full(250, 0.25)]))
+    path = tmp_path / "two.xyz"
+    np.savetxt(path, np.vstack(rings)[rng.permutation(500)])
+    return path
+
+
+def test_two_circles_open_as_two_fitted_curves_shown_and_exported(qtbot, window, tmp_path):
+    from nurbs_core.geometry import NurbsCurve
+    from nurbs_core.io import load, save
+
+    open_by_drop(qtbot, window, [_two_circles(tmp_path)])
+    document = window.document
+    message = window.statusBar().currentMessage()
+    assert "2 separate pieces" in message and "NURBS shape(s) from" not in message
+    assert document.patch_names == ["two.xyz curve 1 (closed)", "two.xyz curve 2 (closed)"]
+    radii = set()
+    for curve in document.patches:
+        assert curve.kind == "curve"
+        along = curve_points(curve, np.linspace(0.0, 1.0, 2000))
+        np.testing.assert_allclose(along[:, 2], 0.25)             # at the cloud's height
+        centre = along[:, :2].mean(axis=0)
+        x, y, radius = min(CIRCLES, key=lambda c: np.hypot(*(centre - c[:2])))
+        # the fit stops within its floor (1e-5 of the diagonal, at most 3 x that off)
+        assert np.abs(np.hypot(*(along[:, :2] - (x, y)).T) - radius).max() < 3e-4
+        radii.add(radius)
+    assert radii == {1.0, 0.5}
+    # both drawn (tessellated in a job): one line actor each in the loaded-shapes group
+    qtbot.waitUntil(lambda: len(window.scene._extra_meshes["patches"]) == 2, timeout=20_000)
+    drawn = [window.scene.plotter.actors[name] for name in window.scene._extra_meshes["patches"]]
+    assert len(drawn) == 2 and all(actor.GetVisibility() for actor in drawn)
+    # what File > Export writes: every curve
+    exported = tmp_path / "curves.3dm"
+    save(document.all_geometry(), exported)
+    assert [type(shape) for shape in load(exported)] == [NurbsCurve, NurbsCurve]
+
+
+def test_one_curve_is_not_cut(qtbot, window, tmp_path):
+    angle = np.linspace(0.0, 2.0 * np.pi, 300, endpoint=False)
+    path = tmp_path / "ring.xyz"
+    np.savetxt(path, np.column_stack([np.cos(angle), np.sin(angle), np.zeros(300)]))
+    open_by_drop(qtbot, window, [path])
+    assert window.document.patches == []
+    assert window.document.settings.fit.kind == "curve"
