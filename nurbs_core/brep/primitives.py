@@ -18,11 +18,23 @@ from typing import Any
 import numpy as np
 import scipy.optimize
 
+from nurbs_core.brep.distance_jacobians import (
+    AxisFrame,
+    cone_jacobian,
+    cylinder_jacobian,
+    sphere_jacobian,
+    torus_jacobian,
+)
+
 #: the types from simplest to most complex (by parameter count)
 SIMPLICITY = ("plane", "sphere", "cylinder", "cone", "torus")
 
 #: least-squares refinement runs on at most this many of a region's points (random, fixed seed)
 REFINE_POINTS = 4000
+
+#: refine passes scipy the exact Jacobians of :mod:`nurbs_core.brep.distance_jacobians` (False:
+#: scipy's finite differences, the baseline ``benchmarks/bench_segment.py`` measures against)
+EXACT_JACOBIANS = True
 
 #: a cone narrower than this half-angle (degrees) is a cylinder, wider than 90 minus it a plane
 CONE_LIMIT = 2.0
@@ -277,6 +289,12 @@ def _closest_between_lines(p0: np.ndarray, d0: np.ndarray, p1: np.ndarray,
     return 0.5 * (p0 + s * d0 + p1 + t * d1)
 
 
+def _jacobian(exact: Any) -> Any:
+    """What refine passes scipy as the Jacobian: ``exact`` (a function of the parameters) or,
+    without :data:`EXACT_JACOBIANS`, finite differences."""
+    return exact if EXACT_JACOBIANS else "2-point"
+
+
 # --- least-squares refinement ----------------------------------------------------------------------
 
 
@@ -284,8 +302,9 @@ def refine(primitive: Primitive, points: np.ndarray, at_most: int = REFINE_POINT
            evaluations: int | None = None) -> Primitive:
     """``primitive`` with its parameters refined by least squares on points (N, 3) (``at_most``
     of them, drawn with a fixed seed): the sum of squared geometric distances is minimised (a
-    plane in closed form); ``evaluations``: at most this many residual evaluations (None:
-    scipy's default, to convergence)."""
+    plane in closed form, the others by Levenberg-Marquardt with their exact Jacobians,
+    :mod:`nurbs_core.brep.distance_jacobians`); ``evaluations``: at most this many residual
+    evaluations (None: scipy's default, to convergence)."""
     points = np.asarray(points, np.float64)
     if len(points) > at_most:
         pick = np.random.default_rng(0).choice(len(points), at_most, replace=False)
@@ -298,22 +317,20 @@ def refine(primitive: Primitive, points: np.ndarray, at_most: int = REFINE_POINT
         def sphere(x: np.ndarray) -> np.ndarray:
             return np.linalg.norm(points - x[:3], axis=1) - x[3]
         x = scipy.optimize.least_squares(
-            sphere, np.r_[primitive.origin, primitive.radius], method="lm", max_nfev=evaluations).x
+            sphere, np.r_[primitive.origin, primitive.radius], method="lm", max_nfev=evaluations,
+            jac=_jacobian(lambda x: sphere_jacobian(points, x))).x
         return Primitive("sphere", x[:3], primitive.axis, radius=abs(float(x[3])))
     first, second = axis_frame(primitive.axis)
+    frame = AxisFrame(primitive.axis, primitive.origin, first, second)
 
-    def axis_of(x: np.ndarray) -> np.ndarray:
-        return _unit(primitive.axis + x[0] * first + x[1] * second)
-
-    def origin_of(x: np.ndarray) -> np.ndarray:
-        return primitive.origin + x[2] * first + x[3] * second + (
-            x[5] * primitive.axis if len(x) > 5 else 0.0)
+    axis_of, origin_of = frame.axis, frame.origin
 
     if primitive.kind == "cylinder":
         def cylinder(x: np.ndarray) -> np.ndarray:
             return Primitive("cylinder", origin_of(x), axis_of(x), radius=x[4]).signed(points)
         x = scipy.optimize.least_squares(
-            cylinder, np.r_[0.0, 0.0, 0.0, 0.0, primitive.radius], method="lm", max_nfev=evaluations).x
+            cylinder, np.r_[0.0, 0.0, 0.0, 0.0, primitive.radius], method="lm", max_nfev=evaluations,
+            jac=_jacobian(lambda x: cylinder_jacobian(frame, points, x))).x
         return Primitive("cylinder", origin_of(x), axis_of(x), radius=abs(float(x[4])))
 
     if primitive.kind == "torus":
@@ -322,14 +339,15 @@ def refine(primitive: Primitive, points: np.ndarray, at_most: int = REFINE_POINT
                              minor=x[6]).signed(points)
         x = scipy.optimize.least_squares(
             torus, np.r_[0.0, 0.0, 0.0, 0.0, primitive.radius, 0.0, primitive.minor],
-            method="lm", max_nfev=evaluations).x
+            method="lm", max_nfev=evaluations, jac=_jacobian(lambda x: torus_jacobian(frame, points, x))).x
         return Primitive("torus", origin_of(x), axis_of(x), radius=abs(float(x[4])),
                          minor=abs(float(x[6])))
 
     def cone(x: np.ndarray) -> np.ndarray:
         return Primitive("cone", origin_of(x), axis_of(x), angle=x[4]).signed(points)
     x = scipy.optimize.least_squares(
-        cone, np.r_[0.0, 0.0, 0.0, 0.0, primitive.angle, 0.0], method="lm", max_nfev=evaluations).x
+        cone, np.r_[0.0, 0.0, 0.0, 0.0, primitive.angle, 0.0], method="lm", max_nfev=evaluations,
+        jac=_jacobian(lambda x: cone_jacobian(frame, points, x))).x
     return Primitive("cone", origin_of(x), axis_of(x), angle=float(x[4]))
 
 
