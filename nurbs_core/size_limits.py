@@ -72,22 +72,29 @@ def decompression_limit(compressed_size: int) -> int:
     return DECOMPRESSED_FLOOR + DECOMPRESSED_RATIO * max(0, int(compressed_size))
 
 
-def decompression_problem(claimed: int, compressed_size: int, what: str = "data") -> str | None:
+#: How nurbs-fit's users raise the limit (readers under other commands name none of theirs).
+NURBS_FIT_OPTION = "nurbs-fit --max-decompressed SIZE"
+
+
+def decompression_problem(claimed: int, compressed_size: int, what: str = "data",
+                          option: str | None = NURBS_FIT_OPTION) -> str | None:
     """What is wrong when inflating ``claimed`` bytes from ``compressed_size`` would pass the
-    decompression limit (the claimed size, the cap and how to raise it), else None."""
+    decompression limit (the claimed size, the cap and how to raise it: the environment
+    variable, or the calling command's ``option``, None: the variable only), else None."""
     limit = decompression_limit(compressed_size)
     if claimed <= limit:
         return None
     return (f"{what} would decompress to {format_size(claimed)} from "
             f"{format_size(compressed_size)}, more than the limit of {format_size(limit)} (a "
             f"decompression bomb?); to read it anyway, raise the limit with "
-            f"{MAX_DECOMPRESSED_ENV}=SIZE (for example 16G) or nurbs-fit --max-decompressed SIZE")
+            f"{MAX_DECOMPRESSED_ENV}=SIZE (for example 16G)" + (f" or {option}" if option else ""))
 
 
 def dataset_problem(shape: tuple[int, ...], itemsize: int, file_size: int,
-                    what: str = "the dataset") -> str | None:
+                    what: str = "the dataset", option: str | None = NURBS_FIT_OPTION
+                    ) -> str | None:
     """:func:`decompression_problem` of reading an array of ``shape`` (``itemsize`` bytes a
     value, as read) out of a file of ``file_size`` bytes (an HDF5 file of a few KB may declare a
     dataset of any size: chunked, compressed or never written)."""
     claimed = math.prod(int(n) for n in shape) * int(itemsize)
-    return decompression_problem(claimed, file_size, f"{what} {tuple(shape)}")
+    return decompression_problem(claimed, file_size, f"{what} {tuple(shape)}", option)

@@ -295,7 +295,7 @@ def load_spline_dataset(path: str | Path, limit: int | None = None) -> SplineDat
                 continue
             dataset = handle[name]
             problem = dataset_problem(_read_shape(dataset.shape, limit), dataset.dtype.itemsize,
-                                      path.stat().st_size, f"'{name}'")
+                                      path.stat().st_size, f"'{name}'", option=None)
             if problem is not None:
                 raise ValueError(f"{path}: {problem}")
         stop = slice(None) if limit is None else slice(0, int(limit))

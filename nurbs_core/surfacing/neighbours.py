@@ -110,8 +110,9 @@ def estimate_noise(points: np.ndarray, k: int = 24, max_points: int = 4000,
         # through it fits the noise: estimate on a sparser random subset
         points = points[rng.choice(len(points), NOISE_CLOUD, replace=False)]
         tree = None
-    elif tree is not None and tree.n != len(points):
-        raise ValueError(f"the tree holds {tree.n} points, not the {len(points)} given")
+    elif tree is not None and not _tree_over(tree, points):
+        raise ValueError(f"the tree is not over the {len(points)} points given (it holds "
+                         f"{tree.n}, or others)")
     sigma, radius = _median_noise(points, k, max_points, rng, tree)
     if not radius < BIASED_RADII * sigma:
         return sigma
@@ -122,6 +123,15 @@ def estimate_noise(points: np.ndarray, k: int = 24, max_points: int = 4000,
             break
         sigma = thinner
     return sigma
+
+
+def _tree_over(tree: cKDTree, points: np.ndarray, rows: int = 16) -> bool:
+    """Whether ``tree`` was built over ``points`` (N, 3): the same count and the same rows at
+    ``rows`` places spread over them (the neighbours' indices refer to the tree's rows)."""
+    if tree.n != len(points):
+        return False
+    at = np.linspace(0, len(points) - 1, min(rows, len(points))).astype(np.int64)
+    return bool(np.array_equal(np.asarray(tree.data)[at], points[at]))
 
 
 def _median_noise(points: np.ndarray, k: int, max_points: int, rng: np.random.Generator,

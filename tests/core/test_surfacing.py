@@ -362,8 +362,11 @@ def test_the_noise_estimate_queries_the_callers_tree_and_each_neighbourhood_once
     assert readers and len(set(readers)) == len(readers)
     # the caller's tree is read first, unless the cloud was thinned before any reading
     assert (queries[0][0] is tree) == (len(points) <= neighbours.NOISE_CLOUD)
-    with pytest.raises(ValueError, match="the tree holds"):
+    with pytest.raises(ValueError, match="the tree is not over the 4000 points"):
         neighbours.estimate_noise(points[:4000], tree=cKDTree(points[:3000]))
+    # a tree over as many other points (the cloud reordered) is refused too
+    with pytest.raises(ValueError, match="the tree is not over"):
+        neighbours.estimate_noise(points[:4000], tree=cKDTree(points[:4000][::-1]))
 
 
 @pytest.mark.slow
