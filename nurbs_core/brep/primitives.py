@@ -304,7 +304,10 @@ def refine(primitive: Primitive, points: np.ndarray, at_most: int = REFINE_POINT
     of them, drawn with a fixed seed): the sum of squared geometric distances is minimised (a
     plane in closed form, the others by Levenberg-Marquardt with their exact Jacobians,
     :mod:`nurbs_core.brep.distance_jacobians`); ``evaluations``: at most this many residual
-    evaluations (None: scipy's default, to convergence)."""
+    evaluations (None: scipy's default, to convergence). With the exact Jacobians a step costs
+    one evaluation (and one Jacobian); with finite differences MINPACK also counted the n
+    evaluations of each Jacobian, so the same budget now allows up to n + 1 times the steps:
+    ``bench_segment.py`` finds the same surfaces either way, in 1.4-1.7x less CPU time."""
     points = np.asarray(points, np.float64)
     if len(points) > at_most:
         pick = np.random.default_rng(0).choice(len(points), at_most, replace=False)
