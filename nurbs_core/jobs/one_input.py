@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 from nurbs_core.jobs.checks import check_before_work, check_network_outputs, check_no_solid_outputs
 from nurbs_core.jobs.input_cloud import input_cloud
 from nurbs_core.jobs.network import run_patches
-from nurbs_core.jobs.part import part_allowed, run_part
+from nurbs_core.jobs.part import part_allowed, run_part, unchecked_part_note
 from nurbs_core.jobs.settings import FitJob, is_automatic, patch_options
 from nurbs_core.jobs.single import finish_fit, prepare_checked, run_fit
 
@@ -96,6 +96,9 @@ def _automatic(job: FitJob, outputs: list[Path], given: np.ndarray | None,
                          part=part_allowed(job, outputs))
     if not job.quiet:
         print(f"route: {route.reason} ({route.seconds:.1f} s)", file=sys.stderr)
+        unchecked = unchecked_part_note(job, outputs, route)
+        if unchecked is not None:
+            print(f"{job.input}: {unchecked}", file=sys.stderr)
     if route.kind == "curve":
         from nurbs_core.jobs.curves import run_curves
 

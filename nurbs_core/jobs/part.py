@@ -32,6 +32,26 @@ def part_allowed(job: FitJob, outputs: list[Path]) -> bool | None:
     return None
 
 
+def unchecked_part_note(job: FitJob, outputs: list[Path], route: Route) -> str | None:
+    """Why a closed object went to a network without the machined-part check, when an output
+    that cannot hold a solid turned the check off (:func:`part_allowed`; not after --no-part):
+    a machined part asked for as ``-o part.json part.step`` silently became freeform patches
+    with rounded edges. None when the check ran, was declined by --no-part, or the route is
+    no closed object's network."""
+    from nurbs_core.io.points import suffix_of
+    from nurbs_core.io.solid_io import SOLID_SUFFIXES
+
+    if job.part is not None or route.kind != "network" or route.open_network:
+        return None
+    blocking = [p.name for p in outputs if suffix_of(p) not in SOLID_SUFFIXES]
+    if not blocking:
+        return None
+    return (f"not checked for a machined part: {', '.join(blocking)} cannot hold a solid (a part "
+            f"becomes a solid with exact planes, cylinders and cones when every output is "
+            f"{', '.join(s for s in SOLID_SUFFIXES if s in ('.step', '.iges', '.brep'))}; "
+            f"--part forces it, --no-part silences this)")
+
+
 def run_part(job: FitJob, outputs: list[Path], points: np.ndarray,
              route: Route) -> dict[str, Any]:
     """The part route: the solid with analytic faces (:func:`nurbs_core.brep.objects.fit_parts`:
