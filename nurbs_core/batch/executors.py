@@ -240,6 +240,9 @@ class DaskExecutor:
                 workerless_since = workerless_since or time.monotonic()
                 if time.monotonic() - workerless_since < WORKERLESS_S:
                     continue
+                # the results' gathers still waiting end with the client (asyncio then logs
+                # "Task exception was never retrieved" with Dask's AllExit traceback)
+                self._silence()
                 for future in pending:
                     yield from _failed(futures[future], f"no Dask worker left on {where} "
                                        f"for {WORKERLESS_S:g} s (start workers, then "
