@@ -72,17 +72,25 @@ def iter_curve_pieces(points: np.ndarray, pieces: list[np.ndarray],
 
 def listed_pieces(listed: np.ndarray, distinct: np.ndarray, pieces: CurvePieces
                    ) -> list[np.ndarray]:
-    """The pieces as indices into ``listed`` (in their order): each listed point in the piece
-    of its nearest distinct point."""
+    """The pieces as indices into ``listed``: each listed point in the piece of its nearest
+    distinct point, at that point's place in the piece (the order
+    :func:`~nurbs_core.curve_pieces.curve_pieces` gives it: a branch's points taken back from
+    its junction at the end nearer it), repeats of one point in their listed order."""
     import numpy as np
     from scipy.spatial import cKDTree
 
     piece_of = np.empty(len(distinct), np.int64)
+    rank = np.empty(len(distinct), np.int64)
     for number, piece in enumerate(pieces.pieces):
         piece_of[piece] = number
+        rank[piece] = np.arange(len(piece))
     _, nearest = cKDTree(distinct).query(listed)
     owner = piece_of[nearest]
-    return [np.flatnonzero(owner == number) for number in range(pieces.count)]
+    listed_of = []
+    for number in range(pieces.count):
+        members = np.flatnonzero(owner == number)
+        listed_of.append(members[np.argsort(rank[nearest[members]], kind="stable")])
+    return listed_of
 
 
 def _run_pieces(job: FitJob, outputs: list[Path], points: np.ndarray,

@@ -28,14 +28,17 @@ def _two_circles(count: int, sigma: float, seed: int = 0) -> np.ndarray:
     return np.column_stack([points, np.zeros(len(points))])[rng.permutation(len(points))]
 
 
-def _t_junction(count: int = 100, sigma: float = 0.0, seed: int = 0) -> np.ndarray:
-    """A "T": a bar from (-1, 0) to (1, 0) and a stem from (0, 0) down to (0, -1)."""
+def _t_junction(count: int = 100, sigma: float = 0.0, seed: int = 0,
+                shuffled: bool = True) -> np.ndarray:
+    """A "T": a bar from (-1, 0) to (1, 0) and a stem from (0, -1) up to (0, 0); listed as
+    drawn (the bar left to right, then the stem upwards to it) unless ``shuffled``."""
     rng = np.random.default_rng(seed)
     bar = np.column_stack([np.linspace(-1.0, 1.0, count + 1), np.zeros(count + 1)])
-    stem = np.column_stack([np.zeros(count // 2), -np.linspace(0.02, 1.0, count // 2)])
+    stem = np.column_stack([np.zeros(count // 2), -np.linspace(1.0, 0.02, count // 2)])
     points = np.vstack([bar, stem])
     points += rng.normal(scale=sigma, size=points.shape)
-    return np.column_stack([points, np.zeros(len(points))])[rng.permutation(len(points))]
+    points = np.column_stack([points, np.zeros(len(points))])
+    return points[rng.permutation(len(points))] if shuffled else points
 
 
 def _t_distance(samples: np.ndarray) -> np.ndarray:
@@ -153,6 +156,32 @@ def test_a_t_junction_becomes_three_open_curves_on_its_arms(tmp_path, capsys, si
     from scipy.spatial import cKDTree
 
     assert cKDTree(every).query(points[:, :2])[0].max() < 0.02
+
+
+@pytest.mark.parametrize("seed", [0, 2, 5])
+def test_a_t_listed_as_drawn_gives_open_arms_as_fitting_each_arm_alone(tmp_path, capsys, seed):
+    """nurbs-fit keeps the order curve_pieces gives each arm (points taken back from the
+    junction at the end nearer it), not the file's: listed as drawn, the stem's last points
+    lie at the junction beside the bar's, and a noisy point of the bar taken into the stem,
+    listed first, made the stem's fit run back up along it (closed, 11 control points where
+    the arm alone takes 8 or 10)."""
+    from nurbs_core.jobs.curves import iter_curve_pieces
+
+    sigma = 0.003
+    points = _t_junction(sigma=sigma, seed=seed, shuffled=False)
+    source = tmp_path / "t.xyz"
+    np.savetxt(source, points)
+    assert main([str(source), "-o", str(tmp_path / "t.json")]) == 0
+    capsys.readouterr()
+    written = _written(tmp_path / "t.json")
+    alone = [curve for curve, _, _ in iter_curve_pieces(points, curve_pieces(points).pieces)]
+    assert len(written) == len(alone) == 3
+    assert not any(_closes(curve) for curve in written)
+    assert [len(np.asarray(c.control_points)) for c in written] == \
+        [len(np.asarray(c.control_points)) for c in alone]
+    for curve in written:
+        along = curve_points(curve, np.linspace(0.0, 1.0, 2000))[:, :2]
+        assert _t_distance(along).max() < 4 * sigma
 
 
 def test_a_y_and_a_letter_i_are_cut_into_their_curves():
