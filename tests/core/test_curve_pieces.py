@@ -310,6 +310,25 @@ def test_noisy_junctions_are_found_once_with_every_arm_whole(shape, sigma):
         assert min(map(len, pieces.pieces)) >= 45     # each arm's 50 points, about
 
 
+def test_noisy_junctions_are_found_once_with_every_arm_whole_when_one_arm_is_sparser():
+    """The uneven case of the test above: a T whose bar is sampled every 0.01 and stem every
+    0.02, noise 0.002. Linked by the piece's median spacing (the bar's), the stem broke into
+    fragments counted as arms, and its few ring points fell under an arm's share: 9 of these
+    20 seeds found a false junction on the stem or missed the true one."""
+    wrong = []
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        bar = np.column_stack([np.linspace(-1.0, 1.0, 201), np.zeros(201)])
+        stem = np.column_stack([np.zeros(50), -np.linspace(0.02, 1.0, 50)])
+        points = np.vstack([bar, stem]) + rng.normal(scale=0.002, size=(251, 2))
+        pieces = curve_pieces(points[rng.permutation(len(points))])
+        if not (pieces.count == 3 and len(pieces.junctions) == 1
+                and np.linalg.norm(pieces.junctions[0]) < 0.05
+                and min(map(len, pieces.pieces)) >= 45):
+            wrong.append(seed)
+    assert wrong == []
+
+
 def test_coincident_points_are_no_curves_and_left_to_the_fits_to_refuse():
     assert several_curves(np.ones((50, 3)), whole_is_curve=False) is None
     with pytest.raises(ValueError, match="all points coincide"):
