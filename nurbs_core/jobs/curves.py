@@ -27,8 +27,9 @@ def run_curves(job: FitJob, outputs: list[Path], listed: np.ndarray, distinct: n
     """Fit the curve route's cloud: the points as ``listed`` (N, 3) (repeats too, in the file's
     order), one curve when ``pieces`` is None, else one per piece of ``distinct`` (M, 3), the
     cloud the pieces index (each listed point follows its nearest distinct one, keeping its
-    order). Prints the report, writes every output and returns the statistics (``curves``: one
-    dict per curve)."""
+    order). Prints the report, writes every output and returns the statistics (several curves:
+    ``curves``, how many, and ``curve_points``, ``curve_control_points``, ``curve_closed``,
+    ``curve_rms``, ``curve_max``, ``curve_fit_status``, one value per curve)."""
     from nurbs_core.jobs.single import finish_fit, prepare_checked, run_fit
 
     job = job.replace(curve=True)
@@ -93,6 +94,15 @@ def listed_pieces(listed: np.ndarray, distinct: np.ndarray, pieces: CurvePieces
     return listed_of
 
 
+#: The statuses of one curve's fit, from best to worst.
+STATUS_ORDER = ("converged", "budget", "stopped", "diverged", "failed")
+
+
+def worst_status(statuses: list[str]) -> str:
+    """The worst of the curves' fit statuses (:data:`STATUS_ORDER`): the status of them all."""
+    return max(statuses, key=STATUS_ORDER.index)
+
+
 def _run_pieces(job: FitJob, outputs: list[Path], points: np.ndarray,
                 pieces: list[np.ndarray], stoppable: bool) -> dict[str, Any]:
     """Each piece of ``points`` (N, 3) fitted as its own curve (see :func:`run_curves`): one
@@ -123,12 +133,13 @@ def _run_pieces(job: FitJob, outputs: list[Path], points: np.ndarray,
                 iter_curve_pieces(points, pieces, config, stop), start=1):
             count = len(np.asarray(geometry.control_points))
             size = len(pieces[number - 1])
+            said = "stopped by Ctrl-C" if status == "stopped" else status
             print(f"curve {number}: {'closed' if stats.get('closed') else 'open'}, {count} "
                   f"control points, {size} points, rms {stats['rms']:.6g}{u}, max "
-                  f"{stats['max']:.6g}{u}")
+                  f"{stats['max']:.6g}{u}, {said}")
             geometries.append(shifted(geometry, job.origin))
-            curves.append(plain({**stats, "points": size, "control_points": [count],
-                                 "fit_status": status}))
+            curves.append(plain({**stats, "points": size, "control_points": count,
+                                 "closed": bool(stats.get("closed")), "fit_status": status}))
     except ValueError as error:
         raise FitFailed(str(error)) from None
     finally:
@@ -144,10 +155,13 @@ def _run_pieces(job: FitJob, outputs: list[Path], points: np.ndarray,
         print(f"wrote {path} ({len(geometries)} curves)")
     counts = np.array([curve["points"] for curve in curves], np.float64)
     share = counts / counts.sum()
-    every = len(curves) == len(pieces) and all(c["fit_status"] == "converged" for c in curves)
-    return plain({"kind": "curve", "curves": curves, "points": len(points),
+    # no "control_points": a list of two counts there reads as a surface's grid
+    return plain({"kind": "curve", "curves": len(curves), "points": len(points),
                   "mean": float((share * [c["mean"] for c in curves]).sum()),
                   "rms": float(np.sqrt((share * [c["rms"] ** 2 for c in curves]).sum())),
                   "max": max(c["max"] for c in curves),
-                  "fit_status": "converged" if every else "stopped",
-                  "control_points": [c["control_points"][0] for c in curves]})
+                  "fit_status": "stopped" if stop.stopped else worst_status(
+                      [c["fit_status"] for c in curves]),
+                  **{f"curve_{key}": [c[key] for c in curves]
+                     for key in ("points", "control_points", "closed", "rms", "max",
+                                 "fit_status")}})

@@ -366,6 +366,22 @@ def test_the_cat_image_gives_all_its_outlines_none_crossing_a_slit(paper_data, t
     assert cKDTree(np.vstack(samples)).query(points)[0].max() < 2.5
 
 
+def test_several_curves_report_the_worst_status_not_stopped(tmp_path, capsys):
+    """A gradient fit cut at its iteration budget is "budget", curve by curve and for them all:
+    "stopped" is for Ctrl-C alone."""
+    from nurbs_core.jobs import FitJob, fit_one
+
+    source = tmp_path / "two.xyz"
+    np.savetxt(source, _two_circles(200, 0.0))
+    stats = fit_one(FitJob(input=str(source), output=[str(tmp_path / "two.json")],
+                           solver="gradient", iterations=5, quiet=True))
+    captured = capsys.readouterr()
+    lines = [line for line in captured.out.splitlines() if line.startswith("curve ")]
+    assert stats["curves"] == 2 and stats["curve_fit_status"] == ["budget", "budget"]
+    assert stats["fit_status"] == "budget"
+    assert len(lines) == 2 and all(line.endswith(", budget") for line in lines)
+
+
 def test_a_stop_ends_the_curves_after_the_one_under_way():
     """What the first Ctrl-C does to ``nurbs-fit`` on several curves: the curves so far are
     kept (and written), the rest not fitted."""
