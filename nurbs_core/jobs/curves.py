@@ -116,14 +116,14 @@ def _run_pieces(job: FitJob, outputs: list[Path], points: np.ndarray,
     from nurbs_core.jobs.local_frame import shifted
     from nurbs_core.jobs.report import FitFailed, length_unit, plain, print_units, units_of
     from nurbs_core.jobs.settings import fit_config
-    from nurbs_core.jobs.single import interrupt_handler
+    from nurbs_core.jobs.single import fit_method, interrupt_handler
 
     config = fit_config(job, points.shape[1] - (1 if flat_height(points) else 0))
     units = units_of(job)
     u = length_unit(units)
-    print(f"{job.input}: {len(points)} points in {len(pieces)} curves; fitting each by least "
-          f"squares (degree {config.degree_u}, closed and periodic where its points close)",
-          file=sys.stderr)
+    how = fit_method(config, max(map(len, pieces)))
+    print(f"{job.input}: {len(points)} points in {len(pieces)} curves; fitting each as a curve "
+          f"(degree {config.degree_u}) {how}", file=sys.stderr)
     stop = StopToken()
     if stoppable:
         previous = signal.signal(signal.SIGINT, interrupt_handler(stop))

@@ -377,6 +377,9 @@ def test_several_curves_report_the_worst_status_not_stopped(tmp_path, capsys):
                            solver="gradient", iterations=5, quiet=True))
     captured = capsys.readouterr()
     lines = [line for line in captured.out.splitlines() if line.startswith("curve ")]
+    # the plan names the fit that runs, in the single fit's words
+    assert "fitting each as a curve (degree 3) by the gradient fit with adam" in captured.err
+    assert "least squares" not in captured.err
     assert stats["curves"] == 2 and stats["curve_fit_status"] == ["budget", "budget"]
     assert stats["fit_status"] == "budget"
     assert len(lines) == 2 and all(line.endswith(", budget") for line in lines)
