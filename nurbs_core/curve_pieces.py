@@ -306,17 +306,27 @@ def several_curves(points: np.ndarray, whole_is_curve: bool) -> CurvePieces | No
     return pieces
 
 
-def pieces_finding(pieces: CurvePieces) -> str:
+def pieces_finding(pieces: CurvePieces, origin: tuple[float, ...] | None = None) -> str:
     """The route's finding for several curves: separate pieces, branches and where the
-    junctions are."""
+    junctions are, in the file's coordinates: the pieces' cloud about ``origin`` (the local
+    frame of a scan far from the origin, :mod:`nurbs_core.jobs.local_frame`; None: none)."""
     said = []
     if pieces.separate > 1:
         said.append(f"{pieces.separate} separate pieces (farther apart than {pieces.gap:.3g})")
     junctions = len(pieces.junctions)
     if junctions:
-        at = "; ".join("(" + ", ".join(f"{value:.4g}" for value in centre) + ")"
-                       for centre in pieces.junctions[:4])
+        shown = pieces.junctions[:4] + (0.0 if origin is None else np.asarray(origin))
+        # to a hundredth of the gap: far from the origin, 4 significant digits say nothing
+        decimals = max(0, 2 - int(np.floor(np.log10(pieces.gap)))) if pieces.gap > 0 else 4
+        at = "; ".join("(" + ", ".join(_coordinate(value, decimals) for value in centre) + ")"
+                       for centre in shown)
         more = f" and {junctions - 4} more" if junctions > 4 else ""
         said.append(f"branches meeting at {junctions} junction{'s' if junctions > 1 else ''} "
                     f"{at}{more}, cut there")
     return "the cloud is several one-dimensional curves: " + ", ".join(said)
+
+
+def _coordinate(value: float, decimals: int) -> str:
+    """A coordinate to ``decimals`` places, trailing zeros dropped ("0", "0.997", "500000.2")."""
+    text = f"{value:.{decimals}f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text

@@ -111,12 +111,14 @@ class Route:
 
 def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
                  file_mesh_note: str = "", max_hole: float | None = None,
-                 part: bool | None = None) -> Route:
+                 part: bool | None = None, origin: tuple[float, ...] | None = None) -> Route:
     """The route for a surface cloud (N, 3) with no route forced (see :func:`_decide`), timed.
     ``part``: None tries the part route on a closed object and on an open scan that is not a
     height field, False skips it, True takes it whatever the segmentation finds (an open shell
     on an open scan; ValueError when the cloud has no bounded mesh or OpenCASCADE is
-    missing; ValueError naming the scale when the coordinates are out of the fits' range)."""
+    missing; ValueError naming the scale when the coordinates are out of the fits' range).
+    ``origin``: the local frame's origin of points moved there (the finding's coordinates are
+    the file's)."""
     problem = scale_problem(np.asarray(points, np.float64))
     if problem is not None:
         raise ValueError(problem)
@@ -128,7 +130,7 @@ def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
         measures = curve_measures(points)
         pieces = several_curves(points, whole_is_curve=measures is not None)
         if pieces is not None:
-            return Route("curve", pieces_finding(pieces), pieces=pieces,
+            return Route("curve", pieces_finding(pieces, origin), pieces=pieces,
                          seconds=time.perf_counter() - started)
         if measures is not None:
             share = measures[0]

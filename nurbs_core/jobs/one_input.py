@@ -78,7 +78,8 @@ def _forced_curves(job: FitJob, outputs: list[Path], points: np.ndarray,
 
     pieces = several_curves(points, whole_is_curve=curve_measures(points) is not None)
     if pieces is not None and not job.quiet:
-        print(f"{job.input}: {pieces_finding(pieces)}: {pieces.count} curves", file=sys.stderr)
+        print(f"{job.input}: {pieces_finding(pieces, job.origin)}: {pieces.count} curves",
+              file=sys.stderr)
     return run_curves(job, outputs, points, points, pieces, stoppable)
 
 
@@ -93,7 +94,7 @@ def _automatic(job: FitJob, outputs: list[Path], given: np.ndarray | None,
     points, file_mesh, note, job = cloud.points, cloud.file_mesh, cloud.note, cloud.job
     options = patch_options(job, automatic=True)  # checked before the route is decided
     route = choose_route(points, file_mesh, note, max_hole=options.max_hole,
-                         part=part_allowed(job, outputs))
+                         part=part_allowed(job, outputs), origin=job.origin)
     if not job.quiet:
         print(f"route: {route.reason} ({route.seconds:.1f} s)", file=sys.stderr)
     if route.kind == "curve":

@@ -184,6 +184,19 @@ def test_a_t_listed_as_drawn_gives_open_arms_as_fitting_each_arm_alone(tmp_path,
         assert _t_distance(along).max() < 4 * sigma
 
 
+@pytest.mark.parametrize("forced", [False, True])
+def test_the_junction_is_reported_where_it_is_in_the_file(tmp_path, capsys, forced):
+    """A T far from the origin is fitted in a local frame; its junction is reported at
+    (5e5, 5e5, 100), where the file has it, not at the local frame's (0, 0, 0)."""
+    offset = np.array([5e5, 5e5, 100.0])
+    source = tmp_path / "t.xyz"
+    np.savetxt(source, _t_junction() + offset, fmt="%.6f")
+    assert main([str(source), "-o", str(tmp_path / "t.json")] + (["--curve"] if forced
+                                                                  else [])) == 0
+    where = capsys.readouterr().err.split("junction (")[1].split(")")[0]
+    assert np.linalg.norm(np.array([float(value) for value in where.split(",")]) - offset) < 0.05
+
+
 def test_a_y_and_a_letter_i_are_cut_into_their_curves():
     arm = np.linspace(0.0, 1.0, 60)[1:, None]
     directions = [(0.0, -1.0), (np.sin(np.pi / 3), 0.5), (-np.sin(np.pi / 3), 0.5)]
