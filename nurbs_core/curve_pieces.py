@@ -306,6 +306,31 @@ def several_curves(points: np.ndarray, whole_is_curve: bool) -> CurvePieces | No
     return pieces
 
 
+@dataclass
+class CloudCurves:
+    """What a cloud holds as curves (:func:`cloud_curves`): its ``measures`` as one curve
+    (:func:`~nurbs_core.curve_cloud.curve_measures`; None: it is not one) and the several
+    curves it holds (:func:`several_curves`; None: one curve or none)."""
+
+    measures: tuple[float, float] | None
+    pieces: CurvePieces | None
+
+    @property
+    def is_curve(self) -> bool:
+        """Whether the whole cloud is one curve."""
+        return self.measures is not None
+
+
+def cloud_curves(points: np.ndarray) -> CloudCurves:
+    """The one decision of whether a cloud (N, d) is one curve or holds several: the automatic
+    route, ``--curve`` and the app all ask it. Several curves are looked for as
+    :func:`several_curves` says: separate pieces only when the whole is one curve."""
+    from nurbs_core.curve_cloud import curve_measures
+
+    measures = curve_measures(points)
+    return CloudCurves(measures, several_curves(points, whole_is_curve=measures is not None))
+
+
 def pieces_finding(pieces: CurvePieces, origin: tuple[float, ...] | None = None) -> str:
     """The route's finding for several curves: separate pieces, branches and where the
     junctions are, in the file's coordinates: the pieces' cloud about ``origin`` (the local

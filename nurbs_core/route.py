@@ -124,16 +124,14 @@ def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
         raise ValueError(problem)
     started = time.perf_counter()
     if file_mesh is None and not part:
-        from nurbs_core.curve_cloud import curve_measures
-        from nurbs_core.curve_pieces import pieces_finding, several_curves
+        from nurbs_core.curve_pieces import cloud_curves, pieces_finding
 
-        measures = curve_measures(points)
-        pieces = several_curves(points, whole_is_curve=measures is not None)
-        if pieces is not None:
-            return Route("curve", pieces_finding(pieces, origin), pieces=pieces,
+        curves = cloud_curves(points)
+        if curves.pieces is not None:
+            return Route("curve", pieces_finding(curves.pieces, origin), pieces=curves.pieces,
                          seconds=time.perf_counter() - started)
-        if measures is not None:
-            share = measures[0]
+        if curves.measures is not None:
+            share = curves.measures[0]
             return Route("curve", f"the cloud is one-dimensional (thin across in {share:.0%} of "
                                   f"its neighbourhoods, one chain)",
                          seconds=time.perf_counter() - started)

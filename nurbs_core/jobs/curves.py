@@ -10,7 +10,7 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
 from nurbs_core.curve_cloud import flat_height
-from nurbs_core.jobs.settings import FitJob
+from nurbs_core.jobs.settings import FitJob, fit_config
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -43,32 +43,49 @@ def run_curves(job: FitJob, outputs: list[Path], listed: np.ndarray, distinct: n
                        stoppable)
 
 
+def curve_config(points: np.ndarray, job: FitJob | None = None) -> FitConfig:
+    """The FitConfig of each curve of ``points`` (N, 3) (2-D when they lie at one height): the
+    job's curve settings (``nurbs-fit``'s defaults when None: the app's curves are fitted as the
+    command line fits them)."""
+    job = (job or FitJob(input="")).replace(curve=True)
+    return fit_config(job, points.shape[1] - (1 if flat_height(points) else 0))
+
+
 def iter_curve_pieces(points: np.ndarray, pieces: list[np.ndarray],
                       config: FitConfig | None = None, stop: StopToken | None = None
                       ) -> Iterator[tuple[CurveArrays, dict[str, Any], str]]:
-    """Each piece (indices) of ``points`` (N, 3) fitted as its own curve by the engine's curve
-    fit (``config``: the engine's curve defaults), in 2-D when the points lie at one height and
-    lifted back: (curve, statistics, status) per piece, as far as a ``stop`` lets them run (the
-    piece under way ends with its result so far). ValueError naming the piece whose fit
-    failed."""
-    from nurbs_core.fitting.config import FitConfig
+    """Each piece (indices) of ``points`` (N, 3) fitted as its own curve
+    (:func:`fit_curve_piece`): (curve, statistics, status) per piece, as far as a ``stop`` lets
+    them run (the piece under way ends with its result so far). ValueError naming the piece
+    whose fit failed."""
+    config = config or curve_config(points)
+    for number, piece in enumerate(pieces, start=1):
+        if stop is not None and stop.stopped:
+            return
+        try:
+            yield fit_curve_piece(points, piece, config, stop)
+        except ValueError as error:
+            raise ValueError(f"curve {number} of {len(pieces)} ({len(piece)} points): "
+                             f"{error}") from None
+
+
+def fit_curve_piece(points: np.ndarray, piece: np.ndarray, config: FitConfig | None = None,
+                    stop: StopToken | None = None) -> tuple[CurveArrays, dict[str, Any], str]:
+    """One piece (indices) of ``points`` (N, 3) fitted as a curve by the engine's curve fit
+    (``config``: :func:`curve_config`'s defaults when None), in 2-D when the points lie at one
+    height and lifted back: (curve, statistics, status); ValueError when its fit failed."""
     from nurbs_core.fitting.run import fit_arrays
     from nurbs_core.jobs.single import lifted_curve
 
     flat_z = flat_height(points)
     target = points[:, :2] if flat_z else points
-    config = config or FitConfig(kind="curve")
-    for number, piece in enumerate(pieces, start=1):
-        if stop is not None and stop.stopped:
-            return
-        result = fit_arrays(target[piece], config, stop=stop)
-        if result.status == "failed":
-            raise ValueError(f"curve {number} of {len(pieces)} ({len(piece)} points): the fit "
-                             f"failed: {result.message}")
-        geometry = result.geometry
-        if flat_z:
-            geometry = lifted_curve(geometry, float(points[0, 2]))
-        yield geometry, dict(result.statistics), str(result.status)
+    result = fit_arrays(target[piece], config or curve_config(points), stop=stop)
+    if result.status == "failed":
+        raise ValueError(f"the fit failed: {result.message}")
+    geometry = result.geometry
+    if flat_z:
+        geometry = lifted_curve(geometry, float(points[0, 2]))
+    return geometry, dict(result.statistics), str(result.status)
 
 
 def listed_pieces(listed: np.ndarray, distinct: np.ndarray, pieces: CurvePieces
@@ -115,10 +132,9 @@ def _run_pieces(job: FitJob, outputs: list[Path], points: np.ndarray,
     from nurbs_core.io.dispatch import save_all
     from nurbs_core.jobs.local_frame import shifted
     from nurbs_core.jobs.report import FitFailed, length_unit, plain, print_units, units_of
-    from nurbs_core.jobs.settings import fit_config
     from nurbs_core.jobs.single import fit_method, interrupt_handler
 
-    config = fit_config(job, points.shape[1] - (1 if flat_height(points) else 0))
+    config = curve_config(points, job)
     units = units_of(job)
     u = length_unit(units)
     how = fit_method(config, max(map(len, pieces)))

@@ -72,11 +72,10 @@ def _forced_curves(job: FitJob, outputs: list[Path], points: np.ndarray,
                    stoppable: bool) -> dict[str, Any]:
     """``--curve``: one curve, or one per curve when the cloud holds several
     (:func:`nurbs_core.curve_pieces.several_curves`: separate pieces, branches)."""
-    from nurbs_core.curve_cloud import curve_measures
-    from nurbs_core.curve_pieces import pieces_finding, several_curves
+    from nurbs_core.curve_pieces import cloud_curves, pieces_finding
     from nurbs_core.jobs.curves import run_curves
 
-    pieces = several_curves(points, whole_is_curve=curve_measures(points) is not None)
+    pieces = cloud_curves(points).pieces
     if pieces is not None and not job.quiet:
         print(f"{job.input}: {pieces_finding(pieces, job.origin)}: {pieces.count} curves",
               file=sys.stderr)
