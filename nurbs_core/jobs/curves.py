@@ -33,7 +33,7 @@ def run_curves(job: FitJob, outputs: list[Path], listed: np.ndarray, distinct: n
     from nurbs_core.jobs.single import finish_fit, prepare_checked, run_fit
 
     job = job.replace(curve=True)
-    if pieces is None or pieces.count < 2:
+    if pieces is None:
         prepared = prepare_checked(job, listed, outputs)
         return finish_fit(prepared, run_fit(prepared, stoppable))
     if job.report is not None:
@@ -124,15 +124,13 @@ def _run_pieces(job: FitJob, outputs: list[Path], points: np.ndarray,
                 pieces: list[np.ndarray], stoppable: bool) -> dict[str, Any]:
     """Each piece of ``points`` (N, 3) fitted as its own curve (see :func:`run_curves`): one
     line per curve; the first Ctrl-C stops the fit under way and writes the curves so far."""
-    import signal
-
     import numpy as np
 
     from nurbs_core.fitting.config import StopToken
     from nurbs_core.io.dispatch import save_all
     from nurbs_core.jobs.local_frame import shifted
     from nurbs_core.jobs.report import FitFailed, length_unit, plain, print_units, units_of
-    from nurbs_core.jobs.single import fit_method, interrupt_handler
+    from nurbs_core.jobs.single import ctrl_c_stops, fit_method
 
     config = curve_config(points, job)
     units = units_of(job)
@@ -141,26 +139,22 @@ def _run_pieces(job: FitJob, outputs: list[Path], points: np.ndarray,
     print(f"{job.input}: {len(points)} points in {len(pieces)} curves; fitting each as a curve "
           f"(degree {config.degree_u}) {how}", file=sys.stderr)
     stop = StopToken()
-    if stoppable:
-        previous = signal.signal(signal.SIGINT, interrupt_handler(stop))
     curves, geometries = [], []
     try:
-        for number, (geometry, stats, status) in enumerate(
-                iter_curve_pieces(points, pieces, config, stop), start=1):
-            count = len(np.asarray(geometry.control_points))
-            size = len(pieces[number - 1])
-            said = "stopped by Ctrl-C" if status == "stopped" else status
-            print(f"curve {number}: {'closed' if stats.get('closed') else 'open'}, {count} "
-                  f"control points, {size} points, rms {stats['rms']:.6g}{u}, max "
-                  f"{stats['max']:.6g}{u}, {said}")
-            geometries.append(shifted(geometry, job.origin))
-            curves.append(plain({**stats, "points": size, "control_points": count,
-                                 "closed": bool(stats.get("closed")), "fit_status": status}))
+        with ctrl_c_stops(stop, stoppable):
+            for number, (geometry, stats, status) in enumerate(
+                    iter_curve_pieces(points, pieces, config, stop), start=1):
+                count = len(np.asarray(geometry.control_points))
+                size = len(pieces[number - 1])
+                said = "stopped by Ctrl-C" if status == "stopped" else status
+                print(f"curve {number}: {'closed' if stats.get('closed') else 'open'}, {count} "
+                      f"control points, {size} points, rms {stats['rms']:.6g}{u}, max "
+                      f"{stats['max']:.6g}{u}, {said}")
+                geometries.append(shifted(geometry, job.origin))
+                curves.append(plain({**stats, "points": size, "control_points": count,
+                                     "closed": bool(stats.get("closed")), "fit_status": status}))
     except ValueError as error:
         raise FitFailed(str(error)) from None
-    finally:
-        if stoppable:
-            signal.signal(signal.SIGINT, previous)
     if len(curves) < len(pieces):
         print(f"stopped: curves {len(curves) + 1} to {len(pieces)} not fitted", file=sys.stderr)
     if not curves:

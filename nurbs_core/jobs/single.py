@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
@@ -190,15 +191,24 @@ def run_fit(prepared: PreparedFit, stoppable: bool = True) -> FitResult:
     from nurbs_core.fitting.run import fit_arrays
 
     stop = StopToken()
-    if stoppable:
-        previous = signal.signal(signal.SIGINT, interrupt_handler(stop))
-    try:
+    with ctrl_c_stops(stop, stoppable):
         return fit_arrays(prepared.target, prepared.config, stop=stop, parameters=prepared.parameters,
                    initial=prepared.initial,
                    on_snapshot=Progress(prepared.config.iterations, prepared.job.quiet))
+
+
+@contextmanager
+def ctrl_c_stops(stop: StopToken, stoppable: bool = True) -> Iterator[None]:
+    """Within it, the first Ctrl-C (SIGINT) stops ``stop`` and a second aborts
+    (:func:`interrupt_handler`), when ``stoppable``; the previous handler restored after."""
+    if not stoppable:
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, interrupt_handler(stop))
+    try:
+        yield
     finally:
-        if stoppable:
-            signal.signal(signal.SIGINT, previous)
+        signal.signal(signal.SIGINT, previous)
 
 
 def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:

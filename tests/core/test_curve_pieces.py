@@ -398,9 +398,44 @@ def test_several_curves_report_the_worst_status_not_stopped(tmp_path, capsys):
     assert len(lines) == 2 and all(line.endswith(", budget") for line in lines)
 
 
+def test_a_ctrl_c_during_a_curve_writes_it_so_far_and_fits_no_more(tmp_path, capsys,
+                                                                    monkeypatch):
+    """The first Ctrl-C (a real SIGINT, through nurbs-fit's handler) during the first curve's
+    fit: that curve ends with its result so far, marked on its line, no further curve is
+    fitted, the file holds the one curve and the status is "stopped"."""
+    import os
+    import signal
+
+    import nurbs_core.fitting.run as run
+    from nurbs_core.jobs import FitJob, fit_one
+
+    real = run.fit_arrays
+    fits = []
+
+    def interrupted(*args, **kwargs):
+        fits.append(len(args[0]))
+        os.kill(os.getpid(), signal.SIGINT)     # the user's Ctrl-C, mid-curve
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(run, "fit_arrays", interrupted)
+    source = tmp_path / "two.xyz"
+    np.savetxt(source, _two_circles(200, 0.0))
+    stats = fit_one(FitJob(input=str(source), output=[str(tmp_path / "two.json")]),
+                    stoppable=True)
+    captured = capsys.readouterr()
+    assert len(fits) == 1
+    assert stats["fit_status"] == "stopped" and stats["curves"] == 1
+    assert stats["curve_fit_status"] == ["stopped"]
+    lines = [line for line in captured.out.splitlines() if line.startswith("curve ")]
+    assert len(lines) == 1 and lines[0].endswith(", stopped by Ctrl-C")
+    assert "stopped: curves 2 to 2 not fitted" in captured.err
+    assert "wrote " in captured.out and len(_written(tmp_path / "two.json")) == 1
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # restored
+
+
 def test_a_stop_ends_the_curves_after_the_one_under_way():
-    """What the first Ctrl-C does to ``nurbs-fit`` on several curves: the curves so far are
-    kept (and written), the rest not fitted."""
+    """A stop between curves (iter_curve_pieces, as the app's and nurbs-fit's loops run it):
+    the curves so far are kept, the rest not fitted (what is written: the test above)."""
     from nurbs_core.fitting.config import StopToken
     from nurbs_core.jobs.curves import iter_curve_pieces
 
