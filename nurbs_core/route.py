@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -53,6 +53,9 @@ from nurbs_core.coordinate_range import scale_problem
 from nurbs_core.patches.defaults import MIN_NETWORK_POINTS
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import quality_problems
+
+if TYPE_CHECKING:
+    from nurbs_core.curve_pieces import CurvePieces
 
 RouteKind = Literal["single_patch", "network", "part", "curve"]
 
@@ -77,9 +80,8 @@ class Route:
     seconds: float = 0.0
     #: a part's analytic regions (:class:`nurbs_core.brep.segment.Segmentation`)
     segmentation: Any = None
-    #: the curves of a cloud that holds several
-    #: (:class:`nurbs_core.curve_pieces.CurvePieces`; None for one curve)
-    pieces: Any = None
+    #: the curves of a cloud that holds several (None for one curve)
+    pieces: CurvePieces | None = None
     #: the part's freeform region when the route found one
     #: (:class:`nurbs_core.brep.freeform.FreeformRegion`: the fit takes it, not measured twice)
     freeform: Any = None
