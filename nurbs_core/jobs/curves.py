@@ -32,6 +32,7 @@ def run_curves(job: FitJob, outputs: list[Path], listed: np.ndarray, distinct: n
     ``curve_rms``, ``curve_max``, ``curve_fit_status``, one value per curve)."""
     from nurbs_core.jobs.single import finish_fit, prepare_checked, run_fit
 
+    check_curve_outputs(outputs)
     job = job.replace(curve=True)
     if pieces is None:
         prepared = prepare_checked(job, listed, outputs)
@@ -41,6 +42,20 @@ def run_curves(job: FitJob, outputs: list[Path], listed: np.ndarray, distinct: n
                          "curves has none (fit it without --report)")
     return _run_pieces(job, outputs, listed, listed_pieces(listed, distinct, pieces),
                        stoppable)
+
+
+def check_curve_outputs(outputs: list[Path]) -> None:
+    """Curves have no surface to tessellate: a mesh output (.obj, .stl, .ply, .glb) is refused
+    before any curve is fitted (FileFormatError naming it and the formats that hold curves)."""
+    from nurbs_core.io.errors import FileFormatError
+    from nurbs_core.io.points import suffix_of
+    from nurbs_core.io.tessellate import MESH_EXPORT_SUFFIXES
+
+    for path in outputs:
+        if suffix_of(path) in MESH_EXPORT_SUFFIXES:
+            raise FileFormatError(path, "a mesh file holds surfaces, but the cloud is fitted "
+                                        "as curves: write them as .3dm, .step, .iges, .json or "
+                                        ".csv")
 
 
 def curve_config(points: np.ndarray, job: FitJob | None = None) -> FitConfig:

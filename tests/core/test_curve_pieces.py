@@ -433,6 +433,24 @@ def test_a_ctrl_c_during_a_curve_writes_it_so_far_and_fits_no_more(tmp_path, cap
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # restored
 
 
+@pytest.mark.parametrize("suffix", [".obj", ".stl", ".ply", ".glb"])
+def test_curves_into_a_mesh_file_are_refused_before_any_fit(tmp_path, capsys, monkeypatch,
+                                                            suffix):
+    import nurbs_core.fitting.run as run
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("a curve was fitted for an output that cannot hold it")
+
+    monkeypatch.setattr(run, "fit_arrays", no_fit)
+    source = tmp_path / "two.xyz"
+    np.savetxt(source, _two_circles(200, 0.0))
+    written = tmp_path / "two.json"
+    assert main([str(source), "-o", str(written), str(tmp_path / f"two{suffix}")]) == 1
+    assert f"two{suffix}: a mesh file holds surfaces, but the cloud is fitted as curves" in \
+        capsys.readouterr().err
+    assert not written.exists()         # nothing written
+
+
 def test_a_stop_ends_the_curves_after_the_one_under_way():
     """A stop between curves (iter_curve_pieces, as the app's and nurbs-fit's loops run it):
     the curves so far are kept, the rest not fitted (what is written: the test above)."""
