@@ -11,7 +11,7 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,6 +24,9 @@ from app.workers.display import DisplayGeometry, display_geometry
 from app.workers.fit_worker import FINAL_DEVIATION_POINTS, sampled_deviation, signed_map
 from app.workers.quality import measure_quality
 from nurbs_core.geometry_arrays import GeometryArrays
+
+if TYPE_CHECKING:
+    from nurbs_core.curve_pieces import CurvePieces
 
 #: (menu label, suffix, needs the optional OCP package)
 EXPORT_FORMATS = (
@@ -99,56 +102,57 @@ def load_files(paths: list[str], cancel: threading.Event | None = None) -> Loade
             raise
     _check(cancel)
     draw_display_subset(loaded.targets)
-    loaded.curve = is_curve(loaded.targets)
-    fit_several_curves(loaded, cancel)
+    clouds = [t for t in loaded.targets if t.visible and len(t.points)]
+    if clouds:
+        from nurbs_core.curve_pieces import cloud_curves
+
+        # the decision nurbs-fit's route takes: one curve (a curve at one height is fitted in
+        # 2-D by the controller), several, or no curve
+        curves = cloud_curves(np.concatenate([t.points for t in clouds]))
+        loaded.curve = curves.is_curve
+        if curves.pieces is not None:
+            fit_several_curves(loaded, clouds, curves.pieces, cancel)
     return loaded
 
 
-def fit_several_curves(loaded: LoadedFiles, cancel: threading.Event | None = None) -> None:
-    """When the visible clouds hold several curves (separate pieces, a wire's branches:
-    :func:`nurbs_core.curve_pieces.several_curves`), each is fitted as its own curve, as
-    ``nurbs-fit`` fits them (a file's points as listed), and added to the loaded NURBS shapes:
-    the viewport shows them all, the document tree lists them, File > Export and sessions keep
-    them. One fit (Start) holds one shape, which would jump between the curves."""
-    from nurbs_core.curve_pieces import pieces_finding, several_curves
+def fit_several_curves(loaded: LoadedFiles, clouds: list[Target], pieces: CurvePieces,
+                       cancel: threading.Event | None = None) -> None:
+    """The several curves the visible ``clouds`` hold (separate pieces, a wire's branches:
+    :func:`nurbs_core.curve_pieces.cloud_curves`, whose ``pieces`` index their stacked
+    points), each fitted as its own curve, as ``nurbs-fit`` fits them (a file's points as
+    listed, its curve settings), and added to the loaded NURBS shapes: the viewport shows them
+    all, the document tree lists them, File > Export and sessions keep them. One fit (Start)
+    holds one shape, which would jump between the curves. ``cancel`` is checked before each
+    curve; a curve whose fit fails is left out (a note says which), the others kept."""
+    from nurbs_core.curve_pieces import pieces_finding
+    from nurbs_core.jobs.curves import curve_config, fit_curve_piece, listed_pieces
 
-    clouds = [t for t in loaded.targets if t.visible and len(t.points)]
-    if not clouds:
-        return
     distinct = np.concatenate([t.points for t in clouds])
-    pieces = several_curves(distinct, whole_is_curve=loaded.curve)
-    if pieces is None:
-        return
-    from nurbs_core.jobs.curves import iter_curve_pieces, listed_pieces
-
-    _check(cancel)
     listed = np.concatenate([t.points if t.file_order is None else t.file_order.points
                              for t in clouds])
-    fitted = [(curve, statistics) for curve, statistics, _ in
-              iter_curve_pieces(listed, listed_pieces(listed, distinct, pieces))]
-    _check(cancel)
+    config = curve_config(listed)
     source = clouds[0].name if len(clouds) == 1 else "the clouds"
-    for number, (curve, statistics) in enumerate(fitted, start=1):
+    fitted, failed = [], []
+    for number, piece in enumerate(listed_pieces(listed, distinct, pieces), start=1):
+        _check(cancel)
+        try:
+            curve, statistics, _ = fit_curve_piece(listed, piece, config)
+        except ValueError as error:
+            failed.append(f"curve {number} ({len(piece)} points): {error}")
+            continue
+        fitted.append(statistics)
         loaded.patches.append(curve)
         shape = "closed" if statistics.get("closed") else "open"
         loaded.patch_names.append(f"{source} curve {number} ({shape})")
-    worst = max(statistics["max"] for _, statistics in fitted)
+    _check(cancel)
     loaded.curves = len(fitted)
+    worst = f", max distance {max(s['max'] for s in fitted):.4g}" if fitted else ""
     loaded.notes.append(f"{pieces_finding(pieces).capitalize()}: each fitted as its own curve "
-                        f"({len(fitted)} curves, max distance {worst:.4g}), shown with the NURBS "
-                        "shapes and exported with them. Start fits one shape over all visible "
-                        "points: select one curve's points to fit it alone.")
-
-
-def is_curve(targets: list[Target]) -> bool:
-    """Whether the visible targets' points (each (N_i, 3)) together form a curve: one-dimensional,
-    thin across in every neighbourhood (:func:`nurbs_core.curve_cloud.is_curve_cloud`, the test
-    ``nurbs-fit``'s automatic route takes). A curve at one height is fitted in 2-D (the
-    controller)."""
-    from nurbs_core.curve_cloud import is_curve_cloud
-
-    clouds = [t.points for t in targets if t.visible and len(t.points)]
-    return bool(clouds) and is_curve_cloud(np.concatenate(clouds))
+                        f"({len(fitted)} of {pieces.count} curves{worst}), shown with the "
+                        "NURBS shapes and exported with them. Start fits one shape over all "
+                        "visible points: select one curve's points to fit it alone.")
+    if failed:
+        loaded.notes.append(f"{source}: not fitted: " + "; ".join(failed) + ".")
 
 
 def draw_display_subset(targets: list[Target]) -> None:

@@ -12,8 +12,9 @@ numpy + scipy only (the route asks it before any torch is loaded):
    pieces. A piece under
    :data:`MIN_PIECE_POINTS` points joins the piece of its nearest point: nothing is lost.
 2. **Junctions**: a point is at a junction when the points of its ring (between
-   :data:`RING_INNER` and :data:`RING_OUTER` spacings away), joined as in 1., fall into three
-   or more groups each holding :data:`MIN_ARM_SHARE` of the ring: three or more arms leave it.
+   :data:`RING_INNER` and :data:`RING_OUTER` spacings away), joined within :data:`ARM_LINK`
+   of their own spacings, fall into three or more groups each holding :data:`MIN_ARM_SHARE`
+   of the ring's length: three or more arms leave it.
    A point along a curve sees two groups, an end one. Where several neighbouring points are at
    a junction, their cluster is one junction (its centre is reported).
 3. **Branches**: the points near a junction (:data:`CUT_GAPS`) are taken out, the
@@ -45,8 +46,11 @@ RING_OUTER = 6.0
 #: The spacing that sizes the rings is at least this many times the noise
 #: (:func:`nurbs_core.fitting.curve_core.curve_noise`).
 NOISE_SPACINGS = 3.0
-#: Points of a ring closer than this many spacings belong to the same arm.
+#: Points of a ring closer than this many spacings (the smaller of their own: see
+#: :func:`junction_points`) belong to the same arm.
 ARM_LINK = 2.5
+#: A point's own spacing is its distance to this nearest point (one on either side of it).
+LOCAL_NEIGHBOUR = 2
 #: Points within this many gaps (or RING_OUTER spacings) of a junction are cut from the branches
 #: before these are told apart (then they rejoin the branch of their nearest point): two arms
 #: cut at radius r meeting at 60 degrees end r apart.
@@ -100,10 +104,15 @@ def _components(points: np.ndarray, tree: cKDTree, radius: float) -> np.ndarray:
 
 
 def junction_points(points: np.ndarray, spacing: float) -> np.ndarray:
-    """Whether each point (N, d) of one piece, evenly spaced ``spacing`` apart, is at a
-    junction (N,) bool: its ring (see the module) holds three or more arms."""
+    """Whether each point (N, d) of one piece, about ``spacing`` apart, is at a junction (N,)
+    bool: its ring (see the module) holds three or more arms. Each point's own spacing (its
+    distance to its :data:`LOCAL_NEIGHBOUR`-th nearest point, at least ``spacing``) links it to
+    its arm and weighs it there: an arm sampled more sparsely than the piece's median is neither
+    broken into fragments (each counted as an arm) nor too small a share of its ring."""
     tree = cKDTree(points)
-    inner, outer, gap = RING_INNER * spacing, RING_OUTER * spacing, ARM_LINK * spacing
+    inner, outer = RING_INNER * spacing, RING_OUTER * spacing
+    distances, _ = tree.query(points, k=min(LOCAL_NEIGHBOUR + 1, len(points)))
+    own = np.maximum(distances[:, -1], spacing)
     rings = tree.query_ball_point(points, outer)
     at_junction = np.zeros(len(points), bool)
     for index, ring in enumerate(rings):
@@ -111,11 +120,23 @@ def junction_points(points: np.ndarray, spacing: float) -> np.ndarray:
         ring = ring[np.linalg.norm(points[ring] - points[index], axis=1) >= inner]
         if len(ring) < 3:
             continue
-        local = points[ring]
-        labels = _components(local, cKDTree(local), gap)
-        sizes = np.bincount(labels)
-        at_junction[index] = int((sizes >= MIN_ARM_SHARE * len(ring)).sum()) >= 3
+        labels = _linked(points[ring], ARM_LINK * own[ring])
+        length = np.bincount(labels, weights=own[ring])
+        at_junction[index] = int((length >= MIN_ARM_SHARE * length.sum()).sum()) >= 3
     return at_junction
+
+
+def _linked(points: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """The label (N,) of each point's connected component when two points are joined within
+    the smaller of their ``reach`` (N,): a sparse point reaches its sparse neighbours, never
+    across to a dense arm beside it."""
+    pairs = cKDTree(points).query_pairs(float(reach.max()), output_type="ndarray")
+    lengths = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1)
+    pairs = pairs[lengths <= np.minimum(reach[pairs[:, 0]], reach[pairs[:, 1]])]
+    count = len(points)
+    graph = scipy.sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                                    shape=(count, count))
+    return connected_components(graph, directed=False)[1]
 
 
 def _branches(points: np.ndarray, gap: float) -> tuple[list[np.ndarray], np.ndarray, float]:
@@ -285,17 +306,52 @@ def several_curves(points: np.ndarray, whole_is_curve: bool) -> CurvePieces | No
     return pieces
 
 
-def pieces_finding(pieces: CurvePieces) -> str:
+@dataclass
+class CloudCurves:
+    """What a cloud holds as curves (:func:`cloud_curves`): its ``measures`` as one curve
+    (:func:`~nurbs_core.curve_cloud.curve_measures`; None: it is not one) and the several
+    curves it holds (:func:`several_curves`; None: one curve or none)."""
+
+    measures: tuple[float, float] | None
+    pieces: CurvePieces | None
+
+    @property
+    def is_curve(self) -> bool:
+        """Whether the whole cloud is one curve."""
+        return self.measures is not None
+
+
+def cloud_curves(points: np.ndarray) -> CloudCurves:
+    """The one decision of whether a cloud (N, d) is one curve or holds several: the automatic
+    route, ``--curve`` and the app all ask it. Several curves are looked for as
+    :func:`several_curves` says: separate pieces only when the whole is one curve."""
+    from nurbs_core.curve_cloud import curve_measures
+
+    measures = curve_measures(points)
+    return CloudCurves(measures, several_curves(points, whole_is_curve=measures is not None))
+
+
+def pieces_finding(pieces: CurvePieces, origin: tuple[float, ...] | None = None) -> str:
     """The route's finding for several curves: separate pieces, branches and where the
-    junctions are."""
+    junctions are, in the file's coordinates: the pieces' cloud about ``origin`` (the local
+    frame of a scan far from the origin, :mod:`nurbs_core.jobs.local_frame`; None: none)."""
     said = []
     if pieces.separate > 1:
         said.append(f"{pieces.separate} separate pieces (farther apart than {pieces.gap:.3g})")
     junctions = len(pieces.junctions)
     if junctions:
-        at = "; ".join("(" + ", ".join(f"{value:.4g}" for value in centre) + ")"
-                       for centre in pieces.junctions[:4])
+        shown = pieces.junctions[:4] + (0.0 if origin is None else np.asarray(origin))
+        # to a hundredth of the gap: far from the origin, 4 significant digits say nothing
+        decimals = max(0, 2 - int(np.floor(np.log10(pieces.gap)))) if pieces.gap > 0 else 4
+        at = "; ".join("(" + ", ".join(_coordinate(value, decimals) for value in centre) + ")"
+                       for centre in shown)
         more = f" and {junctions - 4} more" if junctions > 4 else ""
         said.append(f"branches meeting at {junctions} junction{'s' if junctions > 1 else ''} "
                     f"{at}{more}, cut there")
     return "the cloud is several one-dimensional curves: " + ", ".join(said)
+
+
+def _coordinate(value: float, decimals: int) -> str:
+    """A coordinate to ``decimals`` places, trailing zeros dropped ("0", "0.997", "500000.2")."""
+    text = f"{value:.{decimals}f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text

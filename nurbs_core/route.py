@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -53,6 +53,9 @@ from nurbs_core.coordinate_range import scale_problem
 from nurbs_core.patches.defaults import MIN_NETWORK_POINTS
 from nurbs_core.patches.scan_mesh import ScanMesh
 from nurbs_core.status import quality_problems
+
+if TYPE_CHECKING:
+    from nurbs_core.curve_pieces import CurvePieces
 
 RouteKind = Literal["single_patch", "network", "part", "curve"]
 
@@ -77,9 +80,8 @@ class Route:
     seconds: float = 0.0
     #: a part's analytic regions (:class:`nurbs_core.brep.segment.Segmentation`)
     segmentation: Any = None
-    #: the curves of a cloud that holds several
-    #: (:class:`nurbs_core.curve_pieces.CurvePieces`; None for one curve)
-    pieces: Any = None
+    #: the curves of a cloud that holds several (None for one curve)
+    pieces: CurvePieces | None = None
     #: the part's freeform region when the route found one
     #: (:class:`nurbs_core.brep.freeform.FreeformRegion`: the fit takes it, not measured twice)
     freeform: Any = None
@@ -111,27 +113,27 @@ class Route:
 
 def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
                  file_mesh_note: str = "", max_hole: float | None = None,
-                 part: bool | None = None) -> Route:
+                 part: bool | None = None, origin: tuple[float, ...] | None = None) -> Route:
     """The route for a surface cloud (N, 3) with no route forced (see :func:`_decide`), timed.
     ``part``: None tries the part route on a closed object and on an open scan that is not a
     height field, False skips it, True takes it whatever the segmentation finds (an open shell
     on an open scan; ValueError when the cloud has no bounded mesh or OpenCASCADE is
-    missing; ValueError naming the scale when the coordinates are out of the fits' range)."""
+    missing; ValueError naming the scale when the coordinates are out of the fits' range).
+    ``origin``: the local frame's origin of points moved there (the finding's coordinates are
+    the file's)."""
     problem = scale_problem(np.asarray(points, np.float64))
     if problem is not None:
         raise ValueError(problem)
     started = time.perf_counter()
     if file_mesh is None and not part:
-        from nurbs_core.curve_cloud import curve_measures
-        from nurbs_core.curve_pieces import pieces_finding, several_curves
+        from nurbs_core.curve_pieces import cloud_curves, pieces_finding
 
-        measures = curve_measures(points)
-        pieces = several_curves(points, whole_is_curve=measures is not None)
-        if pieces is not None:
-            return Route("curve", pieces_finding(pieces), pieces=pieces,
+        curves = cloud_curves(points)
+        if curves.pieces is not None:
+            return Route("curve", pieces_finding(curves.pieces, origin), pieces=curves.pieces,
                          seconds=time.perf_counter() - started)
-        if measures is not None:
-            share = measures[0]
+        if curves.measures is not None:
+            share = curves.measures[0]
             return Route("curve", f"the cloud is one-dimensional (thin across in {share:.0%} of "
                                   f"its neighbourhoods, one chain)",
                          seconds=time.perf_counter() - started)

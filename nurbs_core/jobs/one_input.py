@@ -72,13 +72,13 @@ def _forced_curves(job: FitJob, outputs: list[Path], points: np.ndarray,
                    stoppable: bool) -> dict[str, Any]:
     """``--curve``: one curve, or one per curve when the cloud holds several
     (:func:`nurbs_core.curve_pieces.several_curves`: separate pieces, branches)."""
-    from nurbs_core.curve_cloud import curve_measures
-    from nurbs_core.curve_pieces import pieces_finding, several_curves
+    from nurbs_core.curve_pieces import cloud_curves, pieces_finding
     from nurbs_core.jobs.curves import run_curves
 
-    pieces = several_curves(points, whole_is_curve=curve_measures(points) is not None)
+    pieces = cloud_curves(points).pieces
     if pieces is not None and not job.quiet:
-        print(f"{job.input}: {pieces_finding(pieces)}: {pieces.count} curves", file=sys.stderr)
+        print(f"{job.input}: {pieces_finding(pieces, job.origin)}: {pieces.count} curves",
+              file=sys.stderr)
     return run_curves(job, outputs, points, points, pieces, stoppable)
 
 
@@ -93,7 +93,7 @@ def _automatic(job: FitJob, outputs: list[Path], given: np.ndarray | None,
     points, file_mesh, note, job = cloud.points, cloud.file_mesh, cloud.note, cloud.job
     options = patch_options(job, automatic=True)  # checked before the route is decided
     route = choose_route(points, file_mesh, note, max_hole=options.max_hole,
-                         part=part_allowed(job, outputs))
+                         part=part_allowed(job, outputs), origin=job.origin)
     if not job.quiet:
         print(f"route: {route.reason} ({route.seconds:.1f} s)", file=sys.stderr)
         unchecked = unchecked_part_note(job, outputs, route)

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
@@ -118,30 +119,38 @@ def _grid_parameters(count_u: int, count_v: int, points: int) -> np.ndarray:
 def _print_plan(job: FitJob, config: FitConfig, count: int,
                 known_parameters: bool) -> None:
     """The report's first line (stderr): the input, its size and how it is fitted."""
-    from nurbs_core.fitting.plan import fit_plan
-
-    plan = fit_plan(config, known_parameters, job.initial is not None)
-    if plan.stages == ("exact",):
-        how = "by exact least squares at the known parameters"
-    elif plan.stages == ("least_squares",) and config.kind == "curve":
-        from nurbs_core.fitting.curve_core import control_cap
-
-        how = ("by least squares (closed and periodic where the points close; control points "
-               + (f"growing to at most {control_cap(config, count)})"
-                  if config.max_control_points else "fixed)"))
-    elif plan.stages == ("least_squares",):
-        how = (f"by fairing least squares (stiffness {config.stiffness:g}"
-               + (f", grid growing to at most {config.max_control_points} per direction"
-                  if config.max_control_points else "") + ")")
-    elif plan.stages == ("least_squares", "gradient"):
-        how = (f"by fairing least squares (stiffness {config.stiffness:g}), then the gradient "
-               f"fit with {config.optimizer}, loss {config.loss}")
-    else:
-        how = f"by the gradient fit with {config.optimizer}, loss {config.loss}"
+    how = fit_method(config, count, known_parameters, job.initial is not None)
     print(f"{job.input}: {count} points; fitting a {config.kind} "
           f"(degree {config.degree_u}" + ("" if job.curve else f"x{config.degree_v}")
           + f", {config.control_points_u}" + ("" if job.curve else f"x{config.control_points_v}")
           + f" control points) {how}", file=sys.stderr)
+
+
+def fit_method(config: FitConfig, count: int, known_parameters: bool = False,
+               has_initial: bool = False) -> str:
+    """How a fit of ``config`` runs on ``count`` points (the plan's words, "by least squares
+    (...)", "by the gradient fit with ..."): the stages of
+    :func:`nurbs_core.fitting.plan.fit_plan`. Several curves name their largest one's
+    ``count`` (the cap on control points grows with it)."""
+    from nurbs_core.fitting.plan import fit_plan
+
+    plan = fit_plan(config, known_parameters, has_initial)
+    if plan.stages == ("exact",):
+        return "by exact least squares at the known parameters"
+    if plan.stages == ("least_squares",) and config.kind == "curve":
+        from nurbs_core.fitting.curve_core import control_cap
+
+        return ("by least squares (closed and periodic where the points close; control points "
+                + (f"growing to at most {control_cap(config, count)})"
+                   if config.max_control_points else "fixed)"))
+    if plan.stages == ("least_squares",):
+        return (f"by fairing least squares (stiffness {config.stiffness:g}"
+                + (f", grid growing to at most {config.max_control_points} per direction"
+                   if config.max_control_points else "") + ")")
+    if plan.stages == ("least_squares", "gradient"):
+        return (f"by fairing least squares (stiffness {config.stiffness:g}), then the gradient "
+                f"fit with {config.optimizer}, loss {config.loss}")
+    return f"by the gradient fit with {config.optimizer}, loss {config.loss}"
 
 
 def _initial(job: FitJob, flat_z: bool) -> NurbsCurve | NurbsSurface | None:
@@ -182,15 +191,24 @@ def run_fit(prepared: PreparedFit, stoppable: bool = True) -> FitResult:
     from nurbs_core.fitting.run import fit_arrays
 
     stop = StopToken()
-    if stoppable:
-        previous = signal.signal(signal.SIGINT, interrupt_handler(stop))
-    try:
+    with ctrl_c_stops(stop, stoppable):
         return fit_arrays(prepared.target, prepared.config, stop=stop, parameters=prepared.parameters,
                    initial=prepared.initial,
                    on_snapshot=Progress(prepared.config.iterations, prepared.job.quiet))
+
+
+@contextmanager
+def ctrl_c_stops(stop: StopToken, stoppable: bool = True) -> Iterator[None]:
+    """Within it, the first Ctrl-C (SIGINT) stops ``stop`` and a second aborts
+    (:func:`interrupt_handler`), when ``stoppable``; the previous handler restored after."""
+    if not stoppable:
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, interrupt_handler(stop))
+    try:
+        yield
     finally:
-        if stoppable:
-            signal.signal(signal.SIGINT, previous)
+        signal.signal(signal.SIGINT, previous)
 
 
 def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:

@@ -5,6 +5,7 @@ exported together; the window says what it found."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from app_helpers import open_by_drop
 
 from nurbs_core.evaluate_arrays import curve_points
@@ -62,3 +63,64 @@ def test_one_curve_is_not_cut(qtbot, window, tmp_path):
     open_by_drop(qtbot, window, [path])
     assert window.document.patches == []
     assert window.document.settings.fit.kind == "curve"
+
+
+def test_the_window_fits_each_curve_as_nurbs_fit_does(tmp_path, capsys):
+    """One source of curve settings (nurbs_core.jobs.curves.curve_config): the curves the
+    window fits on opening are the curves ``nurbs-fit`` writes for the same file."""
+    from app.loading import load_files
+    from nurbs_core.cli import main
+    from nurbs_core.io import load
+
+    path = _two_circles(tmp_path)
+    assert main([str(path), "-o", str(tmp_path / "two.json")]) == 0
+    capsys.readouterr()
+    written = [shape.numpy() for shape in load(tmp_path / "two.json")]
+    opened = load_files([str(path)]).patches
+    assert len(opened) == len(written) == 2
+    for mine, theirs in zip(opened, written):
+        np.testing.assert_allclose(np.asarray(mine.control_points),
+                                   np.asarray(theirs.control_points), atol=1e-9)
+
+
+def _counting_fits(monkeypatch, after_first=None, failing=()):
+    """The engine's fit counted (and the calls numbered in ``failing`` made to raise, the
+    first followed by ``after_first``)."""
+    import nurbs_core.fitting.run as run
+
+    calls = []
+    real = run.fit_arrays
+
+    def fit_arrays(*args, **kwargs):
+        calls.append(len(args[0]))
+        if len(calls) in failing:
+            raise ValueError("a test's fit that fails")
+        result = real(*args, **kwargs)
+        if after_first is not None and len(calls) == 1:
+            after_first()
+        return result
+
+    monkeypatch.setattr(run, "fit_arrays", fit_arrays)
+    return calls
+
+
+def test_cancel_stops_the_curves_at_the_next_one(tmp_path, monkeypatch):
+    import threading
+
+    from app.loading import LoadCancelled, load_files
+
+    cancel = threading.Event()
+    calls = _counting_fits(monkeypatch, after_first=cancel.set)
+    with pytest.raises(LoadCancelled):
+        load_files([str(_two_circles(tmp_path))], cancel)
+    assert len(calls) == 1          # the second curve never started
+
+
+def test_a_curve_whose_fit_fails_leaves_the_others_and_says_so(tmp_path, monkeypatch):
+    from app.loading import load_files
+
+    _counting_fits(monkeypatch, failing=(1,))
+    loaded = load_files([str(_two_circles(tmp_path))])
+    assert loaded.patch_names == ["two.xyz curve 2 (closed)"] and loaded.curves == 1
+    assert any("not fitted: curve 1 (250 points): a test's fit that fails" in note
+               for note in loaded.notes)

@@ -28,14 +28,17 @@ def _two_circles(count: int, sigma: float, seed: int = 0) -> np.ndarray:
     return np.column_stack([points, np.zeros(len(points))])[rng.permutation(len(points))]
 
 
-def _t_junction(count: int = 100, sigma: float = 0.0, seed: int = 0) -> np.ndarray:
-    """A "T": a bar from (-1, 0) to (1, 0) and a stem from (0, 0) down to (0, -1)."""
+def _t_junction(count: int = 100, sigma: float = 0.0, seed: int = 0,
+                shuffled: bool = True) -> np.ndarray:
+    """A "T": a bar from (-1, 0) to (1, 0) and a stem from (0, -1) up to (0, 0); listed as
+    drawn (the bar left to right, then the stem upwards to it) unless ``shuffled``."""
     rng = np.random.default_rng(seed)
     bar = np.column_stack([np.linspace(-1.0, 1.0, count + 1), np.zeros(count + 1)])
-    stem = np.column_stack([np.zeros(count // 2), -np.linspace(0.02, 1.0, count // 2)])
+    stem = np.column_stack([np.zeros(count // 2), -np.linspace(1.0, 0.02, count // 2)])
     points = np.vstack([bar, stem])
     points += rng.normal(scale=sigma, size=points.shape)
-    return np.column_stack([points, np.zeros(len(points))])[rng.permutation(len(points))]
+    points = np.column_stack([points, np.zeros(len(points))])
+    return points[rng.permutation(len(points))] if shuffled else points
 
 
 def _t_distance(samples: np.ndarray) -> np.ndarray:
@@ -153,6 +156,45 @@ def test_a_t_junction_becomes_three_open_curves_on_its_arms(tmp_path, capsys, si
     from scipy.spatial import cKDTree
 
     assert cKDTree(every).query(points[:, :2])[0].max() < 0.02
+
+
+@pytest.mark.parametrize("seed", [0, 2, 5])
+def test_a_t_listed_as_drawn_gives_open_arms_as_fitting_each_arm_alone(tmp_path, capsys, seed):
+    """nurbs-fit keeps the order curve_pieces gives each arm (points taken back from the
+    junction at the end nearer it), not the file's: listed as drawn, the stem's last points
+    lie at the junction beside the bar's, and a noisy point of the bar taken into the stem,
+    listed first, made the stem's fit run back up along it (closed, 11 control points where
+    the arm alone takes 8 or 10)."""
+    from nurbs_core.jobs.curves import iter_curve_pieces
+
+    sigma = 0.003
+    points = _t_junction(sigma=sigma, seed=seed, shuffled=False)
+    source = tmp_path / "t.xyz"
+    np.savetxt(source, points)
+    assert main([str(source), "-o", str(tmp_path / "t.json")]) == 0
+    capsys.readouterr()
+    written = _written(tmp_path / "t.json")
+    alone = [curve for curve, _, _ in iter_curve_pieces(points, curve_pieces(points).pieces)]
+    assert len(written) == len(alone) == 3
+    assert not any(_closes(curve) for curve in written)
+    assert [len(np.asarray(c.control_points)) for c in written] == \
+        [len(np.asarray(c.control_points)) for c in alone]
+    for curve in written:
+        along = curve_points(curve, np.linspace(0.0, 1.0, 2000))[:, :2]
+        assert _t_distance(along).max() < 4 * sigma
+
+
+@pytest.mark.parametrize("forced", [False, True])
+def test_the_junction_is_reported_where_it_is_in_the_file(tmp_path, capsys, forced):
+    """A T far from the origin is fitted in a local frame; its junction is reported at
+    (5e5, 5e5, 100), where the file has it, not at the local frame's (0, 0, 0)."""
+    offset = np.array([5e5, 5e5, 100.0])
+    source = tmp_path / "t.xyz"
+    np.savetxt(source, _t_junction() + offset, fmt="%.6f")
+    assert main([str(source), "-o", str(tmp_path / "t.json")] + (["--curve"] if forced
+                                                                  else [])) == 0
+    where = capsys.readouterr().err.split("junction (")[1].split(")")[0]
+    assert np.linalg.norm(np.array([float(value) for value in where.split(",")]) - offset) < 0.05
 
 
 def test_a_y_and_a_letter_i_are_cut_into_their_curves():
@@ -281,6 +323,25 @@ def test_noisy_junctions_are_found_once_with_every_arm_whole(shape, sigma):
         assert min(map(len, pieces.pieces)) >= 45     # each arm's 50 points, about
 
 
+def test_noisy_junctions_are_found_once_with_every_arm_whole_when_one_arm_is_sparser():
+    """The uneven case of the test above: a T whose bar is sampled every 0.01 and stem every
+    0.02, noise 0.002. Linked by the piece's median spacing (the bar's), the stem broke into
+    fragments counted as arms, and its few ring points fell under an arm's share: 9 of these
+    20 seeds found a false junction on the stem or missed the true one."""
+    wrong = []
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        bar = np.column_stack([np.linspace(-1.0, 1.0, 201), np.zeros(201)])
+        stem = np.column_stack([np.zeros(50), -np.linspace(0.02, 1.0, 50)])
+        points = np.vstack([bar, stem]) + rng.normal(scale=0.002, size=(251, 2))
+        pieces = curve_pieces(points[rng.permutation(len(points))])
+        if not (pieces.count == 3 and len(pieces.junctions) == 1
+                and np.linalg.norm(pieces.junctions[0]) < 0.05
+                and min(map(len, pieces.pieces)) >= 45):
+            wrong.append(seed)
+    assert wrong == []
+
+
 def test_coincident_points_are_no_curves_and_left_to_the_fits_to_refuse():
     assert several_curves(np.ones((50, 3)), whole_is_curve=False) is None
     with pytest.raises(ValueError, match="all points coincide"):
@@ -318,9 +379,81 @@ def test_the_cat_image_gives_all_its_outlines_none_crossing_a_slit(paper_data, t
     assert cKDTree(np.vstack(samples)).query(points)[0].max() < 2.5
 
 
+def test_several_curves_report_the_worst_status_not_stopped(tmp_path, capsys):
+    """A gradient fit cut at its iteration budget is "budget", curve by curve and for them all:
+    "stopped" is for Ctrl-C alone."""
+    from nurbs_core.jobs import FitJob, fit_one
+
+    source = tmp_path / "two.xyz"
+    np.savetxt(source, _two_circles(200, 0.0))
+    stats = fit_one(FitJob(input=str(source), output=[str(tmp_path / "two.json")],
+                           solver="gradient", iterations=5, quiet=True))
+    captured = capsys.readouterr()
+    lines = [line for line in captured.out.splitlines() if line.startswith("curve ")]
+    # the plan names the fit that runs, in the single fit's words
+    assert "fitting each as a curve (degree 3) by the gradient fit with adam" in captured.err
+    assert "least squares" not in captured.err
+    assert stats["curves"] == 2 and stats["curve_fit_status"] == ["budget", "budget"]
+    assert stats["fit_status"] == "budget"
+    assert len(lines) == 2 and all(line.endswith(", budget") for line in lines)
+
+
+def test_a_ctrl_c_during_a_curve_writes_it_so_far_and_fits_no_more(tmp_path, capsys,
+                                                                    monkeypatch):
+    """The first Ctrl-C (a real SIGINT, through nurbs-fit's handler) during the first curve's
+    fit: that curve ends with its result so far, marked on its line, no further curve is
+    fitted, the file holds the one curve and the status is "stopped"."""
+    import os
+    import signal
+
+    import nurbs_core.fitting.run as run
+    from nurbs_core.jobs import FitJob, fit_one
+
+    real = run.fit_arrays
+    fits = []
+
+    def interrupted(*args, **kwargs):
+        fits.append(len(args[0]))
+        os.kill(os.getpid(), signal.SIGINT)     # the user's Ctrl-C, mid-curve
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(run, "fit_arrays", interrupted)
+    source = tmp_path / "two.xyz"
+    np.savetxt(source, _two_circles(200, 0.0))
+    stats = fit_one(FitJob(input=str(source), output=[str(tmp_path / "two.json")]),
+                    stoppable=True)
+    captured = capsys.readouterr()
+    assert len(fits) == 1
+    assert stats["fit_status"] == "stopped" and stats["curves"] == 1
+    assert stats["curve_fit_status"] == ["stopped"]
+    lines = [line for line in captured.out.splitlines() if line.startswith("curve ")]
+    assert len(lines) == 1 and lines[0].endswith(", stopped by Ctrl-C")
+    assert "stopped: curves 2 to 2 not fitted" in captured.err
+    assert "wrote " in captured.out and len(_written(tmp_path / "two.json")) == 1
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # restored
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".stl", ".ply", ".glb"])
+def test_curves_into_a_mesh_file_are_refused_before_any_fit(tmp_path, capsys, monkeypatch,
+                                                            suffix):
+    import nurbs_core.fitting.run as run
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("a curve was fitted for an output that cannot hold it")
+
+    monkeypatch.setattr(run, "fit_arrays", no_fit)
+    source = tmp_path / "two.xyz"
+    np.savetxt(source, _two_circles(200, 0.0))
+    written = tmp_path / "two.json"
+    assert main([str(source), "-o", str(written), str(tmp_path / f"two{suffix}")]) == 1
+    assert f"two{suffix}: a mesh file holds surfaces, but the cloud is fitted as curves" in \
+        capsys.readouterr().err
+    assert not written.exists()         # nothing written
+
+
 def test_a_stop_ends_the_curves_after_the_one_under_way():
-    """What the first Ctrl-C does to ``nurbs-fit`` on several curves: the curves so far are
-    kept (and written), the rest not fitted."""
+    """A stop between curves (iter_curve_pieces, as the app's and nurbs-fit's loops run it):
+    the curves so far are kept, the rest not fitted (what is written: the test above)."""
     from nurbs_core.fitting.config import StopToken
     from nurbs_core.jobs.curves import iter_curve_pieces
 
