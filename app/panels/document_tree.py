@@ -99,7 +99,8 @@ class DocumentTree(QTreeWidget):
                            layer_visible("solid"),
                            "the solid with analytic faces (Solid mode): " + solid.report.status)
             if document.patches:
-                patches = self._item(self, f"Patches ({len(document.patches)})",
+                patches = self._item(self, f"{_shapes_name(document.patches)} "
+                                           f"({len(document.patches)})",
                                      ("layer", "patches"), layer_visible("patches"))
                 for name in document.patch_names:
                     child = QTreeWidgetItem(patches, [name])
@@ -123,3 +124,13 @@ class DocumentTree(QTreeWidget):
             self._set_layer_visible(key, checked)
         else:
             self._set_target_visible(key, checked)
+
+
+def _shapes_name(shapes: list) -> str:
+    """What the document's loaded NURBS shapes are called in the tree: "Curves" when every one
+    is a curve (a cloud of several outlines), "Patches" when none is, "Shapes" when mixed."""
+    from nurbs_core.geometry_arrays import CurveArrays
+
+    curves = sum(isinstance(shape, CurveArrays) for shape in shapes)
+    return "Curves" if curves == len(shapes) else "Patches" if curves == 0 else "Shapes"
+

@@ -46,6 +46,10 @@ def test_two_circles_open_as_two_fitted_curves_shown_and_exported(qtbot, window,
         assert np.abs(np.hypot(*(along[:, :2] - (x, y)).T) - radius).max() < 3e-4
         radii.add(radius)
     assert radii == {1.0, 0.5}
+    # the document tree calls them what they are
+    tree = window.tree
+    tops = [tree.topLevelItem(i).text(0) for i in range(tree.topLevelItemCount())]
+    assert "Curves (2)" in tops and not any(t.startswith("Patches") for t in tops)
     # both drawn (tessellated in a job): one line actor each in the loaded-shapes group
     qtbot.waitUntil(lambda: len(window.scene._extra_meshes["patches"]) == 2, timeout=20_000)
     drawn = [window.scene.plotter.actors[name] for name in window.scene._extra_meshes["patches"]]
