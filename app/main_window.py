@@ -787,6 +787,14 @@ class MainWindow(QMainWindow):
                 "clears the selection: Start then fits every point)", 8000)
         if self.solid_policy.starts_with_solid():
             return self.solid_policy.start_for_start()
+        if (self.document.several_curves and self.document.selection is None
+                and self.active_controller() is self.controller):
+            # one live fit holds one shape: over all the curves it would jump between them
+            self.report(f"The cloud holds {self.document.several_curves} curves, each fitted "
+                        "when it opened (the document tree lists them; File > Export writes "
+                        "them all). Start fits one curve live: select its points (Box or "
+                        "Lasso), then Start.")
+            return False
         if self.active_controller() is self.patch_controller:
             self.network_quality_dock.raise_()
             # (its step keeps the curve shown before it: cleared once the run has begun)

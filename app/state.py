@@ -499,6 +499,9 @@ class Document(QObject):
         self.targets: list[Target] = []
         self.patches: list[GeometryArrays] = []
         self.patch_names: list[str] = []
+        #: how many curves the opened cloud holds when it holds several (each fitted when it
+        #: opened, among :attr:`patches`); 0 otherwise. One live fit holds one shape.
+        self.several_curves = 0
         self.fitted: GeometryArrays | None = None
         #: what :attr:`fitted` is and how it was made (None with no fitted shape)
         self.fitted_account: FitAccount | None = None

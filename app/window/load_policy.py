@@ -222,11 +222,14 @@ class LoadPolicy(QObject):
         document.replace_content(loaded.targets, loaded.patches, loaded.patch_names, units)
         if loaded.solid is not None:  # a STEP, IGES or .brep file with trimmed faces
             document.set_solid(loaded.solid)
+        document.several_curves = loaded.curves if loaded.curves > 1 else 0
         count = document.visible_point_count()  # not stacked again: the viewport just did
-        if count and document.settings.fit.kind != "curve" and loaded.curve:
+        if count and document.settings.fit.kind != "curve" and (loaded.curve
+                                                                 or document.several_curves):
             document.edit_settings("Kind (curve cloud)", kind="curve")
             window.report("The cloud is a curve (thin across everywhere): switched to curve "
-                          "fitting.")
+                          "fitting." if loaded.curve else "The cloud holds several curves: "
+                          "switched to curve fitting (for one curve's points at a time).")
         grid = control_grid_for(count, document.settings.fit) if count else None
         if grid is not None:
             document.edit_settings("Control grid (small cloud)", control_points_u=grid[0],

@@ -128,3 +128,23 @@ def test_a_curve_whose_fit_fails_leaves_the_others_and_says_so(tmp_path, monkeyp
     assert loaded.patch_names == ["two.xyz curve 2 (closed)"] and loaded.curves == 1
     assert any("not fitted: curve 1 (250 points): a test's fit that fails" in note
                for note in loaded.notes)
+
+
+def test_start_on_several_curves_asks_for_one_curve_and_fits_a_selected_one(qtbot, window,
+                                                                             tmp_path):
+    """One live fit holds one shape: Start over two circles used to fit a surface through
+    both. Now the window switches to curve fitting, Start says to select one curve, and a
+    selected circle is fitted as its own closed curve."""
+    open_by_drop(qtbot, window, [_two_circles(tmp_path)])
+    document = window.document
+    assert document.several_curves == 2 and document.settings.fit.kind == "curve"
+    assert not window.start_fit() and not window.is_fitting()
+    assert "holds 2 curves" in window.statusBar().currentMessage()
+    points = document.target_points()
+    x, y, radius = CIRCLES[1]
+    small = np.abs(np.hypot(points[:, 0] - x, points[:, 1] - y) - radius) < 0.05
+    document.set_selection(small)
+    with qtbot.waitSignal(window.controller.fit_finished, timeout=120_000):
+        assert window.start_fit()
+    along = curve_points(document.fitted, np.linspace(0.0, 1.0, 2000))
+    assert np.abs(np.hypot(along[:, 0] - x, along[:, 1] - y) - radius).max() < 0.02
