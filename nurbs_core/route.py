@@ -168,7 +168,8 @@ def _part_or(route: Route, points: np.ndarray, forced: bool,
     from nurbs_core.brep.part import MAX_CURVED, MIN_COVERAGE, part_like
     from nurbs_core.brep.segment import segment_subset
 
-    segmentation = segment_subset(points, give_up=0.0 if forced else 0.02)
+    segmentation = segment_subset(points, give_up=0.0 if forced else 0.02,
+                                  freeform_stop=not forced)
     share = f"{segmentation.coverage:.0%} of the points on {len(segmentation.surfaces)} analytic"
     if part_like(segmentation, points) or forced:
         opening = _sealed_opening(points, segmentation, max_hole)
@@ -189,11 +190,22 @@ def _part_or(route: Route, points: np.ndarray, forced: bool,
                          f"{region.mask.mean():.0%} of the points between "
                          f"{len(region.planes)} planes", route.mesh, segmentation=segmentation,
                          freeform=region)
+    if segmentation.freeform:
+        route.finding += f"; not a machined part ({_freeform_why()})"
+        return route
     why = (f"under {MIN_COVERAGE:.0%}" if segmentation.coverage < MIN_COVERAGE
            else f"mostly spheres, cones and tori, over {MAX_CURVED:.0%}, meeting mostly "
                 f"smoothly: a freeform shape")
     route.finding += f"; not a machined part ({share} surfaces, {why})"
     return route
+
+
+def _freeform_why() -> str:
+    """Why a segmentation that ended early (``Segmentation.freeform``) is no part."""
+    from nurbs_core.brep.segment import FREEFORM_REGION, FREEFORM_ROUNDS
+
+    return (f"its first {FREEFORM_ROUNDS} analytic surfaces are no plane and none holds "
+            f"{FREEFORM_REGION:.0%} of the points: a freeform shape")
 
 
 def _sealed_opening(points: np.ndarray, segmentation: Any, max_hole: float | None
@@ -331,12 +343,14 @@ def _open_part(points: np.ndarray, finding: str, max_hole: float | None, forced:
 
             require_ocp("An open shell with analytic faces")
         return "no OpenCASCADE for a part"
-    segmentation = segment_subset(points, give_up=0.0 if forced else 0.02)
+    segmentation = segment_subset(points, give_up=0.0 if forced else 0.02,
+                                  freeform_stop=not forced)
     surfaces = len(segmentation.surfaces)
     share = (f"{segmentation.coverage:.0%} of the points on {surfaces} analytic surface"
              + ("s" if surfaces != 1 else ""))
     if not forced:
-        why = (f"under {MIN_COVERAGE:.0%}" if segmentation.coverage < MIN_COVERAGE
+        why = (_freeform_why() if segmentation.freeform
+               else f"under {MIN_COVERAGE:.0%}" if segmentation.coverage < MIN_COVERAGE
                else "mostly curved: a freeform shape" if not part_like(segmentation, points)
                else "one surface: a sheet" if surfaces < 2
                else "" if sharp_edges(segmentation, points)

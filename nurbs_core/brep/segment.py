@@ -97,6 +97,13 @@ CANDIDATES = 40
 SCORE_POINTS = 3000
 #: at most this many surfaces
 MAX_REGIONS = 60
+#: With ``freeform_stop``, a search whose first FREEFORM_ROUNDS surfaces hold no plane and
+#: none of them more than FREEFORM_REGION of the points ends there (``Segmentation.freeform``):
+#: a machined part's first rounds take its large faces, planes above all, while a sampled head
+#: gave 8 rounds of spheres, cones and cylinders of 3-9% each, and went on to 24 surfaces and
+#: 10 CPU seconds before the part check declined it (``python benchmarks/bench_segment.py``).
+FREEFORM_ROUNDS = 8
+FREEFORM_REGION = 0.10
 #: a region under this share of the points is small (see _without_redundant)
 SMALL_REGION = 0.02
 #: a torus's points must reach this far around its tube (radians; 30 degrees)
@@ -136,6 +143,9 @@ class Segmentation:
     seconds: float = 0.0
     rounds: int = 0
     region_sizes: list[int] = field(default_factory=list)
+    #: the search ended early on a freeform scan (see :data:`FREEFORM_ROUNDS`): the surfaces are
+    #: its first rounds' only
+    freeform: bool = False
 
     @property
     def coverage(self) -> float:
@@ -291,11 +301,14 @@ def _quadric_noise(points: np.ndarray, tree: cKDTree, k: int = 24) -> float:
 
 
 def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
-            time_limit: float = 30.0, give_up: float = 0.0) -> Segmentation:
+            time_limit: float = 30.0, give_up: float = 0.0,
+            freeform_stop: bool = False) -> Segmentation:
     """Regions of a cloud (N, 3) on analytic surfaces (see the module). ``noise``: the scan's
     noise sigma when known (estimated otherwise); ``time_limit``: CPU seconds after which no new
     round starts; ``give_up``: stop after the first round when its region holds less than this
-    share of the points (a freeform scan: no surface explains much of it)."""
+    share of the points (a freeform scan: no surface explains much of it); ``freeform_stop``:
+    stop after :data:`FREEFORM_ROUNDS` rounds that found no plane and no large region (the
+    result's ``freeform``)."""
     started = time.perf_counter()
     # the limit counts this process's CPU seconds: on a busy machine a wall-clock limit ended
     # the search early, and the same scan gave other surfaces (a plate's hole went missing)
@@ -324,6 +337,7 @@ def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
     # planes) stay those of a search that found the same surfaces
     retry_rng = np.random.default_rng([seed, 1])
     failed = 0
+    largest = 0  # the most points a round's region took
     while (free.sum() >= smallest and len(surfaces) < MAX_REGIONS
            and time.process_time() - cpu_started < time_limit):
         rounds += 1
@@ -358,6 +372,12 @@ def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
         surfaces.append(surface)
         free[members] = False
         unexplained &= surface.distance(points) >= tolerance
+        largest = max(largest, len(members))
+        if (freeform_stop and len(surfaces) == FREEFORM_ROUNDS and largest <= FREEFORM_REGION
+                * count and all(found.kind != "plane" for found in surfaces)):
+            return Segmentation(surfaces, _labels(surfaces, points, normals, tolerance),
+                                normals, noise, tolerance, spacing,
+                                time.perf_counter() - started, rounds, freeform=True)
     if len(surfaces) < MAX_REGIONS and free.sum() >= smallest:
         surfaces += _narrow_planes(points, normals, free, graph, rng, tolerance, smallest,
                                    MAX_REGIONS - len(surfaces))
@@ -406,7 +426,8 @@ def segment_subset(points: np.ndarray, limit: int = SEGMENT_POINTS, **options: A
     return Segmentation(part.surfaces, labels, normals, part.noise, part.tolerance,
                         part.spacing * math.sqrt(limit / len(points)),
                         time.perf_counter() - started, part.rounds,
-                        [int((labels == k).sum()) for k in range(len(part.surfaces))])
+                        [int((labels == k).sum()) for k in range(len(part.surfaces))],
+                        part.freeform)
 
 
 def _narrow_planes(points: np.ndarray, normals: np.ndarray, free: np.ndarray,

@@ -496,3 +496,24 @@ def test_a_thin_plate_scan_at_the_default_noise_is_a_valid_solid_of_six_exact_pl
     sigma = NOISE * float(np.linalg.norm([2.0, 1.2, 0.08]))
     assert fitted.distances.mean() < 1.25 * sigma
     assert abs(volume(fitted.solid) / volume(shape) - 1) < 0.03
+
+
+def test_the_part_check_stops_early_on_a_freeform_scan_and_not_on_parts():
+    """The head (sampled in its parameters, uneven) took 24 rounds and 10-18 CPU seconds of
+    spheres, cones and cylinders of 3-9% each before the part check declined it; its first
+    8 rounds already hold no plane and no region of 10%: the search stops there. Parts' first
+    rounds take their large faces (planes) and go on to their full segmentation."""
+    from nurbs_core import samples
+    from nurbs_core.brep.segment import FREEFORM_ROUNDS
+    from nurbs_core.route import choose_route
+
+    head = samples.head(10_000).points
+    stopped = segment(head, freeform_stop=True)
+    assert stopped.freeform and len(stopped.surfaces) == FREEFORM_ROUNDS
+    assert all(s.kind != "plane" for s in stopped.surfaces)
+    route = choose_route(head)
+    assert route.kind == "network" and "a freeform shape" in route.finding
+    points, _, _ = scan_part(PARTS["countersunk"](), 8000, NOISE, seed=1)
+    full = segment(points, freeform_stop=True)
+    assert not full.freeform
+    assert [s.kind for s in full.surfaces] == [s.kind for s in segment(points).surfaces]
