@@ -1,7 +1,8 @@
 """The segmentation into analytic faces (``nurbs_core.brep.segment.segment``, the machined-part
 check every ``nurbs-fit ... -o part.step`` runs first) with refine's exact Jacobians
 (:mod:`nurbs_core.brep.distance_jacobians`) against scipy's finite differences, the baseline,
-on the same clouds in the same run.
+on the same clouds in the same run; and the part check's early stop on freeform scans
+(``segment(freeform_stop=True)``, as ``nurbs_core.route`` runs it), exact Jacobians too.
 
 Run: ``python benchmarks/bench_segment.py [--points N]``. Clouds: the freeform head
 (``samples.head``, uneven in its parameters: the part check finds 20-odd spheres, cones and tori
@@ -43,28 +44,31 @@ def _clouds(points: int) -> dict[str, np.ndarray]:
     return clouds
 
 
-def _run(points: np.ndarray, exact: bool) -> tuple[float, str, float]:
+def _run(points: np.ndarray, exact: bool, stop: bool = False) -> tuple[float, str, float]:
     primitives.EXACT_JACOBIANS = exact
     started = time.process_time()
-    found = segment(points)
+    found = segment(points, freeform_stop=stop)
     seconds = time.process_time() - started
     kinds = Counter(s.kind for s in found.surfaces)
     types = " ".join(f"{k}:{kinds[k]}" for k in primitives.SIMPLICITY if kinds[k])
-    return seconds, types, float((found.labels >= 0).mean())
+    return seconds, types + (" (stopped: freeform)" if found.freeform else ""), float(
+        (found.labels >= 0).mean())
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points", type=int, default=20_000)
     args = parser.parse_args()
-    print("| cloud | FD cpu s | exact cpu s | speed-up | FD surfaces | exact surfaces | "
-          "FD labelled | exact labelled |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| cloud | FD cpu s | exact cpu s | speed-up | early stop cpu s | FD surfaces | "
+          "exact surfaces | early stop surfaces | FD labelled | exact labelled |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name, cloud in _clouds(args.points).items():
         fd = _run(cloud, exact=False)
         exact = _run(cloud, exact=True)
+        stop = _run(cloud, exact=True, stop=True)
         print(f"| {name} | {fd[0]:.2f} | {exact[0]:.2f} | {fd[0] / max(exact[0], 1e-9):.2f}x | "
-              f"{fd[1]} | {exact[1]} | {fd[2]:.1%} | {exact[2]:.1%} |", flush=True)
+              f"{stop[0]:.2f} | {fd[1]} | {exact[1]} | {stop[1]} | {fd[2]:.1%} | "
+              f"{exact[2]:.1%} |", flush=True)
     primitives.EXACT_JACOBIANS = True
     print(f"\nmachine: {os.cpu_count()} cores, {platform.platform()}; {args.points} points; "
           "one thread; CPU seconds of this process")
