@@ -155,7 +155,8 @@ def _check(batch: BatchSettings, summary: Path) -> None:
         from nurbs_core.batch.executors import check_available
 
         check_available()
-    _prepare_folder(Path(batch.output_dir))
+    if not summary.parent.exists():  # its lock file lies beside it (the results' folder by
+        _prepare_folder(summary.parent)  # default); the results' folder waits for the lock
     check_output_paths([summary], suffixes=(".jsonl", ".csv"))
 
 
@@ -219,6 +220,7 @@ def run_batch(batch: BatchSettings) -> int:
     summary = Path(batch.summary) if batch.summary else directory / "summary.jsonl"
     _check(batch, summary)
     with summary_lock(summary):  # a second batch on this summary is refused, before any work
+        _prepare_folder(directory)  # (a refused one leaves no empty results' folder behind)
         return _run(batch, summary)
 
 

@@ -331,6 +331,26 @@ def test_a_summary_is_locked_by_one_process_at_a_time(tmp_path):
     assert _try_the_lock(summary) == "locked"
 
 
+def test_a_batch_refused_by_the_lock_creates_no_results_folder(tmp_path):
+    """The second batch on a held summary, writing elsewhere, is refused before it makes its
+    results' folder (it used to leave it behind, empty)."""
+    from nurbs_core.batch.runner import run_batch
+    from nurbs_core.batch.settings import BatchSettings
+    from nurbs_core.batch.summary_lock import summary_lock
+    from nurbs_core.io.errors import OutputPathError
+    from nurbs_core.jobs.settings import FitJob
+
+    scans = tmp_path / "scans"
+    _cloud_file(scans / "c0.xyz", 0, points=500)
+    summary = tmp_path / "shared" / "summary.jsonl"
+    summary.parent.mkdir()
+    batch = BatchSettings(job=FitJob(input=str(scans)), inputs=[str(scans)],
+                          output_dir=str(tmp_path / "fits"), summary=str(summary))
+    with summary_lock(summary), pytest.raises(OutputPathError, match="another nurbs-fit batch"):
+        run_batch(batch)
+    assert not (tmp_path / "fits").exists()
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(400)
 def test_a_second_batch_on_a_running_batchs_summary_is_refused_and_a_killed_one_frees_it(
