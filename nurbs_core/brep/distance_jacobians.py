@@ -22,7 +22,8 @@ from typing import NamedTuple
 import numpy as np
 
 
-def _unit_rows(vectors: np.ndarray) -> np.ndarray:
+def unit_rows(vectors: np.ndarray) -> np.ndarray:
+    """``vectors`` (..., 3) scaled to unit length along the last axis (zero ones stay zero)."""
     norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
     return vectors / np.maximum(norm, 1e-300)
 
@@ -30,7 +31,7 @@ def _unit_rows(vectors: np.ndarray) -> np.ndarray:
 def sphere_jacobian(points: np.ndarray, x: np.ndarray) -> np.ndarray:
     """(N, 4) derivatives of ``|p - c| - R`` by ``x = (c, R)`` at points (N, 3)."""
     out = np.empty((len(points), 4))
-    out[:, :3] = -_unit_rows(points - x[:3])
+    out[:, :3] = -unit_rows(points - x[:3])
     out[:, 3] = -1.0
     return out
 
@@ -46,7 +47,7 @@ class AxisFrame:
 
     def axis(self, x: np.ndarray) -> np.ndarray:
         """The unit axis (3,) at ``x``."""
-        return _unit_rows(self.axis0 + x[0] * self.first + x[1] * self.second)
+        return unit_rows(self.axis0 + x[0] * self.first + x[1] * self.second)
 
     def origin(self, x: np.ndarray) -> np.ndarray:
         """The origin (3,) at ``x`` (``x[5]`` moves it along ``axis0`` when ``x`` has it)."""
@@ -118,7 +119,7 @@ def cone_jacobian(frame: AxisFrame, points: np.ndarray, x: np.ndarray) -> np.nda
                            -d.rho * sin - d.h * cos, origin[:, 2]])
     behind = (d.h * cos + d.rho * sin) < 0
     if behind.any():
-        apex = -_unit_rows(d.v[behind]) @ np.stack([frame.first, frame.second, frame.axis0]).T
+        apex = -unit_rows(d.v[behind]) @ np.stack([frame.first, frame.second, frame.axis0]).T
         out[behind] = 0.0
         out[behind, 2:4] = apex[:, :2]
         out[behind, 5] = apex[:, 2]
@@ -126,4 +127,4 @@ def cone_jacobian(frame: AxisFrame, points: np.ndarray, x: np.ndarray) -> np.nda
 
 
 __all__ = ["AxisFrame", "cone_jacobian", "cylinder_jacobian", "sphere_jacobian",
-           "torus_jacobian"]
+           "torus_jacobian", "unit_rows"]

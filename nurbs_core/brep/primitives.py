@@ -25,6 +25,7 @@ from nurbs_core.brep.distance_jacobians import (
     sphere_jacobian,
     torus_jacobian,
 )
+from nurbs_core.brep.distance_jacobians import unit_rows as _unit
 
 #: the types from simplest to most complex (by parameter count)
 SIMPLICITY = ("plane", "sphere", "cylinder", "cone", "torus")
@@ -38,11 +39,6 @@ EXACT_JACOBIANS = True
 
 #: a cone narrower than this half-angle (degrees) is a cylinder, wider than 90 minus it a plane
 CONE_LIMIT = 2.0
-
-
-def _unit(vectors: np.ndarray) -> np.ndarray:
-    norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
-    return vectors / np.maximum(norm, 1e-300)
 
 
 def position_digits(size: float, offset: np.ndarray, digits: int = 5) -> int:
@@ -325,7 +321,6 @@ def refine(primitive: Primitive, points: np.ndarray, at_most: int = REFINE_POINT
         return Primitive("sphere", x[:3], primitive.axis, radius=abs(float(x[3])))
     first, second = axis_frame(primitive.axis)
     frame = AxisFrame(primitive.axis, primitive.origin, first, second)
-
     axis_of, origin_of = frame.axis, frame.origin
 
     if primitive.kind == "cylinder":

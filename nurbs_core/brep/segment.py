@@ -374,7 +374,7 @@ def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
         unexplained &= surface.distance(points) >= tolerance
         largest = max(largest, len(members))
         if (freeform_stop and len(surfaces) == FREEFORM_ROUNDS and largest <= FREEFORM_REGION
-                * count and all(found.kind != "plane" for found in surfaces)):
+                * count and all(kept.kind != "plane" for kept in surfaces)):
             return Segmentation(surfaces, _labels(surfaces, points, normals, tolerance),
                                 normals, noise, tolerance, spacing,
                                 time.perf_counter() - started, rounds, freeform=True)

@@ -48,7 +48,7 @@ def unchecked_part_note(job: FitJob, outputs: list[Path], route: Route) -> str |
         return None
     return (f"not checked for a machined part: {', '.join(blocking)} cannot hold a solid (a part "
             f"becomes a solid with exact planes, cylinders and cones when every output is "
-            f"{', '.join(s for s in SOLID_SUFFIXES if s in ('.step', '.iges', '.brep'))}; "
+            f".step, .iges or .brep; "
             f"--part forces it, --no-part silences this)")
 
 

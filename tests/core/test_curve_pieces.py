@@ -48,6 +48,15 @@ def _t_distance(samples: np.ndarray) -> np.ndarray:
     return np.minimum(to_bar, to_stem)
 
 
+def _fitted_outline(tmp_path, capsys, name, points):
+    """The curves ``nurbs-fit NAME.xyz -o NAME.json`` writes for 2-D outline points (M, 2)."""
+    source = tmp_path / f"{name}.xyz"
+    np.savetxt(source, np.column_stack([points, np.zeros(len(points))]))
+    assert main([str(source), "-o", str(tmp_path / f"{name}.json")]) == 0
+    capsys.readouterr()
+    return _written(tmp_path / f"{name}.json")
+
+
 def _written(path) -> list[CurveArrays]:
     from nurbs_core.geometry import NurbsCurve
     from nurbs_core.io import load
@@ -246,11 +255,7 @@ def test_an_outline_with_an_inner_outline_gives_both_closed_and_on_the_image(tmp
     radius = np.hypot(rows - 100.0, columns - 95.0)
     mask = (radius <= 70) & (radius >= 35)
     points = boundary_points(mask)
-    source = tmp_path / "ring.xyz"
-    np.savetxt(source, np.column_stack([points, np.zeros(len(points))]))
-    assert main([str(source), "-o", str(tmp_path / "ring.json")]) == 0
-    capsys.readouterr()
-    curves = _written(tmp_path / "ring.json")
+    curves = _fitted_outline(tmp_path, capsys, "ring", points)
     assert len(curves) == ndimage.label(~mask)[1] == 2      # one per boundary of the region
     depth = ndimage.distance_transform_edt(~mask)
     inside = ndimage.distance_transform_edt(mask)
@@ -361,11 +366,7 @@ def test_the_cat_image_gives_all_its_outlines_none_crossing_a_slit(paper_data, t
     image = paper_data / "skeletons" / "cat.png"
     mask = foreground_mask(image)
     points = boundary_points(image)
-    source = tmp_path / "cat.xyz"
-    np.savetxt(source, np.column_stack([points, np.zeros(len(points))]))
-    assert main([str(source), "-o", str(tmp_path / "cat.json")]) == 0
-    capsys.readouterr()
-    curves = _written(tmp_path / "cat.json")
+    curves = _fitted_outline(tmp_path, capsys, "cat", points)
     outlines = ndimage.label(boundary_mask(mask), structure=np.ones((3, 3)))[1]
     assert len(curves) == outlines
     depth = ndimage.distance_transform_edt(~mask)
