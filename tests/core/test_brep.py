@@ -137,6 +137,35 @@ def test_winding_number_of_a_closed_mesh_is_one_inside_and_zero_outside():
     np.testing.assert_allclose(numbers, [1, 1, 0, 0, 0], atol=1e-9)
 
 
+def test_a_thin_ring_between_a_cylinder_and_a_cone_is_a_cell_of_the_solid():
+    """A ring 0.05 thick at most in a 1.6 wide box (a turned part's wedge between a band and
+    the cone beyond its shoulder): no point a fiftieth of its size inside its largest triangles
+    lies inside it, and the cell must not be dropped for that."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCone, BRepPrimAPI_MakeCylinder
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+
+    from nurbs_core.brep.solid import build_solid
+    from nurbs_core.io.cad import triangulate
+
+    height, bottom, top = 0.47, 0.798, 0.75  # the cone's radii inside the cylinder's 0.8
+    axis = gp_Ax2(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1))
+    ring = BRepAlgoAPI_Cut(BRepPrimAPI_MakeCylinder(axis, 0.8, height).Shape(),
+                           BRepPrimAPI_MakeCone(axis, bottom, top, height).Shape()).Shape()
+    vertices, triangles, _ = triangulate(ring, 1e-3)
+    slope = (bottom - top) / height
+    surfaces = [Primitive("plane", np.zeros(3), np.array([0, 0, -1.0])),
+                Primitive("plane", np.array([0, 0, height]), np.array([0, 0, 1.0])),
+                Primitive("cylinder", np.zeros(3), np.array([0, 0, 1.0]), radius=0.8),
+                Primitive("cone", np.array([0, 0, bottom / slope]), np.array([0, 0, -1.0]),
+                          angle=float(np.arctan(slope)))]
+    solid = build_solid(surfaces, vertices, triangles, (vertices.min(0), vertices.max(0)),
+                        tolerance=1e-3)
+    assert is_valid(solid)
+    assert volume(solid) == pytest.approx(volume(ring), rel=1e-6)
+    assert sorted(face_kind(f) for f in faces(solid)) == ["cone", "cylinder", "plane", "plane"]
+
+
 # the bracket (the longest: about 80 CPU s of segmentation and solid) runs in the slow set
 @pytest.fixture(scope="module", params=["plate", pytest.param("bracket", marks=pytest.mark.slow),
                                         "turned", "countersunk"])

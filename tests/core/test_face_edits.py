@@ -117,6 +117,34 @@ def test_a_cylinder_forced_to_nurbs_is_a_bspline_face_in_step(plate, tmp_path):
     assert len(hole) > 100 and hole.mean() < result.noise * 1.25
 
 
+def test_a_full_cylindrical_band_forced_to_nurbs_is_a_tube_face_between_its_planes():
+    """The turned part's large cylinder goes all the way round between the bottom plane and
+    the shoulder's plane, with the rest of the part beyond the shoulder: its NURBS face is a
+    tube that must reach past both planes (it stopped short of the shoulder, and the kept
+    pieces made 3 or 4 shells)."""
+    from OCP.BRep import BRep_Tool
+
+    points, _, mesh, fitted = _fitted("turned", 6000, 2)
+    band = max((f for f in fitted.faces if f.kind == "cylinder"), key=lambda f: f.points)
+    assert sum(f.region == band.region for f in fitted.faces) == 1  # one face all round
+    edited = apply_edit(fitted.regions, points, FaceEdit("type", (band.region,), "freeform"))
+    result = _rebuilt(points, mesh, edited)
+    assert result.valid and result.closed and is_valid(result.solid)
+    assert result.status == "converged", result.problems
+    kinds = sorted(f.kind for f in fitted.faces)
+    kinds[kinds.index("cylinder")] = "freeform"
+    assert sorted(f.kind for f in result.faces) == sorted(kinds)
+    (tube,) = [face for face in faces(result.solid) if face_kind(face) == "freeform"]
+    surface = BRep_Tool.Surface_s(tube)
+    assert surface.IsUClosed() != surface.IsVClosed()  # closed round the band, open along it
+    # it holds the band's points as the cylinder did, on the scan
+    (index,) = [k for k, f in enumerate(result.faces) if f.kind == "freeform"]
+    mine = result.distances[result.point_faces == index]
+    assert len(mine) > 0.97 * band.points
+    tolerance = result.segmentation.tolerance
+    assert mine.mean() < 0.5 * tolerance and np.percentile(mine, 99) < 1.5 * tolerance
+
+
 def test_an_impossible_type_is_reported_with_its_deviation(plate):
     points, _, mesh, fitted = plate
     cylinder = _region_of(fitted, "cylinder")
