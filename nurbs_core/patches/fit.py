@@ -234,10 +234,10 @@ def fit_network(points: np.ndarray, vertices: np.ndarray, quads: np.ndarray,
         penalty = math.nan
         cps: list[float] = []
         for done in range(1, passes_per_grid + 1):
-            before, weights = network, huber_weights(dist, _spread(dist, sigma))
-            network, seam = solver.solve(before, patch, uv, q, weights)
+            solved, weights = network, huber_weights(dist, _spread(dist, sigma))
+            network, seam = solver.solve(solved, patch, uv, q, weights)
             if done == 1:
-                freedom = fitted_freedom(solver, before, patch, uv, q, weights, network)
+                freedom = fitted_freedom(solver, solved, patch, uv, q, weights, network)
                 penalty = CP_PENALTY * sigma ** 2 * freedom
             patch, uv, dist = _reassign(network, q, patch, uv)
             rms = float(np.sqrt(np.mean(dist ** 2)))
