@@ -188,3 +188,14 @@ def is_curve_cloud(points: np.ndarray, seed: int = 0) -> bool:
 def flat_height(points: np.ndarray) -> bool:
     """Whether the points (N, 3) all lie at one height (z): a curve among them is fitted in 2-D."""
     return bool(len(points)) and float(np.ptp(points[:, 2])) == 0.0
+
+
+def straight_line(points: np.ndarray) -> bool:
+    """Whether the points (N, d), at least two apart, lie on one straight line (to rounding: the
+    spread across their principal axis at most 1e-6 of the spread along, the surface fits'
+    "collinear"): a curve however few they are (its fit says when they are too few)."""
+    points = np.asarray(points, np.float64)
+    if len(points) < 2 or not np.isfinite(points).all():
+        return False
+    spread = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
+    return bool(spread[0] > 0 and (len(spread) < 2 or spread[1] <= 1e-6 * spread[0]))

@@ -1,0 +1,147 @@
+"""Straight lines through the automatic route: a line is a curve, not a refused "collinear"
+surface."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nurbs_core.cli import main
+from nurbs_core.evaluate_arrays import curve_points
+from nurbs_core.geometry_arrays import CurveArrays
+
+START, END = np.array([1.0, -2.0, 0.5]), np.array([7.0, 1.0, 2.5])
+
+
+def _line(count: int = 200, dimensions: int = 3, noise: float = 0.0, uneven: bool = False,
+          seed: int = 0) -> np.ndarray:
+    """Points along the segment START-END (z = 0 in 2-D, as a flat file lists them)."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 1.0, count) ** (2 if uneven else 1)
+    points = START + t[:, None] * (END - START)
+    if dimensions == 2:
+        points[:, 2] = 0.0
+    points[:, :dimensions] += rng.normal(scale=noise, size=(count, dimensions))
+    return points
+
+
+def _written(path) -> list[CurveArrays]:
+    from nurbs_core.geometry import NurbsCurve
+    from nurbs_core.io import load
+
+    shapes = load(path)
+    assert all(isinstance(shape, NurbsCurve) for shape in shapes)
+    return [shape.numpy() for shape in shapes]
+
+
+def _off_line(points: np.ndarray, start: np.ndarray, end: np.ndarray) -> float:
+    """The largest distance of the points (N, 3) from the infinite line through start, end."""
+    direction = (end - start) / np.linalg.norm(end - start)
+    offset = points - start
+    return float(np.linalg.norm(offset - np.outer(offset @ direction, direction), axis=1).max())
+
+
+@pytest.mark.parametrize("dimensions", [2, 3])
+@pytest.mark.parametrize("noise", [0.0, 0.002])
+@pytest.mark.parametrize("uneven", [False, True])
+def test_the_automatic_route_fits_a_straight_line_as_one_straight_curve(
+        tmp_path, capsys, dimensions, noise, uneven):
+    points = _line(dimensions=dimensions, noise=noise, uneven=uneven)
+    source, out = tmp_path / "line.xyz", tmp_path / "line.json"
+    np.savetxt(source, points)
+    assert main([str(source), "-o", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert ": a curve" in captured.err
+    assert "point-to-curve distance" in captured.out and "open curve" in captured.out
+    (curve,) = _written(out)
+    start, end = points[0], points[-1]
+    samples = curve_points(curve, np.linspace(0.0, 1.0, 400))
+    samples = np.column_stack([samples, np.zeros(len(samples))])[:, :3] \
+        if samples.shape[1] == 2 else samples
+    length = float(np.linalg.norm(end - start))
+    # straight: on the line to the noise, from one end of the segment to the other
+    assert _off_line(samples, START if dimensions == 3 else start,
+                     END if dimensions == 3 else end) <= 1e-9 * length + 5 * noise
+    # the ends are least squares over the end points' foot parameters, not interpolated: on an
+    # exact line they land within 2e-4 of the length past the end points
+    ends = sorted([samples[0], samples[-1]], key=lambda p: float(np.linalg.norm(p - start)))
+    assert np.linalg.norm(ends[0] - start) <= 5e-4 * length + 5 * noise
+    assert np.linalg.norm(ends[1] - end) <= 5e-4 * length + 5 * noise
+
+
+def test_a_straight_line_is_written_to_every_curve_format_and_read_back(tmp_path, capsys):
+    """.json, .csv and .3dm (read back by rhino3dm), .step and .iges (by OpenCASCADE): one
+    straight edge as long as the segment."""
+    import rhino3dm
+
+    source = tmp_path / "line.xyz"
+    np.savetxt(source, _line())
+    outputs = [tmp_path / f"line{suffix}" for suffix in (".json", ".csv", ".3dm", ".step",
+                                                         ".iges")]
+    assert main([str(source), "-o", *map(str, outputs)]) == 0
+    capsys.readouterr()
+    assert len(_written(outputs[0])) == 1
+    length = float(np.linalg.norm(END - START))
+    model = rhino3dm.File3dm.Read(str(outputs[2]))
+    (curve,) = [item.Geometry for item in model.Objects]
+    assert isinstance(curve, rhino3dm.NurbsCurve) and curve.IsLinear(1e-9 * length)
+    assert curve.PointAtStart.DistanceTo(curve.PointAtEnd) == pytest.approx(length, rel=1e-3)
+    pytest.importorskip("OCP")
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+    from OCP.IGESControl import IGESControl_Reader
+    from OCP.STEPControl import STEPControl_Reader
+
+    for path, reader in ((outputs[3], STEPControl_Reader()), (outputs[4], IGESControl_Reader())):
+        assert reader.ReadFile(str(path)).name == "IFSelect_RetDone"
+        reader.TransferRoots()
+        properties = GProp_GProps()
+        BRepGProp.LinearProperties_s(reader.OneShape(), properties)
+        assert properties.Mass() == pytest.approx(length, rel=1e-3)
+
+
+@pytest.mark.parametrize("shape", ["L", "T"])
+def test_straight_pieces_among_others_are_fitted_straight(tmp_path, capsys, shape):
+    """An L (two segments meeting at a corner) and a T (three arms at a junction), exact: every
+    curve written is straight, on one of the segments."""
+    count = 150
+    t = np.linspace(0.0, 1.0, count)[:, None]
+    bar = np.array([0.0, 0.0, 0.0]) + t * np.array([8.0, 0.0, 0.0])
+    if shape == "L":
+        segments = [(np.array([0.0, 0.0, 0.0]), np.array([8.0, 0.0, 0.0])),
+                    (np.array([8.0, 0.0, 0.0]), np.array([8.0, 5.0, 0.0]))]
+        points = np.vstack([bar, np.array([8.0, 0.0, 0.0]) + t[1:] * np.array([0.0, 5.0, 0.0])])
+    else:
+        segments = [(np.array([0.0, 0.0, 0.0]), np.array([8.0, 0.0, 0.0])),
+                    (np.array([4.0, 0.0, 0.0]), np.array([4.0, -5.0, 0.0]))]
+        points = np.vstack([bar, np.array([4.0, 0.0, 0.0]) + t[1:] * np.array([0.0, -5.0, 0.0])])
+    points[:, 2] = 0.0
+    source, out = tmp_path / f"{shape}.xyz", tmp_path / f"{shape}.json"
+    np.savetxt(source, points)
+    assert main([str(source), "-o", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert "curve" in captured.err
+    curves = _written(out)
+    assert len(curves) >= (1 if shape == "L" else 3)
+    for curve in curves:
+        samples = np.asarray(curve_points(curve, np.linspace(0.0, 1.0, 200)))
+        samples = np.column_stack([samples[:, :2], np.zeros(len(samples))])
+        distance = np.min([np.linalg.norm(samples - np.clip(
+            ((samples - a) @ (b - a) / ((b - a) @ (b - a)))[:, None], 0, 1) * (b - a) - a,
+            axis=1) for a, b in segments], axis=0)
+        assert distance.max() <= 0.05   # on the segments (the L's corner rounds within this)
+
+
+@pytest.mark.parametrize("points, message", [
+    (np.ones((10, 3)), "all 10 points coincide"),
+    (np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]), "2 points are too few for a curve"),
+])
+def test_degenerate_lines_get_one_line_refusals(tmp_path, capsys, points, message):
+    source = tmp_path / "few.xyz"
+    np.savetxt(source, points)
+    assert main([str(source), "-o", str(tmp_path / "few.json")]) != 0
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.err
+    errors = [line for line in captured.err.splitlines() if "error" in line]
+    assert len(errors) == 1 and message in errors[0]
+    assert "collinear" not in errors[0]    # no collinear *surface*: a line is a curve
