@@ -1,5 +1,5 @@
-"""Straight lines through the automatic route: a line is a curve, not a refused "collinear"
-surface."""
+"""Straight lines through the automatic route (a line is a curve, not a refused "collinear"
+surface), and one source of curve defaults for nurbs-fit, the Python API and the app."""
 
 from __future__ import annotations
 
@@ -145,3 +145,50 @@ def test_degenerate_lines_get_one_line_refusals(tmp_path, capsys, points, messag
     errors = [line for line in captured.err.splitlines() if "error" in line]
     assert len(errors) == 1 and message in errors[0]
     assert "collinear" not in errors[0]    # no collinear *surface*: a line is a curve
+
+
+@pytest.mark.parametrize("options", [{}, {"solver": "gradient", "iterations": 40}])
+def test_nurbs_fit_and_the_python_api_fit_the_same_curve(tmp_path, capsys, options):
+    """One source of curve defaults: ``FitConfig(kind="curve")`` fits the curve nurbs-fit
+    writes for the same points (its loss, its control points), by least squares and by the
+    gradient fit (which starts from the configured control points and minimises the loss)."""
+    from nurbs_core.fitting.config import FitConfig
+    from nurbs_core.fitting.run import fit_arrays
+
+    angle = np.linspace(0.0, 1.5 * np.pi, 300)
+    points = np.column_stack([2.0 * np.cos(angle), np.sin(angle), 0.3 * angle])
+    points += np.random.default_rng(0).normal(scale=0.003, size=points.shape)
+    source, out = tmp_path / "arc.xyz", tmp_path / "arc.json"
+    np.savetxt(source, points)
+    flags = [text for name, value in options.items() for text in (f"--{name}", str(value))]
+    assert main([str(source), "--curve", *flags, "-o", str(out)]) == 0
+    capsys.readouterr()
+    (written,) = _written(out)
+    result = fit_arrays(points, FitConfig(kind="curve", **options))
+    assert result.status in ("converged", "budget")
+    np.testing.assert_allclose(np.asarray(result.geometry.control_points),
+                               np.asarray(written.control_points), atol=1e-9)
+
+
+def test_a_curve_config_has_the_curve_defaults_however_it_is_made():
+    """``FitConfig(kind="curve")`` and the app's switch of a loaded curve cloud's settings
+    (``replace(kind="curve")``) both take the curves' defaults (nurbs-fit's); back to a surface
+    the surface's; a value the user set stays."""
+    from nurbs_core.fitting.config import (
+        DEFAULT_CURVE_CONTROL_POINTS,
+        DEFAULT_CURVE_LOSS,
+        FitConfig,
+        Loss,
+    )
+    from nurbs_core.jobs.curves import curve_config
+
+    curve = FitConfig(kind="curve")
+    assert curve.loss == Loss.parse(DEFAULT_CURVE_LOSS)
+    assert curve.control_points_u == DEFAULT_CURVE_CONTROL_POINTS
+    assert FitConfig().replace(kind="curve") == curve
+    assert curve.replace(kind="surface") == FitConfig()
+    edited = FitConfig(control_points_u=20, loss="chamfer").replace(kind="curve")
+    assert edited.control_points_u == 20 and str(edited.loss) == "chamfer"
+    cli = curve_config(np.random.default_rng(0).normal(size=(50, 3)))
+    assert (cli.loss, cli.control_points_u, cli.samples_u, cli.max_control_points) == (
+        curve.loss, curve.control_points_u, curve.samples_u, curve.max_control_points)
