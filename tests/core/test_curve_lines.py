@@ -192,3 +192,33 @@ def test_a_curve_config_has_the_curve_defaults_however_it_is_made():
     cli = curve_config(np.random.default_rng(0).normal(size=(50, 3)))
     assert (cli.loss, cli.control_points_u, cli.samples_u, cli.max_control_points) == (
         curve.loss, curve.control_points_u, curve.samples_u, curve.max_control_points)
+
+
+#: a random line whose neighbour graph fell apart at a gap (fitted as an open network of patches)
+_GAPPED_SEED = 4
+
+
+def _random_line(seed: int, count: int = 200, noise: float = 0.005) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.random(count))
+    return START + t[:, None] * (END - START) + rng.normal(scale=noise, size=(count, 3))
+
+
+def test_randomly_sampled_lines_are_curves():
+    """A line sampled at random has gaps wider than its nearest neighbours reach from either
+    side: its neighbour graph fell apart, and 4 of these 40 lines were fitted as surfaces."""
+    from nurbs_core.curve_pieces import cloud_curves
+
+    wrong = [seed for seed in range(40) if not cloud_curves(_random_line(seed)).is_curve]
+    assert wrong == []
+
+
+def test_a_randomly_sampled_line_with_a_wide_gap_is_one_straight_curve(tmp_path, capsys):
+    points = _random_line(_GAPPED_SEED)
+    source, out = tmp_path / "line.xyz", tmp_path / "line.json"
+    np.savetxt(source, points)
+    assert main([str(source), "-o", str(out)]) == 0
+    assert ": a curve" in capsys.readouterr().err
+    (curve,) = _written(out)
+    samples = np.asarray(curve_points(curve, np.linspace(0.0, 1.0, 400)))
+    assert _off_line(samples, START, END) <= 5 * 0.005
