@@ -222,3 +222,27 @@ def test_a_randomly_sampled_line_with_a_wide_gap_is_one_straight_curve(tmp_path,
     (curve,) = _written(out)
     samples = np.asarray(curve_points(curve, np.linspace(0.0, 1.0, 400)))
     assert _off_line(samples, START, END) <= 5 * 0.005
+
+
+@pytest.mark.parametrize("count", [2, 200])
+def test_a_line_fits_at_degree_one(tmp_path, capsys, count):
+    """``--degree 1``, what the refusal of two points at degree 3 suggests: a straight polyline
+    through the points (the least-squares curve's foot points took a second derivative a
+    degree-1 spline has not: "Order of derivative (n = 2) must be <= order of spline")."""
+    points = _line(count, noise=0.0 if count == 2 else 0.002)
+    source, out = tmp_path / "line.xyz", tmp_path / "line.json"
+    np.savetxt(source, points)
+    assert main([str(source), "--degree", "1", "-o", str(out)]) == 0
+    assert "open curve" in capsys.readouterr().out
+    (curve,) = _written(out)
+    assert curve.degree == 1
+    samples = np.asarray(curve_points(curve, np.linspace(0.0, 1.0, 400)))
+    assert _off_line(samples, START, END) <= 1e-9 + 5 * 0.002
+
+
+def test_a_closed_polyline_is_reported_c0_across_its_join(tmp_path, capsys):
+    angle = np.linspace(0.0, 2.0 * np.pi, 200, endpoint=False)
+    source = tmp_path / "ring.xyz"
+    np.savetxt(source, np.column_stack([2.0 * np.cos(angle), np.sin(angle), np.zeros(200)]))
+    assert main([str(source), "--degree", "1", "-o", str(tmp_path / "ring.json")]) == 0
+    assert "closed curve (periodic: its ends meet, C0 across the join)" in capsys.readouterr().out
