@@ -35,6 +35,8 @@
   height), with no mesh of its own and no part forced: a curve, fitted in 2-D when it lies at
   one height. A cloud of several curves (separate pieces, or a wire branching at junctions:
   :func:`nurbs_core.curve_pieces.several_curves`) carries its ``pieces``: one curve each.
+  Points on one straight line are a curve however few (:func:`nurbs_core.curve_cloud.straight_line`:
+  never a surface; the curve fit says when they are too few).
 
 A route forced by the caller (``--single-patch``, ``--patches``) is taken as it is. The decision
 carries its reason (printed by the CLI) and the closed or open mesh it built, so the network does
@@ -136,6 +138,12 @@ def choose_route(points: np.ndarray, file_mesh: ScanMesh | None = None,
             share = curves.measures[0]
             return Route("curve", f"the cloud is one-dimensional (thin across in {share:.0%} of "
                                   f"its neighbourhoods, one chain)",
+                         seconds=time.perf_counter() - started)
+        from nurbs_core.curve_cloud import straight_line
+
+        if straight_line(points):
+            # too few to judge as a chain, but a surface it cannot be
+            return Route("curve", f"the {len(points)} points lie on one straight line",
                          seconds=time.perf_counter() - started)
     route = _decide(points, file_mesh, file_mesh_note, max_hole, part)
     if route.kind == "network" and not route.open_network and part is not False:

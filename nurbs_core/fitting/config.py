@@ -53,6 +53,17 @@ MAX_SAMPLES = 2048 * 2048
 MAX_THREADS_PER_CPU = 4
 #: Control points of a curve when none are given.
 DEFAULT_CURVE_CONTROL_POINTS = 16
+#: The settings whose defaults depend on the kind: the one place that owns a curve's defaults
+#: (``FitConfig(kind="curve")``, ``nurbs-fit --curve`` and the app's switch to curves all take
+#: them, so the three fit one cloud alike).
+KIND_DEFAULTS: dict[str, dict[str, Any]] = {
+    "surface": {"control_points_u": 12, "loss": DEFAULT_LOSS},
+    "curve": {"control_points_u": DEFAULT_CURVE_CONTROL_POINTS, "loss": DEFAULT_CURVE_LOSS},
+}
+#: The field defaults that stand for "the kind's default" (:data:`KIND_DEFAULTS`), resolved when
+#: a FitConfig is made: never seen on one.
+_KIND_COUNT = 0
+_KIND_LOSS = Loss.parse(DEFAULT_LOSS)
 
 def _knot_tuple(value: Any) -> tuple[float, ...] | None:
     if value is None:
@@ -72,7 +83,9 @@ class FitConfig:
     units of the diagonal (squared for ``mse`` / ``p2s``). For ``lbfgs`` the learning rate is the
     initial trial step of its strong-Wolfe line search (1.0 is the usual choice).
 
-    kind "curve" uses ``degree_u`` and ``control_points_u`` and accepts 2-D or 3-D points.
+    kind "curve" uses ``degree_u`` and ``control_points_u`` and accepts 2-D or 3-D points; its
+    defaults for ``control_points_u`` and ``loss`` are the curves' (:data:`KIND_DEFAULTS`, as
+    ``nurbs-fit --curve`` fits), also when :meth:`replace` switches the kind.
     ``loss`` is a :class:`Loss` (given as one, as text or as pairs); the default is ``DEFAULT_LOSS``
     (``"p2s+0.001*chamfer"``), the paper's composite is ``PAPER_POINT_CLOUD_LOSS``
     (``"chamfer+0.1*laplacian+10*hausdorff"``). With known parameters ``p2s`` equals ``mse``.
@@ -108,9 +121,11 @@ class FitConfig:
     kind: str = "surface"
     degree_u: int = 3
     degree_v: int = 3
-    control_points_u: int = 12
+    #: the kind's default when not given (:data:`KIND_DEFAULTS`: 12 for a surface, 16 a curve)
+    control_points_u: int = _KIND_COUNT
     control_points_v: int = 12
-    loss: Loss = field(default_factory=lambda: Loss.parse(DEFAULT_LOSS))
+    #: the kind's default when not given (DEFAULT_LOSS for a surface, DEFAULT_CURVE_LOSS a curve)
+    loss: Loss = field(default_factory=lambda: _KIND_LOSS)
     optimizer: str = "adam"
     learning_rate: float = 0.01
     iterations: int = 500
@@ -175,6 +190,11 @@ class FitConfig:
     knots_v: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
+        defaults = KIND_DEFAULTS.get(self.kind, KIND_DEFAULTS["surface"])
+        if self.control_points_u == _KIND_COUNT:
+            object.__setattr__(self, "control_points_u", defaults["control_points_u"])
+        if self.loss is _KIND_LOSS:
+            object.__setattr__(self, "loss", Loss.parse(defaults["loss"]))
         object.__setattr__(self, "loss", Loss.of(self.loss))
         for name in ("knots_u", "knots_v"):
             object.__setattr__(self, name, _knot_tuple(getattr(self, name)))
@@ -184,6 +204,13 @@ class FitConfig:
     def replace(self, **changes: Any) -> FitConfig:
         """A copy with ``changes``; custom knots that no longer fit the degree or the control
         count are dropped (back to the uniform ones)."""
+        if changes.get("kind", self.kind) != self.kind:
+            # a setting still at the old kind's default takes the new kind's
+            old, kind = KIND_DEFAULTS.get(self.kind), KIND_DEFAULTS.get(changes["kind"])
+            for name, value in (kind or {}).items():
+                if old is not None and name not in changes and getattr(self, name) == (
+                        Loss.parse(old[name]) if name == "loss" else old[name]):
+                    changes[name] = value
         new = dataclasses.replace(self, **changes)
         drop: dict[str, Any] = {}
         for d in ("u", "v"):

@@ -194,7 +194,9 @@ def foot_parameters(spline: BSpline, points: np.ndarray, parameters: np.ndarray,
     """The parameters (N,) of the points' (N, d) feet on the spline and their distances (N,):
     Newton steps from the given parameters and from the nearest of dense samples, the closer
     kept."""
-    first, second = spline.derivative(1), spline.derivative(2)
+    first = spline.derivative(1)
+    # a polyline's (degree 1) second derivative is zero within its spans: Gauss-Newton steps
+    second = spline.derivative(2) if spline.k >= 2 else None
     count = len(spline.c)
     samples = np.linspace(0.0, 1.0, max(20 * count, 200), endpoint=not closed)
     _, nearest = cKDTree(spline(samples)).query(points)
@@ -205,7 +207,8 @@ def foot_parameters(spline: BSpline, points: np.ndarray, parameters: np.ndarray,
             offset = spline(t) - points
             tangent = first(t)
             gradient = (offset * tangent).sum(1)
-            hessian = (tangent * tangent).sum(1) + (offset * second(t)).sum(1)
+            hessian = (tangent * tangent).sum(1) + (0.0 if second is None
+                                                   else (offset * second(t)).sum(1))
             hessian = np.where(hessian > 1e-12, hessian, (tangent * tangent).sum(1) + 1e-12)
             t = t - gradient / hessian
             t = np.mod(t, 1.0) if closed else np.clip(t, 0.0, 1.0)

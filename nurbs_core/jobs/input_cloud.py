@@ -141,7 +141,8 @@ def automatic_cloud(job: FitJob, points: np.ndarray | None) -> AutomaticCloud:
         points = load_points(job.input).points
     listed = np.asarray(points, np.float64)
     distinct, merge_note = without_repeats(listed)
-    check_spread(distinct, "surface")
+    # not yet "surface": points on one straight line are a curve, the route decides
+    check_spread(distinct, "curve or surface")
     if job.initial is not None:
         return AutomaticCloud(distinct, listed, None, "", merge_note, job)
     moved, _, moved_job = in_local_frame(job, distinct, None)

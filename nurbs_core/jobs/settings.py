@@ -111,17 +111,13 @@ def _corners(indices: list[int] | None) -> tuple[int, int, int, int] | None:
 def fit_config(job: FitJob, dimensions: int) -> FitConfig:
     """The FitConfig of ``job`` for points of ``dimensions`` coordinates (ValueError for
     settings that do not fit together)."""
-    from nurbs_core.fitting.config import (
-        DEFAULT_CURVE_CONTROL_POINTS,
-        DEFAULT_CURVE_LOSS,
-        DEFAULT_LOSS,
-        FitConfig,
-        Loss,
-    )
+    from nurbs_core.fitting.config import FitConfig, Loss
 
     directions = 1 if job.curve else 2
     degrees = _pair(job.degree, "--degree", directions)
-    default_counts = [DEFAULT_CURVE_CONTROL_POINTS] if job.curve else [12, 12]
+    # the kind's defaults are FitConfig's (the Python API and the app fit as the CLI does)
+    defaults = FitConfig(kind="curve" if job.curve else "surface")
+    default_counts = [defaults.control_points_u, defaults.control_points_v][:directions]
     counts = _pair(job.control_points or default_counts, "--control-points", directions)
     samples = _pair(job.samples, "--samples", directions)
     if job.curve:
@@ -129,7 +125,7 @@ def fit_config(job: FitJob, dimensions: int) -> FitConfig:
     learning_rate = job.learning_rate
     if learning_rate is None:
         learning_rate = 1.0 if job.optimizer == "lbfgs" else 0.01
-    loss = Loss.of(job.loss or (DEFAULT_CURVE_LOSS if job.curve else DEFAULT_LOSS))
+    loss = Loss.of(job.loss) if job.loss else defaults.loss
     max_counts = job.max_control_points
     if max_counts is None:
         max_counts = 0 if job.control_points else FitConfig.max_control_points

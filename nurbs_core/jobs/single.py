@@ -242,8 +242,9 @@ def finish_fit(prepared: PreparedFit, result: FitResult) -> dict[str, Any]:
           f"{stats['rms']:.6g}{u}, max {stats['max']:.6g}{u}  (bounding-box diagonal "
           f"{diagonal:.6g}{u})")
     if "closed" in stats:
-        print("closed curve (periodic: its ends meet, C2 across the join)" if stats["closed"]
-              else "open curve")
+        # a periodic spline of degree p is C(p-1) across its join
+        print(f"closed curve (periodic: its ends meet, C{config.degree_u - 1} across the join)"
+              if stats["closed"] else "open curve")
     if "paired_mean" in stats:
         print(f"at the known parameters: mean {stats['paired_mean']:.6g}{u}, "
               f"rms {stats['paired_rms']:.6g}{u}, max {stats['paired_max']:.6g}{u}")

@@ -69,6 +69,25 @@ def test_one_curve_is_not_cut(qtbot, window, tmp_path):
     assert window.document.settings.fit.kind == "curve"
 
 
+def test_a_curve_cloud_switches_to_the_curve_settings_nurbs_fit_uses(qtbot, window, tmp_path):
+    """The switch to curves takes the curves' defaults (FitConfig's, which nurbs-fit reads):
+    before, the window fitted a curve with the surface's loss and control points."""
+    from nurbs_core.fitting.config import FitConfig
+    from nurbs_core.jobs.curves import curve_config
+
+    angle = np.linspace(0.0, 2.0 * np.pi, 300, endpoint=False)
+    path = tmp_path / "ring.xyz"
+    points = np.column_stack([np.cos(angle), np.sin(angle), 0.1 * np.sin(3 * angle)])
+    np.savetxt(path, points)
+    open_by_drop(qtbot, window, [path])
+    fit = window.document.settings.fit
+    cli = curve_config(points)
+    assert (fit.kind, fit.loss, fit.control_points_u, fit.max_control_points) == (
+        "curve", cli.loss, cli.control_points_u, cli.max_control_points)
+    assert fit == FitConfig(kind="curve").replace(**{
+        name: getattr(fit, name) for name in ("snapshot_interval", "threads", "seed")})
+
+
 def test_the_window_fits_each_curve_as_nurbs_fit_does(tmp_path, capsys):
     """One source of curve settings (nurbs_core.jobs.curves.curve_config): the curves the
     window fits on opening are the curves ``nurbs-fit`` writes for the same file."""
