@@ -432,7 +432,7 @@ def test_start_on_an_open_head_goes_on_as_an_open_network_when_one_patch_is_poor
     one patch."""
     from nurbs_core import samples
 
-    shape = samples.head(6000)
+    shape = samples.head(6000, truth_count=20_000)  # only its points are used
     _open_cloud(qtbot, window, tmp_path, "head", shape.points[shape.points[:, 2] > -0.5])
     with qtbot.waitSignal(window.patch_controller.fit_finished, timeout=FIT_TIMEOUT_MS) as done:
         window.start_action.trigger()
@@ -448,7 +448,7 @@ def test_start_on_an_open_head_goes_on_as_an_open_network_when_one_patch_is_poor
 def test_a_forced_single_patch_stays_one_patch_whatever_its_quality(qtbot, window, tmp_path):
     from nurbs_core import samples
 
-    shape = samples.head(6000)
+    shape = samples.head(6000, truth_count=20_000)  # only its points are used
     _open_cloud(qtbot, window, tmp_path, "head", shape.points[shape.points[:, 2] > -0.5])
     window.document.edit_settings("Single patch", single_patch=True)
     with qtbot.waitSignal(window.controller.fit_finished, timeout=FIT_TIMEOUT_MS):
