@@ -299,7 +299,7 @@ def test_a_cloud_written_twice_is_fitted_once_and_says_so(tmp_path, capsys):
         assert captured.out.startswith("status: converged"), captured.out
         flipped = float(captured.out.split("flipped area: ")[1].split("%")[0])
         assert flipped < 1.0
-    blob = samples.blob(1500, seed=3).points
+    blob = samples.blob(1500, seed=3, truth_count=20_000).points
     np.savetxt(source, np.vstack([blob, blob, blob[:500]]))
     points, _, _ = surface_input(str(source), quiet=True)
     assert len(points) == 1500

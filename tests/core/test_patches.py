@@ -326,7 +326,7 @@ def test_leaving_a_losing_grid_early_gives_the_same_network_in_fewer_passes(monk
     trial stops early, and the network and its foot points are those of the full trial."""
     from nurbs_core.patches import fit
 
-    points = samples.blob(3000).points
+    points = samples.blob(3000, truth_count=20_000).points
     centre = points.mean(axis=0)
     vertices = centre + CUBE_VERTICES * np.ptp(points, axis=0) / 2.0
     early = list(fit_network(points, vertices, CUBE_QUADS, points))
@@ -470,13 +470,13 @@ def test_a_very_noisy_scan_gets_patches_many_noise_sigmas_across():
     truth's, 3.9% folded). The noise bounds the count; a clean scan's bound is far above it."""
     from nurbs_core.patches.pipeline import NOISE_PATCH_SIDE, estimate_noise, plain_layout
 
-    points = samples.blob(5000, seed=5, noise=0.02).points
+    points = samples.blob(5000, seed=5, noise=0.02, truth_count=20_000).points
     mesh = closed_mesh(points)
     noise = estimate_noise(points)
     bounded = plain_layout(mesh, "auto", len(points), noise)
     assert len(bounded.quads) <= 1.2 * mesh.area / (NOISE_PATCH_SIDE * noise) ** 2
     assert len(plain_layout(mesh, "auto", len(points)).quads) > 2 * len(bounded.quads)
-    clean = samples.blob(5000, seed=5, noise=0.002).points
+    clean = samples.blob(5000, seed=5, noise=0.002, truth_count=20_000).points
     bound = closed_mesh(clean).area / (NOISE_PATCH_SIDE * estimate_noise(clean)) ** 2
     assert bound > 1000  # far above AUTO_MAX: the clean scan's layout is left as it was
 

@@ -182,7 +182,7 @@ def test_stiffness_trades_closeness_for_fairness(one_torch_thread):
 
 
 def test_least_squares_passes_are_live_and_stoppable(one_torch_thread):
-    points = samples.height_field(2000).points
+    points = samples.height_field(2000, truth_count=20_000).points
     snapshots = list(iter_fit(points, FitConfig()))
     assert all(not s.done for s in snapshots[:-1]) and snapshots[-1].done
     assert [s.iteration for s in snapshots] == sorted(s.iteration for s in snapshots)
