@@ -266,7 +266,7 @@ def test_closed_cloud_becomes_a_network_by_default_and_a_forced_patch_is_not_con
     from nurbs_core.io.network_io import read_network
 
     source = tmp_path / "sphere.xyz"
-    np.savetxt(source, samples.sphere(1500).points)
+    np.savetxt(source, samples.sphere(1500, truth_count=20_000).points)
     out = tmp_path / "sphere.json"
     assert main([str(source), "-o", str(out)]) == 0
     captured = capsys.readouterr()

@@ -484,9 +484,9 @@ def test_a_very_noisy_scan_gets_patches_many_noise_sigmas_across():
 def test_the_layouts_of_separate_objects_join_without_sharing_a_vertex():
     from nurbs_core.patches.object_layouts import joined_layouts, object_meshes
 
-    one = closed_mesh(samples.sphere(1500, seed=1).points)
-    two = closed_mesh(np.vstack([samples.sphere(1500, seed=1).points,
-                                 samples.sphere(1500, seed=2).points + [4.0, 0.0, 0.0]]))
+    one = closed_mesh(samples.sphere(1500, seed=1, truth_count=20_000).points)
+    two = closed_mesh(np.vstack([samples.sphere(1500, seed=1, truth_count=20_000).points,
+                                 samples.sphere(1500, seed=2, truth_count=20_000).points + [4.0, 0.0, 0.0]]))
     assert len(object_meshes(one)) == 1
     parts = object_meshes(two)
     assert len(parts) == 2 and all(part.closed and part.pieces == 1 for part, _ in parts)
