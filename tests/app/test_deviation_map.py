@@ -143,7 +143,7 @@ def _network_signed_reference(network, points: np.ndarray) -> np.ndarray:
 def test_patches_mode_paints_the_network_with_signed_bands(qtbot, window, tmp_path):
     from nurbs_core import samples
 
-    points = samples.sphere(3000).points.copy()
+    points = samples.sphere(3000, truth_count=20_000).points.copy()
     rng = np.random.default_rng(5)
     bumped = rng.choice(len(points), 60, replace=False)
     outward, inward = bumped[:30], bumped[30:]

@@ -157,7 +157,7 @@ def test_a_patch_network_fit_is_one_undo_step_with_its_switch_to_patches(qtbot, 
 
     document = window.document
     path = tmp_path / "sphere.xyz"
-    np.savetxt(path, samples.sphere(1500).points, fmt="%.8f")
+    np.savetxt(path, samples.sphere(1500, truth_count=20_000).points, fmt="%.8f")
     open_by_drop(qtbot, window, [path])
     solid_route_off(window)  # a sphere is a part: the network route is tested here
     steps = document.undo_stack.index()
@@ -317,7 +317,7 @@ def test_the_window_opens_within_the_screen_and_the_patch_quality_dock_scrolls(q
     window.resize(1280, 800)
     qtbot.waitUntil(lambda: window.width() == 1280 and window.height() == 800)
     path = tmp_path / "sphere.xyz"
-    np.savetxt(path, samples.sphere(1500).points, fmt="%.8f")
+    np.savetxt(path, samples.sphere(1500, truth_count=20_000).points, fmt="%.8f")
     open_by_drop(qtbot, window, [path])
     solid_route_off(window)  # a sphere is a part: the network route is tested here
     window.document.set_units("mm")

@@ -76,7 +76,7 @@ def test_patch_fit_is_drawn_measured_and_exported(qtbot, window, tmp_path, monke
     from nurbs_core import samples
     from nurbs_core.io.network_io import read_network
 
-    _open_cloud(qtbot, window, tmp_path, "sphere", samples.sphere(1500).points)
+    _open_cloud(qtbot, window, tmp_path, "sphere", samples.sphere(1500, truth_count=20_000).points)
     window.set_layer_visible("cloud", False)
     background = viewport_image(window)  # nothing drawn: the background alone
     window.set_layer_visible("cloud", True)
@@ -204,7 +204,7 @@ def test_patch_fit_is_drawn_measured_and_exported(qtbot, window, tmp_path, monke
 def test_pause_and_stop_mid_fit_keep_the_window_responsive(qtbot, window, tmp_path):
     from nurbs_core import samples
 
-    _open_cloud(qtbot, window, tmp_path, "torus", samples.torus(3000).points)
+    _open_cloud(qtbot, window, tmp_path, "torus", samples.torus(3000, truth_count=20_000).points)
     _patches_mode(window)
     controller = window.patch_controller
     assert window.start_fit()
@@ -265,7 +265,7 @@ def test_pause_and_stop_mid_fit_keep_the_window_responsive(qtbot, window, tmp_pa
 def test_closing_mid_fit_stops_the_worker_at_once(qtbot, window, tmp_path):
     from nurbs_core import samples
 
-    _open_cloud(qtbot, window, tmp_path, "torus", samples.torus(3000).points)
+    _open_cloud(qtbot, window, tmp_path, "torus", samples.torus(3000, truth_count=20_000).points)
     _patches_mode(window)
     assert window.start_fit()
     _wait_for_pass(qtbot, window)
@@ -278,7 +278,7 @@ def test_closing_mid_fit_stops_the_worker_at_once(qtbot, window, tmp_path):
 def test_engine_refusals_show_a_message_not_a_traceback(qtbot, window, tmp_path):
     from nurbs_core import samples
 
-    points = samples.sphere(60).points
+    points = samples.sphere(60, truth_count=20_000).points
     _open_cloud(qtbot, window, tmp_path, "cloud", points)
     _patches_mode(window)
     shown = []
@@ -303,7 +303,7 @@ def test_start_on_a_closed_cloud_goes_on_as_a_network(qtbot, window, tmp_path):
     Start fits a network at once (no refusal, no dialog); Undo returns to one patch."""
     from nurbs_core import samples
 
-    _open_cloud(qtbot, window, tmp_path, "sphere", samples.sphere(1500).points)
+    _open_cloud(qtbot, window, tmp_path, "sphere", samples.sphere(1500, truth_count=20_000).points)
     solid_route_off(window)  # on auto a sphere, a part-like scan, becomes a solid
     assert window.document.settings.fit_mode == "single"
     shown = []
@@ -390,7 +390,7 @@ def test_network_display_matches_the_engine_tessellation_and_seams():
     from nurbs_core.patches.measures import seam_statistics
     from nurbs_core.patches.pipeline import fit_patches
 
-    network = fit_patches(samples.sphere(1500).points).network
+    network = fit_patches(samples.sphere(1500, truth_count=20_000).points).network
     display = network_display(network, resolution=12)
     vertices, faces = network_mesh_arrays(network, 12)
     np.testing.assert_array_equal(display.vertices, vertices)
@@ -432,7 +432,7 @@ def test_start_on_an_open_head_goes_on_as_an_open_network_when_one_patch_is_poor
     one patch."""
     from nurbs_core import samples
 
-    shape = samples.head(6000)
+    shape = samples.head(6000, truth_count=20_000)  # only its points are used
     _open_cloud(qtbot, window, tmp_path, "head", shape.points[shape.points[:, 2] > -0.5])
     with qtbot.waitSignal(window.patch_controller.fit_finished, timeout=FIT_TIMEOUT_MS) as done:
         window.start_action.trigger()
@@ -448,7 +448,7 @@ def test_start_on_an_open_head_goes_on_as_an_open_network_when_one_patch_is_poor
 def test_a_forced_single_patch_stays_one_patch_whatever_its_quality(qtbot, window, tmp_path):
     from nurbs_core import samples
 
-    shape = samples.head(6000)
+    shape = samples.head(6000, truth_count=20_000)  # only its points are used
     _open_cloud(qtbot, window, tmp_path, "head", shape.points[shape.points[:, 2] > -0.5])
     window.document.edit_settings("Single patch", single_patch=True)
     with qtbot.waitSignal(window.controller.fit_finished, timeout=FIT_TIMEOUT_MS):

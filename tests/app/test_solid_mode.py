@@ -149,7 +149,7 @@ def test_start_on_a_sphere_scan_on_auto_makes_a_solid_sphere(qtbot, window, tmp_
     from nurbs_core import samples
 
     path = tmp_path / "ball.xyz"
-    np.savetxt(path, samples.sphere(1500).points, fmt="%.8f")
+    np.savetxt(path, samples.sphere(1500, truth_count=20_000).points, fmt="%.8f")
     open_by_drop(qtbot, window, [path])
     shown = []
     window.error_shown.connect(shown.append)

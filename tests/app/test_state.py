@@ -215,7 +215,7 @@ def test_a_closed_cloud_refusal_points_to_multi_patch_and_force_single_patch():
     from nurbs_core.fitting import FitConfig, iter_fit
 
     with pytest.raises(ValueError) as caught:
-        iter_fit(samples.sphere(1500).points, FitConfig())
+        iter_fit(samples.sphere(1500, truth_count=20_000).points, FitConfig())
     message = refusal_message(caught.value)
     assert "closed" in message and "multi-patch" in message
     assert "Force single patch" in message and "single_patch /" not in message

@@ -266,7 +266,7 @@ def test_closed_cloud_becomes_a_network_by_default_and_a_forced_patch_is_not_con
     from nurbs_core.io.network_io import read_network
 
     source = tmp_path / "sphere.xyz"
-    np.savetxt(source, samples.sphere(1500).points)
+    np.savetxt(source, samples.sphere(1500, truth_count=20_000).points)
     out = tmp_path / "sphere.json"
     assert main([str(source), "-o", str(out)]) == 0
     captured = capsys.readouterr()
@@ -299,7 +299,7 @@ def test_a_cloud_written_twice_is_fitted_once_and_says_so(tmp_path, capsys):
         assert captured.out.startswith("status: converged"), captured.out
         flipped = float(captured.out.split("flipped area: ")[1].split("%")[0])
         assert flipped < 1.0
-    blob = samples.blob(1500, seed=3).points
+    blob = samples.blob(1500, seed=3, truth_count=20_000).points
     np.savetxt(source, np.vstack([blob, blob, blob[:500]]))
     points, _, _ = surface_input(str(source), quiet=True)
     assert len(points) == 1500

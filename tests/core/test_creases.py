@@ -72,12 +72,12 @@ def test_a_box_scan_has_creases_along_its_twelve_edges():
 
 
 @pytest.mark.parametrize("make", [
-    lambda: samples.sphere(count=10_000, noise=NOISE),
-    lambda: samples.blob(count=10_000, noise=NOISE, seed=0),
-    lambda: samples.blob(count=10_000, noise=NOISE, seed=1),
-    lambda: samples.torus(count=10_000, noise=NOISE),
-    lambda: samples.capsule(count=10_000, noise=NOISE),
-    lambda: samples.rounded_box(count=10_000, noise=NOISE),
+    lambda: samples.sphere(count=10_000, noise=NOISE, truth_count=20_000),
+    lambda: samples.blob(count=10_000, noise=NOISE, seed=0, truth_count=20_000),
+    lambda: samples.blob(count=10_000, noise=NOISE, seed=1, truth_count=20_000),
+    lambda: samples.torus(count=10_000, noise=NOISE, truth_count=20_000),
+    lambda: samples.capsule(count=10_000, noise=NOISE, truth_count=20_000),
+    lambda: samples.rounded_box(count=10_000, noise=NOISE, truth_count=20_000),
 ], ids=["sphere", "blob_s0", "blob_s1", "torus", "capsule", "rounded_box"])
 def test_smooth_shapes_have_no_creases(make):
     points = make().points

@@ -91,7 +91,7 @@ def test_a_sparse_head_whose_flat_spots_run_smoothly_into_it_is_no_freeform_part
     solid before)."""
     from nurbs_core import samples
 
-    points = samples.head(count=4000, noise=NOISE, variant=4).points
+    points = samples.head(count=4000, noise=NOISE, variant=4, truth_count=20_000).points
     segmentation = segment_subset(points)
     assert freeform_region(segmentation, points) is None
 

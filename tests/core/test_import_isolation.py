@@ -39,7 +39,7 @@ def test_closed_networks_and_parts_fit_and_save_without_torch(tmp_path):
     from nurbs_core import samples
 
     head = tmp_path / "head.xyz"
-    np.savetxt(head, samples.head(3000, seed=1).points)
+    np.savetxt(head, samples.head(3000, seed=1, truth_count=20_000).points)
     import importlib.util
 
     suffixes = [".json", ".3dm", ".stl"] + ([".step"] if importlib.util.find_spec("OCP") else [])

@@ -28,7 +28,7 @@ def _corner_angles(vertices: np.ndarray, quads: np.ndarray) -> np.ndarray:
 
 
 def test_coarsening_a_fine_sphere_layout_keeps_it_valid_and_on_the_sphere():
-    mesh = closed_mesh(samples.sphere(4000, noise=0.0).points)
+    mesh = closed_mesh(samples.sphere(4000, noise=0.0, truth_count=20_000).points)
     fine = quad_layout(mesh.vertices, mesh.faces, 600)
     vertices, quads = coarsen(fine.vertices, fine.quads, mesh.vertices, mesh.vertex_normals())
     assert len(quads) < len(fine.quads) / 4             # much coarser
@@ -53,7 +53,7 @@ def test_remembering_the_shape_checks_changes_no_decision(monkeypatch):
     # by their arguments; with every result forgotten at once it must reach the same layout
     from nurbs_core.patches import coarsen as coarsen_module
 
-    mesh = closed_mesh(samples.sphere(3000, noise=0.002, seed=3).points)
+    mesh = closed_mesh(samples.sphere(3000, noise=0.002, seed=3, truth_count=20_000).points)
     fine = quad_layout(mesh.vertices, mesh.faces, 500)
     remembered = coarsen(fine.vertices, fine.quads, mesh.vertices, mesh.vertex_normals())
     monkeypatch.setattr(coarsen_module, "REMEMBERED", 0)
@@ -121,7 +121,7 @@ def test_a_quads_facing_check_is_every_condition_of_its_definition():
     every corner between MIN_CORNER and its supplement, every bilinear point near the mesh."""
     from nurbs_core.patches.coarsen import COS_CORNER, OFF_MESH, _Shape
 
-    mesh = closed_mesh(samples.sphere(2000, noise=0.0).points)
+    mesh = closed_mesh(samples.sphere(2000, noise=0.0, truth_count=20_000).points)
     shape = _Shape(mesh.vertices, mesh.vertex_normals())
     layout = quad_layout(mesh.vertices, mesh.faces, 100)
     rng = np.random.default_rng(2)

@@ -364,7 +364,7 @@ def _folded_start(points: np.ndarray) -> NurbsSurface:
 
 @pytest.mark.parametrize("case", ["no model", "no module", "closed", "known parameters", "folded"])
 def test_without_a_usable_model_or_an_open_patch_it_falls_back_and_says_why(monkeypatch, case):
-    cloud = samples.sphere(800, seed=0).points if case == "closed" else \
+    cloud = samples.sphere(800, seed=0, truth_count=20_000).points if case == "closed" else \
         samples.saddle(600, seed=1).points
     if case == "no model":
         def predictor(path):
@@ -417,7 +417,7 @@ def test_the_shipped_models_start_does_not_stick_out_at_a_squeezed_corner():
     """A round cloud: the pinned map squeezes the square's corners onto the outline, and the
     start's solve is smoothed enough not to grow a horn there (with the 1e-4 smoothing of other
     starts this cloud's start reached 29 point spacings past the cloud)."""
-    points = samples.bowl(700, seed=106).points
+    points = samples.bowl(700, seed=106, truth_count=20_000).points
     config = FitConfig(solver="gradient", init="learned", iterations=0, threads=1)
     start = next(iter(iter_fit(points, config)))
     assert start.message.startswith("learned start (the shipped model"), start.message

@@ -15,7 +15,7 @@ SITE = np.array([5e6, 4e6, 300.0])
 
 
 def test_only_a_cloud_far_from_the_origin_gets_a_local_frame():
-    cloud = samples.blob(500, seed=0).points
+    cloud = samples.blob(500, seed=0, truth_count=20_000).points
     assert far_origin(cloud) is None
     assert far_origin(cloud + 0.5 * FAR_DIAGONALS) is None  # a few diagonals away: untouched
     origin = far_origin(cloud + SITE)
@@ -40,7 +40,7 @@ def _same_fit_near_and_far(tmp_path, capsys, cloud: np.ndarray, suffix: str) -> 
 def test_a_far_closed_scan_is_the_same_network_written_where_it_was(tmp_path, capsys):
     from nurbs_core.io.network_io import read_network
 
-    cloud = samples.blob(1200, seed=0).points
+    cloud = samples.blob(1200, seed=0, truth_count=20_000).points
     near, far = _same_fit_near_and_far(tmp_path, capsys, cloud, ".json")
     assert "status: converged" in far
     volume = [float(text.split("enclosed volume ")[1].split()[0]) for text in (near, far)]
@@ -80,7 +80,7 @@ def test_every_route_fits_a_far_scan_in_a_local_frame(tmp_path, capsys, route):
 
     curve = route[0] == "--curve"
     cloud = (np.c_[np.linspace(0, 1, 200), np.sin(np.linspace(0, 3, 200)), np.zeros(200)]
-             if curve else samples.blob(1500, seed=0).points if route[0] == "--patches"
+             if curve else samples.blob(1500, seed=0, truth_count=20_000).points if route[0] == "--patches"
              else samples.saddle(1500, seed=0).points)
     source, out = tmp_path / "far.xyz", tmp_path / "far.json"
     np.savetxt(source, cloud + SITE, fmt="%.7f")

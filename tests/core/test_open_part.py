@@ -172,7 +172,7 @@ def test_nurbs_fit_writes_the_open_shell_and_says_so(tmp_path, capsys):
 def _open_head():
     from nurbs_core import samples
 
-    head = samples.head(6000).points
+    head = samples.head(6000, truth_count=20_000).points
     return head[head[:, 2] > -0.5]
 
 

@@ -329,7 +329,7 @@ def test_leaving_a_losing_grid_early_gives_the_same_network_in_fewer_passes(monk
     from nurbs_core.patches import fit
 
     monkeypatch.setattr(fit, "SETTLED", 0.0)
-    points = samples.sphere(3000).points
+    points = samples.sphere(3000, truth_count=20_000).points
     centre = points.mean(axis=0)
     vertices = centre + CUBE_VERTICES * np.ptp(points, axis=0) / 2.0
     early = list(fit_network(points, vertices, CUBE_QUADS, points))
@@ -473,13 +473,13 @@ def test_a_very_noisy_scan_gets_patches_many_noise_sigmas_across():
     truth's, 3.9% folded). The noise bounds the count; a clean scan's bound is far above it."""
     from nurbs_core.patches.pipeline import NOISE_PATCH_SIDE, estimate_noise, plain_layout
 
-    points = samples.blob(5000, seed=5, noise=0.02).points
+    points = samples.blob(5000, seed=5, noise=0.02, truth_count=20_000).points
     mesh = closed_mesh(points)
     noise = estimate_noise(points)
     bounded = plain_layout(mesh, "auto", len(points), noise)
     assert len(bounded.quads) <= 1.2 * mesh.area / (NOISE_PATCH_SIDE * noise) ** 2
     assert len(plain_layout(mesh, "auto", len(points)).quads) > 2 * len(bounded.quads)
-    clean = samples.blob(5000, seed=5, noise=0.002).points
+    clean = samples.blob(5000, seed=5, noise=0.002, truth_count=20_000).points
     bound = closed_mesh(clean).area / (NOISE_PATCH_SIDE * estimate_noise(clean)) ** 2
     assert bound > 1000  # far above AUTO_MAX: the clean scan's layout is left as it was
 
@@ -487,9 +487,9 @@ def test_a_very_noisy_scan_gets_patches_many_noise_sigmas_across():
 def test_the_layouts_of_separate_objects_join_without_sharing_a_vertex():
     from nurbs_core.patches.object_layouts import joined_layouts, object_meshes
 
-    one = closed_mesh(samples.sphere(1500, seed=1).points)
-    two = closed_mesh(np.vstack([samples.sphere(1500, seed=1).points,
-                                 samples.sphere(1500, seed=2).points + [4.0, 0.0, 0.0]]))
+    one = closed_mesh(samples.sphere(1500, seed=1, truth_count=20_000).points)
+    two = closed_mesh(np.vstack([samples.sphere(1500, seed=1, truth_count=20_000).points,
+                                 samples.sphere(1500, seed=2, truth_count=20_000).points + [4.0, 0.0, 0.0]]))
     assert len(object_meshes(one)) == 1
     parts = object_meshes(two)
     assert len(parts) == 2 and all(part.closed and part.pieces == 1 for part, _ in parts)

@@ -70,7 +70,7 @@ def test_nurbs_fit_writes_an_html_report_of_a_patch(tmp_path, capsys):
 
 def test_a_pdf_report_has_its_text_and_figure_pages(tmp_path):
     source = tmp_path / "sheet.xyz"
-    np.savetxt(source, samples.height_field(2000).points)
+    np.savetxt(source, samples.height_field(2000, truth_count=20_000).points)
     report = tmp_path / "report.pdf"
     assert main([str(source), "-o", str(tmp_path / "fit.json"), "--report", str(report),
                  "--quiet"]) == 0
@@ -81,7 +81,7 @@ def test_a_pdf_report_has_its_text_and_figure_pages(tmp_path):
 
 def test_a_report_of_a_curve_is_refused_before_any_work(tmp_path, capsys):
     source = tmp_path / "sheet.xyz"
-    np.savetxt(source, samples.height_field(500).points)
+    np.savetxt(source, samples.height_field(500, truth_count=20_000).points)
     with pytest.raises(SystemExit):
         main([str(source), "-o", str(tmp_path / "fit.json"), "--curve", "--report",
               str(tmp_path / "r.html")])
@@ -93,7 +93,7 @@ def test_a_report_of_a_curve_is_refused_before_any_work(tmp_path, capsys):
                                            ("sheet.xyz", "it is the input file")])
 def test_a_bad_report_file_is_refused_before_any_work(tmp_path, capsys, name, message):
     source = tmp_path / "sheet.xyz"
-    np.savetxt(source, samples.height_field(500).points)
+    np.savetxt(source, samples.height_field(500, truth_count=20_000).points)
     before = source.read_bytes()
     assert main([str(source), "-o", str(tmp_path / "fit.json"), "--report",
                  str(tmp_path / name)]) == 1
@@ -103,7 +103,7 @@ def test_a_bad_report_file_is_refused_before_any_work(tmp_path, capsys, name, me
 
 def test_a_batch_refuses_a_report(tmp_path, capsys):
     source = tmp_path / "a.xyz"
-    np.savetxt(source, samples.height_field(500).points)
+    np.savetxt(source, samples.height_field(500, truth_count=20_000).points)
     with pytest.raises(SystemExit):
         main([str(source), "--output-dir", str(tmp_path), "--report", str(tmp_path / "r.html")])
     assert "--report writes the report of one input" in capsys.readouterr().err

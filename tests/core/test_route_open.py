@@ -103,7 +103,7 @@ def test_crowding_weighs_triangles_by_their_area_like_a_loop_over_them():
 def test_a_cloud_one_patch_cannot_map_is_left_to_the_single_patch_route():
     """A closed cloud (no outline) has no map: map_crowding raises, as the single patch does."""
     with pytest.raises(ValueError, match="closed surface"):
-        map_crowding(samples.sphere(2000).points, MESH_POINTS)
+        map_crowding(samples.sphere(2000, truth_count=20_000).points, MESH_POINTS)
 
 
 # --- the route -----------------------------------------------------------------------------------
@@ -142,11 +142,11 @@ def test_a_height_field_is_routed_without_wrapping_it(monkeypatch):
         return real_closed_mesh(points, **kwargs)
 
     monkeypatch.setattr(wrap_module, "closed_mesh", counting_closed_mesh)
-    route = choose_route(samples.height_field(4000).points)
+    route = choose_route(samples.height_field(4000, truth_count=20_000).points)
     assert route.kind == "single_patch" and "a height field over its principal plane" in \
         route.reason
     assert wrapped == []
-    route = choose_route(samples.sphere(4000).points, part=False)
+    route = choose_route(samples.sphere(4000, truth_count=20_000).points, part=False)
     assert route.kind == "network" and "encloses a volume" in route.reason
     assert wrapped == [4000]
 
@@ -184,7 +184,7 @@ def test_the_bunnys_head_goes_straight_to_the_open_network_with_its_mesh(bunny_h
 
 def test_deciding_an_open_clouds_route_imports_no_torch(bunny_head, tmp_path):
     sheet, head = tmp_path / "sheet.npy", tmp_path / "head.npy"
-    np.save(sheet, samples.leaflet_like(2000).points)
+    np.save(sheet, samples.leaflet_like(2000, truth_count=20_000).points)
     np.save(head, bunny_head)
     code = ("import sys\nimport numpy as np\nfrom nurbs_core.route import choose_route\n"
             f"paths = ({str(sheet)!r}, {str(head)!r})\n"

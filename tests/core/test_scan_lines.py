@@ -30,7 +30,7 @@ def _circle(count: int, centre: float = 0.0) -> np.ndarray:
 
 
 @pytest.mark.parametrize("points", [
-    samples.saddle(3000).points, samples.blob(4000).points, _saddle_in_lines(200, 100),
+    samples.saddle(3000).points, samples.blob(4000, truth_count=20_000).points, _saddle_in_lines(200, 100),
     _circle(2000), np.vstack([_circle(300), _circle(300, 3.0)])],
     ids=["random sheet", "closed blob", "lines closer than their points", "a curve",
          "two small circles"])

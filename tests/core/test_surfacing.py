@@ -84,7 +84,7 @@ def test_a_curled_sheet_maps_without_a_single_flipped_triangle():
 
 def test_closed_cloud_is_refused():
     with pytest.raises(NotADiskError, match="multi-patch"):
-        mesh_parameterization(samples.sphere(2000).points)
+        mesh_parameterization(samples.sphere(2000, truth_count=20_000).points)
 
 
 def _small_sheet(kind: str, count: int) -> np.ndarray:
@@ -165,7 +165,7 @@ def test_height_field_area_ratio_within_two_percent(one_torch_thread):
 
 
 def test_closed_shapes_fail_loudly_unless_forced(one_torch_thread):
-    points = samples.sphere(1500).points
+    points = samples.sphere(1500, truth_count=20_000).points
     with pytest.raises(ValueError, match="multi-patch"):
         fit(points, FitConfig())
     forced = fit(points, FitConfig(single_patch=True, control_points_u=6, control_points_v=6))
@@ -182,7 +182,7 @@ def test_stiffness_trades_closeness_for_fairness(one_torch_thread):
 
 
 def test_least_squares_passes_are_live_and_stoppable(one_torch_thread):
-    points = samples.height_field(2000).points
+    points = samples.height_field(2000, truth_count=20_000).points
     snapshots = list(iter_fit(points, FitConfig()))
     assert all(not s.done for s in snapshots[:-1]) and snapshots[-1].done
     assert [s.iteration for s in snapshots] == sorted(s.iteration for s in snapshots)

@@ -46,7 +46,7 @@ def test_no_note_for_an_open_surface_or_a_single_patch():
 
 def test_nurbs_fit_says_why_a_closed_scan_was_not_checked(tmp_path):
     cloud = tmp_path / "ball.xyz"
-    np.savetxt(cloud, samples.sphere(1500).points)
+    np.savetxt(cloud, samples.sphere(1500, truth_count=20_000).points)
     run = subprocess.run([sys.executable, "-m", "nurbs_core.cli", str(cloud), "-o",
                           str(tmp_path / "ball.json"), "--patches", "auto"],
                          capture_output=True, text=True, timeout=300)
