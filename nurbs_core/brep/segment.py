@@ -565,11 +565,11 @@ def _coaxial_walls(surfaces: list[Primitive], points: np.ndarray, normals: np.nd
         if wall is None or len(members) < smallest or not _a_wall(wall, points[members],
                                                                   normals[members], tolerance):
             continue
-        if any(o.kind == "cylinder" and abs(float(o.axis @ wall.axis)) > np.cos(np.radians(3.0))
-               and abs(o.radius - wall.radius) < tolerance
-               and float(np.linalg.norm(np.cross(o.origin - wall.origin, wall.axis))) < tolerance
+        # found already: a cylinder found holds 80% of its points (a hole found again around
+        # a counterbore's axis tilted 4 degrees replaced the hole, tilted)
+        if any(o.kind == "cylinder" and (o.distance(points[members]) < tolerance).mean() >= 0.8
                for o in surfaces + found):
-            continue  # found already
+            continue
         found.append(wall)
     if not found:
         return surfaces
