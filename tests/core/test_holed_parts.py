@@ -98,3 +98,23 @@ def test_a_holed_part_is_its_converged_solid_with_exact_faces(name, seed):
     out_kinds = np.array([face_kind(f) for f in faces(result.solid)])
     assert (out_kinds[result.point_faces] == np.array(kinds)[owner]).mean() >= 0.9
     assert sorted(out_kinds) == sorted(kinds)
+
+
+@pytest.mark.parametrize("seed", [3, 0])
+def test_a_counterbores_short_wall_is_the_cylinder_coaxial_with_its_hole(seed):
+    """The boss plate's counterbore (radius 0.27, 0.1 high: about 410 of 20,000 points, every
+    normal on it blurred by its floor and rim) came out a sphere of radius 0.278 (seed 3) or
+    unlabelled beside a stray cylinder (seed 0): 4 of the 8 default scans (seeds 0-7) lost it.
+    Found by distance alone around the through hole's axis, it is the cylinder of radius 0.27
+    on all 8."""
+    points, owner, kinds = scan_part(HOLED_PARTS["boss_plate"](), 20_000, NOISE, seed=seed)
+    segmentation = segment(points)
+    assert sorted(s.kind for s in segmentation.surfaces) == sorted(kinds)  # 3 cylinders, 8 planes
+    radii = sorted(s.radius for s in segmentation.surfaces if s.kind == "cylinder")
+    assert np.allclose(radii, [0.15, 0.27, 0.3], atol=0.005)
+    wall = next(k for k, s in enumerate(segmentation.surfaces)
+                if s.kind == "cylinder" and abs(s.radius - 0.27) < 0.005)
+    # the true face whose points lie 0.27 from the hole's axis (x, y) = (1.45, 0.7)
+    counterbore = next(f for f, kind in enumerate(kinds) if kind == "cylinder" and abs(
+        np.median(np.linalg.norm(points[owner == f, :2] - [1.45, 0.7], axis=1)) - 0.27) < 0.01)
+    assert (segmentation.labels[owner == counterbore] == wall).mean() >= 0.8
