@@ -21,6 +21,13 @@ def _fit(qtbot, window, controller=None):
     return blocker.args[0]
 
 
+def _no_crease_search(window):
+    """Patch fits without the crease search (an undoable settings edit): these tests check what
+    the window does with a network, and a sphere has no creases, so the layout and the network
+    are the same, 2.4 s sooner per fit."""
+    window.document.edit_patches("Creases", creases=False)
+
+
 def _measured(qtbot, window):
     """The fitted shape put back by an undo is measured again in a job: wait for it."""
     qtbot.waitUntil(lambda: window.jobs.active_count() == 0, timeout=30000)
@@ -160,6 +167,7 @@ def test_a_patch_network_fit_is_one_undo_step_with_its_switch_to_patches(qtbot, 
     np.savetxt(path, samples.sphere(1500, truth_count=20_000).points, fmt="%.8f")
     open_by_drop(qtbot, window, [path])
     solid_route_off(window)  # a sphere is a part: the network route is tested here
+    _no_crease_search(window)
     steps = document.undo_stack.index()
     # one patch cannot hold a closed cloud: Start goes on as a network (the automatic route)
     first = _fit(qtbot, window, window.patch_controller)
@@ -320,6 +328,7 @@ def test_the_window_opens_within_the_screen_and_the_patch_quality_dock_scrolls(q
     np.savetxt(path, samples.sphere(1500, truth_count=20_000).points, fmt="%.8f")
     open_by_drop(qtbot, window, [path])
     solid_route_off(window)  # a sphere is a part: the network route is tested here
+    _no_crease_search(window)
     window.document.set_units("mm")
     _fit(qtbot, window, window.patch_controller)
     QApplication.processEvents()
