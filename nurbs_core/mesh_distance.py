@@ -13,8 +13,6 @@ both measure with it.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -27,8 +25,8 @@ CANDIDATES = 12
 #: is: a 64 x 64 grid's 7,938 triangles were split into 127,008).
 SPLIT_EDGES = 200
 SPLIT_MEDIAN = 4.0
-#: Points measured again against every triangle within reach, per chunk (memory).
-RECHECK_CHUNK = 200_000
+#: (point, triangle) pairs measured at once (memory).
+PAIR_CHUNK = 500_000
 
 
 def signed_distances(points: np.ndarray, vertices: np.ndarray,
@@ -62,21 +60,8 @@ def signed_distances(points: np.ndarray, vertices: np.ndarray,
     best = np.full(len(points), np.inf)
     signed = np.zeros(len(points))
     nearest = candidates[:, 0].copy()
-
-    def measure(which: np.ndarray, column: np.ndarray) -> None:
-        foot = trimesh.triangles.closest_point(triangles[column], points[which])
-        offset = points[which] - foot
-        distance = np.linalg.norm(offset, axis=1)
-        closer = distance < best[which]
-        chosen = which[closer]
-        best[chosen] = distance[closer]
-        nearest[chosen] = column[closer]
-        side = np.where((offset * normals[column]).sum(1) >= 0, 1.0, -1.0)
-        signed[chosen] = (side * distance)[closer]
-
-    everyone = np.arange(len(points))
-    for column in candidates.T:
-        measure(everyone, column)
+    everyone = np.repeat(np.arange(len(points)), k)
+    _keep_nearest(points, triangles, normals, everyone, candidates.ravel(), best, signed, nearest)
     # a triangle not measured is no closer when its centroid lies beyond best + reach; where
     # one lies nearer, every triangle within that reach is measured (exact either way)
     if k < len(triangles):
@@ -85,20 +70,27 @@ def signed_distances(points: np.ndarray, vertices: np.ndarray,
             found = tree.query_ball_point(points[unsure], best[unsure] + reach)
             owner = np.repeat(unsure, [len(f) for f in found])
             column = np.fromiter((j for f in found for j in f), np.int64, count=len(owner))
-            for start in range(0, len(owner), RECHECK_CHUNK):
-                part = slice(start, start + RECHECK_CHUNK)
-                _measure_pairs(measure, owner[part], column[part])
+            _keep_nearest(points, triangles, normals, owner, column, best, signed, nearest)
     return signed, normals[nearest]
 
 
-def _measure_pairs(measure: Callable[[np.ndarray, np.ndarray], None], owner: np.ndarray,
-                   column: np.ndarray) -> None:
-    """``measure`` over (point, triangle) pairs, a point at most once per call (its best is
-    updated between calls): the pairs in rounds by their rank within their point."""
-    order = np.argsort(owner, kind="stable")
-    owner, column = owner[order], column[order]
-    first = np.searchsorted(owner, owner)
-    rank = np.arange(len(owner)) - first
-    for r in range(int(rank.max()) + 1 if len(rank) else 0):
-        chosen = rank == r
-        measure(owner[chosen], column[chosen])
+def _keep_nearest(points: np.ndarray, triangles: np.ndarray, normals: np.ndarray,
+                  owner: np.ndarray, column: np.ndarray, best: np.ndarray, signed: np.ndarray,
+                  nearest: np.ndarray) -> None:
+    """Each (point ``owner``, triangle ``column``) pair measured (trimesh's closest point, in
+    chunks of :data:`PAIR_CHUNK`); a point's nearest triangle among its pairs replaces its
+    ``best`` distance, ``signed`` distance and ``nearest`` triangle (all (N,)) when closer."""
+    import trimesh
+
+    for start in range(0, len(owner), PAIR_CHUNK):  # (no pairs: nothing to do)
+        who, which = owner[start:start + PAIR_CHUNK], column[start:start + PAIR_CHUNK]
+        offset = points[who] - trimesh.triangles.closest_point(triangles[which], points[who])
+        distance = np.linalg.norm(offset, axis=1)
+        order = np.lexsort((distance, who))           # by point, the nearest first
+        first = order[np.r_[True, who[order][1:] != who[order][:-1]]]
+        closer = first[distance[first] < best[who[first]]]
+        chosen = who[closer]
+        best[chosen] = distance[closer]
+        nearest[chosen] = which[closer]
+        side = np.where((offset[closer] * normals[which[closer]]).sum(1) >= 0, 1.0, -1.0)
+        signed[chosen] = side * distance[closer]

@@ -133,4 +133,3 @@ def _shapes_name(shapes: list) -> str:
 
     curves = sum(isinstance(shape, CurveArrays) for shape in shapes)
     return "Curves" if curves == len(shapes) else "Patches" if curves == 0 else "Shapes"
-

@@ -399,8 +399,10 @@ def segment(points: np.ndarray, noise: float | None = None, seed: int = 0,
         surfaces = _without_redundant(surfaces, points, normals, tolerance)
     surfaces = _leftover_narrow_planes(surfaces, points, normals, graph, rng, tolerance,
                                        smallest)
-    surfaces = _coaxial_walls(surfaces, points, normals, graph, tolerance, smallest)
     labels = _labels(surfaces, points, normals, tolerance)
+    walled = _coaxial_walls(surfaces, labels, points, normals, graph, tolerance, smallest)
+    if walled is not surfaces:
+        surfaces, labels = walled, _labels(walled, points, normals, tolerance)
     sizes = [int((labels == k).sum()) for k in range(len(surfaces))]
     keep = [k for k, size in enumerate(sizes) if size >= smallest]
     surfaces = [surfaces[k] for k in keep]
@@ -510,9 +512,9 @@ def _leftover_narrow_planes(surfaces: list[Primitive], points: np.ndarray,
     return _coplanar_merged(surfaces + kept, points, normals, tolerance) if kept else surfaces
 
 
-def _coaxial_walls(surfaces: list[Primitive], points: np.ndarray, normals: np.ndarray,
-                   graph: scipy.sparse.csr_matrix, tolerance: float, smallest: int
-                   ) -> list[Primitive]:
+def _coaxial_walls(surfaces: list[Primitive], labels: np.ndarray, points: np.ndarray,
+                   normals: np.ndarray, graph: scipy.sparse.csr_matrix, tolerance: float,
+                   smallest: int) -> list[Primitive]:
     """The surfaces with the short walls coaxial with a cylinder found added, by distance
     alone (a counterbore, a stepped bore or shaft): each one a few spacings high, so every
     neighbourhood on it reaches over its edges and no normal there is its own. The rounds took
@@ -526,15 +528,16 @@ def _coaxial_walls(surfaces: list[Primitive], points: np.ndarray, normals: np.nd
     collected again twice). It is kept when it holds :func:`min_region` points spread over
     :data:`WALL_ARC` and across 2 tolerances of height, unbiased, with :data:`NARROW_AGREE` of
     their normals within 30 degrees of its own; the small regions that it holds 80% of the
-    points of give way to it."""
+    points of give way to it. ``labels`` (N,): the surfaces' points (:func:`_labels`). Returns
+    ``surfaces`` itself when no wall is found."""
     count = len(points)
-    labels = _labels(surfaces, points, normals, tolerance)
     sizes = np.bincount(labels[labels >= 0], minlength=len(surfaces))
     small = sizes < WALL_REGION * count
     planes = [s.axis for s in surfaces if s.kind == "plane"]
     found: list[Primitive] = []
-    for cylinder in [s for s in surfaces if s.kind == "cylinder"]:
-        mine = [k for k, s in enumerate(surfaces) if s is cylinder][0]
+    for mine, cylinder in enumerate(surfaces):
+        if cylinder.kind != "cylinder":
+            continue
         open_ = (labels < 0) | (small[np.maximum(labels, 0)] & (labels >= 0) & (labels != mine))
         index = np.flatnonzero(open_)
         if len(index) < smallest:

@@ -113,9 +113,7 @@ START_SIZE = 6
 #: 1.25 points then): the sphere, capsule and blob keep 6 x 6 patches; the head 6 -> 8 (surface to
 #: truth 0.28 -> 0.25 noise sigmas), the bunny 6 -> 8 (0.38 -> 0.37), the aorta 10 -> 12
 #: (0.33 -> 0.29), the duck 8 -> 10 (0.33 -> 0.32), the box 10 -> 12 (0.27 -> 0.26); at 2 the
-#: duck went to 12 and pleated. On the bunny sampled from its smoothed mesh at noise 5e-4 of
-#: the diagonal, 10,000 points: 8 -> 10, the points' mean distance 1.30 -> 1.04 x their
-#: distance to the truth.
+#: duck went to 12 and pleated.
 CP_PENALTY = 4.0
 #: A larger grid's trial ends once its Cp, falling by this many times its last pass's fall on
 #: each pass it has left, would still stay above the best grid's (:func:`_cannot_win`).
@@ -123,7 +121,8 @@ CP_REACH = 2.0
 #: A grid has at most one control point per this many cloud points (the fairing holds sparse
 #: regions; Cp, charging the effective freedom, chooses among the sizes this allows). At 1.25
 #: the bunny's 141 patches over 10,000 points could not reach 10 x 10: its points' mean
-#: distance stayed 1.42 x their distance to the (faceted) truth; at 0.75, 10 x 10 and 1.15 x.
+#: distance stayed 1.42 x their distance to the truth; at 0.75, 10 x 10 and 1.15 x (column
+#: "floor x" of ``python benchmarks/bench_scans.py --cases bunny_cloud``).
 POINTS_PER_CONTROL = 0.75
 #: Share of the data term measured point to point (the rest: point to tangent plane).
 POINT_SHARE = 0.25
@@ -357,8 +356,7 @@ def fitted_freedom(solver: _Solver, network: PatchNetwork, patch: np.ndarray, uv
     target (N, 3) along the normal, one more solve, and the fitted surface's answering move
     summed against it; the pass is linear in its targets). ``fitted``: the pass's own solution.
     The fairing holds many control points still, so the trace is well below their count: it is
-    what Mallows' Cp charges for (a count of control points over-charges a faired grid: on the
-    bunny it kept 8 x 8 patches 1.3x the noise floor from the points where 10 x 10 give 1.12x)."""
+    what Mallows' Cp charges for (:data:`CP_PENALTY`)."""
     z = np.random.default_rng(seed).choice((-1.0, 1.0), len(targets))
     _, su, sv = evaluate(network, patch, uv[:, 0], uv[:, 1])
     normal = unit(np.cross(su, sv))
