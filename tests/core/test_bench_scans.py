@@ -3,6 +3,7 @@ nurbs-fit gives a table row with what nurbs-fit told the user."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 
@@ -43,3 +44,19 @@ def test_a_watertight_stl_runs_as_a_user_runs_it(bench, tmp_path, capsys):
     cells = [cell.strip() for cell in row.strip("|").split("|")]
     assert cells[1:3] == ["network", "converged"]
     assert (tmp_path / "capsule_stl.fit.stl").stat().st_size > 0
+
+
+def test_the_floor_ratio_is_one_on_the_truth_and_grows_off_it(bench, tmp_path):
+    """'floor x': the points' mean distance to the fit over their distance to the truth mesh: 1
+    when the fit is the truth, more when it lies off it."""
+    import trimesh
+
+    source = tmp_path / "cloud.xyz"
+    bunny = trimesh.load(bench.BUNNY, process=False)
+    points, _ = trimesh.sample.sample_surface(bunny, 2000, seed=1)
+    np.savetxt(source, points + np.random.default_rng(0).normal(0.0, 0.01, points.shape))
+    assert float(bench.floor_ratio(source, bench.BUNNY, bench.BUNNY)) == 1.0
+    moved = tmp_path / "moved.stl"
+    bunny.copy().apply_translation((0.0, 0.0, 0.05)).export(moved)
+    assert float(bench.floor_ratio(source, moved, bench.BUNNY)) > 1.2
+    assert bench.floor_ratio(source, tmp_path / "missing.stl", bench.BUNNY) == "-"
